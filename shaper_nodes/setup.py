@@ -1,0 +1,26 @@
+from setuptools import find_packages, setup
+
+package_name = "shaper_nodes"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", ["config/shaper.yaml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="Vibration suppression maintainers",
+    maintainer_email="maintainers@vibration-suppression.dev",
+    description="Input shaping core and ROS 2 nodes",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "shaper_node = shaper_nodes.shaper_node:main",
+            "recorder = shaper_nodes.recorder:main",
+        ],
+    },
+)

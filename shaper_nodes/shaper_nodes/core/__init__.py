@@ -1,0 +1,21 @@
+"""ROS-free core of the vibration-suppression suite.
+
+Nothing in this package imports rclpy or message types: nodes convert messages to numpy
+arrays at the edge and call these functions and classes.
+
+Modules
+-------
+shapers
+    Impulse sequences (ZV, ZVD, ZV-D^n, EI, custom) behind a registry of named designs.
+vibration
+    The percentage vibration V(omega, zeta) of an impulse sequence, sensitivity curves, and
+    residual-vibration metrics of measured cycles.
+fir
+    Discretisation of an impulse sequence to a causal FIR at the command rate, and the
+    streaming multi-joint FIR with bumpless coefficient changes.
+trajectory
+    Whole-trajectory shaping (resampling, convolution, derivatives) for
+    joint_trajectory_controller.
+validation
+    Checks of incoming data with errors that name the problem.
+"""
