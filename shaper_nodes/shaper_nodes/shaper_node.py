@@ -32,6 +32,7 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -143,7 +144,8 @@ class ShaperNode(Node):
         self.create_service(ShapeTrajectory, "~/shape_trajectory", self._on_shape_trajectory)
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
-        self.create_timer(float(self.get_parameter("diagnostics_period").value), self._publish_summary)
+        self.create_timer(float(self.get_parameter("diagnostics_period").value), self._publish_summary,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_active()
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"

@@ -1,0 +1,96 @@
+"""Cycle bookkeeping: buffer one cycle's signals and measure its residual vibration.
+
+Used by every component that reports per-cycle residual vibration (the sim plant, the demo,
+tests, bag analysis), so that they all measure the same thing: the RMS and peak of the tip
+acceleration magnitude from the time the commanded joint positions have come to rest after
+the cycle's MOTION_END (within ``settle_tolerance`` of their final value) until its END.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .vibration import ResidualVibration, residual_vibration, settle_time
+
+START, MOTION_END, END = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class CycleResult:
+    """One finished cycle: its times (s), residual vibration and its traces."""
+
+    cycle: int
+    start: float
+    motion_end: float
+    residual: ResidualVibration
+    accel_times: np.ndarray
+    accel: np.ndarray
+    position_times: np.ndarray
+    positions: np.ndarray
+
+
+class CycleMonitor:
+    """Collect accelerometer and joint-position samples per cycle, evaluate at END.
+
+    Parameters
+    ----------
+    settle_tolerance : float
+        Band (rad or m) within which the joint positions count as at rest.
+    remove_mean : bool
+        Remove the window mean of the acceleration (sensor offset, gravity) before the RMS.
+    """
+
+    def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False) -> None:
+        self.settle_tolerance = float(settle_tolerance)
+        self.remove_mean = remove_mean
+        self._cycle: int | None = None
+        self._start = 0.0
+        self._motion_end: float | None = None
+        self._acc_t: list[float] = []
+        self._acc: list[np.ndarray] = []
+        self._pos_t: list[float] = []
+        self._pos: list[np.ndarray] = []
+
+    @property
+    def in_cycle(self) -> bool:
+        return self._cycle is not None
+
+    def add_accel(self, t: float, accel) -> None:
+        """An accelerometer sample (m/s^2, 1 to 3 axes) at time t (s)."""
+        if self._cycle is not None:
+            self._acc_t.append(float(t))
+            self._acc.append(np.asarray(accel, dtype=float).ravel())
+
+    def add_positions(self, t: float, positions) -> None:
+        """Joint positions (rad or m) at time t (s)."""
+        if self._cycle is not None:
+            self._pos_t.append(float(t))
+            self._pos.append(np.asarray(positions, dtype=float).ravel())
+
+    def event(self, kind: int, cycle: int, t: float) -> CycleResult | None:
+        """A cycle event; returns the cycle's result at its END, else None."""
+        if kind == START:
+            self._cycle, self._start, self._motion_end = int(cycle), float(t), None
+            self._acc_t, self._acc, self._pos_t, self._pos = [], [], [], []
+            return None
+        if self._cycle is None or int(cycle) != self._cycle:
+            return None
+        if kind == MOTION_END:
+            self._motion_end = float(t)
+            return None
+        if kind != END:
+            return None
+        motion_end = self._motion_end if self._motion_end is not None else self._start
+        acc_t = np.asarray(self._acc_t)
+        acc = np.vstack(self._acc) if self._acc else np.zeros((0, 3))
+        pos_t = np.asarray(self._pos_t)
+        pos = np.vstack(self._pos) if self._pos else np.zeros((0, 1))
+        after = pos_t >= motion_end
+        window_start = (settle_time(pos_t[after], pos[after], motion_end, self.settle_tolerance)
+                        if after.any() else motion_end)
+        residual = residual_vibration(acc_t, acc, window_start, float(t) + 1e-12, self.remove_mean)
+        result = CycleResult(self._cycle, self._start, motion_end, residual, acc_t, acc, pos_t, pos)
+        self._cycle = None
+        return result

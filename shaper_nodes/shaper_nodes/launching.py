@@ -1,0 +1,73 @@
+"""Start installed node executables as subprocesses, as ``ros2 run`` would (no launch needed).
+
+The executable is looked up in the installed layout ``<prefix>/lib/<package>/<executable>`` of
+the package's ament index prefix, which is exactly where ``ros2 run`` looks.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import signal
+import subprocess
+from collections.abc import Mapping
+
+
+def executable(package: str, name: str) -> pathlib.Path:
+    """Path of an installed node executable, as ``ros2 run package name`` finds it."""
+    from ament_index_python.packages import get_package_prefix
+
+    path = pathlib.Path(get_package_prefix(package)) / "lib" / package / name
+    if not (path.is_file() and os.access(path, os.X_OK)):
+        raise FileNotFoundError(f"no executable {name!r} in package {package!r} (looked for {path})")
+    return path
+
+
+def ros_args(params: Mapping[str, object], remaps: Mapping[str, str] | None = None) -> list[str]:
+    """``--ros-args -p name:=value ...``; values are written as YAML (JSON), floats keep a point."""
+    args = ["--ros-args"]
+    for key, value in params.items():
+        args += ["-p", f"{key}:={json.dumps(value)}"]
+    for src, dst in (remaps or {}).items():
+        args += ["-r", f"{src}:={dst}"]
+    return args
+
+
+class NodeProcess:
+    """A node executable running in its own process; stop() sends SIGINT like Ctrl-C."""
+
+    def __init__(self, package: str, name: str, params: Mapping[str, object] | None = None,
+                 log_path: str | pathlib.Path | None = None, env: Mapping[str, str] | None = None,
+                 remaps: Mapping[str, str] | None = None) -> None:
+        self.cmd = [str(executable(package, name)), *ros_args(params or {}, remaps)]
+        self.log_path = pathlib.Path(log_path) if log_path else None
+        self.env = {**os.environ, **(env or {})}
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> NodeProcess:
+        out = open(self.log_path, "w") if self.log_path else subprocess.DEVNULL  # noqa: SIM115
+        self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env)
+        return self
+
+    def running(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGINT, wait up to ``timeout`` s, then SIGKILL; returns the exit code."""
+        if self.proc is None:
+            return None
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.returncode
+
+    def __enter__(self) -> NodeProcess:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

@@ -1,0 +1,147 @@
+"""A client node that runs experiments against the sim plant and the shaper over the graph.
+
+It speaks only the public interfaces (SetShaper, rcl_interfaces/SetParameters, Trigger,
+the Imu, JointState and CycleEvent topics), so the demo and the integration tests drive the
+real nodes exactly as a user would. It measures each cycle's residual vibration itself from
+what it receives, with the same core code (``CycleMonitor``) that the plant's reports use.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.srv import SetParameters
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Imu, JointState
+from shaper_msgs.msg import CycleEvent
+from shaper_msgs.msg import Mode as ModeMsg
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_msgs.srv import SetShaper
+from std_srvs.srv import Trigger
+
+from shaper_nodes.conversions import time_to_sec
+from shaper_nodes.core.cycles import CycleMonitor, CycleResult
+
+from .plants import mck_from_mode
+
+
+class Conductor(Node):
+    """Drive the sim plant and the shaper; collect per-cycle results."""
+
+    def __init__(self, *args, plant: str = "/sim_plant", shaper: str = "/shaper", imu_topic: str = "/tip_imu",
+                 settle_tolerance: float = 1e-6, **kwargs) -> None:
+        super().__init__("conductor", *args, **kwargs)
+        self.plant, self.shaper = plant, shaper
+        self.monitor = CycleMonitor(settle_tolerance)
+        self.results: list[CycleResult] = []
+        self.create_subscription(Imu, imu_topic, self._on_imu, qos_profile_sensor_data)
+        self.create_subscription(JointState, "/joint_states", self._on_js, 100)
+        self.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
+        self.set_shaper_cli = self.create_client(SetShaper, f"{shaper}/set_shaper")
+        self.plant_params_cli = self.create_client(SetParameters, f"{plant}/set_parameters")
+        self.start_cli = self.create_client(Trigger, f"{plant}/start_task")
+        self.executor_ = SingleThreadedExecutor(context=self.context)
+        self.executor_.add_node(self)
+
+    # ----------------------------------------------------------------- data
+    def _on_imu(self, msg: Imu) -> None:
+        a = msg.linear_acceleration
+        self.monitor.add_accel(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+
+    def _on_js(self, msg: JointState) -> None:
+        self.monitor.add_positions(time_to_sec(msg.header.stamp), msg.position)
+
+    def _on_event(self, msg: CycleEvent) -> None:
+        result = self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
+        if result is not None:
+            self.results.append(result)
+
+    # ----------------------------------------------------------------- driving
+    def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not done():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+            self.executor_.spin_once(timeout_sec=0.05)
+
+    def call(self, client, request, timeout: float = 10.0):
+        self.spin_until(client.service_is_ready, timeout, f"service {client.srv_name}")
+        future = client.call_async(request)
+        self.spin_until(future.done, timeout, f"answer of {client.srv_name}")
+        return future.result()
+
+    def wait_ready(self, timeout: float = 30.0, subscribers: dict[str, int] | None = None) -> None:
+        """Wait for the services and for the given topics to have at least N subscribers."""
+        for cli in (self.set_shaper_cli, self.plant_params_cli, self.start_cli):
+            self.spin_until(cli.service_is_ready, timeout, f"service {cli.srv_name}")
+        for topic, n in (subscribers or {}).items():
+            self.spin_until(lambda t=topic, k=n: self.count_subscribers(t) >= k, timeout,
+                            f"{n} subscribers on {topic}")
+
+    def set_shaper(self, family: str, omega: float = 1.0, zeta: float = 0.0, source: str = "user",
+                   **extra) -> SetShaper.Response:
+        req = SetShaper.Request()
+        req.shaper = ShaperMsg(family=family, source=source, **extra)
+        if family not in ("none", "custom"):
+            req.shaper.design_modes = [ModeMsg(natural_frequency=float(omega), damping_ratio=float(zeta))]
+        resp = self.call(self.set_shaper_cli, req)
+        if not resp.success:
+            raise RuntimeError(f"shaper refused {family}: {resp.message}")
+        return resp
+
+    def set_plant(self, **values) -> None:
+        """Set sim plant parameters (names with '.' given as '__', e.g. task__cycles=3)."""
+        req = SetParameters.Request()
+        req.parameters = [Parameter(k.replace("__", "."), value=v).to_parameter_msg() for k, v in values.items()]
+        resp = self.call(self.plant_params_cli, req)
+        bad = [r.reason for r in resp.results if not r.successful]
+        if bad:
+            raise RuntimeError(f"sim plant refused parameters: {bad}")
+
+    def set_plant_mode(self, omega: float, zeta: float, mass: float = 1.0) -> None:
+        """Make every joint of the sim plant an m-c-k system with this mode (rad/s, -)."""
+        m, c, k = mck_from_mode(omega, zeta, mass)
+        self.set_plant(plant__mass=[m], plant__damping=[c], plant__stiffness=[k])
+
+    def run_cycles(self, cycles: int, timeout: float = 600.0,
+                   progress: Callable[[int], None] | None = None) -> list[CycleResult]:
+        """Start a run of ``cycles`` cycles on the plant and return their results."""
+        self.set_plant(task__cycles=int(cycles))
+        first = len(self.results)
+        resp = self.call(self.start_cli, Trigger.Request())
+        if not resp.success:
+            raise RuntimeError(f"sim plant did not start: {resp.message}")
+        seen = first
+
+        def done() -> bool:
+            nonlocal seen
+            if progress and len(self.results) > seen:
+                seen = len(self.results)
+                progress(seen - first)
+            return len(self.results) >= first + cycles
+
+        self.spin_until(done, timeout, f"{cycles} cycles")
+        return self.results[first:]
+
+    def close(self) -> None:
+        self.executor_.shutdown()
+        self.destroy_node()
+
+
+def rms(results: list[CycleResult]) -> float:
+    """Mean over cycles of the residual RMS, m/s^2."""
+    return float(np.mean([r.residual.rms for r in results]))
+
+
+def spin_context(domain_id: int | None = None):
+    """A fresh rclpy context (optionally on a given ROS domain)."""
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=domain_id)
+    return ctx

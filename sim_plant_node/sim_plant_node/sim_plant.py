@@ -1,0 +1,361 @@
+"""Simulated plant node: flexible joints with a tip accelerometer, running a repeated task.
+
+Stands in for a robot and its ros2_control forward position controller in tests and the demo.
+
+Each step the task runner publishes the raw setpoint (``topics.command_out``, to the shaper),
+the plant takes the shaped setpoint (``topics.command_in``, std_msgs/Float64MultiArray as
+forward_command_controller does), integrates one period exactly, and publishes
+``/joint_states`` (joint = base position x1 and velocity), ``~/tip_state`` (tip x2 and its
+velocity), the tip accelerometer (sensor_msgs/Imu, m/s^2, configurable noise and bias), cycle
+events and a per-cycle report.
+
+Modes (parameter ``mode``)
+--------------------------
+lockstep
+    Simulated time: publishes /clock and steps only when the shaped setpoint for the previous
+    raw setpoint has arrived, so runs go as fast as the nodes answer and give the same result
+    on a loaded machine. Idle (no task running) the plant does not step. If no answer comes
+    within ``lockstep_timeout`` seconds of wall time, the plant holds the last setpoint, warns,
+    and goes on.
+realtime
+    Wall-clock rate; the latest shaped setpoint received is applied each period.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, JointState
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import Shaper as ShaperMsg
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from shaper_nodes.core.cycles import CycleMonitor
+from shaper_nodes.core.validation import InputError, finite_array
+
+from .plants import CycleTask, MckPlant
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness")
+
+
+def _desc(text: str, lo: float | None = None, hi: float | None = None, read_only: bool = False) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text, read_only=read_only)
+    if lo is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return d
+
+
+def _stamp(t: float):
+    from builtin_interfaces.msg import Time
+
+    ns = int(round(t * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+class SimPlantNode(Node):
+    """See the module docstring. Extra arguments go to ``Node``."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__("sim_plant", *args, **kwargs)
+        d = self.declare_parameter
+        d("joint_names", ["joint_1"], _desc("Joint names, one m-c-k plant each.", read_only=True))
+        d("rate", 500.0, _desc("Integration and command rate, Hz.", 1.0, 10000.0, read_only=True))
+        d("mode", "lockstep", _desc("'lockstep' (simulated time, /clock) or 'realtime' (wall clock).", read_only=True))
+        d("lockstep_timeout", 2.0, _desc("Lockstep: wall time to wait for the shaped setpoint, s.", 0.01, 600.0))
+        d("plant.mass", [1.0], _desc("Tip mass per joint (one value for all), kg (or kg m^2)."))
+        d("plant.damping", [0.6283185307179586], _desc("Damping per joint, N s/m (or N m s/rad)."))
+        d("plant.stiffness", [986.96044010893586], _desc("Stiffness per joint, N/m (or N m/rad)."))
+        d("imu.axes", [0, 1, 2], _desc("Joint index whose tip acceleration each IMU axis x, y, z measures (-1: none)."))
+        d("imu.noise_stddev", 0.0, _desc("Accelerometer white noise, m/s^2 (one sigma).", 0.0, 1000.0))
+        d("imu.bias", [0.0, 0.0, 0.0], _desc("Accelerometer constant offset per axis, m/s^2."))
+        d("imu.frame_id", "tool0", _desc("frame_id of the Imu messages.", read_only=True))
+        d("imu.seed", 1, _desc("Seed of the noise generator.", read_only=True))
+        d("task.name", "point_to_point", _desc("Task name in cycle events."))
+        d("task.start", [0.0], _desc("Start pose, one value per joint (or one for all), rad or m."))
+        d("task.goal", [0.5], _desc("Goal pose, rad or m."))
+        d("task.max_velocity", 1.0, _desc("Largest joint velocity of a move, rad/s or m/s.", 1e-6, 1e6))
+        d("task.max_acceleration", 10.0, _desc("Largest joint acceleration of a move, rad/s^2 or m/s^2.", 1e-6, 1e9))
+        d("task.dwell", 2.0, _desc("Dwell after each move (the residual-vibration window), s.", 0.0, 3600.0))
+        d("task.cycles", 4, _desc("Cycles per run (started by ~/start_task)."))
+        d("task.preroll", 1.0, _desc("Rest at the start pose before the first cycle, s.", 0.0, 3600.0))
+        d("task.autostart", False, _desc("Start a run as soon as the node is up.", read_only=True))
+        d("settle_tolerance", 1e-6, _desc("Joint positions within this of their final value count as at rest, rad or m.",
+                                          0.0, 1.0))
+        for key, default in {"command_out": "/shaper/commands", "command_in": "/forward_position_controller/commands",
+                             "joint_states": "/joint_states", "tip_state": "~/tip_state", "imu": "/tip_imu",
+                             "cycle_events": "/cycle_events", "cycle_reports": "/cycle_reports",
+                             "active_shaper": "/shaper/active_shaper"}.items():
+            d(f"topics.{key}", default, _desc(f"Topic name ({key}).", read_only=True))
+
+        self.joint_names = list(self.get_parameter("joint_names").value)
+        self.n = len(self.joint_names)
+        self.rate = float(self.get_parameter("rate").value)
+        self.mode = str(self.get_parameter("mode").value)
+        if self.mode not in ("lockstep", "realtime"):
+            raise ValueError(f"mode must be 'lockstep' or 'realtime', got {self.mode!r}")
+        self.plant = self._make_plant({})
+        axes = [int(a) for a in self.get_parameter("imu.axes").value][:3]
+        self._axes = [a if 0 <= a < self.n else -1 for a in axes] + [-1] * (3 - len(axes))
+        self._rng = np.random.default_rng(int(self.get_parameter("imu.seed").value))
+        self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value))
+        self._active_shaper = ShaperMsg()
+
+        tp = lambda k: self.get_parameter(f"topics.{k}").value  # noqa: E731
+        self._cmd_pub = self.create_publisher(Float64MultiArray, tp("command_out"), 10)
+        self._js_pub = self.create_publisher(JointState, tp("joint_states"), 10)
+        self._tip_pub = self.create_publisher(JointState, tp("tip_state"), 10)
+        self._imu_pub = self.create_publisher(Imu, tp("imu"), qos_profile_sensor_data)
+        self._event_pub = self.create_publisher(CycleEvent, tp("cycle_events"), 10)
+        self._report_pub = self.create_publisher(CycleReport, tp("cycle_reports"), 10)
+        self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
+        self.create_subscription(Float64MultiArray, tp("command_in"), self._on_command, 10)
+        self.create_subscription(ShaperMsg, tp("active_shaper"), self._on_shaper, LATCHED)
+        self.create_service(Trigger, "~/start_task", self._on_start)
+        self.create_service(Trigger, "~/stop_task", self._on_stop)
+        self.add_on_set_parameters_callback(self._validate_params)
+
+        self.step_index = 0
+        self.sim_time = 0.0
+        self.task: CycleTask | None = None
+        self._preroll_left = 0
+        self._raw = np.zeros(self.n)
+        self._applied = np.zeros(self.n)
+        self._latest_shaped: np.ndarray | None = None
+        self._waiting_since: float | None = None
+        self.timeouts = 0
+        self.refused = 0
+        self.plant.reset(self._pose("task.start", {}))
+        self._applied = self.plant.base_position
+        self._raw = self._applied.copy()
+        if self.mode == "lockstep":
+            self.create_timer(0.05, self._watchdog)
+            self._publish_clock()
+        else:
+            self.create_timer(1.0 / self.rate, self._realtime_tick)
+        if self.get_parameter("task.autostart").value:
+            self._start_task()
+        self.get_logger().info(
+            f"{self.n} joints, modes " + ", ".join(
+                f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(self.plant.natural_frequency,
+                                                                          self.plant.damping_ratio))
+            + f", {self.mode} at {self.rate:g} Hz")
+
+    # ----------------------------------------------------------------- configuration
+    def _vector(self, name: str, overrides: dict) -> np.ndarray:
+        v = np.asarray(overrides.get(name, self.get_parameter(name).value), dtype=float).ravel()
+        if v.size == 1:
+            v = np.full(self.n, v[0])
+        if v.size != self.n or not np.all(np.isfinite(v)):
+            raise ValueError(f"{name} needs 1 or {self.n} finite values, got {v.tolist()}")
+        return v
+
+    def _pose(self, name: str, overrides: dict) -> np.ndarray:
+        return self._vector(name, overrides)
+
+    def _make_plant(self, overrides: dict) -> MckPlant:
+        return MckPlant(*(self._vector(p, overrides) for p in PLANT_PARAMS), rate=self.rate)
+
+    def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
+        changes = {p.name: p.value for p in params}
+        try:
+            new = self._make_plant(changes) if any(p in changes for p in PLANT_PARAMS) else None
+            for pose in ("task.start", "task.goal"):
+                if pose in changes:
+                    self._pose(pose, changes)
+        except ValueError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        if new is not None:  # all checks passed: takes effect at the next step
+            new.state = self.plant.state.copy()
+            self.plant = new
+        return SetParametersResult(successful=True)
+
+    # ----------------------------------------------------------------- task
+    def _start_task(self) -> tuple[bool, str]:
+        if self.task is not None:
+            return False, "a task is already running"
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
+        try:
+            self.task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
+                                  float(g("task.max_acceleration")), float(g("task.dwell")), self.rate,
+                                  int(g("task.cycles")))
+        except ValueError as err:
+            return False, str(err)
+        self._preroll_left = int(round(float(g("task.preroll")) * self.rate))
+        self._preroll_total = self._preroll_left
+        if self.mode == "lockstep" and self._waiting_since is None:
+            self._publish_next()
+        return True, (f"{self.task.cycles} cycles of {self.task.samples_per_cycle / self.rate:.3f} s"
+                      f" (move {self.task.move_duration:.3f} s) after {self._preroll_left / self.rate:.3f} s preroll")
+
+    def _on_start(self, req, resp):
+        resp.success, resp.message = self._start_task()
+        return resp
+
+    def _on_stop(self, req, resp):
+        resp.success, resp.message = self.task is not None, "stopped" if self.task else "no task running"
+        self.task = None
+        return resp
+
+    def _next_raw(self) -> list:
+        """Raw setpoint for the current step, and its cycle events."""
+        if self.task is None:
+            return []
+        if self._preroll_left > 0:
+            self._raw = self.task.start.copy()
+            self._preroll_left -= 1
+            if self._preroll_left == 0:
+                # rest exactly at the applied setpoint, whatever came before the run
+                self.plant.reset(self._applied)
+            return []
+        self._raw, events = self.task.step()
+        return events
+
+    # ----------------------------------------------------------------- stepping
+    def _publish_clock(self) -> None:
+        if self._clock_pub is not None:
+            self._clock_pub.publish(Clock(clock=_stamp(self.sim_time)))
+
+    def _now(self) -> float:
+        if self.mode == "lockstep":
+            return self.sim_time
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _publish_next(self) -> None:
+        """Publish the raw setpoint of the current step (and its events)."""
+        events = self._next_raw()
+        t = self._now()
+        for ev in events:
+            self._emit_event(ev, t)
+        self._cmd_pub.publish(Float64MultiArray(data=self._raw.tolist()))
+        self._waiting_since = time.monotonic()
+
+    def _emit_event(self, ev, t: float) -> None:
+        msg = CycleEvent(event=ev.kind, cycle=ev.cycle, task=str(self.get_parameter("task.name").value),
+                         joint_names=self.joint_names, start_positions=ev.start.tolist(),
+                         goal_positions=ev.goal.tolist())
+        msg.header.stamp = _stamp(t)
+        self._event_pub.publish(msg)
+        result = self._monitor.event(ev.kind, ev.cycle, t)
+        if result is not None:
+            self._report(result)
+        if ev.kind == CycleEvent.END and self.task is not None and self.task.done:
+            self.get_logger().info(f"task run finished after {self.task.cycles} cycles")
+            self.task = None
+
+    def _report(self, result) -> None:
+        r = result.residual
+        msg = CycleReport(source="sim_plant", cycle=result.cycle, window_start=r.window_start, window_end=r.window_end,
+                          residual_rms=r.rms, residual_peak=r.peak, shaper_used=self._active_shaper,
+                          shaper_next=self._active_shaper)
+        msg.header.stamp = _stamp(self._now())
+        self._report_pub.publish(msg)
+
+    def _integrate(self, command: np.ndarray) -> None:
+        self._applied = command
+        self.plant.step(command)
+        self.step_index += 1
+        self.sim_time = self.step_index / self.rate
+        t = self._now()
+        stamp = _stamp(t)
+        js = JointState(name=self.joint_names, position=self.plant.base_position.tolist(),
+                        velocity=self.plant.base_velocity.tolist())
+        js.header.stamp = stamp
+        self._js_pub.publish(js)
+        tip = JointState(name=self.joint_names, position=self.plant.tip_position.tolist(),
+                         velocity=self.plant.tip_velocity.tolist())
+        tip.header.stamp = stamp
+        self._tip_pub.publish(tip)
+        acc_joint = self.plant.tip_acceleration
+        acc = np.array([acc_joint[a] if a >= 0 else 0.0 for a in self._axes])
+        acc += np.asarray(self.get_parameter("imu.bias").value, dtype=float)[:3]
+        sigma = float(self.get_parameter("imu.noise_stddev").value)
+        if sigma > 0:
+            acc += self._rng.normal(0.0, sigma, 3)
+        imu = Imu()
+        imu.header.stamp = stamp
+        imu.header.frame_id = str(self.get_parameter("imu.frame_id").value)
+        imu.orientation_covariance[0] = -1.0
+        imu.angular_velocity_covariance[0] = -1.0
+        imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = acc.tolist()
+        imu.linear_acceleration_covariance[0] = imu.linear_acceleration_covariance[4] = \
+            imu.linear_acceleration_covariance[8] = sigma**2
+        self._imu_pub.publish(imu)
+        self._monitor.add_accel(t, acc)
+        self._monitor.add_positions(t, self.plant.base_position)
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        try:
+            command = finite_array("shaped command", msg.data, size=self.n)
+        except InputError as err:
+            self.refused += 1
+            self.get_logger().error(f"refused setpoint: {err}; holding the last one", throttle_duration_sec=1.0)
+            command = None
+        if self.mode == "realtime":
+            if command is not None:
+                self._latest_shaped = command
+            return
+        if self._waiting_since is None:
+            return  # not waiting (idle, or a late answer after a timeout): ignore
+        self._waiting_since = None
+        self._integrate(self._applied if command is None else command)
+        self._publish_clock()
+        if self.task is not None:
+            self._publish_next()
+
+    def _watchdog(self) -> None:
+        if self._waiting_since is None or time.monotonic() - self._waiting_since < float(
+                self.get_parameter("lockstep_timeout").value):
+            return
+        self.timeouts += 1
+        self.get_logger().warning("no shaped setpoint within lockstep_timeout; holding the last setpoint",
+                                  throttle_duration_sec=5.0)
+        self._waiting_since = None
+        self._integrate(self._applied)
+        self._publish_clock()
+        if self.task is not None:
+            self._publish_next()
+
+    def _realtime_tick(self) -> None:
+        events = self._next_raw() if self.task is not None else []
+        t = self._now()
+        for ev in events:
+            self._emit_event(ev, t)
+        self._cmd_pub.publish(Float64MultiArray(data=self._raw.tolist()))
+        command = self._latest_shaped if self._latest_shaped is not None else self._applied
+        self._integrate(command)
+
+    def _on_shaper(self, msg: ShaperMsg) -> None:
+        self._active_shaper = msg
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SimPlantNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as err:
+        print(f"sim_plant: {err}", flush=True)
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
