@@ -44,9 +44,11 @@ class NodeProcess:
         self.log_path = pathlib.Path(log_path) if log_path else None
         self.env = {**os.environ, **(env or {})}
         self.proc: subprocess.Popen | None = None
+        self._log = None
 
     def start(self) -> NodeProcess:
-        out = open(self.log_path, "w") if self.log_path else subprocess.DEVNULL  # noqa: SIM115
+        self._log = open(self.log_path, "w") if self.log_path else None  # noqa: SIM115
+        out = self._log if self._log else subprocess.DEVNULL
         self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env)
         return self
 
@@ -64,6 +66,9 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
         return self.proc.returncode
 
     def __enter__(self) -> NodeProcess:

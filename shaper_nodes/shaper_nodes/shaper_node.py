@@ -136,9 +136,12 @@ class ShaperNode(Node):
         self._traj_pub = pub(tp["trajectory_out"], JointTrajectory)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(Float64MultiArray, tp["array_in"], self._on_array, 10)
-        self.create_subscription(JointTrajectory, tp["stream_in"], self._on_stream, 10)
-        self.create_subscription(JointTrajectory, tp["trajectory_in"], self._on_trajectory, 10)
+        subs = {
+            "array_in": self.create_subscription(Float64MultiArray, tp["array_in"], self._on_array, 10),
+            "stream_in": self.create_subscription(JointTrajectory, tp["stream_in"], self._on_stream, 10),
+            "trajectory_in": self.create_subscription(JointTrajectory, tp["trajectory_in"], self._on_trajectory, 10),
+        }
+        self._in_topics = {k: sub.topic_name for k, sub in subs.items()}  # fully qualified, for messages
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
         self.create_service(ShapeTrajectory, "~/shape_trajectory", self._on_shape_trajectory)
@@ -149,7 +152,7 @@ class ShaperNode(Node):
         self._publish_active()
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"
-            f" {tp['array_in']} -> {tp['array_out']}")
+            f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}")
 
     # ----------------------------------------------------------------- shaper changes
     def _describe(self) -> str:
@@ -288,15 +291,12 @@ class ShaperNode(Node):
         try:
             x = finite_array("data", msg.data, size=len(self.joint_names))
         except InputError as err:
-            self._reject(self._array_topic(), err)
+            self._reject(self._in_topics["array_in"], err)
             return
         out = Float64MultiArray(layout=msg.layout)
         out.data = self._array_filter.process(x).tolist()
         self._array_pub.publish(out)
         self.forwarded["array"] += 1
-
-    def _array_topic(self) -> str:
-        return self.get_parameter("topics.array_in").value
 
     def _trajectory_arrays(self, msg: JointTrajectory, require_times: bool) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         perm = joint_permutation(self.joint_names, msg.joint_names)
@@ -319,7 +319,7 @@ class ShaperNode(Node):
         return times, fields
 
     def _on_stream(self, msg: JointTrajectory) -> None:
-        topic = self.get_parameter("topics.stream_in").value
+        topic = self._in_topics["stream_in"]
         try:
             times, fields = self._trajectory_arrays(msg, require_times=False)
             names = tuple(fields)
@@ -352,7 +352,7 @@ class ShaperNode(Node):
         return out
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
-        topic = self.get_parameter("topics.trajectory_in").value
+        topic = self._in_topics["trajectory_in"]
         try:
             out = self.shape_whole(msg)
         except InputError as err:

@@ -1,0 +1,11 @@
+"""Benchmarks of the shaper suite: figures and ratios measured in one run, never pass/fail.
+
+Run with ``./run bench`` (``python -m benchmarks`` in the suite's environment; ``--help`` lists
+the options). Every figure is printed next to a baseline measured in the same run, because the
+machines it runs on are small and noisy:
+
+* :mod:`benchmarks.latency`: round-trip latency (driver -> node -> driver) and CPU share of the
+  shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`).
+* :mod:`benchmarks.fir_throughput`: joint-samples per second of the FIR core
+  (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter``.
+"""

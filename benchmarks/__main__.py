@@ -1,0 +1,165 @@
+"""``python -m benchmarks``: run the benchmarks, print a table, optionally write JSON.
+
+See :mod:`benchmarks` for what is measured, and ``--help`` for the options.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import platform
+import sys
+import tempfile
+import time
+
+
+def _progress(text: str) -> None:
+    print(f"[bench] {text}", file=sys.stderr, flush=True)
+
+
+def _fmt(value: float, spec: str = ".0f") -> str:
+    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
+
+
+def _ratio(a: float, b: float) -> float:
+    return a / b if b and not math.isnan(a) and not math.isnan(b) else float("nan")
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Command-line options."""
+    p = argparse.ArgumentParser(prog="python -m benchmarks", description="Shaper suite benchmarks (figures, not pass/fail).")
+    p.add_argument("--seconds", type=float, default=5.0, help="duration of each latency measurement, s (default 5)")
+    p.add_argument("--rate", type=float, default=1000.0, help="send rate of the latency driver, Hz (default 1000)")
+    p.add_argument("--joints", type=int, default=7, help="joints (values per message and FIR channels; default 7)")
+    p.add_argument("--warmup", type=float, default=0.5, help="warm-up after the first reply, s (default 0.5)")
+    p.add_argument("--drain", type=float, default=0.5, help="receive time after the last send, s (default 0.5)")
+    p.add_argument("--discovery-timeout", type=float, default=30.0, help="node start-up and discovery limit, s")
+    p.add_argument("--fir-repeats", type=int, default=5, help="passes per FIR method, best reported (default 5)")
+    p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
+    p.add_argument("--skip-fir", action="store_true", help="skip the FIR throughput measurement")
+    p.add_argument("--json", metavar="PATH", type=pathlib.Path, help="also write the figures to this JSON file")
+    args = p.parse_args(argv)
+    if not (args.seconds > 0 and args.rate > 0 and args.joints >= 1 and args.fir_repeats >= 1):
+        p.error("--seconds and --rate must be > 0, --joints and --fir-repeats >= 1")
+    return args
+
+
+def run_latency(args: argparse.Namespace) -> dict:
+    """The three latency measurements (echo baseline, shaper none, shaper ZVD) and their ratios."""
+    from .latency import echo_target, measure, shaper_target
+
+    zvd = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03,
+           "discretization": "split"}
+    targets = [
+        echo_target(),
+        shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}),
+        shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd),
+    ]
+    runs = []
+    with tempfile.TemporaryDirectory(prefix="shaper_bench_") as tmp:
+        for target in targets:
+            _progress(f"latency: {target.label} ({args.seconds:g} s at {args.rate:g} Hz)")
+            result = measure(target, seconds=args.seconds, rate=args.rate, joints=args.joints, warmup=args.warmup,
+                             drain=args.drain, discovery_timeout=args.discovery_timeout,
+                             log_dir=pathlib.Path(tmp), progress=_progress)
+            result.extra["dense_taps"] = target.fir.length
+            result.extra["nonzero_taps"] = int(target.fir.delays.size)
+            runs.append(result.as_dict())
+    base = runs[0]
+    ratios = []
+    for r in runs[1:]:
+        ratios.append({
+            "label": r["label"],
+            "p50": _ratio(r["p50_us"], base["p50_us"]),
+            "p99": _ratio(r["p99_us"], base["p99_us"]),
+            "max": _ratio(r["max_us"], base["max_us"]),
+            "node_cpu": _ratio(r["node_cpu_pct"], base["node_cpu_pct"]),
+            "extra_p50_us": r["p50_us"] - base["p50_us"],
+            "extra_p99_us": r["p99_us"] - base["p99_us"],
+        })
+    return {"baseline": base["label"], "runs": runs, "ratios_to_baseline": ratios}
+
+
+def print_latency(lat: dict, args: argparse.Namespace) -> None:
+    """Latency table."""
+    runs = lat["runs"]
+    n = runs[0]["sent"]
+    print(f"Round-trip latency driver -> node -> driver (two hops), {args.joints} joints,"
+          f" target {args.rate:g} Hz, {args.seconds:g} s ({n} messages per node)")
+    print("  sequence numbers travel in the data (a ramp) and are decoded through the node's known FIR;"
+          " CPU in % of one core")
+    head = (f"  {'node':<18}{'sent':>6}{'recv':>6}{'lost':>5}{'send Hz':>9}{'p50 us':>8}{'p99 us':>8}"
+            f"{'max us':>8}{'mean us':>8}{'node CPU%':>10}{'drv CPU%':>9}{'out err':>9}")
+    print(head)
+    print("  " + "-" * (len(head) - 2))
+    for r in runs:
+        print(f"  {r['label']:<18}{r['sent']:>6}{r['received']:>6}{r['lost']:>5}{_fmt(r['send_rate_hz'], '.1f'):>9}"
+              f"{_fmt(r['p50_us']):>8}{_fmt(r['p99_us']):>8}{_fmt(r['max_us']):>8}{_fmt(r['mean_us']):>8}"
+              f"{_fmt(r['node_cpu_pct'], '.1f'):>10}{_fmt(r['driver_cpu_pct'], '.1f'):>9}"
+              f"{_fmt(r['max_output_error'], '.0e'):>9}")
+    notes = [f"{r['label']}: {r['duplicates']} duplicates, {r['undecoded']} undecoded, {r['inexact']} inexact"
+             for r in runs if r["duplicates"] or r["undecoded"] or r["inexact"]]
+    for note in notes:
+        print(f"  note: {note}")
+    print(f"  send interval p99: " + ", ".join(f"{r['label']} {_fmt(r['send_interval_p99_us'])} us" for r in runs))
+    print()
+    print(f"  ratio to {lat['baseline']:<16}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}"
+          f"{'+p50 us':>9}{'+p99 us':>9}")
+    for q in lat["ratios_to_baseline"]:
+        print(f"  {q['label']:<25}{_fmt(q['p50'], '.2f'):>7}{_fmt(q['p99'], '.2f'):>7}{_fmt(q['max'], '.2f'):>7}"
+              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['extra_p50_us'], '+.0f'):>9}{_fmt(q['extra_p99_us'], '+.0f'):>9}")
+
+
+def print_fir(fir: dict) -> None:
+    """FIR throughput table."""
+    s = fir["shaper"]
+    print(f"FIR throughput: ZVD {s['frequency_hz']:g} Hz, damping {s['damping_ratio']:g}, at {s['rate_hz']:g} Hz"
+          f" ({s['impulses']} impulses -> {s['dense_taps']} dense taps, {s['nonzero_taps']} non-zero),"
+          f" {fir['joints']} joints, best of {fir['repeats']}")
+    head = f"  {'method':<34}{'samples':>8}{'joint-samples/s':>17}{'vs lfilter':>11}{'max |diff|':>11}  agree"
+    print(head)
+    print("  " + "-" * (len(head) - 2))
+    for m in fir["methods"]:
+        print(f"  {m['method']:<34}{m['samples']:>8}{m['joint_samples_per_s']:>17,.0f}{m['ratio_to_lfilter']:>11.3g}"
+              f"{m['max_abs_diff']:>11.1e}  {'yes' if m['agrees'] else 'NO'}")
+    print(f"  reference: {fir['reference']}; outputs agree to {fir['tolerance']:g}:"
+          f" {'yes' if fir['all_agree'] else 'NO'}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    args = parse_args(argv)
+    started = time.time()
+    report: dict = {
+        "meta": {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started)),
+                 "host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
+                 "rmw": os.environ.get("RMW_IMPLEMENTATION", ""), "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", ""),
+                 "argv": sys.argv[1:] if argv is None else argv},
+    }
+    if not args.skip_latency:
+        report["latency"] = run_latency(args)
+    if not args.skip_fir:
+        from .fir_throughput import run as run_fir
+
+        report["fir"] = run_fir(joints=args.joints, repeats=args.fir_repeats, progress=_progress)
+    report["meta"]["elapsed_s"] = time.time() - started
+
+    print()
+    if "latency" in report:
+        print_latency(report["latency"], args)
+        print()
+    if "fir" in report:
+        print_fir(report["fir"])
+        print()
+    print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2, allow_nan=True) + "\n")
+        print(f"figures written to {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

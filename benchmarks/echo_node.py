@@ -1,0 +1,74 @@
+"""A bare echo node: the latency baseline for the shaper node.
+
+It republishes every ``std_msgs/Float64MultiArray`` received on the input topic, unchanged (the
+very message object), on the output topic: one subscription, one publisher, a
+``SingleThreadedExecutor`` and nothing else. The difference between the shaper node's hop
+latency and this node's is what the shaper's own work (validation, FIR, message building) costs.
+
+Run it as ``python -m benchmarks.echo_node [--in TOPIC] [--out TOPIC] [--ros-args ...]``;
+SIGINT stops it cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+
+#: default topics (the benchmark driver uses the same defaults)
+IN_TOPIC = "/bench/echo_in"
+OUT_TOPIC = "/bench/echo_out"
+#: QoS depth, as the shaper node's subscriptions and publishers
+DEPTH = 10
+
+
+class EchoNode(Node):
+    """Republish ``Float64MultiArray`` from ``in_topic`` to ``out_topic`` with no processing.
+
+    Parameters
+    ----------
+    in_topic, out_topic : str
+        Topic names.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (e.g. ``context``).
+    """
+
+    def __init__(self, in_topic: str = IN_TOPIC, out_topic: str = OUT_TOPIC, **kwargs) -> None:
+        super().__init__("bench_echo", **kwargs)
+        self._pub = self.create_publisher(Float64MultiArray, out_topic, DEPTH)
+        self.create_subscription(Float64MultiArray, in_topic, self._pub.publish, DEPTH)
+        self.get_logger().info(f"echoing {in_topic} -> {out_topic}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    argv = list(sys.argv if argv is None else argv)
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.echo_node", description=__doc__.split("\n")[0])
+    parser.add_argument("--in", dest="in_topic", default=IN_TOPIC, help=f"input topic (default {IN_TOPIC})")
+    parser.add_argument("--out", dest="out_topic", default=OUT_TOPIC, help=f"output topic (default {OUT_TOPIC})")
+    args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+
+    context = rclpy.context.Context()
+    rclpy.init(args=argv, context=context)
+    node = None
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        node = EchoNode(args.in_topic, args.out_topic, context=context)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
