@@ -1,0 +1,59 @@
+"""`ros2 run <package> <executable>` works: executables under lib/<package>/, ament index markers.
+
+ros2cli is not on PyPI, so this checks the installed layout that ros2 run relies on and starts
+every node from there.
+"""
+
+import os
+import pathlib
+import subprocess
+import time
+
+import pytest
+from ament_index_python.packages import get_package_prefix, get_package_share_directory, get_packages_with_prefixes
+
+from shaper_nodes.launching import NodeProcess, executable
+
+pytestmark = pytest.mark.integration
+
+NODES = [("shaper_nodes", "shaper_node", {"joint_names": ["a"]}), ("shaper_nodes", "recorder", None),
+         ("sim_plant_node", "sim_plant", {})]
+
+
+@pytest.mark.parametrize("package", ["shaper_msgs", "shaper_nodes", "sim_plant_node"])
+def test_packages_are_in_the_ament_index(package):
+    assert package in get_packages_with_prefixes()
+    prefix = pathlib.Path(get_package_prefix(package))
+    assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / package).exists()
+    assert (pathlib.Path(get_package_share_directory(package)) / "package.xml").exists()
+
+
+@pytest.mark.parametrize("package, name, params", NODES)
+def test_every_node_starts_from_its_installed_executable(package, name, params, tmp_path, domain_id):
+    path = executable(package, name)
+    assert path.parent == pathlib.Path(get_package_prefix(package)) / "lib" / package
+    if params is None:
+        params = {"output": str(tmp_path / "bag")}
+    log = tmp_path / "node.log"
+    proc = NodeProcess(package, name, params, log_path=log, env={"ROS_DOMAIN_ID": str(domain_id)}).start()
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and "[INFO]" not in log.read_text():
+        assert proc.running(), log.read_text()
+        time.sleep(0.1)
+    assert proc.running(), log.read_text()
+    assert proc.stop() == 0, log.read_text()
+
+
+def test_demo_executable_help():
+    out = subprocess.run([str(executable("sim_plant_node", "demo")), "--help"], capture_output=True, text=True,
+                         timeout=60, env=os.environ)
+    assert out.returncode == 0 and "--frequency" in out.stdout
+
+
+def test_bad_configuration_exits_with_a_clear_error(tmp_path, domain_id):
+    proc = NodeProcess("shaper_nodes", "shaper_node", {"joint_names": ["a", "a"]}, log_path=tmp_path / "log",
+                       env={"ROS_DOMAIN_ID": str(domain_id)}).start()
+    proc.proc.wait(timeout=30)
+    assert proc.proc.returncode == 1
+    proc.stop()
+    assert "joint_names must be a non-empty list of distinct names" in (tmp_path / "log").read_text()
