@@ -27,9 +27,7 @@ import math
 import time
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -44,6 +42,7 @@ from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.validation import InputError, finite_array
 
 from .plants import CycleTask, MckPlant
+from shaper_nodes.node_main import run_node
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness")
@@ -340,21 +339,7 @@ class SimPlantNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimPlantNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as err:
-        print(f"sim_plant: {err}", flush=True)
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SimPlantNode, "sim_plant", args)
 
 
 if __name__ == "__main__":
