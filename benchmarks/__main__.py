@@ -11,9 +11,15 @@ import math
 import os
 import pathlib
 import platform
+import signal
 import sys
 import tempfile
+import textwrap
 import time
+
+
+#: outside load (percent of one core) above which the latency table carries a warning
+BUSY_WARNING_PCT = 25.0
 
 
 def _progress(text: str) -> None:
@@ -30,7 +36,8 @@ def _ratio(a: float, b: float) -> float:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command-line options."""
-    p = argparse.ArgumentParser(prog="python -m benchmarks", description="Shaper suite benchmarks (figures, not pass/fail).")
+    p = argparse.ArgumentParser(prog="python -m benchmarks",
+                                description="Shaper suite benchmarks (figures, not pass/fail).")
     p.add_argument("--seconds", type=float, default=5.0, help="duration of each latency measurement, s (default 5)")
     p.add_argument("--rate", type=float, default=1000.0, help="send rate of the latency driver, Hz (default 1000)")
     p.add_argument("--joints", type=int, default=7, help="joints (values per message and FIR channels; default 7)")
@@ -89,28 +96,37 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
     n = runs[0]["sent"]
     print(f"Round-trip latency driver -> node -> driver (two hops), {args.joints} joints,"
           f" target {args.rate:g} Hz, {args.seconds:g} s ({n} messages per node)")
-    print("  sequence numbers travel in the data (a ramp) and are decoded through the node's known FIR;"
-          " CPU in % of one core")
+    print("  replies are matched to sends by the sequence number in layout.data_offset (fallback: the data")
+    print("  ramp decoded through the node's FIR); out err: largest relative deviation of a reply from the")
+    print("  expected FIR output; CPU: % of one core over the sending window, for the node, the driver")
+    print("  (this process) and the rest of the machine (other: outside load, i.e. noise)")
     head = (f"  {'node':<18}{'sent':>6}{'recv':>6}{'lost':>5}{'send Hz':>9}{'p50 us':>8}{'p99 us':>8}"
-            f"{'max us':>8}{'mean us':>8}{'node CPU%':>10}{'drv CPU%':>9}{'out err':>9}")
+            f"{'max us':>8}{'mean us':>8}{'node CPU':>9}{'drv CPU':>8}{'other':>7}{'out err':>9}")
     print(head)
     print("  " + "-" * (len(head) - 2))
     for r in runs:
         print(f"  {r['label']:<18}{r['sent']:>6}{r['received']:>6}{r['lost']:>5}{_fmt(r['send_rate_hz'], '.1f'):>9}"
               f"{_fmt(r['p50_us']):>8}{_fmt(r['p99_us']):>8}{_fmt(r['max_us']):>8}{_fmt(r['mean_us']):>8}"
-              f"{_fmt(r['node_cpu_pct'], '.1f'):>10}{_fmt(r['driver_cpu_pct'], '.1f'):>9}"
+              f"{_fmt(r['node_cpu_pct'], '.1f'):>9}{_fmt(r['driver_cpu_pct'], '.1f'):>8}"
+              f"{_fmt(r['other_cpu_pct'], '.0f'):>7}"
               f"{_fmt(r['max_output_error'], '.0e'):>9}")
-    notes = [f"{r['label']}: {r['duplicates']} duplicates, {r['undecoded']} undecoded, {r['inexact']} inexact"
-             for r in runs if r["duplicates"] or r["undecoded"] or r["inexact"]]
+    notes = [f"{r['label']}: {r['duplicates']} duplicates, {r['undecoded']} undecoded, {r['seq_from_data']} matched"
+             f" through the data (no data_offset), {r['inexact']} inexact (after lost inputs)"
+             for r in runs if r["duplicates"] or r["undecoded"] or r["seq_from_data"] or r["inexact"]]
+    busiest = max(runs, key=lambda r: r["other_cpu_pct"])
+    if busiest["other_cpu_pct"] > BUSY_WARNING_PCT:
+        notes.append(f"the machine was busy with other work (up to {busiest['other_cpu_pct']:.0f} % of a core during"
+                     f" '{busiest['label']}'): these figures are noisy, compare runs with little 'other'")
     for note in notes:
-        print(f"  note: {note}")
+        print(textwrap.fill(note, width=104, initial_indent="  note: ", subsequent_indent="        "))
     print(f"  send interval p99: " + ", ".join(f"{r['label']} {_fmt(r['send_interval_p99_us'])} us" for r in runs))
     print()
     print(f"  ratio to {lat['baseline']:<16}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}"
           f"{'+p50 us':>9}{'+p99 us':>9}")
     for q in lat["ratios_to_baseline"]:
         print(f"  {q['label']:<25}{_fmt(q['p50'], '.2f'):>7}{_fmt(q['p99'], '.2f'):>7}{_fmt(q['max'], '.2f'):>7}"
-              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['extra_p50_us'], '+.0f'):>9}{_fmt(q['extra_p99_us'], '+.0f'):>9}")
+              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['extra_p50_us'], '+.0f'):>9}"
+              f"{_fmt(q['extra_p99_us'], '+.0f'):>9}")
 
 
 def print_fir(fir: dict) -> None:
@@ -119,19 +135,38 @@ def print_fir(fir: dict) -> None:
     print(f"FIR throughput: ZVD {s['frequency_hz']:g} Hz, damping {s['damping_ratio']:g}, at {s['rate_hz']:g} Hz"
           f" ({s['impulses']} impulses -> {s['dense_taps']} dense taps, {s['nonzero_taps']} non-zero),"
           f" {fir['joints']} joints, best of {fir['repeats']}")
-    head = f"  {'method':<34}{'samples':>8}{'joint-samples/s':>17}{'vs lfilter':>11}{'max |diff|':>11}  agree"
+    head = (f"  {'method':<34}{'samples':>8}{'us/call':>9}{'joint-samples/s':>17}{'vs lfilter':>11}"
+            f"{'max |diff|':>11}  agree")
     print(head)
     print("  " + "-" * (len(head) - 2))
     for m in fir["methods"]:
-        print(f"  {m['method']:<34}{m['samples']:>8}{m['joint_samples_per_s']:>17,.0f}{m['ratio_to_lfilter']:>11.3g}"
+        print(f"  {m['method']:<34}{m['samples']:>8}{m['best_s'] / m['calls'] * 1e6:>9.1f}"
+              f"{m['joint_samples_per_s']:>17,.0f}{m['ratio_to_lfilter']:>11.3g}"
               f"{m['max_abs_diff']:>11.1e}  {'yes' if m['agrees'] else 'NO'}")
     print(f"  reference: {fir['reference']}; outputs agree to {fir['tolerance']:g}:"
           f" {'yes' if fir['all_agree'] else 'NO'}")
 
 
+def _terminate(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _json_safe(value: object) -> object:
+    """``value`` with NaN and infinities replaced by None (strict JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = parse_args(argv)
+    # SIGTERM unwinds like Ctrl-C, so that the nodes started are stopped (try/finally)
+    signal.signal(signal.SIGTERM, _terminate)
     started = time.time()
     report: dict = {
         "meta": {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started)),
@@ -139,12 +174,19 @@ def main(argv: list[str] | None = None) -> int:
                  "rmw": os.environ.get("RMW_IMPLEMENTATION", ""), "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", ""),
                  "argv": sys.argv[1:] if argv is None else argv},
     }
-    if not args.skip_latency:
-        report["latency"] = run_latency(args)
-    if not args.skip_fir:
-        from .fir_throughput import run as run_fir
+    try:
+        if not args.skip_latency:
+            report["latency"] = run_latency(args)
+        if not args.skip_fir:
+            from .fir_throughput import run as run_fir
 
-        report["fir"] = run_fir(joints=args.joints, repeats=args.fir_repeats, progress=_progress)
+            report["fir"] = run_fir(joints=args.joints, repeats=args.fir_repeats, progress=_progress)
+    except KeyboardInterrupt:
+        _progress("interrupted")
+        return 130
+    except RuntimeError as err:  # a node did not start, was not discovered or died
+        _progress(f"error: {err}")
+        return 1
     report["meta"]["elapsed_s"] = time.time() - started
 
     print()
@@ -156,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
         print()
     print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2, allow_nan=True) + "\n")
+        args.json.write_text(json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")
         print(f"figures written to {args.json}")
     return 0
 

@@ -17,6 +17,7 @@ import sys
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray
 
 #: default topics (the benchmark driver uses the same defaults)
@@ -53,7 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
 
     context = rclpy.context.Context()
-    rclpy.init(args=argv, context=context)
+    # rclpy installs its SIGINT/SIGTERM handlers (which wake the executor) only for the default
+    # context unless asked; without them SIGINT would wait for the next message to be noticed
+    rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.ALL)
     node = None
     executor = SingleThreadedExecutor(context=context)
     try:

@@ -41,6 +41,7 @@ class FirMethodResult:
 
     method: str
     samples: int
+    calls: int
     joints: int
     best_s: float
     median_s: float
@@ -79,7 +80,7 @@ def _lfilter_samples(taps: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def run(*, hz: float = 8.0, zeta: float = 0.03, rate: float = 1000.0, joints: int = 7, block: int = 1000,
-        blocks: int = 50, sample_calls: int = 5000, repeats: int = 5, seed: int = 0,
+        blocks: int = 100, sample_calls: int = 10000, repeats: int = 5, seed: int = 0,
         progress: Callable[[str], None] = lambda s: None) -> dict:
     """Run the FIR throughput benchmark; returns the figures as a dictionary.
 
@@ -109,20 +110,22 @@ def run(*, hz: float = 8.0, zeta: float = 0.03, rate: float = 1000.0, joints: in
     x = np.cumsum(rng.normal(scale=0.01, size=(block * blocks, joints)), axis=0) + rng.uniform(-1, 1, joints)
     xs = x[: min(sample_calls, x.shape[0])]
 
-    methods: dict[str, tuple[Callable[[], np.ndarray], int]] = {
-        "shaper, sample by sample": (lambda: _shaper_samples(fir, xs), xs.shape[0]),
-        f"shaper, blocks of {block} x {joints}": (lambda: _shaper_blocks(fir, x, block), x.shape[0]),
-        f"lfilter (zi), blocks of {block} x {joints}": (lambda: _lfilter_blocks(taps, x, block), x.shape[0]),
-        "lfilter (zi), sample by sample": (lambda: _lfilter_samples(taps, xs), xs.shape[0]),
+    ns, nb = xs.shape[0], x.shape[0]
+    # name: (function, samples, calls)
+    methods: dict[str, tuple[Callable[[], np.ndarray], int, int]] = {
+        "shaper, sample by sample": (lambda: _shaper_samples(fir, xs), ns, ns),
+        f"shaper, blocks of {block} x {joints}": (lambda: _shaper_blocks(fir, x, block), nb, -(-nb // block)),
+        f"lfilter (zi), blocks of {block} x {joints}": (lambda: _lfilter_blocks(taps, x, block), nb, -(-nb // block)),
+        "lfilter (zi), sample by sample": (lambda: _lfilter_samples(taps, xs), ns, ns),
     }
     reference = f"lfilter (zi), blocks of {block} x {joints}"
     times: dict[str, list[float]] = {m: [] for m in methods}
     outputs: dict[str, np.ndarray] = {}
-    for m, (fn, _) in methods.items():  # warm-up pass, and the outputs to compare
+    for m, (fn, _, _) in methods.items():  # warm-up pass, and the outputs to compare
         outputs[m] = fn()
     for r in range(repeats):
         progress(f"FIR throughput: pass {r + 1}/{repeats}")
-        for m, (fn, _) in methods.items():
+        for m, (fn, _, _) in methods.items():
             t = time.perf_counter()
             fn()
             times[m].append(time.perf_counter() - t)
@@ -130,12 +133,12 @@ def run(*, hz: float = 8.0, zeta: float = 0.03, rate: float = 1000.0, joints: in
     ref_out = outputs[reference]
     ref_rate = x.shape[0] * joints / min(times[reference])
     results = []
-    for m, (_, samples) in methods.items():
+    for m, (_, samples, calls) in methods.items():
         best = min(times[m])
         diff = float(np.max(np.abs(outputs[m] - ref_out[:samples])))
         throughput = samples * joints / best
         results.append(FirMethodResult(
-            method=m, samples=samples, joints=joints, best_s=best, median_s=float(np.median(times[m])),
+            method=m, samples=samples, calls=calls, joints=joints, best_s=best, median_s=float(np.median(times[m])),
             joint_samples_per_s=throughput, ratio_to_lfilter=throughput / ref_rate, max_abs_diff=diff,
             agrees=diff <= AGREEMENT_TOL))
     return {

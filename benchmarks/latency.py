@@ -6,20 +6,29 @@ time-stamps the replies on its output topic: driver -> node -> driver, two hops.
 
 Matching replies to sends
 -------------------------
-The send time of every message is kept in an array indexed by its sequence number, and the
-sequence number travels in the data itself: sample ``k`` (k = 1, 2, ...) is the ramp
-``x_j(k) = k (1 + j / 8)`` on joint ``j``. The node under test may filter the data (the shaper
-does), so a reply is decoded by comparing its joint 0 with the node's *expected* output for the
-ramp, computed here with the same causal FIR (:class:`shaper_nodes.core.fir.StreamingShaper`,
-designed with the parameters given to the node; identity for the echo node and for shaper family
-``none``). A causal FIR with non-negative taps and a positive first tap (every shaper family here)
-maps a ramp to a strictly increasing sequence, so the inverse is a nearest-neighbour look-up, and
-it tolerates lost messages (they only make the following replies inexact, which is reported as
-``inexact``; they are still matched to the nearest sequence number). Before the ramp the driver
-sends zeros until the first reply arrives (both hops discovered) and for ``warmup`` s more, so the
-node's filter starts at rest at 0 exactly as the local one does. Every joint of every reply is
-also checked against the expected output (``max_output_error``): the comparison is only fair if
-the node did the work it should.
+The send time of every message is kept in an array indexed by its sequence number ``k``
+(1, 2, ..., n). The sequence number travels with the message twice:
+
+* in ``layout.data_offset``, which both nodes pass through unchanged (the echo node republishes
+  the message itself, the shaper node copies the layout of its input to its output); this is
+  the primary key, and it is immune to filtering and to lost messages;
+* in the data, as the ramp ``x_j(k) = k (1 + j / 8)`` on joint ``j``. The node under test may
+  filter the data (the shaper does, and the sequence number cannot simply be read back), so a
+  reply is decoded by comparing its joint 0 with the node's *expected* output for the ramp,
+  computed here with the same causal FIR (:class:`shaper_nodes.core.fir.StreamingShaper`,
+  designed from the parameters given to the node; identity for the echo node and for shaper
+  family ``none``). A causal FIR with non-negative taps and a positive first tap (every shaper
+  family here) maps a ramp to a strictly increasing sequence, so the inverse is a
+  nearest-neighbour look-up. This is the fallback when a reply carries no ``data_offset``; it is
+  exact only while no message is lost on the way in (a lost input shifts the filter's history).
+
+Before the ramp the driver sends zeros (``data_offset`` 0) until the first reply arrives (both
+hops discovered) and for ``warmup`` s more, so the node's filter starts at rest at 0 exactly as
+the local one does. Every joint of every reply is checked against the expected output
+(``max_output_error``, relative; ``inexact`` counts replies off by more than 1e-9, which only
+happens after a lost input): the comparison is only fair if the node did the work it should.
+Shaper family ``none`` still runs the node's full path (validation, ``StreamingShaper`` with one
+tap, message building).
 
 Timing
 ------
@@ -29,7 +38,8 @@ rather than bursting), stamped with :func:`time.perf_counter_ns` just before ``p
 are stamped on entry to the subscription callback (the main thread spins a
 ``SingleThreadedExecutor``). The achieved send rate is reported. CPU shares come from
 ``/proc/<pid>/stat`` (utime + stime over the sending window) for the node and from
-:func:`os.times` for the driver, in percent of one core.
+:func:`os.times` for the driver, in percent of one core; ``other_cpu_pct`` is the rest of the
+machine's busy time over the same window (from ``/proc/stat``), an indicator of outside noise.
 """
 
 from __future__ import annotations
@@ -58,6 +68,8 @@ from .echo_node import DEPTH
 #: the repository root (the parent of this package), the working directory of the echo node
 REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
 _CLK_TCK = os.sysconf("SC_CLK_TCK")
+#: QoS depth of the driver's reply subscription
+REPLY_DEPTH = 1000
 
 
 # --------------------------------------------------------------------------- processes
@@ -142,6 +154,14 @@ def proc_cpu_seconds(pid: int) -> float:
     return (int(rest[11]) + int(rest[12])) / _CLK_TCK
 
 
+def machine_busy_seconds() -> float:
+    """Busy CPU time of the whole machine (all CPUs; not idle, not iowait), s, from ``/proc/stat``."""
+    with open("/proc/stat") as f:
+        ticks = [int(v) for v in f.readline().split()[1:]]
+    # user nice system idle iowait irq softirq steal [guest guest_nice, already counted in user]
+    return (sum(ticks[:8]) - ticks[3] - ticks[4]) / _CLK_TCK
+
+
 def self_cpu_seconds() -> float:
     """User + system CPU time of this process (all threads), s."""
     t = os.times()
@@ -169,6 +189,7 @@ class LatencyResult:
     lost: int
     duplicates: int
     undecoded: int
+    seq_from_data: int
     inexact: int
     max_output_error: float
     send_rate_hz: float
@@ -179,6 +200,7 @@ class LatencyResult:
     mean_us: float
     node_cpu_pct: float
     driver_cpu_pct: float
+    other_cpu_pct: float
     extra: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
@@ -213,18 +235,19 @@ class Driver(Node):
         super().__init__("bench_driver", context=context)
         self.in_topic, self.out_topic = in_topic, out_topic
         self.pub = self.create_publisher(Float64MultiArray, in_topic, DEPTH)
-        self.create_subscription(Float64MultiArray, out_topic, self._on_reply, DEPTH)
-        self.replies: list[tuple[int, object]] = []
+        # a deep queue on the measuring side, so that the driver itself never drops a reply
+        self.create_subscription(Float64MultiArray, out_topic, self._on_reply, REPLY_DEPTH)
+        self.replies: list[tuple[int, int, object]] = []
 
     def _on_reply(self, msg: Float64MultiArray) -> None:
-        self.replies.append((time.perf_counter_ns(), msg.data))
+        self.replies.append((time.perf_counter_ns(), msg.layout.data_offset, msg.data))
 
     def discovered(self) -> bool:
         """Whether the node's subscription and publisher are both seen."""
         return self.pub.get_subscription_count() >= 1 and self.count_publishers(self.out_topic) >= 1
 
     def send_paced(self, rows: np.ndarray, rate: float, stamps: np.ndarray | None = None,
-                   stop: threading.Event | None = None) -> int:
+                   stop: threading.Event | None = None, first_seq: int = 0) -> int:
         """Publish the rows of ``rows`` one per period (wall clock), cycling until ``stop`` if given.
 
         Parameters
@@ -237,6 +260,8 @@ class Driver(Node):
             Receives the :func:`time.perf_counter_ns` stamp taken just before each publish.
         stop : threading.Event, optional
             If given, keep sending (cycling through ``rows``) until it is set.
+        first_seq : int
+            If > 0, row ``i`` is sent with ``layout.data_offset = first_seq + i``; else with 0.
 
         Returns
         -------
@@ -250,6 +275,7 @@ class Driver(Node):
         i = 0
         while (i < len(lists)) if stop is None else not stop.is_set():
             msg.data = lists[i % len(lists)]
+            msg.layout.data_offset = first_seq + i if first_seq > 0 else 0
             now = time.perf_counter_ns()
             if now < deadline:
                 time.sleep((deadline - now) * 1e-9)
@@ -351,13 +377,16 @@ def measure(target: Target, *, seconds: float = 5.0, rate: float = 1000.0, joint
         # measurement: the ramp 1..n
         stamps = np.zeros(n, dtype=np.int64)
         pid = proc.proc.pid
-        node_cpu0, driver_cpu0, wall0 = proc_cpu_seconds(pid), self_cpu_seconds(), time.perf_counter()
-        sender = threading.Thread(target=driver.send_paced, args=(data[1:], rate), kwargs={"stamps": stamps},
+        node_cpu0, driver_cpu0, busy0 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
+        wall0 = time.perf_counter()
+        sender = threading.Thread(target=driver.send_paced, args=(data[1:], rate),
+                                  kwargs={"stamps": stamps, "first_seq": 1},
                                   daemon=True)
         sender.start()
         _spin_until(executor, lambda: not sender.is_alive(), seconds * 10 + 10)
         sender.join()
-        node_cpu1, driver_cpu1, wall1 = proc_cpu_seconds(pid), self_cpu_seconds(), time.perf_counter()
+        node_cpu1, driver_cpu1, busy1 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
+        wall1 = time.perf_counter()
         end = time.monotonic() + drain
         _spin_until(executor, lambda: time.monotonic() >= end, drain + 1.0)
         alive()
@@ -373,31 +402,37 @@ def measure(target: Target, *, seconds: float = 5.0, rate: float = 1000.0, joint
             progress(f"{target.label}: node exited with {code} (log {log_path})")
 
     return _analyse(target, replies, stamps, expected, rate, joints,
-                    node_cpu=(node_cpu1 - node_cpu0), driver_cpu=(driver_cpu1 - driver_cpu0), wall=(wall1 - wall0))
+                    node_cpu=(node_cpu1 - node_cpu0), driver_cpu=(driver_cpu1 - driver_cpu0),
+                    busy=(busy1 - busy0), wall=(wall1 - wall0))
 
 
-def _analyse(target: Target, replies: list[tuple[int, object]], stamps: np.ndarray, expected: np.ndarray,
-             rate: float, joints: int, *, node_cpu: float, driver_cpu: float, wall: float) -> LatencyResult:
+def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.ndarray, expected: np.ndarray,
+             rate: float, joints: int, *, node_cpu: float, driver_cpu: float, busy: float,
+             wall: float) -> LatencyResult:
     n = stamps.size
     key = expected[:, 0]  # strictly increasing; index = sequence number (0 = rest)
     half_gap = 0.5 * float(np.min(np.diff(key)))
     latencies: list[float] = []
     seen = np.zeros(n + 1, dtype=bool)
-    duplicates = undecoded = inexact = 0
+    duplicates = undecoded = inexact = from_data = 0
     max_err = 0.0
-    for t_recv, values in replies:
+    for t_recv, offset, values in replies:
         row = np.asarray(values, dtype=float)
         if row.size != joints:
             undecoded += 1
             continue
-        if abs(row[0] - key[0]) <= half_gap:
-            continue  # a late reply to the warm-up's rest value
-        k = int(np.clip(np.searchsorted(key, row[0]), 1, n))
-        if k > 1 and abs(key[k - 1] - row[0]) < abs(key[k] - row[0]):
-            k -= 1
-        if abs(key[k] - row[0]) > half_gap:
-            undecoded += 1
-            continue
+        if 1 <= offset <= n:
+            k = int(offset)
+        else:
+            if abs(row[0] - key[0]) <= half_gap:
+                continue  # a late reply to the warm-up's rest value
+            k = int(np.clip(np.searchsorted(key, row[0]), 1, n))
+            if k > 1 and abs(key[k - 1] - row[0]) < abs(key[k] - row[0]):
+                k -= 1
+            if abs(key[k] - row[0]) > half_gap:
+                undecoded += 1
+                continue
+            from_data += 1
         err = float(np.max(np.abs(row - expected[k]) / np.maximum(1.0, np.abs(expected[k]))))
         max_err = max(max_err, err)
         inexact += err > 1e-9
@@ -416,12 +451,14 @@ def _analyse(target: Target, replies: list[tuple[int, object]], stamps: np.ndarr
 
     return LatencyResult(
         label=target.label, joints=joints, target_rate_hz=rate, sent=n, received=received, lost=n - received,
-        duplicates=duplicates, undecoded=undecoded, inexact=int(inexact), max_output_error=max_err,
-        send_rate_hz=(n - 1) / span if span > 0 else float("nan"),
+        duplicates=duplicates, undecoded=undecoded, seq_from_data=from_data, inexact=int(inexact),
+        max_output_error=max_err,
+        send_rate_hz=float((n - 1) / span) if span > 0 else float("nan"),
         send_interval_p99_us=float(np.percentile(intervals, 99)) if intervals.size else float("nan"),
         p50_us=pct(50), p99_us=pct(99), max_us=float(lat.max()) if lat.size else float("nan"),
         mean_us=float(lat.mean()) if lat.size else float("nan"),
         node_cpu_pct=100.0 * node_cpu / wall, driver_cpu_pct=100.0 * driver_cpu / wall,
+        other_cpu_pct=100.0 * max(0.0, busy - node_cpu - driver_cpu) / wall,
     )
 
 
