@@ -47,11 +47,10 @@ from __future__ import annotations
 import os
 import pathlib
 import signal
-import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -62,6 +61,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from shaper_nodes.core.fir import SparseFir, StreamingShaper
+from shaper_nodes.launching import ChildProcess
 
 from .echo_node import DEPTH
 
@@ -73,49 +73,6 @@ REPLY_DEPTH = 1000
 
 
 # --------------------------------------------------------------------------- processes
-class ChildProcess:
-    """A command in a subprocess with output to a log file; :meth:`stop` sends SIGINT, then SIGKILL.
-
-    Parameters
-    ----------
-    cmd : sequence of str
-        The command line.
-    log_path : path-like
-        File that receives the process' stdout and stderr.
-    cwd : path-like, optional
-        Working directory.
-    """
-
-    def __init__(self, cmd: Sequence[str], log_path: str | pathlib.Path, cwd: str | pathlib.Path | None = None) -> None:
-        self.cmd = list(cmd)
-        self.log_path = pathlib.Path(log_path)
-        self.cwd = cwd
-        self.proc: subprocess.Popen | None = None
-
-    def start(self) -> ChildProcess:
-        """Start the process."""
-        with open(self.log_path, "w") as out:
-            self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, cwd=self.cwd)
-        return self
-
-    def running(self) -> bool:
-        """Whether the process has been started and has not exited."""
-        return self.proc is not None and self.proc.poll() is None
-
-    def stop(self, timeout: float = 10.0) -> int | None:
-        """SIGINT, wait up to ``timeout`` s, then SIGKILL; returns the exit code."""
-        if self.proc is None:
-            return None
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        return self.proc.returncode
-
-
 @dataclass
 class Target:
     """A node under test.

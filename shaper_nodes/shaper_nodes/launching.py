@@ -34,22 +34,22 @@ def ros_args(params: Mapping[str, object], remaps: Mapping[str, str] | None = No
     return args
 
 
-class NodeProcess:
-    """A node executable running in its own process; stop() sends SIGINT like Ctrl-C."""
+class ChildProcess:
+    """A command running in its own process, output to a log file; stop() sends SIGINT like Ctrl-C."""
 
-    def __init__(self, package: str, name: str, params: Mapping[str, object] | None = None,
-                 log_path: str | pathlib.Path | None = None, env: Mapping[str, str] | None = None,
-                 remaps: Mapping[str, str] | None = None) -> None:
-        self.cmd = [str(executable(package, name)), *ros_args(params or {}, remaps)]
+    def __init__(self, cmd: list[str], log_path: str | pathlib.Path | None = None,
+                 env: Mapping[str, str] | None = None, cwd: str | pathlib.Path | None = None) -> None:
+        self.cmd = list(cmd)
         self.log_path = pathlib.Path(log_path) if log_path else None
         self.env = {**os.environ, **(env or {})}
+        self.cwd = cwd
         self.proc: subprocess.Popen | None = None
         self._log = None
 
-    def start(self) -> NodeProcess:
+    def start(self) -> ChildProcess:
         self._log = open(self.log_path, "w") if self.log_path else None  # noqa: SIM115
         out = self._log if self._log else subprocess.DEVNULL
-        self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env)
+        self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env, cwd=self.cwd)
         return self
 
     def running(self) -> bool:
@@ -71,8 +71,17 @@ class NodeProcess:
             self._log = None
         return self.proc.returncode
 
-    def __enter__(self) -> NodeProcess:
+    def __enter__(self) -> ChildProcess:
         return self.start()
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+class NodeProcess(ChildProcess):
+    """An installed node executable (found as ``ros2 run`` finds it) in its own process."""
+
+    def __init__(self, package: str, name: str, params: Mapping[str, object] | None = None,
+                 log_path: str | pathlib.Path | None = None, env: Mapping[str, str] | None = None,
+                 remaps: Mapping[str, str] | None = None) -> None:
+        super().__init__([str(executable(package, name)), *ros_args(params or {}, remaps)], log_path, env)
