@@ -21,6 +21,8 @@ setup(
         "console_scripts": [
             "shaper_node = shaper_nodes.shaper_node:main",
             "recorder = shaper_nodes.recorder:main",
+            "identifier = shaper_nodes.identifier_node:main",
+            "shaper_design = shaper_nodes.design_cli:main",
         ],
     },
 )

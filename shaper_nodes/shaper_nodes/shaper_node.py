@@ -85,7 +85,7 @@ class ShaperNode(Node):
             "EI family: allowed percentage vibration at the design mode, fraction (0.05 = 5 %).", 0.001, 0.3))
         self.declare_parameter("discretization", "split", _desc(
             "Impulse times between samples: 'split' linearly between the two samples (default) or 'round'."))
-        self.declare_parameter("allowed_sources", ["parameters", "service", "learner", "scheduler", "user"], _desc(
+        self.declare_parameter("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"], _desc(
             "Sources allowed to change the active shaper (update policy).", read_only=True))
         self.declare_parameter("error_throttle", 1.0, _desc(
             "Least time between two error logs or diagnostics of the same class of bad input, s.", 0.0, 3600.0))
