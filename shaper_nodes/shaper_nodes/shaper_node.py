@@ -11,6 +11,10 @@ topics.stream_in -> topics.stream_out
     velocities and accelerations too when given.
 topics.trajectory_in -> topics.trajectory_out, and service ~/shape_trajectory
     A whole trajectory for joint_trajectory_controller, resampled at ``command_rate`` and shaped.
+action.server_name (~/follow_joint_trajectory) -> action.controller
+    control_msgs/action/FollowJointTrajectory: each goal's trajectory shaped as above and
+    forwarded to the controller's action, feedback, result and cancel relayed; a new goal
+    preempts the running one (see trajectory_action.py).
 ~/active_shaper (latched), ~/set_shaper, ~/get_shaper
     The active shaper, and changing or reading it. Changes (service or parameters) are
     validated first; a refused change leaves the active shaper as it was. Accepted changes are
@@ -46,6 +50,7 @@ from .core.shapers import FAMILIES, Mode, Shaper, ShaperError, design
 from .core.trajectory import shape_trajectory
 from .core.validation import InputError, finite_array, joint_permutation, strictly_increasing
 from .node_main import run_node
+from .trajectory_action import TrajectoryActionProxy
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DESIGN_PARAMS = ("shaper.family", "shaper.frequency_hz", "shaper.damping_ratio",
@@ -98,6 +103,13 @@ class ShaperNode(Node):
         }
         for key, default in topics.items():
             self.declare_parameter(f"topics.{key}", default, _desc(f"Topic name ({key}).", read_only=True))
+        self.declare_parameter("action.server_name", "~/follow_joint_trajectory", _desc(
+            "FollowJointTrajectory action served by this node; empty: no action server.", read_only=True))
+        self.declare_parameter("action.controller", "/joint_trajectory_controller/follow_joint_trajectory", _desc(
+            "The controller's FollowJointTrajectory action that shaped goals are forwarded to.", read_only=True))
+        self.declare_parameter("action.server_timeout", 2.0, _desc(
+            "How long a goal waits for the controller's action server and for its answer to the goal"
+            " request, s.", 0.01, 3600.0, read_only=True))
 
         self.joint_names = list(self.get_parameter("joint_names").value or [])
         if not self.joint_names or len(set(self.joint_names)) != len(self.joint_names):
@@ -144,6 +156,15 @@ class ShaperNode(Node):
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
         self.create_service(ShapeTrajectory, "~/shape_trajectory", self._on_shape_trajectory)
+        self._action: TrajectoryActionProxy | None = None
+        server_name = str(self.get_parameter("action.server_name").value)
+        action_topic = self.resolve_topic_name(server_name) if server_name else ""
+        if server_name:
+            self._action = TrajectoryActionProxy(
+                self, server_name, str(self.get_parameter("action.controller").value), self.shape_whole,
+                on_refused=lambda err: self._reject(action_topic, err),
+                on_forwarded=lambda: self.forwarded.update(["action"]),
+                timeout=float(self.get_parameter("action.server_timeout").value))
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
         self.create_timer(float(self.get_parameter("diagnostics_period").value), self._publish_summary,
@@ -151,7 +172,8 @@ class ShaperNode(Node):
         self._publish_active()
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"
-            f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}")
+            f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}"
+            + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else ""))
 
     # ----------------------------------------------------------------- shaper changes
     def _describe(self) -> str:
@@ -359,6 +381,12 @@ class ShaperNode(Node):
             return
         self._traj_pub.publish(out)
         self.forwarded["trajectory"] += 1
+
+    def destroy_node(self) -> None:
+        if self._action is not None:  # action servers and clients are not destroyed with the node
+            self._action.destroy()
+            self._action = None
+        super().destroy_node()
 
     def _on_shape_trajectory(self, req, resp):
         try:

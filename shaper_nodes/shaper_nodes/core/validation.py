@@ -20,6 +20,7 @@ KINDS = (
     "non_increasing_time",
     "inconsistent_fields",
     "invalid_shaper",
+    "unsupported",
 )
 
 

@@ -1,0 +1,374 @@
+"""The shaper's FollowJointTrajectory action in front of a controller, over real DDS.
+
+A test controller plays joint_trajectory_controller: it serves the real
+control_msgs/action/FollowJointTrajectory interface, records each goal it receives, publishes a
+few feedback messages, and then succeeds, aborts with a given error, or holds the goal until it
+is cancelled or released. The shaper node, the controller and a client node share one
+SingleThreadedExecutor (the shaper's own run_node spins the same way); one test runs the installed
+shaper_node executable as a subprocess instead.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from action_msgs.msg import GoalStatus
+from builtin_interfaces.msg import Duration
+from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectoryPoint
+
+from shaper_nodes.conversions import duration_to_sec
+from shaper_nodes.core.fir import discretize
+from shaper_nodes.core.shapers import Mode, design
+from shaper_nodes.core.trajectory import shape_trajectory
+from shaper_nodes.shaper_node import ShaperNode
+
+pytestmark = pytest.mark.integration
+
+JOINTS = ["j1", "j2", "j3"]
+RATE = 100.0
+CONTROLLER = "/joint_trajectory_controller/follow_joint_trajectory"
+SERVER = "/shaper/follow_joint_trajectory"
+Goal, Result = FollowJointTrajectory.Goal, FollowJointTrajectory.Result
+
+
+class TestController:
+    """Plays joint_trajectory_controller's action server.
+
+    ``mode``: ``"succeed"``, ``"abort"`` (with ``abort_code``, ``abort_string``), or ``"hold"``
+    (until the goal is cancelled or :meth:`release` d). ``accept=False`` rejects every goal.
+    """
+
+    __test__ = False  # not a pytest class
+
+    def __init__(self, ctx, name: str = CONTROLLER, mode: str = "succeed", feedbacks: int = 3) -> None:
+        self.node = rclpy.create_node("test_controller", context=ctx)
+        self.mode, self.feedbacks, self.accept = mode, feedbacks, True
+        self.abort_code, self.abort_string = Result.PATH_TOLERANCE_VIOLATED, "j2 path error 0.3 rad"
+        self.goals: list[Goal] = []
+        self.cancels = 0
+        self._hold: dict[bytes, Future] = {}
+        self.server = ActionServer(self.node, FollowJointTrajectory, name, execute_callback=self._execute,
+                                   goal_callback=lambda _: GoalResponse.ACCEPT if self.accept else GoalResponse.REJECT,
+                                   cancel_callback=self._on_cancel)
+
+    def _on_cancel(self, handle) -> CancelResponse:
+        self.cancels += 1
+        self.release(handle)
+        return CancelResponse.ACCEPT
+
+    def release(self, handle=None) -> None:
+        for key, fut in self._hold.items():
+            if (handle is None or key == bytes(handle.goal_id.uuid)) and not fut.done():
+                fut.set_result(None)
+
+    async def _execute(self, handle) -> Result:
+        goal = handle.request
+        self.goals.append(goal)
+        for k in range(self.feedbacks):
+            fb = FollowJointTrajectory.Feedback(joint_names=list(goal.trajectory.joint_names))
+            fb.desired = goal.trajectory.points[k]
+            fb.actual = JointTrajectoryPoint(positions=[float(k)] * len(JOINTS))
+            fb.error = JointTrajectoryPoint(positions=[0.001 * k] * len(JOINTS))
+            fb.multi_dof_desired = MultiDOFJointTrajectoryPoint()
+            handle.publish_feedback(fb)
+        if self.mode == "hold":
+            self._hold[bytes(handle.goal_id.uuid)] = hold = Future()
+            await hold
+        if handle.is_cancel_requested:
+            handle.canceled()
+            return Result(error_code=Result.SUCCESSFUL, error_string="canceled at the controller")
+        if self.mode == "abort":
+            handle.abort()
+            return Result(error_code=self.abort_code, error_string=self.abort_string)
+        handle.succeed()
+        return Result(error_code=Result.SUCCESSFUL, error_string="")
+
+    def close(self) -> None:
+        self.server.destroy()
+        self.node.destroy_node()
+
+
+class Client:
+    """Our action client: one goal, its feedback, response and result."""
+
+    def __init__(self, rig, goal: Goal) -> None:
+        self.rig, self.feedback = rig, []
+        self.sent = rig.client.send_goal_async(goal, feedback_callback=lambda m: self.feedback.append(m.feedback))
+        rig.spin_until(self.sent.done, "goal response")
+        self.handle = self.sent.result()
+        self.result = self.handle.get_result_async() if self.handle.accepted else None
+
+    @property
+    def accepted(self) -> bool:
+        return self.handle.accepted
+
+    def wait_result(self):
+        self.rig.spin_until(self.result.done, "result")
+        res = self.result.result()
+        return res.status, res.result
+
+
+class Rig:
+    """Shaper node, test controller and client node in one executor."""
+
+    def __init__(self, ctx, controller: TestController | None, **params) -> None:
+        overrides = [Parameter("joint_names", value=JOINTS), Parameter("command_rate", value=RATE),
+                     Parameter("shaper.family", value="zv"), Parameter("shaper.frequency_hz", value=5.0),
+                     Parameter("shaper.damping_ratio", value=0.0), Parameter("error_throttle", value=0.0)]
+        overrides += [Parameter(k, value=v) for k, v in params.items()]
+        self.node = ShaperNode(context=ctx, parameter_overrides=overrides)
+        self.controller = controller
+        self.probe = rclpy.create_node("probe", context=ctx)
+        self.client = ActionClient(self.probe, FollowJointTrajectory, SERVER)
+        self.diag: list = []
+        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        for n in (self.node, self.probe) + ((controller.node,) if controller else ()):
+            self.ex.add_node(n)
+        self.spin_until(self.client.server_is_ready, "the shaper's action server")
+        if controller:
+            self.spin_until(self.node._action._client.server_is_ready, "the controller's action server")
+        self.spin_until(lambda: self.probe.count_publishers("/diagnostics") > 0, "diagnostics publisher")
+
+    def _on_diag(self, msg) -> None:
+        self.diag += [s for s in msg.status if s.name.endswith(": input")]
+
+    def spin_until(self, cond, what: str, timeout: float = 10.0) -> None:
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            self.ex.spin_once(timeout_sec=0.02)
+
+    def settle(self, seconds: float = 0.3) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=0.02)
+
+    def send(self, goal: Goal) -> Client:
+        return Client(self, goal)
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.client.destroy()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+        if self.controller:
+            self.controller.close()
+
+
+@pytest.fixture
+def controller(ros_context):
+    return TestController(ros_context)
+
+
+@pytest.fixture
+def rig(ros_context, controller):
+    r = Rig(ros_context, controller)
+    yield r
+    r.close()
+
+
+def trajectory(names=("j2", "j1", "j3"), points=((0.0, (0, 0, 0)), (0.5, (0.5, 1.0, 0.0)), (1.0, (1.0, 2.0, -1.0)))):
+    msg = JointTrajectory(joint_names=list(names))
+    for t, pos in points:
+        msg.points.append(JointTrajectoryPoint(positions=[float(p) for p in pos], time_from_start=Duration(
+            sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))))
+    return msg
+
+
+def goal_of(traj: JointTrajectory, **fields) -> Goal:
+    return Goal(trajectory=traj, **fields)
+
+
+def times_of(traj: JointTrajectory) -> np.ndarray:
+    return np.array([duration_to_sec(p.time_from_start) for p in traj.points])
+
+
+def assert_valid_for_jtc(traj: JointTrajectory) -> None:
+    """What joint_trajectory_controller checks, plus finiteness (which it does not check)."""
+    assert list(traj.joint_names) == JOINTS
+    assert len(traj.points) > 1 and np.all(np.diff(times_of(traj)) > 0)
+    for p in traj.points:
+        assert len(p.positions) == len(p.velocities) == len(p.accelerations) == len(JOINTS) and not len(p.effort)
+        assert np.all(np.isfinite([*p.positions, *p.velocities, *p.accelerations]))
+    assert list(traj.points[-1].velocities) == [0.0] * len(JOINTS)
+
+
+def test_goal_reaches_the_controller_shaped_and_the_result_and_feedback_come_back(rig, controller):
+    tolerances = dict(path_tolerance=[JointTolerance(name="j1", position=0.1)],
+                      goal_tolerance=[JointTolerance(name="j3", position=0.01, velocity=0.02)],
+                      goal_time_tolerance=Duration(sec=0, nanosec=500_000_000))
+    traj = trajectory()
+    client = rig.send(goal_of(traj, **tolerances))
+    assert client.accepted
+    status, result = client.wait_result()
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.error_code == Result.SUCCESSFUL
+
+    assert len(controller.goals) == 1
+    sent = controller.goals[0]
+    assert_valid_for_jtc(sent.trajectory)
+    # The same as shaping the input with the core directly (joint order j1 j2 j3, zv at 5 Hz).
+    fir = discretize(design("zv", [Mode.from_hz(5.0, 0.0)]), RATE, "split")
+    positions = np.array([[p.positions[1], p.positions[0], p.positions[2]] for p in traj.points])
+    expected = shape_trajectory(times_of(traj), positions, fir, RATE)
+    np.testing.assert_allclose(times_of(sent.trajectory), expected.times, atol=1e-9)
+    np.testing.assert_allclose([p.positions for p in sent.trajectory.points], expected.positions, atol=1e-12)
+    np.testing.assert_allclose([p.velocities for p in sent.trajectory.points], expected.velocities, atol=1e-9)
+    assert times_of(sent.trajectory)[-1] == pytest.approx(1.0 + 0.1 + 1 / RATE)  # + zv duration + 1 sample
+    np.testing.assert_allclose(sent.trajectory.points[-1].positions, [2.0, 1.0, -1.0], atol=1e-12)
+    # Tolerances and goal_time_tolerance unchanged; nothing multi-DOF.
+    assert sent.path_tolerance == tolerances["path_tolerance"]
+    assert sent.goal_tolerance == tolerances["goal_tolerance"]
+    assert sent.goal_time_tolerance == tolerances["goal_time_tolerance"]
+    assert not sent.multi_dof_trajectory.points
+
+    rig.spin_until(lambda: len(client.feedback) == 3, "three relayed feedback messages")
+    for k, fb in enumerate(client.feedback):
+        assert fb.desired == sent.trajectory.points[k] and list(fb.actual.positions) == [float(k)] * 3
+    assert rig.node.forwarded["action"] == 1
+
+
+def test_controller_abort_is_relayed_with_its_error(rig, controller):
+    controller.mode = "abort"
+    status, result = rig.send(goal_of(trajectory())).wait_result()
+    assert status == GoalStatus.STATUS_ABORTED
+    assert result.error_code == Result.PATH_TOLERANCE_VIOLATED and result.error_string == "j2 path error 0.3 rad"
+
+
+def test_cancel_reaches_the_controller_and_the_client_sees_canceled(rig, controller):
+    controller.mode = "hold"
+    client = rig.send(goal_of(trajectory()))
+    rig.spin_until(lambda: controller.goals and len(client.feedback) == 3, "goal at the controller, feedback")
+    cancel = client.handle.cancel_goal_async()
+    rig.spin_until(cancel.done, "cancel response")
+    assert len(cancel.result().goals_canceling) == 1
+    status, result = client.wait_result()
+    assert controller.cancels == 1
+    assert status == GoalStatus.STATUS_CANCELED and result.error_string == "canceled at the controller"
+
+
+def test_a_new_goal_preempts_the_running_one(rig, controller):
+    controller.mode = "hold"
+    first = rig.send(goal_of(trajectory()))
+    rig.spin_until(lambda: len(controller.goals) == 1, "first goal at the controller")
+    second = rig.send(goal_of(trajectory(points=((0.0, (1, 2, -1)), (0.4, (0, 0, 0))))))
+    status, result = first.wait_result()
+    assert status == GoalStatus.STATUS_CANCELED and controller.cancels == 1
+    rig.spin_until(lambda: len(controller.goals) == 2, "second goal at the controller")
+    controller.release()
+    status, _ = second.wait_result()
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    np.testing.assert_allclose(controller.goals[1].trajectory.points[-1].positions, [0.0, 0.0, 0.0], atol=1e-12)
+
+
+INVALID = [
+    (trajectory(names=("j1", "j2", "jX")), {}, "unknown_joint", "unknown joint names ['jX']"),
+    (trajectory(names=("j1", "j2")), {}, "missing_joint", "missing joint names ['j3']"),
+    (trajectory(points=((0.0, (0, 0, 0)), (0.5, (0, math.nan, 0)))), {}, "non_finite", "non-finite"),
+    (trajectory(points=((0.0, (0, 0, 0)), (0.5, (1, 1, 1)), (0.5, (2, 2, 2)))), {}, "non_increasing_time",
+     "not strictly increasing"),
+    (trajectory(points=((0.0, (0, 0)),)), {}, "wrong_size", "expected 3"),
+    (JointTrajectory(joint_names=JOINTS), {}, "empty", "no points"),
+    (trajectory(), {"path_tolerance": [JointTolerance(name="j1", position=math.inf)]}, "non_finite",
+     "path_tolerance of joint 'j1'"),
+]
+
+
+@pytest.mark.parametrize("traj, fields, kind, words", INVALID)
+def test_invalid_goal_is_rejected_with_a_reason_and_nothing_reaches_the_controller(rig, controller, traj, fields,
+                                                                                    kind, words):
+    client = rig.send(goal_of(traj, **fields))
+    assert not client.accepted
+    rig.spin_until(lambda: any(s.values[0].value == kind for s in rig.diag), f"diagnostic {kind}")
+    status = next(s for s in rig.diag if s.values[0].value == kind)
+    assert words in status.message and SERVER in status.message
+    assert rig.node.rejections[kind] == 1
+    rig.settle(0.2)
+    assert controller.goals == []
+    # the next valid goal goes through
+    assert rig.send(goal_of(trajectory())).wait_result()[0] == GoalStatus.STATUS_SUCCEEDED
+
+
+def test_multi_dof_goal_is_rejected(rig, controller):
+    goal = goal_of(trajectory())
+    goal.multi_dof_trajectory.joint_names = ["base"]
+    assert not rig.send(goal).accepted
+    rig.spin_until(lambda: any(s.values[0].value == "unsupported" for s in rig.diag), "diagnostic unsupported")
+    assert controller.goals == []
+
+
+def test_goal_rejected_by_the_controller_is_aborted_with_a_reason(rig, controller):
+    controller.accept = False
+    status, result = rig.send(goal_of(trajectory())).wait_result()
+    assert status == GoalStatus.STATUS_ABORTED and result.error_code == Result.INVALID_GOAL
+    assert "rejected" in result.error_string and CONTROLLER in result.error_string
+
+
+def test_absent_controller_aborts_with_a_clear_reason(ros_context):
+    rig = Rig(ros_context, None, **{"action.controller": "/nobody/follow_joint_trajectory",
+                                    "action.server_timeout": 0.3})
+    try:
+        t0 = time.monotonic()
+        status, result = rig.send(goal_of(trajectory())).wait_result()
+        assert status == GoalStatus.STATUS_ABORTED and result.error_code == Result.INVALID_GOAL
+        assert result.error_string == ("controller action server /nobody/follow_joint_trajectory not available"
+                                       " after 0.3 s; the goal was not sent")
+        assert time.monotonic() - t0 < 5.0
+    finally:
+        rig.close()
+
+
+def test_installed_shaper_node_forwards_goals(start_node, ros_context):
+    shaper = start_node("shaper_nodes", "shaper_node", {"joint_names": JOINTS, "command_rate": RATE,
+                                                          "shaper.family": "zvd", "shaper.frequency_hz": 4.0,
+                                                          "shaper.damping_ratio": 0.0})
+    controller = TestController(ros_context)
+    probe = rclpy.create_node("probe", context=ros_context)
+    client = ActionClient(probe, FollowJointTrajectory, SERVER)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(controller.node)
+    ex.add_node(probe)
+    try:
+        end = time.monotonic() + 30
+        while not client.server_is_ready():
+            assert time.monotonic() < end and shaper.running(), "shaper_node's action server did not appear"
+            ex.spin_once(timeout_sec=0.05)
+        sent = client.send_goal_async(goal_of(trajectory()))
+        ex.spin_until_future_complete(sent, timeout_sec=10)
+        assert sent.result().accepted
+        result = sent.result().get_result_async()
+        ex.spin_until_future_complete(result, timeout_sec=10)
+        assert result.result().status == GoalStatus.STATUS_SUCCEEDED
+        assert_valid_for_jtc(controller.goals[0].trajectory)
+        assert times_of(controller.goals[0].trajectory)[-1] == pytest.approx(1.0 + 0.25 + 1 / RATE)  # zvd 4 Hz
+    finally:
+        ex.shutdown()
+        client.destroy()
+        probe.destroy_node()
+        controller.close()
+
+
+def test_cancel_before_the_goal_reached_the_controller(ros_context):
+    rig = Rig(ros_context, None, **{"action.controller": "/nobody/follow_joint_trajectory",
+                                    "action.server_timeout": 30.0})
+    try:
+        client = rig.send(goal_of(trajectory()))
+        rig.settle(0.2)  # waiting for the absent controller
+        cancel = client.handle.cancel_goal_async()
+        status, result = client.wait_result()
+        assert cancel.done() and len(cancel.result().goals_canceling) == 1
+        assert status == GoalStatus.STATUS_CANCELED
+        assert result.error_string == "canceled before it was sent to the controller"
+    finally:
+        rig.close()
