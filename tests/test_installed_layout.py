@@ -17,7 +17,7 @@ from shaper_nodes.launching import NodeProcess, executable
 pytestmark = pytest.mark.integration
 
 NODES = [("shaper_nodes", "shaper_node", {"joint_names": ["a"]}), ("shaper_nodes", "recorder", None),
-         ("sim_plant_node", "sim_plant", {})]
+         ("shaper_nodes", "identifier", {}), ("sim_plant_node", "sim_plant", {})]
 
 
 @pytest.mark.parametrize("package", ["shaper_msgs", "shaper_nodes", "sim_plant_node"])
@@ -48,6 +48,13 @@ def test_demo_executable_help():
     out = subprocess.run([str(executable("sim_plant_node", "demo")), "--help"], capture_output=True, text=True,
                          timeout=60, env=os.environ)
     assert out.returncode == 0 and "--frequency" in out.stdout
+
+
+def test_design_cli_runs_from_its_installed_executable():
+    out = subprocess.run([str(executable("shaper_nodes", "shaper_design")), "compare", "--frequency", "10",
+                          "--damping", "0.02"], capture_output=True, text=True, timeout=120, env=os.environ)
+    assert out.returncode == 0, out.stderr
+    assert "zvd" in out.stdout and "2hump_ei" in out.stdout
 
 
 def test_bad_configuration_exits_with_a_clear_error(tmp_path, domain_id):
