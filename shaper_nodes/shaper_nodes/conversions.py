@@ -7,7 +7,14 @@ from builtin_interfaces.msg import Duration, Time
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 
-from .core.shapers import Mode, Shaper, ShaperError, design
+from .core.shapers import (
+    DEFAULT_INSENSITIVITY,
+    DEFAULT_VIBRATION_TOLERANCE,
+    Mode,
+    Shaper,
+    ShaperError,
+    design,
+)
 
 
 def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None = None) -> ShaperMsg:
@@ -20,7 +27,9 @@ def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None
     msg.times = shaper.times.tolist()
     msg.design_modes = [ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta) for m in shaper.modes]
     msg.derivative_order = int(shaper.params.get("derivative_order", 0))
+    # 0 where the family does not use the parameter (in requests 0 means the family default)
     msg.vibration_tolerance = float(shaper.params.get("vibration_tolerance", 0.0))
+    msg.insensitivity = float(shaper.params.get("insensitivity", 0.0))
     msg.source = source
     msg.revision = int(revision)
     return msg
@@ -28,6 +37,10 @@ def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None
 
 def shaper_from_msg(msg: ShaperMsg) -> Shaper:
     """Design or validate the shaper a shaper_msgs/Shaper asks for.
+
+    ``vibration_tolerance`` and ``insensitivity`` equal to 0 mean the family default (5 % and
+    0.4); any other value is passed on and checked by the design (families that do not use a
+    parameter ignore it).
 
     Raises
     ------
@@ -44,10 +57,17 @@ def shaper_from_msg(msg: ShaperMsg) -> Shaper:
         family,
         modes,
         derivative_order=int(msg.derivative_order) if family == "zvdn" else 1,
-        vibration_tolerance=float(msg.vibration_tolerance) if msg.vibration_tolerance > 0 else 0.05,
+        vibration_tolerance=_or_default(msg.vibration_tolerance, DEFAULT_VIBRATION_TOLERANCE),
+        insensitivity=_or_default(msg.insensitivity, DEFAULT_INSENSITIVITY),
         amplitudes=np.asarray(msg.amplitudes, dtype=float) if family == "custom" else None,
         times=np.asarray(msg.times, dtype=float) if family == "custom" else None,
     )
+
+
+def _or_default(value: float, default: float) -> float:
+    """A message parameter: 0 means the family default; anything else (NaN too) is checked later."""
+    x = float(value)
+    return default if x == 0.0 else x
 
 
 def duration_to_sec(d: Duration) -> float:

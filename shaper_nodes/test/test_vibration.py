@@ -3,12 +3,18 @@
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from shaper_nodes.core.fir import discretize, fir_impulses
 from shaper_nodes.core.shapers import Mode, design
-from shaper_nodes.core.vibration import percentage_vibration, residual_vibration, settle_time
+from shaper_nodes.core.vibration import (
+    insensitivity_width,
+    percentage_vibration,
+    residual_vibration,
+    settle_time,
+)
 
 
 @settings(max_examples=40, deadline=None)
@@ -69,3 +75,45 @@ def test_settle_time():
     p = np.array([0, 1, 2, 3, 4, 5, 5, 5, 5, 5], float)[:, None]
     assert settle_time(t, p, 0.0, 1e-9) == t[5]
     assert settle_time(t, p, 0.7, 1e-9) == 0.7
+
+
+@pytest.mark.parametrize("level", [0.01, 0.05, 0.2])
+def test_insensitivity_width_of_undamped_zv_and_zvd_is_the_analytic_one(level):
+    """Undamped, V_ZV = |cos(pi r / 2)| and V_ZVD = cos^2(pi r / 2), r = omega / omega_design."""
+    m = Mode(3.0, 0.0)
+    zv, zvd = design("zv", [m]), design("zvd", [m])
+    assert insensitivity_width(zv.amplitudes, zv.times, m.omega, 0.0, level) == pytest.approx(
+        4 * math.asin(level) / math.pi, abs=1e-9)
+    assert insensitivity_width(zvd.amplitudes, zvd.times, m.omega, 0.0, level) == pytest.approx(
+        4 * math.asin(math.sqrt(level)) / math.pi, abs=1e-9)
+
+
+@pytest.mark.parametrize("family, zeta", [("zvd", 0.1), ("ei", 0.05), ("3hump_ei", 0.1), ("si", 0.2)])
+def test_insensitivity_width_agrees_with_a_dense_scan(family, zeta):
+    """Brute force: the run of grid points with V <= 5 % (V_tol humps count as inside)."""
+    m = Mode(10.0, zeta)
+    s = design(family, [m])
+    r = np.linspace(0.0, 5.0, 500001)
+    inside = percentage_vibration(s.amplitudes, s.times, r * m.omega, zeta) <= 0.05 * (1 + 1e-6)
+    centre = 100000
+    out = np.flatnonzero(~inside)
+    lo = r[out[out < centre].max()]
+    hi = r[out[out > centre].min()] if np.any(out > centre) else 5.0
+    assert insensitivity_width(s.amplitudes, s.times, m.omega, zeta) == pytest.approx(hi - lo, abs=2e-5)
+
+
+def test_insensitivity_width_is_zero_when_the_design_frequency_is_above_the_level():
+    m = Mode(10.0, 0.05)
+    s = design("none")
+    assert insensitivity_width(s.amplitudes, s.times, m.omega, m.zeta) == 0.0
+    ei = design("ei", [m], vibration_tolerance=0.1)
+    assert insensitivity_width(ei.amplitudes, ei.times, m.omega, m.zeta, level=0.05) == 0.0
+    assert insensitivity_width(ei.amplitudes, ei.times, m.omega, m.zeta, level=0.1) > 0.4
+
+
+@pytest.mark.parametrize("kwargs", [dict(design_omega=0.0), dict(design_omega=float("nan")), dict(zeta=1.0),
+                                    dict(level=0.0), dict(level=float("nan"))])
+def test_insensitivity_width_rejects_bad_arguments(kwargs):
+    args = {"design_omega": 1.0, "zeta": 0.0, "level": 0.05, **kwargs}
+    with pytest.raises(ValueError):
+        insensitivity_width([0.5, 0.5], [0.0, math.pi], **args)
