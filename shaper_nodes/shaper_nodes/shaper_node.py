@@ -54,7 +54,8 @@ from .trajectory_action import TrajectoryActionProxy
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DESIGN_PARAMS = ("shaper.family", "shaper.frequency_hz", "shaper.damping_ratio",
-                 "shaper.derivative_order", "shaper.vibration_tolerance", "discretization")
+                 "shaper.derivative_order", "shaper.vibration_tolerance", "shaper.insensitivity",
+                 "discretization")
 TRAJ_FIELDS = ("positions", "velocities", "accelerations")
 
 
@@ -87,7 +88,10 @@ class ShaperNode(Node):
         self.declare_parameter("shaper.derivative_order", 2, _desc(
             "n of the ZV-D^n family (family zvdn): 0 = ZV, 1 = ZVD, 2 = ZVDD.", 0, 10, integer=True))
         self.declare_parameter("shaper.vibration_tolerance", 0.05, _desc(
-            "EI family: allowed percentage vibration at the design mode, fraction (0.05 = 5 %).", 0.001, 0.3))
+            "EI, multi-hump EI and SI families: tolerated percentage vibration, fraction (0.05 = 5 %).", 0.001, 0.3))
+        self.declare_parameter("shaper.insensitivity", 0.4, _desc(
+            "SI family: width of the band where V <= vibration_tolerance, fraction of the design frequency"
+            " (0.4 = +-20 %).", 0.01, 1.5))
         self.declare_parameter("discretization", "split", _desc(
             "Impulse times between samples: 'split' linearly between the two samples (default) or 'round'."))
         self.declare_parameter("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"], _desc(
@@ -198,7 +202,8 @@ class ShaperNode(Node):
                 f" (must be below rate / 4 = {self.rate / 4:g} Hz)")
         shaper = design(family, [Mode.from_hz(freq, float(val("shaper.damping_ratio")))],
                         derivative_order=int(val("shaper.derivative_order")),
-                        vibration_tolerance=float(val("shaper.vibration_tolerance")))
+                        vibration_tolerance=float(val("shaper.vibration_tolerance")),
+                        insensitivity=float(val("shaper.insensitivity")))
         return shaper, method
 
     def _validate_params(self, params: list[Parameter]) -> SetParametersResult:

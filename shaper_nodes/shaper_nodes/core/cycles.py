@@ -82,6 +82,7 @@ class CycleMonitor:
             return None
         if kind != END:
             return None
+        cycle, self._cycle = self._cycle, None  # the cycle is over whatever its data
         motion_end = self._motion_end if self._motion_end is not None else self._start
         acc_t = np.asarray(self._acc_t)
         acc = np.vstack(self._acc) if self._acc else np.zeros((0, 3))
@@ -91,6 +92,4 @@ class CycleMonitor:
         window_start = (settle_time(pos_t[after], pos[after], motion_end, self.settle_tolerance)
                         if after.any() else motion_end)
         residual = residual_vibration(acc_t, acc, window_start, float(t) + 1e-12, self.remove_mean)
-        result = CycleResult(self._cycle, self._start, motion_end, residual, acc_t, acc, pos_t, pos)
-        self._cycle = None
-        return result
+        return CycleResult(cycle, self._start, motion_end, residual, acc_t, acc, pos_t, pos)

@@ -195,7 +195,8 @@ def residual_vibration(
         Subtract the window mean per axis first (for sensors with a DC offset or gravity).
     """
     t = np.asarray(times, dtype=float)
-    a = np.asarray(accel, dtype=float).reshape(t.size, -1)
+    a = np.asarray(accel, dtype=float)
+    a = a.reshape(t.size, -1) if a.size else np.zeros((t.size, 1))
     sel = (t >= start) & (t < end)
     w = a[sel]
     if w.shape[0] == 0:

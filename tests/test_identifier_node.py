@@ -1,0 +1,135 @@
+"""The identifier node in-process with a probe over real DDS: stale, gappy or bad sensor data.
+
+A cycle whose accelerometer data is missing, has a gap or non-finite samples is reported and
+never identified from; a good cycle after it is.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from builtin_interfaces.msg import Time
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import Imu
+from shaper_msgs.msg import CycleEvent
+from shaper_msgs.srv import Identify
+
+from shaper_nodes.identifier_node import IMU_QOS, IdentifierNode
+
+pytestmark = pytest.mark.integration
+RATE = 200.0  # Hz
+HZ, ZETA = 4.0, 0.03
+
+
+def stamp(t: float) -> Time:
+    ns = int(round(t * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+class Rig:
+    def __init__(self, ctx):
+        self.node = IdentifierNode(context=ctx, parameter_overrides=[Parameter("min_samples", value=50)])
+        self.probe = rclpy.create_node("probe", context=ctx)
+        self.imu = self.probe.create_publisher(Imu, "/tip_imu", IMU_QOS)
+        self.events = self.probe.create_publisher(CycleEvent, "/cycle_events", 100)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.node)
+        self.ex.add_node(self.probe)
+        self.spin_until(lambda: self.imu.get_subscription_count() and self.events.get_subscription_count(),
+                        "discovery")
+        self.t = 0.0
+
+    def spin_until(self, cond, what, timeout=20.0):
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            self.ex.spin_once(timeout_sec=0.02)
+
+    def event(self, kind: int, cycle: int) -> None:
+        msg = CycleEvent(event=kind, cycle=cycle)
+        msg.header.stamp = stamp(self.t)
+        self.events.publish(msg)
+
+    def cycle(self, cycle: int, accel=None, seconds: float = 2.0) -> None:
+        """One cycle: START, MOTION_END, then ``accel(t)`` sampled at RATE (None: no samples), END."""
+        self.event(CycleEvent.START, cycle)
+        self.t += 0.1
+        self.event(CycleEvent.MOTION_END, cycle)
+        self.spin_until(lambda: self.node.monitor.in_cycle, "START")
+        t0 = self.t
+        for k in range(int(seconds * RATE)):
+            t = t0 + k / RATE
+            value = None if accel is None else accel(t - t0)
+            if value is not None:
+                msg = Imu()
+                msg.header.stamp = stamp(t)
+                msg.linear_acceleration.x = float(value)
+                self.imu.publish(msg)
+            if k % 20 == 0:
+                self.ex.spin_once(timeout_sec=0.0)
+        self.t = t0 + seconds
+        self.settle()
+        self.event(CycleEvent.END, cycle)
+        self.spin_until(lambda: not self.node.monitor.in_cycle, "END")
+
+    def settle(self, seconds=0.3):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=0.02)
+
+    def identify(self, **fields) -> Identify.Response:
+        cli = self.probe.create_client(Identify, "/identifier/identify")
+        self.spin_until(cli.service_is_ready, "service")
+        fut = cli.call_async(Identify.Request(**fields))
+        self.spin_until(fut.done, "answer")
+        return fut.result()
+
+    def close(self):
+        self.ex.shutdown()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+
+
+def decay(t: float) -> float:
+    w = 2 * math.pi * HZ
+    return 5.0 * math.exp(-ZETA * w * t) * math.cos(w * math.sqrt(1 - ZETA**2) * t)
+
+
+@pytest.fixture
+def rig(ros_context):
+    r = Rig(ros_context)
+    yield r
+    r.close()
+
+
+def test_missing_gappy_and_non_finite_data_are_reported_and_skipped(rig):
+    rig.cycle(0, accel=None)
+    rig.cycle(1, accel=lambda t: None if 0.8 < t < 1.1 else decay(t))
+    rig.cycle(2, accel=lambda t: math.nan if 0.5 < t < 0.52 else decay(t))
+    assert len(rig.node.cycles) == 0
+    assert len(rig.node.skipped) == 3, rig.node.skipped
+    assert "0 accelerometer samples" in rig.node.skipped[0]
+    assert "gap" in rig.node.skipped[1] and "stale" in rig.node.skipped[1]
+    assert "non-finite" in rig.node.skipped[2]
+    refused = rig.identify()
+    assert not refused.success and "no finished cycle" in refused.message
+
+    rig.cycle(3, accel=decay)  # the node kept running and learns from the next good cycle
+    assert [r.cycle for r, _ in rig.node.cycles] == [3]
+    resp = rig.identify(apply=False)
+    assert resp.success, resp.message
+    assert not resp.applied
+    omega = np.array([m.natural_frequency for m in resp.estimate.modes])
+    assert np.min(np.abs(omega / (2 * math.pi * HZ) - 1)) < 0.02, resp.message
+
+
+def test_bad_requests_are_refused_with_the_reason(rig):
+    rig.cycle(0, accel=decay)
+    assert not rig.identify(method="nope").success
+    bad = rig.identify(target_vibration=1.5)
+    assert not bad.success and "target_vibration" in bad.message
