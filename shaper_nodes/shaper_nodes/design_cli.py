@@ -229,8 +229,8 @@ def _cmd_show(args: argparse.Namespace) -> str:
         }
     if args.json:
         return json.dumps(doc, indent=2)
-    params = ", ".join(f"{k}={v:g}" for k, v in doc["params"].items()) or "none"
-    out = [f"family {shaper.family} ({params}); {doc['damping_assumed']}", ""]
+    params = ", ".join(f"{k}={v:g}" for k, v in doc["params"].items())
+    out = [f"family {shaper.family}{f' ({params})' if params else ''}; {doc['damping_assumed']}", ""]
     out.append(_table(("#", "time (s)", "amplitude"),
                       [(i, f"{t:.6f}", f"{a:.6f}") for i, (a, t) in enumerate(zip(shaper.amplitudes, shaper.times))]))
     out += ["", f"duration {shaper.duration:.6f} s", ""]
