@@ -50,27 +50,16 @@ class UsageError(Exception):
     """Bad command-line input; the message names the problem (exit status 2)."""
 
 
-def _positive(what: str):  # noqa: ANN202 - argparse type factory
+def _number(what: str, positive: bool = False):  # noqa: ANN202 - argparse type factory
+    """An argparse type: a finite float (and > 0 if ``positive``), else an error naming ``what``."""
+
     def parse(text: str) -> float:
         try:
             x = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{what} must be a number, got {text!r}") from None
-        if not (math.isfinite(x) and x > 0.0):
-            raise argparse.ArgumentTypeError(f"{what} must be finite and > 0, got {text!r}")
-        return x
-
-    return parse
-
-
-def _finite(what: str):  # noqa: ANN202 - argparse type factory
-    def parse(text: str) -> float:
-        try:
-            x = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what} must be a number, got {text!r}") from None
-        if not math.isfinite(x):
-            raise argparse.ArgumentTypeError(f"{what} must be finite, got {text!r}")
+        if not (math.isfinite(x) and (x > 0.0 or not positive)):
+            raise argparse.ArgumentTypeError(f"{what} must be finite{' and > 0' if positive else ''}, got {text!r}")
         return x
 
     return parse
@@ -90,13 +79,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     def common(p: argparse.ArgumentParser, repeat_frequency: bool) -> None:
         action = "append" if repeat_frequency else "store"
-        p.add_argument("--frequency", "-f", type=_positive("--frequency (Hz)"), required=True, action=action,
+        p.add_argument("--frequency", "-f", type=_number("--frequency (Hz)", positive=True), required=True, action=action,
                        help="natural frequency of the mode, Hz" + (" (repeat for several modes)" * repeat_frequency))
-        p.add_argument("--damping", "-z", type=_finite("--damping"), required=True, action=action,
+        p.add_argument("--damping", "-z", type=_number("--damping"), required=True, action=action,
                        help="damping ratio, in [0, 0.95]" + (" (one for all, or one per --frequency)" * repeat_frequency))
-        p.add_argument("--tolerance", type=_finite("--tolerance"), default=DEFAULT_VIBRATION_TOLERANCE,
+        p.add_argument("--tolerance", type=_number("--tolerance"), default=DEFAULT_VIBRATION_TOLERANCE,
                        help="vibration tolerance V_tol of ei, 2hump_ei, 3hump_ei, si, fraction (default %(default)s)")
-        p.add_argument("--insensitivity", type=_finite("--insensitivity"), default=DEFAULT_INSENSITIVITY,
+        p.add_argument("--insensitivity", type=_number("--insensitivity"), default=DEFAULT_INSENSITIVITY,
                        help="si band width / design frequency (default %(default)s)")
         p.add_argument("--derivative-order", type=int, default=1, help="n of zvdn (default %(default)s)")
         p.add_argument("--json", action="store_true", help="print one JSON document")
@@ -107,9 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
     p_show = sub.add_parser("show", help="impulses, duration, V and insensitivity of one design")
     p_show.add_argument("family", help="family name (see 'list')")
     common(p_show, repeat_frequency=True)
-    p_show.add_argument("--amplitudes", type=_finite("--amplitudes"), nargs="+", help="custom family: amplitudes")
-    p_show.add_argument("--times", type=_finite("--times"), nargs="+", help="custom family: impulse times, s")
-    p_show.add_argument("--rate", type=_positive("--rate (Hz)"), help="command rate, Hz: also show the discretised FIR")
+    p_show.add_argument("--amplitudes", type=_number("--amplitudes"), nargs="+", help="custom family: amplitudes")
+    p_show.add_argument("--times", type=_number("--times"), nargs="+", help="custom family: impulse times, s")
+    p_show.add_argument("--rate", type=_number("--rate (Hz)", positive=True), help="command rate, Hz: also show the discretised FIR")
     p_show.add_argument("--discretization", choices=("split", "round"), default="split",
                         help="impulse times between samples (default %(default)s)")
 
@@ -121,7 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     common(p_plot, repeat_frequency=False)
     p_plot.add_argument("--families", nargs="+", default=list(DEFAULT_FAMILIES), help="families to plot")
     p_plot.add_argument("--out", required=True, help="output image file (.png)")
-    p_plot.add_argument("--max-ratio", type=_positive("--max-ratio"), default=2.0,
+    p_plot.add_argument("--max-ratio", type=_number("--max-ratio", positive=True), default=2.0,
                         help="plot up to this multiple of the frequency (default %(default)s)")
     return parser
 

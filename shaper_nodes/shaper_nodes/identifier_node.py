@@ -25,7 +25,6 @@ import math
 from collections import deque
 
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -39,6 +38,7 @@ from .core.cycles import CycleMonitor, CycleResult
 from .core.identification import METHODS, IdentificationError, identify_records, recommend_shaper
 from .core.shapers import ShaperError, none_shaper
 from .node_main import run_node
+from .parameters import describe as _desc
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: sensor QoS with a deep queue: identification runs in this node's executor, and the
@@ -48,17 +48,6 @@ IMU_QOS = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=Re
 #: a gap between two accelerometer samples longer than this many median periods marks the
 #: cycle's data as incomplete
 MAX_GAP_PERIODS = 5.0
-
-
-def _desc(text: str, lo: float | None = None, hi: float | None = None, *, integer: bool = False,
-          read_only: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text, read_only=read_only)
-    if lo is not None and hi is not None:
-        if integer:
-            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
-        else:
-            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-    return d
 
 
 def check_record(result: CycleResult, min_samples: int) -> tuple[np.ndarray, np.ndarray]:

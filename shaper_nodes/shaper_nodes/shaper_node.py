@@ -34,7 +34,7 @@ from collections import Counter
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -50,6 +50,7 @@ from .core.shapers import FAMILIES, Mode, Shaper, ShaperError, design
 from .core.trajectory import shape_trajectory
 from .core.validation import InputError, finite_array, joint_permutation, strictly_increasing
 from .node_main import run_node
+from .parameters import describe as _desc
 from .trajectory_action import TrajectoryActionProxy
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -57,17 +58,6 @@ DESIGN_PARAMS = ("shaper.family", "shaper.frequency_hz", "shaper.damping_ratio",
                  "shaper.derivative_order", "shaper.vibration_tolerance", "shaper.insensitivity",
                  "discretization")
 TRAJ_FIELDS = ("positions", "velocities", "accelerations")
-
-
-def _desc(text: str, lo: float | None = None, hi: float | None = None, *, integer: bool = False,
-          read_only: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text, read_only=read_only)
-    if lo is not None and hi is not None:
-        if integer:
-            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
-        else:
-            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-    return d
 
 
 class ShaperNode(Node):

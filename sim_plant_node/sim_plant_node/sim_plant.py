@@ -27,7 +27,7 @@ import math
 import time
 
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -43,16 +43,10 @@ from shaper_nodes.core.validation import InputError, finite_array
 
 from .plants import CycleTask, MckPlant
 from shaper_nodes.node_main import run_node
+from shaper_nodes.parameters import describe as _desc
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness")
-
-
-def _desc(text: str, lo: float | None = None, hi: float | None = None, read_only: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text, read_only=read_only)
-    if lo is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-    return d
 
 
 def _stamp(t: float):

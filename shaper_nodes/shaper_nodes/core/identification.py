@@ -397,18 +397,25 @@ def _budget(rec: _Record, theta: np.ndarray, max_modes: int) -> bool:
     return inside < max_modes and m < max_modes + (NUISANCE_MODES if rec.limited else 0)
 
 
+def _next_peak(model: _Model, rec: _Record, theta: np.ndarray, fmin: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float | None]:
+    """The residual of the modes so far, its spectrum, and its strongest new peak (Hz) or None."""
+    resid = model.solve(theta)[2] if theta.size else rec.y
+    freqs, power = _spectrum(resid, rec.dt)
+    peaks = [f for f in _peaks(freqs, power, rec.search, fmin) if not _near(f, theta, 0.5 * fmin)]
+    return resid, freqs, power, (peaks[0] if peaks else None)
+
+
 def _method_fit(rec: _Record, max_modes: int) -> tuple[np.ndarray, np.ndarray | None]:
     model = _Model(rec)
     theta = np.zeros(0)
     rss = model.rss_null()
     fmin = 1.0 / rec.t[-1]
     while _budget(rec, theta, max_modes):
-        resid = model.solve(theta)[2] if theta.size else rec.y
-        freqs, power = _spectrum(resid, rec.dt)
-        peaks = [f for f in _peaks(freqs, power, rec.search, fmin) if not _near(f, theta, 0.5 * fmin)]
-        if not peaks:
+        peak = _next_peak(model, rec, theta, fmin)[3]
+        if peak is None:
             break
-        cand = _fit_poles(model, _start_for(model, theta, peaks[0], rec), rec)
+        cand = _fit_poles(model, _start_for(model, theta, peak, rec), rec)
         rss_new = model.rss(cand)
         m = cand.size // 2
         if rss - rss_new <= _penalty(model) * _sigma2(model, rss_new, m):
@@ -547,12 +554,10 @@ def _method_spectral(rec: _Record, max_modes: int) -> tuple[np.ndarray, np.ndarr
     fmin = 1.0 / rec.t[-1]
     rss = model.rss_null()
     while _budget(rec, theta, max_modes):
-        resid = model.solve(theta)[2] if theta.size else rec.y
-        freqs, power = _spectrum(resid, rec.dt)
-        peaks = [f for f in _peaks(freqs, power, rec.search, fmin) if not _near(f, theta, 0.5 * fmin)]
-        if not peaks:
+        resid, freqs, power, peak = _next_peak(model, rec, theta, fmin)
+        if peak is None:
             break
-        est = _spectral_mode(rec, resid, peaks[0], freqs, power)
+        est = _spectral_mode(rec, resid, peak, freqs, power)
         if est is None:
             break
         s, w, ss, sw = est
