@@ -6,7 +6,8 @@ arrays at the edge and call these functions and classes.
 Modules
 -------
 shapers
-    Impulse sequences (ZV, ZVD, ZV-D^n, EI, custom) behind a registry of named designs.
+    Impulse sequences (ZV, ZVD, ZV-D^n, MZV, EI, two- and three-hump EI, SI, custom) behind a
+    registry of named designs.
 vibration
     The percentage vibration V(omega, zeta) of an impulse sequence, sensitivity curves, and
     residual-vibration metrics of measured cycles.
@@ -16,6 +17,11 @@ fir
 trajectory
     Whole-trajectory shaping (resampling, convolution, derivatives) for
     joint_trajectory_controller.
+identification
+    Vibration modes (frequency, damping, uncertainty) from free decays, and the shaper
+    recommendation by worst-case vibration over the uncertainty band.
+cycles
+    Per-cycle buffering and the residual-vibration window every component measures alike.
 validation
     Checks of incoming data with errors that name the problem.
 """
