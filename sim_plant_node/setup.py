@@ -9,7 +9,9 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", ["config/sim_plant.yaml"]),
+        ("share/" + package_name + "/config", ["config/sim_plant.yaml", "config/list_case1.yaml",
+                                               "config/list_case2.yaml", "config/list_case3.yaml",
+                                               "config/list_case4.yaml"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

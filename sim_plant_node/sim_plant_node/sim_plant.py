@@ -4,10 +4,20 @@ Stands in for a robot and its ros2_control forward position controller in tests 
 
 Each step the task runner publishes the raw setpoint (``topics.command_out``, to the shaper),
 the plant takes the shaped setpoint (``topics.command_in``, std_msgs/Float64MultiArray as
-forward_command_controller does), integrates one period exactly, and publishes
-``/joint_states`` (joint = base position x1 and velocity), ``~/tip_state`` (tip x2 and its
-velocity), the tip accelerometer (sensor_msgs/Imu, m/s^2, configurable noise and bias), cycle
-events and a per-cycle report.
+forward_command_controller does), integrates one period, and publishes ``/joint_states``
+(joint = base position and velocity, which for every model is the applied setpoint and its
+slope), ``~/tip_state`` (tip position and velocity), the tip accelerometer (sensor_msgs/Imu,
+m/s^2, configurable noise and bias), cycle events and a per-cycle report.
+
+Plant models (parameter ``plant.model``, see sim_plant_node.plants and docs/list_plants.md)
+------------------------------------------------------------------------------------------
+mck
+    Base-driven m-c-k flexible joint (spring and damper between base and tip), exact.
+list_linear, list_time_varying, list_hardening, list_saturation
+    The four plants of the LIST simulations (seed 003): damper to ground; mass that doubles
+    over the first second of every cycle; cubic hardening spring ``plant.stiffness_cubic``;
+    P loop ``plant.gain`` with actuator force limit ``plant.force_limit``. The time-varying
+    mass follows the time since the current cycle's START event.
 
 Modes (parameter ``mode``)
 --------------------------
@@ -41,12 +51,16 @@ from std_srvs.srv import Trigger
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.validation import InputError, finite_array
 
-from .plants import CycleTask, MckPlant
+from .plants import (LIST_FORCE_LIMIT, LIST_GAIN, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
+                     MckPlant, make_plant)
 from shaper_nodes.node_main import run_node
 from shaper_nodes.parameters import describe as _desc
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness")
+# per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant
+PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
+                "plant.force_limit")
+PLANT_KEYS = ("plant.model",) + PLANT_PARAMS
 
 
 def _stamp(t: float):
@@ -66,9 +80,23 @@ class SimPlantNode(Node):
         d("rate", 500.0, _desc("Integration and command rate, Hz.", 1.0, 10000.0, read_only=True))
         d("mode", "lockstep", _desc("'lockstep' (simulated time, /clock) or 'realtime' (wall clock).", read_only=True))
         d("lockstep_timeout", 2.0, _desc("Lockstep: wall time to wait for the shaped setpoint, s.", 0.01, 600.0))
-        d("plant.mass", [1.0], _desc("Tip mass per joint (one value for all), kg (or kg m^2)."))
-        d("plant.damping", [0.6283185307179586], _desc("Damping per joint, N s/m (or N m s/rad)."))
-        d("plant.stiffness", [986.96044010893586], _desc("Stiffness per joint, N/m (or N m/rad)."))
+        d("plant.model", "mck", _desc(
+            "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
+            " 'list_time_varying', 'list_hardening', 'list_saturation'. Changes live, keeping the state."))
+        d("plant.mass", [1.0], _desc(
+            "Tip mass per joint (one value for all), kg (or kg m^2), > 0; list_time_varying: the mass at a"
+            " cycle's START, m(t) = mass (1 + t) for t < 1 s, 2 mass after."))
+        d("plant.damping", [0.6283185307179586], _desc(
+            "Damping per joint, N s/m (or N m s/rad), >= 0: between base and tip for mck, to ground for list_*."))
+        d("plant.stiffness", [986.96044010893586], _desc(
+            "Linear stiffness per joint, N/m (or N m/rad), > 0 (unused by list_saturation)."))
+        d("plant.stiffness_cubic", [LIST_STIFFNESS_CUBIC], _desc(
+            "list_hardening: cubic stiffness k3 per joint, spring force k d + k3 d^3 (d = u - x),"
+            " N/m^3 (or N m/rad^3), >= 0."))
+        d("plant.gain", [LIST_GAIN], _desc(
+            "list_saturation: P gain Kp per joint, force Kp (u - x) before the limit, N/m (or N m/rad), > 0."))
+        d("plant.force_limit", [LIST_FORCE_LIMIT], _desc(
+            "list_saturation: actuator force limit f_max per joint, N (or N m), > 0 (.inf: none)."))
         d("imu.axes", [0, 1, 2], _desc("Joint index whose tip acceleration each IMU axis x, y, z measures (-1: none)."))
         d("imu.noise_stddev", 0.0, _desc("Accelerometer white noise, m/s^2 (one sigma).", 0.0, 1000.0))
         d("imu.bias", [0.0, 0.0, 0.0], _desc("Accelerometer constant offset per axis, m/s^2."))
@@ -120,6 +148,7 @@ class SimPlantNode(Node):
 
         self.step_index = 0
         self.sim_time = 0.0
+        self._cycle_start_step: int | None = None  # step_index at the current cycle's START
         self.task: CycleTask | None = None
         self._preroll_left = 0
         self._raw = np.zeros(self.n)
@@ -139,30 +168,45 @@ class SimPlantNode(Node):
         if self.get_parameter("task.autostart").value:
             self._start_task()
         self.get_logger().info(
-            f"{self.n} joints, modes " + ", ".join(
+            f"{self.n} joints, plant {self.get_parameter('plant.model').value}, modes " + ", ".join(
                 f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(self.plant.natural_frequency,
                                                                           self.plant.damping_ratio))
             + f", {self.mode} at {self.rate:g} Hz")
 
     # ----------------------------------------------------------------- configuration
-    def _vector(self, name: str, overrides: dict) -> np.ndarray:
+    def _vector(self, name: str, overrides: dict, allow_inf: bool = False) -> np.ndarray:
         v = np.asarray(overrides.get(name, self.get_parameter(name).value), dtype=float).ravel()
         if v.size == 1:
             v = np.full(self.n, v[0])
-        if v.size != self.n or not np.all(np.isfinite(v)):
-            raise ValueError(f"{name} needs 1 or {self.n} finite values, got {v.tolist()}")
+        finite = np.isfinite(v) | (allow_inf & np.isinf(v))
+        if v.size != self.n or not np.all(finite):
+            kind = "" if allow_inf else "finite "
+            raise ValueError(f"{name} needs 1 or {self.n} {kind}values, got {v.tolist()}")
         return v
 
     def _pose(self, name: str, overrides: dict) -> np.ndarray:
         return self._vector(name, overrides)
 
-    def _make_plant(self, overrides: dict) -> MckPlant:
-        return MckPlant(*(self._vector(p, overrides) for p in PLANT_PARAMS), rate=self.rate)
+    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant:
+        model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
+        if model not in PLANT_MODELS:
+            raise ValueError(f"plant.model must be one of {', '.join(PLANT_MODELS)}; got {model!r}")
+        m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
+        try:
+            return make_plant(model, m, c, k, self.rate, stiffness_cubic=k3, gain=kp, force_limit=f_max)
+        except ValueError as err:
+            raise ValueError(f"plant.{err}") from None  # the plant names its argument first
+
+    def _cycle_time(self) -> float | None:
+        """Time since the current cycle's START at the present step, s (None before any)."""
+        if self._cycle_start_step is None:
+            return None
+        return (self.step_index - self._cycle_start_step) / self.rate
 
     def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
         try:
-            new = self._make_plant(changes) if any(p in changes for p in PLANT_PARAMS) else None
+            new = self._make_plant(changes) if any(p in changes for p in PLANT_KEYS) else None
             for pose in ("task.start", "task.goal"):
                 if pose in changes:
                     self._pose(pose, changes)
@@ -170,6 +214,7 @@ class SimPlantNode(Node):
             return SetParametersResult(successful=False, reason=str(err))
         if new is not None:  # all checks passed: takes effect at the next step
             new.state = self.plant.state.copy()
+            new.cycle_time = self.plant.cycle_time
             self.plant = new
         return SetParametersResult(successful=True)
 
@@ -185,6 +230,7 @@ class SimPlantNode(Node):
         except ValueError as err:
             return False, str(err)
         self._preroll_left = int(round(float(g("task.preroll")) * self.rate))
+        self._cycle_start_step = None  # the preroll belongs to no cycle
         self._preroll_total = self._preroll_left
         if self.mode == "lockstep" and self._waiting_since is None:
             self._publish_next()
@@ -239,6 +285,8 @@ class SimPlantNode(Node):
                          goal_positions=ev.goal.tolist())
         msg.header.stamp = _stamp(t)
         self._event_pub.publish(msg)
+        if ev.kind == CycleEvent.START:
+            self._cycle_start_step = self.step_index  # the next period is the cycle's first
         result = self._monitor.event(ev.kind, ev.cycle, t)
         if result is not None:
             self._report(result)
@@ -256,7 +304,7 @@ class SimPlantNode(Node):
 
     def _integrate(self, command: np.ndarray) -> None:
         self._applied = command
-        self.plant.step(command)
+        self.plant.step(command, cycle_time=self._cycle_time())
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
         t = self._now()
