@@ -47,6 +47,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--fir-repeats", type=int, default=5, help="passes per FIR method, best reported (default 5)")
     p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
     p.add_argument("--skip-fir", action="store_true", help="skip the FIR throughput measurement")
+    p.add_argument("--skip-list", action="store_true", help="skip the LIST update timing")
     p.add_argument("--json", metavar="PATH", type=pathlib.Path, help="also write the figures to this JSON file")
     args = p.parse_args(argv)
     if not (args.seconds > 0 and args.rate > 0 and args.joints >= 1 and args.fir_repeats >= 1):
@@ -181,6 +182,10 @@ def main(argv: list[str] | None = None) -> int:
             from .fir_throughput import run as run_fir
 
             report["fir"] = run_fir(joints=args.joints, repeats=args.fir_repeats, progress=_progress)
+        if not args.skip_list:
+            from .list_update import run as run_list
+
+            report["list_update"] = run_list(progress=_progress)
     except KeyboardInterrupt:
         _progress("interrupted")
         return 130
@@ -195,6 +200,11 @@ def main(argv: list[str] | None = None) -> int:
         print()
     if "fir" in report:
         print_fir(report["fir"])
+        print()
+    if "list_update" in report:
+        from .list_update import print_table as print_list
+
+        print_list(report["list_update"])
         print()
     print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
     if args.json:
