@@ -9,7 +9,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml"]),
+        ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml", "config/learner.yaml"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -22,6 +22,8 @@ setup(
             "shaper_node = shaper_nodes.shaper_node:main",
             "recorder = shaper_nodes.recorder:main",
             "identifier = shaper_nodes.identifier_node:main",
+            "learner = shaper_nodes.learner_node:main",
+            "list_replay = shaper_nodes.list_replay:main",
             "shaper_design = shaper_nodes.design_cli:main",
         ],
     },
