@@ -14,6 +14,9 @@ topics.imu (sensor_msgs/Imu, sensor QoS), topics.cycle_events, ``<shaper>/active
     non-finite accelerometer data is reported and skipped, never learned from.
 ``<shaper>/set_shaper``
     Where the learned shaper goes (family "custom", source "learner").
+~/hold (std_srvs/SetBool)
+    true: stop exploring and apply the best parameters so far (held until false, or until M at
+    them rises above ``list.rollback_factor`` times the best); false: learn again.
 ~/reports (shaper_msgs/CycleReport)
     One per finished cycle, published after the new shaper was accepted: M (residual_rms and
     metric "M"), phi, the parameters used and next, the action taken; a skipped cycle has the
@@ -40,10 +43,12 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from sensor_msgs.msg import Imu
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
+from std_srvs.srv import SetBool
 
 from .conversions import shaper_to_msg, time_to_sec
 from .core.list_learning import ListConfig, ListError, ListLearner, ListParams
@@ -111,6 +116,8 @@ class LearnerNode(Node):
         d("stale_after", 0.1, describe(
             "A cycle whose last accelerometer sample is older than this at END is stale, s.", 0.0, 60.0,
             read_only=True))
+        d("end_wait", 0.5, describe(
+            "At a cycle's END, wait up to this long for accelerometer samples stamped up to END, s.", 0.0, 10.0))
         d("service_timeout", 5.0, describe("Time to wait for the shaper node's services, s.", 0.1, 600.0))
         defaults = ListConfig()
         d("list.structure", defaults.structure, describe("Impulse structure: 'zv2' (the paper's 2 impulses) or"
@@ -137,6 +144,9 @@ class LearnerNode(Node):
             "Relative step below which a parameter counts as converged.", 0.0, 1.0, read_only=True))
         d("list.rollback_factor", defaults.rollback_factor, describe(
             "Roll back to the best parameters when M exceeds this times the best M.", 1.0, 100.0, read_only=True))
+        d("list.patience", defaults.patience, describe(
+            "Hold at the best parameters after this many trials in a row without a better M (0 = never).",
+            0, 1000, integer=True, read_only=True))
         d("list.saturation", defaults.saturation if math.isfinite(defaults.saturation) else 0.0, describe(
             "Accelerometer full scale, m/s^2: a cycle reaching it is rejected (0 = no limit).", 0.0, 1e6,
             read_only=True))
@@ -165,6 +175,7 @@ class LearnerNode(Node):
         self._set_shaper = self.create_client(SetShaper, f"{shaper}/set_shaper",
                                               callback_group=MutuallyExclusiveCallbackGroup())
         self._report_pub = self.create_publisher(CycleReport, "~/reports", 10)
+        self.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup())
         # steady clock: with use_sim_time, ROS time stands still while the lockstep plant is idle
         self._startup = self.create_timer(0.2, self._send_initial, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._waiting_logged = False
@@ -244,8 +255,36 @@ class LearnerNode(Node):
     def _on_active(self, msg: ShaperMsg) -> None:
         self.session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
 
+    async def _sleep(self, seconds: float) -> None:
+        """Wait without blocking the executor (steady clock; other callback groups keep running)."""
+        done = Future()
+        timer = self.create_timer(seconds, lambda: done.done() or done.set_result(True),
+                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+        await done
+        self.destroy_timer(timer)
+
+    async def _on_hold(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
+        learner = self.session.learner
+        if req.data:
+            params = learner.hold()
+            ok, why = await self._send(params) if params is not None else (True, "")
+            resp.success = ok
+            resp.message = f"holding at {self._describe(params)}" + ("" if ok else f"; shaper node refused: {why}")
+        else:
+            learner.resume()
+            resp.success, resp.message = True, "learning resumed"
+        if self.state_path is not None:
+            save_state(self.state_path, learner, self.structure)
+        self.get_logger().info(resp.message)
+        return resp
+
     async def _on_event(self, msg: CycleEvent) -> None:
-        result = self.session.on_event(msg.event, msg.cycle, time_to_sec(msg.header.stamp),
+        stamp = time_to_sec(msg.header.stamp)
+        if msg.event == CycleEvent.END:  # the last samples of the cycle may still be on their way
+            deadline = time.monotonic() + float(self.get_parameter("end_wait").value)
+            while self.session.latest_imu < stamp and time.monotonic() < deadline:
+                await self._sleep(0.01)
+        result = self.session.on_event(msg.event, msg.cycle, stamp,
                                        msg.start_positions, msg.goal_positions)
         if result is None:
             return

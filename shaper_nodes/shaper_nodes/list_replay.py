@@ -21,6 +21,7 @@ import sys
 from collections.abc import Mapping
 
 from .core.list_learning import ListError, ListLearner, ListParams
+from .core.cycles import END
 from .core.list_session import ListSession, SessionResult, list_config
 from .core.shapers import Mode
 
@@ -69,22 +70,38 @@ def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
         missing = [t for t in names.values() if t not in found]
         if missing:
             raise ListError(f"bag {path} has no messages on {missing} (topics: {sorted(reader.topics)})")
+        pending = None  # an END waits, as in the node, until a sample stamped at or after it arrives
+
+        def event(msg) -> None:
+            result = session.on_event(int(msg.event), int(msg.cycle), _sec(msg.header.stamp),
+                                      msg.start_positions, msg.goal_positions)
+            if result is None:
+                return
+            results.append(result)
+            update = result.update
+            if update is not None and update.action != "rejected" and update.next != update.used:
+                session.sent(update.next)
+
         for conn, _, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic == names["imu"]:
                 a = msg.linear_acceleration
                 session.on_imu(_sec(msg.header.stamp), (a.x, a.y, a.z))
+                if pending is not None and session.latest_imu >= _sec(pending.header.stamp):
+                    event(pending)
+                    pending = None
             elif conn.topic == names["shaper"]:
                 session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
             else:
-                result = session.on_event(int(msg.event), int(msg.cycle), _sec(msg.header.stamp),
-                                          msg.start_positions, msg.goal_positions)
-                if result is None:
-                    continue
-                results.append(result)
-                update = result.update
-                if update is not None and update.action != "rejected" and update.next != update.used:
-                    session.sent(update.next)
+                if pending is not None:
+                    event(pending)
+                    pending = None
+                if int(msg.event) == END and session.latest_imu < _sec(msg.header.stamp):
+                    pending = msg
+                else:
+                    event(msg)
+        if pending is not None:
+            event(pending)
     return results
 
 

@@ -281,6 +281,10 @@ class ListConfig:
         ``zv2`` or ``zvd3`` (:data:`STRUCTURES`).
     rollback_factor : float
         M above this times the best M rolls back to the best parameters.
+    patience : int
+        After this many trials in a row without a new best M, the learner holds at the best
+        parameters, and stays there until M at them rises above ``rollback_factor`` times the
+        best (the plant changed); 0: never give up.
     saturation : float
         A cycle with any |acceleration| at or above this is rejected (saturated sensor), m/s^2.
     min_samples : int
@@ -302,6 +306,7 @@ class ListConfig:
     rule: str = "components"
     structure: str = "zv2"
     rollback_factor: float = 1.5
+    patience: int = 6
     saturation: float = math.inf
     min_samples: int = 50
     max_gap_periods: float = 5.0
@@ -327,6 +332,7 @@ class ListConfig:
                 raise ListError(f"{name} must be in (0, {hi:g}], got {v!r}")
             put(name, v)
         put("phase_trials", _int("phase_trials", self.phase_trials, 1))
+        put("patience", _int("patience", self.patience, 0))
         tol = _finite("switch_tol", self.switch_tol)
         if not 0.0 <= tol < 1.0:
             raise ListError(f"switch_tol must be in [0, 1), got {tol!r}")
@@ -374,7 +380,7 @@ class ListConfig:
             "t2_bounds": None if self.t2_bounds is None else list(self.t2_bounds),
             "max_step_a1": self.max_step_a1, "max_step_t2": self.max_step_t2,
             "phase_trials": self.phase_trials, "switch_tol": self.switch_tol, "rule": self.rule,
-            "structure": self.structure, "rollback_factor": self.rollback_factor,
+            "structure": self.structure, "rollback_factor": self.rollback_factor, "patience": self.patience,
             "saturation": self.saturation if math.isfinite(self.saturation) else None,
             "min_samples": self.min_samples, "max_gap_periods": self.max_gap_periods, "history": self.history,
         }
@@ -925,6 +931,8 @@ class ListLearner:
         self._scale = {"t2": 1.0, "a1": 1.0}  # per parameter, multiplies its maximum step
         self._limited = False  # the step to the last proposal was cut by the maximum step
         self._searching = False  # this phase minimises M alone (phi's model failed)
+        self._stale = 0  # trials in a row without a new best M
+        self._parked = False  # holding at the best point after `patience` such trials
         self._history: list[dict[str, Any]] = []
         if params is None and reference is not None:
             params, _ = self._clip(ListParams.from_mode(reference.mode), bounds_from=True)
@@ -973,6 +981,26 @@ class ListLearner:
     def history(self) -> list[dict[str, Any]]:
         """The last ``config.history`` updates, as :meth:`ListUpdate.as_dict`."""
         return [dict(h) for h in self._history]
+
+    def hold(self) -> ListParams | None:
+        """Stop exploring: hold at the best parameters so far (returned; the current ones if
+        nothing was measured yet) until :meth:`resume`, or until M there rises above
+        ``rollback_factor`` times the best (the plant changed)."""
+        if self._best is None:
+            return self._params
+        self._parked, self._phase, self._trials, self._searching = True, "hold", [], False
+        self._last = self._best
+        self._params = self._best.params
+        return self._params
+
+    def resume(self) -> None:
+        """Explore again after :meth:`hold` (or after holding for ``patience``)."""
+        self._parked, self._stale = False, 0
+
+    @property
+    def holding(self) -> bool:
+        """Whether the learner holds at its best parameters (:meth:`hold`, or ``patience``)."""
+        return self._parked
 
     def _set_initial(self, params: ListParams) -> None:
         if not isinstance(params, ListParams):
@@ -1038,7 +1066,8 @@ class ListLearner:
                 self._set_initial(guess)
             self._phase, self._trials, self._best, self._last = "t2", [], None, None
             self._scale = {"t2": 1.0, "a1": 1.0}
-            self._limited = self._searching = False
+            self._limited = self._searching = self._parked = False
+            self._stale = 0
             return self._record(m_ref, 0.0, None, self._params, "none", "reference",
                                 f"reference: mode {ref.omega / (2 * math.pi):.4g} Hz, damping {ref.zeta:.4g}"
                                 f" identified; next {_fmt(self._params)}{note}", complex(1.0, 0.0))
@@ -1197,17 +1226,33 @@ class ListLearner:
     def _learn(self, trial: _Trial) -> tuple[ListParams, str, str, str]:
         cfg = self._config
         proposed = self._params
-        previous_last, self._last = self._last, trial
         best = self._best
+        if self._parked:
+            assert best is not None
+            if _same(trial.params, best.params) and trial.m <= cfg.rollback_factor * best.m:
+                self._last = trial
+                return best.params, "none", "hold", (
+                    f"holding at the best {_fmt(best.params)} (best M {best.m:.4g}, now {trial.m:.4g}):"
+                    f" {cfg.patience} trials in a row found nothing better")
+            self._parked, self._stale = False, 0  # M rose at the best point, or another shaper ran
+        previous_last, self._last = self._last, trial
         notes = ""
         if best is None or trial.score < best.score:
-            self._best = trial
+            self._best, self._stale = trial, 0
+        elif not _same(trial.params, best.params) and cfg.patience and self._stale + 1 >= cfg.patience:
+            self._stale += 1
+            self._parked, self._phase, self._trials, self._searching = True, "hold", [], False
+            self._last = best
+            return best.params, "none", "hold", (
+                f"{self._stale} trials in a row without a better M than {best.m:.4g}: holding at the best"
+                f" {_fmt(best.params)} until M there rises above {cfg.rollback_factor:g} x")
         elif _same(trial.params, best.params):
             if trial.m > cfg.rollback_factor * best.m and min(self._scale.values()) < 1.0:
                 self._scale = {"t2": 1.0, "a1": 1.0}
                 notes = f"; M at the best point rose from {best.m:.4g} to {trial.m:.4g} (plant changed?): steps reset"
             self._best = trial  # the latest measurement of a point is the one that counts
         elif trial.m > cfg.rollback_factor * best.m:
+            self._stale += 1
             phase, kept = self._phase, ""
             in_phase = (phase in _PARAMS and bool(self._trials) and proposed is not None
                         and _same(trial.params, proposed)
@@ -1348,6 +1393,7 @@ class ListLearner:
             "trials": [tr.as_dict() for tr in self._trials],
             "best": trial(self._best), "last": trial(self._last), "step_scale": dict(self._scale),
             "step_limited": self._limited, "searching": self._searching,
+            "stale": self._stale, "parked": self._parked,
             "history": [dict(h) for h in self._history],
         }
 
@@ -1364,7 +1410,7 @@ class ListLearner:
     @classmethod
     def _from_dict(cls, d: Any) -> ListLearner:
         keys = {"format", "version", "config", "params", "t2_bounds", "reference", "iteration", "phase", "trials",
-                "best", "last", "step_scale", "step_limited", "searching", "history"}
+                "best", "last", "step_scale", "step_limited", "searching", "stale", "parked", "history"}
         if not isinstance(d, dict):
             raise ListError(f"learner state must be a dictionary, got {type(d).__name__}")
         if d.get("format") != "list_learner" or d.get("version") != STATE_VERSION:
@@ -1414,6 +1460,10 @@ class ListLearner:
         if not (isinstance(d["step_limited"], bool) and isinstance(d["searching"], bool)):
             raise ListError("step_limited and searching must be true or false")
         self._limited, self._searching = d["step_limited"], d["searching"]
+        self._stale = _int("stale", d["stale"], 0)
+        if not isinstance(d["parked"], bool) or (d["parked"] and (self._phase != "hold" or self._best is None)):
+            raise ListError("parked must be true or false, and true only while holding at a best point")
+        self._parked = d["parked"]
         if self._searching and len(self._trials) < 2:
             raise ListError("searching with fewer than two trials")
         if not isinstance(d["history"], list) or not all(isinstance(h, dict) for h in d["history"]):

@@ -49,7 +49,7 @@ def list_config(values: Mapping[str, object]) -> ListConfig:
     for key in ("highpass_hz", "max_step_a1", "max_step_t2", "switch_tol", "rollback_factor"):
         if key in v:
             kw[key] = float(v[key])
-    for key in ("phase_trials", "min_samples"):
+    for key in ("phase_trials", "patience", "min_samples"):
         if key in v:
             kw[key] = int(v[key])
     if "window_delay" in v:
@@ -125,6 +125,7 @@ class ListSession:
         self._t: list[float] = []
         self._a: list[np.ndarray] = []
         self._ref_displacement: np.ndarray | None = None
+        self._latest = -math.inf
 
     # ----------------------------------------------------------------- inputs
     def sent(self, params: ListParams | None) -> None:
@@ -135,11 +136,17 @@ class ListSession:
         self.active = ActiveShaper(tuple(float(a) for a in amplitudes), tuple(float(t) for t in times),
                                    str(source), int(revision))
 
+    @property
+    def latest_imu(self) -> float:
+        """Stamp of the latest accelerometer sample received (s), -inf before the first."""
+        return self._latest
+
     def on_imu(self, t: float, accel) -> None:
         """An accelerometer sample. Kept by its stamp: at END the cycle takes the samples stamped
         between its START and END, whatever order they arrived in relative to the events."""
         self._t.append(float(t))
         self._a.append(np.asarray(accel, dtype=float).ravel())
+        self._latest = max(self._latest, float(t))
         if self._cycle is None and len(self._t) > 2 * KEEP_BEFORE_START:
             del self._t[:-KEEP_BEFORE_START], self._a[:-KEEP_BEFORE_START]
 
