@@ -8,4 +8,6 @@ machines it runs on are small and noisy:
   shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`).
 * :mod:`benchmarks.fir_throughput`: joint-samples per second of the FIR core
   (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter``.
+* :mod:`benchmarks.list_update`: one LIST update for a 10 s cycle of 1 kHz 3-axis accelerometer
+  data, against ``filtfilt`` + ``hilbert`` on the same data.
 """

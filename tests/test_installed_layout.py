@@ -17,7 +17,7 @@ from shaper_nodes.launching import NodeProcess, executable
 pytestmark = pytest.mark.integration
 
 NODES = [("shaper_nodes", "shaper_node", {"joint_names": ["a"]}), ("shaper_nodes", "recorder", None),
-         ("shaper_nodes", "identifier", {}), ("sim_plant_node", "sim_plant", {})]
+         ("shaper_nodes", "identifier", {}), ("shaper_nodes", "learner", {}), ("sim_plant_node", "sim_plant", {})]
 
 
 @pytest.mark.parametrize("package", ["shaper_msgs", "shaper_nodes", "sim_plant_node"])
@@ -55,6 +55,12 @@ def test_design_cli_runs_from_its_installed_executable():
                           "--damping", "0.02"], capture_output=True, text=True, timeout=120, env=os.environ)
     assert out.returncode == 0, out.stderr
     assert "zvd" in out.stdout and "2hump_ei" in out.stdout
+
+
+def test_list_replay_names_a_missing_bag(tmp_path):
+    out = subprocess.run([str(executable("shaper_nodes", "list_replay")), str(tmp_path / "nope")],
+                         capture_output=True, text=True, timeout=120, env=os.environ)
+    assert out.returncode == 2 and "list_replay:" in out.stderr and "Traceback" not in out.stderr
 
 
 def test_bad_configuration_exits_with_a_clear_error(tmp_path, domain_id):

@@ -167,6 +167,7 @@ class LearnerNode(Node):
         self.results: list[SessionResult] = []
 
         shaper = str(p("shaper")).rstrip("/")
+        self._sleep_group = MutuallyExclusiveCallbackGroup()  # (Node has its own _timers)
         inputs = MutuallyExclusiveCallbackGroup()  # taken while an END's update awaits the shaper node
         self.create_subscription(Imu, p("topics.imu"), self._on_imu, IMU_QOS, callback_group=inputs)
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED,
@@ -258,8 +259,9 @@ class LearnerNode(Node):
     async def _sleep(self, seconds: float) -> None:
         """Wait without blocking the executor (steady clock; other callback groups keep running)."""
         done = Future()
+        # its own callback group: the awaiting callback holds the default one
         timer = self.create_timer(seconds, lambda: done.done() or done.set_result(True),
-                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+                                  callback_group=self._sleep_group, clock=Clock(clock_type=ClockType.STEADY_TIME))
         await done
         self.destroy_timer(timer)
 

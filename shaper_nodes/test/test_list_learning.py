@@ -633,3 +633,45 @@ def convergence_table(cycles=15, seeds=3):
 
 if __name__ == "__main__":
     print(convergence_table())
+
+
+# --------------------------------------------------------------------------------------------
+# Patience and hold
+
+
+def test_patience_holds_at_the_best_until_m_rises_there():
+    """patience = 1: the first trial that is not a new best (worse, but not by the rollback
+    factor) parks the learner at the best point; it stays until M there rises."""
+    config = ListConfig(highpass_hz=0.5, patience=1)
+    learner, run = learn(config=config, cycles=1)
+    best_params, best_m = learner.best
+    used = learner.params
+    assert used != best_params
+    t, y = cycle(best_params)  # the trial measures 1.2 x the best point's vibration
+    upd = learner.update(t, 1.2 * y, MOTION_END, END, used)
+    assert upd.action == "hold" and upd.next == best_params and learner.holding, upd.reason
+    for _ in range(3):
+        upd = learner.update(*cycle(best_params), MOTION_END, END, best_params)
+        assert upd.action == "hold" and learner.params == best_params
+    # M at the best point rises well above the best (the plant changed): learning resumes
+    t, y = cycle(best_params)
+    upd = learner.update(t, 3.0 * y + 0.5 * np.sin(OMEGA_D * t), MOTION_END, END, best_params)
+    assert not learner.holding
+
+
+def test_hold_on_request_applies_the_best_and_survives_a_save():
+    learner, run = learn(cycles=3)
+    best_params, best_m = learner.best
+    assert learner.hold() == best_params and learner.holding
+    restored = ListLearner.from_dict(learner.to_dict())
+    assert restored.holding and restored.params == best_params
+    used = restored.params
+    upd = restored.update(*cycle(used), MOTION_END, END, used)
+    assert upd.action == "hold" and upd.next == best_params
+    restored.resume()
+    assert not restored.holding
+
+
+def test_patience_must_be_a_non_negative_integer():
+    with pytest.raises(ListError, match="patience"):
+        ListConfig(patience=-1)

@@ -205,7 +205,8 @@ def main(argv: list[str] | None = None) -> int:
         ctx = spin_context()
         print(f"{case.name}: {case.title}", flush=True)
         try:
-            results[case.name] = run_case(case, args.cycles, start, ctx, state, args.noise, progress=lambda r: print(
+            results[case.name] = run_case(case, args.cycles, start, ctx, state, args.noise, hold_after=args.cycles - 1,
+                                          progress=lambda r: print(
                 f"  cycle {r.index:2d}: M {r.m:9.4g}  A1 {r.a1:.5f}  T2 {r.t2:.5f}  {r.action}", flush=True))
         finally:
             ctx.try_shutdown()
@@ -215,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
             f"Regenerate with `./run exec python -m sim_plant_node.list_cases` ({args.cycles} cycles per case,"
             f" accelerometer noise {args.noise:g} m/s²; sim plant, shaper and learner as separate processes in"
             " lockstep). Cycle 0 runs unshaped: it is the phase reference (and the initial guess for cases 2-4);"
+            " before the last cycle the learner is told to hold (`~/hold`), so the last row runs the best"
+            " parameters found;"
             " M is the learner's measure (RMS of the high-pass filtered tip acceleration over the residual"
             " window). See [list.md](list.md) for the method.", ""]
     for name, rows in results.items():

@@ -59,7 +59,33 @@ def mck_from_mode(omega: float, zeta: float, mass: float = 1.0) -> tuple[float, 
     return mass, 2.0 * zeta * math.sqrt(k * mass), k
 
 
-class MckPlant:
+class _JointState:
+    """The state layout both plants share, per joint: tip x, x', base (command) u, its slope."""
+
+    state: np.ndarray
+
+    @property
+    def base_position(self) -> np.ndarray:
+        """The base position / command u at the end of the last period (/joint_states), m or rad."""
+        return self.state[:, 2].copy()
+
+    @property
+    def base_velocity(self) -> np.ndarray:
+        """Slope of the base / command over the last period."""
+        return self.state[:, 3].copy()
+
+    @property
+    def tip_position(self) -> np.ndarray:
+        """Tip position x."""
+        return self.state[:, 0].copy()
+
+    @property
+    def tip_velocity(self) -> np.ndarray:
+        """Tip velocity x'."""
+        return self.state[:, 1].copy()
+
+
+class MckPlant(_JointState):
     """Per-joint m-c-k flexible joints integrated exactly under a first-order-hold base motion.
 
     Parameters
@@ -130,22 +156,6 @@ class MckPlant:
         self.state[:, 2] = u  # exact by construction; removes round-off drift
 
     @property
-    def base_position(self) -> np.ndarray:
-        return self.state[:, 2].copy()
-
-    @property
-    def base_velocity(self) -> np.ndarray:
-        return self.state[:, 3].copy()
-
-    @property
-    def tip_position(self) -> np.ndarray:
-        return self.state[:, 0].copy()
-
-    @property
-    def tip_velocity(self) -> np.ndarray:
-        return self.state[:, 1].copy()
-
-    @property
     def tip_acceleration(self) -> np.ndarray:
         """x2'' at the end of the last period (left limit), m/s^2 or rad/s^2."""
         x2, v2, x1, r = self.state.T
@@ -188,7 +198,7 @@ def _per_joint(name: str, value, joints: int | None, unit: str, *, positive: boo
     return v
 
 
-class ListPlant:
+class ListPlant(_JointState):
     """The plants of the LIST simulations (seed 003), per joint, integrated with RK4.
 
     See the module docstring for the equations. State per joint, as MckPlant's: tip x, tip
@@ -343,26 +353,6 @@ class ListPlant:
         if self.model == "time_varying" and cycle_time is not None:
             return cycle_time + s < MASS_RAMP_TIME < cycle_time + s + h
         return False
-
-    @property
-    def base_position(self) -> np.ndarray:
-        """The command u at the end of the last period (what /joint_states carries), m."""
-        return self.state[:, 2].copy()
-
-    @property
-    def base_velocity(self) -> np.ndarray:
-        """Slope of the command over the last period, m/s."""
-        return self.state[:, 3].copy()
-
-    @property
-    def tip_position(self) -> np.ndarray:
-        """x, m."""
-        return self.state[:, 0].copy()
-
-    @property
-    def tip_velocity(self) -> np.ndarray:
-        """x', m/s."""
-        return self.state[:, 1].copy()
 
     @property
     def applied_force(self) -> np.ndarray:

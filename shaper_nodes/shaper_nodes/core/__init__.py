@@ -20,6 +20,9 @@ trajectory
 identification
     Vibration modes (frequency, damping, uncertainty) from free decays, and the shaper
     recommendation by worst-case vibration over the uncertainty band.
+list_learning, list_session
+    The Learning Input Shaping Technique (seed 003), and the bookkeeping the learner node and
+    the offline replay share.
 cycles
     Per-cycle buffering and the residual-vibration window every component measures alike.
 validation

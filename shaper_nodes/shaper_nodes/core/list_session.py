@@ -219,7 +219,10 @@ class ListSession:
         if active is None:
             return None, "the active shaper is not known yet (no message on the active-shaper topic)"
         if active.is_identity:
-            return None, ""
+            if self._sent is None or self.learner.reference is None:
+                return None, ""  # asked for (or needed): the reference cycle
+            return None, ("the cycle ran unshaped although the learner had sent its shaper (the update"
+                          " arrived after it started, or another source set none); not learned from")
         if self._sent is not None and self._matches(self._sent, active):
             return self._sent, ""
         if self._previous is not None and self._matches(self._previous, active):
