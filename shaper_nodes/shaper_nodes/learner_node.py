@@ -275,8 +275,7 @@ class LearnerNode(Node):
         else:
             learner.resume()
             resp.success, resp.message = True, "learning resumed"
-        if self.state_path is not None:
-            save_state(self.state_path, learner, self.structure)
+        self._save()
         self.get_logger().info(resp.message)
         return resp
 
@@ -304,11 +303,7 @@ class LearnerNode(Node):
         applied, why = True, ""
         if update.next != update.used:
             applied, why = await self._send(update.next)
-        if self.state_path is not None:
-            try:
-                save_state(self.state_path, self.session.learner, self.structure)
-            except OSError as err:
-                self.get_logger().error(f"could not save the learner state to {self.state_path}: {err}")
+        self._save()
         report.residual_rms = float(update.m)
         report.shaper_used = self._shaper_msg(update.used)
         report.shaper_next = self._shaper_msg(update.next)
@@ -323,6 +318,15 @@ class LearnerNode(Node):
         log(f"cycle {msg.cycle}: M {update.m:.4g}, phi {math.degrees(update.phi):.1f} deg, {update.action}"
             f" ({update.parameter}): {self._describe(update.used)} -> {self._describe(update.next)}"
             + ("" if applied else f"; shaper node refused: {why}"))
+
+    def _save(self) -> None:
+        """Save the learner's state (if a state file is configured); a failure is logged, not fatal."""
+        if self.state_path is None:
+            return
+        try:
+            save_state(self.state_path, self.session.learner, self.structure)
+        except OSError as err:
+            self.get_logger().error(f"could not save the learner state to {self.state_path}: {err}")
 
     def _shaper_msg(self, params: ListParams | None) -> ShaperMsg:
         shaper = none_shaper() if params is None else params.shaper(self.structure)
