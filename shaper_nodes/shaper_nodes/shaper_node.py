@@ -25,10 +25,13 @@ action.server_name (~/follow_joint_trajectory) -> action.controller
 
 Update policy: every change names its source; ``allowed_sources`` lists the sources that may
 change the shaper (parameters count as source "parameters"); the last accepted change wins.
+Changes from the sources in ``retime_sources`` (e.g. the scheduler) re-time the motion already
+commanded instead of switching bumplessly (time-varying shaping, see core/fir.py).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 
@@ -46,7 +49,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .conversions import duration_to_sec, sec_to_duration, shaper_from_msg, shaper_to_msg
 from .core.fir import MAX_STAGES, SparseFir, StreamingShaper, discretize
-from .core.shapers import FAMILIES, Mode, Shaper, ShaperError, design
+from .core.shapers import FAMILIES, MAX_DURATION, Mode, Shaper, ShaperError, design
 from .core.trajectory import shape_trajectory
 from .core.validation import InputError, finite_array, joint_permutation, strictly_increasing
 from .node_main import run_node
@@ -86,6 +89,10 @@ class ShaperNode(Node):
             "Impulse times between samples: 'split' linearly between the two samples (default) or 'round'."))
         self.declare_parameter("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"], _desc(
             "Sources allowed to change the active shaper (update policy).", read_only=True))
+        self.declare_parameter("retime_sources", Parameter.Type.STRING_ARRAY, _desc(
+            "Sources whose changes re-time the motion already commanded (time-varying shaping: pending"
+            " impulses follow the new shaper, e.g. 'scheduler' for pose-dependent modes) instead of the"
+            " bumpless switch that leaves it to the old shaper. Default none.", read_only=True))
         self.declare_parameter("error_throttle", 1.0, _desc(
             "Least time between two error logs or diagnostics of the same class of bad input, s.", 0.0, 3600.0))
         self.declare_parameter("diagnostics_period", 1.0, _desc(
@@ -110,7 +117,9 @@ class ShaperNode(Node):
             raise ValueError("parameter joint_names must be a non-empty list of distinct names")
         self.rate = float(self.get_parameter("command_rate").value)
         self.allowed_sources = set(self.get_parameter("allowed_sources").value)
+        self.retime_sources = set(self.get_parameter("retime_sources").value or [])
         n = len(self.joint_names)
+        retain = math.ceil(MAX_DURATION * self.rate) + 1 if self.retime_sources else 0
 
         shaper, method = self._design_from_params({})
         self._method = method
@@ -118,8 +127,8 @@ class ShaperNode(Node):
         self._fir = discretize(shaper, self.rate, method)
         self._source = "parameters"
         self._revision = 1
-        self._array_filter = StreamingShaper(self._fir, n)
-        self._stream_filters = {f: StreamingShaper(self._fir, n) for f in TRAJ_FIELDS}
+        self._array_filter = StreamingShaper(self._fir, n, retain)
+        self._stream_filters = {f: StreamingShaper(self._fir, n, retain) for f in TRAJ_FIELDS}
         self._stream_fields: tuple[str, ...] | None = None
         self._pending_params: tuple[Shaper, str] | None = None
 
@@ -228,7 +237,8 @@ class ShaperNode(Node):
             return False, (f"shaper duration {shaper.duration * 1e3:.3g} ms is shorter than one"
                            f" command period ({1e3 / self.rate:.3g} ms)")
         try:
-            self._check_switchable()
+            if source not in self.retime_sources:
+                self._check_switchable()
             self._commit(shaper, source, self._method)
         except (RuntimeError, ValueError) as err:
             return False, str(err)
@@ -237,7 +247,7 @@ class ShaperNode(Node):
     def _commit(self, shaper: Shaper, source: str, method: str) -> None:
         fir = discretize(shaper, self.rate, method)  # may raise; nothing changed yet
         for f in [self._array_filter, *self._stream_filters.values()]:
-            f.switch(fir)
+            f.retime(fir) if source in self.retime_sources else f.switch(fir)
         self._shaper, self._fir, self._source, self._method = shaper, fir, source, method
         self._revision += 1
         self._publish_active()

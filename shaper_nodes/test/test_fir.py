@@ -98,3 +98,29 @@ def test_too_many_pending_switches_is_refused_and_leaves_the_filter():
     with pytest.raises(RuntimeError, match="still settling"):
         s.switch(fb)
     assert s.fir is before
+
+
+@SETTINGS
+@given(shaper_st, shaper_st, st.integers(0, 150), st.integers(1, 5),
+       arrays(float, (150, 2), elements=st.floats(-10, 10)))
+def test_retime_is_the_time_varying_fir_on_the_input_history(a, b, k_switch, chunk, x):
+    """After retime(), y(k) = sum_i g_i x(k - d_i) with the new filter on the whole input history."""
+    rate = 250.0
+    fa, fb = discretize(a, rate), discretize(b, rate)
+    sh = StreamingShaper(fa, 2, retain=fb.length)
+    out = [sh.process(x[i:min(i + chunk, k_switch)]) for i in range(0, k_switch, chunk)]
+    sh.retime(fb)
+    out.append(sh.process(x[k_switch:]))
+    y = np.vstack(out)
+    np.testing.assert_allclose(y[:k_switch], offline(x, fa.dense())[:k_switch], atol=1e-9)
+    np.testing.assert_allclose(y[k_switch:], offline(x, fb.dense())[k_switch:], atol=1e-9)
+
+
+def test_retime_needs_enough_history_and_leaves_the_filter_otherwise():
+    fa = discretize(design("zv", [Mode.from_hz(10.0, 0.0)]), 1000.0)
+    fb = discretize(design("zv", [Mode.from_hz(1.0, 0.0)]), 1000.0)
+    sh = StreamingShaper(fa, 1, retain=10)
+    sh.process(np.ones((5, 1)))
+    with pytest.raises(RuntimeError, match="needs 500 samples"):
+        sh.retime(fb)
+    assert sh.fir is fa

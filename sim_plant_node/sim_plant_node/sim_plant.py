@@ -53,6 +53,7 @@ from shaper_nodes.core.validation import InputError, finite_array
 
 from .plants import (LIST_FORCE_LIMIT, LIST_GAIN, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
                      MckPlant, make_plant)
+from .two_mass import StaircaseTask, TwoMassPlant
 from shaper_nodes.node_main import run_node
 from shaper_nodes.parameters import describe as _desc
 
@@ -108,6 +109,9 @@ class SimPlantNode(Node):
         d("task.max_velocity", 1.0, _desc("Largest joint velocity of a move, rad/s or m/s.", 1e-6, 1e6))
         d("task.max_acceleration", 10.0, _desc("Largest joint acceleration of a move, rad/s^2 or m/s^2.", 1e-6, 1e9))
         d("task.dwell", 2.0, _desc("Dwell after each move (the residual-vibration window), s.", 0.0, 3600.0))
+        d("task.levels", Parameter.Type.DOUBLE_ARRAY, _desc(
+            "If set, a staircase instead of moves: the command steps to each level in turn (one cycle per step,"
+            " task.dwell each; steps x joints values), e.g. seed 004's velocity steps (plant.model two_mass)."))
         d("task.cycles", 4, _desc("Cycles per run (started by ~/start_task)."))
         d("task.preroll", 1.0, _desc("Rest at the start pose before the first cycle, s.", 0.0, 3600.0))
         d("task.autostart", False, _desc("Start a run as soon as the node is up.", read_only=True))
@@ -189,6 +193,8 @@ class SimPlantNode(Node):
 
     def _make_plant(self, overrides: dict) -> MckPlant | ListPlant:
         model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
+        if model == "two_mass":  # seed 004's two-mass system, m1 = 10 x0 + 1 (two_mass.py)
+            return TwoMassPlant(self.n, self.rate)
         if model not in PLANT_MODELS:
             raise ValueError(f"plant.model must be one of {', '.join(PLANT_MODELS)}; got {model!r}")
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
@@ -227,6 +233,9 @@ class SimPlantNode(Node):
             self.task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
                                   float(g("task.max_acceleration")), float(g("task.dwell")), self.rate,
                                   int(g("task.cycles")))
+            if self.get_parameter("task.levels").value:
+                self.task = StaircaseTask(self._pose("task.start", {}), self.get_parameter("task.levels").value,
+                                          float(g("task.dwell")), self.rate)
         except ValueError as err:
             return False, str(err)
         self._preroll_left = int(round(float(g("task.preroll")) * self.rate))

@@ -22,11 +22,27 @@ the output is continuous, every part of the motion stays vibration-free with res
 filter that shaped it, and the output settles to the same final value (every step response
 ends at 1). A retired filter's contribution is constant once its taps have passed, and is
 then folded into the offset.
+
+Re-timing switch (time-varying shaping)
+---------------------------------------
+:meth:`StreamingShaper.retime` instead makes the new filter act on the recent input as well,
+
+    y(k) = sum_i g_i(k) x(k - d_i(k)),
+
+the filter of the present sample applied to the input history: the impulses of motion already
+commanded but not yet emitted come out at the new filter's times and amplitudes. This is the
+time-varying shaper of configuration-dependent systems (seed 004's shaper follows the fuzzy
+interpolator's mode continuously): when a step's second impulse is still pending while the
+pose, and so the mode, changes, it is re-timed to the new mode. The output is continuous when
+the input was constant over both filters' lengths; otherwise it may jump by the difference of
+the two filters' outputs on the recent input, which is what re-timing a pending impulse means.
+It needs the input history, kept when the shaper is built with ``retain`` > 0 samples.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,7 +155,7 @@ class StreamingShaper:
     before the next sample.
     """
 
-    def __init__(self, fir: SparseFir, channels: int) -> None:
+    def __init__(self, fir: SparseFir, channels: int, retain: int = 0) -> None:
         if channels < 1:
             raise ValueError("channels must be >= 1")
         self.channels = int(channels)
@@ -147,6 +163,8 @@ class StreamingShaper:
         self._stages: list[_Stage] = []
         self._offset = np.zeros(self.channels)
         self._last: np.ndarray | None = None
+        self.retain = max(0, int(retain))  # input samples kept for retime()
+        self._raw: deque[np.ndarray] = deque(maxlen=self.retain or 1)
 
     @property
     def fir(self) -> SparseFir:
@@ -167,6 +185,7 @@ class StreamingShaper:
         """Forget all history; with ``value``, rest there (output = value)."""
         self._stages.clear()
         self._last = None
+        self._raw.clear()
         self._offset = np.zeros(self.channels)
         if value is not None:
             self._start(np.asarray(value, dtype=float).reshape(self.channels))
@@ -198,6 +217,33 @@ class StreamingShaper:
         self._stages.append(_Stage(fir, self._last))
         self._fir = fir
 
+    def retime(self, fir: SparseFir) -> None:
+        """Make ``fir`` the active filter on the input history as well (see the module docstring).
+
+        Raises
+        ------
+        RuntimeError
+            If the shaper keeps too little history for ``fir`` (``retain`` < its length - 1);
+            the active filter is then unchanged.
+        """
+        if self._last is None:
+            self._fir = fir
+            return
+        need = fir.length - 1
+        if need > self.retain:
+            raise RuntimeError(f"re-timing needs {need} samples of input history, the shaper keeps {self.retain}")
+        hist = list(self._raw)[-need:] if need else []
+        first = self._raw[0] if self._raw else self._last  # before the first sample: at rest there
+        if len(self._raw) < self.retain:
+            hist = [first] * (need - len(hist)) + hist
+        origin = self._last.copy()
+        stage = _Stage(fir, origin)
+        if need:
+            stage.history = np.asarray(hist, dtype=float).reshape(need, self.channels) - origin
+        self._stages = [stage]
+        self._offset = origin
+        self._fir = fir
+
     def process(self, block: np.ndarray) -> np.ndarray:
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         x = np.asarray(block, dtype=float)
@@ -224,4 +270,6 @@ class StreamingShaper:
                 keep.append(stage)
         self._stages = keep
         self._last = x2[-1].copy()
+        if self.retain:
+            self._raw.extend(x2[-self.retain:].copy())
         return out.reshape(x.shape) if single else out
