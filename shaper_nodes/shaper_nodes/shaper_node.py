@@ -31,7 +31,6 @@ commanded instead of switching bumplessly (time-varying shaping, see core/fir.py
 
 from __future__ import annotations
 
-import math
 import time
 from collections import Counter
 
@@ -39,6 +38,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -48,8 +48,8 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .conversions import duration_to_sec, sec_to_duration, shaper_from_msg, shaper_to_msg
-from .core.fir import MAX_STAGES, SparseFir, StreamingShaper, discretize
-from .core.shapers import FAMILIES, MAX_DURATION, Mode, Shaper, ShaperError, design
+from .core.fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize
+from .core.shapers import FAMILIES, Mode, Shaper, ShaperError, design
 from .core.trajectory import shape_trajectory
 from .core.validation import InputError, finite_array, joint_permutation, strictly_increasing
 from .node_main import run_node
@@ -117,9 +117,12 @@ class ShaperNode(Node):
             raise ValueError("parameter joint_names must be a non-empty list of distinct names")
         self.rate = float(self.get_parameter("command_rate").value)
         self.allowed_sources = set(self.get_parameter("allowed_sources").value)
-        self.retime_sources = set(self.get_parameter("retime_sources").value or [])
+        try:
+            self.retime_sources = set(self.get_parameter("retime_sources").value)
+        except ParameterUninitializedException:  # not set: none
+            self.retime_sources = set()
         n = len(self.joint_names)
-        retain = math.ceil(MAX_DURATION * self.rate) + 1 if self.retime_sources else 0
+        filt = RetimingShaper if self.retime_sources else StreamingShaper
 
         shaper, method = self._design_from_params({})
         self._method = method
@@ -127,8 +130,8 @@ class ShaperNode(Node):
         self._fir = discretize(shaper, self.rate, method)
         self._source = "parameters"
         self._revision = 1
-        self._array_filter = StreamingShaper(self._fir, n, retain)
-        self._stream_filters = {f: StreamingShaper(self._fir, n, retain) for f in TRAJ_FIELDS}
+        self._array_filter = filt(self._fir, n)
+        self._stream_filters = {f: filt(self._fir, n) for f in TRAJ_FIELDS}
         self._stream_fields: tuple[str, ...] | None = None
         self._pending_params: tuple[Shaper, str] | None = None
 

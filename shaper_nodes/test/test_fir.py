@@ -1,4 +1,6 @@
-"""Streaming FIR: equals offline convolution; bumpless, exact switching."""
+"""Streaming FIR: equals offline convolution; bumpless, exact switching; re-timing."""
+
+import math
 
 import numpy as np
 import pytest
@@ -6,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from shaper_nodes.core.fir import MAX_STAGES, StreamingShaper, discretize
+from shaper_nodes.core.fir import MAX_STAGES, RetimingShaper, StreamingShaper, discretize
 from shaper_nodes.core.shapers import Mode, design
 
 SETTINGS = settings(max_examples=40, deadline=None)
@@ -101,26 +103,35 @@ def test_too_many_pending_switches_is_refused_and_leaves_the_filter():
 
 
 @SETTINGS
-@given(shaper_st, shaper_st, st.integers(0, 150), st.integers(1, 5),
-       arrays(float, (150, 2), elements=st.floats(-10, 10)))
-def test_retime_is_the_time_varying_fir_on_the_input_history(a, b, k_switch, chunk, x):
-    """After retime(), y(k) = sum_i g_i x(k - d_i) with the new filter on the whole input history."""
+@given(shaper_st, shaper_st, st.integers(0, 150), arrays(float, (150, 2), elements=st.floats(-10, 10)))
+def test_retiming_shaper_without_retime_is_the_bumpless_streaming_shaper(a, b, k_switch, x):
     rate = 250.0
     fa, fb = discretize(a, rate), discretize(b, rate)
-    sh = StreamingShaper(fa, 2, retain=fb.length)
-    out = [sh.process(x[i:min(i + chunk, k_switch)]) for i in range(0, k_switch, chunk)]
-    sh.retime(fb)
-    out.append(sh.process(x[k_switch:]))
-    y = np.vstack(out)
-    np.testing.assert_allclose(y[:k_switch], offline(x, fa.dense())[:k_switch], atol=1e-9)
-    np.testing.assert_allclose(y[k_switch:], offline(x, fb.dense())[k_switch:], atol=1e-9)
+    ref, sh = StreamingShaper(fa, 2), RetimingShaper(fa, 2)
+    y_ref = np.vstack([ref.process(x[:k_switch]), *([] if ref.switch(fb) else []), ref.process(x[k_switch:])])
+    y = np.vstack([sh.process(x[:k_switch]), *([] if sh.switch(fb) else []), sh.process(x[k_switch:])])
+    np.testing.assert_allclose(y, y_ref, atol=1e-9)
 
 
-def test_retime_needs_enough_history_and_leaves_the_filter_otherwise():
-    fa = discretize(design("zv", [Mode.from_hz(10.0, 0.0)]), 1000.0)
-    fb = discretize(design("zv", [Mode.from_hz(1.0, 0.0)]), 1000.0)
-    sh = StreamingShaper(fa, 1, retain=10)
-    sh.process(np.ones((5, 1)))
-    with pytest.raises(RuntimeError, match="needs 500 samples"):
-        sh.retime(fb)
-    assert sh.fir is fa
+def test_retime_moves_a_pending_impulse_and_never_takes_back_what_was_emitted():
+    rate = 100.0
+    slow = discretize(design("zv", [Mode(math.pi / 2.0, 0.0)]), rate)  # second impulse at 2 s
+    fast = discretize(design("zv", [Mode(math.pi, 0.0)]), rate)        # at 1 s
+    sh = RetimingShaper(slow, 1)
+    x = np.concatenate([np.zeros(10), np.ones(400)])[:, None]
+    y1 = sh.process(x[:60])                 # the step at 0.1 s; half emitted
+    assert y1[-1, 0] == pytest.approx(0.5)
+    sh.retime(fast)                         # 0.5 s after the step: the rest now comes at 1 s
+    y2 = sh.process(x[60:])
+    t_full = (60 + int(np.argmax(y2[:, 0] >= 1.0 - 1e-12))) / rate
+    assert t_full == pytest.approx(1.1, abs=0.011)
+    sh.retime(slow)                         # after everything was emitted: nothing goes back
+    y3 = sh.process(np.ones((300, 1)))
+    np.testing.assert_allclose(y3, 1.0)
+    # re-timing to a later time while the second impulse is pending delays it; emitted stays
+    sh2 = RetimingShaper(fast, 1)
+    y = sh2.process(x[:60])
+    sh2.retime(slow)
+    y = np.vstack([y, sh2.process(x[60:])])
+    assert np.all(np.diff(y[:, 0]) >= -1e-12)
+    assert (np.argmax(y[:, 0] >= 1.0 - 1e-12)) / rate == pytest.approx(2.1, abs=0.011)

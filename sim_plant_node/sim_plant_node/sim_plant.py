@@ -38,6 +38,7 @@ import time
 
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -233,9 +234,11 @@ class SimPlantNode(Node):
             self.task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
                                   float(g("task.max_acceleration")), float(g("task.dwell")), self.rate,
                                   int(g("task.cycles")))
-            if self.get_parameter("task.levels").value:
-                self.task = StaircaseTask(self._pose("task.start", {}), self.get_parameter("task.levels").value,
-                                          float(g("task.dwell")), self.rate)
+            try:  # a staircase (seed 004) when task.levels is set
+                self.task = StaircaseTask(self._pose("task.start", {}), g("task.levels"), float(g("task.dwell")),
+                                          self.rate)
+            except ParameterUninitializedException:
+                pass
         except ValueError as err:
             return False, str(err)
         self._preroll_left = int(round(float(g("task.preroll")) * self.rate))

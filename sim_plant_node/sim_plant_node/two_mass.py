@@ -278,3 +278,14 @@ def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangul
             rule.update(natural_frequency=[mode.omega], damping_ratio=[mode.zeta])
         rules[f"x{i}"] = rule
     return {"premises": [premise], "rules": rules}
+
+
+def scheduler_parameters(spec: dict) -> dict:
+    """The scheduler node's parameters (flat names) for a rule base mapping (see rule_base_spec)."""
+    out: dict = {"premises": list(spec["premises"]), "rule_names": list(spec["rules"])}
+    if spec.get("range"):
+        out["range"] = [float(v) for v in spec["range"]]
+    for name, rule in spec["rules"].items():
+        for key, value in rule.items():
+            out[f"rules.{name}.{key}"] = [v if isinstance(v, str) else float(v) for v in value]
+    return out

@@ -23,26 +23,26 @@ filter that shaped it, and the output settles to the same final value (every ste
 ends at 1). A retired filter's contribution is constant once its taps have passed, and is
 then folded into the offset.
 
-Re-timing switch (time-varying shaping)
----------------------------------------
-:meth:`StreamingShaper.retime` instead makes the new filter act on the recent input as well,
+Re-timing (time-varying shaping)
+--------------------------------
+:class:`RetimingShaper` writes the output the same way but keeps, per pending increment, the
+fraction already emitted, e_j(k). A bumpless :meth:`~RetimingShaper.switch` gives new
+increments the new filter (the behaviour above); :meth:`~RetimingShaper.retime` gives the new
+filter to the pending increments as well, from their age on, never taking back what was
+already emitted:
 
-    y(k) = sum_i g_i(k) x(k - d_i(k)),
+    e_j(k) = max(e_j at the retime, s_new(k - j)).
 
-the filter of the present sample applied to the input history: the impulses of motion already
-commanded but not yet emitted come out at the new filter's times and amplitudes. This is the
-time-varying shaper of configuration-dependent systems (seed 004's shaper follows the fuzzy
-interpolator's mode continuously): when a step's second impulse is still pending while the
-pose, and so the mode, changes, it is re-timed to the new mode. The output is continuous when
-the input was constant over both filters' lengths; otherwise it may jump by the difference of
-the two filters' outputs on the recent input, which is what re-timing a pending impulse means.
-It needs the input history, kept when the shaper is built with ``retain`` > 0 samples.
+So when the mode changes while a move's impulses are still pending (seed 004: the pose, and
+with it the mode, changes with the first impulse of a step), the rest of the move comes out at
+the new mode's impulse times, as the time-varying shaper of a configuration-dependent system
+does, and the output never steps back. Every increment still ends fully emitted, so the output
+settles at the input.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -155,7 +155,7 @@ class StreamingShaper:
     before the next sample.
     """
 
-    def __init__(self, fir: SparseFir, channels: int, retain: int = 0) -> None:
+    def __init__(self, fir: SparseFir, channels: int) -> None:
         if channels < 1:
             raise ValueError("channels must be >= 1")
         self.channels = int(channels)
@@ -163,8 +163,6 @@ class StreamingShaper:
         self._stages: list[_Stage] = []
         self._offset = np.zeros(self.channels)
         self._last: np.ndarray | None = None
-        self.retain = max(0, int(retain))  # input samples kept for retime()
-        self._raw: deque[np.ndarray] = deque(maxlen=self.retain or 1)
 
     @property
     def fir(self) -> SparseFir:
@@ -185,7 +183,6 @@ class StreamingShaper:
         """Forget all history; with ``value``, rest there (output = value)."""
         self._stages.clear()
         self._last = None
-        self._raw.clear()
         self._offset = np.zeros(self.channels)
         if value is not None:
             self._start(np.asarray(value, dtype=float).reshape(self.channels))
@@ -217,33 +214,6 @@ class StreamingShaper:
         self._stages.append(_Stage(fir, self._last))
         self._fir = fir
 
-    def retime(self, fir: SparseFir) -> None:
-        """Make ``fir`` the active filter on the input history as well (see the module docstring).
-
-        Raises
-        ------
-        RuntimeError
-            If the shaper keeps too little history for ``fir`` (``retain`` < its length - 1);
-            the active filter is then unchanged.
-        """
-        if self._last is None:
-            self._fir = fir
-            return
-        need = fir.length - 1
-        if need > self.retain:
-            raise RuntimeError(f"re-timing needs {need} samples of input history, the shaper keeps {self.retain}")
-        hist = list(self._raw)[-need:] if need else []
-        first = self._raw[0] if self._raw else self._last  # before the first sample: at rest there
-        if len(self._raw) < self.retain:
-            hist = [first] * (need - len(hist)) + hist
-        origin = self._last.copy()
-        stage = _Stage(fir, origin)
-        if need:
-            stage.history = np.asarray(hist, dtype=float).reshape(need, self.channels) - origin
-        self._stages = [stage]
-        self._offset = origin
-        self._fir = fir
-
     def process(self, block: np.ndarray) -> np.ndarray:
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         x = np.asarray(block, dtype=float)
@@ -270,6 +240,116 @@ class StreamingShaper:
                 keep.append(stage)
         self._stages = keep
         self._last = x2[-1].copy()
-        if self.retain:
-            self._raw.extend(x2[-self.retain:].copy())
+        return out.reshape(x.shape) if single else out
+
+
+class RetimingShaper:
+    """Causal multi-channel shaper whose filter can be re-timed for pending motion (see the
+    module docstring), or switched bumplessly as :class:`StreamingShaper`.
+
+    Parameters
+    ----------
+    fir : SparseFir
+        The initial filter.
+    channels : int
+        Number of channels (joints).
+    """
+
+    def __init__(self, fir: SparseFir, channels: int) -> None:
+        if channels < 1:
+            raise ValueError("channels must be >= 1")
+        self.channels = int(channels)
+        self._fir = fir
+        self._filters: list[np.ndarray] = []  # step responses s(0..length-1) of the filters in use
+        self.reset()
+
+    @property
+    def fir(self) -> SparseFir:
+        """The active filter."""
+        return self._fir
+
+    @property
+    def started(self) -> bool:
+        return self._last is not None
+
+    @property
+    def stages(self) -> int:
+        """Distinct filters still shaping pending increments, the active one included."""
+        return len(set(self._fid.tolist()) | {self._active})
+
+    def reset(self, value: np.ndarray | None = None) -> None:
+        """Forget all history; with ``value``, rest there (output = value)."""
+        self._last: np.ndarray | None = None
+        self._base = np.zeros(self.channels)
+        self._filters = [np.cumsum(self._fir.dense())]
+        self._active = 0
+        self._inc = np.zeros((0, self.channels))   # pending increments
+        self._age = np.zeros(0, dtype=int)          # samples since each arrived (0 at arrival)
+        self._fid = np.zeros(0, dtype=int)          # index of the filter shaping each
+        self._floor = np.zeros(0)                   # emitted fraction at the last retime
+        self._emitted = np.zeros(0)
+        if value is not None:
+            self._last = np.asarray(value, dtype=float).reshape(self.channels).copy()
+            self._base = self._last.copy()
+
+    def _use(self, fir: SparseFir) -> None:
+        self._fir = fir
+        self._filters.append(np.cumsum(fir.dense()))
+        self._active = len(self._filters) - 1
+
+    def switch(self, fir: SparseFir) -> None:
+        """Bumpless: ``fir`` shapes the increments from the next sample on."""
+        self._use(fir)
+
+    def retime(self, fir: SparseFir) -> None:
+        """``fir`` shapes the pending increments too, from their present age, never un-emitting."""
+        self._fir = fir
+        self._filters = [np.cumsum(fir.dense())]  # no increment keeps another filter
+        self._active = 0
+        self._fid[:] = 0
+        self._floor = self._emitted.copy()
+
+    def _sample(self, x: np.ndarray) -> np.ndarray:
+        if self._last is None:
+            self.reset(x)
+        d = x - self._last
+        self._last = x.copy()
+        if np.any(d != 0.0):
+            self._inc = np.vstack([self._inc, d])
+            self._age = np.append(self._age, -1)
+            self._fid = np.append(self._fid, self._active)
+            self._floor = np.append(self._floor, -np.inf)
+            self._emitted = np.append(self._emitted, 0.0)
+        if self._age.size == 0:
+            return self._base.copy()
+        self._age += 1
+        s = np.ones(self._age.size)
+        done = np.zeros(self._age.size, dtype=bool)
+        for f in np.unique(self._fid):
+            step = self._filters[f]
+            sel = self._fid == f
+            age = self._age[sel]
+            s[sel] = np.where(age < step.size, step[np.minimum(age, step.size - 1)], 1.0)
+            done[sel] = age >= step.size
+        self._emitted = np.maximum(self._floor, s)
+        done &= self._emitted >= 1.0
+        if np.any(done):  # fully emitted: folded into the base
+            self._base = self._base + (self._emitted[done, None] * self._inc[done]).sum(axis=0)
+            keep = ~done
+            self._inc, self._age, self._fid = self._inc[keep], self._age[keep], self._fid[keep]
+            self._floor, self._emitted = self._floor[keep], self._emitted[keep]
+            used = sorted(set(self._fid.tolist()) | {self._active})
+            if len(used) != len(self._filters):  # forget filters no increment uses
+                remap = {old: new for new, old in enumerate(used)}
+                self._filters = [self._filters[i] for i in used]
+                self._fid = np.array([remap[i] for i in self._fid.tolist()], dtype=int)
+                self._active = remap[self._active]
+        return self._base + self._emitted @ self._inc
+
+    def process(self, block: np.ndarray) -> np.ndarray:
+        """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
+        x = np.asarray(block, dtype=float)
+        single = x.ndim == 1
+        x2 = x.reshape(-1, self.channels)
+        out = np.array([self._sample(row) for row in x2]).reshape(x2.shape)
         return out.reshape(x.shape) if single else out
