@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -118,8 +119,10 @@ class SchedulerNode(Node):
         self.premises = self.core.rule_base.premises
 
         shaper = str(p("shaper")).rstrip("/")
-        self._set_cli = self.create_client(SetShaper, f"{shaper}/set_shaper")
-        self._get_cli = self.create_client(GetShaper, f"{shaper}/get_shaper")
+        # the clients' answers must get through while a service callback awaits them
+        clients = ReentrantCallbackGroup()
+        self._set_cli = self.create_client(SetShaper, f"{shaper}/set_shaper", callback_group=clients)
+        self._get_cli = self.create_client(GetShaper, f"{shaper}/get_shaper", callback_group=clients)
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED)
         self.create_subscription(JointState, str(p("joint_states")), self._on_joint_states, 50)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
@@ -156,8 +159,10 @@ class SchedulerNode(Node):
         if now - self._reported.get(kind, -math.inf) < float(self.get_parameter("error_throttle").value):
             return
         self._reported[kind] = now
-        log = self.get_logger().error if level == DiagnosticStatus.ERROR else self.get_logger().warning
-        log(message)
+        if level == DiagnosticStatus.ERROR:  # rclpy wants one severity per call site
+            self.get_logger().error(message)
+        else:
+            self.get_logger().warning(message)
         status = DiagnosticStatus(level=level, name=f"{self.get_name()}: {kind}",
                                   hardware_id=self.get_fully_qualified_name(), message=message,
                                   values=[KeyValue(key="kind", value=kind)])

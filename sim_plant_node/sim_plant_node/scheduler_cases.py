@@ -219,6 +219,27 @@ def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout
 
 
 # --------------------------------------------------------------------------------------------- docs
+def interpolation_table() -> str:
+    """Frequency error of the interpolated mode against the plant's over x0 in [0, 0.7] m, for
+    rule bases of several sizes, interpolating the models or the mode parameters (ROS-free)."""
+    from shaper_nodes.core.fuzzy import rule_base_from_dict
+
+    xs = np.linspace(0.0, 0.7, 281)
+    true = np.array([_mode_at(float(m1)).omega for m1 in m1_of(xs)])
+    mids = [0.5 * (a + b) for a, b in zip((0.0,) + STEP_POSES[:-1], STEP_POSES)]
+    lines = ["| operating points x0 (m) | interpolating | largest error | error at the steps' midpoints"
+             f" x0 = {', '.join(f'{m:.3g}' for m in mids)} m |", "|---|---|---|---|"]
+    for label, pts in (("0.02, 0.7 (the paper's two)", STEP_POSES[::4]), ("0, 0.175, ..., 0.7 (5)", np.linspace(0, 0.7, 5)),
+                       ("0, 0.1, ..., 0.7 (8, case c)", FUZZY_POINTS)):
+        base = rule_base_from_dict(rule_base_spec(pts, JOINT))
+        for method in ("model", "modes"):
+            err = np.array([base.evaluate([x], method).modes[0].omega for x in xs]) / true - 1
+            at = np.interp(mids, xs, err)
+            lines.append(f"| {label} | {method} | {100 * np.max(np.abs(err)):.1f} % |"
+                         f" {', '.join(f'{100 * e:+.1f}' for e in at)} % |")
+    return "\n".join(lines) + "\n"
+
+
 def true_mode_curve(t: np.ndarray, x0: np.ndarray):
     """The plant's mode (eq. (1) linearised at the present m1) along a run: rad/s and -."""
     out = np.array([[m.omega, m.zeta] for m in (_mode_at(float(m1)) for m1 in m1_of(x0))])
@@ -332,6 +353,9 @@ def main(argv: list[str] | None = None) -> int:
             f" |x1 - x0| from {WINDOW:g} s after a step to the next step. See [scheduler.md](scheduler.md).", "",
             *[f"- ({n}) {r.case.title}" for n, r in runs.items()], "",
             markdown(runs), ratio.strip(), "",
+            "Natural frequency of the interpolated mode against the plant's (eq. (1) at m1 = 10 x0 + 1) over"
+            " x0 in [0, 0.7] m, triangular memberships (the midpoints are where a step's second impulse is"
+            " timed):", "", interpolation_table(),
             *[f"![{p.stem}](img/{p.name})" for p in paths], ""]
     (args.docs / "scheduler_results.md").write_text("\n".join(text))
     print(f"wrote {args.docs / 'scheduler_results.md'} and {len(paths)} plots ({time.monotonic() - t_start:.0f} s)")

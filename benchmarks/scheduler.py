@@ -1,0 +1,170 @@
+"""The scheduler: one interpolation plus shaper design, and the node's CPU share at 500 Hz.
+
+Timing (ROS-free, best of ``repeats`` passes of ``number`` calls each):
+
+``evaluate + design``
+    What the scheduler does per update: the TS rule base of config/scheduler.yaml (seed 004's
+    two-mass system, eight rules, 4x4 models) evaluated at a pose (weights, interpolated model,
+    its eigenvalues and lightly damped modes), and the ZV shaper designed on the mode.
+``baseline: design``
+    The ZV design alone (``core.shapers.design``), what any shaper change costs.
+
+CPU share: the scheduler node (config/scheduler.yaml's rule base, evaluating every 0.05 s, a shaper
+node answering its requests) gets ``/joint_states`` at 500 Hz for ``seconds`` s, the pose
+sweeping 0..0.7 m so that it keeps sending shapers; its CPU time (``/proc/<pid>/stat``) over
+that window divided by the window is its share of one core. The baseline is a bare node with one
+/joint_states subscription that does nothing, fed the same way.
+
+Run it with ``python -m benchmarks.scheduler`` or as part of ``python -m benchmarks``;
+``python -m benchmarks.scheduler --baseline-node`` is the bare node.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from shaper_nodes.core.fuzzy import rule_base_from_dict
+from shaper_nodes.core.scheduling import Scheduler
+from shaper_nodes.core.shapers import Mode, design
+
+
+def _spec() -> dict:
+    from sim_plant_node.two_mass import rule_base_spec
+
+    return rule_base_spec(np.linspace(0.0, 0.7, 8))
+
+
+def _best(fn: Callable[[], None], number: int, repeats: int) -> float:
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / number)
+    return best
+
+
+def timing(number: int = 200, repeats: int = 7) -> dict:
+    core = Scheduler(rule_base_from_dict(_spec()), "model", "zv")
+    poses = iter(np.tile(np.linspace(0.0, 0.7, 97), 10**6))
+
+    def evaluate_design() -> None:
+        core.scheduled(core.evaluate([next(poses)]))
+
+    mode = Mode(0.5, 0.06)
+    t_full = _best(evaluate_design, number, repeats)
+    t_design = _best(lambda: design("zv", [mode]), number, repeats)
+    return {"evaluate_design_us": 1e6 * t_full, "design_us": 1e6 * t_design, "ratio": t_full / t_design}
+
+
+def _baseline_main() -> int:
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+
+    rclpy.init()
+    node = Node("bench_idle")
+    node.create_subscription(JointState, "/joint_states", lambda m: None, 50)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def cpu_share(seconds: float = 5.0, rate: float = 500.0, progress: Callable[[str], None] = print) -> dict:
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+
+    from shaper_nodes.launching import ChildProcess, NodeProcess
+    from sim_plant_node.two_mass import scheduler_parameters
+
+    from .latency import proc_cpu_seconds
+
+    env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    out: dict = {"rate_hz": rate, "seconds": seconds}
+    with tempfile.TemporaryDirectory(prefix="sched_bench_") as tmp:
+        log = pathlib.Path(tmp)
+        shaper = NodeProcess("shaper_nodes", "shaper_node", {"joint_names": ["joint_1"], "command_rate": 500.0,
+                                                             "retime_sources": ["scheduler"]},
+                             log_path=log / "shaper.log", env=env).start()
+        ctx = rclpy.context.Context()
+        rclpy.init(context=ctx)
+        node = Node("bench_driver", context=ctx)
+        pub = node.create_publisher(JointState, "/joint_states", 50)
+        try:
+            for label, proc in (
+                    ("idle node", ChildProcess([sys.executable, "-m", "benchmarks.scheduler", "--baseline-node"],
+                                               log / "idle.log", env=env, cwd=os.getcwd())),
+                    ("scheduler", NodeProcess("shaper_nodes", "scheduler", scheduler_parameters(_spec()),
+                                              log_path=log / "scheduler.log", env=env))):
+                progress(f"scheduler: CPU of the {label} at {rate:g} Hz joint states ({seconds:g} s)")
+                proc.start()
+                deadline = time.monotonic() + 30.0
+                while pub.get_subscription_count() < 1:
+                    if time.monotonic() > deadline or not proc.running():
+                        raise RuntimeError(f"{label} did not start or subscribe (see its log)")
+                    time.sleep(0.05)
+                time.sleep(1.0)  # discovery settles, the node warms up
+                msg = JointState(name=["joint_1"], position=[0.0])
+                n = int(seconds * rate)
+                c0, t0 = proc_cpu_seconds(proc.proc.pid), time.monotonic()
+                for k in range(n):
+                    msg.position = [0.35 + 0.35 * math.sin(2 * math.pi * 0.2 * k / rate)]
+                    pub.publish(msg)
+                    wait = t0 + (k + 1) / rate - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
+                c1, t1 = proc_cpu_seconds(proc.proc.pid), time.monotonic()
+                out[label] = {"cpu_pct": 100.0 * (c1 - c0) / (t1 - t0), "sent_hz": n / (t1 - t0)}
+                proc.stop()
+                while pub.get_subscription_count() > 0 and time.monotonic() < t1 + 10.0:
+                    time.sleep(0.05)
+        finally:
+            node.destroy_node()
+            ctx.try_shutdown()
+            shaper.stop()
+    out["ratio"] = out["scheduler"]["cpu_pct"] / max(out["idle node"]["cpu_pct"], 1e-9)
+    return out
+
+
+def run(*, seconds: float = 5.0, progress: Callable[[str], None] = print) -> dict:
+    progress("scheduler: timing one interpolation + design")
+    return {"timing": timing(), "cpu": cpu_share(seconds, progress=progress)}
+
+
+def print_table(result: dict) -> None:
+    t, c = result["timing"], result["cpu"]
+    print("scheduler (seed 004 rule base, 8 rules, 4x4 models)")
+    print(f"  evaluate + ZV design : {t['evaluate_design_us']:8.1f} us per update")
+    print(f"  baseline: ZV design  : {t['design_us']:8.1f} us            ratio {t['ratio']:.2f}")
+    print(f"  CPU at {c['rate_hz']:g} Hz joint states ({c['seconds']:g} s):")
+    for label in ("idle node", "scheduler"):
+        print(f"    {label:10s}: {c[label]['cpu_pct']:5.1f} % of one core (fed at {c[label]['sent_hz']:.0f} Hz)")
+    print(f"    ratio scheduler / idle node: {c['ratio']:.2f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if "--baseline-node" in argv:
+        return _baseline_main()
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    print_table(run(progress=lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,62 @@
+"""Scheduling core: rate-limit measure and the learner's corrections per region."""
+
+import math
+
+import numpy as np
+import pytest
+
+from shaper_nodes.core.fuzzy import Rule, RuleBase, Triangular, triangular_partition
+from shaper_nodes.core.scheduling import Scheduler, relative_change
+from shaper_nodes.core.shapers import Mode, Shaper, ShaperError, design
+
+
+def base():
+    pts = [0.0, 1.0, 2.0]
+    rules = []
+    for mf, p in zip(triangular_partition(pts), pts):
+        w, z = 2.0 - 0.5 * p, 0.05
+        a = np.array([[0.0, 1.0], [-w * w, -2 * z * w]])
+        rules.append(Rule((mf,), a, np.array([[0.0], [1.0]]), name=f"r{int(p)}"))
+    return RuleBase(("q",), tuple(rules))
+
+
+def same(a, b):
+    return a.family == b.family and np.array_equal(a.times, b.times) and np.array_equal(a.amplitudes, b.amplitudes)
+
+
+def test_relative_change():
+    assert relative_change([Mode(1.0, 0.05)], [Mode(1.02, 0.05)]) == pytest.approx(0.02)
+    assert relative_change([Mode(1.0, 0.0)], [Mode(1.0, 0.001)]) == pytest.approx(0.1)  # zeta floor 0.01
+    assert relative_change([Mode(1.0, 0.05)], []) == math.inf
+
+
+def test_corrections_are_exact_where_learned_and_kept_per_region():
+    s = Scheduler(base())
+    at = s.evaluate([0.3])
+    sched = s.scheduled(at)
+    assert same(s.shaper(at), sched)  # no correction yet: the scheduled ZV
+    learned = Shaper(np.array([0.45, 0.55]), np.array([0.0, 1.1 * sched.times[1]]))
+    region, _ = s.learn(at, learned)
+    assert region == 0
+    got = s.shaper(at)
+    np.testing.assert_allclose(got.times, learned.times, rtol=1e-12)
+    np.testing.assert_allclose(got.amplitudes, learned.amplitudes, rtol=1e-12)
+    far = s.evaluate([2.0])  # a region with no correction: the scheduled ZV
+    assert same(s.shaper(far), s.scheduled(far))
+    again = s.shaper(s.evaluate([0.3]))
+    np.testing.assert_allclose(again.times, learned.times, rtol=1e-12)
+    with pytest.raises(ShaperError, match="two-impulse"):
+        s.learn(at, design("zvd", [Mode(2.0, 0.05)]))
+
+
+def test_mode_interpolation_and_family_checks():
+    s = Scheduler(base(), method="modes")
+    (m,) = s.evaluate([0.5]).modes
+    assert m.omega == pytest.approx(0.5 * 2.0 + 0.5 * 1.5, rel=1e-9)
+    with pytest.raises(ValueError, match="interpolation"):
+        Scheduler(base(), method="cubic")
+    with pytest.raises(ValueError):
+        Scheduler(base(), family="nonsense")
+    rb = RuleBase(("q",), (Rule((Triangular(0, 0, 1),), np.array([[-1.0]]), np.array([[1.0]])),))
+    with pytest.raises(ValueError, match="no lightly damped mode"):
+        Scheduler(rb).evaluate([0.5])
