@@ -156,3 +156,21 @@ def test_the_learner_correction_is_kept_per_region_and_reapplied(graph):
     future = peer.cli.call_async(SetShaper.Request(shaper=ShaperMsg(family="zv", source="user")))
     spin_until(ex, future.done, 10.0, "the refusal")
     assert not future.result().success and "learner only" in future.result().message
+
+
+def test_the_real_learner_speaks_to_the_scheduler(graph, start_node):
+    """The learner node pointed at the scheduler (shaper: /scheduler): without a saved state it
+    starts with the identity shaper (its unshaped reference cycle); the scheduler forwards it to
+    the shaper node, mirrors it on ~/active_shaper, and holds the schedule meanwhile."""
+    sched, peer, ex = graph
+    settle_at(sched, peer, ex, 0.3)
+    start_node("shaper_nodes", "learner", {"shaper": "/scheduler"})
+    spin_until(ex, lambda: peer.real and peer.real[-1].source == "learner", 60.0, "the learner's first shaper")
+    assert peer.real[-1].family == "none"
+    spin_until(ex, lambda: peer.active and peer.active[-1].revision == peer.real[-1].revision, 10.0, "mirror")
+    sent = sched.sent
+    deadline = time.monotonic() + 1.0
+    while time.monotonic() < deadline:  # the pose moves, but the learner's reference cycle holds
+        peer.pose(0.6)
+        ex.spin_once(timeout_sec=0.02)
+    assert sched.sent == sent and peer.real[-1].source == "learner"
