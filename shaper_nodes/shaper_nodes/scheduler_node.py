@@ -213,8 +213,8 @@ class SchedulerNode(Node):
         self._interp = interp
         if self._pending or self._held_by_learner or not self._set_cli.service_is_ready():
             return
-        if self.last_sent is not None and \
-                relative_change(self.last_sent.modes, interp.modes) < float(self.get_parameter("relative_change").value):
+        threshold = float(self.get_parameter("relative_change").value)
+        if self.last_sent is not None and relative_change(self.last_sent.modes, interp.modes) < threshold:
             return
         if self._now() - self._sent_at < self._min_gap():
             return

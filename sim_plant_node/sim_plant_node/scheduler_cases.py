@@ -229,7 +229,8 @@ def interpolation_table() -> str:
     mids = [0.5 * (a + b) for a, b in zip((0.0,) + STEP_POSES[:-1], STEP_POSES)]
     lines = ["| operating points x0 (m) | interpolating | largest error | error at the steps' midpoints"
              f" x0 = {', '.join(f'{m:.3g}' for m in mids)} m |", "|---|---|---|---|"]
-    for label, pts in (("0.02, 0.7 (the paper's two)", STEP_POSES[::4]), ("0, 0.175, ..., 0.7 (5)", np.linspace(0, 0.7, 5)),
+    for label, pts in (("0.02, 0.7 (the paper's two)", STEP_POSES[::4]),
+                       ("0, 0.175, ..., 0.7 (5)", np.linspace(0, 0.7, 5)),
                        ("0, 0.1, ..., 0.7 (8, case c)", FUZZY_POINTS)):
         base = rule_base_from_dict(rule_base_spec(pts, JOINT))
         for method in ("model", "modes"):

@@ -21,9 +21,9 @@ TwoMassPlant
     (c0 / m0 = 15 1/s). At rest x0 = x1, and x0 = v / c0 for a constant m1 (the command
     acts as a position setpoint scaled by 1 / c0); as m1 changes with x0 on the way (eq. (1)
     writes m1 x1'', not d(m1 x1')/dt) the rest pose is off by a path-dependent fraction of a
-    percent (0.36 m becomes 0.3614 m after seed 004's steps). m1 is kept at least M1_MIN so that the model stays defined for x0 below
-    -0.1 m. /joint_states carries x0 and x0' (the pose the scheduler sees), the tip state and
-    the accelerometer x1, x1' and x1''.
+    percent (0.36 m becomes 0.3614 m after seed 004's steps). m1 is kept at least M1_MIN so
+    that the model stays defined for x0 below -0.1 m. /joint_states carries x0 and x0' (the
+    pose the scheduler sees), the tip state and the accelerometer x1, x1' and x1''.
 two_mass_matrices
     (A, B) of eq. (1) for a given m1: the linear model at one operating point.
 StaircaseTask
