@@ -108,6 +108,12 @@ class SimPlantNode(Node):
         d("task.max_velocity", 1.0, _desc("Largest joint velocity of a move, rad/s or m/s.", 1e-6, 1e6))
         d("task.max_acceleration", 10.0, _desc("Largest joint acceleration of a move, rad/s^2 or m/s^2.", 1e-6, 1e9))
         d("task.dwell", 2.0, _desc("Dwell after each move (the residual-vibration window), s.", 0.0, 3600.0))
+        d("task.profile", "trapezoid", _desc(
+            "Move profile: 'trapezoid' (within max_velocity and max_acceleration), 'step' (jump to the target)"
+            " or 'ramp' (constant max_velocity)."))
+        d("task.round_trip", False, _desc(
+            "Every cycle goes start -> goal -> start (each with a dwell), so all cycles are the same;"
+            " otherwise cycles alternate between the poses."))
         d("task.cycles", 4, _desc("Cycles per run (started by ~/start_task)."))
         d("task.preroll", 1.0, _desc("Rest at the start pose before the first cycle, s.", 0.0, 3600.0))
         d("task.autostart", False, _desc("Start a run as soon as the node is up.", read_only=True))
@@ -226,7 +232,7 @@ class SimPlantNode(Node):
         try:
             self.task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
                                   float(g("task.max_acceleration")), float(g("task.dwell")), self.rate,
-                                  int(g("task.cycles")))
+                                  int(g("task.cycles")), str(g("task.profile")), bool(g("task.round_trip")))
         except ValueError as err:
             return False, str(err)
         self._preroll_left = int(round(float(g("task.preroll")) * self.rate))
