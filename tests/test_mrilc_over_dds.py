@@ -85,3 +85,14 @@ def test_bad_feedforward_profiles_are_refused_and_the_plant_keeps_running(start_
         assert send(injection="command", data=[]).success  # an empty profile clears it
     finally:
         conductor.close()
+
+
+def test_profile_is_saved_and_reloaded(start_node, ros_context, tmp_path):
+    start = Starter(start_node)
+    state = tmp_path / "mrilc.json"
+    first = run_learning(PERTURBED, 3, start, ros_context, {"state_file": str(state), "mrilc.law": "robust"})
+    start.stop_all()
+    assert [r.iteration for r in first] == [1, 2, 3] and state.exists()
+    again = run_learning(PERTURBED, 1, start, ros_context, {"state_file": str(state), "mrilc.law": "robust"})
+    assert again[0].iteration == 4
+    assert again[0].rms_e < first[2].rms_e < first[0].rms_e  # it went on from the saved profile
