@@ -17,25 +17,8 @@ from sim_plant_node.mrilc_cases import JOINT, NOMINAL, PERTURBED, RATE, plant_pa
 pytestmark = pytest.mark.integration
 
 
-class Starter:
-    """start_node, remembering the processes so that a run's nodes can be stopped before the next."""
-
-    def __init__(self, start_node):
-        self.start_node, self.procs = start_node, []
-
-    def __call__(self, package, executable, params):
-        proc = self.start_node(package, executable, params)
-        self.procs.append(proc)
-        return proc
-
-    def stop_all(self):
-        for proc in reversed(self.procs):
-            assert proc.stop() == 0
-        self.procs = []
-
-
-def test_mrilc_400_iterations_on_the_perturbed_plant(start_node, ros_context):
-    start = Starter(start_node)
+def test_mrilc_400_iterations_on_the_perturbed_plant(starter, ros_context):
+    start = starter
     nominal = run_shaper_only(NOMINAL, 2, start, ros_context)
     start.stop_all()
     assert [r.action for r in nominal] == ["hold", "hold"]
@@ -87,8 +70,8 @@ def test_bad_feedforward_profiles_are_refused_and_the_plant_keeps_running(start_
         conductor.close()
 
 
-def test_profile_is_saved_and_reloaded(start_node, ros_context, tmp_path):
-    start = Starter(start_node)
+def test_profile_is_saved_and_reloaded(starter, ros_context, tmp_path):
+    start = starter
     state = tmp_path / "mrilc.json"
     first = run_learning(PERTURBED, 3, start, ros_context, {"state_file": str(state), "mrilc.law": "robust"})
     start.stop_all()

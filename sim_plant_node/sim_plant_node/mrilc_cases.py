@@ -153,29 +153,15 @@ def main(argv: list[str] | None = None) -> int:
                    help="where mrilc_results.md and img/mrilc_learning.png go (default docs)")
     args = p.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.launching import NodeProcess
-
-    from .conductor import spin_context
+    from .conductor import node_session
 
     logs = pathlib.Path("out") / "mrilc_cases"
     logs.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
 
     def session(name: str, fn):
-        procs: list = []
-
-        def start(package, executable, params):
-            proc = NodeProcess(package, executable, params, log_path=logs / f"{name}-{executable}.log")
-            procs.append(proc.start())
-            return proc
-
-        ctx = spin_context()
-        try:
+        with node_session(logs, name) as (start, ctx):
             return fn(start, ctx)
-        finally:
-            ctx.try_shutdown()
-            for proc in reversed(procs):
-                proc.stop()
 
     def show(r: Iteration) -> None:
         if r.iteration in (1, 2, 5, 10, 25, 50, 100, 200, 300, 400) or r.action != "learn":
