@@ -350,9 +350,10 @@ class SimPlantNode(Node):
 
     def _integrate(self, command: np.ndarray) -> None:
         self._applied = command
-        ref = JointState(name=self.joint_names, position=command.tolist())
-        ref.header.stamp = _stamp(self._now())  # the start of the period the setpoint applies to
-        self._ref_pub.publish(ref)
+        if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; costly at every step)
+            ref = JointState(name=self.joint_names, position=command.tolist())
+            ref.header.stamp = _stamp(self._now())  # the start of the period the setpoint applies to
+            self._ref_pub.publish(ref)
         ff = self._feedforward()
         if ff is not None and ff[0] == "command":
             command = command + ff[1]
