@@ -51,6 +51,7 @@ from std_srvs.srv import Trigger
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.validation import InputError, finite_array
 
+from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, make_loop_plant
 from .plants import (LIST_FORCE_LIMIT, LIST_GAIN, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
                      MckPlant, make_plant)
 from shaper_nodes.node_main import run_node
@@ -60,7 +61,7 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 # per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
                 "plant.force_limit")
-PLANT_KEYS = ("plant.model",) + PLANT_PARAMS
+PLANT_KEYS = ("plant.model",) + PLANT_PARAMS + tuple(LOOP_PARAMS)
 
 
 def _stamp(t: float):
@@ -82,7 +83,10 @@ class SimPlantNode(Node):
         d("lockstep_timeout", 2.0, _desc("Lockstep: wall time to wait for the shaped setpoint, s.", 0.01, 600.0))
         d("plant.model", "mck", _desc(
             "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
-            " 'list_time_varying', 'list_hardening', 'list_saturation'. Changes live, keeping the state."))
+            " 'list_time_varying', 'list_hardening', 'list_saturation'; the closed loops (seeds 001, 002, see"
+            " loop.*) 'delay_loop', 'qft_open', 'qft_fb', 'qft_ffb'. Changes live, keeping the state."))
+        for name, (default, text) in LOOP_PARAMS.items():
+            d(name, default, _desc(text))
         d("plant.mass", [1.0], _desc(
             "Tip mass per joint (one value for all), kg (or kg m^2), > 0; list_time_varying: the mass at a"
             " cycle's START, m(t) = mass (1 + t) for t < 1 s, 2 mass after."))
@@ -142,6 +146,7 @@ class SimPlantNode(Node):
         self._cmd_pub = self.create_publisher(Float64MultiArray, tp("command_out"), 10)
         self._js_pub = self.create_publisher(JointState, tp("joint_states"), 10)
         self._tip_pub = self.create_publisher(JointState, tp("tip_state"), 10)
+        self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
         self._imu_pub = self.create_publisher(Imu, tp("imu"), qos_profile_sensor_data)
         self._event_pub = self.create_publisher(CycleEvent, tp("cycle_events"), 10)
         self._report_pub = self.create_publisher(CycleReport, tp("cycle_reports"), 10)
@@ -193,11 +198,14 @@ class SimPlantNode(Node):
     def _pose(self, name: str, overrides: dict) -> np.ndarray:
         return self._vector(name, overrides)
 
-    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant:
+    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant | LoopPlant:
         model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
-        if model not in PLANT_MODELS:
-            raise ValueError(f"plant.model must be one of {', '.join(PLANT_MODELS)}; got {model!r}")
+        if model not in PLANT_MODELS + LOOP_MODELS:
+            raise ValueError(f"plant.model must be one of {', '.join(PLANT_MODELS + LOOP_MODELS)}; got {model!r}")
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
+        if model in LOOP_MODELS:
+            return make_loop_plant(model, m, c, k, self.rate, {p: overrides.get(p, self.get_parameter(p).value)
+                                                               for p in LOOP_PARAMS})
         try:
             return make_plant(model, m, c, k, self.rate, stiffness_cubic=k3, gain=kp, force_limit=f_max)
         except ValueError as err:
@@ -323,6 +331,12 @@ class SimPlantNode(Node):
                          velocity=self.plant.tip_velocity.tolist())
         tip.header.stamp = stamp
         self._tip_pub.publish(tip)
+        if isinstance(self.plant, LoopPlant):  # per joint: output y (with d_o), measured y + n, control u, reference r
+            p = self.plant
+            loop = JointState(name=[f"{j}/{s}" for s in p.SIGNALS for j in self.joint_names],
+                              position=np.concatenate([p.output, p.measured, p.control, p.reference]).tolist())
+            loop.header.stamp = stamp
+            self._loop_pub.publish(loop)
         acc_joint = self.plant.tip_acceleration
         acc = np.array([acc_joint[a] if a >= 0 else 0.0 for a in self._axes])
         acc += np.asarray(self.get_parameter("imu.bias").value, dtype=float)[:3]
