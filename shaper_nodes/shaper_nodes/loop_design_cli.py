@@ -222,13 +222,16 @@ def _cmd_qft_table(args: argparse.Namespace) -> str:
     for name in ("output_disturbance", "input_disturbance", "noise"):
         specs[name] = np.max([qft.loop_specs(args.design, p, args.frequencies, args.gain)[name]
                               for p in qft.plant_grid(5)], axis=0).tolist()
+    marg = [] if args.design == "open" else qft.margins(args.design, gain=args.gain)
     failing = sorted({w for r in rows for w in r.violations})
     bands = _failing_bands(args.design, args.delta, args.gain)
     doc: dict[str, Any] = {
         "design": args.design, "gain": gain, "delta_m": args.delta, "frequencies": list(args.frequencies),
         "plants": [{"m": r.plant.m, "c": r.plant.c, "k": r.plant.k, "errors": list(r.errors),
                     "violations": list(r.violations)} for r in rows],
-        "failing_frequencies": failing, "dense_grid_failing_bands": bands, "worst_case_specs": specs}
+        "failing_frequencies": failing, "dense_grid_failing_bands": bands, "worst_case_specs": specs,
+        "margins": [{"m": x.plant.m, "c": x.plant.c, "k": x.plant.k, "gain_margin": x.gain_margin,
+                     "phase_margin_deg": x.phase_margin, "crossover": x.crossover, "stable": x.stable} for x in marg]}
     if args.json:
         return json.dumps(doc, indent=2)
     label = {"ffb": "feedforward-feedback (Fig. 4, spec 9)", "fb": "feedback (Fig. 2, spec 7)",
@@ -251,6 +254,12 @@ def _cmd_qft_table(args: argparse.Namespace) -> str:
             _table(["spec"] + [f"{w:g}" for w in args.frequencies],
                    [[n] + [f"{v:.4g}" for v in vals] for n, vals in specs.items()],
                    right=[False] + [True] * len(args.frequencies))]
+    if marg:
+        worst = min(marg, key=lambda x: x.phase_margin)
+        out += ["", f"loop L = P G on the corners: {'all stable' if all(x.stable for x in marg) else 'UNSTABLE for some'};"
+                f" crossover {min(x.crossover for x in marg):.4g}-{max(x.crossover for x in marg):.4g} rad/s;"
+                f" smallest phase margin {worst.phase_margin:.3g} deg ({worst.plant.label()}),"
+                f" smallest gain margin {min(x.gain_margin for x in marg):.3g}"]
     return "\n".join(out)
 
 

@@ -43,6 +43,7 @@ RATE_002 = 1000.0
 SUBSTEPS_002 = 10  # loop at 10 kHz (at 1 kHz the zero-order-hold controller's sample of delay destabilises it)
 DWELL_002 = 1.0
 EVENT_TIME = 0.5  # disturbance / noise step after the reference step, s
+WHITE_NOISE = 1e-3  # white measurement noise, m (one sigma per loop sample)
 
 
 def tdf_interval_from_cli(omega_a: float = OMEGA_A, delay: float = DELAY_USED) -> tuple[float, float]:
@@ -167,6 +168,8 @@ RUNS_002 = (
     Run002("disturbance, ZV + feedforward-feedback", "qft_ffb", "zv", {"loop.disturbance_step": 1.0}),
     Run002("noise, open loop ZV", "qft_open", "zv", {"loop.noise_step": 1.0}),
     Run002("noise, ZV + feedforward-feedback", "qft_ffb", "zv", {"loop.noise_step": 1.0}),
+    Run002("white noise, open loop ZV", "qft_open", "zv", {"loop.noise_stddev": WHITE_NOISE}),
+    Run002("white noise, ZV + feedforward-feedback", "qft_ffb", "zv", {"loop.noise_stddev": WHITE_NOISE}),
 )
 
 
@@ -194,7 +197,8 @@ def run_seed002(start: Callable[[str, str, dict], object], ctx, runs=RUNS_002,
     out: dict[str, Traces] = {}
     try:
         for run in runs:
-            params = {"plant.model": run.model, "loop.disturbance_step": 0.0, "loop.noise_step": 0.0, **run.loop}
+            params = {"plant.model": run.model, "loop.disturbance_step": 0.0, "loop.noise_step": 0.0,
+                      "loop.noise_stddev": 0.0, **run.loop}
             conductor.set_plant(**{k.replace(".", "__"): v for k, v in params.items()})
             conductor.set_shaper(run.shaper, p0.omega_n, p0.zeta)
             out[run.name] = _run(conductor, rec)
@@ -210,6 +214,14 @@ def residual(tr: Traces, family: str, until: float = DWELL_002) -> tuple[np.ndar
     w = (tr.t >= shaper_duration(family) - 1e-9) & (tr.t <= until)
     e = tr.output[w] - 1.0
     return np.sqrt(np.mean(e**2, axis=0)), np.max(np.abs(e), axis=0)
+
+
+def noise_effect(noisy: Traces, clean: Traces) -> np.ndarray:
+    """Per joint RMS of the true output's deviation caused by white noise (noisy run minus the same run
+    without noise) over the last half of the dwell, m."""
+    w = noisy.t >= EVENT_TIME
+    diff = [noisy.output[w, j] - np.interp(noisy.t[w], clean.t, clean.output[:, j]) for j in range(noisy.output.shape[1])]
+    return np.sqrt(np.mean(np.square(diff), axis=1))
 
 
 def event_effect(tr: Traces, signal: str = "output") -> np.ndarray:
@@ -244,22 +256,25 @@ def _plot001(path: pathlib.Path, cases: dict[str, float], tr: Traces) -> None:
     plt.close(fig)
 
 
-def _plot002(path: pathlib.Path, traces: dict[str, Traces], names: list[str], title: str, signal: str = "output") -> None:
+def _plot002(path: pathlib.Path, traces: dict[str, Traces], names: list[str], title: str,
+             signals: tuple[str, ...] = ("output",)) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 3.8), sharey=True)
-    for ax, name in zip(axes, names):
-        tr = traces[name]
-        ax.plot(tr.t, getattr(tr, signal), lw=0.8)
-        ax.plot(tr.t, tr.reference[:, 0], "k--", lw=1, label="shaped reference")
-        ax.set_title(name, fontsize=9)
-        ax.set_xlabel("time (s)")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel(f"x2 ({signal}), m")
-    axes[0].legend(fontsize=7)
+    fig, axes = plt.subplots(len(signals), len(names), figsize=(4 * len(names), 3.6 * len(signals)), sharey=True,
+                             squeeze=False)
+    for row, signal in zip(axes, signals):
+        for ax, name in zip(row, names):
+            tr = traces[name]
+            ax.plot(tr.t, getattr(tr, signal), lw=0.8)
+            ax.plot(tr.t, tr.reference[:, 0], "k--", lw=1, label="shaped reference")
+            ax.set_title(f"{name}: {'true output y' if signal == 'output' else 'measured y + n'}", fontsize=8)
+            ax.set_xlabel("time (s)")
+            ax.grid(alpha=0.3)
+        row[0].set_ylabel("x2, m")
+    axes[0][0].legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -267,9 +282,11 @@ def _plot002(path: pathlib.Path, traces: dict[str, Traces], names: list[str], ti
 
 
 def report001(cases: dict[str, float], tr: Traces, interval: tuple[float, float]) -> str:
+    from shaper_nodes.core.time_delay import ppusmd_gains
+
+    a0, a1, _ = ppusmd_gains(OMEGA_A, DELAY_USED)
     lines = [f"## Seed 001: time-delay feedback controller, w_A = {OMEGA_A:g} rad/s, T = pi/(3 w_A) ="
-             f" {DELAY:.6f} s, on the 1 kHz loop grid {DELAY_USED:g} s (gains A0 = A2 = 1.0000, A1 = -1.0000 to 4"
-             " decimals)", "",
+             f" {DELAY:.6f} s, on the 1 kHz loop grid {DELAY_USED:g} s (gains A0 = A2 = {a0:.6g}, A1 = {a1:.6g})", "",
              f"`loop_design tdf-interval --omega-a 3 --delay {DELAY_USED:g}` prints the stable interval"
              f" {interval[0]:.5g} <= w_R <= {interval[1]:.5g} rad/s.", "",
              "| plant | overshoot (%) | settled to 1e-6 at (s) | peak abs(y - 1) in 25-30 s over 5-10 s | verdict |",
@@ -307,15 +324,20 @@ def report002(traces: dict[str, Traces]) -> str:
     lines += ["", "![steps](img/closed_loop_002_step.png)", "",
               f"Unit-step plant-output disturbance and unit-step measurement noise at {EVENT_TIME:g} s: RMS of"
               f" the output minus 1 over the {0.5:g} s after the step (true output y = x2 + d_o; measured y + n), mm.",
-              "", "| plant (m, c, k) | disturbance, open | disturbance, FFB | noise, open: true (measured) |"
-              " noise, FFB: true (measured) |", "|---|---|---|---|---|"]
+              f" White measurement noise of {1e3 * WHITE_NOISE:g} mm per loop sample: RMS of the deviation of the true"
+              " output from the same run without noise, over 0.5-1 s, mm.",
+              "", "| plant (m, c, k) | disturbance, open | disturbance, FFB | noise step, open: true (measured) |"
+              " noise step, FFB: true (measured) | white noise, open | white noise, FFB |", "|---|---|---|---|---|---|---|"]
+    wo = noise_effect(traces["white noise, open loop ZV"], traces["open loop, ZV"])
+    wf = noise_effect(traces["white noise, ZV + feedforward-feedback"], traces["ZV + feedforward-feedback"])
     do, df = event_effect(traces["disturbance, open loop ZV"]), event_effect(traces["disturbance, ZV + feedforward-feedback"])
     no, nf = event_effect(traces["noise, open loop ZV"]), event_effect(traces["noise, ZV + feedforward-feedback"])
     nom = event_effect(traces["noise, open loop ZV"], "measured")
     nfm = event_effect(traces["noise, ZV + feedforward-feedback"], "measured")
     for i, c in enumerate(cs):
         lines.append(f"| {c.m:g}, {c.c:g}, {c.k:g} | {1e3 * do[i]:.4g} | {1e3 * df[i]:.4g} |"
-                     f" {1e3 * no[i]:.4g} ({1e3 * nom[i]:.4g}) | {1e3 * nf[i]:.4g} ({1e3 * nfm[i]:.4g}) |")
+                     f" {1e3 * no[i]:.4g} ({1e3 * nom[i]:.4g}) | {1e3 * nf[i]:.4g} ({1e3 * nfm[i]:.4g}) |"
+                     f" {1e3 * wo[i]:.3g} | {1e3 * wf[i]:.3g} |")
     lines += ["", "![disturbance and noise](img/closed_loop_002_disturbance.png)", ""]
     return "\n".join(lines)
 
@@ -362,8 +384,8 @@ def main(argv: list[str] | None = None) -> int:
                 _plot002(args.docs / "img" / "closed_loop_002_disturbance.png", traces,
                          ["disturbance, open loop ZV", "noise, open loop ZV", "disturbance, ZV + feedforward-feedback",
                           "noise, ZV + feedforward-feedback"],
-                         f"seed 002 Fig. 10: unit-step output disturbance / measurement noise at {EVENT_TIME:g} s"
-                         " (true output y)")
+                         f"seed 002 Fig. 10: unit-step output disturbance / measurement noise at {EVENT_TIME:g} s",
+                         ("output", "measured"))
             print(f"seed {seed} done ({time.monotonic() - t0:.0f} s)", flush=True)
         finally:
             ctx.try_shutdown()

@@ -224,3 +224,27 @@ def bounds(spec: str, omega: float, phases_deg: np.ndarray, delta: float = DELTA
         low = np.where(bad, lo, np.inf).min(axis=1)
         lower = np.where(bad.any(axis=1), np.where(low > 0, 20 * np.log10(np.maximum(low, 1e-300)), -np.inf), np.nan)
     return lower, upper
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Stability margins of L = P G for one plant: gain margin (factor), phase margin (deg), gain
+    crossover (rad/s), and whether the closed loop is stable (its poles)."""
+
+    plant: MckParams
+    gain_margin: float
+    phase_margin: float
+    crossover: float
+    stable: bool
+
+
+def margins(design: str, plants: list[MckParams] | None = None, gain: float | None = None) -> list[Margins]:
+    """Margins of the loop of a design ('fb', 'ffb') for each plant (default: the eight corners)."""
+    g = controller_tf(design_gain(design) if gain is None else gain)
+    out = []
+    for p in plants or corners():
+        loop = g * plant_tf(p)
+        gm, pm, _, wc = control.margin(loop)
+        poles = control.poles(control.feedback(loop, 1))
+        out.append(Margins(p, float(gm), float(pm), float(wc), bool(np.all(np.real(poles) < 0))))
+    return out
