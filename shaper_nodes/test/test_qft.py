@@ -78,7 +78,7 @@ def test_disturbance_and_noise_specs():
     w = np.array([10.0, 125.0])
     s = loop_specs("ffb", nominal(), w)
     assert s["output_disturbance"][0] < 0.1  # integral action rejects a slow output disturbance
-    assert s["noise"][0] == pytest.approx(1.0, abs=0.01)  # below the bandwidth the output follows the noise
+    assert s["noise"][0] == pytest.approx(1.0, abs=0.05)  # below the bandwidth the output follows the noise
     open_ = loop_specs("open", nominal(), w)
     assert s["input_disturbance"][1] < 0.2 * open_["input_disturbance"][1]  # resonance damped by the loop
 
