@@ -166,10 +166,12 @@ def _cmd_tdf_plot(args: argparse.Namespace) -> str:
             ax.plot(ts, up, color="tab:green", lw=1)
             ax.axhline(wa, color="k", lw=1)
             ax.set_title(f"Region of stability, w_A = {wa:g} rad/s (seed 001 Fig. 4)")
+            ax.set_ylim(0, 1.3 * float(np.nanmax(up)))
         for n in (1, 2):
             ax.axvline(n * math.pi / wa, color="0.6", ls=":", lw=0.8)
         ax.set_xlabel("delay T (s)")
-        ax.set_ylim(0, 8 * wa)
+        if args.figure == 3:
+            ax.set_ylim(0, 8 * wa)
         ax.set_ylabel("w_R (rad/s)")
     else:
         was = np.linspace(0.05, 2 * math.pi / args.delay * 0.999, 600)
