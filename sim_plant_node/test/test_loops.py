@@ -156,3 +156,22 @@ def test_node_builds_loop_plants_and_refuses_bad_loop_parameters(ros_context):
             assert isinstance(node.plant, QftLoopPlant) and node.plant.model == model
     finally:
         node.destroy_node()
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("config, cls", [("delay_loop.yaml", DelayLoopPlant), ("qft_ffb.yaml", QftLoopPlant)])
+def test_example_configs_load(ros_context, config, cls):
+    import pathlib
+
+    from sim_plant_node.sim_plant import SimPlantNode
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "config" / config
+    node = SimPlantNode(context=ros_context, cli_args=["--ros-args", "--params-file", str(path)])
+    try:
+        assert isinstance(node.plant, cls)
+        if cls is DelayLoopPlant:
+            assert node.plant.delay_samples == 349 and node.plant.natural_frequency[0] == pytest.approx(4.0)
+        else:
+            assert node.plant.model == "qft_ffb" and node.plant.gain == qft.GAIN_FFB
+    finally:
+        node.destroy_node()
