@@ -1,8 +1,9 @@
 """Closed-loop plants: a base-driven m-c-k joint with a loop controller inside the plant (seeds 001, 002).
 
 The reference r of the loop is the (shaped) command the sim plant receives; the controller
-output u drives the base x1 (what /joint_states carries), the tip x2 is the plant output (what
-~/tip_state carries). Per joint, x2 / x1 = (c s + k) / (m s^2 + c s + k) (c = 0: the undamped
+output u drives the base x1, the tip x2 is the plant output. As for the seed 000 loop
+(``mck_pid``), /joint_states carries the output y (position), y' (velocity) and the control u
+(effort), and ~/tip_state y and y'; ~/loop_state adds the measured output and the reference. Per joint, x2 / x1 = (c s + k) / (m s^2 + c s + k) (c = 0: the undamped
 plant w_R^2 / (s^2 + w_R^2) of seed 001). The controller runs ``substeps`` times per command
 period (loop rate = rate x substeps); at each loop sample k
 
@@ -127,6 +128,24 @@ class LoopPlant(_JointState):
         self._state = np.array(value, dtype=float).reshape(self.joints, 4)
         if hasattr(self, "_rng"):
             self._rest(self._state[:, 0].copy())
+
+    @property
+    def base_position(self) -> np.ndarray:
+        """The output y = x2 + d_o at the end of the last period (what /joint_states carries)."""
+        return np.asarray(self.output, dtype=float).copy()
+
+    @property
+    def base_velocity(self) -> np.ndarray:
+        """y' (= x2')."""
+        return self._state[:, 1].copy()
+
+    tip_position = base_position
+    tip_velocity = base_velocity
+
+    @property
+    def effort(self) -> np.ndarray:
+        """The controller output u (the base position x1) over the last loop sample."""
+        return np.asarray(self.control, dtype=float).copy()
 
     @property
     def natural_frequency(self) -> np.ndarray:
