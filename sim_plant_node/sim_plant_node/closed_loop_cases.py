@@ -96,8 +96,9 @@ def _session(start: Callable[[str, str, dict], object], ctx, joints: list[str], 
 
     from .conductor import Conductor
 
+    # a generous lockstep timeout: on a loaded machine the plant waits for the shaper instead of holding
     start("sim_plant_node", "sim_plant", {"joint_names": joints, "rate": rate, "mode": "lockstep",
-                                          "imu.axes": [0, -1, -1], **plant})
+                                          "lockstep_timeout": 60.0, "imu.axes": [0, -1, -1], **plant})
     start("shaper_nodes", "shaper_node", {"joint_names": joints, "command_rate": rate, "use_sim_time": True})
     conductor = Conductor(context=ctx)
     rec = _Recorder(len(joints))
