@@ -175,3 +175,26 @@ def test_example_configs_load(ros_context, config, cls):
             assert node.plant.model == "qft_ffb" and node.plant.gain == qft.GAIN_FFB
     finally:
         node.destroy_node()
+
+
+def test_ramp_references_from_the_task():
+    """A ramp (task.profile 'ramp') through the loops: the feedforward-feedback loop on the nominal plant
+    follows it as the model P0 does (type 2: no lag at the end of the ramp), and the time-delay loop with
+    the exact model lags by T (G_FF(s) = 1 - s T + ... for A1 + 2 A2 = 1) and arrives 2T after the ramp."""
+    from sim_plant_node.plants import CycleTask
+
+    p0 = qft.nominal()
+    for plant, lag in ((make_loop_plant("qft_ffb", [p0.m], [p0.c], [p0.k], 1000.0, {"loop.substeps": 10}), 0.0),
+                       (delay_loop(3.0, rate=1000.0, substeps=1), 0.349)):
+        task = CycleTask([0.0], [1.0], 0.5, 1.0, 2.0, plant.rate, 1, profile="ramp")
+        plant.reset(0.0)
+        rs, ys = [], []
+        while not task.done:
+            r, _ = task.step()
+            plant.step(r, len(rs) / plant.rate)
+            rs.append(r[0])
+            ys.append(plant.output[0])
+        t = np.arange(1, len(ys) + 1) / plant.rate
+        mid = np.searchsorted(t, 1.5)  # on the ramp (2 s long at 0.5 m/s)
+        assert ys[mid] == pytest.approx(rs[mid] - 0.5 * lag, abs=2e-3)
+        assert ys[-1] == pytest.approx(1.0, abs=1e-6)
