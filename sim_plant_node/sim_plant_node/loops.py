@@ -127,7 +127,10 @@ class LoopPlant(_JointState):
         """Take over a plant state (a live model change): the controller rests at the tip position."""
         self._state = np.array(value, dtype=float).reshape(self.joints, 4)
         if hasattr(self, "_rng"):
-            self._rest(self._state[:, 0].copy())
+            x2 = self._state[:, 0].copy()
+            self.output, self.measured, self.reference = x2.copy(), x2.copy(), x2.copy()
+            self.control = self._state[:, 2].copy()
+            self._rest(x2)
 
     @property
     def base_position(self) -> np.ndarray:

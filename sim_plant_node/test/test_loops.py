@@ -198,3 +198,12 @@ def test_ramp_references_from_the_task():
         mid = np.searchsorted(t, 1.5)  # on the ramp (2 s long at 0.5 m/s)
         assert ys[mid] == pytest.approx(rs[mid] - 0.5 * lag, abs=2e-3)
         assert ys[-1] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_taking_over_a_state_puts_the_controller_at_rest_at_the_tip():
+    p = delay_loop(3.0)
+    p.state = np.array([[0.3, 0.0, 0.3, 0.0]])
+    assert p.base_position[0] == 0.3 and p.effort[0] == 0.3
+    for i in range(300):
+        p.step(np.array([0.3]), None)
+    assert abs(p.output[0] - 0.3) < 1e-12  # at rest: nothing moves
