@@ -125,20 +125,22 @@ class StableInterval:
 def stable_interval(omega_a: float, delay: float) -> StableInterval:
     """w_A <= w_R <= min(w_R(k) > w_A) (eq. 27) for the assumed frequency w_A and delay T.
 
-    The crossings w_R(k) grow about linearly in k (w_R(k) >= k pi / (2 T) once k pi / T >> w_A),
-    so the search stops once no larger k can give a smaller bound.
+    For large k, w_R(k) tends to k pi / (T sqrt 2) (even k) and k pi |sin(w_A T / 2)| / T (odd k), so
+    the search over k stops once half the smaller of these exceeds the best bound found.
     """
     _check(omega_a, delay)
     best: Crossing | None = None
+    slope = 0.5 * min(1.0 / math.sqrt(2.0), abs(math.sin(0.5 * omega_a * delay))) * math.pi / delay
     k_max = 8
     while True:
         cands = [x for x in change_points(omega_a, delay, k_max) if x.k > 0 and x.omega_r > omega_a * (1 + 1e-12)]
         if cands:
             best = min(cands, key=lambda x: x.omega_r)
-        if best is not None and k_max * math.pi / (2.0 * delay) > best.omega_r and k_max * math.pi / delay > 4 * omega_a:
+        if best is not None and k_max * slope > best.omega_r and k_max * math.pi / delay > 4 * omega_a:
             break
-        if k_max > 100000:
-            raise TimeDelayError("no upper stability bound found")  # pragma: no cover - cannot happen
+        if k_max > 200000:
+            raise TimeDelayError(f"no upper stability bound found up to k = {k_max} (w_A T = {omega_a * delay:.6g}"
+                                 " is too close to a multiple of 2 pi)")
         k_max *= 2
     return StableInterval(omega_a, delay, omega_a, best.omega_r, best.k)
 
