@@ -111,15 +111,37 @@ def _cmd_tdf_select(args: argparse.Namespace) -> str:
                 ends.append(td.stable_interval(wa, args.delay).upper if wa > 0 else float("nan"))
             except td.TimeDelayError:
                 ends.append(float("nan"))
+        # which w_A of the range keep w_R inside its stable interval, and which gives the largest margin
+        grid = np.linspace(r.low, r.high, 401)[1:] if r.low == 0 else np.linspace(r.low, r.high, 401)
+        ups = np.array([_upper(float(wa), args.delay) for wa in grid])
+        ok = (grid <= args.omega_r) & (ups >= args.omega_r)
+        # two-sided margin: how far (as a ratio) w_R is from both edges w_A and the upper bound
+        with np.errstate(divide="ignore", invalid="ignore"):
+            margin = np.minimum(args.omega_r / grid, ups / args.omega_r)
+        best = int(np.nanargmax(np.where(ok, margin, np.nan))) if ok.any() else None
         rows.append({"k": r.k, "omega_a_low": r.low, "omega_a_high": r.high,
-                     "upper_bound_at_low": ends[0], "upper_bound_at_high": ends[1]})
+                     "upper_bound_at_low": ends[0], "upper_bound_at_high": ends[1],
+                     "stable_omega_a": [float(grid[ok].min()), float(grid[ok].max())] if ok.any() else None,
+                     "best_omega_a": None if best is None else float(grid[best]),
+                     "best_upper_bound": None if best is None else float(ups[best]),
+                     "best_margin": None if best is None else float(margin[best])})
     if args.json:
         return json.dumps({"omega_r": args.omega_r, "delay": args.delay, "ranges": rows}, indent=2)
     out = [f"w_R = {args.omega_r:g} rad/s, T = {args.delay:g} s: choose w_A in (eqs. 28-30)",
            _table(("k", "w_A from", "w_A to", "upper w_R bound there (from)", "(to)"),
                   [(r["k"], f"{r['omega_a_low']:.5g}", f"{r['omega_a_high']:.5g}",
-                    f"{r['upper_bound_at_low']:.5g}", f"{r['upper_bound_at_high']:.5g}") for r in rows]),
+                    *("-" if math.isnan(b) else f"{b:.5g}" for b in (r["upper_bound_at_low"], r["upper_bound_at_high"])))
+                   for r in rows]),
            "then check the margin with tdf-interval (the lower bound is always w_R = w_A)."]
+    for r in rows:
+        if r["stable_omega_a"] is None:
+            out.append(f"k = {r['k']}: no w_A of this range keeps w_R = {args.omega_r:g} rad/s stable")
+        else:
+            lo, hi = r["stable_omega_a"]
+            out.append(f"k = {r['k']}: w_R = {args.omega_r:g} rad/s is stable for w_A in about [{lo:.4g}, {hi:.4g}]"
+                       f" rad/s; the largest margin to both edges, a factor {r['best_margin']:.4g}, at"
+                       f" w_A = {r['best_omega_a']:.4g} rad/s (stable {r['best_omega_a']:.4g} <= w_R <="
+                       f" {r['best_upper_bound']:.5g} rad/s)")
     return "\n".join(out)
 
 

@@ -5,6 +5,7 @@ import math
 
 import pytest
 
+from shaper_nodes.core.time_delay import growth_rate
 from shaper_nodes.loop_design_cli import main
 
 
@@ -29,6 +30,12 @@ def test_tdf_select(capsys):
     assert status == 0
     (r,) = json.loads(out)["ranges"]
     assert (r["k"], r["omega_a_low"], r["omega_a_high"]) == (1, 0.0, 3.0)
+    # the suggested w_A keeps the plant inside its stable interval, by the independent check too
+    wa = r["best_omega_a"]
+    assert r["stable_omega_a"][0] <= wa <= r["stable_omega_a"][1] <= 3.0
+    assert wa < 3.0 < r["best_upper_bound"]
+    assert growth_rate(wa, 0.5, 3.0, 100) < 0
+    assert growth_rate(0.95 * r["stable_omega_a"][0], 0.5, 3.0, 100) > 0  # below the range: unstable
 
 
 def test_qft_table_names_where_the_spec_fails(capsys):
