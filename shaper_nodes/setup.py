@@ -26,6 +26,7 @@ setup(
             "learner = shaper_nodes.learner_node:main",
             "list_replay = shaper_nodes.list_replay:main",
             "shaper_design = shaper_nodes.design_cli:main",
+            "loop_design = shaper_nodes.loop_design_cli:main",
         ],
     },
 )

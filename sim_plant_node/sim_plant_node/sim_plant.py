@@ -63,6 +63,7 @@ from std_srvs.srv import Trigger
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.validation import InputError, finite_array
 
+from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, make_loop_plant
 from .pid_loop import PidLoopPlant
 from .plants import (LIST_FORCE_LIMIT, LIST_GAIN, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
                      MckPlant, make_plant)
@@ -74,8 +75,8 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 # per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
                 "plant.force_limit")
-PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator") + PLANT_PARAMS
-MODELS = PLANT_MODELS + ("mck_pid",)
+PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator") + PLANT_PARAMS + tuple(LOOP_PARAMS)
+MODELS = PLANT_MODELS + ("mck_pid",) + LOOP_MODELS
 
 
 def _stamp(t: float):
@@ -98,7 +99,10 @@ class SimPlantNode(Node):
         d("plant.model", "mck", _desc(
             "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
             " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
-            " seed 000). Changes live, keeping the state when the models share it."))
+            " seed 000), or the closed loops of seeds 001, 002 (see loop.*) 'delay_loop', 'qft_open', 'qft_fb',"
+            " 'qft_ffb'. Changes live, keeping the state when the models share it."))
+        for name, (default, text) in LOOP_PARAMS.items():
+            d(name, default, _desc(text))
         d("controller.numerator", list(PAPER_CONTROLLER[0]), _desc(
             "mck_pid: feedback controller C(s) numerator, highest power first (default seed 000 eq. 13)."))
         d("controller.denominator", list(PAPER_CONTROLLER[1]), _desc("mck_pid: C(s) denominator."))
@@ -161,6 +165,7 @@ class SimPlantNode(Node):
         self._cmd_pub = self.create_publisher(Float64MultiArray, tp("command_out"), 10)
         self._js_pub = self.create_publisher(JointState, tp("joint_states"), 10)
         self._tip_pub = self.create_publisher(JointState, tp("tip_state"), 10)
+        self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
         self._imu_pub = self.create_publisher(Imu, tp("imu"), qos_profile_sensor_data)
         self._event_pub = self.create_publisher(CycleEvent, tp("cycle_events"), 10)
         self._report_pub = self.create_publisher(CycleReport, tp("cycle_reports"), 10)
@@ -216,11 +221,14 @@ class SimPlantNode(Node):
     def _pose(self, name: str, overrides: dict) -> np.ndarray:
         return self._vector(name, overrides)
 
-    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant | PidLoopPlant:
+    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant | PidLoopPlant | LoopPlant:
         model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
         if model not in MODELS:
             raise ValueError(f"plant.model must be one of {', '.join(MODELS)}; got {model!r}")
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
+        if model in LOOP_MODELS:
+            return make_loop_plant(model, m, c, k, self.rate, {p: overrides.get(p, self.get_parameter(p).value)
+                                                               for p in LOOP_PARAMS})
         try:
             plant = make_plant("mck" if model == "mck_pid" else model, m, c, k, self.rate, stiffness_cubic=k3,
                                gain=kp, force_limit=f_max)
@@ -373,6 +381,12 @@ class SimPlantNode(Node):
                          velocity=self.plant.tip_velocity.tolist())
         tip.header.stamp = stamp
         self._tip_pub.publish(tip)
+        if isinstance(self.plant, LoopPlant):  # per joint: output y (with d_o), measured y + n, control u, reference r
+            p = self.plant
+            loop = JointState(name=[f"{j}/{s}" for s in p.SIGNALS for j in self.joint_names],
+                              position=np.concatenate([p.output, p.measured, p.control, p.reference]).tolist())
+            loop.header.stamp = stamp
+            self._loop_pub.publish(loop)
         acc_joint = self.plant.tip_acceleration
         acc = np.array([acc_joint[a] if a >= 0 else 0.0 for a in self._axes])
         acc += np.asarray(self.get_parameter("imu.bias").value, dtype=float)[:3]
