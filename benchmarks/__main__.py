@@ -48,6 +48,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
     p.add_argument("--skip-fir", action="store_true", help="skip the FIR throughput measurement")
     p.add_argument("--skip-list", action="store_true", help="skip the LIST update timing")
+    p.add_argument("--skip-mrilc", action="store_true", help="skip the MRILC update timing")
     p.add_argument("--skip-scheduler", action="store_true", help="skip the scheduler timing and CPU share")
     p.add_argument("--json", metavar="PATH", type=pathlib.Path, help="also write the figures to this JSON file")
     args = p.parse_args(argv)
@@ -187,6 +188,10 @@ def main(argv: list[str] | None = None) -> int:
             from .list_update import run as run_list
 
             report["list_update"] = run_list(progress=_progress)
+        if not args.skip_mrilc:
+            from .mrilc_update import run as run_mrilc
+
+            report["mrilc_update"] = run_mrilc(progress=_progress)
         if not args.skip_scheduler:
             from .scheduler import run as run_scheduler
 
@@ -210,6 +215,11 @@ def main(argv: list[str] | None = None) -> int:
         from .list_update import print_table as print_list
 
         print_list(report["list_update"])
+        print()
+    if "mrilc_update" in report:
+        from .mrilc_update import print_table as print_mrilc
+
+        print_mrilc(report["mrilc_update"])
         print()
     if "scheduler" in report:
         from .scheduler import print_table as print_scheduler

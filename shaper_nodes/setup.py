@@ -9,7 +9,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml", "config/learner.yaml"]),
+        ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml", "config/learner.yaml",
+                                           "config/mrilc.yaml"]),
         ("share/" + package_name + "/config", ["config/scheduler.yaml"]),
     ],
     install_requires=["setuptools"],
@@ -27,6 +28,7 @@ setup(
             "scheduler = shaper_nodes.scheduler_node:main",
             "list_replay = shaper_nodes.list_replay:main",
             "shaper_design = shaper_nodes.design_cli:main",
+            "loop_design = shaper_nodes.loop_design_cli:main",
         ],
     },
 )

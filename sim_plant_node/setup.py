@@ -12,6 +12,7 @@ setup(
         ("share/" + package_name + "/config", ["config/sim_plant.yaml", "config/list_case1.yaml",
                                                "config/list_case2.yaml", "config/list_case3.yaml",
                                                "config/list_case4.yaml"]),
+        ("share/" + package_name + "/config", ["config/delay_loop.yaml", "config/qft_ffb.yaml"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

@@ -57,6 +57,13 @@ def test_design_cli_runs_from_its_installed_executable():
     assert "zvd" in out.stdout and "2hump_ei" in out.stdout
 
 
+def test_loop_design_cli_runs_from_its_installed_executable():
+    out = subprocess.run([str(executable("shaper_nodes", "loop_design")), "tdf-interval", "--omega-a", "3",
+                          "--delay", "0.349"], capture_output=True, text=True, timeout=120, env=os.environ)
+    assert out.returncode == 0, out.stderr
+    assert "stable for 3 <= w_R <= 5.04568 rad/s" in out.stdout
+
+
 def test_list_replay_names_a_missing_bag(tmp_path):
     out = subprocess.run([str(executable("shaper_nodes", "list_replay")), str(tmp_path / "nope")],
                          capture_output=True, text=True, timeout=120, env=os.environ)

@@ -431,10 +431,12 @@ START, MOTION_END, END = 0, 1, 2
 class CycleTask:
     """Repeated point-to-point moves between two poses with a dwell after each.
 
-    Cycle i moves from ``poses[i % 2]`` to ``poses[(i + 1) % 2]``. Every step of the task gives
+    Cycle i moves from ``poses[i % 2]`` to ``poses[(i + 1) % 2]``; with ``round_trip`` every
+    cycle goes from the start pose to the goal, dwells, comes back and dwells again, so that
+    all cycles are the same (what iterative learning needs). Every step of the task gives
     the command for that sample and the cycle events that happen at it: START with the first
-    sample of a cycle, MOTION_END with the sample where the command reaches the goal, END with
-    the last dwell sample.
+    sample of a cycle, MOTION_END with the sample where the command reaches the cycle's last
+    target, END with the last dwell sample.
 
     Parameters
     ----------
@@ -449,23 +451,39 @@ class CycleTask:
         Command rate, Hz.
     cycles : int
         Number of cycles.
+    profile : str
+        'trapezoid' (trapezoidal velocity within the limits), 'step' (the command jumps to the
+        target at the first sample of the move) or 'ramp' (constant velocity ``max_velocity``,
+        ``max_acceleration`` unused).
+    round_trip : bool
+        Every cycle is start -> goal -> start (see above).
     """
 
+    PROFILES = ("trapezoid", "step", "ramp")
+
     def __init__(self, start, goal, max_velocity: float, max_acceleration: float, dwell: float,
-                 rate: float, cycles: int) -> None:
+                 rate: float, cycles: int, profile: str = "trapezoid", round_trip: bool = False) -> None:
         self.start = np.asarray(start, dtype=float).ravel()
         self.goal = np.asarray(goal, dtype=float).ravel()
         if self.start.shape != self.goal.shape:
             raise ValueError("start and goal poses differ in size")
         if not (max_velocity > 0 and max_acceleration > 0 and dwell >= 0 and rate > 0 and cycles >= 1):
             raise ValueError("task needs max_velocity > 0, max_acceleration > 0, dwell >= 0, cycles >= 1")
+        if profile not in self.PROFILES:
+            raise ValueError(f"task profile must be one of {', '.join(self.PROFILES)}; got {profile!r}")
         dist = float(np.max(np.abs(self.goal - self.start)))
-        self.move_duration, ta = trapezoid(dist, max_velocity, max_acceleration)
+        self.profile, self.round_trip = profile, bool(round_trip)
+        if profile == "trapezoid":
+            self.move_duration, ta = trapezoid(dist, max_velocity, max_acceleration)
+        else:  # step: no duration; ramp: no acceleration phase
+            self.move_duration, ta = (0.0 if profile == "step" else dist / max_velocity), 0.0
         self.rate = float(rate)
         self.move_samples = int(math.ceil(self.move_duration * rate - 1e-9))
-        self.samples_per_cycle = self.move_samples + 1 + int(round(dwell * rate))
-        k = np.arange(self.samples_per_cycle)
-        self._s = trapezoid_fraction(k / rate, self.move_duration, ta)
+        leg = self.move_samples + 1 + int(round(dwell * rate))  # one move and its dwell
+        s = trapezoid_fraction(np.arange(leg) / rate, self.move_duration, ta)
+        self._s = np.concatenate([s, 1.0 - s]) if self.round_trip else s
+        self.samples_per_cycle = self._s.size
+        self.motion_end_sample = self.samples_per_cycle - leg + self.move_samples
         self.cycles = int(cycles)
         self.index = 0
 
@@ -475,7 +493,7 @@ class CycleTask:
 
     def pose(self, cycle: int) -> tuple[np.ndarray, np.ndarray]:
         """(start, goal) of a cycle."""
-        return (self.start, self.goal) if cycle % 2 == 0 else (self.goal, self.start)
+        return (self.start, self.goal) if cycle % 2 == 0 or self.round_trip else (self.goal, self.start)
 
     def step(self) -> tuple[np.ndarray, list[TaskEvent]]:
         """The command for the next sample and the events at it."""
@@ -487,7 +505,7 @@ class CycleTask:
         events = []
         if k == 0:
             events.append(TaskEvent(START, cycle, a, b))
-        if k == self.move_samples:
+        if k == self.motion_end_sample:
             events.append(TaskEvent(MOTION_END, cycle, a, b))
         if k == self.samples_per_cycle - 1:
             events.append(TaskEvent(END, cycle, a, b))

@@ -87,3 +87,27 @@ def test_task_events_and_profile():
     vel = np.diff(commands[:, 0]) * 100.0
     assert np.max(np.abs(vel)) <= 1.0 + 1e-9
     assert np.max(np.abs(np.diff(vel) * 100.0)) <= 10.0 + 1e-6
+
+
+@pytest.mark.parametrize("profile", ["trapezoid", "step", "ramp"])
+def test_round_trip_cycles_are_identical_and_end_where_they_start(profile):
+    task = CycleTask([0.0], [1.0], 2.0, 10.0, 0.2, 100.0, 3, profile=profile, round_trip=True)
+    steps = [task.step() for _ in range(3 * task.samples_per_cycle)]
+    cmd = np.array([c[0] for c, _ in steps]).reshape(3, -1)
+    assert np.array_equal(cmd[0], cmd[1]) and np.array_equal(cmd[0], cmd[2])
+    assert cmd[0, -1] == 0.0 and cmd[0].max() == 1.0
+    kinds = [(i, e.kind) for i, (_, evs) in enumerate(steps[: task.samples_per_cycle]) for e in evs]
+    assert kinds[0] == (0, START) and kinds[-1] == (task.samples_per_cycle - 1, END)
+    motion_end = [i for i, k in kinds if k == MOTION_END]
+    assert motion_end == [task.motion_end_sample] and cmd[0, motion_end[0]] == 0.0
+    assert np.all(cmd[0, motion_end[0]:] == 0.0) and cmd[0, motion_end[0] - 1] > 0.0
+
+
+def test_step_and_ramp_profiles():
+    step = CycleTask([0.0], [2.0], 1.0, 10.0, 0.1, 100.0, 2, profile="step")
+    assert step.move_samples == 0 and step.step()[0][0] == 2.0
+    ramp = CycleTask([0.0], [2.0], 4.0, 10.0, 0.1, 100.0, 1, profile="ramp")
+    cmd = np.array([ramp.step()[0][0] for _ in range(ramp.samples_per_cycle)])
+    assert ramp.move_duration == 0.5 and np.allclose(np.diff(cmd[:51]), 0.04)
+    with pytest.raises(ValueError, match="profile"):
+        CycleTask([0.0], [1.0], 1.0, 1.0, 0.1, 100.0, 1, profile="sine")

@@ -25,6 +25,9 @@ list_learning, list_session
     the offline replay share.
 cycles
     Per-cycle buffering and the residual-vibration window every component measures alike.
+time_delay, qft
+    Closed-loop shaping: the time-delay feedback controller's stability analysis (seed 001) and
+    QFT model matching with bounds on the Nichols chart (seed 002).
 validation
     Checks of incoming data with errors that name the problem.
 """
