@@ -78,7 +78,7 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
                 "plant.force_limit")
 PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator") + PLANT_PARAMS + tuple(LOOP_PARAMS)
-MODELS = PLANT_MODELS + ("mck_pid",) + LOOP_MODELS
+MODELS = PLANT_MODELS + ("mck_pid",) + LOOP_MODELS + ("two_mass",)
 
 
 def _stamp(t: float):
@@ -102,7 +102,8 @@ class SimPlantNode(Node):
             "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
             " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
             " seed 000), or the closed loops of seeds 001, 002 (see loop.*) 'delay_loop', 'qft_open', 'qft_fb',"
-            " 'qft_ffb'. Changes live, keeping the state when the models share it."))
+            " 'qft_ffb', or seed 004's two-mass system 'two_mass' (m1 = 10 x0 + 1). Changes live, keeping the"
+            " state when the models share it."))
         for name, (default, text) in LOOP_PARAMS.items():
             d(name, default, _desc(text))
         d("controller.numerator", list(PAPER_CONTROLLER[0]), _desc(
@@ -228,10 +229,10 @@ class SimPlantNode(Node):
 
     def _make_plant(self, overrides: dict) -> MckPlant | ListPlant | PidLoopPlant | LoopPlant:
         model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
-        if model == "two_mass":  # seed 004's two-mass system, m1 = 10 x0 + 1 (two_mass.py)
-            return TwoMassPlant(self.n, self.rate)
         if model not in MODELS:
             raise ValueError(f"plant.model must be one of {', '.join(MODELS)}; got {model!r}")
+        if model == "two_mass":  # seed 004's two-mass system, m1 = 10 x0 + 1 (two_mass.py)
+            return TwoMassPlant(self.n, self.rate)
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
         if model in LOOP_MODELS:
             return make_loop_plant(model, m, c, k, self.rate, {p: overrides.get(p, self.get_parameter(p).value)
