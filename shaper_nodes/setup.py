@@ -25,6 +25,8 @@ setup(
             "learner = shaper_nodes.learner_node:main",
             "list_replay = shaper_nodes.list_replay:main",
             "shaper_design = shaper_nodes.design_cli:main",
+            "analyze_bag = shaper_nodes.bag_analysis_cli:main",
+            "bag_play = shaper_nodes.bag_play:main",
         ],
     },
 )

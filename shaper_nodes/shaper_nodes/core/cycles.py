@@ -84,12 +84,23 @@ class CycleMonitor:
             return None
         cycle, self._cycle = self._cycle, None  # the cycle is over whatever its data
         motion_end = self._motion_end if self._motion_end is not None else self._start
-        acc_t = np.asarray(self._acc_t)
         acc = np.vstack(self._acc) if self._acc else np.zeros((0, 3))
-        pos_t = np.asarray(self._pos_t)
         pos = np.vstack(self._pos) if self._pos else np.zeros((0, 1))
-        after = pos_t >= motion_end
-        window_start = (settle_time(pos_t[after], pos[after], motion_end, self.settle_tolerance)
-                        if after.any() else motion_end)
-        residual = residual_vibration(acc_t, acc, window_start, float(t) + 1e-12, self.remove_mean)
-        return CycleResult(cycle, self._start, motion_end, residual, acc_t, acc, pos_t, pos)
+        return evaluate_cycle(cycle, self._start, motion_end, float(t), np.asarray(self._acc_t), acc,
+                              np.asarray(self._pos_t), pos, self.settle_tolerance, self.remove_mean)
+
+
+def evaluate_cycle(cycle: int, start: float, motion_end: float, end: float, accel_times: np.ndarray,
+                   accel: np.ndarray, position_times: np.ndarray, positions: np.ndarray,
+                   settle_tolerance: float = 1e-6, remove_mean: bool = False) -> CycleResult:
+    """The residual vibration of one cycle from its samples (as :class:`CycleMonitor` does at END).
+
+    The window runs from the time the positions have come to rest after ``motion_end`` (within
+    ``settle_tolerance`` of their last value) until ``end``; times in s, acceleration in m/s^2.
+    """
+    after = position_times >= motion_end
+    window_start = (settle_time(position_times[after], positions[after], motion_end, settle_tolerance)
+                    if after.any() else motion_end)
+    residual = residual_vibration(accel_times, accel, window_start, float(end) + 1e-12, remove_mean)
+    return CycleResult(int(cycle), float(start), float(motion_end), residual, accel_times, accel,
+                       position_times, positions)
