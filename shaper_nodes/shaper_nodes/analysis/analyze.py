@@ -37,11 +37,13 @@ from ..core.identification import (IdentificationError, ModeFit, Recommendation,
 from ..core.shapers import Shaper
 from ..core.vibration import percentage_vibration, settling_time
 from .reading import BagError
-from .segment import CycleSpan, from_events, from_motion
+from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
 from .streams import Recording
 
 #: active shapers that let through at least this V count for the unshaped level
 MIN_V_FOR_LEVEL = 0.2
+#: with remove_mean "auto", a median acceleration larger than this (m/s^2) is an offset (gravity, bias)
+OFFSET_LIMIT = 1.0
 #: fewest samples of a residual window used for the spectrum
 MIN_SPECTRUM_SAMPLES = 64
 
@@ -88,6 +90,7 @@ class CycleRow:
     shaper_impulses: tuple[tuple[float, ...], tuple[float, ...]] | None
     complete: bool = True
     v_active: float = float("nan")  # V of the active shaper at the identified mode
+    issue: str = ""  # why the cycle is not used over the bag ("" if it is)
 
 
 @dataclass
@@ -115,6 +118,11 @@ class Analysis:
     notes: list[str]
     removed_mean: bool
 
+    @property
+    def origin(self) -> float:
+        """Whole second at or before the first accelerometer sample: reports give times from it, s."""
+        return float(math.floor(self.recording.accel.t[0]))
+
 
 def analyze(rec: Recording, options: Options | None = None) -> Analysis:
     """Analyse an extracted recording (see the module docstring).
@@ -133,9 +141,10 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
     acc = rec.accel
     remove_mean = _remove_mean(acc.values, opt.remove_mean)
     if remove_mean and opt.remove_mean == "auto":
-        notes.append(f"the accelerometer has an offset of {np.linalg.norm(np.nanmean(acc.values, axis=0)):.3g} m/s^2"
+        notes.append(f"the accelerometer has an offset of {np.linalg.norm(np.nanmedian(acc.values, axis=0)):.3g} m/s^2"
                      " (gravity, bias): each window's mean is removed")
     pos = _positions(rec, opt)
+    step = float(np.median(np.diff(acc.t))) if len(acc) > 1 else 0.0
     rows, traces = [], []
     for span in spans:
         a0, a1 = np.searchsorted(acc.t, [span.start, span.end], side="left")
@@ -152,14 +161,23 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
         settle = (settling_time(at, av, res.window_start, res.window_end, band, remove_mean)
                   if res.samples and band > 0 else float("nan"))
         label, impulses = _active_shaper(rec, span)
+        issue = ""
+        if res.samples == 0:
+            issue = "no accelerometer sample in the residual window"
+        elif step > 0:
+            edges = np.concatenate([[span.start], at, [span.end]])
+            gap = float(np.max(np.diff(edges)))
+            if gap > GAP_FACTOR * step:
+                issue = f"a {gap:.3g} s gap in the accelerometer data"
         rows.append(CycleRow(span.cycle, span.start, span.motion_end, res.window_start, span.end, res.rms,
-                             res.peak, res.samples, settle, label, impulses, span.complete))
+                             res.peak, res.samples, settle, label, impulses, span.complete, issue=issue))
         traces.append((at - span.start, av))
-    empty = [r.cycle for r in rows if r.samples == 0]
-    if empty:
-        notes.append(f"cycles {empty}: no accelerometer sample in the residual window")
+    for i, r in enumerate(rows):
+        if r.issue:
+            notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
     windows = [(t[(t + r.start >= r.window_start) & (t + r.start < r.end)],
-                a[(t + r.start >= r.window_start) & (t + r.start < r.end)]) for (t, a), r in zip(traces, rows)]
+                a[(t + r.start >= r.window_start) & (t + r.start < r.end)]) if not r.issue else (np.zeros(0), np.zeros((0, 3)))
+               for (t, a), r in zip(traces, rows)]
     spectrum = _spectrum(windows)
     modes, id_notes = _identify(windows, rows, opt)
     notes += id_notes
@@ -218,9 +236,7 @@ def _remove_mean(values: np.ndarray, mode: str) -> bool:
         return mode == "yes"
     if mode != "auto":
         raise BagError(f"remove_mean must be auto, yes or no, got {mode!r}")
-    mean = np.nanmean(values, axis=0)
-    spread = np.nanstd(values, axis=0)
-    return bool(np.linalg.norm(mean) > 3.0 * max(float(np.linalg.norm(spread)), 1e-12) and np.linalg.norm(mean) > 0.5)
+    return bool(np.linalg.norm(np.nanmedian(values, axis=0)) > OFFSET_LIMIT)
 
 
 def _band(spec: str, peak: float) -> float:
@@ -292,6 +308,7 @@ def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeFit
 
 def _prediction(rows: list[CycleRow], modes: list[ModeFit], rec: Recommendation | None, opt: Options
                 ) -> tuple[float, dict]:
+    rows = [r for r in rows if not r.issue]
     usable = [r.rms / r.v_active for r in rows
               if r.samples and np.isfinite(r.v_active) and r.v_active >= MIN_V_FOR_LEVEL and np.isfinite(r.rms)]
     if not usable:

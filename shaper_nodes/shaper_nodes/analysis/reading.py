@@ -31,6 +31,10 @@ class BagError(ValueError):
     """The recording cannot be read or analysed; the message names the problem."""
 
 
+class BagRecovery(Exception):
+    """Internal: read the recording with the record-by-record scan."""
+
+
 @dataclass(frozen=True)
 class TopicInfo:
     """A topic of the recording: its type and message count (None: not known before reading)."""
@@ -125,7 +129,7 @@ class Bag:
         Nothing there, not a recording, or no message at all could be read.
     """
 
-    def __init__(self, path: str | pathlib.Path) -> None:
+    def __init__(self, path: str | pathlib.Path, recover: bool = False) -> None:
         self.path = pathlib.Path(path)
         self.notes: list[str] = []
         self.damage: list[Damage] = []
@@ -133,6 +137,8 @@ class Bag:
         self._reader = None
         self._recovered: list[_Recovered] = []
         try:
+            if recover:
+                raise BagRecovery("asked to scan the file record by record")
             self._open_rosbags()
         except BagError:
             raise
@@ -142,7 +148,8 @@ class Bag:
                 raise BagError(f"cannot read {self.path}: {err}") from None
             if not has_meta and self.path.is_dir():
                 self.notes.append(f"{self.path} has no metadata.yaml: the recorder did not finish the bag")
-            self.notes.append(f"rosbags could not open the recording ({err}); scanned it record by record")
+            if not isinstance(err, BagRecovery):
+                self.notes.append(f"rosbags could not open the recording ({err}); scanned it record by record")
             self._recovered = [_Recovered(f) for f in files]
             for rec in self._recovered:
                 rec.damage.expected_messages = expected if len(files) == 1 else None
@@ -308,14 +315,11 @@ class _Recovered:
                             yield item
                     elif op == OP_CHUNK:
                         chunk = Chunk.read(stream)
-                        try:
-                            records = _chunk_records(chunk)
-                        except Exception as err:  # noqa: BLE001 - a corrupt chunk is skipped, reading goes on
-                            if collect:
-                                self.damage.skipped_chunks.append(
-                                    f"chunk at byte {good} ({_sec(chunk.message_start_time):.3f}-"
-                                    f"{_sec(chunk.message_end_time):.3f} s): {err}")
-                            records = []
+                        records, err = _chunk_records(chunk)
+                        if err and collect:
+                            self.damage.skipped_chunks.append(
+                                f"chunk at byte {good} ({_sec(chunk.message_start_time):.3f}-"
+                                f"{_sec(chunk.message_end_time):.3f} s): {err}; {len(records)} records before it kept")
                         for rec in records:
                             if isinstance(rec, Schema):
                                 if collect:
@@ -374,10 +378,36 @@ _OPNAMES = {OP_SCHEMA: "schema", OP_CHANNEL: "channel", OP_MESSAGE: "message", O
             OP_FOOTER: "footer", OP_DATA_END: "data-end"}
 
 
-def _chunk_records(chunk) -> list:
-    from mcap.stream_reader import breakup_chunk
+def _chunk_records(chunk) -> tuple[list, str]:
+    """The records of a chunk up to the first corrupt one, and what was wrong ("" if nothing)."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import get_chunk_data_stream
 
-    return breakup_chunk(chunk, validate_crc=True)
+    try:
+        stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+        data = stream.read(size)
+    except Exception as err:  # noqa: BLE001 - decompression or CRC failure: the whole chunk is lost
+        return [], f"its data is corrupt ({type(err).__name__}: {err})"
+    records: list = []
+    pos = 0
+    parsers = {OP_SCHEMA: Schema.read, OP_CHANNEL: Channel.read}
+    while pos < size:
+        if pos + 9 > size:
+            return records, f"corrupt record header at offset {pos} of the chunk"
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if pos + 9 + length > size:
+            return records, f"record at offset {pos} of the chunk claims {length} bytes, {size - pos - 9} remain"
+        body = ReadDataStream(io.BytesIO(data[pos + 9: pos + 9 + length]))
+        try:
+            if op == OP_MESSAGE:
+                records.append(Message.read(body, length))
+            elif op in parsers:
+                records.append(parsers[op](body))
+        except Exception as err:  # noqa: BLE001 - an unparsable record ends the chunk
+            return records, f"unreadable record at offset {pos} of the chunk ({err})"
+        pos += 9 + length
+    return records, ""
 
 
 def describe_damage(d: Damage) -> str:

@@ -49,10 +49,11 @@ def summary(an: Analysis) -> dict:
         "damage": [{"file": d.path, "size_bytes": d.size, "readable_bytes": d.readable, "lost_bytes": d.lost_bytes,
                     "reason": d.reason, "lost_time_s": [t * 1e-9 for t in d.lost_time] if d.lost_time else None,
                     "skipped_chunks": d.skipped_chunks, "text": describe_damage(d)} for d in rec.damage],
-        "cycles": [{"cycle": r.cycle, "start_s": r.start, "motion_end_s": r.motion_end, "window_start_s": r.window_start,
-                    "end_s": r.end, "residual_rms": r.rms, "residual_peak": r.peak, "samples": r.samples,
+        "time_origin_s": an.origin,
+        "cycles": [{"cycle": r.cycle, "start_s": r.start - an.origin, "motion_end_s": r.motion_end - an.origin,
+                    "window_start_s": r.window_start - an.origin, "end_s": r.end - an.origin, "residual_rms": r.rms, "residual_peak": r.peak, "samples": r.samples,
                     "settling_time_s": r.settling_time, "shaper": r.shaper, "v_active": r.v_active,
-                    "complete": r.complete} for r in an.cycles],
+                    "complete": r.complete, "issue": r.issue} for r in an.cycles],
         "modes": [{"frequency_hz": m.hz, "omega": m.omega, "zeta": m.zeta, "frequency_std_hz": m.omega_std / (2 * math.pi),
                    "zeta_std": m.zeta_std, "amplitude": m.amplitude, "method": m.method} for m in an.modes],
         "spectrum_peak_hz": (float(an.spectrum[0][int(np.argmax(an.spectrum[1][1:])) + 1])
@@ -72,6 +73,13 @@ def summary(an: Analysis) -> dict:
     return _clean(doc)
 
 
+def _settle(r) -> str:
+    """Settling time, or '>' the window when the vibration is still outside the band at its end."""
+    if math.isfinite(r.settling_time):
+        return f"{r.settling_time:.3f}"
+    return f">{r.end - r.window_start:.2f}" if r.samples else "n/a"
+
+
 def table(an: Analysis) -> str:
     """The terminal table: cycles, modes, recommendation, replays, notes."""
     lines = [f"{an.recording.path}: {an.recording.messages_read} messages read ({an.recording.reader});"
@@ -80,9 +88,9 @@ def table(an: Analysis) -> str:
         lines.append(f"WARNING: {describe_damage(d)}")
     lines.append(f"{'cycle':>5} {'RMS m/s2':>10} {'peak m/s2':>10} {'settle s':>9} {'window s':>17}  shaper")
     for r in an.cycles:
-        lines.append(f"{r.cycle:>5} {_f(r.rms):>10} {_f(r.peak):>10} {_f(r.settling_time, '.3f'):>9}"
-                     f" {_f(r.window_start, '.3f'):>8}-{_f(r.end, '.3f'):<8}  {r.shaper}"
-                     + ("" if r.complete else "  (ends with the recording)"))
+        lines.append(f"{r.cycle:>5} {_f(r.rms):>10} {_f(r.peak):>10} {_settle(r):>9}"
+                     f" {_f(r.window_start - an.origin, '.3f'):>8}-{_f(r.end - an.origin, '.3f'):<8}  {r.shaper}"
+                     + ("" if r.complete else "  (ends with the recording)") + (f"  [{r.issue}]" if r.issue else ""))
     if an.modes:
         lines.append("modes: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
                                           f" damping {m.zeta:.3g} ± {m.zeta_std:.2g}" for m in an.modes))
@@ -123,7 +131,8 @@ def write_report(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
 
     csv_file("cycles.csv", ["cycle", "start_s", "motion_end_s", "window_start_s", "end_s", "residual_rms_m_s2",
                             "residual_peak_m_s2", "samples", "settling_time_s", "shaper", "v_active"],
-             [[r.cycle, f"{r.start:.9g}", f"{r.motion_end:.9g}", f"{r.window_start:.9g}", f"{r.end:.9g}",
+             [[r.cycle, f"{r.start - an.origin:.9g}", f"{r.motion_end - an.origin:.9g}",
+               f"{r.window_start - an.origin:.9g}", f"{r.end - an.origin:.9g}",
                f"{r.rms:.6g}", f"{r.peak:.6g}", r.samples, f"{r.settling_time:.6g}", r.shaper, f"{r.v_active:.4g}"]
               for r in an.cycles])
     csv_file("modes.csv", ["frequency_hz", "frequency_std_hz", "damping_ratio", "damping_std", "amplitude"],
@@ -149,7 +158,8 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     rec = an.recording
     md = [f"# Bag analysis: `{rec.path}`", "",
           f"{rec.messages_read} messages read with {rec.reader}; cycles from {an.segmentation};"
-          f" accelerometer `{rec.topics['accel']}`" + (", window mean removed" if an.removed_mean else "") + ".", ""]
+          f" accelerometer `{rec.topics['accel']}`" + (", window mean removed" if an.removed_mean else "")
+          + f"; times in s from {an.origin:.0f} s on the recording's clock.", ""]
     for d in doc["damage"]:
         md += [f"> **Damaged recording:** {d['text']}", ""]
     md += ["## Cycles", "", "Residual vibration: RMS and peak of the tip acceleration magnitude (m/s²) from the"
@@ -157,8 +167,9 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
            f" that until the magnitude stays within {an.options.band} (of the cycle's peak, or m/s²).", "",
            "| cycle | RMS (m/s²) | peak (m/s²) | settling (s) | window (s) | shaper |", "|---|---|---|---|---|---|"]
     for r in an.cycles:
-        md.append(f"| {r.cycle} | {_f(r.rms)} | {_f(r.peak)} | {_f(r.settling_time, '.3f')} |"
-                  f" {r.window_start:.3f}-{r.end:.3f} | {r.shaper} |")
+        md.append(f"| {r.cycle} | {_f(r.rms)} | {_f(r.peak)} | {_settle(r)} |"
+                  f" {r.window_start - an.origin:.3f}-{r.end - an.origin:.3f} | {r.shaper}"
+                  + (f" ({r.issue})" if r.issue else "") + " |")
     md += ["", "## Modes and the recommended shaper", ""]
     if an.modes:
         md += ["| mode | frequency (Hz) | damping ratio |", "|---|---|---|"]

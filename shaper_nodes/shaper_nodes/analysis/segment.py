@@ -22,6 +22,8 @@ from .streams import Events, Signal
 MOTION_FRACTION = 0.01
 #: moves closer than this (s) are one move
 MIN_REST = 0.05
+#: a step longer than this many median steps is a gap in the data, not a move
+GAP_FACTOR = 5.0
 #: moves whose largest joint displacement is below this fraction of the largest move's are noise
 MIN_MOVE_FRACTION = 0.01
 
@@ -98,6 +100,7 @@ def from_motion(signal: Signal, end_time: float | None = None, threshold: float 
         return [], [f"{signal.topic}: too few position samples to find moves"]
     dt = np.diff(t)
     ok = dt > 0
+    ok &= dt <= GAP_FACTOR * float(np.median(dt[ok])) if ok.any() else ok  # a step across a gap is no move
     speed = np.zeros(dt.size)
     speed[ok] = np.nanmax(np.abs(np.diff(p, axis=0)[ok]) / dt[ok, None], axis=1)
     top = float(np.nanpercentile(speed[ok], 99.5)) if ok.any() else 0.0
@@ -112,6 +115,16 @@ def from_motion(signal: Signal, end_time: float | None = None, threshold: float 
     breaks = np.flatnonzero(np.diff(idx) > 1)
     starts = np.concatenate([[idx[0]], idx[breaks + 1]])
     stops = np.concatenate([idx[breaks], [idx[-1]]]) + 1  # sample index where the run is at rest
+    # widen each run over its slow start and end (below the threshold, above the resting noise)
+    still = speed[ok & ~moving]
+    floor = 2.0 * float(np.median(still)) if still.size else 0.0
+    for k in range(starts.size):
+        lo = stops[k - 1] if k else 0
+        while starts[k] > lo and speed[starts[k] - 1] > floor:
+            starts[k] -= 1
+        hi = starts[k + 1] if k + 1 < starts.size else speed.size
+        while stops[k] < hi and speed[stops[k]] > floor:
+            stops[k] += 1
     moves: list[list[int]] = []
     for a, b in zip(starts, stops):
         if moves and t[a] - t[moves[-1][1]] < min_rest:

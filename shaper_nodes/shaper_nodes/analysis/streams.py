@@ -231,12 +231,31 @@ def read_recording(path, overrides: Mapping[str, str] | None = None, progress: b
                    on_progress: Callable[[int], None] | None = None) -> Recording:
     """Open the bag at ``path``, choose the topics and extract them.
 
+    A recording that rosbags opens but fails to read to the end (a corrupt record in an indexed
+    file) is read again record by record, skipping what is corrupt.
+
     Raises
     ------
     BagError
         Not a recording, unreadable, no message, or no accelerometer topic.
     """
-    with Bag(path) as bag:
+    try:
+        return _read(path, overrides, progress, on_progress, recover=False)
+    except _ReadFailed as err:
+        rec = _read(path, overrides, progress, on_progress, recover=True)
+        rec.notes.insert(0, f"rosbags stopped reading after {err.count} messages ({err.reason});"
+                            " read again record by record")
+        return rec
+
+
+class _ReadFailed(Exception):
+    def __init__(self, count: int, reason: str) -> None:
+        super().__init__(reason)
+        self.count, self.reason = count, reason
+
+
+def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
+    with Bag(path, recover=recover) as bag:
         infos = bag.topics
         if not infos:
             raise BagError(f"{path}: the recording has no topics (empty bag)")
@@ -269,7 +288,17 @@ def read_recording(path, overrides: Mapping[str, str] | None = None, progress: b
         first_error: dict[str, str] = {}
         result = ReadResult()
         seq = -1
-        for seq, (topic, msgtype, log_ns, raw) in enumerate(bag.messages(wanted, result)):
+        messages = bag.messages(wanted, result)
+        while True:
+            try:
+                topic, msgtype, log_ns, raw = next(messages)
+            except StopIteration:
+                break
+            except Exception as err:  # noqa: BLE001 - rosbags' errors on a corrupt record: read again
+                if recover:
+                    raise BagError(f"{path}: reading failed after {seq + 1} messages: {err}") from None
+                raise _ReadFailed(seq + 1, f"{type(err).__name__}: {err}") from None
+            seq += 1
             if seq % 4096 == 0:
                 show(seq)
                 if on_progress:
@@ -340,13 +369,23 @@ def read_recording(path, overrides: Mapping[str, str] | None = None, progress: b
             notes.append(f"{topic}: {n} message(s) could not be decoded and were skipped (first: {first_error[topic]})")
         if seq < 0:
             raise BagError(f"{path}: no messages could be read on {sorted(wanted)}")
-        accel = _signal(chosen["accel"], acc_seq, acc_t, acc) if acc else None
-        if accel is None:
+        accel = _finite(_signal(chosen["accel"], acc_seq, acc_t, acc), notes) if acc else None
+        if accel is None or len(accel) == 0:
             raise BagError(f"{path}: no accelerometer message could be read on {chosen['accel']}")
-        joints = _signal(chosen["joints"], js["seq"], js["t"], js["p"], js["names"] or ()) if js["t"] else None
-        commands = _signal(chosen["commands"], cmd["seq"], cmd["t"], cmd["p"]) if cmd["t"] else None
+        joints = _finite(_signal(chosen["joints"], js["seq"], js["t"], js["p"], js["names"] or ()), notes) \
+            if js["t"] else None
+        commands = _finite(_signal(chosen["commands"], cmd["seq"], cmd["t"], cmd["p"]), notes) if cmd["t"] else None
         return Recording(str(path), chosen, accel, joints, commands, events, shapers, result.messages, notes,
                          list(bag.damage), bag.reader_name, {t: i.msgtype for t, i in infos.items()})
+
+
+def _finite(sig: Signal, notes: list[str]) -> Signal:
+    """``sig`` without samples whose time or values are not finite (noted)."""
+    good = np.isfinite(sig.t) & np.all(np.isfinite(sig.values), axis=1)
+    if good.all():
+        return sig
+    notes.append(f"{sig.topic}: {int((~good).sum())} sample(s) with non-finite time or values dropped")
+    return Signal(sig.topic, sig.seq[good], sig.t[good], sig.values[good], sig.names)
 
 
 def _reorder(names: tuple[str, ...], got: tuple[str, ...], p: tuple[float, ...]) -> tuple[float, ...]:
