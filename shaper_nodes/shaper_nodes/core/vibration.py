@@ -208,7 +208,7 @@ def residual_vibration(
 
 
 def settling_time(times: np.ndarray, accel: np.ndarray, start: float, end: float, band: float,
-                  remove_mean: bool = False) -> float:
+                  remove_mean: bool = False, hold: float = 0.1) -> float:
     """Time from ``start`` until the acceleration magnitude stays within ``band`` up to ``end``, s.
 
     Parameters
@@ -223,13 +223,16 @@ def settling_time(times: np.ndarray, accel: np.ndarray, start: float, end: float
         Band half-width, m/s^2, > 0.
     remove_mean : bool
         Subtract the window mean per axis first.
+    hold : float
+        Fraction of the window the magnitude must stay within the band at its end to count as
+        settled (an oscillation near a zero crossing at the window's end is not settled).
 
     Returns
     -------
     float
         0 if the magnitude is within the band from ``start`` on; the time after ``start`` of the
-        first sample from which it stays within it; NaN if it is still outside at the last
-        sample of the window, or the window holds no sample.
+        first sample from which it stays within it; NaN if it does not stay within it for the
+        last ``hold`` of the window, or the window holds no sample.
     """
     if not (math.isfinite(band) and band > 0.0):
         raise ValueError(f"band must be finite and > 0 m/s^2, got {band!r}")
@@ -246,6 +249,6 @@ def settling_time(times: np.ndarray, accel: np.ndarray, start: float, end: float
     if outside.size == 0:
         return 0.0
     last = int(outside[-1])
-    if last == tw.size - 1:
+    if last == tw.size - 1 or float(tw[-1] - tw[last + 1]) < hold * float(end - start):
         return float("nan")
     return float(tw[last + 1] - start)
