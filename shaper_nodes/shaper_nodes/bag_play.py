@@ -49,6 +49,12 @@ class BagPlayNode(Node):
             "Least wall time between two published messages, s: spreads messages that were logged at the same"
             " time (a lockstep simulation's clock stands still while it waits), so that they arrive in order.",
             0.0, 1.0, read_only=True))
+        d("pause_after_topics", [""], describe(
+            "After a message on one of these topics, pause for pause_after before the next message.", read_only=True))
+        d("pause_after", 0.0, describe(
+            "Pause after a message on pause_after_topics, s of wall time: gives the nodes that act on it (a learner"
+            " at a cycle's END) time to finish before the recording's later messages arrive, which in a lockstep"
+            " recording may follow at once.", 0.0, 60.0, read_only=True))
         d("wait_for_subscribers", 0, describe(
             "Before playing, wait until every played topic has this many subscribers (0: do not wait).", 0, 100,
             integer=True, read_only=True))
@@ -72,6 +78,8 @@ class BagPlayNode(Node):
             self.get_logger().warning(f"damaged recording: {describe_damage(dmg)}; playing what is readable")
         self.rate = float(p("rate"))
         self.min_interval = float(p("min_interval"))
+        self.pause_topics = {t for t in p("pause_after_topics") if t}
+        self.pause = float(p("pause_after"))
         infos = self.bag.topics
         wanted = [t for t in p("topics") if t]
         missing = [t for t in wanted if t not in infos]
@@ -168,6 +176,9 @@ class BagPlayNode(Node):
             self._pubs[topic].publish(bytes(raw))
             self.published[topic] += 1
             last = time.monotonic()
+            if topic in self.pause_topics and self.pause > 0.0:
+                wall0 += self.pause  # the rest of the recording keeps its spacing, later
+                last += self.pause
 
     def _on_stop(self, req, resp):
         self._stop.set()

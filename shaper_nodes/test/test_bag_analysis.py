@@ -14,7 +14,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from shaper_nodes import bag_analysis_cli
 from shaper_nodes.analysis.analyze import Options, analyze
-from shaper_nodes.analysis.reading import Bag, BagError
+from shaper_nodes.analysis.reading import Bag, BagError, mcap_chunks
 from shaper_nodes.analysis.streams import imu_fast, joint_state_fast, read_recording
 from shaper_nodes.analysis.synthetic import simulate, write_bag
 from shaper_nodes.core.vibration import residual_vibration
@@ -113,7 +113,7 @@ def test_cut_mid_chunk_is_analysed_up_to_the_cut_with_what_was_lost(robot_bag, t
     full = analyze(read_recording(path), Options(learners=()))
     mcap = next(path.glob("*.mcap"))
     data = mcap.read_bytes()
-    second = _chunks(data)[1]
+    second = mcap_chunks(data)[1]
     cut = second[0] + 4000  # 4000 bytes into the second chunk
     (tmp_path / "cut.mcap").write_bytes(data[:cut])
     rec = read_recording(tmp_path / "cut.mcap")
@@ -135,7 +135,7 @@ def test_cut_mid_chunk_is_analysed_up_to_the_cut_with_what_was_lost(robot_bag, t
 def test_a_corrupt_record_skips_its_chunk_and_reading_goes_on(robot_bag, tmp_path):
     path = robot_bag[0]
     data = bytearray(next(path.glob("*.mcap")).read_bytes())
-    start, length = _chunks(bytes(data))[1]
+    start, length = mcap_chunks(bytes(data))[1]
     records = start + 9 + 8 + 8 + 8 + 4 + 4 + 8  # chunk header with no compression name
     struct.pack_into("<Q", data, records + 1, 10**12)  # the chunk's first record claims 1 TB
     (tmp_path / "bad.mcap").write_bytes(bytes(data))
@@ -190,19 +190,6 @@ def test_cli_writes_the_report_folder_and_json(robot_bag, tmp_path, capsys):
 
 
 # ------------------------------------------------------------------------------ helpers
-def _chunks(data: bytes) -> list[tuple[int, int]]:
-    """(offset, length) of the chunk records of an MCAP file."""
-    pos, out = 8, []
-    while pos + 9 <= len(data):
-        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
-        if op == 0x06:
-            out.append((pos, length))
-        if op == 0x02:
-            break
-        pos += 9 + length
-    return out
-
-
 def bag_analysis_cli_output(argv: list[str]) -> str:
     import contextlib
     import io

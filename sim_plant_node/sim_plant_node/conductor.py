@@ -18,7 +18,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.msg import Mode as ModeMsg
@@ -41,7 +41,10 @@ class Conductor(Node):
         self.plant, self.shaper = plant, shaper
         self.monitor = CycleMonitor(settle_tolerance)
         self.results: list[CycleResult] = []
-        self.create_subscription(Imu, imu_topic, self._on_imu, qos_profile_sensor_data)
+        # best effort as the sensor publishes, but a deep queue: with the default sensor-data depth (5) a busy
+        # machine drops samples here and the measured residual depends on the load
+        imu_qos = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.create_subscription(Imu, imu_topic, self._on_imu, imu_qos)
         self.create_subscription(JointState, "/joint_states", self._on_js, 100)
         self.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         self.set_shaper_cli = self.create_client(SetShaper, f"{shaper}/set_shaper")

@@ -410,6 +410,19 @@ def _chunk_records(chunk) -> tuple[list, str]:
     return records, ""
 
 
+def mcap_chunks(data: bytes) -> list[tuple[int, int]]:
+    """(byte offset, record length) of every chunk record of an MCAP file's bytes (for tests and tools)."""
+    pos, out = 8, []
+    while pos + 9 <= len(data):
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if op == OP_CHUNK:
+            out.append((pos, length))
+        if op == OP_FOOTER:
+            break
+        pos += 9 + length
+    return out
+
+
 def describe_damage(d: Damage) -> str:
     """One sentence on what a damaged file lost."""
     if not d.reason and not d.skipped_chunks:
