@@ -61,6 +61,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--method", default="fit", help="identification method: fit, spectral, matrix_pencil")
     p.add_argument("--max-modes", type=int, default=2, help="most modes to identify (default 2)")
     p.add_argument("--band-hz", type=_band_hz, help="look for modes in LOW,HIGH Hz only")
+    p.add_argument("--identify-cycles", type=int, default=20,
+                   help="identify the modes in at most this many cycles, evenly spread (0 = all; default 20)")
     p.add_argument("--target", type=float, default=0.05,
                    help="largest acceptable worst-case percentage vibration, fraction (default 0.05)")
     p.add_argument("--sigmas", type=float, default=2.0, help="uncertainty box half-width, standard deviations")
@@ -85,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         overrides = {role: getattr(args, f"{role}_topic") for role in ROLE_TYPES if getattr(args, f"{role}_topic")}
         options = Options(settle_tolerance=args.settle_tolerance, band=args.band, remove_mean=args.remove_mean,
                           segmentation=args.segmentation, positions=args.positions, method=args.method,
-                          max_modes=args.max_modes, band_hz=args.band_hz, target=args.target, sigmas=args.sigmas,
+                          max_modes=args.max_modes, band_hz=args.band_hz, identify_cycles=args.identify_cycles,
+                          target=args.target, sigmas=args.sigmas,
                           learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
                           learner_params=params)
         rec = read_recording(args.bag, overrides, progress=not args.no_progress and sys.stderr.isatty())

@@ -15,7 +15,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from shaper_nodes import bag_analysis_cli
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import Bag, BagError, mcap_chunks
-from shaper_nodes.analysis.streams import imu_fast, joint_state_fast, read_recording
+from shaper_nodes.analysis.streams import JointStateDecoder, imu_fast, joint_state_fast, read_recording
 from shaper_nodes.analysis.synthetic import simulate, write_bag
 from shaper_nodes.core.vibration import residual_vibration
 
@@ -51,9 +51,12 @@ def test_fast_decoders_agree_with_rosbags():
             js = STORE.types["sensor_msgs/msg/JointState"](
                 header=Header(stamp=Time(sec=5, nanosec=7), frame_id=frame), name=list(names), position=pos,
                 velocity=rng.normal(size=len(names)), effort=np.zeros(0))
-            t, got_names, got = joint_state_fast(STORE.serialize_cdr(js, "sensor_msgs/msg/JointState"))
+            raw = STORE.serialize_cdr(js, "sensor_msgs/msg/JointState")
+            t, got_names, got = joint_state_fast(raw)
             assert t == pytest.approx(5.000000007, abs=1e-12)
             assert got_names == names and np.array_equal(got, pos)
+            decoder = JointStateDecoder()
+            assert decoder(raw) == (t, got_names, got) and decoder(raw) == (t, got_names, got)  # cached layout
 
 
 def test_synthetic_writer_patches_what_rosbags_reads(robot_bag):

@@ -55,7 +55,8 @@ class Options:
     settle_tolerance : rad or m, positions at rest; band : settling band, m/s^2 (a float) or
     a fraction of the cycle's peak (a string ending in %); remove_mean : "auto", "yes", "no";
     segmentation : "auto", "events", "motion"; method, max_modes, band_hz : identification;
-    target, sigmas : recommendation; learners : names of :data:`LEARNER_REPLAYS` to run;
+    target, sigmas : recommendation; identify_cycles : most cycles identified (evenly spread over
+    the usable ones; 0 = all); learners : names of :data:`LEARNER_REPLAYS` to run;
     learner_params : parameters as the live learner node takes them.
     """
 
@@ -69,6 +70,7 @@ class Options:
     band_hz: tuple[float, float] | None = None
     target: float = 0.05
     sigmas: float = 2.0
+    identify_cycles: int = 20
     learners: tuple[str, ...] = ("list",)
     learner_params: Mapping[str, object] = field(default_factory=dict)
 
@@ -286,14 +288,18 @@ def _spectrum(windows: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
 
 def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeFit], list[str]]:
     per_record, failed = [], []
-    for (t, a), r in zip(windows, rows):
-        if t.size == 0:
-            continue
+    usable = [i for i, (t, _) in enumerate(windows) if t.size]
+    notes = []
+    if opt.identify_cycles and len(usable) > opt.identify_cycles:
+        pick = np.unique(np.round(np.linspace(0, len(usable) - 1, opt.identify_cycles)).astype(int))
+        notes.append(f"identification: {pick.size} of {len(usable)} cycles, evenly spread (--identify-cycles)")
+        usable = [usable[i] for i in pick]
+    for i in usable:
+        (t, a), r = windows[i], rows[i]
         try:
             per_record.append(identify(t, a, method=opt.method, max_modes=opt.max_modes, band_hz=opt.band_hz))
         except IdentificationError as err:
             failed.append(f"cycle {r.cycle}: {err}")
-    notes = []
     if failed:
         notes.append(f"identification: {len(failed)} of {len(failed) + len(per_record)} cycles give no mode"
                      f" (left out): " + "; ".join(failed[:5]) + (" ..." if len(failed) > 5 else ""))

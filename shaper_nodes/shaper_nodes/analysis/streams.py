@@ -187,6 +187,34 @@ def joint_state_fast(raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
     return t, tuple(names), struct.unpack_from(f"<{npos}d", raw, pos)
 
 
+class JointStateDecoder:
+    """:func:`joint_state_fast` that skips the names when they are those of the previous message."""
+
+    def __init__(self) -> None:
+        self._prefix = b""
+        self._names: tuple[str, ...] = ()
+        self._layout: tuple[int, struct.Struct] | None = None
+
+    def __call__(self, raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
+        n = len(self._prefix)
+        if n and raw[12:12 + n] == self._prefix:
+            offset, fmt = self._layout
+            sec, nsec = _I32U32.unpack_from(raw, 4)
+            return sec + 1e-9 * nsec, self._names, fmt.unpack_from(raw, offset)
+        t, names, pos = joint_state_fast(raw)
+        # the bytes from the frame_id to the position count fix where the positions are
+        _, end = _header(raw)
+        end = _align(end, 4) + 4  # the names' count
+        for _ in names:
+            end = _align(end, 4)
+            end += 4 + _U32.unpack_from(raw, end)[0]
+        end = _align(end, 4) + 4
+        self._prefix = bytes(raw[12:end])
+        self._names = names
+        self._layout = (_align(end, 8) if pos else end, struct.Struct(f"<{len(pos)}d"))
+        return t, names, pos
+
+
 def _little_endian(raw) -> bool:
     return len(raw) > 4 and raw[1] == 1
 
@@ -280,7 +308,8 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
         show = Progress(total, progress)
         acc_seq: list[int] = []
         acc_t: list[float] = []
-        acc: list[tuple[float, float, float]] = []
+        acc: list[float] = []  # flat x, y, z, x, ...
+        js_fast = JointStateDecoder()
         js = {"seq": [], "t": [], "p": [], "names": None}
         cmd = {"seq": [], "t": [], "p": []}
         events, shapers = Events(), Shapers()
@@ -316,10 +345,10 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
                         a = (la.x, la.y, la.z)
                     acc_seq.append(seq)
                     acc_t.append(t)
-                    acc.append(a)
+                    acc.extend(a)
                 elif role == "joints":
                     if _little_endian(raw):
-                        t, names, p = joint_state_fast(raw)
+                        t, names, p = js_fast(raw)
                         if t == 0.0:
                             t = log_ns * 1e-9
                     else:
@@ -369,7 +398,7 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
             notes.append(f"{topic}: {n} message(s) could not be decoded and were skipped (first: {first_error[topic]})")
         if seq < 0:
             raise BagError(f"{path}: no messages could be read on {sorted(wanted)}")
-        accel = _finite(_signal(chosen["accel"], acc_seq, acc_t, acc), notes) if acc else None
+        accel = _finite(_signal(chosen["accel"], acc_seq, acc_t, np.array(acc).reshape(-1, 3)), notes) if acc else None
         if accel is None or len(accel) == 0:
             raise BagError(f"{path}: no accelerometer message could be read on {chosen['accel']}")
         joints = _finite(_signal(chosen["joints"], js["seq"], js["t"], js["p"], js["names"] or ()), notes) \
@@ -395,7 +424,14 @@ def _reorder(names: tuple[str, ...], got: tuple[str, ...], p: tuple[float, ...])
 
 def _signal(topic: str, seq: list[int], t: list[float], values: list, names=()) -> Signal:
     try:
-        vals = np.asarray(values, dtype=float).reshape(len(values), -1)
+        if isinstance(values, np.ndarray):
+            vals = values
+        else:  # rows of equal length: flatten first (much faster than from a list of tuples)
+            width = len(values[0]) if len(values) else 0
+            if any(len(v) != width for v in values):
+                raise ValueError("ragged")
+            vals = np.fromiter((x for v in values for x in v), dtype=float, count=len(values) * width)
+            vals = vals.reshape(len(values), width)
     except ValueError:  # ragged rows (a malformed message) become NaN-padded
         width = max((len(v) for v in values), default=0)
         vals = np.full((len(values), width), np.nan)
