@@ -21,13 +21,7 @@ from .analysis.analyze import LEARNER_REPLAYS, Options, analyze
 from .analysis.reading import BagError
 from .analysis.report import summary, table, write_report
 from .analysis.streams import ROLE_TYPES, read_recording
-
-
-def _value(text: str):
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return text
+from .list_replay import parse_params
 
 
 def _band_hz(text: str) -> tuple[float, float]:
@@ -78,12 +72,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        params = {}
-        for item in args.param:
-            name, sep, value = item.partition("=")
-            if not sep:
-                raise BagError(f"--param needs NAME=VALUE, got {item!r}")
-            params[name.strip()] = _value(value)
+        params = parse_params(args.param)
         overrides = {role: getattr(args, f"{role}_topic") for role in ROLE_TYPES if getattr(args, f"{role}_topic")}
         options = Options(settle_tolerance=args.settle_tolerance, band=args.band, remove_mean=args.remove_mean,
                           segmentation=args.segmentation, positions=args.positions, method=args.method,

@@ -159,6 +159,23 @@ def _value(text: str):
         return text
 
 
+def parse_params(items: Iterable[str]) -> dict[str, object]:
+    """``NAME=VALUE`` strings (``--param``) as a dict; values parsed as JSON where they are JSON.
+
+    Raises
+    ------
+    ListError
+        An item without ``=``.
+    """
+    params: dict[str, object] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ListError(f"--param needs NAME=VALUE, got {item!r}")
+        params[name.strip()] = _value(value)
+    return params
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="list_replay", description=__doc__.split("\n\n")[0])
     p.add_argument("bag", type=pathlib.Path, help="rosbag2 folder or .mcap file")
@@ -169,12 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="one JSON document instead of a table")
     args = p.parse_args(argv)
     try:
-        params = {}
-        for item in args.param:
-            name, sep, value = item.partition("=")
-            if not sep:
-                raise ListError(f"--param needs NAME=VALUE, got {item!r}")
-            params[name.strip()] = _value(value)
+        params = parse_params(args.param)
         rows = [_row(r) for r in replay(args.bag, params, {k: getattr(args, f"{k}_topic") for k in TOPICS})]
     except (ListError, OSError, ValueError) as err:
         print(f"list_replay: {err}", file=sys.stderr)

@@ -189,7 +189,7 @@ def test_cli_writes_the_report_folder_and_json(robot_bag, tmp_path, capsys):
                  "traces.png", "spectrum.png", "sensitivity.png", "learning.png"):
         assert (out / name).stat().st_size > 0, name
     assert json.loads((out / "summary.json").read_text()) == doc
-    assert "| cycle | RMS" in (out / "report.md").read_text()
+    assert "| # | cycle | RMS" in (out / "report.md").read_text()
 
 
 # ------------------------------------------------------------------------------ helpers

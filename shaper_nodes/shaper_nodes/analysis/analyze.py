@@ -33,7 +33,7 @@ import numpy as np
 
 from ..core.cycles import END, MOTION_END, START, evaluate_cycle
 from ..core.identification import (IdentificationError, ModeFit, Recommendation, combine_modes, identify,
-                                   recommend_shaper, worst_case_vibration)
+                                   recommend_shaper)
 from ..core.shapers import Shaper
 from ..core.vibration import percentage_vibration, settling_time
 from .reading import BagError
@@ -255,8 +255,10 @@ def _active_shaper(rec: Recording, span: CycleSpan) -> tuple[str, tuple | None]:
     s = rec.shapers
     if not s.seq:
         return "unknown", None
-    before = [i for i, q in enumerate(s.seq) if q <= span.start_seq]
-    during = [i for i, q in enumerate(s.seq) if span.start_seq < q < span.end_seq]
+    # by the time each became active (its stamp): messages logged at the same time (a lockstep
+    # simulation's clock stands still between cycles) may come in either order in the recording
+    before = [i for i, t in enumerate(s.t) if t <= span.start]
+    during = [i for i, t in enumerate(s.t) if span.start < t < span.end]
     if not before:
         return "unknown", None
     i = before[-1]
@@ -412,9 +414,3 @@ def shaper_of(candidate_shaper: Shaper) -> dict:
     """Impulses of a shaper, for reports."""
     return {"family": candidate_shaper.family, "amplitudes": [float(a) for a in candidate_shaper.amplitudes],
             "times": [float(t) for t in candidate_shaper.times], "duration": float(candidate_shaper.duration)}
-
-
-def predicted_for(shaper: Shaper, modes: list[ModeFit], level: float, sigmas: float = 2.0) -> tuple[float, float]:
-    """(nominal, worst) predicted residual RMS of ``shaper`` for an unshaped level, m/s^2."""
-    nominal, worst = worst_case_vibration(shaper, modes, sigmas)
-    return level * nominal, level * worst

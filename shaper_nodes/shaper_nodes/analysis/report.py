@@ -86,9 +86,9 @@ def table(an: Analysis) -> str:
              f" cycles from {an.segmentation}"]
     for d in an.recording.damage:
         lines.append(f"WARNING: {describe_damage(d)}")
-    lines.append(f"{'cycle':>5} {'RMS m/s2':>10} {'peak m/s2':>10} {'settle s':>9} {'window s':>17}  shaper")
-    for r in an.cycles:
-        lines.append(f"{r.cycle:>5} {_f(r.rms):>10} {_f(r.peak):>10} {_settle(r):>9}"
+    lines.append(f"{'#':>4} {'cycle':>5} {'RMS m/s2':>10} {'peak m/s2':>10} {'settle s':>9} {'window s':>17}  shaper")
+    for i, r in enumerate(an.cycles):
+        lines.append(f"{i:>4} {r.cycle:>5} {_f(r.rms):>10} {_f(r.peak):>10} {_settle(r):>9}"
                      f" {_f(r.window_start - an.origin, '.3f'):>8}-{_f(r.end - an.origin, '.3f'):<8}  {r.shaper}"
                      + ("" if r.complete else "  (ends with the recording)") + (f"  [{r.issue}]" if r.issue else ""))
     if an.modes:
@@ -165,9 +165,9 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     md += ["## Cycles", "", "Residual vibration: RMS and peak of the tip acceleration magnitude (m/s²) from the"
            " time the positions have come to rest after the move until the cycle's end; settling: time after"
            f" that until the magnitude stays within {an.options.band} (of the cycle's peak, or m/s²).", "",
-           "| cycle | RMS (m/s²) | peak (m/s²) | settling (s) | window (s) | shaper |", "|---|---|---|---|---|---|"]
-    for r in an.cycles:
-        md.append(f"| {r.cycle} | {_f(r.rms)} | {_f(r.peak)} | {_settle(r)} |"
+           "| # | cycle | RMS (m/s²) | peak (m/s²) | settling (s) | window (s) | shaper |", "|---|---|---|---|---|---|---|"]
+    for i, r in enumerate(an.cycles):
+        md.append(f"| {i} | {r.cycle} | {_f(r.rms)} | {_f(r.peak)} | {_settle(r)} |"
                   f" {r.window_start - an.origin:.3f}-{r.end - an.origin:.3f} | {r.shaper}"
                   + (f" ({r.issue})" if r.issue else "") + " |")
     md += ["", "## Modes and the recommended shaper", ""]
