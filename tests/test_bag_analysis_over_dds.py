@@ -117,6 +117,14 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
     clean = next((k for k, r in enumerate(live) if r.skipped), len(live))
     assert clean >= 2, live  # the reference cycle and at least one learning step
 
+    # the analysis' offline LIST replay of the recording gives the live updates too
+    an = analyze(read_recording(bag), Options(learner_params={**LEARNER, **CASES["case2"].learner}))
+    offline = an.replays["list"].rows
+    assert len(offline) == len(live)
+    for row, it in zip(offline[:clean], live[:clean]):
+        assert row["M"] == pytest.approx(it.m, rel=1e-12)
+        assert (row["a1_next"], row["t2_next"]) == pytest.approx((it.a1_next, it.t2_next), rel=1e-12)
+
     # 2. a fresh learner, fed by bag_play (no plant, no shaper node)
     stand_in = _ShaperStandIn(ros_context)
     reports: list = []
@@ -158,3 +166,18 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
             got = _metric(rep, name)
             assert got == pytest.approx(value, rel=1e-12, abs=1e-15) or (math.isnan(got) and math.isnan(value)), \
                 (k, name, got, value)
+
+
+def test_installed_executables_name_a_missing_bag(tmp_path, domain_id):
+    from shaper_nodes.launching import NodeProcess, executable
+
+    out = subprocess.run([str(executable("shaper_nodes", "analyze_bag")), str(tmp_path / "nope")],
+                         capture_output=True, text=True, timeout=120, env=os.environ)
+    assert out.returncode == 2 and "analyze_bag:" in out.stderr and "no recording" in out.stderr
+    assert "Traceback" not in out.stderr
+    proc = NodeProcess("shaper_nodes", "bag_play", {"bag": str(tmp_path / "nope")}, log_path=tmp_path / "log",
+                       env={"ROS_DOMAIN_ID": str(domain_id)}).start()
+    proc.proc.wait(timeout=60)
+    proc.stop()
+    assert proc.proc.returncode == 1
+    assert "no recording at" in (tmp_path / "log").read_text()

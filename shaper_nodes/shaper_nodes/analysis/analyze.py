@@ -279,11 +279,11 @@ def _spectrum(windows: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
     if not usable:
         return None
     dt = float(np.median(np.concatenate([np.diff(t) for t, _ in usable])))
-    nper = 1 << int(math.floor(math.log2(min(t.size for t, _ in usable))))
-    nper = min(nper, 4096)
+    nper = min(min(t.size for t, _ in usable), 8192)  # the shortest window: one segment of it
+    nfft = 1 << int(math.ceil(math.log2(8 * nper)))  # zero-padded, for a smooth curve
     psds = []
     for _, a in usable:
-        f, p = welch(a - a.mean(axis=0), fs=1.0 / dt, nperseg=nper, axis=0)
+        f, p = welch(a - a.mean(axis=0), fs=1.0 / dt, nperseg=nper, nfft=nfft, axis=0)
         psds.append(p.reshape(p.shape[0], -1).sum(axis=1))
     return f, np.mean(psds, axis=0)
 
