@@ -215,3 +215,43 @@ def test_settling_time_into_a_band():
     assert settling_time(t, 0.01 * a, 0.0, 5.0, 0.1) == 0.0
     with pytest.raises(ValueError, match="band"):
         settling_time(t, a, 0.0, 5.0, -1.0)
+
+
+def test_stamped_monitor_does_not_depend_on_the_order_of_arrival():
+    from shaper_nodes.core.cycles import END, MOTION_END, START, CycleMonitor, StampedCycleMonitor
+
+    t, u, a, truth = simulate(cycles=2, rate=200.0, dwell=1.5)
+    events = [(truth.move_starts[k], kind, k) for k in range(2) for kind in (START, MOTION_END, END)]
+    events = [(s if kind == START else (truth.move_ends[k] if kind == MOTION_END else
+                                       (truth.move_starts[1] - 0.01 if k == 0 else t[-1])), kind, k)
+              for s, kind, k in events]
+    ordered = CycleMonitor()
+    expected = []
+    stream = sorted([(ti, 0, i) for i, ti in enumerate(t)] + [(te, 1, j) for j, (te, _, _) in enumerate(events)])
+    for ti, what, i in stream:
+        if what == 0:
+            ordered.add_accel(ti, a[i])
+            ordered.add_positions(ti, [u[i]])
+        else:
+            _, kind, k = events[i]
+            r = ordered.event(kind, k, ti)
+            if r is not None:
+                expected.append(r)
+    # the same stream, the samples delayed relative to the events by up to 30 samples (in order among
+    # themselves, as one topic's messages arrive)
+    rng = np.random.default_rng(0)
+    delay = np.maximum.accumulate(rng.integers(0, 30, len(stream)) / 200.0)
+    late = [(ti + (d if what == 0 else 0.0), what, i, ti) for (ti, what, i), d in zip(stream, delay)]
+    mon = StampedCycleMonitor()
+    got = []
+    for _, what, i, ti in sorted(late):
+        if what == 0:
+            mon.add_accel(ti, a[i])
+            mon.add_positions(ti, [u[i]])
+        else:
+            _, kind, k = events[i]
+            mon.event(kind, k, ti)
+        got += mon.poll()
+    assert len(got) == len(expected) == 2
+    for g, e in zip(got, expected):
+        assert g.residual == e.residual

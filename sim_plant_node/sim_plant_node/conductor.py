@@ -27,7 +27,7 @@ from shaper_msgs.srv import SetShaper
 from std_srvs.srv import Trigger
 
 from shaper_nodes.conversions import time_to_sec
-from shaper_nodes.core.cycles import CycleMonitor, CycleResult
+from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
 
 from .plants import mck_from_mode
 
@@ -39,7 +39,8 @@ class Conductor(Node):
                  settle_tolerance: float = 1e-6, **kwargs) -> None:
         super().__init__("conductor", *args, **kwargs)
         self.plant, self.shaper = plant, shaper
-        self.monitor = CycleMonitor(settle_tolerance)
+        # by stamps: samples and events come on separate topics, in an order that depends on the load
+        self.monitor = StampedCycleMonitor(settle_tolerance)
         self.results: list[CycleResult] = []
         # best effort as the sensor publishes, but a deep queue: with the default sensor-data depth (5) a busy
         # machine drops samples here and the measured residual depends on the load
@@ -57,14 +58,15 @@ class Conductor(Node):
     def _on_imu(self, msg: Imu) -> None:
         a = msg.linear_acceleration
         self.monitor.add_accel(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+        self.results.extend(self.monitor.poll())
 
     def _on_js(self, msg: JointState) -> None:
         self.monitor.add_positions(time_to_sec(msg.header.stamp), msg.position)
+        self.results.extend(self.monitor.poll())
 
     def _on_event(self, msg: CycleEvent) -> None:
-        result = self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
-        if result is not None:
-            self.results.append(result)
+        self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
+        self.results.extend(self.monitor.poll())
 
     # ----------------------------------------------------------------- driving
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
