@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     img.mkdir(parents=True, exist_ok=True)
     for src, dst in (("demo_report/traces.png", "bag_demo_traces.png"), ("demo_report/spectrum.png", "bag_demo_spectrum.png"),
                      ("demo_report/sensitivity.png", "bag_demo_sensitivity.png"),
-                     ("robot_report/traces.png", "bag_robot_traces.png"), ("robot_report/learning.png", "bag_robot_learning.png")):
+                     ("robot_report/traces.png", "bag_robot_traces.png")):
         shutil.copy(work / src, img / dst)
 
     md = ["# Bag analysis results (generated)", "",
