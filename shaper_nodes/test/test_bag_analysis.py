@@ -255,3 +255,17 @@ def test_stamped_monitor_does_not_depend_on_the_order_of_arrival():
     assert len(got) == len(expected) == 2
     for g, e in zip(got, expected):
         assert g.residual == e.residual
+
+
+def test_a_writer_that_never_finished_is_read_as_far_as_it_wrote(tmp_path):
+    # rosbags' writer abandoned mid-recording, as a killed recorder leaves it: complete chunks in the
+    # file, the chunk being filled lost, no summary, no footer, no metadata.yaml
+    t, u, a, truth = simulate(cycles=8, mode_hz=MODE_HZ, zeta=ZETA)
+    written = write_bag(tmp_path / "killed", t, u, a, finish=False)
+    assert not (tmp_path / "killed" / "metadata.yaml").exists()
+    rec = read_recording(tmp_path / "killed")
+    assert 0 < rec.messages_read < written
+    assert any("did not finish" in n for n in rec.notes)
+    assert rec.damage and "not finished" in bag_analysis_cli_output([str(tmp_path / "killed"), "--learners", ""])
+    an = analyze(rec, Options(learners=()))
+    assert len(an.cycles) >= 3 and an.modes[0].hz == pytest.approx(MODE_HZ, rel=0.02)

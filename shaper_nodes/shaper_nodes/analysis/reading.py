@@ -428,7 +428,11 @@ def describe_damage(d: Damage) -> str:
     if not d.reason and not d.skipped_chunks:
         return f"{d.path}: read to the end"
     parts = []
-    if d.reason:
+    if d.reason == "the file ends without a footer":
+        parts.append(f"{d.path}: the recording was not finished (no summary, no footer): read all {d.readable}"
+                     " bytes; what the recorder had not yet written when it stopped is lost, and its amount is"
+                     " not in the file")
+    elif d.reason:
         parts.append(f"{d.path}: {d.reason}; read {d.readable} of {d.size} bytes, {d.lost_bytes} bytes"
                      f" ({100.0 * d.lost_bytes / max(d.size, 1):.1f} %) lost")
         if d.lost_time is not None:

@@ -92,11 +92,14 @@ class _Template:
 
 def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndarray, *, t0: float = 1.7e9,
               imu_topic: str = "/imu/data", joints_topic: str = "/joint_states", commands_topic: str | None = None,
-              joint_names: tuple[str, ...] = ("joint_1",), imu_every: int = 1, joints_every: int = 1) -> int:
+              joint_names: tuple[str, ...] = ("joint_1",), imu_every: int = 1, joints_every: int = 1,
+              finish: bool = True) -> int:
     """Write the samples into a rosbag2 folder (MCAP); returns the number of messages written.
 
     ``t0`` (s) is added to every time (a robot's wall clock). Every joint of ``joint_names`` gets
-    the position ``u``. ``imu_every``/``joints_every`` write every n-th sample only.
+    the position ``u``. ``imu_every``/``joints_every`` write every n-th sample only. With
+    ``finish`` False the writer is abandoned without closing, as a killed recorder leaves it: the
+    chunk it was filling, the summary, the footer and metadata.yaml are never written.
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -127,7 +130,9 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
     stamp = struct.Struct("<iI")
     path = pathlib.Path(path)
     count = 0
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    try:
         c_imu = writer.add_connection(imu_topic, "sensor_msgs/msg/Imu", typestore=store)
         c_js = writer.add_connection(joints_topic, "sensor_msgs/msg/JointState", typestore=store)
         c_cmd = writer.add_connection(commands_topic, "std_msgs/msg/Float64MultiArray",
@@ -154,4 +159,9 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
                 acc3.pack_into(buf_i, ox, *a[i])
                 writer.write(c_imu, stamp_ns, bytes(buf_i))
                 count += 1
+    finally:
+        if finish:
+            writer.close()
+        else:  # what the process had handed to the OS is in the file; the rest is lost
+            writer.storage.bio.close()
     return count
