@@ -147,10 +147,9 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
                      " (gravity, bias): each window's mean is removed")
     pos = _positions(rec, opt)
     step = float(np.median(np.diff(acc.t))) if len(acc) > 1 else 0.0
-    rows, traces = [], []
+    rows, traces, windows = [], [], []
     for span in spans:
-        a0, a1 = np.searchsorted(acc.t, [span.start, span.end], side="left")
-        a1 = np.searchsorted(acc.t, span.end, side="right")
+        a0, a1 = np.searchsorted(acc.t, span.start, side="left"), np.searchsorted(acc.t, span.end, side="right")
         at, av = acc.t[a0:a1], acc.values[a0:a1]
         if pos is not None:
             p0, p1 = np.searchsorted(pos.t, span.start, "left"), np.searchsorted(pos.t, span.end, "right")
@@ -174,12 +173,11 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
         rows.append(CycleRow(span.cycle, span.start, span.motion_end, res.window_start, span.end, res.rms,
                              res.peak, res.samples, settle, label, impulses, span.complete, issue=issue))
         traces.append((at - span.start, av))
+        inside = (at >= res.window_start) & (at < res.window_end)  # as residual_vibration selects
+        windows.append((at[inside], av[inside]) if not issue else (np.zeros(0), np.zeros((0, av.shape[1]))))
     for i, r in enumerate(rows):
         if r.issue:
             notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
-    windows = [(t[(t + r.start >= r.window_start) & (t + r.start < r.end)],
-                a[(t + r.start >= r.window_start) & (t + r.start < r.end)]) if not r.issue else (np.zeros(0), np.zeros((0, 3)))
-               for (t, a), r in zip(traces, rows)]
     spectrum = _spectrum(windows)
     modes, id_notes = _identify(windows, rows, opt)
     notes += id_notes
