@@ -269,3 +269,17 @@ def test_a_writer_that_never_finished_is_read_as_far_as_it_wrote(tmp_path):
     assert rec.damage and "not finished" in bag_analysis_cli_output([str(tmp_path / "killed"), "--learners", ""])
     an = analyze(rec, Options(learners=()))
     assert len(an.cycles) >= 3 and an.modes[0].hz == pytest.approx(MODE_HZ, rel=0.02)
+
+
+def test_stamped_monitor_completes_a_cycle_whose_last_samples_were_lost():
+    from shaper_nodes.core.cycles import END, MOTION_END, START, StampedCycleMonitor
+
+    for wait, expected in ((60.0, 0), (0.0, 1)):
+        mon = StampedCycleMonitor(max_wait=wait)
+        mon.event(START, 0, 0.0)
+        for k in range(100):
+            mon.add_accel(0.01 * k, (np.sin(0.3 * k), 0.0, 0.0))
+            mon.add_positions(0.01 * k, [min(0.01 * k, 0.2)])
+        mon.event(MOTION_END, 0, 0.2)
+        mon.event(END, 0, 1.5)  # the samples up to END never arrive
+        assert len(mon.poll()) == expected

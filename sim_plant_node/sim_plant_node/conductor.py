@@ -127,6 +127,7 @@ class Conductor(Node):
 
         def done() -> bool:
             nonlocal seen
+            self.results.extend(self.monitor.poll())  # a cycle whose last samples were lost completes too
             if progress and len(self.results) > seen:
                 seen = len(self.results)
                 progress(seen - first)

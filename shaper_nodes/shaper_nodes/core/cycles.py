@@ -8,6 +8,7 @@ the cycle's MOTION_END (within ``settle_tolerance`` of their final value) until 
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -122,15 +123,20 @@ class StampedCycleMonitor:
         As for :class:`CycleMonitor`.
     keep : int
         Most samples kept per stream (older ones are dropped first).
+    max_wait : float
+        A cycle is evaluated anyway this long (s, wall clock) after its END arrived, with the samples
+        there are (a best-effort sample stamped at END may be lost, and a plant may stop after END).
     """
 
-    def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False, keep: int = 500_000) -> None:
+    def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False, keep: int = 500_000,
+                 max_wait: float = 1.0) -> None:
         self.settle_tolerance = float(settle_tolerance)
         self.remove_mean = remove_mean
+        self.max_wait = float(max_wait)
         self._acc: deque = deque(maxlen=keep)
         self._pos: deque = deque(maxlen=keep)
         self._open: tuple[int, float, float | None] | None = None
-        self._pending: list[tuple[int, float, float, float]] = []
+        self._pending: list[tuple[int, float, float, float, float]] = []  # ..., wall time END arrived
 
     def add_accel(self, t: float, accel) -> None:
         """An accelerometer sample (m/s^2, 1 to 3 axes) stamped t (s)."""
@@ -149,16 +155,18 @@ class StampedCycleMonitor:
                 self._open = (self._open[0], self._open[1], float(t))
             elif kind == END:
                 cyc, start, motion_end = self._open
-                self._pending.append((cyc, start, start if motion_end is None else motion_end, float(t)))
+                self._pending.append((cyc, start, start if motion_end is None else motion_end, float(t),
+                                      time.monotonic()))
                 self._open = None
 
     def poll(self) -> list[CycleResult]:
-        """The cycles whose END has passed on both sample streams, in order."""
+        """The cycles whose END has passed on both sample streams (or ``max_wait`` ago), in order."""
         out = []
         latest_acc = self._acc[-1][0] if self._acc else -np.inf
         latest_pos = self._pos[-1][0] if self._pos else -np.inf
-        while self._pending and min(latest_acc, latest_pos) >= self._pending[0][3]:
-            cycle, start, motion_end, end = self._pending.pop(0)
+        while self._pending and (min(latest_acc, latest_pos) >= self._pending[0][3]
+                                 or time.monotonic() - self._pending[0][4] > self.max_wait):
+            cycle, start, motion_end, end, _ = self._pending.pop(0)
             acc_t, acc = self._select(self._acc, start, end, 3)
             pos_t, pos = self._select(self._pos, start, end, 1)
             out.append(evaluate_cycle(cycle, start, motion_end, end, acc_t, acc, pos_t, pos,
