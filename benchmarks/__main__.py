@@ -48,6 +48,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
     p.add_argument("--skip-fir", action="store_true", help="skip the FIR throughput measurement")
     p.add_argument("--skip-list", action="store_true", help="skip the LIST update timing")
+    p.add_argument("--skip-mrilc", action="store_true", help="skip the MRILC update timing")
     p.add_argument("--skip-bag", action="store_true", help="skip the bag analysis throughput measurement")
     p.add_argument("--bag-messages", type=int, default=1_000_000,
                    help="messages in the bag analysis benchmark's recording (default 1000000)")
@@ -189,6 +190,10 @@ def main(argv: list[str] | None = None) -> int:
             from .list_update import run as run_list
 
             report["list_update"] = run_list(progress=_progress)
+        if not args.skip_mrilc:
+            from .mrilc_update import run as run_mrilc
+
+            report["mrilc_update"] = run_mrilc(progress=_progress)
         if not args.skip_bag:
             from .bag_analysis import run as run_bag
 
@@ -212,6 +217,11 @@ def main(argv: list[str] | None = None) -> int:
         from .list_update import print_table as print_list
 
         print_list(report["list_update"])
+        print()
+    if "mrilc_update" in report:
+        from .mrilc_update import print_table as print_mrilc
+
+        print_mrilc(report["mrilc_update"])
         print()
     if "bag_analysis" in report:
         from .bag_analysis import print_table as print_bag

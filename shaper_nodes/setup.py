@@ -9,7 +9,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml", "config/learner.yaml"]),
+        ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml", "config/learner.yaml",
+                                           "config/mrilc.yaml"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

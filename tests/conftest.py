@@ -46,3 +46,26 @@ def start_node(domain_id, tmp_path):
     yield start
     for proc in reversed(procs):
         proc.stop()
+
+
+class Starter:
+    """start_node, remembering the processes so that a run's nodes can be stopped before the next."""
+
+    def __init__(self, start_node):
+        self.start_node, self.procs = start_node, []
+
+    def __call__(self, package, executable, params):
+        proc = self.start_node(package, executable, params)
+        self.procs.append(proc)
+        return proc
+
+    def stop_all(self):
+        for proc in reversed(self.procs):
+            assert proc.stop() == 0
+        self.procs = []
+
+
+@pytest.fixture
+def starter(start_node) -> Starter:
+    """Like start_node, with ``stop_all()`` to stop the nodes started so far."""
+    return Starter(start_node)

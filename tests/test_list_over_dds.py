@@ -19,23 +19,6 @@ pytestmark = pytest.mark.integration
 CYCLES = 11  # cycle 0 unshaped (reference), cycles 1..10 learning
 
 
-class Starter:
-    """start_node, remembering the processes so that a run's nodes can be stopped before the next."""
-
-    def __init__(self, start_node):
-        self.start_node, self.procs = start_node, []
-
-    def __call__(self, package, executable, params):
-        proc = self.start_node(package, executable, params)
-        self.procs.append(proc)
-        return proc
-
-    def stop_all(self):
-        for proc in reversed(self.procs):
-            assert proc.stop() == 0
-        self.procs = []
-
-
 def shaped(rows):
     return [r for r in rows if not r.skipped and not math.isnan(r.a1)]
 
@@ -60,9 +43,9 @@ def test_list_with_saturation_never_ends_above_its_best(start_node, ros_context,
     assert ms[-1] < 0.25 * rows[1].m  # and learning did help (the paper: M fell, then rose at the 7th)
 
 
-def test_restart_resumes_from_the_saved_shaper(start_node, ros_context, tmp_path):
+def test_restart_resumes_from_the_saved_shaper(starter, ros_context, tmp_path):
     state = tmp_path / "state.json"
-    start = Starter(start_node)
+    start = starter
     first = run_case(CASES["case1"], 4, start, ros_context, state)
     saved = json.loads(state.read_text())
     assert saved["version"] == 1

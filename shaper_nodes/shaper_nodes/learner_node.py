@@ -54,6 +54,7 @@ from .conversions import shaper_to_msg, time_to_sec
 from .core.list_learning import ListConfig, ListError, ListLearner, ListParams
 from .core.list_session import ListSession, SessionResult, list_config
 from .core.shapers import Mode, ShaperError, none_shaper
+from .mrilc_node import MrilcMode, write_atomic
 from .node_main import run_node
 from .parameters import describe
 
@@ -66,19 +67,8 @@ SOURCE = "learner"
 
 def save_state(path: pathlib.Path, learner: ListLearner, structure: str) -> None:
     """Write the learner's state to ``path`` atomically: a crash leaves the old file or the new one."""
-    doc = {"version": STATE_VERSION, "structure": structure, "saved_at": time.time(), "learner": learner.to_dict()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(doc, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+    write_atomic(path, {"version": STATE_VERSION, "structure": structure, "saved_at": time.time(),
+                        "learner": learner.to_dict()})
 
 
 def load_state(path: pathlib.Path, structure: str) -> ListLearner:
@@ -106,7 +96,8 @@ class LearnerNode(Node):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__("learner", *args, **kwargs)
         d = self.declare_parameter
-        d("mode", "list", describe("Learning mode: 'list' (Learning Input Shaping Technique).", read_only=True))
+        d("mode", "list", describe("Learning mode: 'list' (Learning Input Shaping Technique, seed 003) or 'mrilc'"
+                                   " (Model-Reference Iterative Learning Control, seed 000).", read_only=True))
         d("shaper", "/shaper", describe("Fully qualified name of the shaper node.", read_only=True))
         d("state_file", "", describe("Where the learner's state is saved and reloaded ('' = not saved).",
                                      read_only=True))
@@ -119,6 +110,13 @@ class LearnerNode(Node):
         d("end_wait", 0.5, describe(
             "At a cycle's END, wait up to this long for accelerometer samples stamped up to END, s.", 0.0, 10.0))
         d("service_timeout", 5.0, describe("Time to wait for the shaper node's services, s.", 0.1, 600.0))
+        mode = self.get_parameter("mode").value
+        if mode not in ("list", "mrilc"):
+            raise ValueError(f"parameter mode must be 'list' or 'mrilc', got {mode!r}")
+        if mode == "mrilc":
+            self.mrilc = MrilcMode(self)
+            return
+        self.mrilc = None
         defaults = ListConfig()
         d("list.structure", defaults.structure, describe("Impulse structure: 'zv2' (the paper's 2 impulses) or"
                                                          " 'zvd3' (the learned pair convolved with itself).",
@@ -156,8 +154,6 @@ class LearnerNode(Node):
             d(f"topics.{key}", default, describe(f"Topic name ({key}).", read_only=True))
 
         p = lambda name: self.get_parameter(name).value  # noqa: E731
-        if p("mode") != "list":
-            raise ValueError(f"parameter mode must be 'list', got {p('mode')!r}")
         self.config = self._config()
         self.structure = self.config.structure
         path = str(p("state_file"))

@@ -8,6 +8,8 @@ what it receives, with the same core code (``CycleMonitor``) that the plant's re
 
 from __future__ import annotations
 
+import contextlib
+import pathlib
 import time
 from collections.abc import Callable
 
@@ -151,3 +153,26 @@ def spin_context(domain_id: int | None = None):
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain_id)
     return ctx
+
+
+@contextlib.contextmanager
+def node_session(logs: pathlib.Path, prefix: str):
+    """Yield ``(start, ctx)``: ``start(package, executable, params)`` starts a node process (log in
+    ``logs/<prefix>-<executable>.log``), ``ctx`` a fresh rclpy context; at exit the context is
+    shut down and every process started is stopped (in reverse order)."""
+    from shaper_nodes.launching import NodeProcess
+
+    procs: list = []
+
+    def start(package: str, executable: str, params: dict):
+        proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log")
+        procs.append(proc.start())
+        return proc
+
+    ctx = spin_context()
+    try:
+        yield start, ctx
+    finally:
+        ctx.try_shutdown()
+        for proc in reversed(procs):
+            proc.stop()

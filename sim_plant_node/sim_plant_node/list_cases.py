@@ -183,9 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="where list_results.md and img/list_cases.png go (default docs)")
     args = p.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.launching import NodeProcess
-
-    from .conductor import spin_context
+    from .conductor import node_session
 
     logs = pathlib.Path("out") / "list_cases"
     logs.mkdir(parents=True, exist_ok=True)
@@ -193,25 +191,13 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     for name in args.cases.split(","):
         case = CASES[name.strip()]
-        procs: list = []
         state = logs / f"{case.name}-state.json"
         state.unlink(missing_ok=True)
-
-        def start(package, executable, params, case=case, procs=procs):
-            proc = NodeProcess(package, executable, params, log_path=logs / f"{case.name}-{executable}.log")
-            procs.append(proc.start())
-            return proc
-
-        ctx = spin_context()
         print(f"{case.name}: {case.title}", flush=True)
-        try:
+        with node_session(logs, case.name) as (start, ctx):
             results[case.name] = run_case(case, args.cycles, start, ctx, state, args.noise, hold_after=args.cycles - 1,
                                           progress=lambda r: print(
                 f"  cycle {r.index:2d}: M {r.m:9.4g}  A1 {r.a1:.5f}  T2 {r.t2:.5f}  {r.action}", flush=True))
-        finally:
-            ctx.try_shutdown()
-            for proc in reversed(procs):
-                proc.stop()
     text = ["# LIST on seed 003's four cases (generated)", "",
             f"Regenerate with `./run exec python -m sim_plant_node.list_cases` ({args.cycles} cycles per case,"
             f" accelerometer noise {args.noise:g} m/s²; sim plant, shaper and learner as separate processes in"

@@ -18,6 +18,17 @@ list_linear, list_time_varying, list_hardening, list_saturation
     over the first second of every cycle; cubic hardening spring ``plant.stiffness_cubic``;
     P loop ``plant.gain`` with actuator force limit ``plant.force_limit``. The time-varying
     mass follows the time since the current cycle's START event.
+mck_pid
+    The mck plant inside the loop of a continuous feedback controller C(s)
+    (``controller.numerator``/``denominator``, default seed 000's PID), with a feedforward
+    effort u2 (seed 000, MRILC): /joint_states carries the output y and the total effort u,
+    ``~/reference`` the applied (shaped) reference. See sim_plant_node.pid_loop.
+
+Feedforward (``~/set_feedforward``, shaper_msgs/SetFeedforward)
+--------------------------------------------------------------
+A profile indexed by the sample within the cycle, installed at the next START: "command"
+profiles are added to the shaped setpoint (every model), "effort" profiles to the controller
+output (mck_pid only).
 
 Modes (parameter ``mode``)
 --------------------------
@@ -44,6 +55,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.srv import SetFeedforward
 from shaper_msgs.msg import Shaper as ShaperMsg
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -51,8 +63,10 @@ from std_srvs.srv import Trigger
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.validation import InputError, finite_array
 
+from .pid_loop import PidLoopPlant
 from .plants import (LIST_FORCE_LIMIT, LIST_GAIN, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
                      MckPlant, make_plant)
+from shaper_nodes.core.mrilc import PAPER_CONTROLLER
 from shaper_nodes.node_main import run_node
 from shaper_nodes.parameters import describe as _desc
 
@@ -60,7 +74,8 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 # per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
                 "plant.force_limit")
-PLANT_KEYS = ("plant.model",) + PLANT_PARAMS
+PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator") + PLANT_PARAMS
+MODELS = PLANT_MODELS + ("mck_pid",)
 
 
 def _stamp(t: float):
@@ -82,7 +97,11 @@ class SimPlantNode(Node):
         d("lockstep_timeout", 2.0, _desc("Lockstep: wall time to wait for the shaped setpoint, s.", 0.01, 600.0))
         d("plant.model", "mck", _desc(
             "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
-            " 'list_time_varying', 'list_hardening', 'list_saturation'. Changes live, keeping the state."))
+            " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
+            " seed 000). Changes live, keeping the state when the models share it."))
+        d("controller.numerator", list(PAPER_CONTROLLER[0]), _desc(
+            "mck_pid: feedback controller C(s) numerator, highest power first (default seed 000 eq. 13)."))
+        d("controller.denominator", list(PAPER_CONTROLLER[1]), _desc("mck_pid: C(s) denominator."))
         d("plant.mass", [1.0], _desc(
             "Tip mass per joint (one value for all), kg (or kg m^2), > 0; list_time_varying: the mass at a"
             " cycle's START, m(t) = mass (1 + t) for t < 1 s, 2 mass after."))
@@ -122,7 +141,7 @@ class SimPlantNode(Node):
         for key, default in {"command_out": "/shaper/commands", "command_in": "/forward_position_controller/commands",
                              "joint_states": "/joint_states", "tip_state": "~/tip_state", "imu": "/tip_imu",
                              "cycle_events": "/cycle_events", "cycle_reports": "/cycle_reports",
-                             "active_shaper": "/shaper/active_shaper"}.items():
+                             "active_shaper": "/shaper/active_shaper", "reference": "~/reference"}.items():
             d(f"topics.{key}", default, _desc(f"Topic name ({key}).", read_only=True))
 
         self.joint_names = list(self.get_parameter("joint_names").value)
@@ -146,6 +165,10 @@ class SimPlantNode(Node):
         self._event_pub = self.create_publisher(CycleEvent, tp("cycle_events"), 10)
         self._report_pub = self.create_publisher(CycleReport, tp("cycle_reports"), 10)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
+        self._ref_pub = self.create_publisher(JointState, tp("reference"), 10)
+        self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward)
+        self._ff_pending: tuple[str, np.ndarray] | None = None
+        self._ff: tuple[str, np.ndarray] | None = None  # (injection, samples x joints) of this cycle
         self.create_subscription(Float64MultiArray, tp("command_in"), self._on_command, 10)
         self.create_subscription(ShaperMsg, tp("active_shaper"), self._on_shaper, LATCHED)
         self.create_service(Trigger, "~/start_task", self._on_start)
@@ -193,15 +216,20 @@ class SimPlantNode(Node):
     def _pose(self, name: str, overrides: dict) -> np.ndarray:
         return self._vector(name, overrides)
 
-    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant:
+    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant | PidLoopPlant:
         model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
-        if model not in PLANT_MODELS:
-            raise ValueError(f"plant.model must be one of {', '.join(PLANT_MODELS)}; got {model!r}")
+        if model not in MODELS:
+            raise ValueError(f"plant.model must be one of {', '.join(MODELS)}; got {model!r}")
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
         try:
-            return make_plant(model, m, c, k, self.rate, stiffness_cubic=k3, gain=kp, force_limit=f_max)
+            plant = make_plant("mck" if model == "mck_pid" else model, m, c, k, self.rate, stiffness_cubic=k3,
+                               gain=kp, force_limit=f_max)
         except ValueError as err:
             raise ValueError(f"plant.{err}") from None  # the plant names its argument first
+        if model != "mck_pid":
+            return plant
+        g = lambda n: overrides.get(n, self.get_parameter(n).value)  # noqa: E731
+        return PidLoopPlant(m, c, k, self.rate, list(g("controller.numerator")), list(g("controller.denominator")))
 
     def _cycle_time(self) -> float | None:
         """Time since the current cycle's START at the present step, s (None before any)."""
@@ -219,7 +247,10 @@ class SimPlantNode(Node):
         except ValueError as err:
             return SetParametersResult(successful=False, reason=str(err))
         if new is not None:  # all checks passed: takes effect at the next step
-            new.state = self.plant.state.copy()
+            try:
+                new.state = self.plant.state.copy()
+            except ValueError:  # another state layout: start the new model at rest where the output is
+                new.reset(self.plant.base_position)
             new.cycle_time = self.plant.cycle_time
             self.plant = new
         return SetParametersResult(successful=True)
@@ -293,6 +324,8 @@ class SimPlantNode(Node):
         self._event_pub.publish(msg)
         if ev.kind == CycleEvent.START:
             self._cycle_start_step = self.step_index  # the next period is the cycle's first
+            if self._ff_pending is not None:
+                self._ff, self._ff_pending = (None if self._ff_pending[1].size == 0 else self._ff_pending), None
         result = self._monitor.event(ev.kind, ev.cycle, t)
         if result is not None:
             self._report(result)
@@ -308,15 +341,32 @@ class SimPlantNode(Node):
         msg.header.stamp = _stamp(self._now())
         self._report_pub.publish(msg)
 
+    def _feedforward(self) -> tuple[str, np.ndarray] | None:
+        """The installed profile's sample for the present period (None outside it)."""
+        if self._ff is None or self._cycle_start_step is None:
+            return None
+        k = self.step_index - self._cycle_start_step
+        return (self._ff[0], self._ff[1][k]) if 0 <= k < self._ff[1].shape[0] else None
+
     def _integrate(self, command: np.ndarray) -> None:
         self._applied = command
+        if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; costly at every step)
+            ref = JointState(name=self.joint_names, position=command.tolist())
+            ref.header.stamp = _stamp(self._now())  # the start of the period the setpoint applies to
+            self._ref_pub.publish(ref)
+        ff = self._feedforward()
+        if ff is not None and ff[0] == "command":
+            command = command + ff[1]
+        if isinstance(self.plant, PidLoopPlant):
+            self.plant.feedforward = ff[1] if ff is not None and ff[0] == "effort" else np.zeros(self.n)
         self.plant.step(command, cycle_time=self._cycle_time())
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
         t = self._now()
         stamp = _stamp(t)
         js = JointState(name=self.joint_names, position=self.plant.base_position.tolist(),
-                        velocity=self.plant.base_velocity.tolist())
+                        velocity=self.plant.base_velocity.tolist(),
+                        effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
         js.header.stamp = stamp
         self._js_pub.publish(js)
         tip = JointState(name=self.joint_names, position=self.plant.tip_position.tolist(),
@@ -339,7 +389,7 @@ class SimPlantNode(Node):
             imu.linear_acceleration_covariance[8] = sigma**2
         self._imu_pub.publish(imu)
         self._monitor.add_accel(t, acc)
-        self._monitor.add_positions(t, self.plant.base_position)
+        self._monitor.add_positions(t, self._applied)  # the commanded positions (what "at rest" means)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         try:
@@ -384,6 +434,37 @@ class SimPlantNode(Node):
 
     def _on_shaper(self, msg: ShaperMsg) -> None:
         self._active_shaper = msg
+
+    def _on_set_feedforward(self, req, resp):
+        resp.success, resp.message = True, ""
+        try:
+            self._ff_pending = self._check_profile(req.profile)
+        except ValueError as err:
+            resp.success, resp.message = False, str(err)
+            self.get_logger().error(f"refused feedforward profile: {err}")
+            return resp
+        if self._cycle_start_step is None or self.task is None:  # no cycle runs: at once
+            self._ff, self._ff_pending = (None if self._ff_pending[1].size == 0 else self._ff_pending), None
+        samples = self._ff_pending[1].shape[0] if self._ff_pending else (self._ff[1].shape[0] if self._ff else 0)
+        resp.message = (f"{req.profile.injection} profile of {samples} samples (iteration {req.profile.iteration})"
+                        + (" from the next START" if self._ff_pending else " installed"))
+        return resp
+
+    def _check_profile(self, msg) -> tuple[str, np.ndarray]:
+        if msg.injection not in ("effort", "command"):
+            raise ValueError(f"injection must be 'effort' or 'command', got {msg.injection!r}")
+        if msg.injection == "effort" and not isinstance(self.plant, PidLoopPlant):
+            raise ValueError("an effort profile needs plant.model 'mck_pid' (no controller output to add it to)")
+        if list(msg.joint_names) != self.joint_names:
+            raise ValueError(f"joint names {list(msg.joint_names)} do not match the plant's {self.joint_names}")
+        if not (math.isfinite(msg.sample_period) and abs(msg.sample_period * self.rate - 1.0) < 1e-6):
+            raise ValueError(f"sample period {msg.sample_period!r} s does not match the plant's {1.0 / self.rate:g} s")
+        data = np.asarray(msg.data, dtype=float)
+        if data.size % self.n:
+            raise ValueError(f"{data.size} values are not a whole number of samples of {self.n} joints")
+        if not np.all(np.isfinite(data)):
+            raise ValueError(f"non-finite value at index {int(np.argmax(~np.isfinite(data)))}")
+        return msg.injection, data.reshape(-1, self.n)
 
 
 def main(args: list[str] | None = None) -> int:

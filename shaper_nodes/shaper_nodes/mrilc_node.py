@@ -1,0 +1,324 @@
+"""The learner node's MRILC mode (seed 000): learn a feedforward profile over cycles.
+
+Started as ``learner`` with ``mode:=mrilc`` (see learner_node.py and config/mrilc.yaml).
+
+At start-up it builds the reference model G_m = C P_nom / (1 + C P_nom) from the configured
+controller and nominal plant, runs the convergence check of seed 000 eq. (11) over the plant
+set and refuses to start (naming the worst plant and frequency) if the learning law fails it,
+sets the shaper node's shaper to a ``mrilc.shaper_family`` (ZVD) designed on G_m's lightly
+damped mode (source "learner"), and installs its profile (zero, or the saved one).
+
+After each cycle it takes the measured output y (``topics.joint_states`` positions, efforts for
+u1 = u - u2) and the applied reference r_s (``topics.reference``, JointState positions stamped
+at the start of the period they apply to) on the sample grid from START to END, computes
+e = y_m - y with y_m = G_m r_s, updates u2 and installs it at the injection point
+(``<mrilc.injection_target>/set_feedforward``, shaper_msgs/SetFeedforward) for the next cycle.
+
+~/reports (shaper_msgs/CycleReport)
+    One per cycle, after the profile was installed: metrics iteration, rms_e, rms_u1, rms_u2,
+    applied, action.<learn|hold|rollback>; a skipped cycle has "skipped" = 1 and the reason in
+    the log.
+~/hold (std_srvs/SetBool)
+    true: stop learning and install the best profile so far; false: learn again.
+Divergence guard: when RMS(e) grows ``mrilc.patience`` iterations in a row (above
+``mrilc.noise_floor``), learning stops and the best profile is installed (action "rollback").
+state_file: the profile and history, saved atomically after every cycle and reloaded at start.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import pathlib
+import time
+
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from shaper_msgs.msg import CycleEvent, CycleReport, FeedforwardProfile
+from shaper_msgs.srv import SetFeedforward, SetShaper
+from std_srvs.srv import SetBool
+
+from .conversions import shaper_to_msg, time_to_sec
+from .core import mrilc as M
+from .core.mrilc_learning import MrilcLearner, MrilcSession
+from .core.shapers import ShaperError, design
+from .parameters import describe
+
+STATE_VERSION = 1
+SOURCE = "learner"
+
+
+def write_atomic(path: pathlib.Path, doc: dict) -> None:
+    """JSON to ``path`` atomically (write, fsync, rename, fsync the folder): a crash leaves the
+    old file or the new one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(doc, f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def declare(node) -> None:
+    """The MRILC parameters (mrilc.*, topics.*)."""
+    d = node.declare_parameter
+    ro = {"read_only": True}
+    d("mrilc.rate", 200.0, describe("Sample rate of the loop and of the profile, Hz.", 1.0, 100000.0, **ro))
+    d("mrilc.controller.numerator", list(M.PAPER_CONTROLLER[0]), describe(
+        "Feedback controller C(s) numerator, highest power first (default seed 000 eq. 13).", **ro))
+    d("mrilc.controller.denominator", list(M.PAPER_CONTROLLER[1]), describe(
+        "Feedback controller C(s) denominator.", **ro))
+    d("mrilc.nominal.omega", M.PAPER_NOMINAL[0], describe("Nominal plant natural frequency, rad/s.", 1e-3, 1e6, **ro))
+    d("mrilc.nominal.zeta", M.PAPER_NOMINAL[1], describe("Nominal plant damping ratio.", 0.0, 0.999, **ro))
+    d("mrilc.check.omegas", list(M.PAPER_OMEGAS), describe(
+        "Plant set of the convergence check: natural frequencies, rad/s (every pair with check.zetas).", **ro))
+    d("mrilc.check.zetas", list(M.PAPER_ZETAS), describe("Plant set: damping ratios.", **ro))
+    d("mrilc.check.min_frequency_hz", 0.1, describe(
+        "Lowest frequency of the check (and of the robust design), Hz: about 1 / (cycle duration).", 1e-4, 1e5, **ro))
+    d("mrilc.law", "p", describe("Learning law: 'p' (gamma z), 'pd' (gamma z + lambda (z - 1)), 'robust'.", **ro))
+    d("mrilc.gamma", 10.0, describe("P/PD learning gain.", 0.0, 1e9, **ro))
+    d("mrilc.lambda", 0.0, describe("PD derivative learning gain.", 0.0, 1e9, **ro))
+    d("mrilc.robust_gain", 0.7, describe("Robust law: fraction of the minimax L applied.", 0.0, 1.0, **ro))
+    d("mrilc.q_cutoff_hz", 0.0, describe("Q filter cut-off (zero-phase Butterworth), Hz (0 = Q = 1).", 0.0, 1e6, **ro))
+    d("mrilc.q_order", 2, describe("Q filter order.", 1, 8, integer=True, **ro))
+    d("mrilc.injection", "effort", describe(
+        "'effort' (added to the controller output) or 'command' (added to the setpoint after the shaper).", **ro))
+    d("mrilc.injection_target", "/sim_plant", describe(
+        "Node offering ~/set_feedforward at the injection point.", **ro))
+    d("mrilc.shaper_family", "zvd", describe(
+        "Shaper designed on the reference model's mode and sent to the shaper node ('' = leave it).", **ro))
+    d("mrilc.learn", True, describe("Learn (true) or only measure and report with the profile held (false).",
+                                    **ro))
+    d("mrilc.patience", 3, describe("Divergence guard: iterations of growing RMS(e) before rollback.", 1, 1000,
+                                    integer=True, **ro))
+    d("mrilc.noise_floor", 1e-9, describe("RMS(e) below which growth is not divergence (output units).",
+                                          0.0, 1e9, **ro))
+    d("joint_names", [""], describe("Joints learned, in profile order ([''] = those of the first START).", **ro))
+    for key, default in {"joint_states": "/joint_states", "reference": "/sim_plant/reference",
+                         "cycle_events": "/cycle_events"}.items():
+        d(f"topics.{key}", default, describe(f"Topic name ({key}).", **ro))
+
+
+class MrilcMode:
+    """Wires the MRILC session into the learner node (which it is given)."""
+
+    def __init__(self, node) -> None:
+        self.node = node
+        declare(node)
+        p = lambda name: node.get_parameter(name).value  # noqa: E731
+        period = 1.0 / float(p("mrilc.rate"))
+        try:
+            law = M.LawConfig(law=str(p("mrilc.law")), gamma=float(p("mrilc.gamma")), lam=float(p("mrilc.lambda")),
+                              gain=float(p("mrilc.robust_gain")), q_cutoff_hz=float(p("mrilc.q_cutoff_hz")),
+                              q_order=int(p("mrilc.q_order")))
+            plant_set = M.paper_plant_set(tuple(p("mrilc.check.omegas")), tuple(p("mrilc.check.zetas")))
+            self.model = M.MrilcModel(
+                M.controller(p("mrilc.controller.numerator"), p("mrilc.controller.denominator")),
+                M.mck_plant(float(p("mrilc.nominal.omega")), float(p("mrilc.nominal.zeta"))), plant_set, period,
+                str(p("mrilc.injection")), law, omega_min=2 * math.pi * float(p("mrilc.check.min_frequency_hz")))
+            self.model.require_convergence()
+        except M.MrilcError as err:
+            raise ValueError(str(err)) from None
+        node.get_logger().info(f"MRILC: reference model mode {self.model.mode.omega:.4g} rad/s, zeta"
+                               f" {self.model.mode.zeta:.4g}; law {law.law}: {self.model.convergence.describe()}")
+        names = [n for n in p("joint_names") if n]
+        self.joint_names: list[str] = names
+        self.patience, self.noise_floor = int(p("mrilc.patience")), float(p("mrilc.noise_floor"))
+        path = str(p("state_file"))
+        self.state_path = pathlib.Path(path).expanduser() if path else None
+        self.session: MrilcSession | None = None
+        self._restore()
+        self.injection = str(p("mrilc.injection"))
+
+        node._sleep_group = MutuallyExclusiveCallbackGroup()
+        inputs = MutuallyExclusiveCallbackGroup()
+        node.create_subscription(JointState, p("topics.joint_states"), self._on_joint_state, 1000,
+                                 callback_group=inputs)
+        node.create_subscription(JointState, p("topics.reference"), self._on_reference, 1000, callback_group=inputs)
+        node.create_subscription(CycleEvent, p("topics.cycle_events"), self._on_event, 100)
+        target = str(p("mrilc.injection_target")).rstrip("/")
+        self._set_ff = node.create_client(SetFeedforward, f"{target}/set_feedforward",
+                                          callback_group=MutuallyExclusiveCallbackGroup())
+        shaper = str(p("shaper")).rstrip("/")
+        self._set_shaper = node.create_client(SetShaper, f"{shaper}/set_shaper",
+                                              callback_group=MutuallyExclusiveCallbackGroup())
+        self._report_pub = node.create_publisher(CycleReport, "~/reports", 10)
+        node.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup())
+        self._family = str(p("mrilc.shaper_family"))
+        self._startup = node.create_timer(0.2, self._send_initial, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.ready = False
+
+    # ------------------------------------------------------------------ state
+    def _new_session(self, joints: int, doc: dict | None = None) -> MrilcSession:
+        if doc is None:
+            learner = MrilcLearner(self.model, joints, self.patience, self.noise_floor)
+            learner.holding = not bool(self.node.get_parameter("mrilc.learn").value)
+        else:
+            learner = MrilcLearner.from_dict(self.model, doc, self.patience, self.noise_floor)
+        stale = float(self.node.get_parameter("stale_after").value)
+        return MrilcSession(learner, stale)
+
+    def _restore(self) -> None:
+        if self.state_path is None or not self.state_path.exists():
+            if self.joint_names:
+                self.session = self._new_session(len(self.joint_names))
+            return
+        try:
+            doc = json.loads(self.state_path.read_text(encoding="utf-8"))
+            if not isinstance(doc, dict) or doc.get("version") != STATE_VERSION or doc.get("mode") != "mrilc":
+                raise M.MrilcError("not a version-1 MRILC state file")
+            if abs(float(doc["sample_period"]) - self.model.period) > 1e-12:
+                raise M.MrilcError(f"saved for a sample period of {doc['sample_period']} s, not {self.model.period} s")
+            names = list(doc["joint_names"])
+            if self.joint_names and names != self.joint_names:
+                raise M.MrilcError(f"saved for joints {names}, not {self.joint_names}")
+            self.joint_names = names
+            self.session = self._new_session(len(names), doc["learner"])
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            aside = self.state_path.with_name(self.state_path.name + ".corrupt")
+            os.replace(self.state_path, aside)
+            self.node.get_logger().error(f"cannot load MRILC state {self.state_path}: {err}; moved to {aside};"
+                                         " starting afresh")
+            self.session = self._new_session(len(self.joint_names)) if self.joint_names else None
+            return
+        self.node.get_logger().info(f"resumed from {self.state_path} at iteration {self.session.learner.iteration}")
+
+    def save(self) -> None:
+        if self.state_path is None or self.session is None:
+            return
+        doc = {"version": STATE_VERSION, "mode": "mrilc", "saved_at": time.time(), "joint_names": self.joint_names,
+               "sample_period": self.model.period, "injection": self.injection,
+               "learner": self.session.learner.to_dict()}
+        try:
+            write_atomic(self.state_path, doc)
+        except OSError as err:
+            self.node.get_logger().error(f"could not save the learner state to {self.state_path}: {err}")
+
+    # ------------------------------------------------------------------ outputs
+    async def _send_initial(self) -> None:
+        if not (self._set_ff.service_is_ready() and (not self._family or self._set_shaper.service_is_ready())):
+            return
+        self._startup.cancel()
+        if self._family:
+            try:
+                shaper = design(self._family, [self.model.mode])
+            except ShaperError as err:
+                self.node.get_logger().error(f"cannot design {self._family} on the reference model: {err}")
+                shaper = None
+            if shaper is not None:
+                msg = shaper_to_msg(shaper, SOURCE, 0, self.node.get_clock().now().to_msg())
+                msg.family = "custom"  # the designed impulses exactly
+                resp = await self._set_shaper.call_async(SetShaper.Request(shaper=msg))
+                if not resp.success:
+                    self.node.get_logger().error(f"the shaper node refused the {self._family} shaper: {resp.message}")
+        ok, why = await self._install(self.session.learner.profile if self.session else np.zeros((0, 0)))
+        if not ok:
+            self.node.get_logger().error(f"the injection point refused the profile: {why}")
+        self.ready = True
+
+    async def _install(self, profile: np.ndarray) -> tuple[bool, str]:
+        timeout = float(self.node.get_parameter("service_timeout").value)
+        if not self._set_ff.wait_for_service(timeout_sec=timeout):
+            return False, f"service {self._set_ff.srv_name} not available within {timeout:g} s"
+        msg = FeedforwardProfile(source=SOURCE, injection=self.injection, joint_names=self.joint_names,
+                                 sample_period=self.model.period)
+        msg.iteration = self.session.learner.iteration if self.session else 1
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.data = np.asarray(profile, dtype=float).ravel().tolist()
+        if self.session:
+            self.session.profile_ready = False
+        resp = await self._set_ff.call_async(SetFeedforward.Request(profile=msg))
+        if self.session:
+            self.session.profile_ready = bool(resp.success)
+        return bool(resp.success), str(resp.message)
+
+    # ------------------------------------------------------------------ inputs
+    def _select(self, msg: JointState, field: str):
+        values = getattr(msg, field)
+        if len(values) != len(msg.name):
+            return None
+        index = {n: i for i, n in enumerate(msg.name)}
+        try:
+            return [values[index[n]] for n in self.joint_names]
+        except KeyError:
+            self.node.get_logger().error(f"joint states lack joints {sorted(set(self.joint_names) - set(index))}",
+                                         throttle_duration_sec=5.0)
+            return None
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        if self.session is None:
+            return
+        pos = self._select(msg, "position")
+        if pos is not None:
+            self.session.on_joint_state(time_to_sec(msg.header.stamp), pos, self._select(msg, "effort"))
+
+    def _on_reference(self, msg: JointState) -> None:
+        if self.session is None:
+            return
+        pos = self._select(msg, "position")
+        if pos is not None:
+            self.session.on_reference(time_to_sec(msg.header.stamp), pos)
+
+    async def _on_hold(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
+        if self.session is None:
+            resp.success, resp.message = False, "no cycle seen yet"
+            return resp
+        learner = self.session.learner
+        if req.data:
+            ok, why = await self._install(learner.hold())
+            resp.success, resp.message = ok, "holding at the best profile" + ("" if ok else f"; refused: {why}")
+        else:
+            learner.resume()
+            resp.success, resp.message = True, "learning resumed"
+        self.save()
+        self.node.get_logger().info(resp.message)
+        return resp
+
+    async def _on_event(self, msg: CycleEvent) -> None:
+        stamp = time_to_sec(msg.header.stamp)
+        if self.session is None:
+            if msg.event != CycleEvent.START:
+                return
+            self.joint_names = list(msg.joint_names)
+            self.session = self._new_session(len(self.joint_names))
+            self.session.profile_ready = False  # learn from the next cycle, once a profile is installed
+            ok, why = await self._install(self.session.learner.profile)
+            if not ok:
+                self.node.get_logger().error(f"the injection point refused the profile: {why}")
+            return
+        if msg.event == CycleEvent.END:
+            deadline = time.monotonic() + float(self.node.get_parameter("end_wait").value)
+            while self.session.latest < stamp and time.monotonic() < deadline:
+                await self.node._sleep(0.01)
+        result = self.session.on_event(msg.event, msg.cycle, stamp)
+        if result is None:
+            return
+        report = CycleReport(source=SOURCE, cycle=int(msg.cycle), window_start=result.start, window_end=result.end)
+        report.header.stamp = msg.header.stamp
+        update = result.update
+        if update is None:
+            self.node.get_logger().warning(f"cycle {msg.cycle} not learned from: {result.skipped}")
+            report.metric_names, report.metric_values = ["skipped"], [1.0]
+            self._report_pub.publish(report)
+            return
+        ok, why = await self._install(update.next_profile)
+        self.save()
+        report.residual_rms = float(update.rms_e)
+        report.metric_names = ["iteration", "rms_e", "rms_u1", "rms_u2", "residual", "applied",
+                               f"action.{update.action}"]
+        report.metric_values = [float(update.iteration), update.rms_e, update.rms_u1, update.rms_u2, update.residual,
+                                1.0 if ok else 0.0, 1.0]
+        self._report_pub.publish(report)
+        log = self.node.get_logger().info if ok else self.node.get_logger().error
+        log(f"cycle {msg.cycle} (iteration {update.iteration}): RMS e {update.rms_e:.4g}, u1 {update.rms_u1:.4g},"
+            f" u2 {update.rms_u2:.4g}, residual {update.residual:.4g}; {update.action}" + ("" if ok else f"; injection point refused: {why}"))

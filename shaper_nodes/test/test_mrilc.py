@@ -1,0 +1,219 @@
+"""MRILC core (seed 000): reference model, convergence check, learning laws, the learner's guard."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from shaper_nodes.core import mrilc as M
+from shaper_nodes.core.mrilc_learning import END, START, MrilcLearner, MrilcSession
+
+RATE = 200.0
+PERIOD = 1.0 / RATE
+
+
+def _zvd_step_and_back(mode, samples: int) -> np.ndarray:
+    """A unit step and back, shaped by the ZVD on ``mode`` (impulses split between samples)."""
+    wd = mode.omega * math.sqrt(1 - mode.zeta**2)
+    k = math.exp(-mode.zeta * math.pi / math.sqrt(1 - mode.zeta**2))
+    amps = np.array([1, 2 * k, k * k]) / (1 + k) ** 2
+    times = np.array([0, math.pi / wd, 2 * math.pi / wd])
+    r = np.zeros(samples)
+    r[: samples // 2] = 1.0
+    out = np.zeros(samples)
+    for a, t in zip(amps, times):
+        k0, f = int(t * RATE), t * RATE - int(t * RATE)
+        out[k0:] += a * (1 - f) * r[: samples - k0]
+        out[k0 + 1:] += a * f * r[: samples - k0 - 1]
+    return out[:, None]
+
+
+def _simulate(model, plant, learner, iterations: int, r_s) -> list:
+    """The sampled loop (exact ZOH discretisation, as the sim plant integrates it) with u2 learned."""
+    t_path = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "command"), PERIOD))
+    h_path = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "effort"), PERIOD))
+    u_r = M.SampledFilter(M.discretise(M.ct.feedback(model.c, plant), PERIOD))      # C / (1 + C P)
+    u_u = M.SampledFilter(M.discretise(M.ct.feedback(1, model.c * plant), PERIOD))  # 1 / (1 + C P)
+    out = []
+    for _ in range(iterations):
+        u2 = learner.profile_for(r_s.shape[0])
+        y = t_path(r_s) + h_path(u2)
+        out.append(learner.learn(r_s, y, effort=u_r(r_s) + u_u(u2)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def paper_model():
+    return M.MrilcModel(M.controller(), M.mck_plant(*M.PAPER_NOMINAL), M.paper_plant_set(), PERIOD,
+                        omega_min=2 * math.pi * 0.5)
+
+
+def test_reference_model_mode_is_the_papers(paper_model):
+    mode = paper_model.mode
+    assert mode.omega == pytest.approx(81.7, abs=0.05)
+    assert mode.zeta == pytest.approx(0.4154, abs=5e-5)
+    assert len(M.modes(paper_model.g_m)) == 1  # one lightly damped mode, as the paper says
+
+
+def test_paper_gain_passes_the_check_for_all_nine_plants(paper_model):
+    report = paper_model.convergence
+    assert report.ok and len(report.per_plant) == 10  # the nine and the nominal
+    assert all(v < 1.0 for v in report.per_plant.values())
+    paper_model.require_convergence()
+
+
+def test_a_violating_gain_is_refused_naming_the_worst_plant(paper_model):
+    bound = M.gain_bound(paper_model.paths_d, PERIOD, paper_model.omega_min)
+    assert 10.0 < bound < 20.0
+    model = M.MrilcModel(M.controller(), M.mck_plant(*M.PAPER_NOMINAL), M.paper_plant_set(), PERIOD,
+                         law=M.LawConfig(gamma=1.5 * bound), omega_min=paper_model.omega_min)
+    assert not model.convergence.ok
+    with pytest.raises(M.MrilcError, match=r"w=5 zeta=0\.15 at [0-9.]+ rad/s.*largest P-type gamma"):
+        model.require_convergence()
+
+
+def test_command_injection_needs_a_much_smaller_gain_and_a_q_filter(paper_model):
+    def model(**law):
+        return M.MrilcModel(M.controller(), M.mck_plant(*M.PAPER_NOMINAL), M.paper_plant_set(), PERIOD,
+                            injection="command", law=M.LawConfig(**law), omega_min=paper_model.omega_min)
+
+    with pytest.raises(M.MrilcError, match="no P-type gamma passes without a Q filter"):
+        model(gamma=10.0).require_convergence()
+    assert model(gamma=0.5, q_cutoff_hz=5.0).convergence.ok
+    assert not model(gamma=10.0, q_cutoff_hz=5.0).convergence.ok
+
+
+def test_nominal_plant_follows_the_reference_model_exactly(paper_model):
+    r_s = _zvd_step_and_back(paper_model.mode, 160)
+    learner = MrilcLearner(paper_model, 1)
+    update = _simulate(paper_model, M.mck_plant(*M.PAPER_NOMINAL), learner, 1, r_s)[0]
+    assert update.rms_e < 1e-12
+
+
+def test_p_type_on_the_perturbed_plant_reaches_two_percent_by_400(paper_model):
+    r_s = _zvd_step_and_back(paper_model.mode, 160)
+    rows = _simulate(paper_model, M.mck_plant(5.0, 0.15), MrilcLearner(paper_model, 1), 400, r_s)
+    assert rows[399].rms_e <= 0.02 * rows[0].rms_e
+    assert rows[-1].rms_u1 < rows[0].rms_u1 and rows[-1].rms_u2 > 0.1 * rows[-1].rms_u1  # u2 takes part of u1
+    assert all(r.action == "learn" for r in rows)
+    nominal = _simulate(paper_model, M.mck_plant(*M.PAPER_NOMINAL), MrilcLearner(paper_model, 1), 1, r_s)[0]
+    assert abs(rows[-1].residual - nominal.residual) <= 0.2 * nominal.residual
+
+
+def _iterations_to(rows, fraction):
+    return next((r.iteration for r in rows if r.rms_e <= fraction * rows[0].rms_e), None)
+
+
+def test_robust_law_converges_faster_on_every_plant(paper_model):
+    robust = M.MrilcModel(M.controller(), M.mck_plant(*M.PAPER_NOMINAL), M.paper_plant_set(), PERIOD,
+                          law=M.LawConfig(law="robust"), omega_min=paper_model.omega_min)
+    assert robust.convergence.ok and robust.convergence.worst_value < paper_model.convergence.worst_value
+    r_s = _zvd_step_and_back(paper_model.mode, 160)
+    for name, plant in M.paper_plant_set().items():
+        if name == "w=10 zeta=0.3":
+            continue  # the nominal plant: e is 0 from the first iteration
+        p_rows = _simulate(paper_model, plant, MrilcLearner(paper_model, 1), 250, r_s)
+        r_rows = _simulate(robust, plant, MrilcLearner(robust, 1), 60, r_s)
+        p_it, r_it = _iterations_to(p_rows, 0.02), _iterations_to(r_rows, 0.02)
+        assert p_it is not None and r_it is not None, name
+        assert r_it < p_it, (name, r_it, p_it)
+
+
+def test_pd_and_q_filter_update_shapes(paper_model):
+    law = M.LawConfig(law="pd", gamma=10.0, lam=2.0, q_cutoff_hz=30.0)
+    f = M.design_learning_filter(law, PERIOD, [], 1.0)
+    e = np.zeros((50, 2))
+    e[10, 0] = 1.0
+    out = f.update(np.zeros((50, 2)), e)
+    assert out.shape == (50, 2) and np.all(out[:, 1] == 0)
+    # zero-phase Q: the response is symmetric about the learned samples 9 and 10 (gamma z + lambda (z - 1))
+    assert np.argmax(np.abs(out[:, 0])) in (9, 10)
+    with pytest.raises(M.MrilcError, match="Nyquist"):
+        M.design_learning_filter(M.LawConfig(q_cutoff_hz=RATE), PERIOD, [], 1.0)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"law": "i"}, "law must be"), ({"gamma": -1.0}, "gamma"), ({"gamma": math.nan}, "gamma"),
+    ({"law": "robust", "gain": 1.5}, "gain"), ({"gamma": 0.0}, "nothing would be learned")])
+def test_invalid_laws_are_refused(kwargs, match):
+    with pytest.raises(M.MrilcError, match=match):
+        M.LawConfig(**kwargs)
+
+
+def test_invalid_models_are_refused():
+    with pytest.raises(M.MrilcError, match="proper"):
+        M.controller([1.0, 2.0, 3.0], [1.0, 1.0])
+    with pytest.raises(M.MrilcError, match="omega"):
+        M.mck_plant(-1.0, 0.1)
+    with pytest.raises(M.MrilcError, match="unstable"):
+        M.reference_model(M.controller([-1000.0], [1.0]), M.mck_plant(10.0, 0.3))
+
+
+def test_divergence_guard_rolls_back_to_the_best_profile(paper_model):
+    learner = MrilcLearner(paper_model, 1, patience=3)
+    r_s = _zvd_step_and_back(paper_model.mode, 40)
+    y0 = paper_model.reference_response(r_s, rest=[0.0])
+    actions, profiles = [], []
+    for k in range(6):
+        profiles.append(learner.profile_for(40).copy())
+        y = y0 - 0.01 * (1 + k) ** 2  # an error that grows every cycle, whatever is learned
+        actions.append(learner.learn(r_s, y).action)
+    assert actions[:3] == ["learn"] * 3 and actions[3] == "rollback" and actions[4:] == ["hold", "hold"]
+    assert np.array_equal(learner.profile, profiles[0])  # the first cycle had the smallest error
+    learner.resume()
+    assert learner.learn(r_s, y0).action == "learn"
+
+
+def test_bad_cycles_are_refused_and_nothing_changes(paper_model):
+    learner = MrilcLearner(paper_model, 1)
+    r_s = _zvd_step_and_back(paper_model.mode, 40)
+    y = paper_model.reference_response(r_s, rest=[0.0])
+    bad = y.copy()
+    bad[7] = np.nan
+    with pytest.raises(M.MrilcError, match="non-finite value at sample 7"):
+        learner.learn(r_s, bad)
+    with pytest.raises(M.MrilcError, match="samples x 1 joints"):
+        learner.learn(np.zeros((40, 2)), np.zeros((40, 2)))
+    assert learner.iteration == 1 and learner.profile.size == 0
+    learner.learn(r_s, y)
+    with pytest.raises(M.MrilcError, match="task changed"):
+        learner.learn(r_s[:30], y[:30])
+
+
+def test_state_round_trip(paper_model):
+    learner = MrilcLearner(paper_model, 1)
+    r_s = _zvd_step_and_back(paper_model.mode, 40)
+    learner.learn(r_s, 0.9 * paper_model.reference_response(r_s, rest=[0.0]))
+    again = MrilcLearner.from_dict(paper_model, learner.to_dict())
+    assert again.iteration == 2 and np.array_equal(again.profile, learner.profile)
+    with pytest.raises(M.MrilcError, match="inconsistent"):
+        MrilcLearner.from_dict(paper_model, {"joints": 1})
+
+
+def test_session_builds_cycles_on_the_grid_and_skips_gaps(paper_model):
+    session = MrilcSession(MrilcLearner(paper_model, 1), stale_after=0.05)
+    r_s = _zvd_step_and_back(paper_model.mode, 40)
+    y = paper_model.reference_response(r_s, rest=[0.0])
+    t0 = 10.0
+
+    def feed(skip=None):
+        for k in range(40):
+            if k != skip:
+                session.on_joint_state(t0 + k * PERIOD, y[k], [0.0])
+            session.on_reference(t0 + k * PERIOD, r_s[k])
+
+    session.on_event(START, 0, t0)
+    feed()
+    done = session.on_event(END, 0, t0 + 39 * PERIOD)
+    assert done.skipped == "" and done.update.rms_e < 1e-12
+    t0 = 20.0
+    session.on_event(START, 1, t0)
+    feed(skip=17)
+    done = session.on_event(END, 1, t0 + 39 * PERIOD)
+    assert done.update is None and "1 of 40 joint state samples missing" in done.skipped
+    session.profile_ready = False
+    session.on_event(START, 2, 30.0)
+    session.profile_ready = True
+    assert "before the learner's profile was installed" in session.on_event(END, 2, 30.1).skipped

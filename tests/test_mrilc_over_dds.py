@@ -1,0 +1,81 @@
+"""MRILC (seed 000) through the ROS graph: sim plant (mck_pid), shaper and learner as processes.
+
+The driver runs one cycle at a time (a unit step and back) and reads the learner's reports.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from shaper_msgs.msg import FeedforwardProfile
+from shaper_msgs.srv import SetFeedforward
+
+from sim_plant_node.conductor import Conductor
+from sim_plant_node.mrilc_cases import JOINT, NOMINAL, PERTURBED, RATE, plant_params, run_learning, run_shaper_only
+
+pytestmark = pytest.mark.integration
+
+
+def test_mrilc_400_iterations_on_the_perturbed_plant(starter, ros_context):
+    start = starter
+    nominal = run_shaper_only(NOMINAL, 2, start, ros_context)
+    start.stop_all()
+    assert [r.action for r in nominal] == ["hold", "hold"]
+    rows = run_learning(PERTURBED, 400, start, ros_context)
+    assert [r.iteration for r in rows] == list(range(1, 401)), [r for r in rows if r.action == "skipped"][:3]
+    assert all(r.action == "learn" for r in rows)
+    assert rows[399].rms_e <= 0.02 * rows[0].rms_e, (rows[0].rms_e, rows[399].rms_e)
+    # the feedback effort falls as the learned effort takes over (the paper's Fig. 11)
+    assert rows[399].rms_u1 < rows[0].rms_u1 and rows[399].rms_u2 > 0
+    assert min(r.rms_u1 for r in rows[:50]) < rows[0].rms_u1
+    # ZVD + MRILC on the perturbed plant vibrates like ZVD alone on the nominal plant
+    assert abs(rows[399].residual - nominal[-1].residual) <= 0.2 * nominal[-1].residual, (
+        rows[399].residual, nominal[-1].residual)
+
+
+def test_learner_refuses_a_gain_that_fails_the_check(start_node, tmp_path):
+    proc = start_node("shaper_nodes", "learner", {"mode": "mrilc", "mrilc.rate": RATE, "mrilc.gamma": 25.0})
+    deadline = time.monotonic() + 60.0
+    while proc.running() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not proc.running()
+    assert proc.proc.returncode != 0
+    log = proc.log_path.read_text()
+    assert "learning refused" in log and "w=5 zeta=0.15" in log and "largest P-type gamma" in log
+
+
+def test_bad_feedforward_profiles_are_refused_and_the_plant_keeps_running(start_node, ros_context):
+    start_node("sim_plant_node", "sim_plant", {"joint_names": JOINT, "rate": RATE, "mode": "lockstep",
+                                               **plant_params(NOMINAL)})
+    conductor = Conductor(context=ros_context)
+    try:
+        cli = conductor.create_client(SetFeedforward, "/sim_plant/set_feedforward")
+        conductor.spin_until(cli.service_is_ready, 30.0, "set_feedforward")
+
+        def send(**fields):
+            base = dict(source="test", injection="effort", joint_names=JOINT, sample_period=1.0 / RATE,
+                        data=[0.0, 0.1])
+            base.update(fields)
+            return conductor.call(cli, SetFeedforward.Request(profile=FeedforwardProfile(**base)))
+
+        assert send().success
+        for fields, why in [({"joint_names": ["elbow"]}, "joint names"), ({"sample_period": 0.001}, "sample period"),
+                            ({"data": [0.0, float("nan")]}, "non-finite value at index 1"),
+                            ({"injection": "torque"}, "injection must be")]:
+            resp = send(**fields)
+            assert not resp.success and why in resp.message, resp.message
+        assert send(injection="command", data=[]).success  # an empty profile clears it
+    finally:
+        conductor.close()
+
+
+def test_profile_is_saved_and_reloaded(starter, ros_context, tmp_path):
+    start = starter
+    state = tmp_path / "mrilc.json"
+    first = run_learning(PERTURBED, 3, start, ros_context, {"state_file": str(state), "mrilc.law": "robust"})
+    start.stop_all()
+    assert [r.iteration for r in first] == [1, 2, 3] and state.exists()
+    again = run_learning(PERTURBED, 1, start, ros_context, {"state_file": str(state), "mrilc.law": "robust"})
+    assert again[0].iteration == 4
+    assert again[0].rms_e < first[2].rms_e < first[0].rms_e  # it went on from the saved profile
