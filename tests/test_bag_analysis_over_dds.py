@@ -144,8 +144,8 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
         spin_until(lambda: stand_in.requests, 60.0, "the learner's first shaper request")
         env = {"ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
         player = NodeProcess("shaper_nodes", "bag_play", {
-            "bag": str(bag), "rate": 3.0, "min_interval": 0.002, "wait_for_subscribers": 1, "start_delay": 1.0,
-            "pause_after_topics": ["/cycle_events"], "pause_after": 0.3,
+            "bag": str(bag), "rate": 2.0, "min_interval": 0.002, "wait_for_subscribers": 1, "start_delay": 1.0,
+            "pause_after_topics": ["/cycle_events"], "pause_after": 0.8,
             "topics": ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]},
             log_path=tmp_path / "bag_play.log", env=env).start()
         try:
