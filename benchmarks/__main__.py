@@ -50,6 +50,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-list", action="store_true", help="skip the LIST update timing")
     p.add_argument("--skip-mrilc", action="store_true", help="skip the MRILC update timing")
     p.add_argument("--skip-scheduler", action="store_true", help="skip the scheduler timing and CPU share")
+    p.add_argument("--skip-bag", action="store_true", help="skip the bag analysis throughput measurement")
+    p.add_argument("--bag-messages", type=int, default=1_000_000,
+                   help="messages in the bag analysis benchmark's recording (default 1000000)")
     p.add_argument("--json", metavar="PATH", type=pathlib.Path, help="also write the figures to this JSON file")
     args = p.parse_args(argv)
     if not (args.seconds > 0 and args.rate > 0 and args.joints >= 1 and args.fir_repeats >= 1):
@@ -196,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
             from .scheduler import run as run_scheduler
 
             report["scheduler"] = run_scheduler(seconds=args.seconds, progress=_progress)
+        if not args.skip_bag:
+            from .bag_analysis import run as run_bag
+
+            report["bag_analysis"] = run_bag(messages=args.bag_messages, progress=_progress)
     except KeyboardInterrupt:
         _progress("interrupted")
         return 130
@@ -225,6 +232,11 @@ def main(argv: list[str] | None = None) -> int:
         from .scheduler import print_table as print_scheduler
 
         print_scheduler(report["scheduler"])
+        print()
+    if "bag_analysis" in report:
+        from .bag_analysis import print_table as print_bag
+
+        print_bag(report["bag_analysis"])
         print()
     print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
     if args.json:

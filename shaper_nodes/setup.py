@@ -29,6 +29,8 @@ setup(
             "list_replay = shaper_nodes.list_replay:main",
             "shaper_design = shaper_nodes.design_cli:main",
             "loop_design = shaper_nodes.loop_design_cli:main",
+            "analyze_bag = shaper_nodes.bag_analysis_cli:main",
+            "bag_play = shaper_nodes.bag_play:main",
         ],
     },
 )

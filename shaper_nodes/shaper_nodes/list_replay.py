@@ -18,7 +18,7 @@ import json
 import math
 import pathlib
 import sys
-from collections.abc import Mapping
+from collections.abc import Iterable, Iterator, Mapping
 
 from .core.list_learning import ListError, ListLearner, ListParams
 from .core.cycles import END
@@ -30,6 +30,69 @@ TOPICS = {"imu": "/tip_imu", "events": "/cycle_events", "shaper": "/shaper/activ
 
 def _sec(stamp) -> float:
     return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+def session_for(params: Mapping[str, object] | None = None) -> ListSession:
+    """A fresh ListSession configured as the learner node with these parameters (``list.*``,
+    ``initial.frequency_hz``, ``initial.damping_ratio``, ``stale_after``), having asked for the
+    identity shaper (the reference cycle) as a fresh node does.
+
+    Raises
+    ------
+    ListError
+        Invalid parameters.
+    """
+    params = dict(params or {})
+    config = list_config({k[len("list."):]: v for k, v in params.items() if k.startswith("list.")})
+    hz = float(params.get("initial.frequency_hz", 0.0))
+    initial = (ListParams.from_mode(Mode.from_hz(hz, float(params.get("initial.damping_ratio", 0.0))))
+               if hz > 0 else None)
+    session = ListSession(ListLearner(config, initial), config.structure, float(params.get("stale_after", 0.1)))
+    session.sent(None)
+    return session
+
+
+def replay_items(items: Iterable[tuple[str, tuple]], params: Mapping[str, object] | None = None
+                 ) -> list[SessionResult]:
+    """The learner's per-cycle results over a stream of recorded inputs, in recording order.
+
+    ``items`` are ``("imu", (t, (ax, ay, az)))``, ``("shaper", (amplitudes, times, source,
+    revision))`` and ``("event", (kind, cycle, t, start_positions, goal_positions))``, times in s.
+    As in the node, an END waits until a sample stamped at or after it has arrived, and after
+    every update the session is told that the new parameters were sent.
+    """
+    session = session_for(params)
+    results: list[SessionResult] = []
+    pending = None  # an END waits, as in the node, until a sample stamped at or after it arrives
+
+    def event(ev) -> None:
+        result = session.on_event(*ev)
+        if result is None:
+            return
+        results.append(result)
+        update = result.update
+        if update is not None and update.action != "rejected" and update.next != update.used:
+            session.sent(update.next)
+
+    for kind, payload in items:
+        if kind == "imu":
+            session.on_imu(*payload)
+            if pending is not None and session.latest_imu >= pending[2]:
+                event(pending)
+                pending = None
+        elif kind == "shaper":
+            session.on_shaper(*payload)
+        else:
+            if pending is not None:
+                event(pending)
+                pending = None
+            if int(payload[0]) == END and session.latest_imu < payload[2]:
+                pending = payload
+            else:
+                event(payload)
+    if pending is not None:
+        event(pending)
+    return results
 
 
 def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
@@ -55,54 +118,28 @@ def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
 
     from .bag import typestore_with_own_types
 
-    params = dict(params or {})
+    session_for(params)  # invalid parameters fail before the bag is read
     names = {**TOPICS, **(topics or {})}
-    config = list_config({k[len("list."):]: v for k, v in params.items() if k.startswith("list.")})
-    hz = float(params.get("initial.frequency_hz", 0.0))
-    initial = (ListParams.from_mode(Mode.from_hz(hz, float(params.get("initial.damping_ratio", 0.0))))
-               if hz > 0 else None)
-    session = ListSession(ListLearner(config, initial), config.structure, float(params.get("stale_after", 0.1)))
-    session.sent(None)  # a fresh learner first asks for the identity shaper (the reference cycle)
-    results: list[SessionResult] = []
     with AnyReader([pathlib.Path(path)], default_typestore=typestore_with_own_types()) as reader:
         conns = [c for c in reader.connections if c.topic in names.values()]
         found = {c.topic for c in conns}
         missing = [t for t in names.values() if t not in found]
         if missing:
             raise ListError(f"bag {path} has no messages on {missing} (topics: {sorted(reader.topics)})")
-        pending = None  # an END waits, as in the node, until a sample stamped at or after it arrives
 
-        def event(msg) -> None:
-            result = session.on_event(int(msg.event), int(msg.cycle), _sec(msg.header.stamp),
-                                      msg.start_positions, msg.goal_positions)
-            if result is None:
-                return
-            results.append(result)
-            update = result.update
-            if update is not None and update.action != "rejected" and update.next != update.used:
-                session.sent(update.next)
-
-        for conn, _, raw in reader.messages(connections=conns):
-            msg = reader.deserialize(raw, conn.msgtype)
-            if conn.topic == names["imu"]:
-                a = msg.linear_acceleration
-                session.on_imu(_sec(msg.header.stamp), (a.x, a.y, a.z))
-                if pending is not None and session.latest_imu >= _sec(pending.header.stamp):
-                    event(pending)
-                    pending = None
-            elif conn.topic == names["shaper"]:
-                session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
-            else:
-                if pending is not None:
-                    event(pending)
-                    pending = None
-                if int(msg.event) == END and session.latest_imu < _sec(msg.header.stamp):
-                    pending = msg
+        def items() -> Iterator[tuple[str, tuple]]:
+            for conn, _, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                if conn.topic == names["imu"]:
+                    a = msg.linear_acceleration
+                    yield "imu", (_sec(msg.header.stamp), (a.x, a.y, a.z))
+                elif conn.topic == names["shaper"]:
+                    yield "shaper", (msg.amplitudes, msg.times, msg.source, msg.revision)
                 else:
-                    event(msg)
-        if pending is not None:
-            event(pending)
-    return results
+                    yield "event", (int(msg.event), int(msg.cycle), _sec(msg.header.stamp), msg.start_positions,
+                                    msg.goal_positions)
+
+        return replay_items(items(), params)
 
 
 def _row(r: SessionResult) -> dict:
@@ -122,6 +159,23 @@ def _value(text: str):
         return text
 
 
+def parse_params(items: Iterable[str]) -> dict[str, object]:
+    """``NAME=VALUE`` strings (``--param``) as a dict; values parsed as JSON where they are JSON.
+
+    Raises
+    ------
+    ListError
+        An item without ``=``.
+    """
+    params: dict[str, object] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ListError(f"--param needs NAME=VALUE, got {item!r}")
+        params[name.strip()] = _value(value)
+    return params
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="list_replay", description=__doc__.split("\n\n")[0])
     p.add_argument("bag", type=pathlib.Path, help="rosbag2 folder or .mcap file")
@@ -132,12 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="one JSON document instead of a table")
     args = p.parse_args(argv)
     try:
-        params = {}
-        for item in args.param:
-            name, sep, value = item.partition("=")
-            if not sep:
-                raise ListError(f"--param needs NAME=VALUE, got {item!r}")
-            params[name.strip()] = _value(value)
+        params = parse_params(args.param)
         rows = [_row(r) for r in replay(args.bag, params, {k: getattr(args, f"{k}_topic") for k in TOPICS})]
     except (ListError, OSError, ValueError) as err:
         print(f"list_replay: {err}", file=sys.stderr)

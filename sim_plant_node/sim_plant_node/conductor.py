@@ -20,7 +20,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.msg import Mode as ModeMsg
@@ -29,7 +29,7 @@ from shaper_msgs.srv import SetShaper
 from std_srvs.srv import Trigger
 
 from shaper_nodes.conversions import time_to_sec
-from shaper_nodes.core.cycles import CycleMonitor, CycleResult
+from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
 
 from .plants import mck_from_mode
 
@@ -41,9 +41,13 @@ class Conductor(Node):
                  settle_tolerance: float = 1e-6, **kwargs) -> None:
         super().__init__("conductor", *args, **kwargs)
         self.plant, self.shaper = plant, shaper
-        self.monitor = CycleMonitor(settle_tolerance)
+        # by stamps: samples and events come on separate topics, in an order that depends on the load
+        self.monitor = StampedCycleMonitor(settle_tolerance)
         self.results: list[CycleResult] = []
-        self.create_subscription(Imu, imu_topic, self._on_imu, qos_profile_sensor_data)
+        # best effort as the sensor publishes, but a deep queue: with the default sensor-data depth (5) a busy
+        # machine drops samples here and the measured residual depends on the load
+        imu_qos = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.create_subscription(Imu, imu_topic, self._on_imu, imu_qos)
         self.create_subscription(JointState, "/joint_states", self._on_js, 100)
         self.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         self.set_shaper_cli = self.create_client(SetShaper, f"{shaper}/set_shaper")
@@ -56,14 +60,15 @@ class Conductor(Node):
     def _on_imu(self, msg: Imu) -> None:
         a = msg.linear_acceleration
         self.monitor.add_accel(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+        self.results.extend(self.monitor.poll())
 
     def _on_js(self, msg: JointState) -> None:
         self.monitor.add_positions(time_to_sec(msg.header.stamp), msg.position)
+        self.results.extend(self.monitor.poll())
 
     def _on_event(self, msg: CycleEvent) -> None:
-        result = self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
-        if result is not None:
-            self.results.append(result)
+        self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
+        self.results.extend(self.monitor.poll())
 
     # ----------------------------------------------------------------- driving
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
@@ -124,6 +129,7 @@ class Conductor(Node):
 
         def done() -> bool:
             nonlocal seen
+            self.results.extend(self.monitor.poll())  # a cycle whose last samples were lost completes too
             if progress and len(self.results) > seen:
                 seen = len(self.results)
                 progress(seen - first)

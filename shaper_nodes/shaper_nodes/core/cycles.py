@@ -8,6 +8,8 @@ the cycle's MOTION_END (within ``settle_tolerance`` of their final value) until 
 
 from __future__ import annotations
 
+import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,12 +86,100 @@ class CycleMonitor:
             return None
         cycle, self._cycle = self._cycle, None  # the cycle is over whatever its data
         motion_end = self._motion_end if self._motion_end is not None else self._start
-        acc_t = np.asarray(self._acc_t)
         acc = np.vstack(self._acc) if self._acc else np.zeros((0, 3))
-        pos_t = np.asarray(self._pos_t)
         pos = np.vstack(self._pos) if self._pos else np.zeros((0, 1))
-        after = pos_t >= motion_end
-        window_start = (settle_time(pos_t[after], pos[after], motion_end, self.settle_tolerance)
-                        if after.any() else motion_end)
-        residual = residual_vibration(acc_t, acc, window_start, float(t) + 1e-12, self.remove_mean)
-        return CycleResult(cycle, self._start, motion_end, residual, acc_t, acc, pos_t, pos)
+        return evaluate_cycle(cycle, self._start, motion_end, float(t), np.asarray(self._acc_t), acc,
+                              np.asarray(self._pos_t), pos, self.settle_tolerance, self.remove_mean)
+
+
+def evaluate_cycle(cycle: int, start: float, motion_end: float, end: float, accel_times: np.ndarray,
+                   accel: np.ndarray, position_times: np.ndarray, positions: np.ndarray,
+                   settle_tolerance: float = 1e-6, remove_mean: bool = False) -> CycleResult:
+    """The residual vibration of one cycle from its samples (as :class:`CycleMonitor` does at END).
+
+    The window runs from the time the positions have come to rest after ``motion_end`` (within
+    ``settle_tolerance`` of their last value) until ``end``; times in s, acceleration in m/s^2.
+    """
+    after = position_times >= motion_end
+    window_start = (settle_time(position_times[after], positions[after], motion_end, settle_tolerance)
+                    if after.any() else motion_end)
+    residual = residual_vibration(accel_times, accel, window_start, float(end) + 1e-12, remove_mean)
+    return CycleResult(int(cycle), float(start), float(motion_end), residual, accel_times, accel,
+                       position_times, positions)
+
+
+class StampedCycleMonitor:
+    """:class:`CycleMonitor` for samples and events that arrive over separate topics.
+
+    Over DDS the accelerometer, the joint states and the cycle events come on different topics,
+    so a sample stamped inside a cycle may arrive before its START or after its END. This monitor
+    keeps the samples by their stamps and evaluates a cycle once samples stamped at or after its
+    END have arrived on both streams (:meth:`poll`), selecting its samples by stamp; its results
+    therefore do not depend on the order of arrival, i.e. on the load of the machine.
+
+    Parameters
+    ----------
+    settle_tolerance, remove_mean
+        As for :class:`CycleMonitor`.
+    keep : int
+        Most samples kept per stream (older ones are dropped first).
+    max_wait : float
+        A cycle is evaluated anyway this long (s, wall clock) after its END arrived, with the samples
+        there are (a best-effort sample stamped at END may be lost, and a plant may stop after END).
+    """
+
+    def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False, keep: int = 500_000,
+                 max_wait: float = 1.0) -> None:
+        self.settle_tolerance = float(settle_tolerance)
+        self.remove_mean = remove_mean
+        self.max_wait = float(max_wait)
+        self._acc: deque = deque(maxlen=keep)
+        self._pos: deque = deque(maxlen=keep)
+        self._open: tuple[int, float, float | None] | None = None
+        self._pending: list[tuple[int, float, float, float, float]] = []  # ..., wall time END arrived
+
+    def add_accel(self, t: float, accel) -> None:
+        """An accelerometer sample (m/s^2, 1 to 3 axes) stamped t (s)."""
+        self._acc.append((float(t), np.asarray(accel, dtype=float).ravel()))
+
+    def add_positions(self, t: float, positions) -> None:
+        """Joint positions (rad or m) stamped t (s)."""
+        self._pos.append((float(t), np.asarray(positions, dtype=float).ravel()))
+
+    def event(self, kind: int, cycle: int, t: float) -> None:
+        """A cycle event; a cycle's result comes from :meth:`poll` once its samples are in."""
+        if kind == START:
+            self._open = (int(cycle), float(t), None)
+        elif self._open is not None and int(cycle) == self._open[0]:
+            if kind == MOTION_END:
+                self._open = (self._open[0], self._open[1], float(t))
+            elif kind == END:
+                cyc, start, motion_end = self._open
+                self._pending.append((cyc, start, start if motion_end is None else motion_end, float(t),
+                                      time.monotonic()))
+                self._open = None
+
+    def poll(self) -> list[CycleResult]:
+        """The cycles whose END has passed on both sample streams (or ``max_wait`` ago), in order."""
+        out = []
+        latest_acc = self._acc[-1][0] if self._acc else -np.inf
+        latest_pos = self._pos[-1][0] if self._pos else -np.inf
+        while self._pending and (min(latest_acc, latest_pos) >= self._pending[0][3]
+                                 or time.monotonic() - self._pending[0][4] > self.max_wait):
+            cycle, start, motion_end, end, _ = self._pending.pop(0)
+            acc_t, acc = self._select(self._acc, start, end, 3)
+            pos_t, pos = self._select(self._pos, start, end, 1)
+            out.append(evaluate_cycle(cycle, start, motion_end, end, acc_t, acc, pos_t, pos,
+                                      self.settle_tolerance, self.remove_mean))
+            # samples before this END cannot belong to a later cycle
+            for buf in (self._acc, self._pos):
+                while buf and buf[0][0] < end:
+                    buf.popleft()
+        return out
+
+    @staticmethod
+    def _select(buf: deque, start: float, end: float, width: int) -> tuple[np.ndarray, np.ndarray]:
+        items = sorted(((t, v) for t, v in buf if start <= t <= end), key=lambda item: item[0])
+        if not items:
+            return np.zeros(0), np.zeros((0, width))
+        return np.array([t for t, _ in items]), np.vstack([v for _, v in items])

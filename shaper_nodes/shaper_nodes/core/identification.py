@@ -731,6 +731,16 @@ def identify_records(
             per_record.append(identify(times, signal, method=name, max_modes=max_modes, band_hz=band_hz))
         except IdentificationError as exc:
             raise IdentificationError(f"record {i}: {exc}") from exc
+    return combine_modes(per_record, method=name, max_modes=max_modes)
+
+
+def combine_modes(per_record: Sequence[Sequence[ModeFit]], *, method: str = "fit", max_modes: int = 2
+                  ) -> list[ModeFit]:
+    """Combine the modes identified in several records, as :func:`identify_records` does.
+
+    ``per_record`` holds each record's modes (from :func:`identify`); matching, the at-least-half
+    rule and the uncertainties are those described in :func:`identify_records`.
+    """
     clusters: list[list[tuple[int, ModeFit]]] = []
     entries = sorted(((i, mf) for i, mfs in enumerate(per_record) for mf in mfs), key=lambda e: -e[1].amplitude)
     for i, mf in entries:
@@ -746,7 +756,7 @@ def identify_records(
             clusters.append([(i, mf)])
         else:
             best.append((i, mf))
-    need = math.ceil(len(records) / 2)
+    need = math.ceil(len(per_record) / 2)
     out = []
     for cl in clusters:
         if len(cl) < need:
@@ -759,7 +769,7 @@ def identify_records(
             om_std = max(om_std, float(np.std(om, ddof=1)))
             ze_std = max(ze_std, float(np.std(ze, ddof=1)))
         out.append(ModeFit(float(om.mean()), float(ze.mean()), om_std, ze_std,
-                           float(np.mean([m.amplitude for _, m in cl])), name))
+                           float(np.mean([m.amplitude for _, m in cl])), method))
     out.sort(key=lambda mf: -mf.amplitude)
     return out[: int(max_modes)]
 

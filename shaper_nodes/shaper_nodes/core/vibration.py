@@ -205,3 +205,50 @@ def residual_vibration(
         w = w - w.mean(axis=0)
     mag = np.linalg.norm(w, axis=1)
     return ResidualVibration(float(start), float(end), float(np.sqrt(np.mean(mag**2))), float(mag.max()), int(w.shape[0]))
+
+
+def settling_time(times: np.ndarray, accel: np.ndarray, start: float, end: float, band: float,
+                  remove_mean: bool = False, hold: float = 0.1) -> float:
+    """Time from ``start`` until the acceleration magnitude stays within ``band`` up to ``end``, s.
+
+    Parameters
+    ----------
+    times : (N,) array
+        Sample times, s.
+    accel : (N,) or (N, 3) array
+        Acceleration, m/s^2 (magnitude over the last axis).
+    start, end : float
+        Window, s (the residual window of a cycle).
+    band : float
+        Band half-width, m/s^2, > 0.
+    remove_mean : bool
+        Subtract the window mean per axis first.
+    hold : float
+        Fraction of the window the magnitude must stay within the band at its end to count as
+        settled (an oscillation near a zero crossing at the window's end is not settled).
+
+    Returns
+    -------
+    float
+        0 if the magnitude is within the band from ``start`` on; the time after ``start`` of the
+        first sample from which it stays within it; NaN if it does not stay within it for the
+        last ``hold`` of the window, or the window holds no sample.
+    """
+    if not (math.isfinite(band) and band > 0.0):
+        raise ValueError(f"band must be finite and > 0 m/s^2, got {band!r}")
+    t = np.asarray(times, dtype=float)
+    a = np.asarray(accel, dtype=float)
+    a = a.reshape(t.size, -1) if a.size else np.zeros((t.size, 1))
+    sel = (t >= start) & (t < end)
+    w, tw = a[sel], t[sel]
+    if tw.size == 0:
+        return float("nan")
+    if remove_mean:
+        w = w - w.mean(axis=0)
+    outside = np.flatnonzero(np.linalg.norm(w, axis=1) > band)
+    if outside.size == 0:
+        return 0.0
+    last = int(outside[-1])
+    if last == tw.size - 1 or float(tw[-1] - tw[last + 1]) < hold * float(end - start):
+        return float("nan")
+    return float(tw[last + 1] - start)

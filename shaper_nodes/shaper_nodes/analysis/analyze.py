@@ -1,0 +1,414 @@
+"""The analysis of a recording: per cycle, over the bag, and what the learners would have done.
+
+Per cycle (:class:`CycleRow`): the residual vibration, RMS and peak of the tip acceleration
+magnitude from the time the positions have come to rest after the motion until the cycle's end
+(:func:`shaper_nodes.core.cycles.evaluate_cycle`, the measure every component of the suite
+uses), the settling time of the acceleration into a band, and the shaper that was active.
+
+Over the bag: the spectrum of the residual windows (Welch, averaged over cycles); the modes,
+identified in every cycle's residual window (:func:`~shaper_nodes.core.identification.identify`)
+and combined across cycles (cycles in which no mode stands out of the noise, e.g. well shaped
+ones, are left out with a note); the recommended shaper
+(:func:`~shaper_nodes.core.identification.recommend_shaper`) and its predicted residual
+vibration: for a linear plant the residual of a cycle is the unshaped residual times the
+percentage vibration V of the shaper at the mode, so the unshaped level U is estimated as the
+median of RMS / V_active over the cycles whose active shaper lets V >= 0.2 through, and the
+prediction is U V_recommended (at the identified mode and at the worst point of its uncertainty
+box), on top of which comes the sensor noise.
+
+Learner replays (:data:`LEARNER_REPLAYS`, name -> function): LIST runs
+:func:`shaper_nodes.list_replay.replay_items` over the recording. A replay function takes the
+recording, its cycles and the parameters given with ``--param`` and returns a
+:class:`LearnerReplay`; MRILC is added by registering its replay here once its learner exists.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.cycles import END, MOTION_END, START, evaluate_cycle
+from ..core.identification import (IdentificationError, ModeFit, Recommendation, combine_modes, identify,
+                                   recommend_shaper)
+from ..core.shapers import Shaper
+from ..core.vibration import percentage_vibration, settling_time
+from .reading import BagError
+from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
+from .streams import Recording
+
+#: active shapers that let through at least this V count for the unshaped level
+MIN_V_FOR_LEVEL = 0.2
+#: with remove_mean "auto", a median acceleration larger than this (m/s^2) is an offset (gravity, bias)
+OFFSET_LIMIT = 1.0
+#: fewest samples of a residual window used for the spectrum
+MIN_SPECTRUM_SAMPLES = 64
+
+
+@dataclass(frozen=True)
+class Options:
+    """What the analysis is asked to do (the CLI's options).
+
+    settle_tolerance : rad or m, positions at rest; band : settling band, m/s^2 (a float) or
+    a fraction of the cycle's peak (a string ending in %); remove_mean : "auto", "yes", "no";
+    segmentation : "auto", "events", "motion"; method, max_modes, band_hz : identification;
+    target, sigmas : recommendation; identify_cycles : most cycles identified (evenly spread over
+    the usable ones; 0 = all); learners : names of :data:`LEARNER_REPLAYS` to run;
+    learner_params : parameters as the live learner node takes them.
+    """
+
+    settle_tolerance: float = 1e-6
+    band: str = "5%"
+    remove_mean: str = "auto"
+    segmentation: str = "auto"
+    positions: str = "auto"
+    method: str = "fit"
+    max_modes: int = 2
+    band_hz: tuple[float, float] | None = None
+    target: float = 0.05
+    sigmas: float = 2.0
+    identify_cycles: int = 20
+    learners: tuple[str, ...] = ("list",)
+    learner_params: Mapping[str, object] = field(default_factory=dict)
+
+
+@dataclass
+class CycleRow:
+    """One cycle's figures: times in s, vibration in m/s^2."""
+
+    cycle: int
+    start: float
+    motion_end: float
+    window_start: float
+    end: float
+    rms: float
+    peak: float
+    samples: int
+    settling_time: float
+    shaper: str
+    shaper_impulses: tuple[tuple[float, ...], tuple[float, ...]] | None
+    complete: bool = True
+    v_active: float = float("nan")  # V of the active shaper at the identified mode
+    issue: str = ""  # why the cycle is not used over the bag ("" if it is)
+
+
+@dataclass
+class LearnerReplay:
+    """What a learner would have done over the recording, cycle by cycle."""
+
+    name: str
+    rows: list[dict]
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Analysis:
+    recording: Recording
+    options: Options
+    segmentation: str
+    cycles: list[CycleRow]
+    traces: list[tuple[np.ndarray, np.ndarray]]  # per cycle: time from START (s), acceleration (N, 3)
+    spectrum: tuple[np.ndarray, np.ndarray] | None  # Hz, (m/s^2)^2/Hz
+    modes: list[ModeFit]
+    recommendation: Recommendation | None
+    unshaped_level: float
+    predicted: dict
+    replays: dict[str, LearnerReplay]
+    notes: list[str]
+    removed_mean: bool
+
+    @property
+    def origin(self) -> float:
+        """Whole second at or before the first accelerometer sample: reports give times from it, s."""
+        return float(math.floor(self.recording.accel.t[0]))
+
+
+def analyze(rec: Recording, options: Options | None = None) -> Analysis:
+    """Analyse an extracted recording (see the module docstring).
+
+    Raises
+    ------
+    BagError
+        No cycle could be found (no events and no motion), or bad options.
+    """
+    opt = options or Options()
+    notes = list(rec.notes)
+    spans, segmentation, seg_notes = _segment(rec, opt)
+    notes += seg_notes
+    if not spans:
+        raise BagError(f"{rec.path}: no cycles found ({'; '.join(seg_notes) or 'no cycle events and no motion'})")
+    acc = rec.accel
+    remove_mean = _remove_mean(acc.values, opt.remove_mean)
+    if remove_mean and opt.remove_mean == "auto":
+        notes.append(f"the accelerometer has an offset of {np.linalg.norm(np.nanmedian(acc.values, axis=0)):.3g} m/s^2"
+                     " (gravity, bias): each window's mean is removed")
+    pos = _positions(rec, opt)
+    step = float(np.median(np.diff(acc.t))) if len(acc) > 1 else 0.0
+    rows, traces, windows = [], [], []
+    for span in spans:
+        a0, a1 = np.searchsorted(acc.t, span.start, side="left"), np.searchsorted(acc.t, span.end, side="right")
+        at, av = acc.t[a0:a1], acc.values[a0:a1]
+        if pos is not None:
+            p0, p1 = np.searchsorted(pos.t, span.start, "left"), np.searchsorted(pos.t, span.end, "right")
+            pt, pv = pos.t[p0:p1], pos.values[p0:p1]
+        else:
+            pt, pv = np.zeros(0), np.zeros((0, 1))
+        res = evaluate_cycle(span.cycle, span.start, span.motion_end, span.end, at, av, pt, pv,
+                             opt.settle_tolerance, remove_mean).residual
+        band = _band(opt.band, res.peak)
+        settle = (settling_time(at, av, res.window_start, res.window_end, band, remove_mean)
+                  if res.samples and band > 0 else float("nan"))
+        label, impulses = _active_shaper(rec, span)
+        issue = ""
+        if res.samples == 0:
+            issue = "no accelerometer sample in the residual window"
+        elif step > 0:
+            edges = np.concatenate([[span.start], at, [span.end]])
+            gap = float(np.max(np.diff(edges)))
+            if gap > GAP_FACTOR * step:
+                issue = f"a {gap:.3g} s gap in the accelerometer data"
+        rows.append(CycleRow(span.cycle, span.start, span.motion_end, res.window_start, span.end, res.rms,
+                             res.peak, res.samples, settle, label, impulses, span.complete, issue=issue))
+        traces.append((at - span.start, av))
+        inside = (at >= res.window_start) & (at < res.window_end)  # as residual_vibration selects
+        windows.append((at[inside], av[inside]) if not issue else (np.zeros(0), np.zeros((0, av.shape[1]))))
+    for i, r in enumerate(rows):
+        if r.issue:
+            notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
+    spectrum = _spectrum(windows)
+    modes, id_notes = _identify(windows, rows, opt)
+    notes += id_notes
+    recommendation, level, predicted = None, float("nan"), {}
+    if modes:
+        top = modes[0]
+        for r in rows:
+            if r.shaper_impulses is not None:
+                r.v_active = float(percentage_vibration(r.shaper_impulses[0], r.shaper_impulses[1], top.omega,
+                                                        top.zeta))
+        try:
+            recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas)
+            notes += list(recommendation.notes)
+        except IdentificationError as err:
+            notes.append(f"no recommendation: {err}")
+        level, predicted = _prediction(rows, modes, recommendation, opt)
+        if predicted.get("note"):
+            notes.append(predicted["note"])
+    replays: dict[str, LearnerReplay] = {}
+    for name in opt.learners:
+        fn = LEARNER_REPLAYS.get(name)
+        if fn is None:
+            notes.append(f"learner replay {name!r}: not available (known: {sorted(LEARNER_REPLAYS)})")
+            continue
+        replays[name] = fn(rec, spans, segmentation, opt.learner_params)
+    return Analysis(rec, opt, segmentation, rows, traces, spectrum, modes, recommendation, level, predicted,
+                    replays, notes, remove_mean)
+
+
+# ------------------------------------------------------------------------------ pieces
+def _segment(rec: Recording, opt: Options) -> tuple[list[CycleSpan], str, list[str]]:
+    if opt.segmentation not in ("auto", "events", "motion"):
+        raise BagError(f"segmentation must be auto, events or motion, got {opt.segmentation!r}")
+    if opt.segmentation != "motion" and rec.events.kind:
+        spans, notes = from_events(rec.events)
+        return spans, f"cycle events ({rec.topics['events']})", notes
+    if opt.segmentation == "events":
+        raise BagError(f"{rec.path}: no cycle events (shaper_msgs/msg/CycleEvent) to segment by")
+    source = rec.commands if rec.commands is not None and len(rec.commands) > 2 else rec.joints
+    if source is None:
+        return [], "", ["no cycle events, and no commands or joint states to find the moves in"]
+    spans, notes = from_motion(source, end_time=float(rec.accel.t[-1]))
+    kind = "commands" if source is rec.commands else "joint states"
+    return spans, f"motion end of the {kind} ({source.topic})", notes
+
+
+def _positions(rec: Recording, opt: Options):
+    """Where the time the positions come to rest is taken from: the joint states, else the commands."""
+    if opt.positions == "commands" or (opt.positions == "auto" and rec.joints is None):
+        return rec.commands
+    return rec.joints
+
+
+def _remove_mean(values: np.ndarray, mode: str) -> bool:
+    if mode in ("yes", "no"):
+        return mode == "yes"
+    if mode != "auto":
+        raise BagError(f"remove_mean must be auto, yes or no, got {mode!r}")
+    return bool(np.linalg.norm(np.nanmedian(values, axis=0)) > OFFSET_LIMIT)
+
+
+def _band(spec: str, peak: float) -> float:
+    text = str(spec).strip()
+    try:
+        if text.endswith("%"):
+            return float(text[:-1]) / 100.0 * peak if math.isfinite(peak) else float("nan")
+        return float(text)
+    except ValueError:
+        raise BagError(f"settling band must be a number (m/s^2) or a percentage of the peak, got {spec!r}") from None
+
+
+def _active_shaper(rec: Recording, span: CycleSpan) -> tuple[str, tuple | None]:
+    s = rec.shapers
+    if not s.seq:
+        return "unknown", None
+    # by the time each became active (its stamp): messages logged at the same time (a lockstep
+    # simulation's clock stands still between cycles) may come in either order in the recording
+    before = [i for i, t in enumerate(s.t) if t <= span.start]
+    during = [i for i, t in enumerate(s.t) if span.start < t < span.end]
+    if not before:
+        return "unknown", None
+    i = before[-1]
+    amps, times = s.amplitudes[i], s.times[i]
+    label = s.family[i] if len(amps) <= 1 or not times else f"{s.family[i]} ({len(amps)} imp., {1e3 * max(times):.1f} ms)"
+    if s.source[i] and s.source[i] not in ("parameters", "user"):
+        label += f" [{s.source[i]}]"
+    if during:
+        label += " (changed during the cycle)"
+        return label, None
+    return label, (amps, times)
+
+
+def _spectrum(windows: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray] | None:
+    from scipy.signal import welch
+
+    usable = [(t, a) for t, a in windows if t.size >= MIN_SPECTRUM_SAMPLES]
+    if not usable:
+        return None
+    dt = float(np.median(np.concatenate([np.diff(t) for t, _ in usable])))
+    nper = min(min(t.size for t, _ in usable), 8192)  # the shortest window: one segment of it
+    nfft = 1 << int(math.ceil(math.log2(8 * nper)))  # zero-padded, for a smooth curve
+    psds = []
+    for _, a in usable:
+        f, p = welch(a - a.mean(axis=0), fs=1.0 / dt, nperseg=nper, nfft=nfft, axis=0)
+        psds.append(p.reshape(p.shape[0], -1).sum(axis=1))
+    return f, np.mean(psds, axis=0)
+
+
+def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeFit], list[str]]:
+    per_record, failed = [], []
+    usable = [i for i, (t, _) in enumerate(windows) if t.size]
+    notes = []
+    if opt.identify_cycles and len(usable) > opt.identify_cycles:
+        pick = np.unique(np.round(np.linspace(0, len(usable) - 1, opt.identify_cycles)).astype(int))
+        notes.append(f"identification: {pick.size} of {len(usable)} cycles, evenly spread (--identify-cycles)")
+        usable = [usable[i] for i in pick]
+    for i in usable:
+        (t, a), r = windows[i], rows[i]
+        try:
+            per_record.append(identify(t, a, method=opt.method, max_modes=opt.max_modes, band_hz=opt.band_hz))
+        except IdentificationError as err:
+            failed.append(f"cycle {r.cycle}: {err}")
+    if failed:
+        notes.append(f"identification: {len(failed)} of {len(failed) + len(per_record)} cycles give no mode"
+                     f" (left out): " + "; ".join(failed[:5]) + (" ..." if len(failed) > 5 else ""))
+    if not per_record:
+        notes.append("no mode identified in any cycle")
+        return [], notes
+    modes = combine_modes(per_record, method=opt.method, max_modes=opt.max_modes)
+    if not modes:
+        notes.append(f"no mode found in at least half of the {len(per_record)} cycles that gave modes")
+    return modes, notes
+
+
+def _prediction(rows: list[CycleRow], modes: list[ModeFit], rec: Recommendation | None, opt: Options
+                ) -> tuple[float, dict]:
+    rows = [r for r in rows if not r.issue]
+    usable = [r.rms / r.v_active for r in rows
+              if r.samples and np.isfinite(r.v_active) and r.v_active >= MIN_V_FOR_LEVEL and np.isfinite(r.rms)]
+    if not usable:
+        assumed = [r.rms for r in rows if r.shaper == "unknown" and r.samples and np.isfinite(r.rms)]
+        if not assumed:
+            return float("nan"), {"note": "no cycle lets enough vibration through (V >= 0.2) to estimate the"
+                                          " unshaped level: no predicted residual vibration"}
+        usable = assumed
+        note = "the active shaper is not recorded: the cycles are taken as unshaped for the predicted level"
+    else:
+        note = ""
+    level = float(np.median(usable))
+    out: dict = {"unshaped_rms": level, "note": note, "cycles_used": len(usable)}
+    if rec is not None and rec.best is not None:
+        out.update(family=rec.best.family, v_nominal=rec.best.nominal_vibration, v_worst=rec.best.worst_vibration,
+                   rms_nominal=level * rec.best.nominal_vibration, rms_worst=level * rec.best.worst_vibration)
+    return level, out
+
+
+# ------------------------------------------------------------------------------ learner replays
+def _list_items(rec: Recording, spans: list[CycleSpan], from_events: bool, assume_unshaped: bool
+                ) -> Iterator[tuple[str, tuple]]:
+    """The recording as the LIST learner's input stream, in recording order."""
+    acc = rec.accel
+
+    def imu():
+        for q, t, a in zip(acc.seq.tolist(), acc.t.tolist(), acc.values.tolist()):
+            yield q, "imu", (t, a)
+
+    def shapers():
+        s = rec.shapers
+        if assume_unshaped:
+            yield -1, "shaper", ((1.0,), (0.0,), "assumed", 0)
+        for i, q in enumerate(s.seq):
+            yield q, "shaper", (s.amplitudes[i], s.times[i], s.source[i], s.revision[i])
+
+    def events():
+        if from_events:
+            e = rec.events
+            for i in np.argsort(np.asarray(e.seq), kind="stable"):
+                yield e.seq[i], "event", (e.kind[i], e.cycle[i], e.t[i], e.start[i], e.goal[i])
+            return
+        for s in spans:
+            yield s.start_seq, "event", (START, s.cycle, s.start, s.start_positions, s.goal_positions)
+            yield s.motion_end_seq, "event", (MOTION_END, s.cycle, s.motion_end, (), ())
+            if s.complete:
+                yield s.end_seq, "event", (END, s.cycle, s.end, (), ())
+
+    for _, kind, payload in heapq.merge(imu(), shapers(), events(), key=lambda x: x[0]):
+        yield kind, payload
+
+
+def list_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, params: Mapping[str, object]
+                ) -> LearnerReplay:
+    """LIST over the recording: the learner node's per-cycle updates (:mod:`shaper_nodes.list_replay`)."""
+    from ..core.list_learning import ListError
+    from ..list_replay import replay_items, session_for
+
+    notes = []
+    params = {k: v for k, v in params.items()}
+    try:
+        session_for(params)
+    except ListError as err:
+        return LearnerReplay("list", [], [f"not run: {err}"])
+    by_events = segmentation.startswith("cycle events")
+    assume = not rec.shapers.seq
+    if not by_events:
+        notes.append("cycle boundaries from the motion, not from events")
+    if assume:
+        notes.append("no active-shaper topic: the first cycle is taken as unshaped; later cycles ran"
+                     " without the learner's shaper, so the learner could only make its first update")
+    results = replay_items(_list_items(rec, spans, by_events, assume), params)
+    rows = []
+    for r in results:
+        u = r.update
+        if u is None or u.action == "rejected":
+            rows.append({"cycle": r.cycle, "skipped": r.skipped or (u.reason if u else "")})
+            continue
+        used = u.used
+        rows.append({"cycle": r.cycle, "iteration": u.iteration, "M": u.m, "phi": u.phi, "action": u.action,
+                     "parameter": u.parameter, "a1_used": used.a1 if used else float("nan"),
+                     "t2_used": used.t2 if used else float("nan"), "a1_next": u.next.a1, "t2_next": u.next.t2})
+    learned = sum(1 for r in rows if "skipped" not in r)
+    notes.append(f"{learned} of {len(rows)} cycles learned from")
+    return LearnerReplay("list", rows, notes)
+
+
+#: learner name -> replay function (recording, cycles, segmentation, parameters) -> LearnerReplay
+LEARNER_REPLAYS: dict[str, Callable[[Recording, list[CycleSpan], str, Mapping[str, object]], LearnerReplay]] = {
+    "list": list_replay,
+}
+
+
+def shaper_of(candidate_shaper: Shaper) -> dict:
+    """Impulses of a shaper, for reports."""
+    return {"family": candidate_shaper.family, "amplitudes": [float(a) for a in candidate_shaper.amplitudes],
+            "times": [float(t) for t in candidate_shaper.times], "duration": float(candidate_shaper.duration)}

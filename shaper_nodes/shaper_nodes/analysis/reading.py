@@ -1,0 +1,443 @@
+"""Open a recording and iterate its messages; recover what a damaged MCAP file still holds.
+
+A recording is a rosbag2 folder (metadata.yaml plus storage files) or a bare ``.mcap`` file.
+rosbags' :class:`~rosbags.highlevel.AnyReader` reads intact ones (MCAP or sqlite3). It needs the
+MCAP footer and summary, so a file cut short (recorder killed, disk full) or with a broken
+record fails to open; such a file is then scanned from its start, record by record, with the
+``mcap`` library's record parsers: schemas, channels, messages and chunks are taken until the
+first record that is cut off or unreadable, a chunk whose data does not decompress or fails its
+CRC is skipped, and :class:`Damage` says how much was lost (bytes, and the time range of the
+messages in the chunk that was cut, read from its header).
+
+Messages are deserialised with rosbags' typestore built from the schemas in the file; a type
+whose definition is missing or does not parse is reported, and its messages are skipped.
+"""
+
+from __future__ import annotations
+
+import io
+import pathlib
+import struct
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+
+#: MCAP magic (start and end of a file)
+MAGIC = b"\x89MCAP0\r\n"
+#: MCAP opcodes used here
+OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_FOOTER, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x02, 0x0F
+
+
+class BagError(ValueError):
+    """The recording cannot be read or analysed; the message names the problem."""
+
+
+class BagRecovery(Exception):
+    """Internal: read the recording with the record-by-record scan."""
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """A topic of the recording: its type and message count (None: not known before reading)."""
+
+    topic: str
+    msgtype: str
+    count: int | None
+
+
+@dataclass
+class Damage:
+    """What a damaged MCAP file lost.
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    size : int
+        File size, bytes.
+    readable : int
+        Bytes up to the end of the last complete record, from the start of the file.
+    reason : str
+        Why reading stopped (or "" if it reached the end).
+    lost_time : tuple of (int, int) or None
+        Log-time range (ns) of the messages in the chunk that was cut, from its header.
+    skipped_chunks : list of str
+        Chunks skipped because their data was corrupt (and why).
+    expected_messages : int or None
+        Message count that metadata.yaml promises, if it exists.
+    """
+
+    path: str
+    size: int
+    readable: int
+    reason: str = ""
+    lost_time: tuple[int, int] | None = None
+    skipped_chunks: list[str] = field(default_factory=list)
+    expected_messages: int | None = None
+
+    @property
+    def lost_bytes(self) -> int:
+        return self.size - self.readable
+
+
+def _sec(ns: int) -> float:
+    return ns * 1e-9
+
+
+@dataclass
+class ReadResult:
+    """Counters of one pass over the messages (filled while iterating)."""
+
+    messages: int = 0
+    undecodable: dict[str, str] = field(default_factory=dict)  # msgtype -> why
+
+
+def mcap_files(path: pathlib.Path) -> tuple[list[pathlib.Path], int | None, bool]:
+    """The MCAP files of a recording, the message count its metadata.yaml gives, and whether that exists."""
+    if path.is_file():
+        return [path], None, False
+    if not path.is_dir():
+        raise BagError(f"no recording at {path} (neither a rosbag2 folder nor a file)")
+    meta = path / "metadata.yaml"
+    expected = None
+    if meta.exists():
+        try:
+            import yaml
+
+            doc = yaml.safe_load(meta.read_text()) or {}
+            info = doc.get("rosbag2_bagfile_information", {})
+            expected = int(info.get("message_count")) if info.get("message_count") is not None else None
+            files = [path / f for f in info.get("relative_file_paths", [])]
+        except Exception as err:  # noqa: BLE001 - a broken metadata.yaml is reported, the files are scanned
+            raise BagError(f"{meta}: unreadable metadata ({err})") from None
+    else:
+        files = []
+    files = [f for f in files if f.suffix == ".mcap" and f.exists()] or sorted(path.glob("*.mcap"))
+    return files, expected, meta.exists()
+
+
+class Bag:
+    """An open recording: its topics, its messages, a deserialiser, and damage if any.
+
+    Parameters
+    ----------
+    path : path
+        A rosbag2 folder or a bare .mcap file.
+
+    Raises
+    ------
+    BagError
+        Nothing there, not a recording, or no message at all could be read.
+    """
+
+    def __init__(self, path: str | pathlib.Path, recover: bool = False) -> None:
+        self.path = pathlib.Path(path)
+        self.notes: list[str] = []
+        self.damage: list[Damage] = []
+        self.reader_name = ""
+        self._reader = None
+        self._recovered: list[_Recovered] = []
+        try:
+            if recover:
+                raise BagRecovery("asked to scan the file record by record")
+            self._open_rosbags()
+        except BagError:
+            raise
+        except Exception as err:  # noqa: BLE001 - rosbags raises several error types; recovery decides
+            files, expected, has_meta = mcap_files(self.path)
+            if not files:
+                raise BagError(f"cannot read {self.path}: {err}") from None
+            if not has_meta and self.path.is_dir():
+                self.notes.append(f"{self.path} has no metadata.yaml: the recorder did not finish the bag")
+            if not isinstance(err, BagRecovery):
+                self.notes.append(f"rosbags could not open the recording ({err}); scanned it record by record")
+            self._recovered = [_Recovered(f) for f in files]
+            for rec in self._recovered:
+                rec.damage.expected_messages = expected if len(files) == 1 else None
+                self.damage.append(rec.damage)
+            self.reader_name = "mcap record scan (recovery)"
+
+    # ----------------------------------------------------------------- opening
+    def _open_rosbags(self) -> None:
+        from rosbags.highlevel import AnyReader
+
+        if not self.path.exists():
+            raise BagError(f"no recording at {self.path}")
+        if self.path.is_dir() and not (self.path / "metadata.yaml").exists():
+            raise OSError("no metadata.yaml")
+        reader = AnyReader([self.path], default_typestore=_default_typestore())
+        reader.open()
+        self._reader = reader
+        self.reader_name = "rosbags AnyReader"
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+    def __enter__(self) -> Bag:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- content
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topic name -> TopicInfo (for a recovered file: every channel seen in the readable part)."""
+        if self._reader is not None:
+            return {name: TopicInfo(name, info.msgtype or "", info.msgcount)
+                    for name, info in self._reader.topics.items()}
+        out: dict[str, TopicInfo] = {}
+        for rec in self._recovered:
+            for topic, msgtype in rec.channels.values():
+                out.setdefault(topic, TopicInfo(topic, msgtype, None))
+        return out
+
+    @property
+    def message_count(self) -> int | None:
+        """Messages in the bag (None if not known before reading: a recovered file)."""
+        return self._reader.message_count if self._reader is not None else None
+
+    def messages(self, topics: Iterable[str], result: ReadResult | None = None
+                 ) -> Iterator[tuple[str, str, int, object]]:
+        """(topic, msgtype, log time ns, raw CDR bytes) of the given topics, in recording order."""
+        wanted = set(topics)
+        result = result if result is not None else ReadResult()
+        if self._reader is not None:
+            conns = [c for c in self._reader.connections if c.topic in wanted]
+            for conn, stamp, raw in self._reader.messages(connections=conns):
+                result.messages += 1
+                yield conn.topic, conn.msgtype, stamp, raw
+            return
+        for rec in self._recovered:
+            for topic, msgtype, stamp, raw in rec.messages(wanted):
+                result.messages += 1
+                yield topic, msgtype, stamp, raw
+
+    def deserializer(self, msgtype: str):
+        """A function raw bytes -> message of ``msgtype``.
+
+        Raises
+        ------
+        BagError
+            The type's definition is missing from the recording or does not parse.
+        """
+        if self._reader is not None:
+            store = self._reader.typestore
+        else:
+            store = next((r.store for r in self._recovered if msgtype in r.store.fielddefs), None)
+            if store is None:
+                why = next((r.bad_types[msgtype] for r in self._recovered if msgtype in r.bad_types),
+                           "no definition in the recording")
+                raise BagError(f"cannot decode {msgtype}: {why}")
+        if msgtype not in store.fielddefs:
+            raise BagError(f"cannot decode {msgtype}: no definition in the recording")
+        deserialize = store.deserialize_cdr
+        return lambda raw: deserialize(raw, msgtype)
+
+
+def _default_typestore():
+    """rosbags' Jazzy store, with this suite's types when shaper_msgs is installed (for bags without
+    definitions, e.g. sqlite3 ones written without them)."""
+    try:
+        from ..bag import typestore_with_own_types
+
+        return typestore_with_own_types()
+    except Exception:  # noqa: BLE001 - no ament index or no shaper_msgs here: standard types only
+        from rosbags.typesys import Stores, get_typestore
+
+        return get_typestore(Stores.ROS2_JAZZY)
+
+
+class _Recovered:
+    """A damaged MCAP file scanned record by record (see the module docstring)."""
+
+    def __init__(self, path: pathlib.Path) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
+        self.path = path
+        self.size = path.stat().st_size
+        self.damage = Damage(str(path), self.size, 0)
+        self.channels: dict[int, tuple[str, str]] = {}  # id -> (topic, msgtype)
+        self._schemas: dict[int, tuple[str, str, str]] = {}  # id -> (name, encoding, text)
+        self.store = get_typestore(Stores.EMPTY)
+        self.bad_types: dict[str, str] = {}
+        # a first pass over the readable part: channels and definitions (messages stream later)
+        for _ in self._records(set(), collect=True):
+            pass
+
+    def messages(self, wanted: set[str]) -> Iterator[tuple[str, str, int, bytes]]:
+        yield from self._records(wanted, collect=False)
+
+    # ----------------------------------------------------------------- scanning
+    def _records(self, wanted: set[str], collect: bool) -> Iterator[tuple[str, str, int, bytes]]:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Channel, Chunk, Message, Schema
+
+        with open(self.path, "rb") as f:
+            if f.read(8) != MAGIC:
+                raise BagError(f"{self.path} is not an MCAP file (bad magic)")
+            good = 8
+            while True:
+                head = f.read(9)
+                if len(head) == 0:
+                    self._stop(collect, good, "the file ends without a footer")
+                    return
+                if len(head) < 9:
+                    self._stop(collect, good, "cut inside a record header")
+                    return
+                op, length = head[0], struct.unpack("<Q", head[1:])[0]
+                if length > self.size:
+                    self._stop(collect, good, f"corrupt record header at byte {good} (length {length})")
+                    return
+                body = f.read(length)
+                if len(body) < length:
+                    lost = None
+                    if op == OP_CHUNK and len(body) >= 16:
+                        lost = struct.unpack("<QQ", body[:16])
+                    self._stop(collect, good, f"cut inside a {_OPNAMES.get(op, hex(op))} record"
+                               f" ({len(body)} of {length} bytes)", lost)
+                    return
+                stream = ReadDataStream(io.BytesIO(body))
+                try:
+                    if op == OP_SCHEMA:
+                        if collect:
+                            s = Schema.read(stream)
+                            self._add_schema(s.id, s.name, s.encoding, s.data)
+                    elif op == OP_CHANNEL:
+                        if collect:
+                            c = Channel.read(stream)
+                            self._add_channel(c.id, c.topic, c.schema_id)
+                    elif op == OP_MESSAGE:
+                        m = Message.read(stream, length)
+                        item = self._message(m, wanted)
+                        if item is not None:
+                            yield item
+                    elif op == OP_CHUNK:
+                        chunk = Chunk.read(stream)
+                        records, err = _chunk_records(chunk)
+                        if err and collect:
+                            self.damage.skipped_chunks.append(
+                                f"chunk at byte {good} ({_sec(chunk.message_start_time):.3f}-"
+                                f"{_sec(chunk.message_end_time):.3f} s): {err}; {len(records)} records before it kept")
+                        for rec in records:
+                            if isinstance(rec, Schema):
+                                if collect:
+                                    self._add_schema(rec.id, rec.name, rec.encoding, rec.data)
+                            elif isinstance(rec, Channel):
+                                if collect:
+                                    self._add_channel(rec.id, rec.topic, rec.schema_id)
+                            elif isinstance(rec, Message):
+                                item = self._message(rec, wanted)
+                                if item is not None:
+                                    yield item
+                    elif op in (OP_FOOTER, OP_DATA_END):
+                        self._stop(collect, self.size, "")
+                        return
+                except Exception as err:  # noqa: BLE001 - an unparsable record ends the readable part
+                    self._stop(collect, good, f"unreadable {_OPNAMES.get(op, hex(op))} record at byte {good}: {err}")
+                    return
+                good += 9 + length
+
+    def _stop(self, collect: bool, good: int, reason: str, lost: tuple[int, int] | None = None) -> None:
+        if collect:
+            self.damage.readable, self.damage.reason, self.damage.lost_time = good, reason, lost
+
+    def _message(self, m, wanted: set[str]) -> tuple[str, str, int, bytes] | None:
+        ch = self.channels.get(m.channel_id)
+        if ch is None or ch[0] not in wanted:
+            return None
+        return ch[0], ch[1], int(m.log_time), m.data
+
+    def _add_schema(self, sid: int, name: str, encoding: str, data: bytes) -> None:
+        self._schemas[sid] = (name, encoding, data.decode("utf-8", errors="replace"))
+
+    def _add_channel(self, cid: int, topic: str, schema_id: int) -> None:
+        from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+        name, encoding, text = self._schemas.get(schema_id, ("", "", ""))
+        self.channels[cid] = (topic, name)
+        if not name or name in self.store.fielddefs or name in self.bad_types:
+            return
+        try:
+            if encoding == "ros2msg":
+                types = get_types_from_msg(text, name)
+            elif encoding == "ros2idl":
+                sep = "=" * 80 + "\n"
+                types = {}
+                for part in (text.split(sep)[1:] if text.startswith(sep + "IDL: ") else [text]):
+                    types.update(get_types_from_idl(part.split("\n", 1)[1] if part.startswith("IDL: ") else part))
+            else:
+                raise BagError(f"schema encoding {encoding!r} is not supported")
+            self.store.register(types)
+        except Exception as err:  # noqa: BLE001 - a type that does not parse is reported, its topic skipped
+            self.bad_types[name] = f"its definition does not parse ({err})"
+
+
+_OPNAMES = {OP_SCHEMA: "schema", OP_CHANNEL: "channel", OP_MESSAGE: "message", OP_CHUNK: "chunk",
+            OP_FOOTER: "footer", OP_DATA_END: "data-end"}
+
+
+def _chunk_records(chunk) -> tuple[list, str]:
+    """The records of a chunk up to the first corrupt one, and what was wrong ("" if nothing)."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import get_chunk_data_stream
+
+    try:
+        stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+        data = stream.read(size)
+    except Exception as err:  # noqa: BLE001 - decompression or CRC failure: the whole chunk is lost
+        return [], f"its data is corrupt ({type(err).__name__}: {err})"
+    records: list = []
+    pos = 0
+    parsers = {OP_SCHEMA: Schema.read, OP_CHANNEL: Channel.read}
+    while pos < size:
+        if pos + 9 > size:
+            return records, f"corrupt record header at offset {pos} of the chunk"
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if pos + 9 + length > size:
+            return records, f"record at offset {pos} of the chunk claims {length} bytes, {size - pos - 9} remain"
+        body = ReadDataStream(io.BytesIO(data[pos + 9: pos + 9 + length]))
+        try:
+            if op == OP_MESSAGE:
+                records.append(Message.read(body, length))
+            elif op in parsers:
+                records.append(parsers[op](body))
+        except Exception as err:  # noqa: BLE001 - an unparsable record ends the chunk
+            return records, f"unreadable record at offset {pos} of the chunk ({err})"
+        pos += 9 + length
+    return records, ""
+
+
+def mcap_chunks(data: bytes) -> list[tuple[int, int]]:
+    """(byte offset, record length) of every chunk record of an MCAP file's bytes (for tests and tools)."""
+    pos, out = 8, []
+    while pos + 9 <= len(data):
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if op == OP_CHUNK:
+            out.append((pos, length))
+        if op == OP_FOOTER:
+            break
+        pos += 9 + length
+    return out
+
+
+def describe_damage(d: Damage) -> str:
+    """One sentence on what a damaged file lost."""
+    if not d.reason and not d.skipped_chunks:
+        return f"{d.path}: read to the end"
+    parts = []
+    if d.reason == "the file ends without a footer":
+        parts.append(f"{d.path}: the recording was not finished (no summary, no footer): read all {d.readable}"
+                     " bytes; what the recorder had not yet written when it stopped is lost, and its amount is"
+                     " not in the file")
+    elif d.reason:
+        parts.append(f"{d.path}: {d.reason}; read {d.readable} of {d.size} bytes, {d.lost_bytes} bytes"
+                     f" ({100.0 * d.lost_bytes / max(d.size, 1):.1f} %) lost")
+        if d.lost_time is not None:
+            a, b = d.lost_time
+            parts.append(f"the cut chunk held messages logged {_sec(a):.3f}-{_sec(b):.3f} s")
+    if d.skipped_chunks:
+        parts.append(f"{len(d.skipped_chunks)} corrupt chunk(s) skipped: " + "; ".join(d.skipped_chunks))
+    return "; ".join(parts)

@@ -1,0 +1,305 @@
+"""Output of an analysis: a terminal table, a JSON document, and a report folder.
+
+The folder holds ``report.md`` (everything, with the plots), ``cycles.csv`` (one row per cycle),
+``modes.csv``, ``candidates.csv`` (every shaper family designed on the modes), one CSV per
+learner replay, ``summary.json`` (what ``--json`` prints) and the plots: ``traces.png``
+(per-cycle acceleration overlaid, from each cycle's start, the residual windows marked),
+``spectrum.png`` (with the identified modes), ``sensitivity.png`` (V against frequency of the
+recommended and the recorded shapers, the identified band shaded) and ``learning.png``
+(the learners' M and parameters per cycle).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import pathlib
+
+import numpy as np
+
+from ..core.vibration import percentage_vibration
+from .analyze import Analysis, shaper_of
+from .reading import describe_damage
+
+
+def _f(x: float, spec: str = ".4g") -> str:
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def _clean(v):
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    if isinstance(v, np.generic):
+        return _clean(v.item())
+    return v
+
+
+def summary(an: Analysis) -> dict:
+    """Everything the analysis found, as plain data (what ``--json`` prints)."""
+    rec = an.recording
+    rcm = an.recommendation
+    doc = {
+        "bag": rec.path, "reader": rec.reader, "messages_read": rec.messages_read, "topics": rec.topics,
+        "segmentation": an.segmentation, "remove_mean": an.removed_mean,
+        "damage": [{"file": d.path, "size_bytes": d.size, "readable_bytes": d.readable, "lost_bytes": d.lost_bytes,
+                    "reason": d.reason, "lost_time_s": [t * 1e-9 for t in d.lost_time] if d.lost_time else None,
+                    "skipped_chunks": d.skipped_chunks, "text": describe_damage(d)} for d in rec.damage],
+        "time_origin_s": an.origin,
+        "cycles": [{"cycle": r.cycle, "start_s": r.start - an.origin, "motion_end_s": r.motion_end - an.origin,
+                    "window_start_s": r.window_start - an.origin, "end_s": r.end - an.origin, "residual_rms": r.rms, "residual_peak": r.peak, "samples": r.samples,
+                    "settling_time_s": r.settling_time, "shaper": r.shaper, "v_active": r.v_active,
+                    "complete": r.complete, "issue": r.issue} for r in an.cycles],
+        "modes": [{"frequency_hz": m.hz, "omega": m.omega, "zeta": m.zeta, "frequency_std_hz": m.omega_std / (2 * math.pi),
+                   "zeta_std": m.zeta_std, "amplitude": m.amplitude, "method": m.method} for m in an.modes],
+        "spectrum_peak_hz": (float(an.spectrum[0][int(np.argmax(an.spectrum[1][1:])) + 1])
+                             if an.spectrum is not None and an.spectrum[0].size > 1 else None),
+        "recommendation": None,
+        "candidates": [],
+        "predicted": an.predicted,
+        "replays": {name: {"rows": r.rows, "notes": r.notes} for name, r in an.replays.items()},
+        "notes": an.notes,
+    }
+    if rcm is not None:
+        doc["candidates"] = [{"family": c.family, "duration_s": c.duration, "v_nominal": c.nominal_vibration,
+                              "v_worst": c.worst_vibration, "meets_target": c.meets_target} for c in rcm.candidates]
+        if rcm.best is not None:
+            doc["recommendation"] = {**shaper_of(rcm.best.shaper), "v_nominal": rcm.best.nominal_vibration,
+                                     "v_worst": rcm.best.worst_vibration, "target": rcm.target}
+    return _clean(doc)
+
+
+def _settle(r) -> str:
+    """Settling time, or '>' the window when the vibration is still outside the band at its end."""
+    if math.isfinite(r.settling_time):
+        return f"{r.settling_time:.3f}"
+    return f">{r.end - r.window_start:.2f}" if r.samples else "n/a"
+
+
+def table(an: Analysis) -> str:
+    """The terminal table: cycles, modes, recommendation, replays, notes."""
+    lines = [f"{an.recording.path}: {an.recording.messages_read} messages read ({an.recording.reader});"
+             f" cycles from {an.segmentation}"]
+    for d in an.recording.damage:
+        lines.append(f"WARNING: {describe_damage(d)}")
+    lines.append(f"{'#':>4} {'cycle':>5} {'RMS m/s2':>10} {'peak m/s2':>10} {'settle s':>9} {'window s':>17}  shaper")
+    for i, r in enumerate(an.cycles):
+        lines.append(f"{i:>4} {r.cycle:>5} {_f(r.rms):>10} {_f(r.peak):>10} {_settle(r):>9}"
+                     f" {_f(r.window_start - an.origin, '.3f'):>8}-{_f(r.end - an.origin, '.3f'):<8}  {r.shaper}"
+                     + ("" if r.complete else "  (ends with the recording)") + (f"  [{r.issue}]" if r.issue else ""))
+    if an.modes:
+        lines.append("modes: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
+                                          f" damping {m.zeta:.3g} ± {m.zeta_std:.2g}" for m in an.modes))
+    rcm = an.recommendation
+    if rcm is not None and rcm.best is not None:
+        p = an.predicted
+        lines.append(f"recommended: {rcm.best.family} ({1e3 * rcm.best.duration:.1f} ms), V {100 * rcm.best.nominal_vibration:.2g} %"
+                     f" at the mode, {100 * rcm.best.worst_vibration:.2g} % worst case;"
+                     f" predicted residual {_f(p.get('rms_nominal', float('nan')))} m/s2"
+                     f" (worst {_f(p.get('rms_worst', float('nan')))}) + noise, from an unshaped level of"
+                     f" {_f(an.unshaped_level)} m/s2")
+    for name, rep in an.replays.items():
+        learned = [r for r in rep.rows if "skipped" not in r]
+        if learned:
+            last = learned[-1]
+            lines.append(f"{name} replay: {len(learned)} update(s); M {_f(learned[0]['M'])} -> {_f(last['M'])};"
+                         f" next A1 {last['a1_next']:.4f}, T2 {last['t2_next']:.4f} s")
+        else:
+            lines.append(f"{name} replay: no update ({'; '.join(rep.notes) or 'no cycle learned from'})")
+    for note in an.notes:
+        lines.append(f"note: {note}")
+    return "\n".join(lines)
+
+
+def write_report(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
+    """Write the report folder; returns the files written."""
+    out.mkdir(parents=True, exist_ok=True)
+    doc = summary(an)
+    files = []
+
+    def csv_file(name: str, header: list[str], rows: list[list]) -> None:
+        path = out / name
+        with open(path, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(header)
+            w.writerows(rows)
+        files.append(path)
+
+    csv_file("cycles.csv", ["cycle", "start_s", "motion_end_s", "window_start_s", "end_s", "residual_rms_m_s2",
+                            "residual_peak_m_s2", "samples", "settling_time_s", "shaper", "v_active"],
+             [[r.cycle, f"{r.start - an.origin:.9g}", f"{r.motion_end - an.origin:.9g}",
+               f"{r.window_start - an.origin:.9g}", f"{r.end - an.origin:.9g}",
+               f"{r.rms:.6g}", f"{r.peak:.6g}", r.samples, f"{r.settling_time:.6g}", r.shaper, f"{r.v_active:.4g}"]
+              for r in an.cycles])
+    csv_file("modes.csv", ["frequency_hz", "frequency_std_hz", "damping_ratio", "damping_std", "amplitude"],
+             [[f"{m.hz:.6g}", f"{m.omega_std / (2 * math.pi):.3g}", f"{m.zeta:.5g}", f"{m.zeta_std:.3g}",
+               f"{m.amplitude:.4g}"] for m in an.modes])
+    if an.recommendation is not None:
+        csv_file("candidates.csv", ["family", "duration_s", "v_nominal", "v_worst", "meets_target"],
+                 [[c.family, f"{c.duration:.6g}", f"{c.nominal_vibration:.4g}", f"{c.worst_vibration:.4g}",
+                   c.meets_target] for c in an.recommendation.candidates])
+    for name, rep in an.replays.items():
+        keys = sorted({k for r in rep.rows for k in r}, key=lambda k: (k != "cycle", k))
+        csv_file(f"replay_{name}.csv", keys, [[r.get(k, "") for k in keys] for r in rep.rows])
+    (out / "summary.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    files.append(out / "summary.json")
+    plots = _plots(an, out)
+    files += plots
+    (out / "report.md").write_text(_markdown(an, doc, [p.name for p in plots]))
+    files.append(out / "report.md")
+    return files
+
+
+def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
+    rec = an.recording
+    md = [f"# Bag analysis: `{rec.path}`", "",
+          f"{rec.messages_read} messages read with {rec.reader}; cycles from {an.segmentation};"
+          f" accelerometer `{rec.topics['accel']}`" + (", window mean removed" if an.removed_mean else "")
+          + f"; times in s from {an.origin:.0f} s on the recording's clock.", ""]
+    for d in doc["damage"]:
+        md += [f"> **Damaged recording:** {d['text']}", ""]
+    md += ["## Cycles", "", "Residual vibration: RMS and peak of the tip acceleration magnitude (m/s²) from the"
+           " time the positions have come to rest after the move until the cycle's end; settling: time after"
+           f" that until the magnitude stays within {an.options.band} (of the cycle's peak, or m/s²).", "",
+           "| # | cycle | RMS (m/s²) | peak (m/s²) | settling (s) | window (s) | shaper |", "|---|---|---|---|---|---|---|"]
+    for i, r in enumerate(an.cycles):
+        md.append(f"| {i} | {r.cycle} | {_f(r.rms)} | {_f(r.peak)} | {_settle(r)} |"
+                  f" {r.window_start - an.origin:.3f}-{r.end - an.origin:.3f} | {r.shaper}"
+                  + (f" ({r.issue})" if r.issue else "") + " |")
+    md += ["", "## Modes and the recommended shaper", ""]
+    if an.modes:
+        md += ["| mode | frequency (Hz) | damping ratio |", "|---|---|---|"]
+        for i, m in enumerate(an.modes):
+            md.append(f"| {i + 1} | {m.hz:.4g} ± {m.omega_std / (2 * math.pi):.2g} | {m.zeta:.4g} ± {m.zeta_std:.2g} |")
+        md.append("")
+    else:
+        md += ["No mode identified.", ""]
+    if doc["recommendation"]:
+        r, p = doc["recommendation"], an.predicted
+        md += [f"Recommended: **{r['family']}**, {1e3 * r['duration']:.1f} ms, impulses "
+               + ", ".join(f"{a:.4f} at {1e3 * t:.2f} ms" for a, t in zip(r["amplitudes"], r["times"]))
+               + f"; V {100 * r['v_nominal']:.3g} % at the mode, {100 * r['v_worst']:.3g} % worst case over ±"
+               f"{an.options.sigmas:g} σ. Predicted residual vibration {_f(p.get('rms_nominal', float('nan')))} m/s²"
+               f" (worst {_f(p.get('rms_worst', float('nan')))}) plus the sensor noise, from an unshaped level of"
+               f" {_f(an.unshaped_level)} m/s² (median over {p.get('cycles_used', 0)} cycles of RMS / V of the"
+               " active shaper).", "", "| family | duration (ms) | V at mode (%) | worst V (%) | meets target |",
+               "|---|---|---|---|---|"]
+        for c in doc["candidates"]:
+            md.append(f"| {c['family']} | {1e3 * c['duration_s']:.1f} | {100 * c['v_nominal']:.3g} |"
+                      f" {100 * c['v_worst']:.3g} | {'yes' if c['meets_target'] else 'no'} |")
+        md.append("")
+    for name, rep in an.replays.items():
+        md += [f"## {name.upper()} replay", "", "; ".join(rep.notes), ""]
+        learned = [r for r in rep.rows if "skipped" not in r]
+        if learned:
+            md += ["| cycle | M (m/s²) | phi (deg) | action | A1 used | T2 used (s) | A1 next | T2 next (s) |",
+                   "|---|---|---|---|---|---|---|---|"]
+        for r in rep.rows:
+            if "skipped" in r:
+                md.append(f"| {r['cycle']} | skipped: {r['skipped']} | | | | | | |" if learned else
+                          f"- cycle {r['cycle']}: skipped: {r['skipped']}")
+            else:
+                md.append(f"| {r['cycle']} | {_f(r['M'])} | {math.degrees(r['phi']):.1f} | {r['action']} |"
+                          f" {_f(r['a1_used'], '.5f')} | {_f(r['t2_used'], '.5f')} | {r['a1_next']:.5f} |"
+                          f" {r['t2_next']:.5f} |")
+        md.append("")
+    if plots:
+        md += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+    if an.notes:
+        md += ["## Notes", ""] + [f"- {n}" for n in an.notes] + [""]
+    return "\n".join(md)
+
+
+def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    files = []
+    # per-cycle traces, overlaid, coloured by shaper
+    axis = int(np.argmax(np.nanvar(an.recording.accel.values, axis=0)))
+    fig, ax = plt.subplots(figsize=(10, 4))
+    labels = sorted({r.shaper for r in an.cycles})
+    colors = {lab: plt.cm.tab10(i % 10) for i, lab in enumerate(labels)}
+    shown = set()
+    for (t, a), r in zip(an.traces, an.cycles):
+        if t.size:
+            ax.plot(t, a[:, axis], lw=0.6, color=colors[r.shaper], alpha=0.8,
+                    label=None if r.shaper in shown else r.shaper)
+            shown.add(r.shaper)
+            ax.axvline(r.window_start - r.start, color=colors[r.shaper], lw=0.5, ls=":")
+    ax.set_xlabel("time from cycle start (s); dotted: start of the residual window")
+    ax.set_ylabel(f"acceleration, axis {'xyz'[axis] if axis < 3 else axis} (m/s²)")
+    ax.set_title(f"{len(an.cycles)} cycles overlaid", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+    files.append(_save(fig, out / "traces.png"))
+    if an.spectrum is not None:
+        f, p = an.spectrum
+        fig, ax = plt.subplots(figsize=(8, 3.6))
+        ax.semilogy(f[1:], p[1:], lw=0.8)
+        for i, m in enumerate(an.modes):
+            ax.axvline(m.hz, color="C3", ls="--", lw=0.8, label=f"mode {i + 1}: {m.hz:.4g} Hz, ζ {m.zeta:.3g}")
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel("PSD ((m/s²)²/Hz)")
+        ax.set_title("residual windows, Welch, averaged over cycles", fontsize=9)
+        ax.grid(alpha=0.3)
+        if an.modes:
+            ax.legend(fontsize=8)
+            ax.set_xlim(0, min(f[-1], 4 * max(m.hz for m in an.modes)))
+        files.append(_save(fig, out / "spectrum.png"))
+    rcm = an.recommendation
+    if an.modes and rcm is not None and rcm.best is not None:
+        top = an.modes[0]
+        hz = np.linspace(0.01, 2.0 * top.hz, 600)
+        fig, ax = plt.subplots(figsize=(8, 3.6))
+        best = rcm.best.shaper
+        ax.plot(hz, 100 * percentage_vibration(best.amplitudes, best.times, 2 * np.pi * hz, top.zeta),
+                lw=1.5, label=f"recommended: {best.family}")
+        seen = set()
+        for r in an.cycles:
+            if r.shaper_impulses is not None and r.shaper not in seen and len(r.shaper_impulses[0]) > 1:
+                seen.add(r.shaper)
+                ax.plot(hz, 100 * percentage_vibration(r.shaper_impulses[0], r.shaper_impulses[1], 2 * np.pi * hz,
+                                                       top.zeta), lw=0.8, ls="--", label=f"recorded: {r.shaper}")
+        s = an.options.sigmas * top.omega_std / (2 * math.pi)
+        ax.axvspan(top.hz - s, top.hz + s, color="C3", alpha=0.15, label=f"mode ±{an.options.sigmas:g}σ")
+        ax.axvline(top.hz, color="C3", lw=0.8)
+        ax.axhline(100 * rcm.target, color="0.5", lw=0.6, ls=":")
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel("V (%)")
+        ax.set_title(f"sensitivity at damping {top.zeta:.3g}", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        files.append(_save(fig, out / "sensitivity.png"))
+    curves = {name: [r for r in rep.rows if "skipped" not in r] for name, rep in an.replays.items()}
+    if any(curves.values()):
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
+        for name, rows in curves.items():
+            if not rows:
+                continue
+            c = [r["cycle"] for r in rows]
+            axes[0].semilogy(c, [r["M"] for r in rows], "o-", ms=3, label=name)
+            axes[1].plot(c, [r["a1_next"] for r in rows], "o-", ms=3, label=name)
+            axes[2].plot(c, [r["t2_next"] for r in rows], "o-", ms=3, label=name)
+        for ax, title in zip(axes, ("M (m/s²)", "A1 next", "T2 next (s)")):
+            ax.set_title(title, fontsize=9)
+            ax.set_xlabel("cycle")
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=8)
+        files.append(_save(fig, out / "learning.png"))
+    return files
+
+
+def _save(fig, path: pathlib.Path) -> pathlib.Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path

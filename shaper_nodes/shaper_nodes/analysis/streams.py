@@ -1,0 +1,442 @@
+"""Find the topics an analysis needs, by type, and extract them into arrays.
+
+Roles and the types that fill them (:data:`ROLE_TYPES`): the accelerometer (sensor_msgs/Imu),
+the joint states (sensor_msgs/JointState), the commands (std_msgs/Float64MultiArray as
+forward_command_controller takes them, or trajectory_msgs/JointTrajectory), the cycle events
+(shaper_msgs/CycleEvent) and the active shaper (shaper_msgs/Shaper). When several topics have a
+role's type, the one named as this suite and ROS name it (:data:`PREFERRED`) is taken, else the
+one with the most messages (ties: the first by name); the choice is reported and can be forced.
+
+Times are the messages' header stamps where they have one (non-zero), else the time the message
+was logged; everything is in seconds on the recording's clock (simulated time in lockstep runs).
+Imu and JointState messages in little-endian CDR are decoded by a direct parser of the fields
+used (checked against rosbags' deserialiser in the tests); other layouts go through rosbags.
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .reading import Bag, BagError, ReadResult
+
+IMU, JOINT_STATE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"
+ARRAY, TRAJECTORY = "std_msgs/msg/Float64MultiArray", "trajectory_msgs/msg/JointTrajectory"
+EVENT, SHAPER = "shaper_msgs/msg/CycleEvent", "shaper_msgs/msg/Shaper"
+
+#: role -> message types that fill it
+ROLE_TYPES: dict[str, tuple[str, ...]] = {
+    "accel": (IMU,),
+    "joints": (JOINT_STATE,),
+    "commands": (ARRAY, TRAJECTORY),
+    "events": (EVENT,),
+    "shaper": (SHAPER,),
+}
+#: names taken first when several topics have a role's type
+PREFERRED: dict[str, tuple[str, ...]] = {
+    "accel": ("/tip_imu", "/imu", "/imu/data"),
+    "joints": ("/joint_states",),
+    "commands": ("/shaper/commands",),
+    "events": ("/cycle_events",),
+    "shaper": ("/shaper/active_shaper",),
+}
+
+
+@dataclass
+class Events:
+    """Cycle events: order in the recording, time (s), kind, cycle, start and goal positions."""
+
+    seq: list[int] = field(default_factory=list)
+    t: list[float] = field(default_factory=list)
+    kind: list[int] = field(default_factory=list)
+    cycle: list[int] = field(default_factory=list)
+    start: list[tuple[float, ...]] = field(default_factory=list)
+    goal: list[tuple[float, ...]] = field(default_factory=list)
+
+
+@dataclass
+class Shapers:
+    """Active-shaper messages: order, time it became active (s), family, impulses, source, revision."""
+
+    seq: list[int] = field(default_factory=list)
+    t: list[float] = field(default_factory=list)
+    family: list[str] = field(default_factory=list)
+    amplitudes: list[tuple[float, ...]] = field(default_factory=list)
+    times: list[tuple[float, ...]] = field(default_factory=list)
+    source: list[str] = field(default_factory=list)
+    revision: list[int] = field(default_factory=list)
+
+
+@dataclass
+class Signal:
+    """Samples of one topic: order in the recording, time (s) and values (N, k)."""
+
+    topic: str
+    seq: np.ndarray
+    t: np.ndarray
+    values: np.ndarray
+    names: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass
+class Recording:
+    """What an analysis uses of a bag, as arrays, and what was chosen, skipped or lost."""
+
+    path: str
+    topics: dict[str, str]  # role -> topic ("" if none)
+    accel: Signal | None
+    joints: Signal | None
+    commands: Signal | None
+    events: Events
+    shapers: Shapers
+    messages_read: int
+    notes: list[str]
+    damage: list  # reading.Damage
+    reader: str
+    all_topics: dict[str, str]  # topic -> type
+
+
+def choose_topics(topics: Mapping[str, object], overrides: Mapping[str, str] | None = None
+                  ) -> tuple[dict[str, str], list[str]]:
+    """role -> topic for every role (``""`` if the bag has none), and notes on the choices.
+
+    Parameters
+    ----------
+    topics : mapping
+        topic -> TopicInfo (``msgtype``, ``count``).
+    overrides : mapping
+        role -> topic to use instead (must exist, with a type of that role).
+
+    Raises
+    ------
+    BagError
+        An override names a topic that is not in the bag or has the wrong type.
+    """
+    chosen: dict[str, str] = {}
+    notes: list[str] = []
+    for role, types in ROLE_TYPES.items():
+        forced = (overrides or {}).get(role)
+        if forced:
+            info = topics.get(forced)
+            if info is None:
+                raise BagError(f"--{role}-topic {forced}: no such topic in the bag (topics: {sorted(topics)})")
+            if info.msgtype not in types:
+                raise BagError(f"--{role}-topic {forced} has type {info.msgtype}, expected one of {list(types)}")
+            chosen[role] = forced
+            continue
+        cands = [info for info in topics.values() if info.msgtype in types]
+        if not cands:
+            chosen[role] = ""
+            continue
+        pref = [c for c in cands if c.topic in PREFERRED.get(role, ())]
+        pick = pref[0] if pref else sorted(cands, key=lambda c: (-(c.count or 0), c.topic))[0]
+        chosen[role] = pick.topic
+        if len(cands) > 1:
+            others = ", ".join(sorted(c.topic for c in cands if c.topic != pick.topic))
+            notes.append(f"{role}: took {pick.topic} ({pick.msgtype}); also of that type: {others}"
+                         f" (choose with --{role}-topic)")
+    return chosen, notes
+
+
+# ------------------------------------------------------------------------------ fast CDR decoding
+_U32, _I32U32, _D3 = struct.Struct("<I"), struct.Struct("<iI"), struct.Struct("<3d")
+
+
+def _align(pos: int, n: int) -> int:
+    """Absolute offset ``pos`` aligned to ``n`` relative to the CDR payload (after 4 header bytes)."""
+    return 4 + ((pos - 4 + n - 1) & ~(n - 1))
+
+
+def _header(raw) -> tuple[float, int]:
+    sec, nsec = _I32U32.unpack_from(raw, 4)
+    (n,) = _U32.unpack_from(raw, 12)
+    return sec + 1e-9 * nsec, 16 + n
+
+
+def imu_fast(raw) -> tuple[float, tuple[float, float, float]]:
+    """(header stamp in s, linear acceleration) of a little-endian CDR sensor_msgs/Imu."""
+    t, pos = _header(raw)
+    return t, _D3.unpack_from(raw, _align(pos, 8) + 200)  # after orientation, 3 covariances/vectors
+
+
+def joint_state_fast(raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
+    """(header stamp in s, names, positions) of a little-endian CDR sensor_msgs/JointState."""
+    t, pos = _header(raw)
+    pos = _align(pos, 4)
+    (count,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    names = []
+    for _ in range(count):
+        pos = _align(pos, 4)
+        (n,) = _U32.unpack_from(raw, pos)
+        names.append(bytes(raw[pos + 4: pos + 3 + n]).decode())
+        pos += 4 + n
+    pos = _align(pos, 4)
+    (npos,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    if npos:
+        pos = _align(pos, 8)
+    return t, tuple(names), struct.unpack_from(f"<{npos}d", raw, pos)
+
+
+class JointStateDecoder:
+    """:func:`joint_state_fast` that skips the names when they are those of the previous message."""
+
+    def __init__(self) -> None:
+        self._prefix = b""
+        self._names: tuple[str, ...] = ()
+        self._layout: tuple[int, struct.Struct] | None = None
+
+    def __call__(self, raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
+        n = len(self._prefix)
+        if n and raw[12:12 + n] == self._prefix:
+            offset, fmt = self._layout
+            sec, nsec = _I32U32.unpack_from(raw, 4)
+            return sec + 1e-9 * nsec, self._names, fmt.unpack_from(raw, offset)
+        t, names, pos = joint_state_fast(raw)
+        # the bytes from the frame_id to the position count fix where the positions are
+        _, end = _header(raw)
+        end = _align(end, 4) + 4  # the names' count
+        for _ in names:
+            end = _align(end, 4)
+            end += 4 + _U32.unpack_from(raw, end)[0]
+        end = _align(end, 4) + 4
+        self._prefix = bytes(raw[12:end])
+        self._names = names
+        self._layout = (_align(end, 8) if pos else end, struct.Struct(f"<{len(pos)}d"))
+        return t, names, pos
+
+
+def _little_endian(raw) -> bool:
+    return len(raw) > 4 and raw[1] == 1
+
+
+# ------------------------------------------------------------------------------ extraction
+class Progress:
+    """A progress line on stderr (messages read, percent, rate), at most twice a second."""
+
+    def __init__(self, total: int | None, enabled: bool = True, stream=sys.stderr) -> None:
+        self.total, self.enabled, self.stream = total, enabled, stream
+        self.t0 = self._last = time.monotonic()
+        self.shown = False
+
+    def __call__(self, done: int) -> None:
+        now = time.monotonic()
+        if not self.enabled or now - self._last < 0.5:
+            return
+        self._last, self.shown = now, True
+        rate = done / max(now - self.t0, 1e-9)
+        if self.total:
+            frac = min(done / self.total, 1.0)
+            bar = "#" * int(30 * frac)
+            eta = (self.total - done) / rate if rate > 0 else 0.0
+            text = f"\rreading [{bar:<30}] {100 * frac:5.1f} % {done}/{self.total} messages, {rate:,.0f}/s, {eta:.0f} s left"
+        else:
+            text = f"\rreading {done} messages, {rate:,.0f}/s"
+        self.stream.write(text)
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _stamp(msg, log_ns: int) -> float:
+    st = msg.header.stamp
+    return (st.sec + 1e-9 * st.nanosec) if (st.sec or st.nanosec) else log_ns * 1e-9
+
+
+def read_recording(path, overrides: Mapping[str, str] | None = None, progress: bool = False,
+                   on_progress: Callable[[int], None] | None = None) -> Recording:
+    """Open the bag at ``path``, choose the topics and extract them.
+
+    A recording that rosbags opens but fails to read to the end (a corrupt record in an indexed
+    file) is read again record by record, skipping what is corrupt.
+
+    Raises
+    ------
+    BagError
+        Not a recording, unreadable, no message, or no accelerometer topic.
+    """
+    try:
+        return _read(path, overrides, progress, on_progress, recover=False)
+    except _ReadFailed as err:
+        rec = _read(path, overrides, progress, on_progress, recover=True)
+        rec.notes.insert(0, f"rosbags stopped reading after {err.count} messages ({err.reason});"
+                            " read again record by record")
+        return rec
+
+
+class _ReadFailed(Exception):
+    def __init__(self, count: int, reason: str) -> None:
+        super().__init__(reason)
+        self.count, self.reason = count, reason
+
+
+def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
+    with Bag(path, recover=recover) as bag:
+        infos = bag.topics
+        if not infos:
+            raise BagError(f"{path}: the recording has no topics (empty bag)")
+        chosen, notes = choose_topics(infos, overrides)
+        notes = list(bag.notes) + notes
+        if not chosen["accel"]:
+            raise BagError(f"{path}: no accelerometer topic (sensor_msgs/msg/Imu); topics: "
+                           + ", ".join(f"{t} [{i.msgtype}]" for t, i in sorted(infos.items())))
+        roles = {topic: role for role, topic in chosen.items() if topic}
+        unused = sorted(f"{t} [{i.msgtype}]" for t, i in infos.items() if t not in roles)
+        if unused:
+            notes.append("not used: " + ", ".join(unused))
+        decoders: dict[str, Callable] = {}
+        for topic in roles:
+            msgtype = infos[topic].msgtype
+            try:
+                decoders[topic] = bag.deserializer(msgtype)
+            except BagError as err:
+                notes.append(f"{topic} skipped: {err}")
+        wanted = set(decoders)
+        total = sum(infos[t].count or 0 for t in wanted) or None
+        show = Progress(total, progress)
+        acc_seq: list[int] = []
+        acc_t: list[float] = []
+        acc: list[float] = []  # flat x, y, z, x, ...
+        js_fast = JointStateDecoder()
+        js = {"seq": [], "t": [], "p": [], "names": None}
+        cmd = {"seq": [], "t": [], "p": []}
+        events, shapers = Events(), Shapers()
+        bad: dict[str, int] = {}
+        first_error: dict[str, str] = {}
+        result = ReadResult()
+        seq = -1
+        messages = bag.messages(wanted, result)
+        while True:
+            try:
+                topic, msgtype, log_ns, raw = next(messages)
+            except StopIteration:
+                break
+            except Exception as err:  # noqa: BLE001 - rosbags' errors on a corrupt record: read again
+                if recover:
+                    raise BagError(f"{path}: reading failed after {seq + 1} messages: {err}") from None
+                raise _ReadFailed(seq + 1, f"{type(err).__name__}: {err}") from None
+            seq += 1
+            if seq % 4096 == 0:
+                show(seq)
+                if on_progress:
+                    on_progress(seq)
+            role = roles[topic]
+            try:
+                if role == "accel":
+                    if _little_endian(raw):
+                        t, a = imu_fast(raw)
+                        if t == 0.0:
+                            t = log_ns * 1e-9
+                    else:
+                        m = decoders[topic](raw)
+                        t, la = _stamp(m, log_ns), m.linear_acceleration
+                        a = (la.x, la.y, la.z)
+                    acc_seq.append(seq)
+                    acc_t.append(t)
+                    acc.extend(a)
+                elif role == "joints":
+                    if _little_endian(raw):
+                        t, names, p = js_fast(raw)
+                        if t == 0.0:
+                            t = log_ns * 1e-9
+                    else:
+                        m = decoders[topic](raw)
+                        t, names, p = _stamp(m, log_ns), tuple(m.name), tuple(m.position)
+                    if js["names"] is None:
+                        js["names"] = names
+                    if names != js["names"] or len(p) != len(names):
+                        p = _reorder(js["names"], names, p)
+                    js["seq"].append(seq)
+                    js["t"].append(t)
+                    js["p"].append(p)
+                elif role == "commands":
+                    m = decoders[topic](raw)
+                    if msgtype == ARRAY:
+                        cmd["seq"].append(seq)
+                        cmd["t"].append(log_ns * 1e-9)
+                        cmd["p"].append(tuple(float(x) for x in m.data))
+                    else:  # JointTrajectory: each point at stamp + time_from_start
+                        t0 = _stamp(m, log_ns)
+                        for pt in m.points:
+                            cmd["seq"].append(seq)
+                            cmd["t"].append(t0 + pt.time_from_start.sec + 1e-9 * pt.time_from_start.nanosec)
+                            cmd["p"].append(tuple(float(x) for x in pt.positions))
+                elif role == "events":
+                    m = decoders[topic](raw)
+                    events.seq.append(seq)
+                    events.t.append(_stamp(m, log_ns))
+                    events.kind.append(int(m.event))
+                    events.cycle.append(int(m.cycle))
+                    events.start.append(tuple(float(x) for x in m.start_positions))
+                    events.goal.append(tuple(float(x) for x in m.goal_positions))
+                else:
+                    m = decoders[topic](raw)
+                    shapers.seq.append(seq)
+                    shapers.t.append(_stamp(m, log_ns))
+                    shapers.family.append(str(m.family))
+                    shapers.amplitudes.append(tuple(float(x) for x in m.amplitudes))
+                    shapers.times.append(tuple(float(x) for x in m.times))
+                    shapers.source.append(str(m.source))
+                    shapers.revision.append(int(m.revision))
+            except Exception as err:  # noqa: BLE001 - a corrupt message is counted and skipped
+                bad[topic] = bad.get(topic, 0) + 1
+                first_error.setdefault(topic, f"{type(err).__name__}: {err}")
+        show.close()
+        for topic, n in bad.items():
+            notes.append(f"{topic}: {n} message(s) could not be decoded and were skipped (first: {first_error[topic]})")
+        if seq < 0:
+            raise BagError(f"{path}: no messages could be read on {sorted(wanted)}")
+        accel = _finite(_signal(chosen["accel"], acc_seq, acc_t, np.array(acc).reshape(-1, 3)), notes) if acc else None
+        if accel is None or len(accel) == 0:
+            raise BagError(f"{path}: no accelerometer message could be read on {chosen['accel']}")
+        joints = _finite(_signal(chosen["joints"], js["seq"], js["t"], js["p"], js["names"] or ()), notes) \
+            if js["t"] else None
+        commands = _finite(_signal(chosen["commands"], cmd["seq"], cmd["t"], cmd["p"]), notes) if cmd["t"] else None
+        return Recording(str(path), chosen, accel, joints, commands, events, shapers, result.messages, notes,
+                         list(bag.damage), bag.reader_name, {t: i.msgtype for t, i in infos.items()})
+
+
+def _finite(sig: Signal, notes: list[str]) -> Signal:
+    """``sig`` without samples whose time or values are not finite (noted)."""
+    good = np.isfinite(sig.t) & np.all(np.isfinite(sig.values), axis=1)
+    if good.all():
+        return sig
+    notes.append(f"{sig.topic}: {int((~good).sum())} sample(s) with non-finite time or values dropped")
+    return Signal(sig.topic, sig.seq[good], sig.t[good], sig.values[good], sig.names)
+
+
+def _reorder(names: tuple[str, ...], got: tuple[str, ...], p: tuple[float, ...]) -> tuple[float, ...]:
+    index = dict(zip(got, p))
+    return tuple(index.get(n, float("nan")) for n in names)
+
+
+def _signal(topic: str, seq: list[int], t: list[float], values: list, names=()) -> Signal:
+    try:
+        if isinstance(values, np.ndarray):
+            vals = values
+        else:  # rows of equal length: flatten first (much faster than from a list of tuples)
+            width = len(values[0]) if len(values) else 0
+            if any(len(v) != width for v in values):
+                raise ValueError("ragged")
+            vals = np.fromiter((x for v in values for x in v), dtype=float, count=len(values) * width)
+            vals = vals.reshape(len(values), width)
+    except ValueError:  # ragged rows (a malformed message) become NaN-padded
+        width = max((len(v) for v in values), default=0)
+        vals = np.full((len(values), width), np.nan)
+        for i, v in enumerate(values):
+            vals[i, : len(v)] = v
+    seq_a, t_a = np.asarray(seq, dtype=np.int64), np.asarray(t, dtype=float)
+    order = np.argsort(t_a, kind="stable")  # by time; equal times keep the recording's order
+    return Signal(topic, seq_a[order], t_a[order], vals[order], tuple(names))

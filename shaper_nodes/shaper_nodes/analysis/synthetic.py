@@ -1,0 +1,167 @@
+"""Synthetic recordings as a robot's own recorder would write them: standard types, no cycle events.
+
+A base-driven flexible joint (natural frequency ``mode_hz``, damping ratio ``zeta``) follows
+trapezoidal point-to-point moves back and forth with a dwell between them; the tip acceleration
+(sensor_msgs/Imu, x axis, plus white noise and an optional constant offset such as gravity on z),
+the joint positions (sensor_msgs/JointState) and optionally the commands
+(std_msgs/Float64MultiArray) are written with rosbags' Writer into a rosbag2 folder with MCAP
+storage. Used by the tests and the benchmark; messages are serialised once and their stamps and
+values patched in (checked against rosbags' deserialiser in the tests), so that a million
+messages are written in seconds.
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Truth:
+    """What the synthetic recording holds: mode (Hz, ratio), move starts and ends (s)."""
+
+    mode_hz: float
+    zeta: float
+    move_starts: tuple[float, ...]
+    move_ends: tuple[float, ...]
+    duration: float
+
+
+def trapezoid(t: np.ndarray, distance: float, vmax: float, amax: float) -> tuple[np.ndarray, np.ndarray]:
+    """Position and velocity of a rest-to-rest trapezoidal move starting at t = 0 (units of distance)."""
+    d = abs(distance)
+    ta = min(vmax / amax, math.sqrt(d / amax))
+    v = amax * ta
+    tc = max(d / v - ta, 0.0)
+    total = 2 * ta + tc
+    tt = np.clip(t, 0.0, total)
+    pos = np.where(tt < ta, 0.5 * amax * tt**2,
+                   np.where(tt < ta + tc, 0.5 * amax * ta**2 + v * (tt - ta),
+                            d - 0.5 * amax * (total - tt) ** 2))
+    vel = np.where(tt < ta, amax * tt, np.where(tt < ta + tc, v, amax * (total - tt)))
+    vel = np.where((t < 0) | (t > total), 0.0, vel)
+    s = math.copysign(1.0, distance)
+    return s * pos, s * vel
+
+
+def simulate(cycles: int = 6, rate: float = 500.0, mode_hz: float = 4.0, zeta: float = 0.02,
+             distance: float = 0.5, vmax: float = 1.0, amax: float = 8.0, dwell: float = 2.5,
+             noise: float = 0.01, offset: tuple[float, float, float] = (0.0, 0.0, 0.0), lead: float = 0.5,
+             seed: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, Truth]:
+    """Times (s), commanded positions (N,) and tip acceleration (N, 3) of back-and-forth moves."""
+    from scipy.signal import StateSpace, lsim
+
+    w = 2 * math.pi * mode_hz
+    move = 2 * min(vmax / amax, math.sqrt(distance / amax)) + max(
+        distance / (amax * min(vmax / amax, math.sqrt(distance / amax))) - min(vmax / amax, math.sqrt(distance / amax)),
+        0.0)
+    period = move + dwell
+    duration = lead + cycles * period
+    t = np.arange(int(round(duration * rate))) / rate
+    u, ud = np.zeros_like(t), np.zeros_like(t)
+    starts, ends = [], []
+    for k in range(cycles):
+        t0 = lead + k * period
+        p, v = trapezoid(t - t0, distance if k % 2 == 0 else -distance, vmax, amax)
+        u += p
+        ud += v
+        starts.append(t0)
+        ends.append(t0 + move)
+    # states x (tip), v (tip velocity); inputs u, u'; output the tip acceleration
+    sys = StateSpace([[0.0, 1.0], [-w * w, -2 * zeta * w]], [[0.0, 0.0], [w * w, 2 * zeta * w]],
+                     [[-w * w, -2 * zeta * w]], [[w * w, 2 * zeta * w]])
+    _, acc, _ = lsim(sys, np.column_stack([u, ud]), t)
+    rng = np.random.default_rng(seed)
+    a = np.zeros((t.size, 3)) + np.asarray(offset, dtype=float)
+    a[:, 0] += acc
+    a += rng.normal(0.0, noise, a.shape)
+    return t, u, a, Truth(mode_hz, zeta, tuple(starts), tuple(ends), duration)
+
+
+class _Template:
+    """A serialised message with the byte offsets of the fields to patch."""
+
+    def __init__(self, store, msg, msgtype: str, sentinels: dict[str, float]) -> None:
+        self.raw = bytes(store.serialize_cdr(msg, msgtype))
+        self.offsets = {name: self.raw.index(struct.pack("<d", value)) for name, value in sentinels.items()}
+
+
+def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndarray, *, t0: float = 1.7e9,
+              imu_topic: str = "/imu/data", joints_topic: str = "/joint_states", commands_topic: str | None = None,
+              joint_names: tuple[str, ...] = ("joint_1",), imu_every: int = 1, joints_every: int = 1,
+              finish: bool = True) -> int:
+    """Write the samples into a rosbag2 folder (MCAP); returns the number of messages written.
+
+    ``t0`` (s) is added to every time (a robot's wall clock). Every joint of ``joint_names`` gets
+    the position ``u``. ``imu_every``/``joints_every`` write every n-th sample only. With
+    ``finish`` False the writer is abandoned without closing, as a killed recorder leaves it: the
+    chunk it was filling, the summary, the footer and metadata.yaml are never written.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    Imu = store.types["sensor_msgs/msg/Imu"]
+    JointState = store.types["sensor_msgs/msg/JointState"]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    Quat = store.types["geometry_msgs/msg/Quaternion"]
+    Vec = store.types["geometry_msgs/msg/Vector3"]
+    F64 = store.types["std_msgs/msg/Float64MultiArray"]
+    Layout = store.types["std_msgs/msg/MultiArrayLayout"]
+    hdr = Header(stamp=Time(sec=0, nanosec=0), frame_id="imu_link")
+    imu = _Template(store, Imu(header=hdr, orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0),
+                               orientation_covariance=np.full(9, -1.0), angular_velocity=Vec(x=0.0, y=0.0, z=0.0),
+                               angular_velocity_covariance=np.zeros(9),
+                               linear_acceleration=Vec(x=1.25e-300, y=2.5e-300, z=5e-300),
+                               linear_acceleration_covariance=np.zeros(9)),
+                    "sensor_msgs/msg/Imu", {"x": 1.25e-300})
+    n = len(joint_names)
+    sentinel = [1e-300 * (k + 3) for k in range(n)]
+    js = _Template(store, JointState(header=Header(stamp=Time(sec=0, nanosec=0), frame_id=""), name=list(joint_names),
+                                     position=np.array(sentinel), velocity=np.zeros(0), effort=np.zeros(0)),
+                   "sensor_msgs/msg/JointState", {"p": sentinel[0]})
+    cmd = _Template(store, F64(layout=Layout(dim=[], data_offset=0), data=np.array(sentinel)),
+                    "std_msgs/msg/Float64MultiArray", {"p": sentinel[0]})
+    stamp = struct.Struct("<iI")
+    path = pathlib.Path(path)
+    count = 0
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    try:
+        c_imu = writer.add_connection(imu_topic, "sensor_msgs/msg/Imu", typestore=store)
+        c_js = writer.add_connection(joints_topic, "sensor_msgs/msg/JointState", typestore=store)
+        c_cmd = writer.add_connection(commands_topic, "std_msgs/msg/Float64MultiArray",
+                                      typestore=store) if commands_topic else None
+        ns = np.round((t + t0) * 1e9).astype(np.int64)
+        buf_i, buf_j, buf_c = bytearray(imu.raw), bytearray(js.raw), bytearray(cmd.raw)
+        ox, oj, oc = imu.offsets["x"], js.offsets["p"], cmd.offsets["p"]
+        pos = struct.Struct(f"<{n}d")
+        acc3 = struct.Struct("<3d")
+        for i in range(t.size):
+            stamp_ns = int(ns[i])
+            sec, nsec = divmod(stamp_ns, 1_000_000_000)
+            if c_cmd is not None:
+                pos.pack_into(buf_c, oc, *([float(u[i])] * n))
+                writer.write(c_cmd, stamp_ns, bytes(buf_c))
+                count += 1
+            if i % joints_every == 0:
+                stamp.pack_into(buf_j, 4, sec, nsec)
+                pos.pack_into(buf_j, oj, *([float(u[i])] * n))
+                writer.write(c_js, stamp_ns, bytes(buf_j))
+                count += 1
+            if i % imu_every == 0:
+                stamp.pack_into(buf_i, 4, sec, nsec)
+                acc3.pack_into(buf_i, ox, *a[i])
+                writer.write(c_imu, stamp_ns, bytes(buf_i))
+                count += 1
+    finally:
+        if finish:
+            writer.close()
+        else:  # what the process had handed to the OS is in the file; the rest is lost
+            writer.storage.bio.close()
+    return count

@@ -1,0 +1,285 @@
+"""Bag analysis on recordings written by another writer (rosbags directly, standard types only,
+no cycle events), damaged recordings, and bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from shaper_nodes import bag_analysis_cli
+from shaper_nodes.analysis.analyze import Options, analyze
+from shaper_nodes.analysis.reading import Bag, BagError, mcap_chunks
+from shaper_nodes.analysis.streams import JointStateDecoder, imu_fast, joint_state_fast, read_recording
+from shaper_nodes.analysis.synthetic import simulate, write_bag
+from shaper_nodes.core.vibration import residual_vibration
+
+STORE = get_typestore(Stores.ROS2_JAZZY)
+MODE_HZ, ZETA = 4.0, 0.02
+GRAVITY = (0.0, 0.0, 9.81)
+
+
+@pytest.fixture(scope="module")
+def robot_bag(tmp_path_factory):
+    """Six back-and-forth moves, IMU with gravity and noise, joint states; no commands, no events."""
+    t, u, a, truth = simulate(cycles=6, mode_hz=MODE_HZ, zeta=ZETA, offset=GRAVITY)
+    path = tmp_path_factory.mktemp("bags") / "robot"
+    write_bag(path, t, u, a, joint_names=("shoulder", "elbow"))
+    return path, t, u, a, truth
+
+
+def test_fast_decoders_agree_with_rosbags():
+    Header, Time = STORE.types["std_msgs/msg/Header"], STORE.types["builtin_interfaces/msg/Time"]
+    Vec, Quat = STORE.types["geometry_msgs/msg/Vector3"], STORE.types["geometry_msgs/msg/Quaternion"]
+    rng = np.random.default_rng(3)
+    for frame in ("", "a", "imu_link", "x" * 13):
+        imu = STORE.types["sensor_msgs/msg/Imu"](
+            header=Header(stamp=Time(sec=1700000000, nanosec=123456789), frame_id=frame),
+            orientation=Quat(x=0.1, y=0.2, z=0.3, w=0.9), orientation_covariance=rng.normal(size=9),
+            angular_velocity=Vec(x=1.0, y=2.0, z=3.0), angular_velocity_covariance=rng.normal(size=9),
+            linear_acceleration=Vec(x=-1.5, y=2.25, z=9.81), linear_acceleration_covariance=rng.normal(size=9))
+        t, acc = imu_fast(STORE.serialize_cdr(imu, "sensor_msgs/msg/Imu"))
+        assert t == pytest.approx(1700000000.123456789, abs=1e-6)
+        assert acc == (-1.5, 2.25, 9.81)
+        for names in ((), ("j1",), ("joint_a", "b", "joint_long_name_c")):
+            pos = rng.normal(size=len(names))
+            js = STORE.types["sensor_msgs/msg/JointState"](
+                header=Header(stamp=Time(sec=5, nanosec=7), frame_id=frame), name=list(names), position=pos,
+                velocity=rng.normal(size=len(names)), effort=np.zeros(0))
+            raw = STORE.serialize_cdr(js, "sensor_msgs/msg/JointState")
+            t, got_names, got = joint_state_fast(raw)
+            assert t == pytest.approx(5.000000007, abs=1e-12)
+            assert got_names == names and np.array_equal(got, pos)
+            decoder = JointStateDecoder()
+            assert decoder(raw) == (t, got_names, got) and decoder(raw) == (t, got_names, got)  # cached layout
+
+
+def test_synthetic_writer_patches_what_rosbags_reads(robot_bag):
+    path, t, u, a, _ = robot_bag
+    with Bag(path) as bag:
+        imu = bag.deserializer("sensor_msgs/msg/Imu")
+        js = bag.deserializer("sensor_msgs/msg/JointState")
+        got_imu, got_js = [], []
+        for topic, _, _, raw in bag.messages(["/imu/data", "/joint_states"]):
+            (got_imu if topic == "/imu/data" else got_js).append(raw)
+            if len(got_imu) > 300 and len(got_js) > 300:
+                break
+    m = imu(got_imu[300])
+    assert (m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z) == tuple(a[300])
+    assert m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec == pytest.approx(1.7e9 + t[300], abs=1e-6)
+    j = js(got_js[300])
+    assert list(j.name) == ["shoulder", "elbow"] and np.array_equal(j.position, [u[300], u[300]])
+
+
+def test_a_robot_recording_without_events_is_segmented_from_the_motion(robot_bag):
+    path, t, u, a, truth = robot_bag
+    rec = read_recording(path)
+    assert rec.topics["accel"] == "/imu/data" and rec.topics["events"] == "" and rec.topics["commands"] == ""
+    an = analyze(rec, Options(learners=()))
+    assert an.segmentation.startswith("motion end of the joint states")
+    assert len(an.cycles) == len(truth.move_starts)
+    rate = 1.0 / (t[1] - t[0])
+    for row, start, end in zip(an.cycles, truth.move_starts, truth.move_ends):
+        assert abs(row.start - 1.7e9 - start) <= 1.5 / rate
+        assert abs(row.motion_end - 1.7e9 - end) <= 1.5 / rate
+    # the offset (gravity) is found and removed; the residual matches an independent computation
+    assert an.removed_mean
+    for k, row in enumerate(an.cycles[:-1]):
+        ref = residual_vibration(t, a, truth.move_ends[k], truth.move_starts[k + 1], remove_mean=True)
+        assert row.rms == pytest.approx(ref.rms, rel=0.01)
+    assert an.modes, an.notes
+    assert an.modes[0].hz == pytest.approx(MODE_HZ, rel=0.02)
+    assert an.modes[0].zeta == pytest.approx(ZETA, rel=0.2)
+    assert an.recommendation is not None and an.recommendation.best is not None
+    # unshaped cycles: the predicted residual of the recommendation is V times the measured level
+    assert an.predicted["rms_nominal"] == pytest.approx(
+        an.recommendation.best.nominal_vibration * float(np.median([r.rms for r in an.cycles])), rel=1e-9)
+
+
+def test_commands_are_used_for_segmentation_when_recorded(tmp_path):
+    t, u, a, truth = simulate(cycles=4, mode_hz=7.0, zeta=0.03, rate=400.0, dwell=2.0)
+    write_bag(tmp_path / "bag", t, u, a, imu_topic="/sensors/accel", joints_topic="/arm/joint_states",
+              commands_topic="/forward_position_controller/commands", joints_every=4)
+    an = analyze(read_recording(tmp_path / "bag"), Options(learners=()))
+    assert an.segmentation == "motion end of the commands (/forward_position_controller/commands)"
+    assert [round(r.start - 1.7e9, 2) for r in an.cycles] == [round(s, 2) for s in truth.move_starts]
+    assert an.modes[0].hz == pytest.approx(7.0, rel=0.02)
+
+
+def test_cut_mid_chunk_is_analysed_up_to_the_cut_with_what_was_lost(robot_bag, tmp_path):
+    path = robot_bag[0]
+    full = analyze(read_recording(path), Options(learners=()))
+    mcap = next(path.glob("*.mcap"))
+    data = mcap.read_bytes()
+    second = mcap_chunks(data)[1]
+    cut = second[0] + 4000  # 4000 bytes into the second chunk
+    (tmp_path / "cut.mcap").write_bytes(data[:cut])
+    rec = read_recording(tmp_path / "cut.mcap")
+    (dmg,) = rec.damage
+    assert dmg.reason.startswith("cut inside a chunk record")
+    assert dmg.readable == second[0] and dmg.lost_bytes == cut - second[0]
+    assert dmg.lost_time is not None and dmg.lost_time[0] > 0
+    an = analyze(rec, Options(learners=()))
+    # every cycle that ended before the lost data is exactly as in the whole recording
+    before = [r for r in an.cycles if r.end * 1e9 < dmg.lost_time[0] and r.complete]
+    assert before
+    for r in before:
+        same = next(f for f in full.cycles if f.start == r.start)
+        assert r.rms == same.rms and r.peak == same.peak
+    text = bag_analysis_cli_output([str(tmp_path / "cut.mcap"), "--learners", ""])
+    assert "WARNING" in text and "lost" in text and "bytes" in text
+
+
+def test_a_corrupt_record_skips_its_chunk_and_reading_goes_on(robot_bag, tmp_path):
+    path = robot_bag[0]
+    data = bytearray(next(path.glob("*.mcap")).read_bytes())
+    start, length = mcap_chunks(bytes(data))[1]
+    records = start + 9 + 8 + 8 + 8 + 4 + 4 + 8  # chunk header with no compression name
+    struct.pack_into("<Q", data, records + 1, 10**12)  # the chunk's first record claims 1 TB
+    (tmp_path / "bad.mcap").write_bytes(bytes(data))
+    rec = read_recording(tmp_path / "bad.mcap")
+    assert rec.damage and rec.damage[0].skipped_chunks
+    assert any("read again record by record" in n for n in rec.notes)
+    an = analyze(rec, Options(learners=()))
+    assert any("gap in the accelerometer data" in r.issue for r in an.cycles)
+    assert an.modes[0].hz == pytest.approx(MODE_HZ, rel=0.02)
+
+
+def test_unknown_types_are_noted_and_empty_or_wrong_bags_are_refused(tmp_path):
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg("float64 level\nstring label", "acme_msgs/msg/Gauge"))
+    t, u, a, _ = simulate(cycles=3)
+    write_bag(tmp_path / "ok", t, u, a)
+    # a bag with only an unknown type and a string topic: no accelerometer
+    with Writer(tmp_path / "wrong", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection("/gauge", "acme_msgs/msg/Gauge", typestore=store)
+        s = w.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        w.write(c, 1, store.serialize_cdr(store.types["acme_msgs/msg/Gauge"](level=1.0, label="x"),
+                                          "acme_msgs/msg/Gauge"))
+        w.write(s, 2, store.serialize_cdr(store.types["std_msgs/msg/String"](data="hi"), "std_msgs/msg/String"))
+    with pytest.raises(BagError, match=r"no accelerometer topic.*/gauge \[acme_msgs/msg/Gauge\]"):
+        read_recording(tmp_path / "wrong")
+    with Writer(tmp_path / "empty", version=9, storage_plugin=StoragePlugin.MCAP):
+        pass
+    with pytest.raises(BagError, match="no topics"):
+        read_recording(tmp_path / "empty")
+    with pytest.raises(BagError, match="no recording"):
+        read_recording(tmp_path / "missing")
+    (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
+    with pytest.raises(BagError, match="bad magic|not an MCAP"):
+        read_recording(tmp_path / "junk.mcap")
+    with pytest.raises(BagError, match="--accel-topic /nope"):
+        read_recording(tmp_path / "ok", {"accel": "/nope"})
+    assert bag_analysis_cli.main([str(tmp_path / "wrong"), "--no-progress"]) == 2
+
+
+def test_cli_writes_the_report_folder_and_json(robot_bag, tmp_path, capsys):
+    path = robot_bag[0]
+    out = tmp_path / "report"
+    assert bag_analysis_cli.main([str(path), "--out", str(out), "--json", "--param", "list.highpass_hz=0.5"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["cycles"]) == 6 and doc["modes"][0]["frequency_hz"] == pytest.approx(MODE_HZ, rel=0.02)
+    assert doc["recommendation"]["family"] and doc["replays"]["list"]["rows"][0]["action"] == "reference"
+    for name in ("report.md", "cycles.csv", "modes.csv", "candidates.csv", "replay_list.csv", "summary.json",
+                 "traces.png", "spectrum.png", "sensitivity.png", "learning.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert json.loads((out / "summary.json").read_text()) == doc
+    assert "| # | cycle | RMS" in (out / "report.md").read_text()
+
+
+# ------------------------------------------------------------------------------ helpers
+def bag_analysis_cli_output(argv: list[str]) -> str:
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = bag_analysis_cli.main(argv + ["--no-progress"])
+    assert code == 0, err.getvalue()
+    return out.getvalue() + err.getvalue()
+
+
+def test_settling_time_into_a_band():
+    from shaper_nodes.core.vibration import settling_time
+
+    t = np.arange(0, 5, 0.001)
+    a = np.exp(-t) * np.sin(2 * math.pi * 5 * t)
+    st = settling_time(t, a, 0.0, 5.0, 0.1)
+    assert st == pytest.approx(math.log(10), abs=0.06)  # envelope e^-t reaches 0.1 at ln 10
+    assert math.isnan(settling_time(t, a, 0.0, 1.0, 0.1))  # still outside at the window's end
+    assert settling_time(t, 0.01 * a, 0.0, 5.0, 0.1) == 0.0
+    with pytest.raises(ValueError, match="band"):
+        settling_time(t, a, 0.0, 5.0, -1.0)
+
+
+def test_stamped_monitor_does_not_depend_on_the_order_of_arrival():
+    from shaper_nodes.core.cycles import END, MOTION_END, START, CycleMonitor, StampedCycleMonitor
+
+    t, u, a, truth = simulate(cycles=2, rate=200.0, dwell=1.5)
+    events = [(truth.move_starts[k], kind, k) for k in range(2) for kind in (START, MOTION_END, END)]
+    events = [(s if kind == START else (truth.move_ends[k] if kind == MOTION_END else
+                                       (truth.move_starts[1] - 0.01 if k == 0 else t[-1])), kind, k)
+              for s, kind, k in events]
+    ordered = CycleMonitor()
+    expected = []
+    stream = sorted([(ti, 0, i) for i, ti in enumerate(t)] + [(te, 1, j) for j, (te, _, _) in enumerate(events)])
+    for ti, what, i in stream:
+        if what == 0:
+            ordered.add_accel(ti, a[i])
+            ordered.add_positions(ti, [u[i]])
+        else:
+            _, kind, k = events[i]
+            r = ordered.event(kind, k, ti)
+            if r is not None:
+                expected.append(r)
+    # the same stream, the samples delayed relative to the events by up to 30 samples (in order among
+    # themselves, as one topic's messages arrive)
+    rng = np.random.default_rng(0)
+    delay = np.maximum.accumulate(rng.integers(0, 30, len(stream)) / 200.0)
+    late = [(ti + (d if what == 0 else 0.0), what, i, ti) for (ti, what, i), d in zip(stream, delay)]
+    mon = StampedCycleMonitor()
+    got = []
+    for _, what, i, ti in sorted(late):
+        if what == 0:
+            mon.add_accel(ti, a[i])
+            mon.add_positions(ti, [u[i]])
+        else:
+            _, kind, k = events[i]
+            mon.event(kind, k, ti)
+        got += mon.poll()
+    assert len(got) == len(expected) == 2
+    for g, e in zip(got, expected):
+        assert g.residual == e.residual
+
+
+def test_a_writer_that_never_finished_is_read_as_far_as_it_wrote(tmp_path):
+    # rosbags' writer abandoned mid-recording, as a killed recorder leaves it: complete chunks in the
+    # file, the chunk being filled lost, no summary, no footer, no metadata.yaml
+    t, u, a, truth = simulate(cycles=8, mode_hz=MODE_HZ, zeta=ZETA)
+    written = write_bag(tmp_path / "killed", t, u, a, finish=False)
+    assert not (tmp_path / "killed" / "metadata.yaml").exists()
+    rec = read_recording(tmp_path / "killed")
+    assert 0 < rec.messages_read < written
+    assert any("did not finish" in n for n in rec.notes)
+    assert rec.damage and "not finished" in bag_analysis_cli_output([str(tmp_path / "killed"), "--learners", ""])
+    an = analyze(rec, Options(learners=()))
+    assert len(an.cycles) >= 3 and an.modes[0].hz == pytest.approx(MODE_HZ, rel=0.02)
+
+
+def test_stamped_monitor_completes_a_cycle_whose_last_samples_were_lost():
+    from shaper_nodes.core.cycles import END, MOTION_END, START, StampedCycleMonitor
+
+    for wait, expected in ((60.0, 0), (0.0, 1)):
+        mon = StampedCycleMonitor(max_wait=wait)
+        mon.event(START, 0, 0.0)
+        for k in range(100):
+            mon.add_accel(0.01 * k, (np.sin(0.3 * k), 0.0, 0.0))
+            mon.add_positions(0.01 * k, [min(0.01 * k, 0.2)])
+        mon.event(MOTION_END, 0, 0.2)
+        mon.event(END, 0, 1.5)  # the samples up to END never arrive
+        assert len(mon.poll()) == expected
