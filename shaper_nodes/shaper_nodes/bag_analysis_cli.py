@@ -4,8 +4,10 @@
 rosbag2 folder or a bare .mcap file (a truncated or corrupt MCAP too: what can be read is
 analysed, and a warning says what was lost), finds the accelerometer, joint-state, command,
 cycle-event and shaper topics by type, segments the cycles (from the cycle events, else from the
-motion of the commands), and prints a table; ``--out`` writes a report folder (Markdown, CSV,
-JSON, PNG plots); ``--json`` prints the summary as JSON instead of the table. See
+motion of the commands), replays the learners (LIST; MRILC where the recording has the cycle
+events, joint states and the applied reference), and prints a table; ``--out`` writes a report
+folder (Markdown, CSV, JSON, PNG plots); ``--json`` prints the summary as JSON instead of the
+table. See
 docs/bag_analysis.md. Exit codes: 0 done, 2 the recording cannot be analysed (the message says
 why), 3 analysed but the recording was damaged (with ``--strict``).
 """
@@ -63,7 +65,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--learners", default=",".join(LEARNER_REPLAYS),
                    help=f"learner replays to run, comma-separated, '' for none (known: {','.join(LEARNER_REPLAYS)})")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="a learner parameter as given to the live node, e.g. list.highpass_hz=0.5 (repeatable)")
+                   help="a learner parameter as given to the live node, e.g. list.highpass_hz=0.5 or"
+                        " mrilc.gamma=10 (repeatable); replay.learned_run=true replays every MRILC cycle"
+                        " (a recording of a live MRILC run)")
     p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
     p.add_argument("--strict", action="store_true", help="exit 3 when the recording was damaged")
     return p.parse_args(argv)

@@ -28,7 +28,6 @@ state_file: the profile and history, saved atomically after every cycle and relo
 from __future__ import annotations
 
 import json
-import math
 import os
 import pathlib
 import time
@@ -44,7 +43,7 @@ from std_srvs.srv import SetBool
 
 from .conversions import shaper_to_msg, time_to_sec
 from .core import mrilc as M
-from .core.mrilc_learning import MrilcLearner, MrilcSession
+from .core.mrilc_learning import DEFAULTS, RANGES, MrilcLearner, MrilcSession, model_from_params
 from .core.shapers import ShaperError, design
 from .parameters import describe
 
@@ -69,44 +68,45 @@ def write_atomic(path: pathlib.Path, doc: dict) -> None:
         os.close(fd)
 
 
+#: what each parameter means (names, defaults and ranges: core.mrilc_learning.DEFAULTS, RANGES)
+DESCRIPTIONS = {
+    "mrilc.rate": "Sample rate of the loop and of the profile, Hz.",
+    "mrilc.controller.numerator": "Feedback controller C(s) numerator, highest power first (default seed 000 eq. 13).",
+    "mrilc.controller.denominator": "Feedback controller C(s) denominator.",
+    "mrilc.nominal.omega": "Nominal plant natural frequency, rad/s.",
+    "mrilc.nominal.zeta": "Nominal plant damping ratio.",
+    "mrilc.check.omegas": "Plant set of the convergence check: natural frequencies, rad/s (every pair with"
+                          " check.zetas).",
+    "mrilc.check.zetas": "Plant set: damping ratios.",
+    "mrilc.check.min_frequency_hz": "Lowest frequency of the check (and of the robust design), Hz: about"
+                                    " 1 / (cycle duration).",
+    "mrilc.law": "Learning law: 'p' (gamma z), 'pd' (gamma z + lambda (z - 1)), 'robust'.",
+    "mrilc.gamma": "P/PD learning gain.",
+    "mrilc.lambda": "PD derivative learning gain.",
+    "mrilc.robust_gain": "Robust law: fraction of the minimax L applied.",
+    "mrilc.q_cutoff_hz": "Q filter cut-off (zero-phase Butterworth), Hz (0 = Q = 1).",
+    "mrilc.q_order": "Q filter order.",
+    "mrilc.injection": "'effort' (added to the controller output) or 'command' (added to the setpoint after the"
+                       " shaper).",
+    "mrilc.injection_target": "Node offering ~/set_feedforward at the injection point.",
+    "mrilc.shaper_family": "Shaper designed on the reference model's mode and sent to the shaper node ('' = leave"
+                           " it).",
+    "mrilc.learn": "Learn (true) or only measure and report with the profile held (false).",
+    "mrilc.patience": "Divergence guard: iterations of growing RMS(e) before rollback.",
+    "mrilc.noise_floor": "RMS(e) below which growth is not divergence (output units).",
+    "joint_names": "Joints learned, in profile order ([''] = those of the first START).",
+    "topics.joint_states": "Topic name (joint_states).",
+    "topics.reference": "Topic name (reference).",
+    "topics.cycle_events": "Topic name (cycle_events).",
+}
+
+
 def declare(node) -> None:
-    """The MRILC parameters (mrilc.*, topics.*)."""
-    d = node.declare_parameter
-    ro = {"read_only": True}
-    d("mrilc.rate", 200.0, describe("Sample rate of the loop and of the profile, Hz.", 1.0, 100000.0, **ro))
-    d("mrilc.controller.numerator", list(M.PAPER_CONTROLLER[0]), describe(
-        "Feedback controller C(s) numerator, highest power first (default seed 000 eq. 13).", **ro))
-    d("mrilc.controller.denominator", list(M.PAPER_CONTROLLER[1]), describe(
-        "Feedback controller C(s) denominator.", **ro))
-    d("mrilc.nominal.omega", M.PAPER_NOMINAL[0], describe("Nominal plant natural frequency, rad/s.", 1e-3, 1e6, **ro))
-    d("mrilc.nominal.zeta", M.PAPER_NOMINAL[1], describe("Nominal plant damping ratio.", 0.0, 0.999, **ro))
-    d("mrilc.check.omegas", list(M.PAPER_OMEGAS), describe(
-        "Plant set of the convergence check: natural frequencies, rad/s (every pair with check.zetas).", **ro))
-    d("mrilc.check.zetas", list(M.PAPER_ZETAS), describe("Plant set: damping ratios.", **ro))
-    d("mrilc.check.min_frequency_hz", 0.1, describe(
-        "Lowest frequency of the check (and of the robust design), Hz: about 1 / (cycle duration).", 1e-4, 1e5, **ro))
-    d("mrilc.law", "p", describe("Learning law: 'p' (gamma z), 'pd' (gamma z + lambda (z - 1)), 'robust'.", **ro))
-    d("mrilc.gamma", 10.0, describe("P/PD learning gain.", 0.0, 1e9, **ro))
-    d("mrilc.lambda", 0.0, describe("PD derivative learning gain.", 0.0, 1e9, **ro))
-    d("mrilc.robust_gain", 0.7, describe("Robust law: fraction of the minimax L applied.", 0.0, 1.0, **ro))
-    d("mrilc.q_cutoff_hz", 0.0, describe("Q filter cut-off (zero-phase Butterworth), Hz (0 = Q = 1).", 0.0, 1e6, **ro))
-    d("mrilc.q_order", 2, describe("Q filter order.", 1, 8, integer=True, **ro))
-    d("mrilc.injection", "effort", describe(
-        "'effort' (added to the controller output) or 'command' (added to the setpoint after the shaper).", **ro))
-    d("mrilc.injection_target", "/sim_plant", describe(
-        "Node offering ~/set_feedforward at the injection point.", **ro))
-    d("mrilc.shaper_family", "zvd", describe(
-        "Shaper designed on the reference model's mode and sent to the shaper node ('' = leave it).", **ro))
-    d("mrilc.learn", True, describe("Learn (true) or only measure and report with the profile held (false).",
-                                    **ro))
-    d("mrilc.patience", 3, describe("Divergence guard: iterations of growing RMS(e) before rollback.", 1, 1000,
-                                    integer=True, **ro))
-    d("mrilc.noise_floor", 1e-9, describe("RMS(e) below which growth is not divergence (output units).",
-                                          0.0, 1e9, **ro))
-    d("joint_names", [""], describe("Joints learned, in profile order ([''] = those of the first START).", **ro))
-    for key, default in {"joint_states": "/joint_states", "reference": "/sim_plant/reference",
-                         "cycle_events": "/cycle_events"}.items():
-        d(f"topics.{key}", default, describe(f"Topic name ({key}).", **ro))
+    """The MRILC parameters (mrilc.*, joint_names, topics.*), read-only, with the core's defaults."""
+    for name, default in DEFAULTS.items():
+        low, high, integer = RANGES.get(name, (None, None, False))
+        node.declare_parameter(name, default, describe(DESCRIPTIONS[name], low, high, integer=integer,
+                                                       read_only=True))
 
 
 class MrilcMode:
@@ -116,24 +116,15 @@ class MrilcMode:
         self.node = node
         declare(node)
         p = lambda name: node.get_parameter(name).value  # noqa: E731
-        period = 1.0 / float(p("mrilc.rate"))
         try:
-            law = M.LawConfig(law=str(p("mrilc.law")), gamma=float(p("mrilc.gamma")), lam=float(p("mrilc.lambda")),
-                              gain=float(p("mrilc.robust_gain")), q_cutoff_hz=float(p("mrilc.q_cutoff_hz")),
-                              q_order=int(p("mrilc.q_order")))
-            plant_set = M.paper_plant_set(tuple(p("mrilc.check.omegas")), tuple(p("mrilc.check.zetas")))
-            self.model = M.MrilcModel(
-                M.controller(p("mrilc.controller.numerator"), p("mrilc.controller.denominator")),
-                M.mck_plant(float(p("mrilc.nominal.omega")), float(p("mrilc.nominal.zeta"))), plant_set, period,
-                str(p("mrilc.injection")), law, omega_min=2 * math.pi * float(p("mrilc.check.min_frequency_hz")))
-            self.model.require_convergence()
+            self.model, settings = model_from_params({name: p(name) for name in DEFAULTS})
         except M.MrilcError as err:
             raise ValueError(str(err)) from None
+        law = self.model.law
         node.get_logger().info(f"MRILC: reference model mode {self.model.mode.omega:.4g} rad/s, zeta"
                                f" {self.model.mode.zeta:.4g}; law {law.law}: {self.model.convergence.describe()}")
-        names = [n for n in p("joint_names") if n]
-        self.joint_names: list[str] = names
-        self.patience, self.noise_floor = int(p("mrilc.patience")), float(p("mrilc.noise_floor"))
+        self.joint_names: list[str] = list(settings.joint_names)
+        self.patience, self.noise_floor = settings.patience, settings.noise_floor
         path = str(p("state_file"))
         self.state_path = pathlib.Path(path).expanduser() if path else None
         self.session: MrilcSession | None = None

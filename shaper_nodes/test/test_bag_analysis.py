@@ -283,3 +283,125 @@ def test_stamped_monitor_completes_a_cycle_whose_last_samples_were_lost():
         mon.event(MOTION_END, 0, 0.2)
         mon.event(END, 0, 1.5)  # the samples up to END never arrive
         assert len(mon.poll()) == expected
+
+
+# ------------------------------------------------------------------------------ MRILC replay
+def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float = 200.0):
+    """Seed 000's loop on the perturbed plant (w = 5, zeta = 0.15) at 200 Hz with u2 = 0 (a run
+    without learning), recorded as the sim plant and the conductor publish it: /joint_states
+    (y, u), /sim_plant/reference (r_s, stamped at the start of its period), /cycle_events, and a
+    tip accelerometer (y''). Returns the cycle's r_s, y and u (samples x 1)."""
+    import pathlib
+
+    from shaper_nodes.analysis.synthetic import trapezoid
+    from shaper_nodes.core import mrilc as M
+    from shaper_nodes.core.mrilc_learning import model_from_params
+
+    model, _ = model_from_params({})
+    plant, period = M.mck_plant(5.0, 0.15), 1.0 / rate
+    t_path = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "command"), period))
+    u_r = M.SampledFilter(M.discretise(M.ct.feedback(model.c, plant), period))  # C / (1 + C P)
+    n = 160
+    k = np.arange(n) * period
+    up, _ = trapezoid(k, 1.0, 5.0, 50.0)
+    down, _ = trapezoid(k - 0.4, -1.0, 5.0, 50.0)
+    r_s = (up + down)[:, None]
+    y, u = t_path(r_s), u_r(r_s)  # u2 = 0: the loop's own response and effort
+    acc = np.gradient(np.gradient(y[:, 0], period), period)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    msg_dir = pathlib.Path(__file__).resolve().parents[2] / "shaper_msgs" / "msg"
+    store.register(get_types_from_msg((msg_dir / "CycleEvent.msg").read_text(), "shaper_msgs/msg/CycleEvent"))
+    T = store.types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    step_ns = int(round(period * 1e9))
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    conn = {name: writer.add_connection(topic, kind, typestore=store) for name, topic, kind in (
+        ("imu", "/tip_imu", "sensor_msgs/msg/Imu"), ("js", "/joint_states", "sensor_msgs/msg/JointState"),
+        ("ref", "/sim_plant/reference", "sensor_msgs/msg/JointState"),
+        ("ev", "/cycle_events", "shaper_msgs/msg/CycleEvent")) if reference or name != "ref"}
+
+    def write(name, ns, msg, kind):
+        writer.write(conn[name], ns, store.serialize_cdr(msg, kind))
+
+    def hdr(ns):
+        return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="")
+
+    def event(kind, cycle, ns):
+        write("ev", ns, T["shaper_msgs/msg/CycleEvent"](
+            header=hdr(ns), event=kind, cycle=cycle, task="round_trip", joint_names=["joint_1"],
+            start_positions=np.zeros(1), goal_positions=np.ones(1)), "shaper_msgs/msg/CycleEvent")
+
+    try:
+        for c in range(cycles):
+            first = 200 + c * (n + 100)  # sample index of the cycle's START (1 s, then 0.5 s apart)
+            event(0, c, first * step_ns)
+            for i in range(n):
+                ns = (first + i) * step_ns
+                if i == 80:
+                    event(1, c, ns)
+                write("js", ns, T["sensor_msgs/msg/JointState"](
+                    header=hdr(ns), name=["joint_1"], position=y[i], velocity=np.zeros(1), effort=u[i]),
+                    "sensor_msgs/msg/JointState")
+                if reference:
+                    write("ref", ns, T["sensor_msgs/msg/JointState"](
+                        header=hdr(ns), name=["joint_1"], position=r_s[i], velocity=np.zeros(0), effort=np.zeros(0)),
+                        "sensor_msgs/msg/JointState")
+                write("imu", ns, T["sensor_msgs/msg/Imu"](
+                    header=hdr(ns), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=np.zeros(9),
+                    angular_velocity=Vec(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=Vec(x=float(acc[i]), y=0.0, z=0.0),
+                    linear_acceleration_covariance=np.zeros(9)), "sensor_msgs/msg/Imu")
+            event(2, c, (first + n - 1) * step_ns)
+    finally:
+        writer.close()
+    return model, r_s, y, u
+
+
+def test_mrilc_replay_gives_the_learners_first_update(tmp_path):
+    from shaper_nodes.core.mrilc_learning import MrilcLearner
+
+    model, r_s, y, u = _mrilc_recording(tmp_path / "mrilc")
+    rec = read_recording(tmp_path / "mrilc")
+    assert rec.topics["reference"] == "/sim_plant/reference" and rec.topics["joints"] == "/joint_states"
+    assert rec.efforts is not None and np.array_equal(rec.efforts.values[:160], u)
+    an = analyze(rec, Options(learners=("mrilc",)))
+    rows = an.replays["mrilc"].rows
+    direct = MrilcLearner(model, 1).learn(r_s, y, u)
+    first = rows[0]
+    assert first["iteration"] == 1 and first["action"] == "learn"
+    assert first["rms_e"] == pytest.approx(direct.rms_e, rel=1e-12) and direct.rms_e > 1e-3  # off-nominal plant
+    assert first["rms_u1"] == pytest.approx(direct.rms_u1, rel=1e-12) and first["rms_u2"] == 0.0
+    assert first["residual"] == pytest.approx(direct.residual, rel=1e-12)
+    # the later cycles ran with u2 = 0, not with the learned profile
+    assert [r["cycle"] for r in rows] == [0, 1, 2]
+    assert all("without the learned profile" in r["skipped"] for r in rows[1:])
+    # as a recording of a live run: every cycle learned from, in order
+    live = analyze(rec, Options(learners=("mrilc",), learner_params={"replay.learned_run": True}))
+    assert [r.get("iteration") for r in live.replays["mrilc"].rows] == [1, 2, 3]
+    assert live.replays["mrilc"].rows[0]["rms_e"] == first["rms_e"]
+
+
+def test_mrilc_replay_says_what_is_missing(tmp_path):
+    _mrilc_recording(tmp_path / "noref", cycles=1, reference=False)
+    rec = read_recording(tmp_path / "noref")
+    assert rec.topics["reference"] == "" and rec.efforts is None
+    replay = analyze(rec, Options(learners=("mrilc",))).replays["mrilc"]
+    assert replay.rows == [] and replay.notes[0].startswith("not possible")
+    assert "applied reference" in replay.notes[0] and "cycle events" not in replay.notes[0]
+    # bad parameters are reported, not raised
+    _mrilc_recording(tmp_path / "ref", cycles=1)
+    bad = analyze(read_recording(tmp_path / "ref"), Options(learners=("mrilc",), learner_params={"mrilc.gama": 5}))
+    assert "unknown MRILC parameter(s) mrilc.gama" in bad.replays["mrilc"].notes[0]
+
+
+def test_cli_runs_the_mrilc_replay_and_plots_its_learning_curve(tmp_path, capsys):
+    _mrilc_recording(tmp_path / "mrilc", cycles=2)
+    code = bag_analysis_cli.main([str(tmp_path / "mrilc"), "--out", str(tmp_path / "report"), "--no-progress",
+                                  "--param", "replay.learned_run=true"])
+    out = capsys.readouterr().out
+    assert code == 0 and "mrilc replay: 2 update(s)" in out
+    assert (tmp_path / "report" / "learning_mrilc.png").exists()
+    assert "## MRILC replay" in (tmp_path / "report" / "report.md").read_text()
+    assert (tmp_path / "report" / "replay_mrilc.csv").read_text().startswith("cycle,action,iteration")

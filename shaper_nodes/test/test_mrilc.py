@@ -217,3 +217,25 @@ def test_session_builds_cycles_on_the_grid_and_skips_gaps(paper_model):
     session.on_event(START, 2, 30.0)
     session.profile_ready = True
     assert "before the learner's profile was installed" in session.on_event(END, 2, 30.1).skipped
+
+
+def test_model_from_params_builds_the_nodes_model_and_refuses_bad_values(paper_model):
+    from shaper_nodes.core.mrilc_learning import DEFAULTS, model_from_params
+
+    model, settings = model_from_params({"mrilc.check.min_frequency_hz": 0.5, "list.gain": 3})
+    assert model.period == PERIOD and model.law == M.LawConfig()
+    assert model.mode.omega == pytest.approx(paper_model.mode.omega, rel=1e-12)
+    assert model.convergence.worst_value == pytest.approx(paper_model.convergence.worst_value, rel=1e-12)
+    assert settings.patience == DEFAULTS["mrilc.patience"] and settings.joint_names == ()
+    assert settings.topics["reference"] == "/sim_plant/reference"
+    for params, message in (({"mrilc.gamma": -1.0}, r"mrilc\.gamma must be in \[0, 1e\+09\]"),
+                            ({"mrilc.rate": float("nan")}, "mrilc.rate must be a finite number"),
+                            ({"mrilc.q_order": 2.5}, "mrilc.q_order must be an integer"),
+                            ({"mrilc.law": "pid"}, "mrilc.law must be one of p, pd, robust"),
+                            ({"mrilc.check.omegas": []}, "mrilc.check.omegas must be a non-empty list"),
+                            ({"mrilc.learn": "yes"}, "mrilc.learn must be true or false"),
+                            ({"mrilc.rat": 100.0}, r"unknown MRILC parameter\(s\) mrilc\.rat"),
+                            ({"mrilc.gamma": 25.0}, "learning refused.*largest P-type gamma")):
+        with pytest.raises(M.MrilcError, match=message):
+            model_from_params(params)
+    assert not model_from_params({"mrilc.gamma": 25.0}, require_convergence=False)[0].convergence.ok

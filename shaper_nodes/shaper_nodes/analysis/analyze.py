@@ -17,9 +17,11 @@ prediction is U V_recommended (at the identified mode and at the worst point of 
 box), on top of which comes the sensor noise.
 
 Learner replays (:data:`LEARNER_REPLAYS`, name -> function): LIST runs
-:func:`shaper_nodes.list_replay.replay_items` over the recording. A replay function takes the
-recording, its cycles and the parameters given with ``--param`` and returns a
-:class:`LearnerReplay`; MRILC is added by registering its replay here once its learner exists.
+:func:`shaper_nodes.list_replay.replay_items` over the recording; MRILC (:func:`mrilc_replay`)
+feeds the joint states, the applied reference and the cycle events to a
+:class:`~shaper_nodes.core.mrilc_learning.MrilcSession` where the recording has them. A replay
+function takes the recording, its cycles and the parameters given with ``--param`` and returns a
+:class:`LearnerReplay`.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from ..core.shapers import Shaper
 from ..core.vibration import percentage_vibration, settling_time
 from .reading import BagError
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
-from .streams import Recording
+from .streams import REFERENCE_SUFFIX, Recording
 
 #: active shapers that let through at least this V count for the unshaped level
 MIN_V_FOR_LEVEL = 0.2
@@ -71,7 +73,7 @@ class Options:
     target: float = 0.05
     sigmas: float = 2.0
     identify_cycles: int = 20
-    learners: tuple[str, ...] = ("list",)
+    learners: tuple[str, ...] = ("list", "mrilc")
     learner_params: Mapping[str, object] = field(default_factory=dict)
 
 
@@ -402,9 +404,117 @@ def list_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, param
     return LearnerReplay("list", rows, notes)
 
 
+def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, params: Mapping[str, object]
+                 ) -> LearnerReplay:
+    """MRILC over the recording: the learner node's per-cycle updates, where the data allows.
+
+    Needs the cycle events, the joint states' positions (y; efforts optional, for RMS(u1)) and the
+    applied reference (role "reference", ``--reference-topic``) for the learner's joints
+    (``joint_names``, else those of the first START, as the node takes them). The model is built
+    from the node's ``mrilc.*`` parameters (:func:`~shaper_nodes.core.mrilc_learning.model_from_params`).
+    With ``replay.learned_run`` false (default: a recording made without the learner), only the
+    first cycle learned from gives a valid update (the later ones did not run with the learned
+    profile) and the rest are listed as skipped; true replays every cycle, as for a recording of a
+    live MRILC run.
+    """
+    from ..core.mrilc import MrilcError
+    from ..core.mrilc_learning import START as M_START
+    from ..core.mrilc_learning import MrilcLearner, MrilcSession, model_from_params
+
+    def refused(why: str) -> LearnerReplay:
+        return LearnerReplay("mrilc", [], [f"not possible: {why}"])
+
+    missing = []
+    if not rec.events.kind:
+        missing.append("cycle events (shaper_msgs/CycleEvent)")
+    if rec.joints is None or not rec.joints.names:
+        missing.append("joint states with named positions (sensor_msgs/JointState)")
+    if rec.reference is None:
+        missing.append(f"the applied reference (a sensor_msgs/JointState topic ending in '{REFERENCE_SUFFIX}',"
+                       " or --reference-topic)")
+    if missing:
+        return refused("the recording has no " + "; no ".join(missing))
+    learned_run = params.get("replay.learned_run", False)
+    if not isinstance(learned_run, bool):
+        return refused(f"parameter replay.learned_run must be true or false, got {learned_run!r}")
+    try:
+        model, settings = model_from_params(params)
+    except MrilcError as err:
+        return refused(str(err))
+    names = list(settings.joint_names)
+    if not names:
+        first = [n for k, n in zip(rec.events.kind, rec.events.joint_names) if k == M_START and n]
+        names = list(first[0]) if first else list(rec.joints.names)
+    cols = {}
+    for label, sig in (("joint states", rec.joints), ("reference", rec.reference)):
+        absent = [n for n in names if n not in sig.names]
+        if absent:
+            return refused(f"the {label} ({sig.topic}) lack joint(s) {absent} (they have {list(sig.names)})")
+        cols[label] = [sig.names.index(n) for n in names]
+    efforts = {}
+    if rec.efforts is not None:
+        e_cols = [rec.efforts.names.index(n) for n in names]
+        efforts = dict(zip(rec.efforts.seq.tolist(), rec.efforts.values[:, e_cols]))
+    stale = params.get("stale_after", 0.1)
+    if isinstance(stale, bool) or not isinstance(stale, (int, float)) or not stale > 0:
+        return refused(f"parameter stale_after must be a number > 0 s, got {stale!r}")
+    learner = MrilcLearner(model, len(names), settings.patience, settings.noise_floor)
+    learner.holding = not settings.learn
+    session = MrilcSession(learner, float(stale))
+
+    def joints():
+        j = rec.joints
+        for q, t, v in zip(j.seq.tolist(), j.t.tolist(), j.values[:, cols["joint states"]]):
+            yield q, 0, (t, v, efforts.get(q))
+
+    def reference():
+        r = rec.reference
+        for q, t, v in zip(r.seq.tolist(), r.t.tolist(), r.values[:, cols["reference"]]):
+            yield q, 1, (t, v)
+
+    def events():
+        e = rec.events
+        for i in np.argsort(np.asarray(e.seq), kind="stable"):
+            yield e.seq[i], 2, (e.kind[i], e.cycle[i], e.t[i])
+
+    unapplied = ("ran without the learned profile (a recording made without learning; --param"
+                 " replay.learned_run=true for a recording of a live MRILC run)")
+    rows: list[dict] = []
+    notes = [f"joints {names}; joint states {rec.joints.topic}, reference {rec.reference.topic}"
+             + ("" if efforts else " (no efforts recorded: RMS(u1) not available)")
+             + f"; model: reference mode {model.mode.omega:.4g} rad/s, zeta {model.mode.zeta:.4g}, law"
+             f" {model.law.law}, {1 / model.period:g} Hz"]
+    for _, kind, payload in heapq.merge(joints(), reference(), events(), key=lambda x: x[0]):
+        if kind == 0:
+            session.on_joint_state(*payload)
+        elif kind == 1:
+            session.on_reference(*payload)
+        else:
+            result = session.on_event(*payload)
+            if result is None:
+                continue
+            u = result.update
+            if u is None:
+                not_installed = not learned_run and result.skipped.startswith("the cycle started before")
+                rows.append({"cycle": result.cycle, "skipped": unapplied if not_installed else result.skipped})
+                continue
+            # the node installs the new profile before the next START; a recording made without
+            # learning never ran with it, so its later cycles are not learned from
+            session.profile_ready = learned_run
+            rows.append({"cycle": result.cycle, "iteration": u.iteration, "rms_e": u.rms_e, "rms_u1": u.rms_u1,
+                         "rms_u2": u.rms_u2, "residual": u.residual, "action": u.action})
+    learned = sum(1 for r in rows if "skipped" not in r)
+    notes.append(f"{learned} of {len(rows)} cycles learned from")
+    if not learned_run and learned:
+        notes.append("a recording made without learning gives only the first update: later cycles did not run"
+                     " with the learned profile")
+    return LearnerReplay("mrilc", rows, notes)
+
+
 #: learner name -> replay function (recording, cycles, segmentation, parameters) -> LearnerReplay
 LEARNER_REPLAYS: dict[str, Callable[[Recording, list[CycleSpan], str, Mapping[str, object]], LearnerReplay]] = {
     "list": list_replay,
+    "mrilc": mrilc_replay,
 }
 
 

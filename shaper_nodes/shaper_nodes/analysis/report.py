@@ -5,8 +5,9 @@ The folder holds ``report.md`` (everything, with the plots), ``cycles.csv`` (one
 learner replay, ``summary.json`` (what ``--json`` prints) and the plots: ``traces.png``
 (per-cycle acceleration overlaid, from each cycle's start, the residual windows marked),
 ``spectrum.png`` (with the identified modes), ``sensitivity.png`` (V against frequency of the
-recommended and the recorded shapers, the identified band shaded) and ``learning.png``
-(the learners' M and parameters per cycle).
+recommended and the recorded shapers, the identified band shaded), ``learning.png``
+(LIST's M and parameters per cycle) and ``learning_mrilc.png`` (MRILC's RMS(e), RMS(u1) and
+RMS(u2) per iteration).
 """
 
 from __future__ import annotations
@@ -104,7 +105,12 @@ def table(an: Analysis) -> str:
                      f" {_f(an.unshaped_level)} m/s2")
     for name, rep in an.replays.items():
         learned = [r for r in rep.rows if "skipped" not in r]
-        if learned:
+        if learned and "rms_e" in learned[0]:
+            last = learned[-1]
+            lines.append(f"{name} replay: {len(learned)} update(s); RMS(e) {_f(learned[0]['rms_e'])} at iteration"
+                         f" {learned[0]['iteration']} -> {_f(last['rms_e'])} at {last['iteration']}; RMS(u2)"
+                         f" {_f(last['rms_u2'])}, residual {_f(last['residual'])}; {last['action']}")
+        elif learned:
             last = learned[-1]
             lines.append(f"{name} replay: {len(learned)} update(s); M {_f(learned[0]['M'])} -> {_f(last['M'])};"
                          f" next A1 {last['a1_next']:.4f}, T2 {last['t2_next']:.4f} s")
@@ -195,6 +201,17 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     for name, rep in an.replays.items():
         md += [f"## {name.upper()} replay", "", "; ".join(rep.notes), ""]
         learned = [r for r in rep.rows if "skipped" not in r]
+        if learned and "rms_e" in learned[0]:
+            md += ["Errors in the joints' units (e = y_m - y, y_m the reference model's response to the"
+                   " applied reference); efforts in the effort's units.", "",
+                   "| cycle | iteration | RMS(e) | RMS(u1) | RMS(u2) | residual | action |",
+                   "|---|---|---|---|---|---|---|"]
+            for r in rep.rows:
+                md.append(f"| {r['cycle']} | skipped: {r['skipped']} | | | | | |" if "skipped" in r else
+                          f"| {r['cycle']} | {r['iteration']} | {_f(r['rms_e'])} | {_f(r['rms_u1'])} |"
+                          f" {_f(r['rms_u2'])} | {_f(r['residual'])} | {r['action']} |")
+            md.append("")
+            continue
         if learned:
             md += ["| cycle | M (m/s²) | phi (deg) | action | A1 used | T2 used (s) | A1 next | T2 next (s) |",
                    "|---|---|---|---|---|---|---|---|"]
@@ -277,7 +294,23 @@ def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
         files.append(_save(fig, out / "sensitivity.png"))
-    curves = {name: [r for r in rep.rows if "skipped" not in r] for name, rep in an.replays.items()}
+    curves = {name: [r for r in rep.rows if "skipped" not in r and "M" in r] for name, rep in an.replays.items()}
+    mrilc = {name: [r for r in rep.rows if "skipped" not in r and "rms_e" in r] for name, rep in an.replays.items()}
+    if any(mrilc.values()):
+        fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
+        for name, rows in mrilc.items():
+            if not rows:
+                continue
+            it = [r["iteration"] for r in rows]
+            axes[0].semilogy(it, [r["rms_e"] for r in rows], "o-", ms=3, label=f"{name} RMS(e)")
+            axes[1].plot(it, [r["rms_u1"] for r in rows], "o-", ms=3, label=f"{name} RMS(u1)")
+            axes[1].plot(it, [r["rms_u2"] for r in rows], "s-", ms=3, label=f"{name} RMS(u2)")
+        for ax, title in zip(axes, ("RMS(e) (joint units)", "efforts")):
+            ax.set_title(title, fontsize=9)
+            ax.set_xlabel("iteration")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+        files.append(_save(fig, out / "learning_mrilc.png"))
     if any(curves.values()):
         fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
         for name, rows in curves.items():

@@ -3,9 +3,13 @@
 Roles and the types that fill them (:data:`ROLE_TYPES`): the accelerometer (sensor_msgs/Imu),
 the joint states (sensor_msgs/JointState), the commands (std_msgs/Float64MultiArray as
 forward_command_controller takes them, or trajectory_msgs/JointTrajectory), the cycle events
-(shaper_msgs/CycleEvent) and the active shaper (shaper_msgs/Shaper). When several topics have a
+(shaper_msgs/CycleEvent), the active shaper (shaper_msgs/Shaper) and the applied reference
+(sensor_msgs/JointState positions, what the MRILC replay needs). When several topics have a
 role's type, the one named as this suite and ROS name it (:data:`PREFERRED`) is taken, else the
 one with the most messages (ties: the first by name); the choice is reported and can be forced.
+The reference is only taken by default from a JointState topic whose name ends in "reference"
+(the sim plant's ``/sim_plant/reference``), and such a topic is not taken for the joint states
+while another one exists. When a reference topic is read, the joint states' efforts are read too.
 
 Times are the messages' header stamps where they have one (non-zero), else the time the message
 was logged; everything is in seconds on the recording's clock (simulated time in lockstep runs).
@@ -36,6 +40,7 @@ ROLE_TYPES: dict[str, tuple[str, ...]] = {
     "commands": (ARRAY, TRAJECTORY),
     "events": (EVENT,),
     "shaper": (SHAPER,),
+    "reference": (JOINT_STATE,),
 }
 #: names taken first when several topics have a role's type
 PREFERRED: dict[str, tuple[str, ...]] = {
@@ -44,7 +49,10 @@ PREFERRED: dict[str, tuple[str, ...]] = {
     "commands": ("/shaper/commands",),
     "events": ("/cycle_events",),
     "shaper": ("/shaper/active_shaper",),
+    "reference": ("/sim_plant/reference",),
 }
+#: the reference role takes by default only topics whose name ends so
+REFERENCE_SUFFIX = "reference"
 
 
 @dataclass
@@ -57,6 +65,7 @@ class Events:
     cycle: list[int] = field(default_factory=list)
     start: list[tuple[float, ...]] = field(default_factory=list)
     goal: list[tuple[float, ...]] = field(default_factory=list)
+    joint_names: list[tuple[str, ...]] = field(default_factory=list)
 
 
 @dataclass
@@ -102,6 +111,8 @@ class Recording:
     damage: list  # reading.Damage
     reader: str
     all_topics: dict[str, str]  # topic -> type
+    reference: Signal | None = None  # the applied reference's positions (role "reference")
+    efforts: Signal | None = None    # the joint states' efforts (read with a reference), joints' names
 
 
 def choose_topics(topics: Mapping[str, object], overrides: Mapping[str, str] | None = None
@@ -133,6 +144,10 @@ def choose_topics(topics: Mapping[str, object], overrides: Mapping[str, str] | N
             chosen[role] = forced
             continue
         cands = [info for info in topics.values() if info.msgtype in types]
+        if role == "reference":
+            cands = [c for c in cands if c.topic.endswith(REFERENCE_SUFFIX)]
+        elif role == "joints" and any(not c.topic.endswith(REFERENCE_SUFFIX) for c in cands):
+            cands = [c for c in cands if not c.topic.endswith(REFERENCE_SUFFIX)]
         if not cands:
             chosen[role] = ""
             continue
@@ -214,6 +229,22 @@ class JointStateDecoder:
         self._layout = (_align(end, 8) if pos else end, struct.Struct(f"<{len(pos)}d"))
         return t, names, pos
 
+    @property
+    def positions_end(self) -> int:
+        """Where the positions of the message last decoded end (for :func:`joint_state_efforts`)."""
+        return self._layout[0] + self._layout[1].size
+
+
+def joint_state_efforts(raw, end: int) -> tuple[float, ...]:
+    """The efforts of a little-endian CDR sensor_msgs/JointState whose positions end at ``end``."""
+    pos = _align(end, 4)
+    (nvel,) = _U32.unpack_from(raw, pos)
+    pos = (_align(pos + 4, 8) if nvel else pos + 4) + 8 * nvel
+    pos = _align(pos, 4)
+    (neff,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    return struct.unpack_from(f"<{neff}d", raw, _align(pos, 8) if neff else pos)
+
 
 def _little_endian(raw) -> bool:
     return len(raw) > 4 and raw[1] == 1
@@ -292,7 +323,11 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
         if not chosen["accel"]:
             raise BagError(f"{path}: no accelerometer topic (sensor_msgs/msg/Imu); topics: "
                            + ", ".join(f"{t} [{i.msgtype}]" for t, i in sorted(infos.items())))
+        if chosen["reference"] and chosen["reference"] == chosen["joints"]:
+            raise BagError(f"{path}: {chosen['reference']} cannot be both the joint states and the reference"
+                           " (choose another with --joints-topic or --reference-topic)")
         roles = {topic: role for role, topic in chosen.items() if topic}
+        with_efforts = bool(chosen["reference"])
         unused = sorted(f"{t} [{i.msgtype}]" for t, i in infos.items() if t not in roles)
         if unused:
             notes.append("not used: " + ", ".join(unused))
@@ -311,6 +346,9 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
         acc: list[float] = []  # flat x, y, z, x, ...
         js_fast = JointStateDecoder()
         js = {"seq": [], "t": [], "p": [], "names": None}
+        ref = {"seq": [], "t": [], "p": [], "names": None}
+        eff = {"seq": [], "t": [], "p": []}
+        decoders_fast = {"joints": js_fast, "reference": JointStateDecoder()}
         cmd = {"seq": [], "t": [], "p": []}
         events, shapers = Events(), Shapers()
         bad: dict[str, int] = {}
@@ -346,21 +384,31 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
                     acc_seq.append(seq)
                     acc_t.append(t)
                     acc.extend(a)
-                elif role == "joints":
+                elif role in ("joints", "reference"):
+                    e = None
                     if _little_endian(raw):
-                        t, names, p = js_fast(raw)
+                        fast = decoders_fast[role]
+                        t, names, p = fast(raw)
+                        if role == "joints" and with_efforts:
+                            e = joint_state_efforts(raw, fast.positions_end)
                         if t == 0.0:
                             t = log_ns * 1e-9
                     else:
                         m = decoders[topic](raw)
                         t, names, p = _stamp(m, log_ns), tuple(m.name), tuple(m.position)
-                    if js["names"] is None:
-                        js["names"] = names
-                    if names != js["names"] or len(p) != len(names):
-                        p = _reorder(js["names"], names, p)
-                    js["seq"].append(seq)
-                    js["t"].append(t)
-                    js["p"].append(p)
+                        e = tuple(m.effort) if role == "joints" and with_efforts else None
+                    d = js if role == "joints" else ref
+                    if d["names"] is None:
+                        d["names"] = names
+                    if e is not None and len(e) == len(names):  # a message without efforts has none
+                        eff["seq"].append(seq)
+                        eff["t"].append(t)
+                        eff["p"].append(e if names == d["names"] else _reorder(d["names"], names, e))
+                    if names != d["names"] or len(p) != len(names):
+                        p = _reorder(d["names"], names, p)
+                    d["seq"].append(seq)
+                    d["t"].append(t)
+                    d["p"].append(p)
                 elif role == "commands":
                     m = decoders[topic](raw)
                     if msgtype == ARRAY:
@@ -381,6 +429,7 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
                     events.cycle.append(int(m.cycle))
                     events.start.append(tuple(float(x) for x in m.start_positions))
                     events.goal.append(tuple(float(x) for x in m.goal_positions))
+                    events.joint_names.append(tuple(str(x) for x in m.joint_names))
                 else:
                     m = decoders[topic](raw)
                     shapers.seq.append(seq)
@@ -404,8 +453,13 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
         joints = _finite(_signal(chosen["joints"], js["seq"], js["t"], js["p"], js["names"] or ()), notes) \
             if js["t"] else None
         commands = _finite(_signal(chosen["commands"], cmd["seq"], cmd["t"], cmd["p"]), notes) if cmd["t"] else None
+        reference = _finite(_signal(chosen["reference"], ref["seq"], ref["t"], ref["p"], ref["names"] or ()), notes) \
+            if ref["t"] else None
+        efforts = _finite(_signal(f"{chosen['joints']} (efforts)", eff["seq"], eff["t"], eff["p"], js["names"] or ()),
+                          notes) if eff["t"] else None
         return Recording(str(path), chosen, accel, joints, commands, events, shapers, result.messages, notes,
-                         list(bag.damage), bag.reader_name, {t: i.msgtype for t, i in infos.items()})
+                         list(bag.damage), bag.reader_name, {t: i.msgtype for t, i in infos.items()},
+                         reference, efforts)
 
 
 def _finite(sig: Signal, notes: list[str]) -> Signal:
