@@ -1,6 +1,9 @@
 """The learner node's MRILC mode (seed 000): learn a feedforward profile over cycles.
 
 Started as ``learner`` with ``mode:=mrilc`` (see learner_node.py and config/mrilc.yaml).
+The parameters' names, defaults and ranges, and the construction of the model from them, are
+in the ROS-free core (core.mrilc_learning.DEFAULTS, RANGES, model_from_params), which offline
+replays (the bag analysis) share.
 
 At start-up it builds the reference model G_m = C P_nom / (1 + C P_nom) from the configured
 controller and nominal plant, runs the convergence check of seed 000 eq. (11) over the plant

@@ -430,7 +430,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     if rec.joints is None or not rec.joints.names:
         missing.append("joint states with named positions (sensor_msgs/JointState)")
     if rec.reference is None:
-        missing.append(f"the applied reference (a sensor_msgs/JointState topic ending in '{REFERENCE_SUFFIX}',"
+        missing.append(f"applied reference (a sensor_msgs/JointState topic ending in '{REFERENCE_SUFFIX}',"
                        " or --reference-topic)")
     if missing:
         return refused("the recording has no " + "; no ".join(missing))
