@@ -79,3 +79,31 @@ def test_profile_is_saved_and_reloaded(starter, ros_context, tmp_path):
     again = run_learning(PERTURBED, 1, start, ros_context, {"state_file": str(state), "mrilc.law": "robust"})
     assert again[0].iteration == 4
     assert again[0].rms_e < first[2].rms_e < first[0].rms_e  # it went on from the saved profile
+
+
+def test_a_recorded_mrilc_run_replays_offline_to_the_live_updates(starter, ros_context, tmp_path):
+    """The bag analysis' MRILC replay of a recorded live run gives the live learner's updates."""
+    from shaper_nodes.analysis.analyze import Options, analyze
+    from shaper_nodes.analysis.streams import read_recording
+
+    start = starter
+    bag = tmp_path / "bag"
+    recorder = start("shaper_nodes", "recorder", {
+        "output": str(bag), "use_sim_time": True,
+        "topics": ["/tip_imu", "/joint_states", "/sim_plant/reference", "/cycle_events"]})
+    live = run_learning(PERTURBED, 3, start, ros_context)
+    time.sleep(0.5)  # the recorder drains its queue
+    assert recorder.stop() == 0
+    start.stop_all()
+    assert [r.action for r in live] == ["learn"] * 3
+    rec = read_recording(bag)
+    params = {"mrilc.rate": RATE, "joint_names": JOINT}
+    for learned_run, expected in ((True, 3), (False, 1)):
+        replay = analyze(rec, Options(learners=("mrilc",), learner_params={**params, "replay.learned_run": learned_run}
+                                      )).replays["mrilc"]
+        rows = [r for r in replay.rows if "skipped" not in r]
+        assert len(rows) == expected, replay
+        for row, it in zip(rows, live):
+            assert row["iteration"] == it.iteration
+            assert (row["rms_e"], row["rms_u1"], row["rms_u2"], row["residual"]) == pytest.approx(
+                (it.rms_e, it.rms_u1, it.rms_u2, it.residual), rel=1e-12)

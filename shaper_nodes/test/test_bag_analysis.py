@@ -289,8 +289,9 @@ def test_stamped_monitor_completes_a_cycle_whose_last_samples_were_lost():
 def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float = 200.0):
     """Seed 000's loop on the perturbed plant (w = 5, zeta = 0.15) at 200 Hz with u2 = 0 (a run
     without learning), recorded as the sim plant and the conductor publish it: /joint_states
-    (y, u), /sim_plant/reference (r_s, stamped at the start of its period), /cycle_events, and a
-    tip accelerometer (y''). Returns the cycle's r_s, y and u (samples x 1)."""
+    (y, u), /sim_plant/reference (r_s, stamped at the start of its period), /cycle_events (the
+    END logged before the cycle's last samples, as in a lockstep recording), and a tip
+    accelerometer (y''). Returns the model, and the cycle's r_s, y and u (samples x 1)."""
     import pathlib
 
     from shaper_nodes.analysis.synthetic import trapezoid
@@ -328,8 +329,8 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
     def hdr(ns):
         return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="")
 
-    def event(kind, cycle, ns):
-        write("ev", ns, T["shaper_msgs/msg/CycleEvent"](
+    def event(kind, cycle, ns, log_ns=None):
+        write("ev", ns if log_ns is None else log_ns, T["shaper_msgs/msg/CycleEvent"](
             header=hdr(ns), event=kind, cycle=cycle, task="round_trip", joint_names=["joint_1"],
             start_positions=np.zeros(1), goal_positions=np.ones(1)), "shaper_msgs/msg/CycleEvent")
 
@@ -341,6 +342,8 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
                 ns = (first + i) * step_ns
                 if i == 80:
                     event(1, c, ns)
+                if i == n - 3:  # the END, stamped at the last sample, logged before the last samples
+                    event(2, c, (first + n - 1) * step_ns, ns)
                 write("js", ns, T["sensor_msgs/msg/JointState"](
                     header=hdr(ns), name=["joint_1"], position=y[i], velocity=np.zeros(1), effort=u[i]),
                     "sensor_msgs/msg/JointState")
@@ -353,7 +356,6 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
                     angular_velocity=Vec(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=np.zeros(9),
                     linear_acceleration=Vec(x=float(acc[i]), y=0.0, z=0.0),
                     linear_acceleration_covariance=np.zeros(9)), "sensor_msgs/msg/Imu")
-            event(2, c, (first + n - 1) * step_ns)
     finally:
         writer.close()
     return model, r_s, y, u

@@ -418,6 +418,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     live MRILC run.
     """
     from ..core.mrilc import MrilcError
+    from ..core.mrilc_learning import END as M_END
     from ..core.mrilc_learning import START as M_START
     from ..core.mrilc_learning import MrilcLearner, MrilcSession, model_from_params
 
@@ -484,25 +485,36 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
              + ("" if efforts else " (no efforts recorded: RMS(u1) not available)")
              + f"; model: reference mode {model.mode.omega:.4g} rad/s, zeta {model.mode.zeta:.4g}, law"
              f" {model.law.law}, {1 / model.period:g} Hz"]
+
+    def handle(event) -> None:
+        result = session.on_event(*event)
+        if result is None:
+            return
+        u = result.update
+        if u is None:
+            not_installed = not learned_run and result.skipped.startswith("the cycle started before")
+            rows.append({"cycle": result.cycle, "skipped": unapplied if not_installed else result.skipped})
+            return
+        rows.append({"cycle": result.cycle, "iteration": u.iteration, "rms_e": u.rms_e, "rms_u1": u.rms_u1,
+                     "rms_u2": u.rms_u2, "residual": u.residual, "action": u.action})
+        # the node installs the new profile before the next START; a recording made without
+        # learning never ran with it, so its later cycles are not learned from
+        session.profile_ready = learned_run
+
+    # as the node waits at an END for the samples stamped up to it (they may be logged after the
+    # END), an END and the events after it wait until both streams have reached its stamp
+    pending: list[tuple[int, int, float]] = []
     for _, kind, payload in heapq.merge(joints(), reference(), events(), key=lambda x: x[0]):
         if kind == 0:
             session.on_joint_state(*payload)
         elif kind == 1:
             session.on_reference(*payload)
         else:
-            result = session.on_event(*payload)
-            if result is None:
-                continue
-            u = result.update
-            if u is None:
-                not_installed = not learned_run and result.skipped.startswith("the cycle started before")
-                rows.append({"cycle": result.cycle, "skipped": unapplied if not_installed else result.skipped})
-                continue
-            # the node installs the new profile before the next START; a recording made without
-            # learning never ran with it, so its later cycles are not learned from
-            session.profile_ready = learned_run
-            rows.append({"cycle": result.cycle, "iteration": u.iteration, "rms_e": u.rms_e, "rms_u1": u.rms_u1,
-                         "rms_u2": u.rms_u2, "residual": u.residual, "action": u.action})
+            pending.append(payload)
+        while pending and (pending[0][0] != M_END or session.latest >= pending[0][2]):
+            handle(pending.pop(0))
+    for event in pending:  # the recording ended: what is still missing is missing
+        handle(event)
     learned = sum(1 for r in rows if "skipped" not in r)
     notes.append(f"{learned} of {len(rows)} cycles learned from")
     if not learned_run and learned:
