@@ -407,3 +407,18 @@ def test_cli_runs_the_mrilc_replay_and_plots_its_learning_curve(tmp_path, capsys
     assert (tmp_path / "report" / "learning_mrilc.png").exists()
     assert "## MRILC replay" in (tmp_path / "report" / "report.md").read_text()
     assert (tmp_path / "report" / "replay_mrilc.csv").read_text().startswith("cycle,action,iteration")
+
+
+def test_reference_topic_choice():
+    from shaper_nodes.analysis.reading import TopicInfo
+    from shaper_nodes.analysis.streams import choose_topics
+
+    js = "sensor_msgs/msg/JointState"
+    topics = {"/imu": TopicInfo("/imu", "sensor_msgs/msg/Imu", 9), "/arm/reference": TopicInfo("/arm/reference", js, 9)}
+    chosen, notes = choose_topics(topics)  # the only JointState topic: the joint states, not a reference
+    assert chosen["joints"] == "/arm/reference" and chosen["reference"] == "" and "only JointState" in notes[0]
+    topics["/states"] = TopicInfo("/states", js, 3)  # fewer messages, but not a reference by its name
+    chosen, _ = choose_topics(topics)
+    assert chosen["joints"] == "/states" and chosen["reference"] == "/arm/reference"
+    with pytest.raises(BagError, match="--reference-topic /imu has type"):
+        choose_topics(topics, {"reference": "/imu"})

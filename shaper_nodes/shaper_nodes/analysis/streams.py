@@ -158,6 +158,9 @@ def choose_topics(topics: Mapping[str, object], overrides: Mapping[str, str] | N
             others = ", ".join(sorted(c.topic for c in cands if c.topic != pick.topic))
             notes.append(f"{role}: took {pick.topic} ({pick.msgtype}); also of that type: {others}"
                          f" (choose with --{role}-topic)")
+    if chosen["reference"] and chosen["reference"] == chosen["joints"] and not (overrides or {}).get("reference"):
+        notes.append(f"reference: {chosen['reference']} is the only JointState topic, taken as the joint states")
+        chosen["reference"] = ""
     return chosen, notes
 
 
