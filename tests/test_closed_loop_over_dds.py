@@ -9,20 +9,31 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shaper_nodes.core.qft import corners
+from shaper_nodes.core.qft import corners, nominal
+from shaper_nodes.core.time_delay import exact_step_response
 
 from sim_plant_node.closed_loop_cases import (
     DELAY_USED,
     EVENT_TIME,
+    OMEGA_A,
     Run002,
+    dominant_oscillation,
     event_effect,
     growth,
     residual,
     run_seed001,
     run_seed002,
     settle_time,
+    settled_window,
+    shaper_floor,
     tdf_interval_from_cli,
+    vibration,
 )
+
+#: allowed excess of the sim's overshoot over the exact continuous one (fraction): the 1 kHz zero-order-hold
+#: loop's error is first order in the step (1.13e-3 at 1 ms, halving with the step: test_loops.py), doubled
+#: to cover the 100 Hz sampling of the peak in the record
+ZOH_OVERSHOOT_TOL = 2e-3
 
 pytestmark = pytest.mark.integration
 
@@ -36,9 +47,13 @@ def test_seed001_time_delay_feedback(start_node, ros_context):
     # w_R = w_A: at 1 without overshoot from 2T on (first sample at or after 2T at 100 Hz)
     assert y[:, 0].max() <= 1.0 + 1e-9
     assert settle_time(tr, 0, tol=1e-9) <= 2 * DELAY_USED + 0.01
-    # w_R = 4: stable; the paper reads "within 20 %" off its Fig. 8, the exact loop gives 20.7 %
+    # w_R = 4: stable, with the overshoot of the exact continuous loop (method of steps, no simulator) up to
+    # the 1 kHz loop's discretisation error. That exact value is above the paper's "within 20 %" (read off
+    # its Fig. 8): 20.64 % for this T (20.65 % for T = pi/9), so 20 % is not reachable with these parameters
     assert growth(tr, 1) < 1e-3
-    assert 0.0 < y[:, 1].max() - 1.0 <= 0.21
+    exact = exact_step_response(OMEGA_A, DELAY_USED, 4.0).overshoot
+    assert exact > 0.20
+    assert exact - 1e-4 <= y[:, 1].max() - 1.0 <= exact + ZOH_OVERSHOOT_TOL
     # w_R = 2.9 (below w_A): grows
     assert growth(tr, 2) > 2.0
     # the interval's edges: stable just inside, unstable just outside
@@ -61,22 +76,42 @@ RUNS = (
 
 def test_seed002_zv_with_feedforward_feedback(start_node, ros_context):
     tr = run_seed002(start_node, ros_context, RUNS)
-    # residual vibration: RMS of x2 - 1 from the end of the shaped step to the end of the dwell
-    ffb, zv, zvd = residual(tr["ffb"], "zv")[0], residual(tr["zv"], "zv")[0], residual(tr["zvd"], "zvd")[0]
     cs = corners()
-    # two corners (all parameters 0.65 or 1.35 times nominal) have P = P0 exactly: open-loop ZV is exact
-    # there and every scheme sits at the floor left by the shaper's discretisation at 1 kHz
-    same = np.array([abs(c.k / c.m - 15791.0) < 1 and abs(c.c / c.m - 25.1327) < 0.01 for c in cs])
-    # two more have the nominal frequency and only another damping ratio (0.21, 0.048): the ZVD is good
-    # there already and the loop's slow creep to the target (no oscillation) leaves it at about a third
-    damping_only = np.array([abs(c.k / c.m - 15791.0) < 1 for c in cs]) & ~same
-    assert same.sum() == 2 and damping_only.sum() == 2
-    # Fig. 9: every other corner plant, a quarter or less of open-loop ZV and of open-loop ZVD
+    p0 = nominal()
+    # two corners (all parameters 0.65 or 1.35 times nominal) have P = P0 (to the issue's 5 digits); two more
+    # have the nominal frequency and only another damping ratio (0.21 and 0.048)
+    same = np.array([abs(c.k / c.m - p0.k) < 1 and abs(c.c / c.m - p0.c) < 0.01 for c in cs])
+    damping_only = np.array([abs(c.k / c.m - p0.k) < 1 for c in cs]) & ~same
+    light = damping_only & np.array([c.zeta < p0.zeta for c in cs])
+    assert same.sum() == 2 and damping_only.sum() == 2 and light.sum() == 1
+    # metric 1 (RMS of x2 - 1 after the shaped step) and metric 2 (residual vibration: the oscillatory part
+    # of x2 - 1 after the shaped step, the loop's non-oscillatory settling removed; docs/closed_loop.md)
+    r_ffb, r_zv, r_zvd = residual(tr["ffb"], "zv")[0], residual(tr["zv"], "zv")[0], residual(tr["zvd"], "zvd")[0]
+    ffb, zv, zvd = vibration(tr["ffb"])[0], vibration(tr["zv"])[0], vibration(tr["zvd"])[0]
+    # Fig. 9 against open-loop ZV: a quarter or less on every corner that differs from P0, by both metrics
+    assert np.all(r_ffb[~same] <= 0.25 * r_zv[~same]), (r_ffb, r_zv)
     assert np.all(ffb[~same] <= 0.25 * zv[~same]), (ffb, zv)
+    # against open-loop ZVD: a quarter or less on the four corners whose frequency differs (both metrics)
+    # and, by metric 2, on the damping-only corner with zeta = 0.21 (metric 1 is 0.30 there: the loop's
+    # slow creep to the target, not vibration)
     off = ~same & ~damping_only
-    assert np.all(ffb[off] <= 0.25 * zvd[off]), (ffb, zvd)
-    assert np.all(ffb[damping_only] <= 0.5 * zvd[damping_only]), (ffb, zvd)
-    assert np.all(ffb[same] <= 1.05 * zv[same]) and np.all(ffb[same] < 1e-4), (ffb, zv)
+    assert np.all(r_ffb[off] <= 0.25 * r_zvd[off]), (r_ffb, r_zvd)
+    assert np.all(ffb[~same & ~light] <= 0.25 * zvd[~same & ~light]), (ffb, zvd)
+    # the damping-only corner with zeta = 0.048 does NOT meet it (0.39 of ZVD): the ZV-shaped step excites
+    # the loop's own lightly damped mode (the plant's mode stiffened by the feedback, about 630 rad/s,
+    # zeta about 0.1), which rings after the shaped step; still well below open-loop ZVD
+    assert np.all(ffb[light] <= 0.5 * zvd[light]), (ffb, zvd)
+    w = settled_window(tr["ffb"])
+    (j,) = np.nonzero(light)[0]
+    omega, _ = dominant_oscillation(tr["ffb"].output[w, j] - 1.0, 1e-3)
+    assert omega > 3 * cs[j].omega_n
+    # P = P0: open-loop ZV is exact up to the floor left by splitting the ZV's impulses onto the 1 ms command
+    # grid (P0's own residual after the sent reference); the loop has (almost) nothing to correct and must
+    # not add to that floor by more than the 5-digit rounding of P vs P0 gives (10 %)
+    floor = shaper_floor(tr["zv"])
+    assert floor < 1e-4
+    assert np.allclose(zv[same], floor, rtol=0.02), (zv, floor)
+    assert np.all(ffb[same] <= 1.1 * floor), (ffb, floor)
     # Fig. 10: the loop removes a unit-step output disturbance that stays in the open loop
     assert np.all(event_effect(tr["dist_ffb"]) < 0.25 * event_effect(tr["dist_open"]))
     # and a unit-step measurement noise: what the sensor shows is brought back, while the true output

@@ -11,6 +11,7 @@ from shaper_nodes.core.time_delay import (
     change_points,
     characteristic,
     controller_response,
+    exact_step_response,
     g_ff,
     growth_rate,
     ppusmd_gains,
@@ -85,3 +86,25 @@ def test_selection_rules_give_a_stable_design():
         si = stable_interval(wa, t)
         assert si.lower <= wr <= si.upper
         assert growth_rate(wa, t, wr, 100) < 0
+
+
+def test_exact_step_response_matched_model_is_the_shaped_step():
+    """w_R = w_A: the loop is the feedforward shaper; the exact response is at 1 from 2T on, no overshoot."""
+    t = math.pi / (3 * WA)
+    r = exact_step_response(WA, t, WA, intervals=8)
+    assert r.overshoot <= 1e-12
+    assert np.abs(r.y[r.t >= 2 * t - 1e-12] - 1.0).max() < 1e-12
+    assert r.y[r.t < 2 * t - 0.02].max() < 1.0 - 1e-4  # and not before
+
+
+def test_exact_step_response_peak_and_input_errors():
+    r = exact_step_response(WA, math.pi / (3 * WA), 4.0)
+    # the peak is a stationary point of the exact solution, above every grid value
+    assert r.peak >= r.y.max() - 1e-15
+    assert r.t[0] <= r.peak_time <= r.t[-1]
+    # more intervals do not move a peak that lies in the first ones
+    assert exact_step_response(WA, math.pi / (3 * WA), 4.0, intervals=40).peak == pytest.approx(r.peak, abs=1e-13)
+    for bad in ({"omega_r": 0.0}, {"omega_r": math.nan}, {"intervals": 0}):
+        kw = {"omega_a": WA, "delay": 0.3, "omega_r": 4.0, **bad}
+        with pytest.raises(TimeDelayError):
+            exact_step_response(**kw)

@@ -207,3 +207,37 @@ def test_taking_over_a_state_puts_the_controller_at_rest_at_the_tip():
     for i in range(300):
         p.step(np.array([0.3]), None)
     assert abs(p.output[0] - 0.3) < 1e-12  # at rest: nothing moves
+
+
+def test_delay_loop_overshoot_converges_to_the_exact_continuous_loop():
+    """Seed 001 at w_R = 4: the zero-order-hold loop's overshoot tends to the exact (method of steps) one at
+    first order in the loop step, from above (the hold's lag adds overshoot)."""
+    from shaper_nodes.core.time_delay import exact_step_response
+
+    delay = 0.349  # on the grid of every step below
+    exact = exact_step_response(WA, delay, 4.0).overshoot
+    os_ = []
+    for sub in (10, 20, 40):  # 1, 0.5, 0.25 ms
+        plant = delay_loop(4.0, substeps=sub, **{"loop.delay": delay})
+        os_.append(step_response(plant, 3.0)[1][:, 0].max() - 1.0)
+    err = np.array(os_) - exact
+    assert np.all(err > 0)
+    assert 1.8 < err[0] / err[1] < 2.6 and 1.8 < err[1] / err[2] < 2.6
+    assert err[0] < 2e-3  # the tolerance the ROS-graph test allows at 1 ms
+    assert abs(2 * os_[1] - os_[0] - exact) < 1e-4  # Richardson
+
+
+def test_modal_split_separates_settling_from_vibration():
+    from sim_plant_node.closed_loop_cases import dominant_oscillation, modal_split
+
+    dt = 1e-3
+    t = np.arange(900) * dt
+    creep = 3e-4 * np.exp(-7.3 * t)
+    ring = 2e-4 * np.exp(-60.0 * t) * np.cos(627.0 * t + 0.3)
+    osc, slow, poles = modal_split(creep + ring, dt)
+    assert np.allclose(osc, ring, atol=1e-12) and np.allclose(slow, creep, atol=1e-12)
+    omega, zeta = dominant_oscillation(creep + ring, dt)
+    assert omega == pytest.approx(math.hypot(60.0, 627.0), rel=1e-6)
+    assert zeta == pytest.approx(60.0 / math.hypot(60.0, 627.0), rel=1e-6)
+    osc, slow, _ = modal_split(np.zeros(50), dt)
+    assert not osc.any() and not slow.any()

@@ -259,3 +259,101 @@ def growth_rate(omega_a: float, delay: float, omega_r: float, samples_per_delay:
     over the sample period, hidden model poles left out): > 0 grows, < 0 decays."""
     dt = delay / int(samples_per_delay)
     return math.log(sampled_spectral_radius(omega_a, delay, omega_r, samples_per_delay)) / dt
+
+
+# ------------------------------------------------------------------------------------------------
+# exact step response of the continuous loop (method of steps)
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    """Exact unit-step response of the continuous delay loop (see :func:`exact_step_response`).
+
+    Attributes
+    ----------
+    t, y : np.ndarray
+        Time (s) and output y on the grid (``points_per_delay`` per T, both ends of every interval).
+    peak_time, peak : float
+        Time (s) and value of the largest output, located to machine precision as a zero of y'.
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    peak_time: float
+    peak: float
+
+    @property
+    def overshoot(self) -> float:
+        """Overshoot of the unit step, as a fraction (peak - 1)."""
+        return self.peak - 1.0
+
+
+def exact_step_response(omega_a: float, delay: float, omega_r: float, intervals: int = 30,
+                        points_per_delay: int = 400, gains: tuple[float, float, float] | None = None
+                        ) -> StepResponse:
+    """Unit-step response of the continuous loop of seed 001 (real plant w_R^2 / (s^2 + w_R^2), IMC
+    controller with the internal model w_A^2 / (s^2 + w_A^2), exact delays T and 2T), computed by the
+    method of steps: on the n-th interval [nT, (n+1)T] the delayed signals are the solution on the
+    earlier intervals, so the stacked states z(jT + tau), j = 0..n, of x = [y, y', yhat, yhat'] obey
+    one linear ODE in tau in [0, T] (zero history before the step, continuity z_j(0) = z_{j-1}(T)),
+    solved by the matrix exponential. No discretisation: the only errors are rounding.
+
+    ``gains`` defaults to the PPUSMD gains for (w_A, T). Independent of the sampled loop and of the
+    sim plant; the peak is the largest of the zeros of y' (Brent) and the interval ends.
+    """
+    from scipy.optimize import brentq
+
+    _check(omega_a, delay)
+    if not (math.isfinite(omega_r) and omega_r > 0):
+        raise TimeDelayError(f"real frequency w_R must be finite and > 0 rad/s, got {omega_r!r}")
+    if int(intervals) < 1 or int(points_per_delay) < 2:
+        raise TimeDelayError("intervals must be >= 1 and points_per_delay >= 2")
+    a0, a1, a2 = gains if gains is not None else ppusmd_gains(omega_a, delay)
+    coef = (a0, a1, a2)
+    ts, ys = [], []
+    best = (0.0, 0.0)
+    prev_end = np.zeros(0)  # z_0 .. z_{n-1} at tau = T of the previous interval
+    taus = np.linspace(0.0, delay, int(points_per_delay) + 1)
+    for n in range(int(intervals)):
+        dim = 4 * (n + 1) + 1  # blocks z_0 .. z_n and the constant reference 1
+        m = np.zeros((dim, dim))
+        one = dim - 1
+        for j in range(n + 1):
+            b = 4 * j
+            m[b, b + 1] = 1.0
+            m[b + 1, b] = -omega_r**2
+            m[b + 2, b + 3] = 1.0
+            m[b + 3, b + 2] = -omega_a**2
+            # u on block j: sum_i A_i v(jT + tau - iT), v = 1 - y + yhat on blocks j - i >= 0, 0 before the step
+            for i, a in enumerate(coef):
+                src = j - i
+                if src < 0:
+                    continue
+                for row, w2 in ((b + 1, omega_r**2), (b + 3, omega_a**2)):
+                    m[row, one] += w2 * a
+                    m[row, 4 * src] -= w2 * a
+                    m[row, 4 * src + 2] += w2 * a
+        x0 = np.zeros(dim)
+        x0[4:4 * (n + 1)] = prev_end
+        x0[one] = 1.0
+        step = expm(m * (taus[1] - taus[0]))
+        xs = np.empty((taus.size, dim))
+        xs[0] = x0
+        for i in range(1, taus.size):
+            xs[i] = step @ xs[i - 1]
+        last = 4 * n
+        y, dy = xs[:, last], xs[:, last + 1]
+        ts.append(n * delay + taus)
+        ys.append(y)
+        for i in np.nonzero(np.sign(dy[:-1]) * np.sign(dy[1:]) < 0)[0]:
+            def slope(tau, i=i):
+                return float((expm(m * (tau - taus[i])) @ xs[i])[last + 1])
+            tau = brentq(slope, taus[i], taus[i + 1], xtol=1e-15, rtol=4 * np.finfo(float).eps)
+            val = float((expm(m * (tau - taus[i])) @ xs[i])[last])
+            if val > best[1]:
+                best = (n * delay + tau, val)
+        k = int(np.argmax(y))
+        if y[k] > best[1]:
+            best = (float(n * delay + taus[k]), float(y[k]))
+        prev_end = xs[-1, :4 * (n + 1)]
+    return StepResponse(np.concatenate(ts), np.concatenate(ys), best[0], best[1])
