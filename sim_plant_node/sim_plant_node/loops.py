@@ -44,7 +44,7 @@ from scipy.linalg import expm, null_space
 from shaper_nodes.core import qft
 from shaper_nodes.core.time_delay import ppusmd_gains
 
-from .plants import _JointState, _per_joint
+from .plants import MckMode, _JointState, _per_joint
 
 LOOP_MODELS = ("delay_loop", "qft_open", "qft_fb", "qft_ffb")
 #: the loop parameters of the sim plant node: name -> (default, description)
@@ -71,7 +71,7 @@ def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return e[:n, :n], e[:n, n:]
 
 
-class LoopPlant(_JointState):
+class LoopPlant(_JointState, MckMode):
     """Base class: the m-c-k joints, the disturbance and noise inputs, the sample loop.
 
     State per joint as the other plants: tip x2, x2', base x1 (= u at the end of the last
@@ -149,14 +149,6 @@ class LoopPlant(_JointState):
     def effort(self) -> np.ndarray:
         """The controller output u (the base position x1) over the last loop sample."""
         return np.asarray(self.control, dtype=float).copy()
-
-    @property
-    def natural_frequency(self) -> np.ndarray:
-        return np.sqrt(self.k / self.m)
-
-    @property
-    def damping_ratio(self) -> np.ndarray:
-        return self.c / (2.0 * np.sqrt(self.k * self.m))
 
     @property
     def tip_acceleration(self) -> np.ndarray:

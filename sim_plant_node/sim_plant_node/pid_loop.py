@@ -26,8 +26,10 @@ from scipy.linalg import expm
 
 from shaper_nodes.core.mrilc import PAPER_CONTROLLER, MrilcError, controller
 
+from .plants import MckMode
 
-class PidLoopPlant:
+
+class PidLoopPlant(MckMode):
     """Per-joint m-c-k plants, each in the loop of the same controller C (see the module docstring).
 
     Parameters
@@ -92,14 +94,6 @@ class PidLoopPlant:
         return a, b, cy, cu, du
 
     # ------------------------------------------------------------------ the common plant interface
-    @property
-    def natural_frequency(self) -> np.ndarray:
-        return np.sqrt(self.k / self.m)
-
-    @property
-    def damping_ratio(self) -> np.ndarray:
-        return self.c / (2.0 * np.sqrt(self.k * self.m))
-
     @property
     def state(self) -> np.ndarray:
         return np.hstack([self.x, self.w])

@@ -85,7 +85,25 @@ class _JointState:
         return self.state[:, 1].copy()
 
 
-class MckPlant(_JointState):
+class MckMode:
+    """The mode of per-joint m-c-k parameters ``m``, ``c``, ``k`` (arrays)."""
+
+    m: np.ndarray
+    c: np.ndarray
+    k: np.ndarray
+
+    @property
+    def natural_frequency(self) -> np.ndarray:
+        """Undamped natural frequency of each joint's mode, rad/s."""
+        return np.sqrt(self.k / self.m)
+
+    @property
+    def damping_ratio(self) -> np.ndarray:
+        """Damping ratio of each joint's mode."""
+        return self.c / (2.0 * np.sqrt(self.k * self.m))
+
+
+class MckPlant(_JointState, MckMode):
     """Per-joint m-c-k flexible joints integrated exactly under a first-order-hold base motion.
 
     Parameters
@@ -128,15 +146,6 @@ class MckPlant(_JointState):
         )
         return expm(a * self.dt)
 
-    @property
-    def natural_frequency(self) -> np.ndarray:
-        """Undamped natural frequency of each joint's mode, rad/s."""
-        return np.sqrt(self.k / self.m)
-
-    @property
-    def damping_ratio(self) -> np.ndarray:
-        """Damping ratio of each joint's mode."""
-        return self.c / (2.0 * np.sqrt(self.k * self.m))
 
     def reset(self, position) -> None:
         """Put every joint at rest: base and tip at ``position``, no motion."""
