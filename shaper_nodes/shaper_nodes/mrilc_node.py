@@ -231,7 +231,14 @@ class MrilcMode:
         msg.data = np.asarray(profile, dtype=float).ravel().tolist()
         if self.session:
             self.session.profile_ready = False
-        resp = await self._set_ff.call_async(SetFeedforward.Request(profile=msg))
+        future = self._set_ff.call_async(SetFeedforward.Request(profile=msg))
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:  # a lost reply must not hang the learner
+            await self.node._sleep(0.002)
+        if not future.done():
+            self._set_ff.remove_pending_request(future)
+            return False, f"{self._set_ff.srv_name} did not answer within {timeout:g} s"
+        resp = future.result()
         if self.session:
             self.session.profile_ready = bool(resp.success)
         return bool(resp.success), str(resp.message)

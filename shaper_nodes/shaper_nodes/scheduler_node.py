@@ -35,6 +35,7 @@ sends a shaper again. Other sources are refused here: they set the shaper node d
 from __future__ import annotations
 
 import math
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -90,6 +91,8 @@ class SchedulerNode(Node):
         d("joint_states", "/joint_states", _desc("Joint state topic.", read_only=True))
         d("period", 0.05, _desc("How often the rule base is evaluated, s (node clock).", 0.001, 60.0, read_only=True))
         d("min_interval", 0.1, _desc("Least time between two shapers sent, s.", 0.0, 3600.0))
+        d("service_timeout", 2.0, _desc(
+            "A set_shaper call unanswered this long (wall time) is given up and sent again, s.", 0.01, 600.0))
         d("relative_change", 0.01, _desc(
             "Least change that sends a new shaper: |d omega| / omega or |d zeta| / max(zeta, 0.01), fraction.",
             0.0, 10.0))
@@ -138,6 +141,8 @@ class SchedulerNode(Node):
         self.last_sent: Interpolation | None = None
         self._sent_at = -math.inf                 # node clock, s
         self._pending = False
+        self._pending_since = 0.0                 # monotonic time of the call in flight
+        self._call = 0                            # number of the latest set_shaper call
         self._held_by_learner = False
         self._active: ShaperMsg | None = None
         self._reported: dict[str, float] = {}
@@ -211,6 +216,12 @@ class SchedulerNode(Node):
         est.header.stamp = self._stamp
         self._mode_pub.publish(est)
         self._interp = interp
+        if self._pending and time.monotonic() - self._pending_since > float(
+                self.get_parameter("service_timeout").value):
+            # e.g. a reply lost while DDS was still matching the service's reply reader: ask again
+            self._report("timeout", DiagnosticStatus.WARN, f"{self._set_cli.srv_name} did not answer within"
+                         " service_timeout; sending again")
+            self._pending = False
         if self._pending or self._held_by_learner or not self._set_cli.service_is_ready():
             return
         threshold = float(self.get_parameter("relative_change").value)
@@ -234,12 +245,15 @@ class SchedulerNode(Node):
         if shaper.family != "custom":  # a family design: the shaper node designs it on the modes
             msg.amplitudes, msg.times = [], []
         req = SetShaper.Request(shaper=msg)
-        self._pending = True
+        self._pending, self._pending_since = True, time.monotonic()
+        self._call += 1
         self._sent_at = self._now()
         future = self._set_cli.call_async(req)
-        future.add_done_callback(lambda f, i=interp: self._on_answer(f, i))
+        future.add_done_callback(lambda f, i=interp, n=self._call: self._on_answer(f, i, n))
 
-    def _on_answer(self, future, interp: Interpolation) -> None:
+    def _on_answer(self, future, interp: Interpolation, call: int) -> None:
+        if call != self._call:
+            return  # the answer to a call given up after service_timeout (sent again since)
         self._pending = False
         resp = future.result()
         if resp is not None and resp.success:
