@@ -39,6 +39,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -62,6 +63,9 @@ RULE_FIELDS = {"membership": Parameter.Type.STRING_ARRAY, "membership_params": P
                "a_matrix": Parameter.Type.DOUBLE_ARRAY, "b_matrix": Parameter.Type.DOUBLE_ARRAY,
                "natural_frequency": Parameter.Type.DOUBLE_ARRAY, "damping_ratio": Parameter.Type.DOUBLE_ARRAY}
 
+
+#: wall time between discovering the shaper's set_shaper service and the first request, s
+DISCOVERY_SETTLE = 0.5
 
 class SchedulerNode(Node):
     """See the module docstring. Extra arguments go to ``Node``."""
@@ -149,6 +153,10 @@ class SchedulerNode(Node):
         self.sent = 0
         self.refused = 0
         self.create_timer(float(p("period")), self._tick)
+        # wall clock (with use_sim_time the node clock stands still while a lockstep plant is idle):
+        # notes when the shaper's set_shaper service appeared, see _service_settled
+        self._ready_since: float | None = None
+        self._watch = self.create_timer(0.05, self._watch_service, clock=Clock(clock_type=ClockType.STEADY_TIME))
         rb = self.core.rule_base
         self.get_logger().info(
             f"{len(rb.rules)} rules over {', '.join(self.premises)} (range "
@@ -222,7 +230,7 @@ class SchedulerNode(Node):
             self._report("timeout", DiagnosticStatus.WARN, f"{self._set_cli.srv_name} did not answer within"
                          " service_timeout; sending again")
             self._pending = False
-        if self._pending or self._held_by_learner or not self._set_cli.service_is_ready():
+        if self._pending or self._held_by_learner or not self._service_settled():
             return
         threshold = float(self.get_parameter("relative_change").value)
         if self.last_sent is not None and relative_change(self.last_sent.modes, interp.modes) < threshold:
@@ -230,6 +238,19 @@ class SchedulerNode(Node):
         if self._now() - self._sent_at < self._min_gap():
             return
         self._send(interp)
+
+    def _watch_service(self) -> None:
+        if self._set_cli.service_is_ready():
+            if self._ready_since is None:
+                self._ready_since = time.monotonic()
+        else:
+            self._ready_since = None
+
+    def _service_settled(self) -> bool:
+        """set_shaper has been discovered for DISCOVERY_SETTLE s: a request sent as soon as the
+        service appears may be answered before DDS has matched the reply reader, and the reply is
+        lost (then service_timeout sends it again, but late)."""
+        return self._ready_since is not None and time.monotonic() - self._ready_since > DISCOVERY_SETTLE
 
     def _min_gap(self) -> float:
         duration = self._active.times[-1] if self._active is not None and len(self._active.times) else 0.0
