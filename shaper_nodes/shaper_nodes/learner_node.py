@@ -241,7 +241,9 @@ class LearnerNode(Node):
             msg.family = "custom"  # the learned impulses exactly, not a design
         req = SetShaper.Request(shaper=msg)
         self.session.sent(params)
-        resp = await self._set_shaper.call_async(req)
+        resp = await self._call(self._set_shaper, req, timeout)
+        if resp is None:
+            return False, f"{self._set_shaper.srv_name} did not answer within {timeout:g} s"
         return bool(resp.success), str(resp.message)
 
     # ----------------------------------------------------------------- inputs
@@ -251,6 +253,18 @@ class LearnerNode(Node):
 
     def _on_active(self, msg: ShaperMsg) -> None:
         self.session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
+
+    async def _call(self, client, request, timeout: float):
+        """The reply to ``request``, or None when none came within ``timeout`` s of wall time (a
+        reply sent before DDS has matched the reply reader is lost; it must not hang the learner)."""
+        future = client.call_async(request)
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            await self._sleep(0.002)
+        if not future.done():
+            client.remove_pending_request(future)
+            return None
+        return future.result()
 
     async def _sleep(self, seconds: float) -> None:
         """Wait without blocking the executor (steady clock; other callback groups keep running)."""

@@ -212,9 +212,11 @@ class MrilcMode:
             if shaper is not None:
                 msg = shaper_to_msg(shaper, SOURCE, 0, self.node.get_clock().now().to_msg())
                 msg.family = "custom"  # the designed impulses exactly
-                resp = await self._set_shaper.call_async(SetShaper.Request(shaper=msg))
-                if not resp.success:
-                    self.node.get_logger().error(f"the shaper node refused the {self._family} shaper: {resp.message}")
+                resp = await self.node._call(self._set_shaper, SetShaper.Request(shaper=msg),
+                                             float(self.node.get_parameter("service_timeout").value))
+                if resp is None or not resp.success:
+                    why = "no answer" if resp is None else resp.message
+                    self.node.get_logger().error(f"the shaper node refused the {self._family} shaper: {why}")
         ok, why = await self._install(self.session.learner.profile if self.session else np.zeros((0, 0)))
         if not ok:
             self.node.get_logger().error(f"the injection point refused the profile: {why}")
@@ -231,14 +233,9 @@ class MrilcMode:
         msg.data = np.asarray(profile, dtype=float).ravel().tolist()
         if self.session:
             self.session.profile_ready = False
-        future = self._set_ff.call_async(SetFeedforward.Request(profile=msg))
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:  # a lost reply must not hang the learner
-            await self.node._sleep(0.002)
-        if not future.done():
-            self._set_ff.remove_pending_request(future)
+        resp = await self.node._call(self._set_ff, SetFeedforward.Request(profile=msg), timeout)
+        if resp is None:
             return False, f"{self._set_ff.srv_name} did not answer within {timeout:g} s"
-        resp = future.result()
         if self.session:
             self.session.profile_ready = bool(resp.success)
         return bool(resp.success), str(resp.message)
