@@ -168,6 +168,8 @@ def test_invalid_parameters_are_refused_and_the_old_shaper_stays(rig):
     assert rig.node.set_parameters_atomically([Parameter("shaper.family", value="zvd")]).successful
     rig.spin_until(lambda: rig.active[-1].revision == rev + 1, "new active shaper")
     assert rig.active[-1].family == "zvd" and rig.active[-1].source == "parameters"
+    assert rig.node.set_parameters_atomically([Parameter("discretization", value="exact")]).successful
+    rig.spin_until(lambda: rig.active[-1].revision == rev + 2, "the same shaper, discretised exactly")
 
 
 def test_set_shaper_service_validates_and_policy_applies(rig):

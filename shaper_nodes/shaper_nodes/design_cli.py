@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_show.add_argument("--amplitudes", type=_number("--amplitudes"), nargs="+", help="custom family: amplitudes")
     p_show.add_argument("--times", type=_number("--times"), nargs="+", help="custom family: impulse times, s")
     p_show.add_argument("--rate", type=_number("--rate (Hz)", positive=True), help="command rate, Hz: also show the discretised FIR")
-    p_show.add_argument("--discretization", choices=("split", "round"), default="split",
+    p_show.add_argument("--discretization", choices=("split", "round", "exact"), default="split",
                         help="impulse times between samples (default %(default)s)")
 
     p_cmp = sub.add_parser("compare", help="table of families at one mode")

@@ -86,7 +86,8 @@ class ShaperNode(Node):
             "SI family: width of the band where V <= vibration_tolerance, fraction of the design frequency"
             " (0.4 = +-20 %).", 0.01, 1.5))
         self.declare_parameter("discretization", "split", _desc(
-            "Impulse times between samples: 'split' linearly between the two samples (default) or 'round'."))
+            "Impulse times between samples: 'split' linearly between the two samples (default), 'round', or"
+            " 'exact' (the split corrected so the FIR meets the shaper's conditions at its modes exactly)."))
         self.declare_parameter("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"], _desc(
             "Sources allowed to change the active shaper (update policy).", read_only=True))
         self.declare_parameter("retime_sources", Parameter.Type.STRING_ARRAY, _desc(
@@ -192,8 +193,8 @@ class ShaperNode(Node):
             return overrides[name] if name in overrides else self.get_parameter(name).value
 
         method = str(val("discretization"))
-        if method not in ("split", "round"):
-            raise ShaperError(f"discretization must be 'split' or 'round', got {method!r}")
+        if method not in ("split", "round", "exact"):
+            raise ShaperError(f"discretization must be 'split', 'round' or 'exact', got {method!r}")
         family = str(val("shaper.family")).strip().lower()
         if family == "custom":
             raise ShaperError("family 'custom' is set through the ~/set_shaper service, not parameters")

@@ -59,6 +59,77 @@ def test_splitting_between_samples_removes_the_rounding_error():
     assert percentage_vibration(*split, m.omega, m.zeta) < 0.001  # 0.04 %
 
 
+def _sampled_residual(fir, rate: float, mode: Mode) -> float:
+    """Residual amplitude of an oscillator driven through a zero-order hold at ``rate`` by the FIR's
+    shaped unit step, over that of the unshaped step: simulated sample by sample (exact discretisation
+    of the oscillator, scipy), read from the state after the last tap. Independent of V's formula."""
+    from scipy.signal import cont2discrete
+
+    wn, z = mode.omega, mode.zeta
+    a = np.array([[0.0, 1.0], [-wn**2, -2 * z * wn]])
+    b = np.array([[0.0], [wn**2]])
+    ad, bd, *_ = cont2discrete((a, b, np.eye(2), np.zeros((2, 1))), 1.0 / rate, method="zoh")
+    n = fir.length + 1
+
+    def transient(u: np.ndarray) -> float:
+        x = np.zeros(2)
+        for k in range(n):
+            x = ad @ x + bd[:, 0] * u[min(k, u.size - 1)]
+        # amplitude of the free oscillation about the final value, scaled back to the last tap
+        e = x - np.array([1.0, 0.0])
+        wd = mode.damped_omega
+        amp = math.hypot(e[0], (e[1] + z * wn * e[0]) / wd)
+        return amp * math.exp(z * wn * n / rate)
+
+    return transient(np.cumsum(fir.dense())) / transient(np.ones(1))
+
+
+def test_exact_discretisation_meets_the_conditions_on_the_sample_grid():
+    """'exact' leaves the sampled plant exactly the continuous shaper's residual at the design mode
+    (zero for the ZV family), where 'split' leaves a floor; taps stay >= 0 and sum to 1."""
+    for hz, zeta in ((7.3, 0.05), (12.0, 0.05), (20.0, 0.1)):
+        m = Mode.from_hz(hz, zeta)
+        for family in ("zv", "zvd", "zvdd", "mzv", "2hump_ei"):
+            s = design(family, [m])
+            for rate in (125.0, 250.0, 500.0, 1000.0):
+                exact, split = discretize(s, rate, "exact"), discretize(s, rate, "split")
+                assert abs(exact.gains.sum() - 1.0) < 1e-12 and np.all(exact.gains > 0)
+                assert _sampled_residual(exact, rate, m) < 1e-9
+                assert percentage_vibration(*fir_impulses(exact, rate), m.omega, m.zeta) < 1e-9
+                if _sampled_residual(split, rate, m) > 1e-6:  # split's floor (unless the impulses sit on samples)
+                    assert _sampled_residual(exact, rate, m) < 1e-3 * _sampled_residual(split, rate, m)
+        for family in ("ei", "3hump_ei", "si"):  # V_tol at the mode by design: kept, not zeroed
+            # the residual itself is kept: V times exp(zeta omega t_last) (V is relative to an impulse at
+            # the last one, and the FIR's last tap is up to a sample later)
+            s = design(family, [m])
+            own = float(percentage_vibration(s.amplitudes, s.times, m.omega, m.zeta)) * math.exp(
+                m.zeta * m.omega * s.duration)
+            a, t = fir_impulses(discretize(s, 500.0, "exact"), 500.0)
+            v = float(percentage_vibration(a, t, m.omega, m.zeta)) * math.exp(m.zeta * m.omega * t[-1])
+            assert abs(v - own) < 1e-9 * own
+
+
+def test_exact_zvd_keeps_its_robustness():
+    """The ZVD's zero slope is kept too: V of the exact FIR 2 % off the mode is second order, like the
+    continuous ZVD's, whereas a FIR meeting only V = 0 would be first order."""
+    m = Mode.from_hz(12.0, 0.05)
+    s = design("zvd", [m])
+    fir = fir_impulses(discretize(s, 250.0, "exact"), 250.0)
+    for f in (0.98, 1.02):
+        cont = float(percentage_vibration(s.amplitudes, s.times, m.omega * f, m.zeta))
+        disc = float(percentage_vibration(*fir, m.omega * f, m.zeta))
+        assert abs(disc - cont) < 0.1 * cont
+
+
+def test_exact_discretisation_refuses_a_rate_too_low_for_the_mode():
+    with pytest.raises(ValueError, match=r"exact discretisation of the zvd shaper at 40 Hz .*20 Hz.*use 'split'"):
+        discretize(design("zvd", [Mode.from_hz(20.0, 0.05)]), 40.0, "exact")
+    with pytest.raises(ValueError, match="use 'split', 'round' or 'exact'"):
+        discretize(design("zv", [Mode.from_hz(5.0, 0.05)]), 100.0, "cubic")
+    one = discretize(design("none"), 100.0, "exact")
+    assert list(one.delays) == [0] and list(one.gains) == [1.0]
+
+
 def test_residual_metrics():
     t = np.arange(0, 2, 0.001)
     acc = np.column_stack([np.sin(2 * np.pi * 5 * t), np.zeros_like(t), np.zeros_like(t)])

@@ -8,6 +8,18 @@ weights ``1 - f`` and ``f`` (``"split"``, the default). Splitting keeps the cent
 impulse exactly where it belongs, so the residual vibration it leaves is second order in
 ``omega Ts`` instead of first order (see ``docs/shaping.md`` for V before and after).
 
+``"exact"`` starts from the split and corrects its taps (least change, in the 2-norm) so that the
+FIR, read as impulses at the sample instants, meets the continuous shaper's own conditions at
+every design mode exactly: its transform S(s) = sum_k b_k exp(-s k Ts) equals the continuous
+shaper's sum_i A_i exp(-s t_i), with the first d derivatives in s, at each mode's pole
+s = -zeta omega + j omega sqrt(1 - zeta^2) (d: the family's derivative order, ZV 0, ZVD 1,
+ZV-D^n n, MZV and SI 0, the EI family 1), and the taps sum to 1. A plant driven through a
+zero-order hold at Ts by the shaped command keeps a residual proportional to |S(s)| at its pole,
+so on the design modes the FIR leaves exactly what the continuous shaper leaves (zero for the
+ZV family: no discretisation floor). The correction is refused (``ValueError``) when the command
+period leaves no solution on the samples next to the impulses (for a positive shaper, none with
+taps >= 0: then the least change is found with the taps bounded below by zero).
+
 Bumpless switching
 ------------------
 :class:`StreamingShaper` writes the shaped output as a sum over the increments of the input,
@@ -84,8 +96,9 @@ def discretize(shaper: Shaper, rate: float, method: str = "split") -> SparseFir:
         The impulse sequence (times in s).
     rate : float
         Command rate, Hz.
-    method : {"split", "round"}
-        Linear split between the two neighbouring samples, or rounding to the nearest.
+    method : {"split", "round", "exact"}
+        Linear split between the two neighbouring samples, rounding to the nearest, or the split
+        corrected to meet the shaper's conditions at its design modes exactly (module docstring).
     """
     if not (math.isfinite(rate) and rate > 0.0):
         raise ValueError(f"command rate must be finite and > 0 Hz, got {rate!r}")
@@ -94,18 +107,101 @@ def discretize(shaper: Shaper, rate: float, method: str = "split") -> SparseFir:
     if method == "round":
         delays = np.rint(pos).astype(int)
         gains = amps.copy()
-    elif method == "split":
+    elif method in ("split", "exact"):
         base = np.floor(pos + 1e-9).astype(int)
         frac = np.clip(pos - base, 0.0, 1.0)
         frac[frac < 1e-9] = 0.0
         delays = np.concatenate([base, base + 1])
         gains = np.concatenate([amps * (1.0 - frac), amps * frac])
     else:
-        raise ValueError(f"unknown discretisation method {method!r}; use 'split' or 'round'")
+        raise ValueError(f"unknown discretisation method {method!r}; use 'split', 'round' or 'exact'")
     acc = np.zeros(int(delays.max()) + 1)
     np.add.at(acc, delays, gains)
+    if method == "exact":
+        acc = _exact_taps(shaper, rate, acc, base)
     nz = np.flatnonzero(acc != 0.0)
     return SparseFir(delays=nz, gains=acc[nz])
+
+
+#: derivative order of the conditions each family meets at its design modes (``exact``)
+_EXACT_ORDER = {"zv": 0, "zvd": 1, "zvdd": 2, "mzv": 0, "si": 0, "custom": 0,
+                "ei": 1, "2hump_ei": 1, "3hump_ei": 1}
+
+
+def _exact_order(shaper: Shaper) -> int:
+    if shaper.family == "zvdn":
+        return int(shaper.params.get("derivative_order", 0))
+    return _EXACT_ORDER.get(shaper.family, 0)
+
+
+def _exact_taps(shaper: Shaper, rate: float, split: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """The split taps ``split`` corrected to meet the shaper's conditions at its modes (``exact``)."""
+    if not shaper.modes or split.size == 1:
+        return split
+    order = _exact_order(shaper)
+    amps, times = np.asarray(shaper.amplitudes), np.asarray(shaper.times)
+    span = max(float(times[-1]), 1.0 / rate)
+
+    def system(taps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t = taps / rate
+        rows, rhs = [np.ones(taps.size)], [1.0]
+        for mode in shaper.modes:
+            s = complex(-mode.zeta * mode.omega, mode.damped_omega)
+            # scaled by exp(s t_n) and span^-n so every row is of order one
+            fir_row = np.exp(-s * (t - times[-1]))
+            cont = amps * np.exp(-s * (times - times[-1]))
+            for n in range(order + 1):
+                row = fir_row * (-t / span) ** n
+                target = complex(np.sum(cont * (-times / span) ** n))
+                rows += [row.real, row.imag]
+                rhs += [target.real, target.imag]
+        return np.array(rows), np.array(rhs)
+
+    positive = bool(np.all(amps >= 0.0))
+
+    def solve(taps: np.ndarray) -> np.ndarray | None:
+        """Least change from the split on ``taps`` meeting the conditions (and >= 0 for a positive shaper)."""
+        a, b = system(taps)
+        g0 = split[taps]
+        g = g0 + np.linalg.lstsq(a, b - a @ g0, rcond=None)[0]
+        if np.max(np.abs(a @ g - b)) > 1e-9:
+            return None
+        if not positive or np.min(g) >= -1e-12:
+            return g
+        # the same least change with the taps bounded below by 0 (a small convex QP), then polished on
+        # its support so the conditions hold to rounding
+        from scipy.optimize import minimize
+
+        res = minimize(lambda x: float(np.sum((x - g0) ** 2)), np.clip(g, 0.0, None), jac=lambda x: 2.0 * (x - g0),
+                       bounds=[(0.0, None)] * taps.size, method="SLSQP", options={"ftol": 1e-15, "maxiter": 500},
+                       constraints=[{"type": "eq", "fun": lambda x: a @ x - b, "jac": lambda x: a}])
+        keep = res.x > 1e-9
+        if not res.success or not np.any(keep):
+            return None
+        sub = res.x[keep] + np.linalg.lstsq(a[:, keep], b - a[:, keep] @ res.x[keep], rcond=None)[0]
+        if np.max(np.abs(a[:, keep] @ sub - b)) > 1e-9 or np.min(sub) < -1e-12:
+            return None
+        g = np.zeros(taps.size)
+        g[keep] = sub
+        return g
+
+    occupied = np.flatnonzero(split)
+    nearby = np.concatenate([base - 1, base, base + 1])
+    wider = np.union1d(occupied, nearby[nearby >= 0])
+    for taps in (occupied, wider):
+        g = solve(taps)
+        if g is not None:
+            break
+    else:
+        worst = max(shaper.modes, key=lambda m: m.omega)
+        raise ValueError(
+            f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz has no "
+            f"{'non-negative ' if positive else ''}solution on the samples next to its impulses "
+            f"(highest mode {worst.hz:.3g} Hz, omega Ts = {worst.omega / rate:.2f}); use 'split'")
+    out = np.zeros(max(int(taps.max()) + 1, split.size))
+    out[taps] = g
+    out[np.abs(out) < 1e-15] = 0.0
+    return out
 
 
 def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
