@@ -24,8 +24,11 @@ delay_loop
     PPUSMD gains are computed for that T (exact delays on the sample grid).
 qft_fb, qft_ffb
     Seed 002's controllers: u = Gr r + G (F r - ym), G of eq. (10) with gain 234.4 (qft_fb, Gr =
-    0) or 166.7 (qft_ffb, Gr = 1), F = P0 (the nominal plant, from ``loop.nominal``); G and F are
-    discretised together by a zero-order hold at the loop rate (the paper: 1 kHz).
+    0) or 166.7 (qft_ffb, Gr = 1), F = P0 (the nominal plant, from ``loop.nominal``). F and G are
+    two digital blocks, each the zero-order-hold equivalent of its transfer function at the loop
+    rate: F samples the reference, G the sampled error e_k = (F r)_k - ym_k. F's samples are then
+    exactly those of P0 driven through the same hold as the plant, so on a plant equal to P0 the
+    error is zero to rounding and the loop's output is the open loop's (Y/R = P0, as in the paper).
 qft_open
     The open loop of seed 002 Fig. 1 with the same disturbance and noise inputs: u = r.
 
@@ -263,35 +266,36 @@ class QftLoopPlant(LoopPlant):
 
         f = control.ss(qft.plant_tf(qft.MckParams(*nom)))
         g = control.ss(qft.controller_tf(gain))
-        af, bf, cf = (np.asarray(x) for x in (f.A, f.B, f.C))
-        ag, bg, cg = (np.asarray(x) for x in (g.A, g.B, g.C))
-        nf, ng = af.shape[0], ag.shape[0]
-        a = np.zeros((nf + ng, nf + ng))
-        a[:nf, :nf], a[nf:, :nf], a[nf:, nf:] = af, bg @ cf, ag
-        b = np.zeros((nf + ng, 2))
-        b[:nf, 0], b[nf:, 1] = bf[:, 0], -bg[:, 0]
-        self._ad, self._bd = _zoh(a, b, self.h)
-        self._cu = np.concatenate([np.zeros(nf), cg[0]])
+        af, bf, cf, df = (np.asarray(x, dtype=float) for x in (f.A, f.B, f.C, f.D))
+        ag, bg, cg, dg = (np.asarray(x, dtype=float) for x in (g.A, g.B, g.C, g.D))
+        # two digital blocks, each the zero-order-hold equivalent of its transfer function at the loop rate:
+        # F samples the reference, G the sampled error F r - y_measured
+        self._af, self._bf = _zoh(af, bf, self.h)
+        self._ag, self._bg = _zoh(ag, bg, self.h)
+        self._cf, self._df = cf[0], float(df[0, 0])
+        self._cg, self._dg = cg[0], float(dg[0, 0])
         # rest: F at steady state with output p; G's integrator holding (1 - Gr) p
         self._xf_unit = -np.linalg.solve(af, bf[:, 0])
-        self._xf_unit /= float(cf[0] @ self._xf_unit)
+        self._xf_unit /= float(self._cf @ self._xf_unit + self._df)
         ns = null_space(ag)[:, 0]
-        self._xg_unit = ns / float(cg[0] @ ns)
-        self._x = np.zeros((self.joints, nf + ng))
-        self._nf = nf
+        self._xg_unit = ns / float(self._cg @ ns)
+        self._xf = np.zeros((self.joints, af.shape[0]))
+        self._xg = np.zeros((self.joints, ag.shape[0]))
         self.reset(np.zeros(self.joints))
 
     def _rest(self, position: np.ndarray) -> None:
-        if not hasattr(self, "_x"):
+        if not hasattr(self, "_xg"):
             return
-        self._x = np.concatenate([np.outer(position, self._xf_unit),
-                                  np.outer((1.0 - self.gr) * position, self._xg_unit)], axis=1)
+        self._xf = np.outer(position, self._xf_unit)
+        self._xg = np.outer((1.0 - self.gr) * position, self._xg_unit)
 
     def _control(self, r: np.ndarray, ym: np.ndarray) -> np.ndarray:
         if self.model == "qft_open":
             return r.copy()
-        u = self._x @ self._cu + self.gr * r
-        self._x = self._x @ self._ad.T + np.column_stack([r, ym]) @ self._bd.T
+        e = self._xf @ self._cf + self._df * r - ym
+        u = self._xg @ self._cg + self._dg * e + self.gr * r
+        self._xf = self._xf @ self._af.T + np.outer(r, self._bf[:, 0])
+        self._xg = self._xg @ self._ag.T + np.outer(e, self._bg[:, 0])
         return u
 
 
