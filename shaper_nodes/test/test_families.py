@@ -357,6 +357,11 @@ def test_cli_show_with_fir(capsys):
     assert sum(t["weight"] for t in taps) == pytest.approx(1.0)
     assert all(t["time_s"] == pytest.approx(t["index"] / 500.0) for t in taps)
     assert doc["fir"]["v_at_design"][0] < (m.omega / 500.0) ** 2  # split: second order in omega Ts
+    assert doc["fir"]["v_at_design"][0] > 1e-6
+    code, out, _ = run(capsys, "show", "zvd", "-f", "8", "-z", "0.05", "--rate", "500", "--discretization", "exact",
+                       "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["fir"]["discretization"] == "exact" and doc["fir"]["v_at_design"][0] < 1e-12
 
 
 def test_cli_show_multi_mode_si_and_custom(capsys):
