@@ -50,6 +50,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-list", action="store_true", help="skip the LIST update timing")
     p.add_argument("--skip-mrilc", action="store_true", help="skip the MRILC update timing")
     p.add_argument("--skip-scheduler", action="store_true", help="skip the scheduler timing and CPU share")
+    p.add_argument("--skip-discretization", action="store_true", help="skip the shaper discretisation timing")
     p.add_argument("--skip-bag", action="store_true", help="skip the bag analysis throughput measurement")
     p.add_argument("--bag-messages", type=int, default=1_000_000,
                    help="messages in the bag analysis benchmark's recording (default 1000000)")
@@ -199,6 +200,10 @@ def main(argv: list[str] | None = None) -> int:
             from .scheduler import run as run_scheduler
 
             report["scheduler"] = run_scheduler(seconds=args.seconds, progress=_progress)
+        if not args.skip_discretization:
+            from .discretization import run as run_discretization
+
+            report["discretization"] = run_discretization(progress=_progress)
         if not args.skip_bag:
             from .bag_analysis import run as run_bag
 
@@ -232,6 +237,11 @@ def main(argv: list[str] | None = None) -> int:
         from .scheduler import print_table as print_scheduler
 
         print_scheduler(report["scheduler"])
+        print()
+    if "discretization" in report:
+        from .discretization import print_table as print_discretization
+
+        print_discretization(report["discretization"])
         print()
     if "bag_analysis" in report:
         from .bag_analysis import print_table as print_bag
