@@ -3,6 +3,9 @@
 Subcommands (``loop_design SUBCOMMAND --help`` for the options)::
 
     loop_design tdf-interval --omega-a RAD_S --delay S      stable w_R interval (seed 001, eq. 27)
+                 [--max-overshoot PCT]                  ... and where the exact overshoot is <= PCT
+    loop_design tdf-step --omega-a RAD_S --delay S --omega-r RAD_S [--band 0.02]
+                                                            stable?, overshoot, peak and settling time
     loop_design tdf-select --omega-r RAD_S --delay S        range of w_A for a plant (eqs. 28-30)
     loop_design tdf-plot --figure {3,4,6} --out FILE.png    analogues of seed 001 Figs. 3, 4, 6
     loop_design qft-table [--design ffb|fb|open]            |M - Y/R| per corner plant and frequency
@@ -49,6 +52,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--omega-a", type=pos("--omega-a (rad/s)"), required=True, help="assumed frequency w_A, rad/s")
     p.add_argument("--delay", type=pos("--delay (s)"), required=True, help="delay time T, s")
     p.add_argument("--k-max", type=int, default=8, help="change points listed up to this k (default %(default)s)")
+    p.add_argument("--max-overshoot", type=pos("--max-overshoot (%)"), metavar="PCT",
+                   help="also give the w_R inside the stable interval where the exact step overshoot is <= PCT %%")
+    p.add_argument("--grid", type=int, default=41,
+                   help="points of the overshoot scan over the stable interval (default %(default)s)")
+    p.add_argument("--json", action="store_true")
+
+    p = sub.add_parser("tdf-step", help="stability, exact step overshoot, peak time and settling time for one w_R")
+    p.add_argument("--omega-a", type=pos("--omega-a (rad/s)"), required=True, help="assumed frequency w_A, rad/s")
+    p.add_argument("--delay", type=pos("--delay (s)"), required=True, help="delay time T, s")
+    p.add_argument("--omega-r", type=pos("--omega-r (rad/s)"), required=True, help="real plant frequency w_R, rad/s")
+    p.add_argument("--band", type=pos("--band"), default=td.DEFAULT_BAND,
+                   help="settling band, a fraction of the step (default %(default)s: 2 %%)")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("tdf-select", help="w_A to choose for a plant w_R and delay T (eqs. 28-30)")
@@ -88,16 +103,87 @@ def _cmd_tdf_interval(args: argparse.Namespace) -> str:
     si = td.stable_interval(args.omega_a, args.delay)
     gains = td.ppusmd_gains(args.omega_a, args.delay)
     pts = [x for x in td.change_points(args.omega_a, args.delay, args.k_max)]
-    doc = {"omega_a": args.omega_a, "delay": args.delay, "gains": list(gains),
-           "stable_interval": [si.lower, si.upper], "upper_k": si.upper_k,
-           "change_points": [{"k": x.k, "phi": x.phi, "omega_r": x.omega_r} for x in pts]}
+    doc: dict[str, Any] = {
+        "omega_a": args.omega_a, "delay": args.delay, "gains": list(gains),
+        "stable_interval": [si.lower, si.upper], "upper_k": si.upper_k,
+        "change_points": [{"k": x.k, "phi": x.phi, "omega_r": x.omega_r} for x in pts]}
+    oi = None
+    if args.max_overshoot is not None:
+        oi = td.overshoot_interval(args.omega_a, args.delay, args.max_overshoot / 100.0, grid=args.grid)
+        doc["overshoot_limited"] = {
+            "max_overshoot_percent": args.max_overshoot,
+            "intervals": [[g.low, g.high] for g in oi.segments],
+            "edges": [[g.low_edge, g.high_edge] for g in oi.segments],
+            "scan": [{"omega_r": w, "overshoot_percent": 100 * lo,
+                      "overshoot_bound_percent": None if math.isinf(hi) else 100 * hi, "class": c}
+                     for w, lo, hi, c in oi.scan]}
     if args.json:
         return json.dumps(doc, indent=2)
     out = [f"w_A = {args.omega_a:g} rad/s, T = {args.delay:.6g} s (w_A T = {args.omega_a * args.delay:.5g} rad)",
            f"gains A0 = {gains[0]:.6g}, A1 = {gains[1]:.6g}, A2 = {gains[2]:.6g}", "",
-           f"stable for {si.lower:.6g} <= w_R <= {si.upper:.6g} rad/s (eq. 27; upper bound from k = {si.upper_k})",
-           "", "possible changes of stability (eq. 15; k = 0 is w_R = w_A, eq. 17):",
+           f"stable for {si.lower:.6g} <= w_R <= {si.upper:.6g} rad/s (eq. 27; upper bound from k = {si.upper_k})"]
+    if oi is not None:
+        out.append(_overshoot_lines(oi))
+    out += ["", "possible changes of stability (eq. 15; k = 0 is w_R = w_A, eq. 17):",
            _table(("k", "phi (rad/s)", "w_R (rad/s)"), [(x.k, f"{x.phi:.5g}", f"{x.omega_r:.6g}") for x in pts])]
+    return "\n".join(out)
+
+
+_EDGE = {"stability": "the stability edge", "overshoot": "overshoot = limit",
+         "horizon": "overshoot not bounded beyond (horizon)"}
+
+
+def _overshoot_lines(oi: td.OvershootInterval) -> str:
+    pct = f"{100 * oi.max_overshoot:g} %"
+    if not oi.segments:
+        return (f"overshoot <= {pct} (exact step response): nowhere in the stable interval"
+                f" (smallest on the {len(oi.scan)}-point scan: {100 * min(x[1] for x in oi.scan):.4g} %)")
+    parts = [f"{g.low:.6g} <= w_R <= {g.high:.6g} rad/s (ends: {_EDGE[g.low_edge]}; {_EDGE[g.high_edge]})"
+             for g in oi.segments]
+    return f"overshoot <= {pct} (exact step response) for " + ", and ".join(parts)
+
+
+def _cmd_tdf_step(args: argparse.Namespace) -> str:
+    perf = td.step_performance(args.omega_a, args.delay, args.omega_r, band=args.band)
+    r, si = perf.response, perf.interval
+    sampled_stable = perf.growth_rate < 0
+    doc = {"omega_a": args.omega_a, "delay": args.delay, "omega_r": args.omega_r, "band": args.band,
+           "stable_interval": [si.lower, si.upper], "in_stable_interval": perf.in_stable_interval,
+           "growth_rate": perf.growth_rate, "sampled_stable": sampled_stable,
+           "overshoot_percent": 100 * r.overshoot, "peak": r.peak, "peak_time": r.peak_time,
+           "peak_captured": r.peak_captured, "settling_time": r.settling_time, "settled": r.settled,
+           "horizon": r.horizon, "accuracy_limited": r.accuracy_limited, "tail_deviation": r.tail_deviation,
+           "rounding_error": r.rounding_error}
+    if args.json:
+        return json.dumps(doc, indent=2)
+    where = (f"inside the stable interval {si.lower:.6g} <= w_R <= {si.upper:.6g} rad/s of eq. (27)"
+             if perf.in_stable_interval else
+             f"OUTSIDE the stable interval {si.lower:.6g} <= w_R <= {si.upper:.6g} rad/s of eq. (27)")
+    check = (f"sampled-data check: {'decays' if sampled_stable else 'GROWS'} at {perf.growth_rate:+.4g} /s"
+             " (slowest pole, 100 samples per T)")
+    verdict = "stable" if perf.in_stable_interval and sampled_stable else (
+        "UNSTABLE" if not (perf.in_stable_interval or sampled_stable) else
+        "the checks disagree: w_R is at or next to an edge of eq. (27), where the sampled loop's edge differs a little")
+    out = [f"w_A = {args.omega_a:g} rad/s, T = {args.delay:.6g} s, w_R = {args.omega_r:g} rad/s: {verdict}",
+           f"  {where}; {check}",
+           f"exact step response (method of steps) over {r.horizon:.4g} s ({round(r.horizon / args.delay)} intervals"
+           f" of T{'; longer would pass the rounding-error limit' if r.accuracy_limited else ''}):"]
+    if r.peak_captured:
+        scope = "the peak for all t: by the end of the horizon |y - 1| stays below it and no longer grows"
+    elif math.isfinite(r.overshoot_bound):
+        scope = f"over the horizon; for all t it is at most {100 * r.overshoot_bound:.4g} %"
+    else:
+        scope = "over the horizon only: the response does not decay within it"
+    if r.overshoot > 1e-9:
+        out.append(f"  overshoot {100 * r.overshoot:.4f} % at t = {r.peak_time:.5g} s (peak {r.peak:.6g}; {scope})")
+    else:
+        out.append(f"  no overshoot (largest output {r.peak:.10g}; {scope})")
+    if r.settled:
+        out.append(f"  settling time ({100 * args.band:g} % band) {r.settling_time:.5g} s")
+    else:
+        out.append(f"  does NOT settle into the {100 * args.band:g} % band within the {r.horizon:.4g} s horizon"
+                   f" (|y - 1| up to {r.tail_deviation:.3g} over its last quarter)"
+                   + (f"; the slowest pole's time constant is {-1 / perf.growth_rate:.3g} s" if sampled_stable else ""))
     return "\n".join(out)
 
 
@@ -346,7 +432,7 @@ def _cmd_qft_plot(args: argparse.Namespace) -> str:
     return json.dumps({"out": args.out}) if args.json else f"wrote {args.out}"
 
 
-COMMANDS = {"tdf-interval": _cmd_tdf_interval, "tdf-select": _cmd_tdf_select, "tdf-plot": _cmd_tdf_plot,
+COMMANDS = {"tdf-interval": _cmd_tdf_interval, "tdf-step": _cmd_tdf_step, "tdf-select": _cmd_tdf_select, "tdf-plot": _cmd_tdf_plot,
             "qft-table": _cmd_qft_table, "qft-plot": _cmd_qft_plot}
 
 
