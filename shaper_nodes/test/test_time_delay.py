@@ -159,7 +159,7 @@ def independent_overshoot(wa, t_delay, wr, per_delay=1000, horizon=None):
 def test_independent_simulation_agrees_with_the_exact_overshoot():
     """The test's own tool first: at w_R = 4 it reproduces the method of steps (which has its own tests)."""
     exact = exact_step_response(WA, T, 4.0).overshoot
-    assert independent_overshoot(WA, T, 4.0) == pytest.approx(exact, abs=2e-4)
+    assert independent_overshoot(WA, T, 4.0) == pytest.approx(exact, abs=1e-5)
 
 
 def test_overshoot_interval_for_the_paper_case_20_percent():
