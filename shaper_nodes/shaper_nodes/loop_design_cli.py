@@ -182,7 +182,7 @@ def _cmd_tdf_step(args: argparse.Namespace) -> str:
         out.append(f"  settling time ({100 * args.band:g} % band) {r.settling_time:.5g} s")
     else:
         out.append(f"  does NOT settle into the {100 * args.band:g} % band within the {r.horizon:.4g} s horizon"
-                   f" (|y - 1| up to {r.tail_deviation:.3g} over its last quarter)"
+                   f" (|y - 1| up to {r.tail_deviation:.3g} near its end)"
                    + (f"; the slowest pole's time constant is {-1 / perf.growth_rate:.3g} s" if sampled_stable else ""))
     return "\n".join(out)
 

@@ -205,6 +205,19 @@ def test_overshoot_interval_reaches_the_stability_edge_when_the_limit_allows():
     assert seg.high == oi.interval.upper or seg.high_edge == "stability"
 
 
+def test_a_horizon_too_short_to_decide_is_conservative():
+    """Capped at a few T (before the peak at about 4 T, and shorter than two periods of w_A), the points
+    cannot be decided: they are "unknown", never counted as meeting the limit, and the ends so found are
+    named "horizon" and lie inside the interval found with a sufficient horizon."""
+    full = overshoot_interval(WA, T, 0.20).segments[0]
+    for cap in (2, 4, 8):
+        oi = overshoot_interval(WA, T, 0.20, max_intervals=cap)
+        assert any(c == "unknown" for *_, c in oi.scan)
+        for seg in oi.segments:
+            assert full.low <= seg.low <= seg.high <= full.high
+            assert "horizon" in (seg.low_edge, seg.high_edge)
+
+
 def test_settling_time_of_the_matched_loop_is_the_shaped_step_closed_form():
     """w_R = w_A, T = pi/(3 w): y = 1 - cos(w t) on [0, T] and sin(w t - pi/6) on [T, 2T], then 1, so the
     2 % band is entered for good at w t = pi/6 + asin(0.98)."""

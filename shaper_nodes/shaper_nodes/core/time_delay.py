@@ -292,7 +292,9 @@ class StepResponse:
         from the band, located by Brent's method within its grid cell); None if |y - 1| > band at the
         end of the horizon (not settled within it).
     tail_deviation, earlier_deviation : float
-        Largest |y - 1| over the last quarter of the horizon, and over the quarter before it.
+        Largest |y - 1| over the last window of the horizon, and over the window before it; a window is
+        the last quarter of the horizon but at least one period 2 pi / min(w_A, w_R). NaN for
+        ``earlier_deviation`` if the horizon is shorter than two windows.
     rounding_error : float
         Largest difference of y between the history re-solved on an interval and the same history
         solved on the interval before (the method of steps re-solves the whole past on every interval):
@@ -331,8 +333,9 @@ class StepResponse:
 
     @property
     def decaying(self) -> bool:
-        """Whether the deviation over the last quarter of the horizon is no larger than over the quarter
-        before (or at rounding level): the horizon reaches the loop's decay."""
+        """Whether the deviation over the last window of the horizon is no larger than over the window
+        before (or at rounding level): the horizon reaches the loop's decay. False if the horizon is
+        shorter than two windows (two periods of the slower of w_A, w_R)."""
         return self.tail_deviation <= self.earlier_deviation or self.tail_deviation <= 1e-9
 
     @property
@@ -470,11 +473,14 @@ def exact_step_response(omega_a: float, delay: float, omega_r: float, intervals:
             return abs(float(at(m, x0, tau - t0)[4 * n]) - 1.0) - band
 
         settling = n * delay + brentq(excess, t0, t1, xtol=1e-13)
+    # tail windows: the last quarter of the horizon, but at least one period of the slower of w_A, w_R
     horizon = t[-1]
-    q3 = np.abs(yy[(t >= 0.5 * horizon) & (t < 0.75 * horizon)] - 1.0)
-    q4 = np.abs(yy[t >= 0.75 * horizon] - 1.0)
+    win = max(0.25 * horizon, 2.0 * math.pi / min(omega_a, omega_r))
+    q4 = np.abs(yy[t >= horizon - win] - 1.0)
+    q3 = np.abs(yy[(t >= horizon - 2.0 * win) & (t < horizon - win)] - 1.0)
+    earlier = float(q3.max()) if horizon >= 2.0 * win else math.nan  # too short to compare: not decaying
     return StepResponse(t, yy, best[0], best[1], float(band), settling,
-                        float(q4.max()), float(q3.max()) if q3.size else math.inf, rounding, limited)
+                        float(q4.max()), earlier, rounding, limited)
 
 
 # ------------------------------------------------------------------------------------------------
