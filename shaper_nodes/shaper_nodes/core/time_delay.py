@@ -411,7 +411,7 @@ def exact_step_response(omega_a: float, delay: float, omega_r: float, intervals:
     maxima (zeros of y', Brent) of the grid cells whose bound y_i + h y'_i could exceed it; the settling
     time is the last exit from ``band`` (a fraction of the step), Brent within its grid cell (grid of T /
     ``points_per_delay`` = h; an excursion that leaves and re-enters the band between two grid points is
-    not seen: at its extremum y' = 0, so it passes the band by less than max|y''| h^2 / 8, about 1e-6 at
+    not seen: at its extremum y' = 0, so it passes the band by less than max|y''| h^2 / 8, about 2e-6 at
     the default grid for the paper's frequencies).
 
     With ``max_rounding_error``, the computation stops before the first interval whose estimated
