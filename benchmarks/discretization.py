@@ -18,13 +18,13 @@ Run it with ``python -m benchmarks.discretization`` or as part of ``python -m be
 
 from __future__ import annotations
 
-import math
 import sys
-import time
 from collections.abc import Callable
 
 from shaper_nodes.core.fir import discretize
 from shaper_nodes.core.shapers import Mode, design
+
+from .scheduler import best_call_time as _best
 
 #: (label, family, modes, command rate Hz)
 CASES = (
@@ -34,16 +34,6 @@ CASES = (
     ("ZVD 4 + 11 Hz at 250 Hz", "zvd", (Mode.from_hz(4.0, 0.02), Mode.from_hz(11.0, 0.05)), 250.0),
     ("EI 8 Hz at 500 Hz", "ei", (Mode.from_hz(8.0, 0.03),), 500.0),
 )
-
-
-def _best(fn: Callable[[], object], number: int, repeats: int) -> float:
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / number)
-    return best
 
 
 def run(number: int = 50, repeats: int = 5, progress: Callable[[str], None] | None = None) -> list[dict]:
