@@ -17,7 +17,6 @@ import tempfile
 import textwrap
 import time
 
-
 #: outside load (percent of one core) above which the latency table carries a warning
 BUSY_WARNING_PCT = 25.0
 

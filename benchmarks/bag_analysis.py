@@ -31,7 +31,6 @@ from collections.abc import Callable
 def run(*, messages: int = 1_000_000, progress: Callable[[str], None] = lambda s: None) -> dict:
     """Write the bag, time the methods once each (the bag is large), return the figures."""
     from rosbags.highlevel import AnyReader
-
     from shaper_nodes.analysis.analyze import Options, analyze
     from shaper_nodes.analysis.streams import read_recording
     from shaper_nodes.analysis.synthetic import simulate, write_bag

@@ -58,10 +58,9 @@ import rclpy
 import rclpy.context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from shaper_nodes.core.shaping.fir import SparseFir, StreamingShaper
+from shaper_nodes.ros.launching import ChildProcess
 from std_msgs.msg import Float64MultiArray
-
-from shaper_nodes.core.fir import SparseFir, StreamingShaper
-from shaper_nodes.launching import ChildProcess
 
 from .echo_node import DEPTH
 
@@ -436,9 +435,9 @@ def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, obj
     ``params`` are extra node parameters (``shaper.*``, ``discretization``); the FIR used for
     decoding is designed from them exactly as the node does.
     """
-    from shaper_nodes.core.fir import discretize
-    from shaper_nodes.core.shapers import Mode, design
-    from shaper_nodes.launching import NodeProcess
+    from shaper_nodes.core.shaping.families import Mode, design
+    from shaper_nodes.core.shaping.fir import discretize
+    from shaper_nodes.ros.launching import NodeProcess
 
     params = dict(params or {})
     family = str(params.get("shaper.family", "none"))

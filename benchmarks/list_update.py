@@ -31,9 +31,8 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.signal import butter, cont2discrete, dlsim, filtfilt, hilbert
-
-from shaper_nodes.core.list_learning import ListConfig, ListLearner, ListParams
-from shaper_nodes.core.shapers import Mode
+from shaper_nodes.core.learning.list.learner import ListConfig, ListLearner, ListParams
+from shaper_nodes.core.shaping.families import Mode
 
 
 def _trapezoid(t: np.ndarray, distance: float, vmax: float, amax: float) -> tuple[np.ndarray, float]:

@@ -30,10 +30,9 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-
-from shaper_nodes.core.fuzzy import rule_base_from_dict
-from shaper_nodes.core.scheduling import Scheduler
-from shaper_nodes.core.shapers import Mode, design
+from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
+from shaper_nodes.core.scheduling.scheduler import Scheduler
+from shaper_nodes.core.shaping.families import Mode, design
 
 
 def _spec() -> dict:
@@ -89,8 +88,7 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, progress: Callable[[str
     import rclpy
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
-
-    from shaper_nodes.launching import ChildProcess, NodeProcess
+    from shaper_nodes.ros.launching import ChildProcess, NodeProcess
     from sim_plant_node.two_mass import scheduler_parameters
 
     from .latency import proc_cpu_seconds

@@ -12,8 +12,7 @@ import os
 
 import pytest
 import rclpy
-
-from shaper_nodes.launching import NodeProcess
+from shaper_nodes.ros.launching import NodeProcess
 
 _counter = itertools.count()
 

@@ -18,11 +18,11 @@ import sys
 import time
 
 import pytest
-
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import Bag, mcap_chunks
 from shaper_nodes.analysis.streams import read_recording
-from sim_plant_node.list_cases import CASES, LEARNER, _metric, run_case
+
+from reproductions.list_cases import CASES, LEARNER, _metric, run_case
 
 pytestmark = pytest.mark.integration
 
@@ -77,6 +77,7 @@ class _ShaperStandIn:
 
     def __init__(self, ctx) -> None:
         from rclpy.node import Node
+
         from shaper_msgs.srv import SetShaper
 
         self.node = Node("shaper_stand_in", context=ctx)
@@ -92,9 +93,9 @@ class _ShaperStandIn:
 
 def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_context, tmp_path, domain_id):
     from rclpy.executors import SingleThreadedExecutor
-    from shaper_msgs.msg import CycleReport
+    from shaper_nodes.ros.launching import NodeProcess
 
-    from shaper_nodes.launching import NodeProcess
+    from shaper_msgs.msg import CycleReport
 
     # 1. a live LIST run, recorded
     bag = tmp_path / "bag"
@@ -169,7 +170,7 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
 
 
 def test_installed_executables_name_a_missing_bag(tmp_path, domain_id):
-    from shaper_nodes.launching import NodeProcess, executable
+    from shaper_nodes.ros.launching import NodeProcess, executable
 
     out = subprocess.run([str(executable("shaper_nodes", "analyze_bag")), str(tmp_path / "nope")],
                          capture_output=True, text=True, timeout=120, env=os.environ)

@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shaper_nodes.core.closed_loop.qft import corners, nominal
+from shaper_nodes.core.closed_loop.time_delay import exact_step_response
 
-from shaper_nodes.core.qft import corners, nominal
-from shaper_nodes.core.time_delay import exact_step_response
-
-from sim_plant_node.closed_loop_cases import (
+from reproductions.closed_loop_cases import (
     DELAY_USED,
     EVENT_TIME,
     OMEGA_A,

@@ -11,13 +11,12 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-from shaper_nodes import bag_analysis_cli
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import Bag, BagError, mcap_chunks
 from shaper_nodes.analysis.streams import JointStateDecoder, imu_fast, joint_state_fast, read_recording
 from shaper_nodes.analysis.synthetic import simulate, write_bag
-from shaper_nodes.core.vibration import residual_vibration
+from shaper_nodes.cli import analyze_bag as bag_analysis_cli
+from shaper_nodes.core.shaping.vibration import residual_vibration
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 MODE_HZ, ZETA = 4.0, 0.02
@@ -205,7 +204,7 @@ def bag_analysis_cli_output(argv: list[str]) -> str:
 
 
 def test_settling_time_into_a_band():
-    from shaper_nodes.core.vibration import settling_time
+    from shaper_nodes.core.shaping.vibration import settling_time
 
     t = np.arange(0, 5, 0.001)
     a = np.exp(-t) * np.sin(2 * math.pi * 5 * t)
@@ -295,8 +294,8 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
     import pathlib
 
     from shaper_nodes.analysis.synthetic import trapezoid
-    from shaper_nodes.core import mrilc as M
-    from shaper_nodes.core.mrilc_learning import model_from_params
+    from shaper_nodes.core.learning.mrilc import model as M
+    from shaper_nodes.core.learning.mrilc.learner import model_from_params
 
     model, _ = model_from_params({})
     plant, period = M.mck_plant(5.0, 0.15), 1.0 / rate
@@ -362,7 +361,7 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
 
 
 def test_mrilc_replay_gives_the_learners_first_update(tmp_path):
-    from shaper_nodes.core.mrilc_learning import MrilcLearner
+    from shaper_nodes.core.learning.mrilc.learner import MrilcLearner
 
     model, r_s, y, u = _mrilc_recording(tmp_path / "mrilc")
     rec = read_recording(tmp_path / "mrilc")

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
-
-from shaper_nodes.core.shapers import (
+from shaper_nodes.cli.shaper_design import main
+from shaper_nodes.core.shaping.families import (
     FAMILIES,
     Mode,
     ShaperError,
@@ -21,8 +21,7 @@ from shaper_nodes.core.shapers import (
     family_info,
     family_properties,
 )
-from shaper_nodes.core.vibration import percentage_vibration
-from shaper_nodes.design_cli import main
+from shaper_nodes.core.shaping.vibration import percentage_vibration
 
 FAST = settings(max_examples=40, deadline=None)
 TOLERANCE_FAMILIES = ("ei", "2hump_ei", "3hump_ei", "si")
@@ -306,7 +305,7 @@ def test_message_round_trip_carries_tolerance_and_insensitivity():
     msgs = pytest.importorskip("shaper_msgs.msg")
     if not hasattr(msgs, "Shaper") or not hasattr(msgs.Shaper(), "insensitivity"):
         pytest.skip("shaper_msgs with Shaper.insensitivity is not built")
-    from shaper_nodes.conversions import shaper_from_msg, shaper_to_msg
+    from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
 
     s = design("si", [Mode(20.0, 0.05)], vibration_tolerance=0.03, insensitivity=0.5)
     msg = shaper_to_msg(s, "test", 1)

@@ -7,9 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-
-from shaper_nodes.core.fir import MAX_STAGES, RetimingShaper, StreamingShaper, discretize
-from shaper_nodes.core.shapers import Mode, design
+from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.shaping.fir import MAX_STAGES, RetimingShaper, StreamingShaper, discretize
 
 SETTINGS = settings(max_examples=40, deadline=None)
 shaper_st = st.builds(

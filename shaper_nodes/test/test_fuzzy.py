@@ -6,9 +6,18 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from shaper_nodes.core.fuzzy import (FuzzyError, Gaussian, Rule, RuleBase, Trapezoidal, Triangular, membership,
-                                     modes_of, rule_base_from_dict, triangular_partition)
+from shaper_nodes.core.scheduling.fuzzy import (
+    FuzzyError,
+    Gaussian,
+    Rule,
+    RuleBase,
+    Trapezoidal,
+    Triangular,
+    membership,
+    modes_of,
+    rule_base_from_dict,
+    triangular_partition,
+)
 
 FAST = settings(max_examples=80, deadline=None)
 

@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from shaper_nodes.core import identification as ident
-from shaper_nodes.core.identification import (
+from shaper_nodes.core.identification import modes as ident
+from shaper_nodes.core.identification.modes import (
     METHODS,
     IdentificationError,
     ModeFit,
@@ -22,8 +21,8 @@ from shaper_nodes.core.identification import (
     identify_records,
     recommend_shaper,
 )
-from shaper_nodes.core.shapers import FAMILIES, design
-from shaper_nodes.core.vibration import percentage_vibration
+from shaper_nodes.core.shaping.families import FAMILIES, design
+from shaper_nodes.core.shaping.vibration import percentage_vibration
 
 RATE = 1000.0
 FREQ_TOL = 0.02

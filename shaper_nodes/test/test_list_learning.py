@@ -19,8 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import cont2discrete, dlsim
-
-from shaper_nodes.core.list_learning import (
+from shaper_nodes.core.learning.list.learner import (
     ACTIONS,
     ListConfig,
     ListError,
@@ -34,8 +33,8 @@ from shaper_nodes.core.list_learning import (
     paper_step,
     secant_step,
 )
-from shaper_nodes.core.shapers import Mode, design
-from shaper_nodes.core.vibration import percentage_vibration
+from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.shaping.vibration import percentage_vibration
 
 MASS, DAMPING, STIFFNESS = 1.0, 1.0, 100.0
 RATE = 500.0

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from shaper_nodes.core.cycles import END, MOTION_END, START
-from shaper_nodes.core.list_learning import ListConfig, ListError, ListLearner, ListParams
-from shaper_nodes.core.list_session import ListSession, list_config
+from shaper_nodes.core.learning.list.learner import ListConfig, ListError, ListLearner, ListParams
+from shaper_nodes.core.learning.list.session import ListSession, list_config
 
 RATE = 200.0
 W, Z = 10.0, 0.05

@@ -4,9 +4,8 @@ import json
 import math
 
 import pytest
-
-from shaper_nodes.core.time_delay import exact_step_response, growth_rate, step_response_with_horizon
-from shaper_nodes.loop_design_cli import main
+from shaper_nodes.cli.loop_design import main
+from shaper_nodes.core.closed_loop.time_delay import exact_step_response, growth_rate, step_response_with_horizon
 
 
 def run(capsys, *argv):

@@ -6,9 +6,8 @@ import math
 
 import numpy as np
 import pytest
-
-from shaper_nodes.core import mrilc as M
-from shaper_nodes.core.mrilc_learning import END, START, MrilcLearner, MrilcSession
+from shaper_nodes.core.learning.mrilc import model as M
+from shaper_nodes.core.learning.mrilc.learner import END, START, MrilcLearner, MrilcSession
 
 RATE = 200.0
 PERIOD = 1.0 / RATE
@@ -220,7 +219,7 @@ def test_session_builds_cycles_on_the_grid_and_skips_gaps(paper_model):
 
 
 def test_model_from_params_builds_the_nodes_model_and_refuses_bad_values(paper_model):
-    from shaper_nodes.core.mrilc_learning import DEFAULTS, model_from_params
+    from shaper_nodes.core.learning.mrilc.learner import DEFAULTS, model_from_params
 
     model, settings = model_from_params({"mrilc.check.min_frequency_hz": 0.5, "list.gain": 3})
     assert model.period == PERIOD and model.law == M.LawConfig()

@@ -4,8 +4,7 @@ import math
 
 import numpy as np
 import pytest
-
-from shaper_nodes.core.qft import (
+from shaper_nodes.core.closed_loop.qft import (
     DELTA_M,
     GAIN_FB,
     GAIN_FFB,

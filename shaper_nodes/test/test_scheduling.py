@@ -4,10 +4,9 @@ import math
 
 import numpy as np
 import pytest
-
-from shaper_nodes.core.fuzzy import Rule, RuleBase, Triangular, triangular_partition
-from shaper_nodes.core.scheduling import Scheduler, relative_change
-from shaper_nodes.core.shapers import Mode, Shaper, ShaperError, design
+from shaper_nodes.core.scheduling.fuzzy import Rule, RuleBase, Triangular, triangular_partition
+from shaper_nodes.core.scheduling.scheduler import Scheduler, relative_change
+from shaper_nodes.core.shaping.families import Mode, Shaper, ShaperError, design
 
 
 def base():

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from shaper_nodes.core.shapers import FAMILIES, Mode, ShaperError, design, zvdn
-from shaper_nodes.core.vibration import percentage_vibration, sensitivity_curve
+from shaper_nodes.core.shaping.families import FAMILIES, Mode, ShaperError, design, zvdn
+from shaper_nodes.core.shaping.vibration import percentage_vibration, sensitivity_curve
 
 freqs = st.floats(min_value=0.2, max_value=80.0)
 dampings = st.floats(min_value=0.0, max_value=0.3)

@@ -4,8 +4,7 @@ import math
 
 import numpy as np
 import pytest
-
-from shaper_nodes.core.time_delay import (
+from shaper_nodes.core.closed_loop.time_delay import (
     TimeDelayError,
     assumed_frequency_range,
     change_points,

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
-
-from shaper_nodes.core.fir import discretize
-from shaper_nodes.core.shapers import Mode, design
-from shaper_nodes.core.trajectory import shape_trajectory
-from shaper_nodes.core.validation import InputError, finite_array, joint_permutation, strictly_increasing
+from shaper_nodes.core.checks import InputError, finite_array, joint_permutation, strictly_increasing
+from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.shaping.fir import discretize
+from shaper_nodes.core.shaping.trajectory import shape_trajectory
 
 FIR = discretize(design("zvd", [Mode.from_hz(4.0, 0.02)]), 250.0)
 

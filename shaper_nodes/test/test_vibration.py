@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from shaper_nodes.core.fir import discretize, fir_impulses
-from shaper_nodes.core.shapers import Mode, design
-from shaper_nodes.core.vibration import (
+from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.shaping.fir import discretize, fir_impulses
+from shaper_nodes.core.shaping.vibration import (
     insensitivity_width,
     percentage_vibration,
     residual_vibration,

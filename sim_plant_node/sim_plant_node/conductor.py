@@ -22,14 +22,14 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
+from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
+from shaper_nodes.ros.conversions import time_to_sec
+from std_srvs.srv import Trigger
+
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
-from std_srvs.srv import Trigger
-
-from shaper_nodes.conversions import time_to_sec
-from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
 
 from .plants import mck_from_mode
 
@@ -160,7 +160,7 @@ def node_session(logs: pathlib.Path, prefix: str):
     """Yield ``(start, ctx)``: ``start(package, executable, params)`` starts a node process (log in
     ``logs/<prefix>-<executable>.log``), ``ctx`` a fresh rclpy context; at exit the context is
     shut down and every process started is stopped (in reverse order)."""
-    from shaper_nodes.launching import NodeProcess
+    from shaper_nodes.ros.launching import NodeProcess
 
     procs: list = []
 

@@ -68,7 +68,7 @@ def plot(path: pathlib.Path, traces: dict, offsets: list[float], shapers: list[s
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.launching import NodeProcess
+    from shaper_nodes.ros.launching import NodeProcess
 
     from .conductor import Conductor, rms, spin_context
 

@@ -43,9 +43,8 @@ import math
 
 import numpy as np
 from scipy.linalg import expm, null_space
-
-from shaper_nodes.core import qft
-from shaper_nodes.core.time_delay import ppusmd_gains
+from shaper_nodes.core.closed_loop import qft
+from shaper_nodes.core.closed_loop.time_delay import ppusmd_gains
 
 from .plants import MckMode, _JointState, _per_joint
 

@@ -55,23 +55,31 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from shaper_msgs.msg import CycleEvent, CycleReport
-from shaper_msgs.srv import SetFeedforward
-from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.core.cycles import CycleMonitor
+from shaper_nodes.core.learning.mrilc.model import PAPER_CONTROLLER
+from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.parameters import describe as _desc
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from shaper_nodes.core.cycles import CycleMonitor
-from shaper_nodes.core.validation import InputError, finite_array
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_msgs.srv import SetFeedforward
 
 from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, make_loop_plant
 from .pid_loop import PidLoopPlant
-from .plants import (LIST_FORCE_LIMIT, LIST_GAIN, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
-                     MckPlant, make_plant)
+from .plants import (
+    LIST_FORCE_LIMIT,
+    LIST_GAIN,
+    LIST_STIFFNESS_CUBIC,
+    PLANT_MODELS,
+    CycleTask,
+    ListPlant,
+    MckPlant,
+    make_plant,
+)
 from .two_mass import StaircaseTask, TwoMassPlant
-from shaper_nodes.core.mrilc import PAPER_CONTROLLER
-from shaper_nodes.node_main import run_node
-from shaper_nodes.parameters import describe as _desc
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant

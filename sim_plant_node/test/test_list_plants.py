@@ -10,11 +10,17 @@ import numpy as np
 import pytest
 from scipy import signal
 from scipy.integrate import solve_ivp
-
-from shaper_nodes.core.fir import StreamingShaper, discretize
-from shaper_nodes.core.shapers import Mode, design
-from sim_plant_node.plants import (LIST_FORCE_LIMIT, LIST_STIFFNESS_CUBIC, PLANT_MODELS, CycleTask, ListPlant,
-                                   MckPlant, make_plant)
+from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.shaping.fir import StreamingShaper, discretize
+from sim_plant_node.plants import (
+    LIST_FORCE_LIMIT,
+    LIST_STIFFNESS_CUBIC,
+    PLANT_MODELS,
+    CycleTask,
+    ListPlant,
+    MckPlant,
+    make_plant,
+)
 
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / "config"
 M, B, K = 1.0, 1.0, 100.0  # the paper's plant: 10 rad/s, zeta 0.05
@@ -305,7 +311,6 @@ def ros_context():
 
 def make_node(ctx, params: dict | None = None, config: str | None = None):
     from rclpy.parameter import Parameter
-
     from sim_plant_node.sim_plant import SimPlantNode
 
     cli = ["--ros-args", "--params-file", str(CONFIG / config)] if config else None

@@ -7,9 +7,8 @@ import os
 
 import numpy as np
 import pytest
-
-from shaper_nodes.core import qft
-from shaper_nodes.core.time_delay import growth_rate, sampled_loop_matrix
+from shaper_nodes.core.closed_loop import qft
+from shaper_nodes.core.closed_loop.time_delay import growth_rate, sampled_loop_matrix
 from sim_plant_node.loops import LOOP_MODELS, DelayLoopPlant, QftLoopPlant, make_loop_plant
 
 WA, T = 3.0, math.pi / 9.0
@@ -143,7 +142,6 @@ def ros_context():
 @pytest.mark.integration
 def test_node_builds_loop_plants_and_refuses_bad_loop_parameters(ros_context):
     from rclpy.parameter import Parameter
-
     from sim_plant_node.sim_plant import SimPlantNode
 
     node = SimPlantNode(context=ros_context, parameter_overrides=[Parameter("plant.model", value="delay_loop")])
@@ -213,7 +211,7 @@ def test_taking_over_a_state_puts_the_controller_at_rest_at_the_tip():
 def test_delay_loop_overshoot_converges_to_the_exact_continuous_loop():
     """Seed 001 at w_R = 4: the zero-order-hold loop's overshoot tends to the exact (method of steps) one at
     first order in the loop step, from above (the hold's lag adds overshoot)."""
-    from shaper_nodes.core.time_delay import exact_step_response
+    from shaper_nodes.core.closed_loop.time_delay import exact_step_response
 
     delay = 0.349  # on the grid of every step below
     exact = exact_step_response(WA, delay, 4.0).overshoot
@@ -229,7 +227,7 @@ def test_delay_loop_overshoot_converges_to_the_exact_continuous_loop():
 
 
 def test_modal_split_separates_settling_from_vibration():
-    from sim_plant_node.closed_loop_cases import dominant_oscillation, modal_split
+    from reproductions.closed_loop_cases import dominant_oscillation, modal_split
 
     dt = 1e-3
     t = np.arange(900) * dt

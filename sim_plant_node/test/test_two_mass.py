@@ -3,11 +3,20 @@
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-
-from shaper_nodes.core.fuzzy import rule_base_from_dict
-from shaper_nodes.core.identification import identify
-from sim_plant_node.two_mass import (C, C0, K, M0, STEP_LEVELS, STEP_POSES, StaircaseTask, TwoMassPlant, m1_of,
-                                     rule_base_spec)
+from shaper_nodes.core.identification.modes import identify
+from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
+from sim_plant_node.two_mass import (
+    C0,
+    M0,
+    STEP_LEVELS,
+    STEP_POSES,
+    C,
+    K,
+    StaircaseTask,
+    TwoMassPlant,
+    m1_of,
+    rule_base_spec,
+)
 
 
 def eq1(t, s, f):

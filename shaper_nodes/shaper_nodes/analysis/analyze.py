@@ -33,11 +33,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.cycles import END, MOTION_END, START, evaluate_cycle
-from ..core.identification import (IdentificationError, ModeFit, Recommendation, combine_modes, identify,
-                                   recommend_shaper)
-from ..core.shapers import Shaper
-from ..core.vibration import percentage_vibration, settling_time
+from shaper_nodes.core.cycles import END, MOTION_END, START, evaluate_cycle
+from shaper_nodes.core.identification.modes import (
+    IdentificationError,
+    ModeFit,
+    Recommendation,
+    combine_modes,
+    identify,
+    recommend_shaper,
+)
+from shaper_nodes.core.shaping.families import Shaper
+from shaper_nodes.core.shaping.vibration import percentage_vibration, settling_time
+
 from .reading import BagError
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
 from .streams import REFERENCE_SUFFIX, Recording
@@ -372,8 +379,8 @@ def _list_items(rec: Recording, spans: list[CycleSpan], from_events: bool, assum
 def list_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, params: Mapping[str, object]
                 ) -> LearnerReplay:
     """LIST over the recording: the learner node's per-cycle updates (:mod:`shaper_nodes.list_replay`)."""
-    from ..core.list_learning import ListError
-    from ..list_replay import replay_items, session_for
+    from shaper_nodes.cli.list_replay import replay_items, session_for
+    from shaper_nodes.core.learning.list.learner import ListError
 
     notes = []
     params = {k: v for k, v in params.items()}
@@ -417,10 +424,10 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     profile) and the rest are listed as skipped; true replays every cycle, as for a recording of a
     live MRILC run.
     """
-    from ..core.mrilc import MrilcError
-    from ..core.mrilc_learning import END as M_END
-    from ..core.mrilc_learning import START as M_START
-    from ..core.mrilc_learning import MrilcLearner, MrilcSession, model_from_params
+    from shaper_nodes.core.learning.mrilc.learner import END as M_END
+    from shaper_nodes.core.learning.mrilc.learner import START as M_START
+    from shaper_nodes.core.learning.mrilc.learner import MrilcLearner, MrilcSession, model_from_params
+    from shaper_nodes.core.learning.mrilc.model import MrilcError
 
     def refused(why: str) -> LearnerReplay:
         return LearnerReplay("mrilc", [], [f"not possible: {why}"])

@@ -240,7 +240,7 @@ def _default_typestore():
     """rosbags' Jazzy store, with this suite's types when shaper_msgs is installed (for bags without
     definitions, e.g. sqlite3 ones written without them)."""
     try:
-        from ..bag import typestore_with_own_types
+        from shaper_nodes.ros.bag_writer import typestore_with_own_types
 
         return typestore_with_own_types()
     except Exception:  # noqa: BLE001 - no ament index or no shaper_msgs here: standard types only

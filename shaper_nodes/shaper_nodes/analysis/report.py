@@ -19,7 +19,8 @@ import pathlib
 
 import numpy as np
 
-from ..core.vibration import percentage_vibration
+from shaper_nodes.core.shaping.vibration import percentage_vibration
+
 from .analyze import Analysis, shaper_of
 from .reading import describe_damage
 

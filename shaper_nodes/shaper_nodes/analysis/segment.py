@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.cycles import END, MOTION_END, START
+from shaper_nodes.core.cycles import END, MOTION_END, START
+
 from .streams import Events, Signal
 
 #: fraction of the top speed above which a sample counts as moving

@@ -1,0 +1,372 @@
+"""Seed 004's three cases through the ROS graph: sim plant, shaper and scheduler as processes.
+
+The sim plant runs the two-mass system (plant.model two_mass, lockstep) through five velocity
+steps (two_mass.STEP_LEVELS, x0 at 0.02, 0.19, 0.36, 0.53, 0.70 m); every step is shaped by
+
+(a) fixed   a ZV shaper designed on the first step's mode (m1 = 1.2 kg), set once on the shaper
+(b) switch  the scheduler with the paper's two-set switch, eq. (9): crisp rules m1 = 1.2 kg for
+            x0 <= 0.35 m, m1 = 8 kg above
+(c) fuzzy   the scheduler with the TS rule base of config/scheduler.yaml (eight operating points
+            x0 = 0, 0.1, ..., 0.7 m, triangular memberships, interpolated models)
+
+and, with --extra, (c2) the paper's own two-rule base (operating points at the first and fifth
+steps, triangular memberships) and (c-modes) case (c) interpolating the mode parameters.
+The residual vibration of a step is the largest |x1 - x0| (m) from WINDOW s after the step to
+the next step (the longest ZV here lasts 8.9 s).
+
+``python -m sim_plant_node.scheduler_cases`` regenerates docs/scheduler_results.md and
+docs/img/scheduler_*.png (see --help); the integration test calls :func:`run_case`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import pathlib
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from sim_plant_node.two_mass import (
+    STEP_LEVELS,
+    STEP_POSES,
+    m1_of,
+    rule_base_spec,
+    scheduler_parameters,
+    two_mass_matrices,
+)
+
+RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz)
+DWELL = 30.0      # s per step
+WINDOW = 10.0     # s after a step where its residual window starts
+PREROLL = 4.0     # s at rest before the first step (the scheduler's first shaper goes out here)
+JOINT = "joint_1"
+FUZZY_POINTS = tuple(np.linspace(0.0, 0.7, 8))  # every 0.1 m
+
+
+def _mode_at(m1: float):
+    from shaper_nodes.core.scheduling.fuzzy import modes_of
+
+    return modes_of(two_mass_matrices(m1)[0])[0]
+
+
+def switch_spec() -> dict:
+    """Seed 004 eq. (9) as a rule base: crisp sets x0 <= 0.35 (m1 = 1.2) and x0 > 0.35 (m1 = 8)."""
+    rules = {}
+    for name, (lo, hi), m1 in (("light", (-1e3, 0.35), 1.2), ("heavy", (0.35 + 1e-9, 1e3), 8.0)):
+        a, b = two_mass_matrices(m1)
+        rules[name] = {"membership": ["trapezoidal"], "membership_params": [lo, lo, hi, hi],
+                       "a_matrix": a.ravel().tolist(), "b_matrix": b.ravel().tolist()}
+    return {"premises": [JOINT], "rules": rules}
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    title: str
+    scheduler: dict | None = None              # scheduler parameters; None: fixed shaper
+    shaper: dict = field(default_factory=dict)  # shaper node parameters
+
+
+def _cases() -> dict[str, Case]:
+    first = _mode_at(1.2)
+    fuzzy = scheduler_parameters(rule_base_spec(FUZZY_POINTS, JOINT))
+    return {
+        "a": Case("a", "ZV on the first step's mode (m1 = 1.2 kg), fixed",
+                  shaper={"shaper.family": "zv", "shaper.frequency_hz": first.hz, "shaper.damping_ratio": first.zeta}),
+        "b": Case("b", "two-set switch of eq. (9): m1 = 8 kg if x0 > 0.35 m, else 1.2 kg",
+                  scheduler=scheduler_parameters(switch_spec())),
+        "c": Case("c", "TS fuzzy interpolation of the models at x0 = 0, 0.1, ..., 0.7 m (ZV on its mode)",
+                  scheduler=fuzzy),
+        "c2": Case("c2", "TS fuzzy interpolation, the paper's two rules (steps 1 and 5), triangular",
+                   scheduler=scheduler_parameters(rule_base_spec((STEP_POSES[0], STEP_POSES[-1]), JOINT))),
+        "c-modes": Case("c-modes", "as (c), interpolating the mode parameters instead of the models",
+                        scheduler={**fuzzy, "interpolation": "modes"}),
+    }
+
+
+CASES = _cases()
+
+
+@dataclass
+class Run:
+    """What one case recorded (times in s of simulated time)."""
+
+    case: Case
+    t: np.ndarray            # joint state times
+    x0: np.ndarray           # m
+    x1: np.ndarray           # m
+    v_shaped: np.ndarray     # m/s, the shaped command applied over the step ending at t
+    mode_t: np.ndarray       # scheduler's mode estimates: time, rad/s, -
+    mode_omega: np.ndarray
+    mode_zeta: np.ndarray
+    step_times: np.ndarray   # START of each step
+    residual: np.ndarray     # m, per step
+    sources: list            # (time, source, family) of every active shaper
+
+
+def residuals(t: np.ndarray, x0: np.ndarray, x1: np.ndarray, step_times: np.ndarray) -> np.ndarray:
+    """Largest |x1 - x0| from WINDOW s after each step to the next step (or the end), m."""
+    ends = list(step_times[1:]) + [t[-1] + 1e-9]
+    out = []
+    for ts, te in zip(step_times, ends):
+        sel = (t >= ts + WINDOW) & (t < te)
+        out.append(float(np.max(np.abs(x1[sel] - x0[sel]))) if np.any(sel) else float("nan"))
+    return np.array(out)
+
+
+def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout: float = 900.0,
+             progress: Callable[[str], None] | None = None) -> Run:
+    """Run the five steps of ``case``; ``start(package, executable, params)`` starts a node process."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+    from shaper_nodes.nodes.shaper import LATCHED
+    from shaper_nodes.ros.conversions import time_to_sec
+    from std_msgs.msg import Float64MultiArray
+    from std_srvs.srv import Trigger
+
+    from shaper_msgs.msg import CycleEvent, ModeEstimate
+    from shaper_msgs.msg import Shaper as ShaperMsg
+
+    start("sim_plant_node", "sim_plant", {
+        "joint_names": [JOINT], "rate": RATE, "mode": "lockstep", "plant.model": "two_mass",
+        "imu.axes": [0, -1, -1], "task.start": [0.0], "task.levels": [float(v) for v in STEP_LEVELS],
+        "task.dwell": DWELL, "task.preroll": PREROLL, "lockstep_timeout": 10.0})
+    shaper = {"joint_names": [JOINT], "command_rate": RATE, "use_sim_time": True, **case.shaper}
+    if case.scheduler is not None:
+        shaper["retime_sources"] = ["scheduler"]
+        start("shaper_nodes", "scheduler", {"use_sim_time": True, **case.scheduler})
+    start("shaper_nodes", "shaper_node", shaper)
+
+    node = Node("scheduler_cases", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    js: list = []
+    tip: list = []
+    cmd: list = []
+    modes: list = []
+    events: list = []
+    active: list = []
+    node.create_subscription(JointState, "/joint_states", lambda m: js.append(
+        (time_to_sec(m.header.stamp), m.position[0])), 1000)
+    node.create_subscription(JointState, "/sim_plant/tip_state", lambda m: tip.append(
+        (time_to_sec(m.header.stamp), m.position[0])), 1000)
+    node.create_subscription(Float64MultiArray, "/forward_position_controller/commands",
+                             lambda m: cmd.append(m.data[0]), 1000)
+    node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", lambda m: modes.append(
+        (time_to_sec(m.header.stamp), m.modes[0].natural_frequency, m.modes[0].damping_ratio)), LATCHED)
+    node.create_subscription(CycleEvent, "/cycle_events", lambda m: events.append(
+        (int(m.event), int(m.cycle), time_to_sec(m.header.stamp))), 100)
+    node.create_subscription(ShaperMsg, "/shaper/active_shaper", lambda m: active.append(
+        (time_to_sec(m.header.stamp), m.source, m.family)), LATCHED)
+    start_cli = node.create_client(Trigger, "/sim_plant/start_task")
+
+    def spin_until(done, limit, what):
+        deadline = time.monotonic() + limit
+        while not done():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"timed out after {limit:g} s waiting for {what}")
+            ex.spin_once(timeout_sec=0.05)
+
+    try:
+        spin_until(start_cli.service_is_ready, 60.0, "the sim plant")
+        need = {"/shaper/commands": 1, "/forward_position_controller/commands": 2, "/joint_states": 1,
+                "/sim_plant/tip_state": 1}
+        if case.scheduler is not None:
+            need["/joint_states"] = 2
+            from shaper_msgs.srv import GetShaper
+
+            sched = node.create_client(GetShaper, "/scheduler/get_shaper")
+            spin_until(sched.service_is_ready, 60.0, "the scheduler")
+        for topic, n in need.items():
+            spin_until(lambda t=topic, k=n: node.count_subscribers(t) >= k, 60.0, f"{n} subscribers on {topic}")
+        spin_until(lambda: bool(active), 60.0, "the shaper's active shaper")
+        settle = time.monotonic() + 1.0
+        spin_until(lambda: time.monotonic() > settle, 5.0, "discovery to settle")
+        future = start_cli.call_async(Trigger.Request())
+        spin_until(future.done, 30.0, "the task to start")
+        if not future.result().success:
+            raise RuntimeError(f"sim plant did not start: {future.result().message}")
+        n_steps = len(STEP_LEVELS)
+        seen = 0
+
+        def finished() -> bool:
+            nonlocal seen
+            ends = sum(1 for k, _, _ in events if k == 2)
+            if progress and ends > seen:
+                seen = ends
+                progress(f"step {ends} of {n_steps} done")
+            last_end = max((t for k, _, t in events if k == 2), default=math.inf)
+            return ends >= n_steps and bool(js) and js[-1][0] >= last_end and bool(tip) and tip[-1][0] >= last_end
+
+        spin_until(finished, timeout, "the five steps")
+        settle = time.monotonic() + 0.5
+        spin_until(lambda: time.monotonic() > settle, 5.0, "the last messages")
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+    # a loaded machine may starve this driver and let a few messages go (the plant keeps 10); what
+    # arrived is paired by stamp, and a run that lost more than 10 % is an error
+    t_js, x0_all = np.array(js).T
+    t_tip, x1_all = np.array(tip).T
+    t0, i0, i1 = np.intersect1d(t_js, t_tip, return_indices=True)
+    x0, x1 = x0_all[i0], x1_all[i1]
+    expected = int(round((PREROLL + len(STEP_LEVELS) * DWELL) * RATE))
+    if t0.size < 0.9 * expected:
+        raise RuntimeError(f"only {t0.size} of {expected} joint and tip states arrived")
+    v = np.array(cmd)  # the k-th shaped command is integrated over the k-th step (if none was lost)
+    step_times = np.array(sorted(t for k, _, t in events if k == 0))
+    m = np.array(modes).reshape(-1, 3).T if modes else np.zeros((3, 0))
+    return Run(case, t0, x0, x1, v, m[0], m[1], m[2], step_times, residuals(t0, x0, x1, step_times), active)
+
+
+# --------------------------------------------------------------------------------------------- docs
+def interpolation_table() -> str:
+    """Frequency error of the interpolated mode against the plant's over x0 in [0, 0.7] m, for
+    rule bases of several sizes, interpolating the models or the mode parameters (ROS-free)."""
+    from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
+
+    xs = np.linspace(0.0, 0.7, 281)
+    true = np.array([_mode_at(float(m1)).omega for m1 in m1_of(xs)])
+    mids = [0.5 * (a + b) for a, b in zip((0.0,) + STEP_POSES[:-1], STEP_POSES)]
+    lines = ["| operating points x0 (m) | interpolating | largest error | error at the steps' midpoints"
+             f" x0 = {', '.join(f'{m:.3g}' for m in mids)} m |", "|---|---|---|---|"]
+    for label, pts in (("0.02, 0.7 (the paper's two)", STEP_POSES[::4]),
+                       ("0, 0.175, ..., 0.7 (5)", np.linspace(0, 0.7, 5)),
+                       ("0, 0.1, ..., 0.7 (8, case c)", FUZZY_POINTS)):
+        base = rule_base_from_dict(rule_base_spec(pts, JOINT))
+        for method in ("model", "modes"):
+            err = np.array([base.evaluate([x], method).modes[0].omega for x in xs]) / true - 1
+            at = np.interp(mids, xs, err)
+            lines.append(f"| {label} | {method} | {100 * np.max(np.abs(err)):.1f} % |"
+                         f" {', '.join(f'{100 * e:+.1f}' for e in at)} % |")
+    return "\n".join(lines) + "\n"
+
+
+def true_mode_curve(t: np.ndarray, x0: np.ndarray):
+    """The plant's mode (eq. (1) linearised at the present m1) along a run: rad/s and -."""
+    out = np.array([[m.omega, m.zeta] for m in (_mode_at(float(m1)) for m1 in m1_of(x0))])
+    return out[:, 0], out[:, 1]
+
+
+def markdown(runs: dict[str, Run]) -> str:
+    names = list(runs)
+    lines = ["| step | x0 (m) | " + " | ".join(f"({n}) residual (mm)" for n in names) + " |",
+             "|---|---|" + "---|" * len(names)]
+    for j, x in enumerate(STEP_POSES):
+        lines.append(f"| {j + 1} | {x:.2f} | " + " | ".join(f"{1e3 * runs[n].residual[j]:.3f}" for n in names) + " |")
+    lines.append("| sum | | " + " | ".join(f"**{1e3 * runs[n].residual.sum():.3f}**" for n in names) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(docs: pathlib.Path, runs: dict[str, Run]) -> list[pathlib.Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    for name, run in runs.items():
+        fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+        ax[0].plot(run.t, run.x1, lw=0.9, label="x1")
+        ax[0].plot(run.t, run.x0, lw=0.7, ls="--", label="x0")
+        ax[0].set_ylabel("position (m)")
+        ax[0].legend(fontsize=8, loc="lower right")
+        ax[0].set_title(f"({name}) {run.case.title}", fontsize=9)
+        ax[1].plot(np.arange(1, run.v_shaped.size + 1) / RATE, run.v_shaped, lw=0.9)
+        ax[1].set_ylabel("shaped command v_s (m/s)")
+        ax[1].set_xlabel("time (s)")
+        for a in ax:
+            a.grid(alpha=0.3)
+        fig.tight_layout()
+        path = docs / "img" / f"scheduler_{name}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        paths.append(path)
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    ref = next(iter(runs.values()))
+    w, z = true_mode_curve(ref.t, ref.x0)
+    ax[0].plot(ref.t, w, color="k", lw=1.5, alpha=0.4, label="plant (eq. (1) at the present m1)")
+    ax[1].plot(ref.t, z, color="k", lw=1.5, alpha=0.4)
+    for name, run in runs.items():
+        if run.mode_t.size:
+            ax[0].step(run.mode_t, run.mode_omega, where="post", lw=0.9, label=f"({name}) scheduled")
+            ax[1].step(run.mode_t, run.mode_zeta, where="post", lw=0.9)
+    ax[0].set_ylabel("natural frequency (rad/s)")
+    ax[1].set_ylabel("damping ratio")
+    ax[1].set_xlabel("time (s)")
+    ax[0].legend(fontsize=8)
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    path = docs / "img" / "scheduler_modes.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return paths + [path]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="scheduler_cases", description=__doc__.split("\n\n")[0])
+    p.add_argument("--cases", default="a,b,c", help="cases to run (default a,b,c; also c2, c-modes)")
+    p.add_argument("--extra", action="store_true", help="also run c2 and c-modes")
+    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
+                   help="where scheduler_results.md and img/scheduler_*.png go (default docs)")
+    args = p.parse_args(argv)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    from shaper_nodes.ros.launching import NodeProcess
+    from sim_plant_node.conductor import spin_context
+
+    names = [n.strip() for n in args.cases.split(",")] + (["c2", "c-modes"] if args.extra else [])
+    logs = pathlib.Path("out") / "scheduler_cases"
+    logs.mkdir(parents=True, exist_ok=True)
+    runs: dict[str, Run] = {}
+    t_start = time.monotonic()
+    for name in dict.fromkeys(names):
+        case = CASES[name]
+        procs: list = []
+
+        def start(package, executable, params, case=case, procs=procs):
+            proc = NodeProcess(package, executable, params, log_path=logs / f"{case.name}-{executable}.log")
+            procs.append(proc.start())
+            return proc
+
+        ctx = spin_context()
+        print(f"({case.name}) {case.title}", flush=True)
+        t_case = time.monotonic()
+        try:
+            runs[name] = run_case(case, start, ctx, progress=lambda s: print("  " + s, flush=True))
+        finally:
+            ctx.try_shutdown()
+            for proc in reversed(procs):
+                proc.stop()
+        print("  residual (mm): " + ", ".join(f"{1e3 * r:.3f}" for r in runs[name].residual)
+              + f" ({time.monotonic() - t_case:.0f} s)", flush=True)
+    args.docs.mkdir(parents=True, exist_ok=True)
+    (args.docs / "img").mkdir(exist_ok=True)
+    paths = plot(args.docs, runs)
+    a = runs.get("a")
+    ratio = "".join(f" sum(a) / sum({n}) = {a.residual.sum() / r.residual.sum():.1f}."
+                    for n, r in runs.items() if a is not None and n != "a")
+    text = ["# Seed 004 through the ROS graph: fixed, switched and fuzzy-scheduled ZV (generated)", "",
+            "Regenerate with `./run exec python -m sim_plant_node.scheduler_cases` (add `--extra` for the paper's"
+            " two-rule base and for interpolating mode parameters). Sim plant (`plant.model: two_mass`, lockstep at"
+            f" {RATE:g} Hz), shaper node and scheduler node run as separate processes; five velocity steps of"
+            f" {DWELL:g} s each put x0 at {', '.join(f'{x:g}' for x in STEP_POSES)} m. Residual: the largest"
+            f" |x1 - x0| from {WINDOW:g} s after a step to the next step. See [scheduler.md](scheduler.md).", "",
+            *[f"- ({n}) {r.case.title}" for n, r in runs.items()], "",
+            markdown(runs), ratio.strip(), "",
+            "Natural frequency of the interpolated mode against the plant's (eq. (1) at m1 = 10 x0 + 1) over"
+            " x0 in [0, 0.7] m, triangular memberships (the midpoints are where a step's second impulse is"
+            " timed):", "", interpolation_table(),
+            *[f"![{p.stem}](img/{p.name})" for p in paths], ""]
+    (args.docs / "scheduler_results.md").write_text("\n".join(text))
+    print(f"wrote {args.docs / 'scheduler_results.md'} and {len(paths)} plots ({time.monotonic() - t_start:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

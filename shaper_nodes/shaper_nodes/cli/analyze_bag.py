@@ -1,0 +1,109 @@
+"""Analyse a recording: residual vibration per cycle, modes, a better shaper, what a learner would do.
+
+``analyze_bag BAG [--out DIR] [--json]`` (also ``ros2 run shaper_nodes analyze_bag``) reads a
+rosbag2 folder or a bare .mcap file (a truncated or corrupt MCAP too: what can be read is
+analysed, and a warning says what was lost), finds the accelerometer, joint-state, command,
+cycle-event and shaper topics by type, segments the cycles (from the cycle events, else from the
+motion of the commands), replays the learners (LIST; MRILC where the recording has the cycle
+events, joint states and the applied reference), and prints a table; ``--out`` writes a report
+folder (Markdown, CSV, JSON, PNG plots); ``--json`` prints the summary as JSON instead of the
+table. See
+docs/bag_analysis.md. Exit codes: 0 done, 2 the recording cannot be analysed (the message says
+why), 3 analysed but the recording was damaged (with ``--strict``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+
+from shaper_nodes.analysis.analyze import LEARNER_REPLAYS, Options, analyze
+from shaper_nodes.analysis.reading import BagError
+from shaper_nodes.analysis.report import summary, table, write_report
+from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
+
+from .list_replay import parse_params
+
+
+def _band_hz(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH in Hz, got {text!r}") from None
+    return lo, hi
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="analyze_bag", description=__doc__.split("\n\n")[0])
+    p.add_argument("bag", type=pathlib.Path, help="rosbag2 folder or .mcap file")
+    p.add_argument("--out", type=pathlib.Path, help="write the report folder here (Markdown, CSV, JSON, PNG)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON instead of the table")
+    for role, types in ROLE_TYPES.items():
+        p.add_argument(f"--{role}-topic", metavar="TOPIC", help=f"the {role} topic ({' or '.join(types)};"
+                       " default: found by type)")
+    p.add_argument("--segmentation", choices=("auto", "events", "motion"), default="auto",
+                   help="cycles from the cycle events, or from the motion of the commands (auto: events if any)")
+    p.add_argument("--positions", choices=("auto", "joints", "commands"), default="auto",
+                   help="positions whose rest starts the residual window (auto: joint states, else commands)")
+    p.add_argument("--settle-tolerance", type=float, default=1e-6,
+                   help="positions within this of their final value are at rest, rad or m (default 1e-6;"
+                        " raise it for measured, noisy joint states)")
+    p.add_argument("--band", default="5%", help="settling band: m/s^2, or a percentage of the cycle's peak"
+                                                " (default 5%%)")
+    p.add_argument("--remove-mean", choices=("auto", "yes", "no"), default="auto",
+                   help="remove each window's mean acceleration (gravity, bias); auto: when the recording"
+                        " has a clear offset")
+    p.add_argument("--method", default="fit", help="identification method: fit, spectral, matrix_pencil")
+    p.add_argument("--max-modes", type=int, default=2, help="most modes to identify (default 2)")
+    p.add_argument("--band-hz", type=_band_hz, help="look for modes in LOW,HIGH Hz only")
+    p.add_argument("--identify-cycles", type=int, default=20,
+                   help="identify the modes in at most this many cycles, evenly spread (0 = all; default 20)")
+    p.add_argument("--target", type=float, default=0.05,
+                   help="largest acceptable worst-case percentage vibration, fraction (default 0.05)")
+    p.add_argument("--sigmas", type=float, default=2.0, help="uncertainty box half-width, standard deviations")
+    p.add_argument("--learners", default=",".join(LEARNER_REPLAYS),
+                   help=f"learner replays to run, comma-separated, '' for none (known: {','.join(LEARNER_REPLAYS)})")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a learner parameter as given to the live node, e.g. list.highpass_hz=0.5 or"
+                        " mrilc.gamma=10 (repeatable); replay.learned_run=true replays every MRILC cycle"
+                        " (a recording of a live MRILC run)")
+    p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
+    p.add_argument("--strict", action="store_true", help="exit 3 when the recording was damaged")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        params = parse_params(args.param)
+        overrides = {role: getattr(args, f"{role}_topic") for role in ROLE_TYPES if getattr(args, f"{role}_topic")}
+        options = Options(settle_tolerance=args.settle_tolerance, band=args.band, remove_mean=args.remove_mean,
+                          segmentation=args.segmentation, positions=args.positions, method=args.method,
+                          max_modes=args.max_modes, band_hz=args.band_hz, identify_cycles=args.identify_cycles,
+                          target=args.target, sigmas=args.sigmas,
+                          learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
+                          learner_params=params)
+        rec = read_recording(args.bag, overrides, progress=not args.no_progress and sys.stderr.isatty())
+        an = analyze(rec, options)
+    except (BagError, OSError, ValueError) as err:
+        print(f"analyze_bag: {err}", file=sys.stderr)
+        return 2
+    for d in rec.damage:
+        from shaper_nodes.analysis.reading import describe_damage
+
+        print(f"analyze_bag: WARNING: damaged recording: {describe_damage(d)}", file=sys.stderr)
+    if args.out:
+        files = write_report(an, args.out)
+        if not args.json:
+            print(f"report: {args.out / 'report.md'} ({len(files)} files)", file=sys.stderr)
+    if args.json:
+        print(json.dumps(summary(an), indent=2, allow_nan=False))
+    else:
+        print(table(an))
+    return 3 if args.strict and rec.damage else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,233 @@
+"""The learner's bookkeeping around :class:`~shaper_nodes.core.list_learning.ListLearner`, free of ROS.
+
+One class, fed the same stream of events whether it runs live in the learner node or offline
+over a recorded bag, so that both give the same updates bit for bit:
+
+- ``on_shaper``: the shaper node's active shaper (latched topic), to know which parameters a
+  cycle actually ran with;
+- ``on_imu``: accelerometer samples (time in s, 1 to 3 axes in m/s^2);
+- ``on_event``: cycle events; at END the buffered cycle is handed to the learner.
+
+A cycle is learned from only if it ran with the shaper the learner asked for (or unshaped,
+which makes it the reference), with the same shaper from START to END; otherwise it is
+skipped with the reason, as are cycles whose START was missed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from shaper_nodes.core.cycles import END, MOTION_END, START
+
+from .learner import ListConfig, ListError, ListLearner, ListParams, ListUpdate
+
+#: samples kept between cycles (those stamped after a START may arrive before it)
+KEEP_BEFORE_START = 1000
+#: relative tolerance when matching the active shaper with the parameters the learner sent
+MATCH_TOL = 1e-9
+
+
+def list_config(values: Mapping[str, object]) -> ListConfig:
+    """The ListConfig of the learner node's ``list.*`` parameters (keys without the prefix).
+
+    Parameters use 0 (or [0, 0]) for "not set": ``window_delay`` 0 -> None, ``t2_bounds``
+    [0, 0] -> None, ``saturation`` 0 -> no limit. Missing keys keep the defaults.
+
+    Raises
+    ------
+    ListError
+        An invalid value; the message names it.
+    """
+    v = dict(values)
+    kw: dict[str, object] = {}
+    for key in ("structure", "rule"):
+        if key in v:
+            kw[key] = str(v[key])
+    for key in ("highpass_hz", "max_step_a1", "max_step_t2", "switch_tol", "rollback_factor"):
+        if key in v:
+            kw[key] = float(v[key])
+    for key in ("phase_trials", "patience", "min_samples"):
+        if key in v:
+            kw[key] = int(v[key])
+    if "window_delay" in v:
+        kw["window_delay"] = float(v["window_delay"]) or None
+    if "saturation" in v:
+        kw["saturation"] = float(v["saturation"]) or math.inf
+    if "a1_bounds" in v:
+        kw["a1_bounds"] = tuple(float(x) for x in v["a1_bounds"])
+    if "t2_bounds" in v:
+        t2 = tuple(float(x) for x in v["t2_bounds"])
+        kw["t2_bounds"] = t2 if any(t2) else None
+    try:
+        return ListConfig(**kw)
+    except (TypeError, ValueError) as err:
+        raise ListError(f"invalid learner configuration: {err}") from None
+
+
+@dataclass(frozen=True)
+class ActiveShaper:
+    """What the shaper node reports as active: impulses, who set it, and its revision."""
+
+    amplitudes: tuple[float, ...]
+    times: tuple[float, ...]
+    source: str
+    revision: int
+
+    @property
+    def is_identity(self) -> bool:
+        return len(self.amplitudes) == 1
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    """The outcome of one finished cycle: the learner's update, or why it was skipped."""
+
+    cycle: int
+    start: float
+    motion_end: float
+    end: float
+    update: ListUpdate | None
+    skipped: str = ""
+
+    @property
+    def learned(self) -> bool:
+        return self.update is not None and self.update.action != "rejected"
+
+
+class ListSession:
+    """Buffer one cycle at a time and run the LIST update at its END.
+
+    Parameters
+    ----------
+    learner : ListLearner
+        The learner (fresh, or restored from a save file).
+    structure : str
+        The impulse structure the learner's parameters are applied as ("zv2" or "zvd3").
+    stale_after : float
+        A cycle whose last accelerometer sample is older than this at END (s) is stale.
+    """
+
+    def __init__(self, learner: ListLearner, structure: str = "zv2", stale_after: float = 0.1) -> None:
+        self.learner = learner
+        self.structure = structure
+        self.stale_after = float(stale_after)
+        self.active: ActiveShaper | None = None
+        self._sent: ListParams | None = None
+        self._previous: ListParams | None = None
+        self._cycle: int | None = None
+        self._start = 0.0
+        self._motion_end: float | None = None
+        self._at_start: ActiveShaper | None = None
+        self._direction = 1.0
+        self._t: list[float] = []
+        self._a: list[np.ndarray] = []
+        self._ref_displacement: np.ndarray | None = None
+        self._latest = -math.inf
+
+    # ----------------------------------------------------------------- inputs
+    def sent(self, params: ListParams | None) -> None:
+        """The learner's parameters were sent to the shaper node (None: the identity)."""
+        self._previous, self._sent = self._sent, params
+
+    def on_shaper(self, amplitudes, times, source: str, revision: int) -> None:
+        self.active = ActiveShaper(tuple(float(a) for a in amplitudes), tuple(float(t) for t in times),
+                                   str(source), int(revision))
+
+    @property
+    def latest_imu(self) -> float:
+        """Stamp of the latest accelerometer sample received (s), -inf before the first."""
+        return self._latest
+
+    def on_imu(self, t: float, accel) -> None:
+        """An accelerometer sample. Kept by its stamp: at END the cycle takes the samples stamped
+        between its START and END, whatever order they arrived in relative to the events."""
+        self._t.append(float(t))
+        self._a.append(np.asarray(accel, dtype=float).ravel())
+        self._latest = max(self._latest, float(t))
+        if self._cycle is None and len(self._t) > 2 * KEEP_BEFORE_START:
+            del self._t[:-KEEP_BEFORE_START], self._a[:-KEEP_BEFORE_START]
+
+    def on_event(self, kind: int, cycle: int, t: float, start_positions=(), goal_positions=()
+                 ) -> SessionResult | None:
+        """A cycle event; returns the result at a cycle's END, else None."""
+        t = float(t)
+        if kind == START:
+            self._cycle, self._start, self._motion_end = int(cycle), t, None
+            self._at_start = self.active
+            keep = [i for i, ti in enumerate(self._t) if ti >= t]
+            self._t, self._a = [self._t[i] for i in keep], [self._a[i] for i in keep]
+            self._direction = self._direction_of(start_positions, goal_positions)
+            return None
+        if self._cycle is None or int(cycle) != self._cycle:
+            if kind == END:
+                return SessionResult(int(cycle), float("nan"), float("nan"), t, None,
+                                     "END without its START (events lost, or the learner started mid-cycle)")
+            return None
+        if kind == MOTION_END:
+            self._motion_end = t - self._start
+            return None
+        if kind != END:
+            return None
+        cycle, self._cycle = self._cycle, None
+        motion_end = self._motion_end if self._motion_end is not None else 0.0
+        result = lambda update, why="": SessionResult(  # noqa: E731
+            cycle, self._start, self._start + motion_end, t, update, why)
+        if self._motion_end is None:
+            return result(None, "no MOTION_END event in the cycle")
+        used, why = self._used(self._at_start)
+        if why:
+            return result(None, why)
+        if self.active != self._at_start:
+            return result(None, "the shaper changed during the cycle")
+        stamps = np.asarray(self._t)
+        mine = stamps <= t
+        times = stamps[mine] - self._start
+        accel = np.vstack([a for a, m in zip(self._a, mine) if m]) if mine.any() else np.zeros((0, 3))
+        self._t = stamps[~mine].tolist()
+        self._a = [a for a, m in zip(self._a, mine) if not m]
+        if times.size == 0:
+            return result(None, "no accelerometer data in the cycle (sensor missing or stale)")
+        if (t - self._start) - times[-1] > self.stale_after:
+            return result(None, f"stale accelerometer: its last sample is {(t - self._start) - times[-1]:.3f} s"
+                                f" before the cycle's END (limit {self.stale_after:g} s)")
+        try:
+            update = self.learner.update(times, accel, motion_end, t - self._start, used, self._direction)
+        except ListError as err:
+            return result(None, str(err))
+        return result(update)
+
+    # ----------------------------------------------------------------- helpers
+    def _direction_of(self, start_positions, goal_positions) -> float:
+        d = np.asarray(goal_positions, dtype=float) - np.asarray(start_positions, dtype=float)
+        if d.size == 0 or not np.all(np.isfinite(d)) or not np.any(d):
+            return 1.0
+        if self._ref_displacement is None or self._ref_displacement.shape != d.shape:
+            self._ref_displacement = d
+        return 1.0 if float(np.dot(d, self._ref_displacement)) >= 0.0 else -1.0
+
+    def _matches(self, params: ListParams, active: ActiveShaper) -> bool:
+        mine = params.shaper(self.structure)
+        return (len(mine.amplitudes) == len(active.amplitudes)
+                and np.allclose(mine.amplitudes, active.amplitudes, rtol=MATCH_TOL, atol=MATCH_TOL)
+                and np.allclose(mine.times, active.times, rtol=MATCH_TOL, atol=MATCH_TOL))
+
+    def _used(self, active: ActiveShaper | None) -> tuple[ListParams | None, str]:
+        """The parameters a cycle ran with (None: unshaped), or a reason not to learn from it."""
+        if active is None:
+            return None, "the active shaper is not known yet (no message on the active-shaper topic)"
+        if active.is_identity:
+            if self._sent is None or self.learner.reference is None:
+                return None, ""  # asked for (or needed): the reference cycle
+            return None, ("the cycle ran unshaped although the learner had sent its shaper (the update"
+                          " arrived after it started, or another source set none); not learned from")
+        if self._sent is not None and self._matches(self._sent, active):
+            return self._sent, ""
+        if self._previous is not None and self._matches(self._previous, active):
+            return None, ("the cycle ran with the learner's previous parameters (the update arrived after it"
+                          " started); not learned from")
+        return None, (f"the cycle ran with a shaper the learner did not set (source {active.source!r},"
+                      f" revision {active.revision}); not learned from")

@@ -1,0 +1,102 @@
+"""Gain-scheduled shaping: the shaper from the fuzzy rule base at the present pose, rate-limited,
+with the learner's corrections kept per operating region. Free of ROS (the scheduler node wraps it).
+
+Policy with the learner
+-----------------------
+The scheduler decides the mode; the learner learns a correction. A correction is the ratio of
+the learner's two-impulse shaper (A1 at 0, 1 - A1 at T2) to the scheduled ZV at the same pose,
+(r_T, r_A) = (T2 / T2_s, A1 / A1_s), kept per rule. At a pose z the corrections are
+interpolated with the rules' weights, r(z) = sum_i w_i(z) r_i, and the shaper sent is the
+scheduled ZV with T2 = r_T(z) T2_s(z) and A1 = r_A(z) A1_s(z). When the learner sends a shaper
+at z, the dominant rule i* (largest weight: the operating region) takes the change that makes
+r(z) equal what the learner found, r_i* += (r_learned - r(z)) / w_i*, so the learner's shaper
+is exactly what is applied at that pose, and moving away and back restores it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shaper_nodes.core.shaping.families import Mode, Shaper, ShaperError, design
+
+from .fuzzy import FuzzyError, Interpolation, RuleBase
+
+#: A1 of a corrected shaper stays within these bounds
+A1_BOUNDS = (0.05, 0.95)
+
+
+def relative_change(old: Sequence[Mode], new: Sequence[Mode]) -> float:
+    """Largest relative change between two mode lists: |d omega| / omega, and |d zeta| / max(zeta,
+    0.01) (so a damping ratio near 0 does not count every change as large); inf if the number of
+    modes differs."""
+    if len(old) != len(new):
+        return math.inf
+    change = 0.0
+    for a, b in zip(old, new):
+        change = max(change, abs(b.omega - a.omega) / a.omega, abs(b.zeta - a.zeta) / max(a.zeta, 0.01))
+    return change
+
+
+@dataclass
+class Scheduler:
+    """The rule base, how to interpolate ('model' or 'modes'), the shaper family, corrections."""
+
+    rule_base: RuleBase
+    method: str = "model"
+    family: str = "zv"
+    corrections: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def __post_init__(self) -> None:
+        if self.method not in ("model", "modes"):
+            raise FuzzyError(f"interpolation must be 'model' or 'modes', got {self.method!r}")
+        design(self.family, [Mode(1.0, 0.05)])  # the family exists and designs from a mode
+        if self.corrections.size == 0:
+            self.corrections = np.ones((len(self.rule_base.rules), 2))
+
+    def evaluate(self, z: Sequence[float]) -> Interpolation:
+        out = self.rule_base.evaluate(z, self.method)
+        if not out.modes:
+            raise FuzzyError("the interpolated model has no lightly damped mode at "
+                             + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.rule_base.premises, out.z)))
+        return out
+
+    def correction(self, interp: Interpolation) -> tuple[float, float]:
+        """(r_T, r_A) at the pose of ``interp``."""
+        r = interp.weights @ self.corrections
+        return float(r[0]), float(r[1])
+
+    def scheduled(self, interp: Interpolation) -> Shaper:
+        """The family's shaper on the interpolated modes, without corrections."""
+        return design(self.family, interp.modes)
+
+    def shaper(self, interp: Interpolation) -> Shaper:
+        """The shaper to apply at the pose of ``interp``: scheduled, times the region's correction."""
+        base = self.scheduled(interp)
+        r_t, r_a = self.correction(interp)
+        if self.family != "zv" or len(base) != 2 or (r_t == 1.0 and r_a == 1.0):
+            return base
+        a1 = min(max(base.amplitudes[0] * r_a, A1_BOUNDS[0]), A1_BOUNDS[1])
+        return Shaper(np.array([a1, 1.0 - a1]), np.array([0.0, base.times[1] * r_t]), "custom", base.modes)
+
+    def learn(self, interp: Interpolation, learned: Shaper) -> tuple[int, tuple[float, float]]:
+        """Take the learner's shaper at the pose of ``interp``; returns (region, its correction).
+
+        Raises
+        ------
+        ShaperError
+            If the family is not ZV or the learner's shaper is not two impulses.
+        """
+        if self.family != "zv":
+            raise ShaperError(f"learner corrections need the scheduler's family 'zv', not {self.family!r}")
+        if len(learned) != 2 or learned.times[1] <= 0:
+            raise ShaperError(f"a learner correction is a two-impulse shaper, got {len(learned)} impulses")
+        base = self.scheduled(interp)
+        wanted = np.array([learned.times[1] / base.times[1], learned.amplitudes[0] / base.amplitudes[0]])
+        i = interp.dominant
+        now = interp.weights @ self.corrections
+        self.corrections[i] = self.corrections[i] + (wanted - now) / interp.weights[i]
+        return i, (float(self.corrections[i, 0]), float(self.corrections[i, 1]))

@@ -1,0 +1,451 @@
+"""Causal FIR filters from impulse sequences, and the streaming multi-joint shaper.
+
+Discretisation
+--------------
+At command period ``Ts`` an impulse at ``t = (k + f) Ts`` (integer k, 0 <= f < 1) is either
+rounded to the nearest sample (``"round"``) or split linearly between samples k and k + 1 with
+weights ``1 - f`` and ``f`` (``"split"``, the default). Splitting keeps the centroid of each
+impulse exactly where it belongs, so the residual vibration it leaves is second order in
+``omega Ts`` instead of first order (see ``docs/shaping.md`` for V before and after).
+
+``"exact"`` starts from the split and corrects its taps (least change, in the 2-norm) so that the
+FIR, read as impulses at the sample instants, meets the continuous shaper's own conditions at
+every design mode exactly: its transform S(s) = sum_k b_k exp(-s k Ts) equals the continuous
+shaper's sum_i A_i exp(-s t_i), with the first d derivatives in s, at each mode's pole
+s = -zeta omega + j omega sqrt(1 - zeta^2) (d: the family's derivative order, ZV 0, ZVD 1,
+ZV-D^n n, MZV and SI 0, the EI family 1), and the taps sum to 1. A plant driven through a
+zero-order hold at Ts by the shaped command keeps a residual proportional to |S(s)| at its pole,
+so on the design modes the FIR leaves exactly what the continuous shaper leaves (zero for the
+ZV family: no discretisation floor). The correction is refused (``ValueError``) when the command
+period leaves no solution on the samples next to the impulses (for a positive shaper, none with
+taps >= 0: then the least change is found with the taps bounded below by zero).
+
+Bumpless switching
+------------------
+:class:`StreamingShaper` writes the shaped output as a sum over the increments of the input,
+each shaped by the filter that was active when it arrived:
+
+    y(k) = y0 + sum_j s_{f(j)}(k - j) (x(j) - x(j - 1)),
+
+where ``s_f`` is the step response of filter ``f`` (0 before the first tap, 1 after the last).
+With one filter this is exactly the convolution ``h * x``. When the filter changes, motion
+already commanded finishes under the old filter while new motion is shaped by the new one, so
+the output is continuous, every part of the motion stays vibration-free with respect to the
+filter that shaped it, and the output settles to the same final value (every step response
+ends at 1). A retired filter's contribution is constant once its taps have passed, and is
+then folded into the offset.
+
+Re-timing (time-varying shaping)
+--------------------------------
+:class:`RetimingShaper` writes the output the same way but keeps, per pending increment, the
+fraction already emitted, e_j(k). A bumpless :meth:`~RetimingShaper.switch` gives new
+increments the new filter (the behaviour above); :meth:`~RetimingShaper.retime` gives the new
+filter to the pending increments as well, from their age on, never taking back what was
+already emitted:
+
+    e_j(k) = max(e_j at the retime, s_new(k - j)).
+
+So when the mode changes while a move's impulses are still pending (seed 004: the pose, and
+with it the mode, changes with the first impulse of a step), the rest of the move comes out at
+the new mode's impulse times, as the time-varying shaper of a configuration-dependent system
+does, and the output never steps back. Every increment still ends fully emitted, so the output
+settles at the input.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .families import Shaper
+
+#: most filters alive at once (the active one plus those whose tails are still running)
+MAX_STAGES = 16
+
+
+@dataclass(frozen=True)
+class SparseFir:
+    """A causal FIR with few non-zero taps: ``y(k) = sum_i gains[i] x(k - delays[i])``.
+
+    ``delays`` are distinct, increasing integers (samples); ``gains`` dimensionless.
+    """
+
+    delays: np.ndarray
+    gains: np.ndarray
+
+    @property
+    def length(self) -> int:
+        """Number of dense taps (largest delay + 1)."""
+        return int(self.delays[-1]) + 1
+
+    def dense(self) -> np.ndarray:
+        """The dense tap vector b_0 .. b_{length-1}."""
+        taps = np.zeros(self.length)
+        taps[self.delays] = self.gains
+        return taps
+
+
+def discretize(shaper: Shaper, rate: float, method: str = "split") -> SparseFir:
+    """Discretise an impulse sequence to a causal FIR at ``rate`` (Hz).
+
+    Parameters
+    ----------
+    shaper : Shaper
+        The impulse sequence (times in s).
+    rate : float
+        Command rate, Hz.
+    method : {"split", "round", "exact"}
+        Linear split between the two neighbouring samples, rounding to the nearest, or the split
+        corrected to meet the shaper's conditions at its design modes exactly (module docstring).
+    """
+    if not (math.isfinite(rate) and rate > 0.0):
+        raise ValueError(f"command rate must be finite and > 0 Hz, got {rate!r}")
+    pos = np.asarray(shaper.times) * rate
+    amps = np.asarray(shaper.amplitudes)
+    if method == "round":
+        delays = np.rint(pos).astype(int)
+        gains = amps.copy()
+    elif method in ("split", "exact"):
+        base = np.floor(pos + 1e-9).astype(int)
+        frac = np.clip(pos - base, 0.0, 1.0)
+        frac[frac < 1e-9] = 0.0
+        delays = np.concatenate([base, base + 1])
+        gains = np.concatenate([amps * (1.0 - frac), amps * frac])
+    else:
+        raise ValueError(f"unknown discretisation method {method!r}; use 'split', 'round' or 'exact'")
+    acc = np.zeros(int(delays.max()) + 1)
+    np.add.at(acc, delays, gains)
+    if method == "exact":
+        acc = _exact_taps(shaper, rate, acc, base)
+    nz = np.flatnonzero(acc != 0.0)
+    return SparseFir(delays=nz, gains=acc[nz])
+
+
+#: derivative order of the conditions each family meets at its design modes (``exact``)
+_EXACT_ORDER = {"zv": 0, "zvd": 1, "zvdd": 2, "mzv": 0, "si": 0, "custom": 0,
+                "ei": 1, "2hump_ei": 1, "3hump_ei": 1}
+
+
+def _exact_order(shaper: Shaper) -> int:
+    if shaper.family == "zvdn":
+        return int(shaper.params.get("derivative_order", 0))
+    return _EXACT_ORDER.get(shaper.family, 0)
+
+
+def _exact_taps(shaper: Shaper, rate: float, split: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """The split taps ``split`` corrected to meet the shaper's conditions at its modes (``exact``)."""
+    if not shaper.modes or split.size == 1:
+        return split
+    order = _exact_order(shaper)
+    amps, times = np.asarray(shaper.amplitudes), np.asarray(shaper.times)
+    span = max(float(times[-1]), 1.0 / rate)
+
+    def system(taps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t = taps / rate
+        rows, rhs = [np.ones(taps.size)], [1.0]
+        for mode in shaper.modes:
+            s = complex(-mode.zeta * mode.omega, mode.damped_omega)
+            # scaled by exp(s t_n) and span^-n so every row is of order one
+            fir_row = np.exp(-s * (t - times[-1]))
+            cont = amps * np.exp(-s * (times - times[-1]))
+            for n in range(order + 1):
+                row = fir_row * (-t / span) ** n
+                target = complex(np.sum(cont * (-times / span) ** n))
+                rows += [row.real, row.imag]
+                rhs += [target.real, target.imag]
+        return np.array(rows), np.array(rhs)
+
+    positive = bool(np.all(amps >= 0.0))
+
+    def solve(taps: np.ndarray) -> np.ndarray | None:
+        """Least change from the split on ``taps`` meeting the conditions (and >= 0 for a positive shaper)."""
+        a, b = system(taps)
+        g0 = split[taps]
+        g = g0 + np.linalg.lstsq(a, b - a @ g0, rcond=None)[0]
+        if np.max(np.abs(a @ g - b)) > 1e-9:
+            return None
+        if not positive or np.min(g) >= -1e-12:
+            return g
+        # the same least change with the taps bounded below by 0 (a small convex QP), then polished on
+        # its support so the conditions hold to rounding
+        from scipy.optimize import minimize
+
+        res = minimize(lambda x: float(np.sum((x - g0) ** 2)), np.clip(g, 0.0, None), jac=lambda x: 2.0 * (x - g0),
+                       bounds=[(0.0, None)] * taps.size, method="SLSQP", options={"ftol": 1e-15, "maxiter": 500},
+                       constraints=[{"type": "eq", "fun": lambda x: a @ x - b, "jac": lambda x: a}])
+        keep = res.x > 1e-9
+        if not res.success or not np.any(keep):
+            return None
+        sub = res.x[keep] + np.linalg.lstsq(a[:, keep], b - a[:, keep] @ res.x[keep], rcond=None)[0]
+        if np.max(np.abs(a[:, keep] @ sub - b)) > 1e-9 or np.min(sub) < -1e-12:
+            return None
+        g = np.zeros(taps.size)
+        g[keep] = sub
+        return g
+
+    occupied = np.flatnonzero(split)
+    nearby = np.concatenate([base - 1, base, base + 1])
+    wider = np.union1d(occupied, nearby[nearby >= 0])
+    for taps in (occupied, wider):
+        g = solve(taps)
+        if g is not None:
+            break
+    else:
+        worst = max(shaper.modes, key=lambda m: m.omega)
+        raise ValueError(
+            f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz has no "
+            f"{'non-negative ' if positive else ''}solution on the samples next to its impulses "
+            f"(highest mode {worst.hz:.3g} Hz, omega Ts = {worst.omega / rate:.2f}); use 'split'")
+    out = np.zeros(max(int(taps.max()) + 1, split.size))
+    out[taps] = g
+    out[np.abs(out) < 1e-15] = 0.0
+    return out
+
+
+def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """The FIR as an impulse sequence (amplitudes, times in s), e.g. to evaluate its V."""
+    return fir.gains.copy(), fir.delays / float(rate)
+
+
+class _Stage:
+    """One FIR running on its own input stream (deviation from ``origin``)."""
+
+    __slots__ = ("fir", "origin", "history", "held", "held_samples")
+
+    def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
+        self.fir = fir
+        self.origin = origin.copy()
+        self.history = np.zeros((fir.length - 1, origin.size))
+        self.held: np.ndarray | None = None
+        self.held_samples = 0
+
+    def run(self, block: np.ndarray) -> np.ndarray:
+        n = block.shape[0]
+        hist_len = self.history.shape[0]
+        ext = np.concatenate([self.history, block]) if hist_len else block
+        out = np.zeros_like(block)
+        for d, g in zip(self.fir.delays, self.fir.gains):
+            start = hist_len - int(d)
+            out += g * ext[start : start + n]
+        if hist_len:
+            self.history = ext[-hist_len:].copy()
+        return out
+
+
+class StreamingShaper:
+    """Causal multi-channel FIR on streamed samples, with bumpless filter changes.
+
+    Parameters
+    ----------
+    fir : SparseFir
+        The initial filter.
+    channels : int
+        Number of channels (joints).
+
+    Notes
+    -----
+    The filter starts at rest at the first sample it sees (as if that value had been commanded
+    forever), so starting the shaper never makes the output jump. :meth:`switch` takes effect
+    before the next sample.
+    """
+
+    def __init__(self, fir: SparseFir, channels: int) -> None:
+        if channels < 1:
+            raise ValueError("channels must be >= 1")
+        self.channels = int(channels)
+        self._fir = fir
+        self._stages: list[_Stage] = []
+        self._offset = np.zeros(self.channels)
+        self._last: np.ndarray | None = None
+
+    @property
+    def fir(self) -> SparseFir:
+        """The active filter."""
+        return self._fir
+
+    @property
+    def started(self) -> bool:
+        """Whether a sample has been seen since construction or :meth:`reset`."""
+        return self._last is not None
+
+    @property
+    def stages(self) -> int:
+        """Filters alive: the active one plus retired ones whose tails are still running."""
+        return len(self._stages)
+
+    def reset(self, value: np.ndarray | None = None) -> None:
+        """Forget all history; with ``value``, rest there (output = value)."""
+        self._stages.clear()
+        self._last = None
+        self._offset = np.zeros(self.channels)
+        if value is not None:
+            self._start(np.asarray(value, dtype=float).reshape(self.channels))
+
+    def _start(self, x0: np.ndarray) -> None:
+        self._offset = x0.copy()
+        self._stages = [_Stage(self._fir, x0)]
+        self._last = x0.copy()
+
+    def switch(self, fir: SparseFir) -> None:
+        """Make ``fir`` the active filter from the next sample on, bumplessly.
+
+        Raises
+        ------
+        RuntimeError
+            If :data:`MAX_STAGES` filters are already alive (changes faster than the filters'
+            lengths); the active filter is then unchanged.
+        """
+        if self._last is None:
+            self._fir = fir
+            return
+        if len(self._stages) >= MAX_STAGES:
+            raise RuntimeError(
+                f"{len(self._stages)} shaper changes still settling; wait {self._fir.length} samples"
+            )
+        active = self._stages[-1]
+        active.held = self._last - active.origin
+        active.held_samples = 0
+        self._stages.append(_Stage(fir, self._last))
+        self._fir = fir
+
+    def process(self, block: np.ndarray) -> np.ndarray:
+        """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
+        x = np.asarray(block, dtype=float)
+        single = x.ndim == 1
+        x2 = x.reshape(-1, self.channels)
+        n = x2.shape[0]
+        if n == 0:
+            return x2.copy()
+        if self._last is None:
+            self._start(x2[0])
+        out = np.broadcast_to(self._offset, x2.shape).copy()
+        keep: list[_Stage] = []
+        for stage in self._stages:
+            if stage.held is None:
+                out += stage.run(x2 - stage.origin)
+                keep.append(stage)
+                continue
+            out += stage.run(np.broadcast_to(stage.held, x2.shape))
+            stage.held_samples += n
+            if stage.held_samples >= stage.fir.length - 1:
+                # tail has passed: from the next sample its output is exactly `held`
+                self._offset = self._offset + stage.held
+            else:
+                keep.append(stage)
+        self._stages = keep
+        self._last = x2[-1].copy()
+        return out.reshape(x.shape) if single else out
+
+
+class RetimingShaper:
+    """Causal multi-channel shaper whose filter can be re-timed for pending motion (see the
+    module docstring), or switched bumplessly as :class:`StreamingShaper`.
+
+    Parameters
+    ----------
+    fir : SparseFir
+        The initial filter.
+    channels : int
+        Number of channels (joints).
+    """
+
+    def __init__(self, fir: SparseFir, channels: int) -> None:
+        if channels < 1:
+            raise ValueError("channels must be >= 1")
+        self.channels = int(channels)
+        self._fir = fir
+        self._filters: list[np.ndarray] = []  # step responses s(0..length-1) of the filters in use
+        self.reset()
+
+    @property
+    def fir(self) -> SparseFir:
+        """The active filter."""
+        return self._fir
+
+    @property
+    def started(self) -> bool:
+        return self._last is not None
+
+    @property
+    def stages(self) -> int:
+        """Distinct filters still shaping pending increments, the active one included."""
+        return len(set(self._fid.tolist()) | {self._active})
+
+    def reset(self, value: np.ndarray | None = None) -> None:
+        """Forget all history; with ``value``, rest there (output = value)."""
+        self._last: np.ndarray | None = None
+        self._base = np.zeros(self.channels)
+        self._filters = [np.cumsum(self._fir.dense())]
+        self._active = 0
+        self._inc = np.zeros((0, self.channels))   # pending increments
+        self._age = np.zeros(0, dtype=int)          # samples since each arrived (0 at arrival)
+        self._fid = np.zeros(0, dtype=int)          # index of the filter shaping each
+        self._floor = np.zeros(0)                   # emitted fraction at the last retime
+        self._emitted = np.zeros(0)
+        if value is not None:
+            self._last = np.asarray(value, dtype=float).reshape(self.channels).copy()
+            self._base = self._last.copy()
+
+    def _use(self, fir: SparseFir) -> None:
+        self._fir = fir
+        self._filters.append(np.cumsum(fir.dense()))
+        self._active = len(self._filters) - 1
+
+    def switch(self, fir: SparseFir) -> None:
+        """Bumpless: ``fir`` shapes the increments from the next sample on."""
+        self._use(fir)
+
+    def retime(self, fir: SparseFir) -> None:
+        """``fir`` shapes the pending increments too, from their present age, never un-emitting."""
+        self._fir = fir
+        self._filters = [np.cumsum(fir.dense())]  # no increment keeps another filter
+        self._active = 0
+        self._fid[:] = 0
+        self._floor = self._emitted.copy()
+
+    def _sample(self, x: np.ndarray) -> np.ndarray:
+        if self._last is None:
+            self.reset(x)
+        d = x - self._last
+        self._last = x.copy()
+        if np.any(d != 0.0):
+            self._inc = np.vstack([self._inc, d])
+            self._age = np.append(self._age, -1)
+            self._fid = np.append(self._fid, self._active)
+            self._floor = np.append(self._floor, -np.inf)
+            self._emitted = np.append(self._emitted, 0.0)
+        if self._age.size == 0:
+            return self._base.copy()
+        self._age += 1
+        s = np.ones(self._age.size)
+        done = np.zeros(self._age.size, dtype=bool)
+        for f in np.unique(self._fid):
+            step = self._filters[f]
+            sel = self._fid == f
+            age = self._age[sel]
+            s[sel] = np.where(age < step.size, step[np.minimum(age, step.size - 1)], 1.0)
+            done[sel] = age >= step.size
+        self._emitted = np.maximum(self._floor, s)
+        done &= self._emitted >= 1.0
+        if np.any(done):  # fully emitted: folded into the base
+            self._base = self._base + (self._emitted[done, None] * self._inc[done]).sum(axis=0)
+            keep = ~done
+            self._inc, self._age, self._fid = self._inc[keep], self._age[keep], self._fid[keep]
+            self._floor, self._emitted = self._floor[keep], self._emitted[keep]
+            used = sorted(set(self._fid.tolist()) | {self._active})
+            if len(used) != len(self._filters):  # forget filters no increment uses
+                remap = {old: new for new, old in enumerate(used)}
+                self._filters = [self._filters[i] for i in used]
+                self._fid = np.array([remap[i] for i in self._fid.tolist()], dtype=int)
+                self._active = remap[self._active]
+        return self._base + self._emitted @ self._inc
+
+    def process(self, block: np.ndarray) -> np.ndarray:
+        """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
+        x = np.asarray(block, dtype=float)
+        single = x.ndim == 1
+        x2 = x.reshape(-1, self.channels)
+        out = np.array([self._sample(row) for row in x2]).reshape(x2.shape)
+        return out.reshape(x.shape) if single else out

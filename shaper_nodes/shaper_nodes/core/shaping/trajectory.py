@@ -1,0 +1,102 @@
+"""Whole-trajectory shaping for joint_trajectory_controller.
+
+The waypoints are resampled on the command-rate grid, convolved with the discretised shaper,
+and differentiated, giving a trajectory that joint_trajectory_controller accepts: strictly
+increasing times, finite values, and zero velocity and acceleration at the last point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+
+from shaper_nodes.core.checks import InputError, finite_array, strictly_increasing
+
+from .fir import SparseFir, StreamingShaper
+
+
+@dataclass(frozen=True)
+class SampledTrajectory:
+    """A trajectory on a uniform grid: times (s) and (N, J) positions, velocities, accelerations."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+
+
+def resample(
+    times: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None, rate: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Resample waypoints on the grid ``times[0] + k / rate`` up to and including the last time.
+
+    Cubic Hermite interpolation where velocities are given for every waypoint, linear
+    otherwise. The grid is extended to the next sample after the last waypoint, holding the
+    final value there.
+    """
+    t = strictly_increasing("time_from_start", times)
+    p = np.asarray(positions, dtype=float)
+    if p.shape[0] != t.size:
+        raise InputError("wrong_size", f"{p.shape[0]} points of positions for {t.size} times")
+    dt = 1.0 / rate
+    n = int(np.ceil((t[-1] - t[0]) * rate - 1e-9)) + 1
+    grid = t[0] + dt * np.arange(n)
+    grid_in = np.minimum(grid, t[-1])
+    if t.size == 1:
+        return grid, np.repeat(p[:1], n, axis=0)
+    if velocities is not None:
+        spline = CubicHermiteSpline(t, p, np.asarray(velocities, dtype=float), axis=0)
+        out = spline(grid_in)
+    else:
+        out = np.column_stack([np.interp(grid_in, t, p[:, j]) for j in range(p.shape[1])])
+    return grid, out
+
+
+def shape_trajectory(
+    times: np.ndarray,
+    positions: np.ndarray,
+    fir: SparseFir,
+    rate: float,
+    velocities: np.ndarray | None = None,
+) -> SampledTrajectory:
+    """Shape a whole trajectory.
+
+    Parameters
+    ----------
+    times : (N,) array
+        Waypoint times from the trajectory start, s, strictly increasing.
+    positions : (N, J) array
+        Waypoint positions (rad or m), finite.
+    fir : SparseFir
+        The discretised shaper at ``rate``.
+    rate : float
+        Command rate, Hz.
+    velocities : (N, J) array, optional
+        Waypoint velocities; if given, used for cubic Hermite resampling.
+
+    Returns
+    -------
+    SampledTrajectory
+        Starting at ``times[0]``, ``fir.length`` samples longer than the resampled input plus
+        one sample at rest, so the last point has zero velocity and acceleration.
+    """
+    p = finite_array("positions", positions)
+    if p.ndim != 2:
+        raise InputError("wrong_size", "positions must be an (N, J) array")
+    if velocities is not None:
+        velocities = finite_array("velocities", velocities, size=p.size).reshape(p.shape)
+    grid, sampled = resample(times, p, velocities, rate)
+    tail = fir.length  # long enough for the shaper to finish, plus one sample at rest
+    held = np.vstack([sampled, np.repeat(sampled[-1:], tail, axis=0)])
+    shaper = StreamingShaper(fir, p.shape[1])
+    shaped = shaper.process(held)
+    shaped[-1] = sampled[-1]
+    dt = 1.0 / rate
+    out_t = grid[0] + dt * np.arange(shaped.shape[0])
+    vel = np.gradient(shaped, dt, axis=0) if shaped.shape[0] > 1 else np.zeros_like(shaped)
+    acc = np.gradient(vel, dt, axis=0) if shaped.shape[0] > 1 else np.zeros_like(shaped)
+    vel[-1] = 0.0
+    acc[-1] = 0.0
+    return SampledTrajectory(out_t, shaped, vel, acc)

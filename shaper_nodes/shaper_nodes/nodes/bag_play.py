@@ -1,0 +1,205 @@
+"""bag_play node: publish a recording's topics with their original timing, for machines without rosbag2.
+
+Reads a rosbag2 folder or a bare .mcap file (a damaged MCAP too, up to where it is readable; see
+:mod:`shaper_nodes.analysis.reading`) and publishes each message's recorded CDR bytes unchanged
+(rclpy's raw publishing, so nothing is lost in a conversion) at its recorded log time divided by
+``rate``. Before playing, the first message of every topic is deserialised with the installed
+message class: a topic whose type is not installed, or whose recorded layout does not match the
+installed one, is skipped with an error naming it. Topics of type shaper_msgs/Shaper, /tf_static
+and those in ``latched_topics`` are published RELIABLE + TRANSIENT_LOCAL (depth 1), as the nodes
+that own them do; the others RELIABLE + VOLATILE, which best-effort subscribers accept too.
+Topic names can be remapped as usual (``--ros-args -r /tip_imu:=/other``).
+
+When the recording is done (or on ``~/stop``) the node logs what it published and exits,
+unless ``loop`` is set.
+
+``ros2 run shaper_nodes bag_play --ros-args -p bag:=my_bag -p rate:=2.0 -p topics:="[/tip_imu]"``
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
+
+from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
+from shaper_nodes.ros.bag_writer import message_class
+from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.parameters import describe
+
+LATCHED_TYPES = ("shaper_msgs/msg/Shaper",)
+LATCHED_NAMES = ("/tf_static",)
+
+
+class BagPlayNode(Node):
+    """See the module docstring. Extra arguments go to ``Node``."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__("bag_play", *args, **kwargs)
+        d = self.declare_parameter
+        d("bag", "", describe("rosbag2 folder or .mcap file to play.", read_only=True))
+        d("rate", 1.0, describe("Playback speed factor (2 = twice as fast).", 1e-3, 1e3, read_only=True))
+        d("topics", [""], describe("Topics to play (empty: all).", read_only=True))
+        d("latched_topics", [""], describe("Further topics to publish TRANSIENT_LOCAL (depth 1).", read_only=True))
+        d("min_interval", 0.0, describe(
+            "Least wall time between two published messages, s: spreads messages that were logged at the same"
+            " time (a lockstep simulation's clock stands still while it waits), so that they arrive in order.",
+            0.0, 1.0, read_only=True))
+        d("pause_after_topics", [""], describe(
+            "After a message on one of these topics, pause for pause_after before the next message.", read_only=True))
+        d("pause_after", 0.0, describe(
+            "Pause after a message on pause_after_topics, s of wall time: gives the nodes that act on it (a learner"
+            " at a cycle's END) time to finish before the recording's later messages arrive, which in a lockstep"
+            " recording may follow at once.", 0.0, 60.0, read_only=True))
+        d("wait_for_subscribers", 0, describe(
+            "Before playing, wait until every played topic has this many subscribers (0: do not wait).", 0, 100,
+            integer=True, read_only=True))
+        d("start_timeout", 30.0, describe("Longest wait for the subscribers, s; then play anyway.", 0.0, 600.0,
+                                          read_only=True))
+        d("start_delay", 0.0, describe("Wait this long before the first message, s (lets discovery settle).",
+                                       0.0, 60.0, read_only=True))
+        d("publish_clock", False, describe("Also publish /clock with the messages' log times.", read_only=True))
+        d("loop", False, describe("Start again at the end.", read_only=True))
+        p = lambda name: self.get_parameter(name).value  # noqa: E731
+        path = str(p("bag"))
+        if not path:
+            raise ValueError("parameter 'bag' is required: a rosbag2 folder or .mcap file")
+        try:
+            self.bag = Bag(path)
+        except BagError as err:
+            raise ValueError(str(err)) from None
+        for note in self.bag.notes:
+            self.get_logger().warning(note)
+        for dmg in self.bag.damage:
+            self.get_logger().warning(f"damaged recording: {describe_damage(dmg)}; playing what is readable")
+        self.rate = float(p("rate"))
+        self.min_interval = float(p("min_interval"))
+        self.pause_topics = {t for t in p("pause_after_topics") if t}
+        self.pause = float(p("pause_after"))
+        infos = self.bag.topics
+        wanted = [t for t in p("topics") if t]
+        missing = [t for t in wanted if t not in infos]
+        if missing:
+            self.get_logger().error(f"not in the recording, not played: {missing} (it has {sorted(infos)})")
+        selected = [t for t in (wanted or sorted(infos)) if t in infos]
+        latched = set(LATCHED_NAMES) | {t for t in p("latched_topics") if t}
+        self._pubs: dict[str, object] = {}
+        for topic in selected:
+            msgtype = infos[topic].msgtype
+            why = self._check(topic, msgtype)
+            if why:
+                self.get_logger().error(f"{topic} [{msgtype}] not played: {why}")
+                continue
+            keep = msgtype in LATCHED_TYPES or topic in latched
+            qos = QoSProfile(depth=1 if keep else 1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if keep else DurabilityPolicy.VOLATILE)
+            self._pubs[topic] = self.create_publisher(message_class(msgtype), topic, qos)
+        if not self._pubs:
+            raise ValueError(f"{path}: nothing to play (topics asked for: {wanted or 'all'}; in the recording:"
+                             f" {sorted(infos)})")
+        self._clock = self.create_publisher(Clock, "/clock", 10) if p("publish_clock") else None
+        self.published: dict[str, int] = {t: 0 for t in self._pubs}
+        self.finished = threading.Event()
+        self._stop = threading.Event()
+        self.create_service(Trigger, "~/stop", self._on_stop)
+        self._thread = threading.Thread(target=self._run, name="bag-play", daemon=True)
+        self._thread.start()
+        self.get_logger().info(f"playing {sorted(self._pubs)} from {path} at {self.rate:g}x ({self.bag.reader_name})")
+
+    def _check(self, topic: str, msgtype: str) -> str:
+        """Why ``topic`` cannot be played ("" if it can): type not installed, or layout mismatch."""
+        from rclpy.serialization import deserialize_message
+
+        try:
+            cls = message_class(msgtype)
+        except (ImportError, AttributeError, ValueError) as err:
+            return f"message type not installed here ({err})"
+        for _, _, _, raw in self.bag.messages([topic]):
+            try:
+                deserialize_message(bytes(raw), cls)
+            except Exception as err:  # noqa: BLE001 - any failure means the layouts differ
+                return f"the recorded messages do not match the installed {msgtype} ({err})"
+            break
+        return ""
+
+    # ----------------------------------------------------------------- playing
+    def _wait_subscribers(self) -> None:
+        need = int(self.get_parameter("wait_for_subscribers").value)
+        deadline = time.monotonic() + float(self.get_parameter("start_timeout").value)
+        while need and not self._stop.is_set():
+            short = [t for t, pub in self._pubs.items() if pub.get_subscription_count() < need]
+            if not short:
+                break
+            if time.monotonic() > deadline:
+                self.get_logger().warning(f"fewer than {need} subscribers on {short}; playing anyway")
+                break
+            time.sleep(0.05)
+        end = time.monotonic() + float(self.get_parameter("start_delay").value)
+        while time.monotonic() < end and not self._stop.is_set():
+            time.sleep(0.02)
+
+    def _run(self) -> None:
+        try:
+            self._wait_subscribers()
+            while not self._stop.is_set():
+                self._play_once()
+                if not self.get_parameter("loop").value:
+                    break
+        except Exception as err:  # noqa: BLE001 - reported; the node then ends
+            self.get_logger().error(f"playback failed: {err}")
+        finally:
+            self.finished.set()
+            counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.published.items()))
+            self.get_logger().info(f"done ({counts})")
+            if not self._stop.is_set():
+                self.context.try_shutdown()  # the spin in main returns: the process ends
+
+    def _play_once(self) -> None:
+        first_ns, wall0, last = None, 0.0, -1e9
+        for topic, _, log_ns, raw in self.bag.messages(list(self._pubs)):
+            if first_ns is None:
+                first_ns, wall0 = log_ns, time.monotonic()
+            due = max(wall0 + (log_ns - first_ns) * 1e-9 / self.rate, last + self.min_interval)
+            while not self._stop.is_set():
+                left = due - time.monotonic()
+                if left <= 0:
+                    break
+                time.sleep(min(left, 0.05))
+            if self._stop.is_set():
+                return
+            if self._clock is not None:
+                self._clock.publish(Clock(clock=_stamp(log_ns)))
+            self._pubs[topic].publish(bytes(raw))
+            self.published[topic] += 1
+            last = time.monotonic()
+            if topic in self.pause_topics and self.pause > 0.0:
+                wall0 += self.pause  # the rest of the recording keeps its spacing, later
+                last += self.pause
+
+    def _on_stop(self, req, resp):
+        self._stop.set()
+        resp.success, resp.message = True, "stopped"
+        return resp
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.bag.close()
+
+
+def _stamp(ns: int):
+    from builtin_interfaces.msg import Time
+
+    return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(BagPlayNode, "bag_play", args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,244 @@
+"""The identifier node: vibration modes from the last cycles' residual vibration, and a shaper.
+
+It listens to the accelerometer, the joint states and the cycle events, keeps the last
+``buffer_cycles`` finished cycles (the free decay after each move, measured as
+:class:`~shaper_nodes.core.cycles.CycleMonitor` does everywhere in the suite), and on request
+identifies the modes (:mod:`shaper_nodes.core.identification`), recommends the shortest shaper
+whose worst-case vibration over the modes' uncertainty stays under a target, and can send it
+to the shaper node. The numerics run here, never on the shaper node's real-time path.
+
+Interfaces (names are parameters, see config/identifier.yaml)
+-------------------------------------------------------------
+topics.imu (sensor_msgs/Imu, sensor QoS), topics.joint_states, topics.cycle_events
+    Inputs. A cycle without accelerometer samples, with a gap in them or with non-finite
+    samples is reported and not buffered (stale or missing sensor data is never identified from).
+~/identify (shaper_msgs/srv/Identify)
+    Identify from the last N buffered cycles, recommend, and optionally apply the recommendation
+    through ``<shaper>/set_shaper`` with source "identification".
+~/mode_estimate (shaper_msgs/ModeEstimate, latched)
+    The last identified modes with their one-sigma uncertainties.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu, JointState
+
+from shaper_msgs.msg import CycleEvent, ModeEstimate
+from shaper_msgs.msg import Mode as ModeMsg
+from shaper_msgs.srv import Identify, SetShaper
+from shaper_nodes.core.cycles import CycleMonitor, CycleResult
+from shaper_nodes.core.identification.modes import METHODS, IdentificationError, identify_records, recommend_shaper
+from shaper_nodes.core.shaping.families import ShaperError, none_shaper
+from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
+from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.parameters import describe as _desc
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: sensor QoS with a deep queue: identification runs in this node's executor, and the
+#: accelerometer samples that arrive meanwhile must not be dropped
+IMU_QOS = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT,
+                     durability=DurabilityPolicy.VOLATILE)
+#: a gap between two accelerometer samples longer than this many median periods marks the
+#: cycle's data as incomplete
+MAX_GAP_PERIODS = 5.0
+
+
+def check_record(result: CycleResult, min_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """The residual-vibration record of a finished cycle: (times (N,), accel (N, k)).
+
+    Raises
+    ------
+    IdentificationError
+        Too few samples in the window, non-finite samples, or a gap in the samples.
+    """
+    t, a = result.accel_times, result.accel
+    sel = (t >= result.residual.window_start) & (t < result.residual.window_end)
+    t, a = t[sel], a[sel]
+    if t.size < min_samples:
+        raise IdentificationError(
+            f"cycle {result.cycle}: {t.size} accelerometer samples in the residual window"
+            f" [{result.residual.window_start:.3f}, {result.residual.window_end:.3f}) s, need {min_samples}")
+    if not np.all(np.isfinite(a)):
+        raise IdentificationError(f"cycle {result.cycle}: non-finite accelerometer samples")
+    dt = np.diff(t)
+    if np.any(dt <= 0.0):
+        raise IdentificationError(f"cycle {result.cycle}: accelerometer stamps not strictly increasing")
+    gap, period = float(dt.max()), float(np.median(dt))
+    if gap > MAX_GAP_PERIODS * period:
+        raise IdentificationError(
+            f"cycle {result.cycle}: a {gap * 1e3:.1f} ms gap in the accelerometer data"
+            f" (median period {period * 1e3:.2f} ms): data incomplete or stale")
+    return t, a
+
+
+class IdentifierNode(Node):
+    """See the module docstring. Extra arguments go to ``Node``."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__("identifier", *args, **kwargs)
+        d = self.declare_parameter
+        d("shaper", "/shaper", _desc("Fully qualified name of the shaper node to apply shapers to.", read_only=True))
+        d("buffer_cycles", 5, _desc("Finished cycles kept for identification.", 1, 1000, integer=True,
+                                    read_only=True))
+        d("method", "fit", _desc("Default identification method: " + ", ".join(f"{k} ({v})" for k, v in
+                                                                                 METHODS.items())))
+        d("max_modes", 2, _desc("Default largest number of modes to identify.", 1, 8, integer=True))
+        d("target_vibration", 0.05, _desc(
+            "Default worst-case percentage vibration the recommended shaper must meet, fraction.", 0.001, 0.5))
+        d("uncertainty_sigmas", 2.0, _desc(
+            "Half-width of the uncertainty band the worst case is taken over, in standard deviations.", 0.0, 10.0))
+        d("band_hz", [0.0, 0.0], _desc("Frequency band searched, Hz ([0, 0]: up to Nyquist)."))
+        d("min_samples", 100, _desc("Fewest accelerometer samples in a cycle's residual window.", 10, 10**7,
+                                    integer=True))
+        d("settle_tolerance", 1e-6, _desc("Band within which the joints count as at rest after a move.", 0.0, 1e3))
+        d("service_timeout", 5.0, _desc("Time to wait for the shaper node's set_shaper service, s.", 0.1, 600.0))
+        for key, default in {"imu": "/tip_imu", "joint_states": "/joint_states",
+                             "cycle_events": "/cycle_events"}.items():
+            d(f"topics.{key}", default, _desc(f"Topic name ({key}).", read_only=True))
+        self._validate_method(str(self.get_parameter("method").value))
+
+        p = self.get_parameter
+        self.monitor = CycleMonitor(float(p("settle_tolerance").value))
+        self.cycles: deque[tuple[CycleResult, tuple[np.ndarray, np.ndarray]]] = deque(
+            maxlen=int(p("buffer_cycles").value))
+        self.skipped: list[str] = []
+        self.create_subscription(Imu, p("topics.imu").value, self._on_imu, IMU_QOS)
+        self.create_subscription(JointState, p("topics.joint_states").value, self._on_joints, 100)
+        self.create_subscription(CycleEvent, p("topics.cycle_events").value, self._on_event, 100)
+        self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
+        shaper = str(p("shaper").value).rstrip("/")
+        # its own callback group: the ~/identify coroutine holds the default group while it awaits
+        # the answer, which the executor must still be able to take
+        self._set_shaper = self.create_client(SetShaper, f"{shaper}/set_shaper",
+                                              callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(Identify, "~/identify", self._on_identify)
+        self.get_logger().info(
+            f"identifying from {p('topics.imu').value}, keeping {self.cycles.maxlen} cycles;"
+            f" applies to {self._set_shaper.srv_name}")
+
+    @staticmethod
+    def _validate_method(method: str) -> str:
+        if method not in METHODS:
+            raise ValueError(f"unknown identification method {method!r}; known: {sorted(METHODS)}")
+        return method
+
+    # ----------------------------------------------------------------- data
+    def _on_imu(self, msg: Imu) -> None:
+        a = msg.linear_acceleration
+        self.monitor.add_accel(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+
+    def _on_joints(self, msg: JointState) -> None:
+        if msg.position:
+            self.monitor.add_positions(time_to_sec(msg.header.stamp), msg.position)
+
+    def _on_event(self, msg: CycleEvent) -> None:
+        if msg.event == CycleEvent.END and not self.monitor.in_cycle:
+            self._skip(f"cycle {msg.cycle}: END without its START (it began before this node was listening,"
+                       " or events were lost)")
+            return
+        if msg.event == CycleEvent.START and self.monitor.in_cycle:
+            self._skip("the cycle in progress never ended (its END was lost)")
+        try:
+            result = self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
+        except ValueError as err:  # e.g. joint states of changing size within a cycle
+            self._skip(f"cycle {msg.cycle}: {err}")
+            return
+        if result is None:
+            return
+        try:
+            record = check_record(result, int(self.get_parameter("min_samples").value))
+        except IdentificationError as err:
+            self._skip(str(err))
+            return
+        self.cycles.append((result, record))
+        self.get_logger().info(
+            f"cycle {result.cycle}: residual RMS {result.residual.rms:.4g} m/s^2 over"
+            f" {result.residual.window_end - result.residual.window_start:.3g} s buffered ({len(self.cycles)})")
+
+    def _skip(self, why: str) -> None:
+        self.skipped.append(why)
+        self.get_logger().warning(f"{why}; cycle not used for identification")
+
+    # ----------------------------------------------------------------- service
+    async def _on_identify(self, req: Identify.Request, resp: Identify.Response) -> Identify.Response:
+        p = self.get_parameter
+        try:
+            method = self._validate_method(req.method.strip() or str(p("method").value))
+            max_modes = int(req.max_modes) or int(p("max_modes").value)
+            target = float(req.target_vibration) or float(p("target_vibration").value)
+            if not (math.isfinite(target) and 0.0 < target < 1.0):
+                raise ValueError(f"target_vibration must be in (0, 1), got {req.target_vibration!r}")
+            if not self.cycles:
+                raise IdentificationError("no finished cycle with valid accelerometer data buffered yet")
+            n = int(req.cycles) or len(self.cycles)
+            used = list(self.cycles)[-n:]
+            lo, hi = (float(x) for x in p("band_hz").value)
+            if hi > 0.0 and not 0.0 <= lo < hi:
+                raise ValueError(f"parameter band_hz must be [low, high] with 0 <= low < high, got {[lo, hi]}")
+            band = (lo, hi) if hi > 0.0 else None
+            modes = identify_records([rec for _, rec in used], method=method, max_modes=max_modes, band_hz=band)
+            rec = recommend_shaper(modes, target, sigmas=float(p("uncertainty_sigmas").value))
+        except (IdentificationError, ShaperError, ValueError) as err:
+            resp.success, resp.message = False, f"identification failed: {err}"
+            self.get_logger().error(resp.message)
+            return resp
+
+        now = self.get_clock().now().to_msg()
+        by_freq = sorted(modes, key=lambda m: m.omega)
+        est = ModeEstimate(source="identification")
+        est.header.stamp = now
+        est.modes = [ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta) for m in by_freq]
+        est.natural_frequency_std = [m.omega_std for m in by_freq]
+        est.damping_ratio_std = [m.zeta_std for m in by_freq]
+        self._estimate_pub.publish(est)
+        resp.estimate = est
+        for c in rec.candidates:
+            resp.candidate_families.append(c.family)
+            resp.candidate_durations.append(c.duration)
+            resp.candidate_worst_vibration.append(c.worst_vibration)
+            resp.candidate_nominal_vibration.append(c.nominal_vibration)
+        found = ", ".join(f"{m.hz:.4g} Hz (+-{m.omega_std / (2 * math.pi):.2g}) zeta {m.zeta:.3g}"
+                          f" (+-{m.zeta_std:.2g})" for m in by_freq)
+        cycles_used = ", ".join(str(r.cycle) for r, _ in used)
+        if rec.best is None:
+            resp.recommended = shaper_to_msg(none_shaper(), "identification", 0, now)
+            resp.success = True
+            resp.message = (f"modes {found} from cycles {cycles_used}; no candidate keeps the worst-case"
+                            f" vibration under {target:.3g}; nothing applied")
+            self.get_logger().warning(resp.message)
+            return resp
+        best = rec.best
+        resp.recommended = shaper_to_msg(best.shaper, "identification", 0, now)
+        resp.success = True
+        resp.message = (f"modes {found} from cycles {cycles_used} ({method}); recommended {best.family}"
+                        f" ({best.duration * 1e3:.1f} ms, worst-case V {100 * best.worst_vibration:.2g} %)")
+        if req.apply:
+            resp.applied, why = await self._apply(resp.recommended)
+            resp.message += f"; {'applied' if resp.applied else 'not applied: ' + why}"
+        self.get_logger().info(resp.message)
+        return resp
+
+    async def _apply(self, shaper_msg) -> tuple[bool, str]:
+        timeout = float(self.get_parameter("service_timeout").value)
+        if not self._set_shaper.wait_for_service(timeout_sec=timeout):
+            return False, f"service {self._set_shaper.srv_name} not available within {timeout:g} s"
+        req = SetShaper.Request()
+        req.shaper = shaper_msg
+        req.shaper.family = "custom"  # the exact impulses identified on, not a re-design
+        result = await self._set_shaper.call_async(req)
+        return bool(result.success), str(result.message)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(IdentifierNode, "identifier", args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

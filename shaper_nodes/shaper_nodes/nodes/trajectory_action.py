@@ -1,0 +1,318 @@
+"""FollowJointTrajectory in front of a controller: shape each goal, forward it, relay the rest.
+
+The shaper node serves ``control_msgs/action/FollowJointTrajectory`` (as joint_trajectory_controller
+does) and is a client of the controller's. For each goal:
+
+- goal request: the trajectory is shaped at once (which validates it: the node's joints in any
+  order, sizes, finite values, strictly increasing times; tolerances finite; no multi-DOF part).
+  An invalid goal is **rejected**, as joint_trajectory_controller rejects one, and the reason goes
+  to the node's log and ``/diagnostics``; nothing reaches the controller.
+- accepted: a goal still running is preempted (its controller goal is cancelled), as
+  joint_trajectory_controller does; one goal is active at a time.
+- execution: waits up to ``timeout`` s for the controller's action server, sends the shaped
+  trajectory with the goal's tolerances and ``goal_time_tolerance`` unchanged, relays every
+  feedback, and ends with the controller's status and result (error_code, error_string).
+- cancel: accepted and forwarded to the controller goal; the final status is the controller's.
+
+Everything here runs in the node's executor without blocking it: the execute callback is a
+coroutine that awaits the controller's futures, so a SingleThreadedExecutor (``rclpy.spin``) is
+enough and the shaper's streaming filters are never touched by two threads.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from action_msgs.msg import GoalStatus
+from control_msgs.action import FollowJointTrajectory
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action.client import ClientGoalHandle
+from rclpy.action.server import ServerGoalHandle
+from rclpy.clock import Clock, ClockType
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.task import Future
+from trajectory_msgs.msg import JointTrajectory
+
+from shaper_nodes.core.checks import InputError, finite_array
+
+Goal = FollowJointTrajectory.Goal
+Result = FollowJointTrajectory.Result
+POLL = 0.05  # s, how often a goal waiting for the controller's server looks again
+WATCH = 1.0  # s, how often a running goal checks that the controller's server is still there
+
+
+def check_tolerances(goal: Goal) -> None:
+    """Refuse non-finite tolerances: joint_trajectory_controller compares with them unchecked.
+
+    Raises
+    ------
+    InputError
+        ``non_finite``, naming the tolerance list and joint.
+    """
+    lists = {"path_tolerance": goal.path_tolerance, "goal_tolerance": goal.goal_tolerance}
+    for field, tols in lists.items():
+        for tol in tols:
+            finite_array(f"{field} of joint {tol.name!r}", [tol.position, tol.velocity, tol.acceleration])
+    lists = {"component_path_tolerance": goal.component_path_tolerance,
+             "component_goal_tolerance": goal.component_goal_tolerance}
+    for field, ctols in lists.items():
+        for ctol in ctols:
+            finite_array(f"{field} of joint {ctol.joint_name!r}",
+                         [ctol.position, ctol.velocity, ctol.acceleration])
+
+
+class _Forward:
+    """One goal of ours and what became of it at the controller."""
+
+    def __init__(self, handle: ServerGoalHandle, goal: Goal) -> None:
+        self.handle = handle
+        self.goal = goal  # the shaped goal to send
+        self.controller: ClientGoalHandle | None = None
+        self.cancel_wanted = False  # our client asked to cancel
+        self.preempted = False  # a newer goal took over
+        self.cancel_sent = False
+
+    @property
+    def stop(self) -> bool:
+        return self.cancel_wanted or self.preempted
+
+    @property
+    def key(self) -> bytes:
+        return bytes(self.handle.goal_id.uuid)
+
+
+class TrajectoryActionProxy:
+    """The FollowJointTrajectory server of a node, forwarding shaped goals to a controller.
+
+    Parameters
+    ----------
+    node : Node
+        The node that owns the server and the client (its executor runs them).
+    server_name : str
+        Name of the action we serve (``~/follow_joint_trajectory``).
+    controller_name : str
+        The controller's action (``/joint_trajectory_controller/follow_joint_trajectory``).
+    shape : callable
+        ``JointTrajectory -> JointTrajectory``, the shaped trajectory in the node's joint order;
+        raises :class:`InputError` on bad input.
+    on_refused : callable
+        Called with the :class:`InputError` of each rejected goal (logging, diagnostics).
+    on_forwarded : callable
+        Called for each goal the controller accepted.
+    timeout : float
+        s: how long a goal waits for the controller's action server and for its answer to the
+        goal request.
+    """
+
+    def __init__(self, node: Node, server_name: str, controller_name: str,
+                 shape: Callable[[JointTrajectory], JointTrajectory],
+                 on_refused: Callable[[InputError], None], on_forwarded: Callable[[], None],
+                 timeout: float) -> None:
+        self._node = node
+        self._shape = shape
+        self._on_refused = on_refused
+        self._on_forwarded = on_forwarded
+        self._timeout = float(timeout)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._log = node.get_logger().get_child("follow_joint_trajectory")
+        self._shaped: dict[int, tuple[Goal, Goal]] = {}  # id(request) -> (request, shaped goal)
+        self._live: dict[bytes, _Forward] = {}
+        self._active: _Forward | None = None
+        self.controller_name = controller_name
+        self._client = ActionClient(node, FollowJointTrajectory, controller_name)
+        self._server = ActionServer(
+            node, FollowJointTrajectory, server_name, execute_callback=self._execute,
+            goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
+            cancel_callback=self._on_cancel)
+
+    def destroy(self) -> None:
+        self._server.destroy()
+        self._client.destroy()
+
+    # ------------------------------------------------------------------ goal requests
+    def shaped_goal(self, goal: Goal) -> Goal:
+        """The goal to send to the controller: shaped trajectory, the same tolerances.
+
+        Raises
+        ------
+        InputError
+            If the goal is invalid (the message names the problem).
+        """
+        multi = goal.multi_dof_trajectory
+        if multi.joint_names or multi.points:
+            raise InputError("unsupported", "multi_dof_trajectory is not supported (only single-DOF joints"
+                             " are shaped); send it empty")
+        check_tolerances(goal)
+        return Goal(trajectory=self._shape(goal.trajectory),
+                    path_tolerance=goal.path_tolerance, component_path_tolerance=goal.component_path_tolerance,
+                    goal_tolerance=goal.goal_tolerance, component_goal_tolerance=goal.component_goal_tolerance,
+                    goal_time_tolerance=goal.goal_time_tolerance)
+
+    def _on_goal(self, goal: Goal) -> GoalResponse:
+        try:
+            shaped = self.shaped_goal(goal)
+        except InputError as err:
+            self._on_refused(err)
+            return GoalResponse.REJECT
+        self._shaped[id(goal)] = (goal, shaped)  # the request object itself keeps the id unique
+        return GoalResponse.ACCEPT
+
+    def _on_accepted(self, handle: ServerGoalHandle) -> None:
+        entry = self._shaped.pop(id(handle.request), None)
+        shaped = entry[1] if entry is not None else self.shaped_goal(handle.request)
+        fwd = _Forward(handle, shaped)
+        self._live[fwd.key] = fwd
+        previous, self._active = self._active, fwd
+        if previous is not None and previous.handle.is_active:
+            self._log.info("a new goal preempts the running one: cancelling it at the controller")
+            previous.preempted = True
+            self._cancel_at_controller(previous)
+        handle.execute()
+
+    def _on_cancel(self, handle: ServerGoalHandle) -> CancelResponse:
+        fwd = self._live.get(bytes(handle.goal_id.uuid))
+        if fwd is not None:
+            fwd.cancel_wanted = True
+            self._cancel_at_controller(fwd)
+        return CancelResponse.ACCEPT
+
+    def _cancel_at_controller(self, fwd: _Forward) -> None:
+        # Before the controller has the goal, _run sees fwd.stop and does not send it (or cancels
+        # it as soon as it is accepted).
+        if fwd.controller is not None and not fwd.cancel_sent:
+            fwd.cancel_sent = True
+            fwd.controller.cancel_goal_async()
+
+    # ------------------------------------------------------------------ execution
+    async def _execute(self, handle: ServerGoalHandle) -> Result:
+        fwd = self._live[bytes(handle.goal_id.uuid)]
+        try:
+            return await self._run(fwd)
+        finally:
+            del self._live[fwd.key]
+            if self._active is fwd:
+                self._active = None
+
+    async def _run(self, fwd: _Forward) -> Result:
+        name = self.controller_name
+        if not await self._wait_for_server(fwd):
+            if fwd.stop:
+                return self._stopped_before_sending(fwd)
+            return self._abort(fwd, f"controller action server {name} not available after {self._timeout:g} s;"
+                                    " the goal was not sent")
+        if fwd.stop:
+            return self._stopped_before_sending(fwd)
+
+        handle = fwd.handle
+
+        def relay(msg) -> None:
+            if handle.is_active:
+                handle.publish_feedback(msg.feedback)
+
+        sent = self._client.send_goal_async(fwd.goal, feedback_callback=relay)
+        if not await self._until(sent, self._timeout):
+            sent.add_done_callback(_cancel_if_accepted)  # do not leave it running if it comes late
+            return self._abort(fwd, f"controller {name} did not answer the goal request within {self._timeout:g} s")
+        fwd.controller = sent.result()
+        if not fwd.controller.accepted:
+            return self._abort(fwd, f"controller {name} rejected the shaped goal (see the controller's log:"
+                                    " joint names, controller not active, trajectory in the past ...)")
+        self._on_forwarded()
+        if fwd.stop:
+            self._cancel_at_controller(fwd)
+        done = fwd.controller.get_result_async()
+        while not await self._until(done, WATCH):
+            if not self._client.server_is_ready():
+                return self._abort(fwd, f"controller action server {name} went away while the goal was running")
+        response = done.result()
+        return self._finish(fwd, response.status, response.result)
+
+    async def _wait_for_server(self, fwd: _Forward) -> bool:
+        end = time.monotonic() + self._timeout
+        while not self._client.server_is_ready():
+            if fwd.stop or time.monotonic() >= end:
+                return False
+            await self._until(Future(), POLL)
+        return True
+
+    async def _until(self, future: Future, timeout: float) -> bool:
+        """Await ``future`` for at most ``timeout`` s (steady clock); whether it is done.
+
+        A coroutine, so the executor goes on serving the node meanwhile.
+        """
+        if future.done():
+            return True
+        wake = Future()
+
+        def fire(*_) -> None:
+            if not wake.done():
+                wake.set_result(None)
+
+        timer = self._node.create_timer(timeout, fire, clock=self._steady)
+        future.add_done_callback(fire)
+        try:
+            await wake
+        finally:
+            self._node.destroy_timer(timer)
+        return future.done()
+
+    # ------------------------------------------------------------------ endings
+    def _finish(self, fwd: _Forward, status: int, result: Result) -> Result:
+        handle = fwd.handle
+        if status == GoalStatus.STATUS_SUCCEEDED:
+            handle.succeed()
+        elif status == GoalStatus.STATUS_CANCELED:
+            if fwd.preempted and not result.error_string:
+                result.error_string = "preempted by a newer goal"
+            if not _to_canceling(handle):
+                handle.abort()
+                return result
+            handle.canceled()
+        else:
+            if status != GoalStatus.STATUS_ABORTED and not result.error_string:
+                result.error_string = f"controller {self.controller_name} ended the goal with status {status}"
+            handle.abort()
+        return result
+
+    def _stopped_before_sending(self, fwd: _Forward) -> Result:
+        if fwd.preempted:
+            result = Result(error_code=Result.INVALID_GOAL,
+                            error_string="preempted by a newer goal before it was sent to the controller")
+        else:
+            result = Result(error_code=Result.SUCCESSFUL,
+                            error_string="canceled before it was sent to the controller")
+        if _to_canceling(fwd.handle):
+            fwd.handle.canceled()
+        else:
+            fwd.handle.abort()
+        return result
+
+    def _abort(self, fwd: _Forward, why: str) -> Result:
+        self._log.error(f"goal aborted: {why}")
+        fwd.handle.abort()
+        return Result(error_code=Result.INVALID_GOAL, error_string=why)
+
+
+def _to_canceling(handle: ServerGoalHandle) -> bool:
+    """Move a goal to CANCELING if it is not there yet (preemption); whether it is there now.
+
+    A goal reaches CANCELED only through CANCELING. A client's cancel request makes that step; a
+    preempted goal (or one cancelled at the controller by someone else) has to make it here.
+    rclpy has no public call for this (rclcpp_action's ``canceled()`` does it itself), hence the
+    private one; if it fails, the caller aborts the goal instead.
+    """
+    if handle.is_cancel_requested:
+        return True
+    try:
+        handle._update_state(_rclpy.GoalEvent.CANCEL_GOAL)
+    except Exception:  # noqa: BLE001 - any failure: fall back to abort
+        return False
+    return handle.is_cancel_requested
+
+
+def _cancel_if_accepted(future: Future) -> None:
+    goal_handle = future.result()
+    if goal_handle is not None and goal_handle.accepted:
+        goal_handle.cancel_goal_async()

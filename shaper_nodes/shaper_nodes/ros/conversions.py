@@ -1,0 +1,83 @@
+"""Conversions between messages and the core's arrays and objects (the nodes' edge)."""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Duration, Time
+
+from shaper_msgs.msg import Mode as ModeMsg
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_nodes.core.shaping.families import (
+    DEFAULT_INSENSITIVITY,
+    DEFAULT_VIBRATION_TOLERANCE,
+    Mode,
+    Shaper,
+    ShaperError,
+    design,
+)
+
+
+def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None = None) -> ShaperMsg:
+    """The core shaper as a shaper_msgs/Shaper."""
+    msg = ShaperMsg()
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.family = shaper.family
+    msg.amplitudes = shaper.amplitudes.tolist()
+    msg.times = shaper.times.tolist()
+    msg.design_modes = [ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta) for m in shaper.modes]
+    msg.derivative_order = int(shaper.params.get("derivative_order", 0))
+    # 0 where the family does not use the parameter (in requests 0 means the family default)
+    msg.vibration_tolerance = float(shaper.params.get("vibration_tolerance", 0.0))
+    msg.insensitivity = float(shaper.params.get("insensitivity", 0.0))
+    msg.source = source
+    msg.revision = int(revision)
+    return msg
+
+
+def shaper_from_msg(msg: ShaperMsg) -> Shaper:
+    """Design or validate the shaper a shaper_msgs/Shaper asks for.
+
+    ``vibration_tolerance`` and ``insensitivity`` equal to 0 mean the family default (5 % and
+    0.4); any other value is passed on and checked by the design (families that do not use a
+    parameter ignore it).
+
+    Raises
+    ------
+    ShaperError
+        If the request is invalid; the message names the problem.
+    """
+    modes = tuple(Mode(float(m.natural_frequency), float(m.damping_ratio)) for m in msg.design_modes)
+    family = msg.family.strip().lower() or ("custom" if len(msg.amplitudes) else "")
+    if not family:
+        raise ShaperError("family is empty")
+    if family != "custom" and (len(msg.amplitudes) or len(msg.times)):
+        raise ShaperError(f"amplitudes/times given for family {family!r}; use family 'custom'")
+    return design(
+        family,
+        modes,
+        derivative_order=int(msg.derivative_order) if family == "zvdn" else 1,
+        vibration_tolerance=_or_default(msg.vibration_tolerance, DEFAULT_VIBRATION_TOLERANCE),
+        insensitivity=_or_default(msg.insensitivity, DEFAULT_INSENSITIVITY),
+        amplitudes=np.asarray(msg.amplitudes, dtype=float) if family == "custom" else None,
+        times=np.asarray(msg.times, dtype=float) if family == "custom" else None,
+    )
+
+
+def _or_default(value: float, default: float) -> float:
+    """A message parameter: 0 means the family default; anything else (NaN too) is checked later."""
+    x = float(value)
+    return default if x == 0.0 else x
+
+
+def duration_to_sec(d: Duration) -> float:
+    return float(d.sec) + 1e-9 * float(d.nanosec)
+
+
+def sec_to_duration(t: float) -> Duration:
+    ns = int(round(t * 1e9))
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def time_to_sec(t: Time) -> float:
+    return float(t.sec) + 1e-9 * float(t.nanosec)
