@@ -125,7 +125,7 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
                      f" '{busiest['label']}'): these figures are noisy, compare runs with little 'other'")
     for note in notes:
         print(textwrap.fill(note, width=104, initial_indent="  note: ", subsequent_indent="        "))
-    print(f"  send interval p99: " + ", ".join(f"{r['label']} {_fmt(r['send_interval_p99_us'])} us" for r in runs))
+    print("  send interval p99: " + ", ".join(f"{r['label']} {_fmt(r['send_interval_p99_us'])} us" for r in runs))
     print()
     print(f"  ratio to {lat['baseline']:<16}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}"
           f"{'+p50 us':>9}{'+p99 us':>9}")

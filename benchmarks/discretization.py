@@ -21,8 +21,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
-from shaper_nodes.core.shaping.families import Mode, design
-from shaper_nodes.core.shaping.fir import discretize
+from shaper_nodes.core.shaping import Mode, design, discretize
 
 from .scheduler import best_call_time as _best
 

@@ -27,8 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
-from shaper_nodes.core.shaping.families import Mode, design
-from shaper_nodes.core.shaping.fir import SparseFir, StreamingShaper, discretize
+from shaper_nodes.core.shaping import Mode, SparseFir, StreamingShaper, design, discretize
 
 #: outputs must agree with lfilter to this (absolute, data of order 1)
 AGREEMENT_TOL = 1e-9

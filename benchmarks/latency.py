@@ -58,7 +58,7 @@ import rclpy
 import rclpy.context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from shaper_nodes.core.shaping.fir import SparseFir, StreamingShaper
+from shaper_nodes.core.shaping import SparseFir, StreamingShaper
 from shaper_nodes.ros.launching import ChildProcess
 from std_msgs.msg import Float64MultiArray
 
@@ -435,8 +435,7 @@ def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, obj
     ``params`` are extra node parameters (``shaper.*``, ``discretization``); the FIR used for
     decoding is designed from them exactly as the node does.
     """
-    from shaper_nodes.core.shaping.families import Mode, design
-    from shaper_nodes.core.shaping.fir import discretize
+    from shaper_nodes.core.shaping import Mode, design, discretize
     from shaper_nodes.ros.launching import NodeProcess
 
     params = dict(params or {})

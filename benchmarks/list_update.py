@@ -31,8 +31,8 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.signal import butter, cont2discrete, dlsim, filtfilt, hilbert
-from shaper_nodes.core.learning.list.learner import ListConfig, ListLearner, ListParams
-from shaper_nodes.core.shaping.families import Mode
+from shaper_nodes.core.learning.list import ListConfig, ListLearner, ListParams
+from shaper_nodes.core.shaping import Mode
 
 
 def _trapezoid(t: np.ndarray, distance: float, vmax: float, amax: float) -> tuple[np.ndarray, float]:

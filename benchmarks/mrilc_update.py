@@ -30,8 +30,8 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.signal import fftconvolve
+from shaper_nodes.core.learning.mrilc import MrilcLearner
 from shaper_nodes.core.learning.mrilc import model as M
-from shaper_nodes.core.learning.mrilc.learner import MrilcLearner
 
 
 def run(*, rate: float = 1000.0, seconds: float = 10.0, joints: int = 7, repeats: int = 20,

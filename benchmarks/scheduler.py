@@ -30,9 +30,8 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
-from shaper_nodes.core.scheduling.scheduler import Scheduler
-from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
+from shaper_nodes.core.shaping import Mode, design
 
 
 def _spec() -> dict:

@@ -177,8 +177,8 @@ RUNS_002 = (
 
 
 def shaper_duration(family: str) -> float:
-    from shaper_nodes.core.closed_loop.qft import nominal
-    from shaper_nodes.core.shaping.families import Mode, design
+    from shaper_nodes.core.closed_loop import nominal
+    from shaper_nodes.core.shaping import Mode, design
 
     p = nominal()
     return float(design(family, [Mode(p.omega_n, p.zeta)]).duration)
@@ -187,7 +187,7 @@ def shaper_duration(family: str) -> float:
 def run_seed002(start: Callable[[str, str, dict], object], ctx, runs=RUNS_002,
                 progress: Callable[[str], None] | None = None) -> dict[str, Traces]:
     """Every seed 002 run on the eight corner plants (one joint each), processes started once."""
-    from shaper_nodes.core.closed_loop.qft import corners, nominal
+    from shaper_nodes.core.closed_loop import corners, nominal
 
     cs = corners()
     joints = [f"corner{i}" for i in range(len(cs))]
@@ -306,7 +306,7 @@ def shaper_floor(tr: Traces, until: float = DWELL_002) -> float:
     floor of every scheme on a plant equal to P0."""
     import control
     from scipy.linalg import expm
-    from shaper_nodes.core.closed_loop.qft import nominal, plant_tf
+    from shaper_nodes.core.closed_loop import nominal, plant_tf
 
     sys_ = control.ss(plant_tf(nominal()))
     a, b, c, d = (np.asarray(x, dtype=float) for x in (sys_.A, sys_.B, sys_.C, sys_.D))
@@ -392,7 +392,7 @@ def _plot002(path: pathlib.Path, traces: dict[str, Traces], names: list[str], ti
 
 
 def report001(cases: dict[str, float], tr: Traces, interval: tuple[float, float]) -> str:
-    from shaper_nodes.core.closed_loop.time_delay import ppusmd_gains
+    from shaper_nodes.core.closed_loop import ppusmd_gains
 
     a0, a1, _ = ppusmd_gains(OMEGA_A, DELAY_USED)
     lines = [f"## Seed 001: time-delay feedback controller, w_A = {OMEGA_A:g} rad/s, T = pi/(3 w_A) ="
@@ -408,7 +408,7 @@ def report001(cases: dict[str, float], tr: Traces, interval: tuple[float, float]
         verdict = "at rest" if at_rest else ("decays" if g < 1 else "grows")
         lines.append(f"| {name} | {100 * (tr.output[:, j].max() - 1):.2f} | "
                      f"{'never' if math.isinf(st) else f'{st:.3f}'} | {'-' if at_rest else f'{g:.3g}'} | {verdict} |")
-    from shaper_nodes.core.closed_loop.time_delay import exact_step_response
+    from shaper_nodes.core.closed_loop import exact_step_response
 
     ex_paper, ex_grid = (exact_step_response(OMEGA_A, d, 4.0) for d in (DELAY, DELAY_USED))
     lines += ["", f"2T = {2 * DELAY_USED:g} s. ![seed 001](img/closed_loop_001.png)", "",
@@ -420,7 +420,7 @@ def report001(cases: dict[str, float], tr: Traces, interval: tuple[float, float]
 
 
 def report002(traces: dict[str, Traces]) -> str:
-    from shaper_nodes.core.closed_loop.qft import corners
+    from shaper_nodes.core.closed_loop import corners
 
     cs = corners()
     runs = (("ZV + feedforward-feedback", "zv"), ("ZV + feedback", "zv"), ("open loop, ZV", "zv"),

@@ -48,7 +48,7 @@ FUZZY_POINTS = tuple(np.linspace(0.0, 0.7, 8))  # every 0.1 m
 
 
 def _mode_at(m1: float):
-    from shaper_nodes.core.scheduling.fuzzy import modes_of
+    from shaper_nodes.core.scheduling import modes_of
 
     return modes_of(two_mass_matrices(m1)[0])[0]
 
@@ -228,7 +228,7 @@ def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout
 def interpolation_table() -> str:
     """Frequency error of the interpolated mode against the plant's over x0 in [0, 0.7] m, for
     rule bases of several sizes, interpolating the models or the mode parameters (ROS-free)."""
-    from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
+    from shaper_nodes.core.scheduling import rule_base_from_dict
 
     xs = np.linspace(0.0, 0.7, 281)
     true = np.array([_mode_at(float(m1)).omega for m1 in m1_of(xs)])

@@ -3,9 +3,7 @@
 Run with ./run exec python scripts/discretisation_table.py
 """
 
-from shaper_nodes.core.shaping.families import Mode, design
-from shaper_nodes.core.shaping.fir import discretize, fir_impulses
-from shaper_nodes.core.shaping.vibration import percentage_vibration
+from shaper_nodes.core.shaping import Mode, design, discretize, fir_impulses, percentage_vibration
 
 for hz in (7.3, 12.0):
     m = Mode.from_hz(hz, 0.05)

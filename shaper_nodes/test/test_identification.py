@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shaper_nodes.core.identification import modes as ident
-from shaper_nodes.core.identification.modes import (
+from shaper_nodes.core.identification import (
     METHODS,
     IdentificationError,
     ModeFit,
@@ -21,6 +20,7 @@ from shaper_nodes.core.identification.modes import (
     identify_records,
     recommend_shaper,
 )
+from shaper_nodes.core.identification import recommend as ident
 from shaper_nodes.core.shaping.families import FAMILIES, design
 from shaper_nodes.core.shaping.vibration import percentage_vibration
 

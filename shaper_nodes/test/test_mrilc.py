@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.mrilc import model as M
-from shaper_nodes.core.learning.mrilc.learner import END, START, MrilcLearner, MrilcSession
+from shaper_nodes.core.learning.mrilc.learner import MrilcLearner, MrilcSession
 
 RATE = 200.0
 PERIOD = 1.0 / RATE

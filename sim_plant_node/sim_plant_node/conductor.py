@@ -15,7 +15,6 @@ from collections.abc import Callable
 
 import numpy as np
 import rclpy
-from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node

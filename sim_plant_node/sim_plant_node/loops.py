@@ -43,8 +43,7 @@ import math
 
 import numpy as np
 from scipy.linalg import expm, null_space
-from shaper_nodes.core.closed_loop import qft
-from shaper_nodes.core.closed_loop.time_delay import ppusmd_gains
+from shaper_nodes.core.closed_loop import ppusmd_gains, qft
 
 from .plants import MckMode, _JointState, _per_joint
 

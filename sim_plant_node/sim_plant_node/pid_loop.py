@@ -23,7 +23,7 @@ import math
 import control as ct
 import numpy as np
 from scipy.linalg import expm
-from shaper_nodes.core.learning.mrilc.model import PAPER_CONTROLLER, MrilcError, controller
+from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER, MrilcError, controller
 
 from .plants import MckMode
 

@@ -57,7 +57,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
-from shaper_nodes.core.learning.mrilc.model import PAPER_CONTROLLER
+from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import describe as _desc
 from std_msgs.msg import Float64MultiArray

@@ -265,7 +265,7 @@ def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangul
     """A rule base (the mapping core.fuzzy.rule_base_from_dict takes) with one rule per pose x0
     in ``points`` (m): eq. (1) linearised at m1 = 10 x0 + 1 and/or its mode, and triangles
     peaking at each point (shoulders at the ends)."""
-    from shaper_nodes.core.scheduling.fuzzy import modes_of, triangular_partition
+    from shaper_nodes.core.scheduling import modes_of, triangular_partition
 
     rules = {}
     for i, (x, mf) in enumerate(zip(points, triangular_partition(points))):

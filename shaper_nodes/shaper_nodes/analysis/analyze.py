@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shaper_nodes.core.cycles import END, MOTION_END, START, evaluate_cycle
-from shaper_nodes.core.identification.modes import (
+from shaper_nodes.core.identification import (
     IdentificationError,
     ModeFit,
     Recommendation,
@@ -42,8 +42,7 @@ from shaper_nodes.core.identification.modes import (
     identify,
     recommend_shaper,
 )
-from shaper_nodes.core.shaping.families import Shaper
-from shaper_nodes.core.shaping.vibration import percentage_vibration, settling_time
+from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_time
 
 from .reading import BagError
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
@@ -380,7 +379,7 @@ def list_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, param
                 ) -> LearnerReplay:
     """LIST over the recording: the learner node's per-cycle updates (:mod:`shaper_nodes.list_replay`)."""
     from shaper_nodes.cli.list_replay import replay_items, session_for
-    from shaper_nodes.core.learning.list.learner import ListError
+    from shaper_nodes.core.learning.list import ListError
 
     notes = []
     params = {k: v for k, v in params.items()}
@@ -424,10 +423,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     profile) and the rest are listed as skipped; true replays every cycle, as for a recording of a
     live MRILC run.
     """
-    from shaper_nodes.core.learning.mrilc.learner import END as M_END
-    from shaper_nodes.core.learning.mrilc.learner import START as M_START
-    from shaper_nodes.core.learning.mrilc.learner import MrilcLearner, MrilcSession, model_from_params
-    from shaper_nodes.core.learning.mrilc.model import MrilcError
+    from shaper_nodes.core.learning.mrilc import MrilcError, MrilcLearner, MrilcSession, model_from_params
 
     def refused(why: str) -> LearnerReplay:
         return LearnerReplay("mrilc", [], [f"not possible: {why}"])
@@ -451,7 +447,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
         return refused(str(err))
     names = list(settings.joint_names)
     if not names:
-        first = [n for k, n in zip(rec.events.kind, rec.events.joint_names) if k == M_START and n]
+        first = [n for k, n in zip(rec.events.kind, rec.events.joint_names) if k == START and n]
         names = list(first[0]) if first else list(rec.joints.names)
     cols = {}
     for label, sig in (("joint states", rec.joints), ("reference", rec.reference)):
@@ -518,7 +514,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
             session.on_reference(*payload)
         else:
             pending.append(payload)
-        while pending and (pending[0][0] != M_END or session.latest >= pending[0][2]):
+        while pending and (pending[0][0] != END or session.latest >= pending[0][2]):
             handle(pending.pop(0))
     for event in pending:  # the recording ended: what is still missing is missing
         handle(event)

@@ -19,7 +19,7 @@ import pathlib
 
 import numpy as np
 
-from shaper_nodes.core.shaping.vibration import percentage_vibration
+from shaper_nodes.core.shaping import percentage_vibration
 
 from .analyze import Analysis, shaper_of
 from .reading import describe_damage

@@ -21,9 +21,8 @@ import sys
 from collections.abc import Iterable, Iterator, Mapping
 
 from shaper_nodes.core.cycles import END
-from shaper_nodes.core.learning.list.learner import ListError, ListLearner, ListParams
-from shaper_nodes.core.learning.list.session import ListSession, SessionResult, list_config
-from shaper_nodes.core.shaping.families import Mode
+from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams, ListSession, SessionResult, list_config
+from shaper_nodes.core.shaping import Mode
 
 TOPICS = {"imu": "/tip_imu", "events": "/cycle_events", "shaper": "/shaper/active_shaper"}
 

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from shaper_nodes.core.shaping.families import (
+from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_VIBRATION_TOLERANCE,
     FAMILIES,
@@ -32,11 +32,13 @@ from shaper_nodes.core.shaping.families import (
     Shaper,
     ShaperError,
     design,
+    discretize,
     family_info,
     family_params,
+    fir_impulses,
+    insensitivity_width,
+    percentage_vibration,
 )
-from shaper_nodes.core.shaping.fir import discretize, fir_impulses
-from shaper_nodes.core.shaping.vibration import insensitivity_width, percentage_vibration
 
 #: families compared and plotted when --families is not given
 DEFAULT_FAMILIES = ("zv", "zvd", "zvdd", "mzv", "ei", "2hump_ei", "3hump_ei", "si")

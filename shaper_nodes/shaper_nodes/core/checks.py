@@ -1,14 +1,24 @@
-"""Input checks with errors that name the problem.
+"""The one home of the core's checks of numbers and arrays, with errors that name the problem.
 
-Every check raises :class:`InputError` whose ``kind`` is one of :data:`KINDS`, so that nodes can
-count, throttle and report rejections per class.
+Two kinds of checks live here:
+
+- checks of incoming data (:func:`finite_array`, :func:`joint_permutation`,
+  :func:`strictly_increasing`) raise :class:`InputError`, whose ``kind`` is one of
+  :data:`KINDS`, so that nodes can count, throttle and report rejections per class;
+- checks of configuration values (:func:`number`, :func:`finite`, :func:`integer`,
+  :func:`in_range`, :func:`finite_values`) raise the error class the caller gives (each core
+  package has its own, e.g. ``ShaperError`` or ``ListError``, all subclasses of ``ValueError``),
+  so that a refusal says which parameter is wrong and why.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 KINDS = (
     "empty",
@@ -101,3 +111,64 @@ def strictly_increasing(name: str, times: np.ndarray) -> np.ndarray:
             f"{name} not strictly increasing: {times[i]:.6g} s at index {i} then {times[i + 1]:.6g} s",
         )
     return times
+
+
+# ----------------------------------------------------------------------------- configuration values
+
+
+def number(name: str, value: Any, error: type[ValueError] = ValueError) -> float:
+    """``value`` as a float; booleans and non-numbers are refused (NaN and infinities pass)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise error(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a number, got {value!r}") from None
+
+
+def finite(name: str, value: Any, error: type[ValueError] = ValueError) -> float:
+    """``value`` as a finite float."""
+    x = number(name, value, error)
+    if not math.isfinite(x):
+        raise error(f"{name} must be finite, got {value!r}")
+    return x
+
+
+def in_range(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf, *, lo_open: bool = False,
+             hi_open: bool = False, error: type[ValueError] = ValueError, unit: str = "") -> float:
+    """``value`` as a finite float in the interval from ``lo`` to ``hi`` (closed unless ``*_open``)."""
+    x = finite(name, value, error)
+    below = x <= lo if lo_open else x < lo
+    above = x >= hi if hi_open else x > hi
+    if below or above:
+        left, right = "(" if lo_open else "[", ")" if hi_open else "]"
+        raise error(f"{name} must be in {left}{lo:g}, {hi:g}{right}{' ' + unit if unit else ''}, got {value!r}")
+    return x
+
+
+def integer(name: str, value: Any, lo: int | None = None, hi: int | None = None,
+            error: type[ValueError] = ValueError) -> int:
+    """``value`` as an int (an integral float such as 3.0 is taken; booleans are not) in [lo, hi]."""
+    ok = not isinstance(value, (bool, np.bool_))
+    try:
+        ok = ok and float(value).is_integer()
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise error(f"{name} must be an integer, got {value!r}")
+    n = int(value)
+    if (lo is not None and n < lo) or (hi is not None and n > hi):
+        bounds = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+        raise error(f"{name} must be an integer in {bounds}, got {value!r}")
+    return n
+
+
+def finite_values(name: str, values: Any, error: type[ValueError] = ValueError) -> npt.NDArray[np.float64]:
+    """``values`` as a flat float array, every value finite (an empty sequence passes)."""
+    try:
+        v = np.asarray(values, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise error(f"{name} must be numbers, got {values!r}") from None
+    if not np.all(np.isfinite(v)):
+        raise error(f"{name} must be finite, got {v.tolist()}")
+    return v

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shaper_nodes.core.shaping.vibration import ResidualVibration, residual_vibration, settle_time
+from shaper_nodes.core.shaping import ResidualVibration, residual_vibration, settle_time
 
 START, MOTION_END, END = 0, 1, 2
 

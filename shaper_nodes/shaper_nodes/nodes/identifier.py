@@ -34,8 +34,8 @@ from shaper_msgs.msg import CycleEvent, ModeEstimate
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.srv import Identify, SetShaper
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
-from shaper_nodes.core.identification.modes import METHODS, IdentificationError, identify_records, recommend_shaper
-from shaper_nodes.core.shaping.families import ShaperError, none_shaper
+from shaper_nodes.core.identification import METHODS, IdentificationError, identify_records, recommend_shaper
+from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import describe as _desc

@@ -50,9 +50,16 @@ from std_srvs.srv import SetBool
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
-from shaper_nodes.core.learning.list.learner import ListConfig, ListError, ListLearner, ListParams
-from shaper_nodes.core.learning.list.session import ListSession, SessionResult, list_config
-from shaper_nodes.core.shaping.families import Mode, ShaperError, none_shaper
+from shaper_nodes.core.learning.list import (
+    ListConfig,
+    ListError,
+    ListLearner,
+    ListParams,
+    ListSession,
+    SessionResult,
+    list_config,
+)
+from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import describe

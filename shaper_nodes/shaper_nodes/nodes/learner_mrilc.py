@@ -38,15 +38,14 @@ import time
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from shaper_msgs.msg import CycleEvent, CycleReport, FeedforwardProfile
 from shaper_msgs.srv import SetFeedforward, SetShaper
+from shaper_nodes.core.learning.mrilc import DEFAULTS, RANGES, MrilcLearner, MrilcSession, model_from_params
 from shaper_nodes.core.learning.mrilc import model as M
-from shaper_nodes.core.learning.mrilc.learner import DEFAULTS, RANGES, MrilcLearner, MrilcSession, model_from_params
-from shaper_nodes.core.shaping.families import ShaperError, design
+from shaper_nodes.core.shaping import ShaperError, design
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.parameters import describe
 

@@ -49,10 +49,8 @@ from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper
-from shaper_nodes.core.scheduling.fuzzy import FuzzyError, Interpolation, rule_base_from_dict
-from shaper_nodes.core.scheduling.scheduler import Scheduler, relative_change
-from shaper_nodes.core.shaping.families import FAMILIES, ShaperError
-from shaper_nodes.core.shaping.fir import MAX_STAGES
+from shaper_nodes.core.scheduling import FuzzyError, Interpolation, Scheduler, relative_change, rule_base_from_dict
+from shaper_nodes.core.shaping import FAMILIES, MAX_STAGES, ShaperError
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import describe as _desc

@@ -48,9 +48,18 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError, finite_array, joint_permutation, strictly_increasing
-from shaper_nodes.core.shaping.families import FAMILIES, Mode, Shaper, ShaperError, design
-from shaper_nodes.core.shaping.fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize
-from shaper_nodes.core.shaping.trajectory import shape_trajectory
+from shaper_nodes.core.shaping import (
+    FAMILIES,
+    MAX_STAGES,
+    Mode,
+    RetimingShaper,
+    Shaper,
+    ShaperError,
+    StreamingShaper,
+    design,
+    discretize,
+    shape_trajectory,
+)
 from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration, shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import describe as _desc

@@ -7,7 +7,7 @@ from builtin_interfaces.msg import Duration, Time
 
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_nodes.core.shaping.families import (
+from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_VIBRATION_TOLERANCE,
     Mode,

@@ -1,1 +1,25 @@
-"""TODO"""
+"""Pose-dependent shaping by Takagi-Sugeno fuzzy interpolation (seed 004), free of ROS.
+
+Modules
+-------
+fuzzy
+    Membership functions, the rule base over one or more premises, the interpolated linear
+    model and its lightly damped modes (or the mode parameters interpolated directly).
+scheduler
+    The shaper at the present pose, the rate limiter (relative change), and the learner's
+    corrections kept per operating region.
+"""
+
+from .fuzzy import FuzzyError, Interpolation, RuleBase, modes_of, rule_base_from_dict, triangular_partition
+from .scheduler import Scheduler, relative_change
+
+__all__ = [
+    "FuzzyError",
+    "Interpolation",
+    "RuleBase",
+    "Scheduler",
+    "modes_of",
+    "relative_change",
+    "rule_base_from_dict",
+    "triangular_partition",
+]

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shaper_nodes.core.shaping.families import MAX_DAMPING, Mode
+from shaper_nodes.core.shaping import MAX_DAMPING, Mode
 
 #: default largest damping ratio of a "lightly damped" mode
 LIGHT_DAMPING = 0.3

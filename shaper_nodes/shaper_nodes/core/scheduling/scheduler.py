@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shaper_nodes.core.shaping.families import Mode, Shaper, ShaperError, design
+from shaper_nodes.core.shaping import Mode, Shaper, ShaperError, design
 
 from .fuzzy import FuzzyError, Interpolation, RuleBase
 

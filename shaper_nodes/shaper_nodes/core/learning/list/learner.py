@@ -60,8 +60,8 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from shaper_nodes.core.identification.modes import IdentificationError, identify
-from shaper_nodes.core.shaping.families import MAX_DURATION, Mode, Shaper, ShaperError
+from shaper_nodes.core.identification import IdentificationError, identify
+from shaper_nodes.core.shaping import MAX_DURATION, Mode, Shaper, ShaperError
 
 #: impulse structures, name -> description
 STRUCTURES: dict[str, str] = {

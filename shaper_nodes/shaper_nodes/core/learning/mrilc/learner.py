@@ -23,11 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.mrilc import model as M
 
 from .model import MrilcError, MrilcModel, rms
-
-START, MOTION_END, END = 0, 1, 2
 
 
 @dataclass(frozen=True)

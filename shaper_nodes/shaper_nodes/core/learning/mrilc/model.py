@@ -53,7 +53,7 @@ import control as ct
 import numpy as np
 from scipy import optimize, signal
 
-from shaper_nodes.core.shaping.families import Mode
+from shaper_nodes.core.shaping import Mode
 
 #: seed 000 eq. (13): PID with derivative filter, C(s) = 177.33 (s^2 + 319.1 s + 2.665e4) / (s (s + 3424))
 PAPER_CONTROLLER = ([177.33, 177.33 * 319.1, 177.33 * 2.665e4], [1.0, 3424.0, 0.0])
