@@ -70,14 +70,32 @@ def _or_default(value: float, default: float) -> float:
     return default if x == 0.0 else x
 
 
+# ----------------------------------------------------------------------------- stamps and durations
+# (any object with ``sec`` and ``nanosec`` is taken, so messages read from a bag by rosbags too)
+
+
 def duration_to_sec(d: Duration) -> float:
+    """A builtin_interfaces/Duration in s."""
     return float(d.sec) + 1e-9 * float(d.nanosec)
 
 
 def sec_to_duration(t: float) -> Duration:
+    """``t`` s as a builtin_interfaces/Duration (rounded to the nanosecond)."""
     ns = int(round(t * 1e9))
     return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def time_to_sec(t: Time) -> float:
+    """A builtin_interfaces/Time (a header stamp) in s."""
     return float(t.sec) + 1e-9 * float(t.nanosec)
+
+
+def ns_to_time(ns: int) -> Time:
+    """``ns`` nanoseconds as a builtin_interfaces/Time."""
+    ns = int(ns)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def sec_to_time(t: float) -> Time:
+    """``t`` s as a builtin_interfaces/Time (rounded to the nanosecond)."""
+    return ns_to_time(int(round(t * 1e9)))
