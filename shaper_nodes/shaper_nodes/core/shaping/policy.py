@@ -1,0 +1,120 @@
+"""The shaper node's update policy: who may change the active shaper, and how a change applies.
+
+Every change of the active shaper names its source (``parameters`` for the node's own
+parameters, else the request's ``source``: ``user``, ``identification``, ``learner``,
+``scheduler``...; an empty source is ``service``). The policy decides, before anything changes:
+
+- **who**: only sources in ``allowed_sources`` may change the shaper; the last accepted change
+  wins;
+- **what**: a shaper shorter than one command period (other than the identity) is refused, as
+  the FIR could not represent it;
+- **how**: a change from a source in ``retime_sources`` re-times the motion already commanded
+  (the impulses still pending follow the new shaper: the mode moved, e.g. the scheduler's
+  pose-dependent shaper), any other change switches bumplessly (the motion already commanded
+  keeps the shaper it started with);
+- **when**: a bumpless switch keeps the old filters alive until their response has passed; with
+  :data:`~.fir.MAX_STAGES` of them alive in a filter, a further switch is refused until they
+  retire ("still settling"), so that a flood of changes cannot grow the filter without bound.
+  Re-timing replaces the pending response and needs no new stage.
+
+:meth:`UpdatePolicy.decide` returns how the change applies or raises :class:`PolicyError` with
+the reason; the node then builds the new filter and swaps it in (validate, then commit).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Literal
+
+from .families import Shaper
+from .fir import MAX_STAGES
+
+#: the source of a request that names none
+DEFAULT_SOURCE = "service"
+#: the source of a change made through the node's parameters
+PARAMETERS_SOURCE = "parameters"
+
+How = Literal["switch", "retime"]
+
+
+class PolicyError(ValueError):
+    """A change the update policy refuses; the message says why."""
+
+
+@dataclass(frozen=True)
+class UpdatePolicy:
+    """Who may change the shaper and how (see the module docstring).
+
+    Attributes
+    ----------
+    allowed_sources : frozenset of str
+        Sources that may change the active shaper.
+    retime_sources : frozenset of str
+        Sources whose changes re-time the motion already commanded.
+    max_stages : int
+        Filters a bumpless switch may keep alive at once.
+    """
+
+    allowed_sources: frozenset[str]
+    retime_sources: frozenset[str] = frozenset()
+    max_stages: int = MAX_STAGES
+
+    @classmethod
+    def of(cls, allowed: Iterable[str], retime: Iterable[str] = ()) -> UpdatePolicy:
+        return cls(frozenset(allowed), frozenset(retime))
+
+    @staticmethod
+    def source_of(requested: str) -> str:
+        """The source a request stands for (its own, stripped; :data:`DEFAULT_SOURCE` if empty)."""
+        return requested.strip() or DEFAULT_SOURCE
+
+    def how(self, source: str) -> How:
+        """How a change from ``source`` applies: ``"retime"`` or ``"switch"``."""
+        return "retime" if source in self.retime_sources else "switch"
+
+    def allow(self, source: str) -> None:
+        """Raise :class:`PolicyError` unless ``source`` may change the shaper."""
+        if source not in self.allowed_sources:
+            raise PolicyError(f"update policy: source {source!r} is not in allowed_sources"
+                              f" {sorted(self.allowed_sources)}")
+
+    def settled(self, stages: Iterable[int]) -> None:
+        """Raise :class:`PolicyError` when a filter already keeps ``max_stages`` shapers alive."""
+        busiest = max(stages, default=0)
+        if busiest >= self.max_stages:
+            raise PolicyError(f"{busiest} shaper changes are still settling; try again shortly")
+
+    def decide(self, source: str, shaper: Shaper, rate: float, stages: Iterable[int]) -> How:
+        """Check a change of the active shaper to ``shaper`` by ``source``.
+
+        Parameters
+        ----------
+        source : str
+            Who asks.
+        shaper : Shaper
+            The new shaper, already designed and validated.
+        rate : float
+            The node's command rate, Hz.
+        stages : iterable of int
+            The number of shapers alive in each of the node's filters.
+
+        Returns
+        -------
+        "switch" or "retime"
+            How the change applies.
+
+        Raises
+        ------
+        PolicyError
+            The source may not change the shaper, the shaper is shorter than one command period,
+            or a switch would exceed the stage limit.
+        """
+        self.allow(source)
+        if shaper.family != "none" and shaper.duration > 0 and shaper.duration * rate < 1.0:
+            raise PolicyError(f"shaper duration {shaper.duration * 1e3:.3g} ms is shorter than one"
+                              f" command period ({1e3 / rate:.3g} ms)")
+        how = self.how(source)
+        if how == "switch":
+            self.settled(stages)
+        return how
