@@ -12,6 +12,7 @@ import os
 
 import pytest
 import rclpy
+
 from shaper_nodes.ros.launching import NodeProcess
 
 _counter = itertools.count()

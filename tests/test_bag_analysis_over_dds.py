@@ -18,11 +18,11 @@ import sys
 import time
 
 import pytest
+
+from reproductions.list_cases import CASES, LEARNER, _metric, run_case
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import Bag, mcap_chunks
 from shaper_nodes.analysis.streams import read_recording
-
-from reproductions.list_cases import CASES, LEARNER, _metric, run_case
 
 pytestmark = pytest.mark.integration
 
@@ -93,9 +93,9 @@ class _ShaperStandIn:
 
 def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_context, tmp_path, domain_id):
     from rclpy.executors import SingleThreadedExecutor
-    from shaper_nodes.ros.launching import NodeProcess
 
     from shaper_msgs.msg import CycleReport
+    from shaper_nodes.ros.launching import NodeProcess
 
     # 1. a live LIST run, recorded
     bag = tmp_path / "bag"

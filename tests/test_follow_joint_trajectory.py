@@ -25,12 +25,13 @@ from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalRespons
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.task import Future
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectoryPoint
+
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.core.shaping.fir import discretize
 from shaper_nodes.core.shaping.trajectory import shape_trajectory
 from shaper_nodes.nodes.shaper import ShaperNode
 from shaper_nodes.ros.conversions import duration_to_sec
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectoryPoint
 
 pytestmark = pytest.mark.integration
 

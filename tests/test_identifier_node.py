@@ -16,10 +16,11 @@ from builtin_interfaces.msg import Time
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
-from shaper_nodes.nodes.identifier import IMU_QOS, IdentifierNode
 
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.srv import Identify
+from shaper_nodes.nodes.identifier import IdentifierNode
+from shaper_nodes.ros.qos import IMU_QOS
 
 pytestmark = pytest.mark.integration
 RATE = 200.0  # Hz

@@ -11,6 +11,7 @@ import time
 
 import pytest
 from ament_index_python.packages import get_package_prefix, get_package_share_directory, get_packages_with_prefixes
+
 from shaper_nodes.ros.launching import NodeProcess, executable
 
 pytestmark = pytest.mark.integration

@@ -17,16 +17,16 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
-from shaper_nodes.core.scheduling.fuzzy import modes_of
-from shaper_nodes.core.shaping.families import Mode, design
-from shaper_nodes.nodes.scheduler import SchedulerNode
-from shaper_nodes.nodes.shaper import LATCHED
-from sim_plant_node.two_mass import m1_of, rule_base_spec, scheduler_parameters, two_mass_matrices
 
 from reproductions.scheduler_cases import CASES, run_case
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
+from shaper_nodes.core.scheduling.fuzzy import modes_of
+from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.nodes.scheduler import SchedulerNode
+from shaper_nodes.ros.qos import LATCHED
+from sim_plant_node.two_mass import m1_of, rule_base_spec, scheduler_parameters, two_mass_matrices
 
 pytestmark = pytest.mark.integration
 
@@ -89,7 +89,7 @@ def graph(start_node, ros_context):
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(sched)
     ex.add_node(peer)
-    spin_until(ex, lambda: peer.cli.service_is_ready() and sched._set_cli.service_is_ready(), 30.0, "services")
+    spin_until(ex, lambda: peer.cli.service_is_ready() and sched.shaper.service_is_ready(), 30.0, "services")
     yield sched, peer, ex
     ex.shutdown()
     peer.destroy_node()

@@ -16,13 +16,14 @@ from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from shaper_nodes.nodes.shaper import LATCHED, ShaperNode
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
+from shaper_nodes.nodes.shaper import ShaperNode
+from shaper_nodes.ros.qos import LATCHED
 
 pytestmark = pytest.mark.integration
 JOINTS = ["j1", "j2", "j3"]

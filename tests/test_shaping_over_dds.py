@@ -3,6 +3,7 @@
 import math
 
 import pytest
+
 from sim_plant_node.conductor import Conductor, rms
 
 pytestmark = pytest.mark.integration

@@ -20,51 +20,59 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Any
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
 from shaper_nodes.ros.bag_writer import message_class
+from shaper_nodes.ros.conversions import ns_to_time
 from shaper_nodes.ros.node_main import run_node
-from shaper_nodes.ros.parameters import describe
+from shaper_nodes.ros.parameters import Spec, declare_all, values
 
 LATCHED_TYPES = ("shaper_msgs/msg/Shaper",)
 LATCHED_NAMES = ("/tf_static",)
+
+#: the bag_play node's parameters
+PARAMETERS: tuple[Spec, ...] = (
+    Spec("bag", "", "rosbag2 folder or .mcap file to play.", read_only=True),
+    Spec("rate", 1.0, "Playback speed factor (2 = twice as fast).", (1e-3, 1e3), read_only=True),
+    Spec("topics", [""], "Topics to play (empty: all).", read_only=True),
+    Spec("latched_topics", [""], "Further topics to publish TRANSIENT_LOCAL (depth 1).", read_only=True),
+    Spec("min_interval", 0.0, "Least wall time between two published messages, s: spreads messages that were"
+         " logged at the same time (a lockstep simulation's clock stands still while it waits), so that they arrive"
+         " in order.", (0.0, 1.0), read_only=True),
+    Spec("pause_after_topics", [""], "After a message on one of these topics, pause for pause_after before the"
+         " next message.", read_only=True),
+    Spec("pause_after", 0.0, "Pause after a message on pause_after_topics, s of wall time: gives the nodes that"
+         " act on it (a learner at a cycle's END) time to finish before the recording's later messages arrive,"
+         " which in a lockstep recording may follow at once.", (0.0, 60.0), read_only=True),
+    Spec("wait_for_subscribers", 0, "Before playing, wait until every played topic has this many subscribers (0:"
+         " do not wait).", (0, 100), read_only=True),
+    Spec("start_timeout", 30.0, "Longest wait for the subscribers, s; then play anyway.", (0.0, 600.0),
+         read_only=True),
+    Spec("start_delay", 0.0, "Wait this long before the first message, s (lets discovery settle).", (0.0, 60.0),
+         read_only=True),
+    Spec("publish_clock", False, "Also publish /clock with the messages' log times.", read_only=True),
+    Spec("loop", False, "Start again at the end.", read_only=True),
+)
 
 
 class BagPlayNode(Node):
     """See the module docstring. Extra arguments go to ``Node``."""
 
-    def __init__(self, *args, **kwargs) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("bag_play", *args, **kwargs)
-        d = self.declare_parameter
-        d("bag", "", describe("rosbag2 folder or .mcap file to play.", read_only=True))
-        d("rate", 1.0, describe("Playback speed factor (2 = twice as fast).", 1e-3, 1e3, read_only=True))
-        d("topics", [""], describe("Topics to play (empty: all).", read_only=True))
-        d("latched_topics", [""], describe("Further topics to publish TRANSIENT_LOCAL (depth 1).", read_only=True))
-        d("min_interval", 0.0, describe(
-            "Least wall time between two published messages, s: spreads messages that were logged at the same"
-            " time (a lockstep simulation's clock stands still while it waits), so that they arrive in order.",
-            0.0, 1.0, read_only=True))
-        d("pause_after_topics", [""], describe(
-            "After a message on one of these topics, pause for pause_after before the next message.", read_only=True))
-        d("pause_after", 0.0, describe(
-            "Pause after a message on pause_after_topics, s of wall time: gives the nodes that act on it (a learner"
-            " at a cycle's END) time to finish before the recording's later messages arrive, which in a lockstep"
-            " recording may follow at once.", 0.0, 60.0, read_only=True))
-        d("wait_for_subscribers", 0, describe(
-            "Before playing, wait until every played topic has this many subscribers (0: do not wait).", 0, 100,
-            integer=True, read_only=True))
-        d("start_timeout", 30.0, describe("Longest wait for the subscribers, s; then play anyway.", 0.0, 600.0,
-                                          read_only=True))
-        d("start_delay", 0.0, describe("Wait this long before the first message, s (lets discovery settle).",
-                                       0.0, 60.0, read_only=True))
-        d("publish_clock", False, describe("Also publish /clock with the messages' log times.", read_only=True))
-        d("loop", False, describe("Start again at the end.", read_only=True))
-        p = lambda name: self.get_parameter(name).value  # noqa: E731
+        declare_all(self, PARAMETERS)
+        v = values(self, PARAMETERS)
+
+        def p(name: str) -> Any:
+            return v[name]
+
         path = str(p("bag"))
         if not path:
             raise ValueError("parameter 'bag' is required: a rosbag2 folder or .mcap file")
@@ -87,7 +95,7 @@ class BagPlayNode(Node):
             self.get_logger().error(f"not in the recording, not played: {missing} (it has {sorted(infos)})")
         selected = [t for t in (wanted or sorted(infos)) if t in infos]
         latched = set(LATCHED_NAMES) | {t for t in p("latched_topics") if t}
-        self._pubs: dict[str, object] = {}
+        self._pubs: dict[str, Publisher] = {}
         for topic in selected:
             msgtype = infos[topic].msgtype
             why = self._check(topic, msgtype)
@@ -101,7 +109,7 @@ class BagPlayNode(Node):
         if not self._pubs:
             raise ValueError(f"{path}: nothing to play (topics asked for: {wanted or 'all'}; in the recording:"
                              f" {sorted(infos)})")
-        self._clock = self.create_publisher(Clock, "/clock", 10) if p("publish_clock") else None
+        self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p("publish_clock") else None
         self.published: dict[str, int] = {t: 0 for t in self._pubs}
         self.finished = threading.Event()
         self._stop = threading.Event()
@@ -121,7 +129,7 @@ class BagPlayNode(Node):
         for _, _, _, raw in self.bag.messages([topic]):
             try:
                 deserialize_message(bytes(raw), cls)
-            except Exception as err:  # noqa: BLE001 - any failure means the layouts differ
+            except Exception as err:
                 return f"the recorded messages do not match the installed {msgtype} ({err})"
             break
         return ""
@@ -149,7 +157,7 @@ class BagPlayNode(Node):
                 self._play_once()
                 if not self.get_parameter("loop").value:
                     break
-        except Exception as err:  # noqa: BLE001 - reported; the node then ends
+        except Exception as err:
             self.get_logger().error(f"playback failed: {err}")
         finally:
             self.finished.set()
@@ -171,8 +179,8 @@ class BagPlayNode(Node):
                 time.sleep(min(left, 0.05))
             if self._stop.is_set():
                 return
-            if self._clock is not None:
-                self._clock.publish(Clock(clock=_stamp(log_ns)))
+            if self._clock_pub is not None:
+                self._clock_pub.publish(Clock(clock=ns_to_time(log_ns)))
             self._pubs[topic].publish(bytes(raw))
             self.published[topic] += 1
             last = time.monotonic()
@@ -190,11 +198,6 @@ class BagPlayNode(Node):
         self._thread.join(timeout=5.0)
         self.bag.close()
 
-
-def _stamp(ns: int):
-    from builtin_interfaces.msg import Time
-
-    return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -14,40 +14,50 @@ topics.imu (sensor_msgs/Imu, sensor QoS), topics.joint_states, topics.cycle_even
     samples is reported and not buffered (stale or missing sensor data is never identified from).
 ~/identify (shaper_msgs/srv/Identify)
     Identify from the last N buffered cycles, recommend, and optionally apply the recommendation
-    through ``<shaper>/set_shaper`` with source "identification".
+    through ``<shaper>/set_shaper`` with source "identification" (a shaper node that does not
+    answer within ``service_timeout`` is reported, and the recommendation is returned unapplied).
 ~/mode_estimate (shaper_msgs/ModeEstimate, latched)
     The last identified modes with their one-sigma uncertainties.
+/diagnostics
+    A set_shaper call the shaper node did not answer.
+
+Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from typing import Any
 
 import numpy as np
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
 
 from shaper_msgs.msg import CycleEvent, ModeEstimate
 from shaper_msgs.msg import Mode as ModeMsg
-from shaper_msgs.srv import Identify, SetShaper
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
-from shaper_nodes.core.identification import METHODS, IdentificationError, identify_records, recommend_shaper
+from shaper_nodes.core.identification import METHODS, IdentificationError, ModeFit, identify_records, recommend_shaper
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
+from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.node_main import run_node
-from shaper_nodes.ros.parameters import describe as _desc
+from shaper_nodes.ros.parameters import Spec, declare_all, topics
+from shaper_nodes.ros.qos import IMU_QOS, LATCHED
+from shaper_nodes.ros.shaper_client import ShaperClient
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: sensor QoS with a deep queue: identification runs in this node's executor, and the
-#: accelerometer samples that arrive meanwhile must not be dropped
-IMU_QOS = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT,
-                     durability=DurabilityPolicy.VOLATILE)
+SOURCE = "identification"
 #: a gap between two accelerometer samples longer than this many median periods marks the
 #: cycle's data as incomplete
 MAX_GAP_PERIODS = 5.0
+
+
+def _validate_method(method: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"unknown identification method {method!r}; known: {sorted(METHODS)}")
+    return method
 
 
 def check_record(result: CycleResult, min_samples: int) -> tuple[np.ndarray, np.ndarray]:
@@ -78,31 +88,42 @@ def check_record(result: CycleResult, min_samples: int) -> tuple[np.ndarray, np.
     return t, a
 
 
+def _check_band(value: Any) -> None:
+    lo, hi = (float(x) for x in value)
+    if hi > 0.0 and not 0.0 <= lo < hi:
+        raise ValueError(f"parameter band_hz must be [low, high] with 0 <= low < high, got {[lo, hi]}")
+
+
+_PROBE = ModeFit(2 * math.pi * 10.0, 0.02, 0.5, 0.002, 1.0, "fit")  # to hold one value against the core
+
+#: the identifier node's parameters (see config/identifier.yaml)
+PARAMETERS: tuple[Spec, ...] = (
+    Spec("shaper", "/shaper", "Fully qualified name of the shaper node to apply shapers to.", read_only=True),
+    Spec("buffer_cycles", 5, "Finished cycles kept for identification.", (1, 1000), read_only=True),
+    Spec("method", "fit", "Default identification method: " + ", ".join(f"{k} ({v})" for k, v in METHODS.items()),
+         check=lambda v: _validate_method(v)),
+    Spec("max_modes", 2, "Default largest number of modes to identify.", (1, 8)),
+    Spec("target_vibration", 0.05, "Default worst-case percentage vibration the recommended shaper must meet,"
+         " fraction.", (0.001, 0.5), check=lambda v: recommend_shaper([_PROBE], v, families=("zv",))),
+    Spec("uncertainty_sigmas", 2.0, "Half-width of the uncertainty band the worst case is taken over, in standard"
+         " deviations.", (0.0, 10.0), check=lambda v: recommend_shaper([_PROBE], 0.05, sigmas=v, families=("zv",))),
+    Spec("band_hz", [0.0, 0.0], "Frequency band searched, Hz ([0, 0]: up to Nyquist).", check=_check_band),
+    Spec("min_samples", 100, "Fewest accelerometer samples in a cycle's residual window.", (10, 10**7)),
+    Spec("settle_tolerance", 1e-6, "Band within which the joints count as at rest after a move, rad or m.",
+         (0.0, 1e3)),
+    Spec("service_timeout", 5.0, "Time to wait for the shaper node's set_shaper service, and then for its"
+         " answer, s.", (0.1, 600.0)),
+    *topics({"imu": "/tip_imu", "joint_states": "/joint_states", "cycle_events": "/cycle_events"}),
+)
+
+
 class IdentifierNode(Node):
     """See the module docstring. Extra arguments go to ``Node``."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__("identifier", *args, **kwargs)
-        d = self.declare_parameter
-        d("shaper", "/shaper", _desc("Fully qualified name of the shaper node to apply shapers to.", read_only=True))
-        d("buffer_cycles", 5, _desc("Finished cycles kept for identification.", 1, 1000, integer=True,
-                                    read_only=True))
-        d("method", "fit", _desc("Default identification method: " + ", ".join(f"{k} ({v})" for k, v in
-                                                                                 METHODS.items())))
-        d("max_modes", 2, _desc("Default largest number of modes to identify.", 1, 8, integer=True))
-        d("target_vibration", 0.05, _desc(
-            "Default worst-case percentage vibration the recommended shaper must meet, fraction.", 0.001, 0.5))
-        d("uncertainty_sigmas", 2.0, _desc(
-            "Half-width of the uncertainty band the worst case is taken over, in standard deviations.", 0.0, 10.0))
-        d("band_hz", [0.0, 0.0], _desc("Frequency band searched, Hz ([0, 0]: up to Nyquist)."))
-        d("min_samples", 100, _desc("Fewest accelerometer samples in a cycle's residual window.", 10, 10**7,
-                                    integer=True))
-        d("settle_tolerance", 1e-6, _desc("Band within which the joints count as at rest after a move.", 0.0, 1e3))
-        d("service_timeout", 5.0, _desc("Time to wait for the shaper node's set_shaper service, s.", 0.1, 600.0))
-        for key, default in {"imu": "/tip_imu", "joint_states": "/joint_states",
-                             "cycle_events": "/cycle_events"}.items():
-            d(f"topics.{key}", default, _desc(f"Topic name ({key}).", read_only=True))
-        self._validate_method(str(self.get_parameter("method").value))
+        declare_all(self, PARAMETERS)
+        _validate_method(str(self.get_parameter("method").value))
 
         p = self.get_parameter
         self.monitor = CycleMonitor(float(p("settle_tolerance").value))
@@ -113,21 +134,13 @@ class IdentifierNode(Node):
         self.create_subscription(JointState, p("topics.joint_states").value, self._on_joints, 100)
         self.create_subscription(CycleEvent, p("topics.cycle_events").value, self._on_event, 100)
         self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
-        shaper = str(p("shaper").value).rstrip("/")
-        # its own callback group: the ~/identify coroutine holds the default group while it awaits
-        # the answer, which the executor must still be able to take
-        self._set_shaper = self.create_client(SetShaper, f"{shaper}/set_shaper",
-                                              callback_group=MutuallyExclusiveCallbackGroup())
+        self.diagnostics = Diagnostics(self)
+        self.shaper = ShaperClient(self, str(p("shaper").value), SOURCE, lambda: float(p("service_timeout").value),
+                                   self.diagnostics)
         self.create_service(Identify, "~/identify", self._on_identify)
         self.get_logger().info(
             f"identifying from {p('topics.imu').value}, keeping {self.cycles.maxlen} cycles;"
-            f" applies to {self._set_shaper.srv_name}")
-
-    @staticmethod
-    def _validate_method(method: str) -> str:
-        if method not in METHODS:
-            raise ValueError(f"unknown identification method {method!r}; known: {sorted(METHODS)}")
-        return method
+            f" applies to {self.shaper.srv_name}")
 
     # ----------------------------------------------------------------- data
     def _on_imu(self, msg: Imu) -> None:
@@ -170,7 +183,7 @@ class IdentifierNode(Node):
     async def _on_identify(self, req: Identify.Request, resp: Identify.Response) -> Identify.Response:
         p = self.get_parameter
         try:
-            method = self._validate_method(req.method.strip() or str(p("method").value))
+            method = _validate_method(req.method.strip() or str(p("method").value))
             max_modes = int(req.max_modes) or int(p("max_modes").value)
             target = float(req.target_vibration) or float(p("target_vibration").value)
             if not (math.isfinite(target) and 0.0 < target < 1.0):
@@ -208,14 +221,14 @@ class IdentifierNode(Node):
                           f" (+-{m.zeta_std:.2g})" for m in by_freq)
         cycles_used = ", ".join(str(r.cycle) for r, _ in used)
         if rec.best is None:
-            resp.recommended = shaper_to_msg(none_shaper(), "identification", 0, now)
+            resp.recommended = shaper_to_msg(none_shaper(), SOURCE, 0, now)
             resp.success = True
             resp.message = (f"modes {found} from cycles {cycles_used}; no candidate keeps the worst-case"
                             f" vibration under {target:.3g}; nothing applied")
             self.get_logger().warning(resp.message)
             return resp
         best = rec.best
-        resp.recommended = shaper_to_msg(best.shaper, "identification", 0, now)
+        resp.recommended = shaper_to_msg(best.shaper, SOURCE, 0, now)
         resp.success = True
         resp.message = (f"modes {found} from cycles {cycles_used} ({method}); recommended {best.family}"
                         f" ({best.duration * 1e3:.1f} ms, worst-case V {100 * best.worst_vibration:.2g} %)")
@@ -225,15 +238,10 @@ class IdentifierNode(Node):
         self.get_logger().info(resp.message)
         return resp
 
-    async def _apply(self, shaper_msg) -> tuple[bool, str]:
-        timeout = float(self.get_parameter("service_timeout").value)
-        if not self._set_shaper.wait_for_service(timeout_sec=timeout):
-            return False, f"service {self._set_shaper.srv_name} not available within {timeout:g} s"
-        req = SetShaper.Request()
-        req.shaper = shaper_msg
-        req.shaper.family = "custom"  # the exact impulses identified on, not a re-design
-        result = await self._set_shaper.call_async(req)
-        return bool(result.success), str(result.message)
+    async def _apply(self, shaper_msg: ShaperMsg) -> tuple[bool, str]:
+        # the exact impulses identified on, not a re-design
+        ok, why, _ = await self.shaper.send(shaper_msg, exact=True)
+        return ok, why
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,9 +1,10 @@
 """The learner node's MRILC mode (seed 000): learn a feedforward profile over cycles.
 
-Started as ``learner`` with ``mode:=mrilc`` (see learner_node.py and config/mrilc.yaml).
-The parameters' names, defaults and ranges, and the construction of the model from them, are
-in the ROS-free core (core.mrilc_learning.DEFAULTS, RANGES, model_from_params), which offline
-replays (the bag analysis) share.
+Started as ``learner`` with ``mode:=mrilc`` (see :mod:`.learner` for what both modes share, and
+config/mrilc.yaml). The parameters' names, defaults, ranges and descriptions, and the
+construction of the model from them, are in the ROS-free core
+(:mod:`shaper_nodes.core.learning.mrilc`: DEFAULTS, RANGES, DESCRIPTIONS, model_from_params),
+which offline replays (the bag analysis) share.
 
 At start-up it builds the reference model G_m = C P_nom / (1 + C P_nom) from the configured
 controller and nominal plant, runs the convergence check of seed 000 eq. (11) over the plant
@@ -25,50 +26,35 @@ e = y_m - y with y_m = G_m r_s, updates u2 and installs it at the injection poin
     true: stop learning and install the best profile so far; false: learn again.
 Divergence guard: when RMS(e) grows ``mrilc.patience`` iterations in a row (above
 ``mrilc.noise_floor``), learning stops and the best profile is installed (action "rollback").
-state_file: the profile and history, saved atomically after every cycle and reloaded at start.
+state_file: ``{"version": 1, "mode": "mrilc", "saved_at", "joint_names", "sample_period",
+"injection", "learner"}``, saved atomically after every cycle and reloaded at start.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import pathlib
-import time
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
-from std_srvs.srv import SetBool
 
 from shaper_msgs.msg import CycleEvent, CycleReport, FeedforwardProfile
-from shaper_msgs.srv import SetFeedforward, SetShaper
-from shaper_nodes.core.learning.mrilc import DEFAULTS, RANGES, MrilcLearner, MrilcSession, model_from_params
-from shaper_nodes.core.learning.mrilc import model as M
+from shaper_msgs.srv import SetFeedforward
+from shaper_nodes.core.learning.mrilc import (
+    DEFAULTS,
+    RANGES,
+    MrilcError,
+    MrilcLearner,
+    MrilcSession,
+    model_from_params,
+)
 from shaper_nodes.core.shaping import ShaperError, design
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
-from shaper_nodes.ros.parameters import describe
+from shaper_nodes.ros.parameters import Spec, declare_all, values
+from shaper_nodes.ros.shaper_client import ServiceClient
 
-STATE_VERSION = 1
-SOURCE = "learner"
-
-
-def write_atomic(path: pathlib.Path, doc: dict) -> None:
-    """JSON to ``path`` atomically (write, fsync, rename, fsync the folder): a crash leaves the
-    old file or the new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(doc, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
+if TYPE_CHECKING:
+    from .learner import LearnerNode
 
 #: what each parameter means (names, defaults and ranges: core.mrilc_learning.DEFAULTS, RANGES)
 DESCRIPTIONS = {
@@ -103,150 +89,130 @@ DESCRIPTIONS = {
 }
 
 
-def declare(node) -> None:
-    """The MRILC parameters (mrilc.*, joint_names, topics.*), read-only, with the core's defaults."""
-    for name, default in DEFAULTS.items():
-        low, high, integer = RANGES.get(name, (None, None, False))
-        node.declare_parameter(name, default, describe(DESCRIPTIONS[name], low, high, integer=integer,
-                                                       read_only=True))
+def _check(name: str) -> Any:
+    """The core's check of one value (the model is built, its convergence not required)."""
+    return lambda v: model_from_params({name: v}, require_convergence=False)
+
+
+#: the MRILC mode's parameters: the core's names, defaults and ranges (see config/mrilc.yaml)
+PARAMETERS: tuple[Spec, ...] = tuple(
+    Spec(name, default, DESCRIPTIONS[name], RANGES[name][:2] if name in RANGES else None, read_only=True,
+         check=_check(name))
+    for name, default in DEFAULTS.items())
 
 
 class MrilcMode:
-    """Wires the MRILC session into the learner node (which it is given)."""
+    """The MRILC adapter of the learner node (see the module docstring)."""
 
-    def __init__(self, node) -> None:
+    def __init__(self, node: LearnerNode) -> None:
         self.node = node
-        declare(node)
-        p = lambda name: node.get_parameter(name).value  # noqa: E731
+        declare_all(node, PARAMETERS)
+        v = values(node, PARAMETERS)
         try:
-            self.model, settings = model_from_params({name: p(name) for name in DEFAULTS})
-        except M.MrilcError as err:
+            self.model, settings = model_from_params(v)
+        except MrilcError as err:
             raise ValueError(str(err)) from None
-        law = self.model.law
-        node.get_logger().info(f"MRILC: reference model mode {self.model.mode.omega:.4g} rad/s, zeta"
-                               f" {self.model.mode.zeta:.4g}; law {law.law}: {self.model.convergence.describe()}")
         self.joint_names: list[str] = list(settings.joint_names)
-        self.patience, self.noise_floor = settings.patience, settings.noise_floor
-        path = str(p("state_file"))
-        self.state_path = pathlib.Path(path).expanduser() if path else None
-        self.session: MrilcSession | None = None
-        self._restore()
-        self.injection = str(p("mrilc.injection"))
-
-        node._sleep_group = MutuallyExclusiveCallbackGroup()
+        self.patience, self.noise_floor, self.learn = settings.patience, settings.noise_floor, settings.learn
+        self.injection = str(v["mrilc.injection"])
+        self.family = settings.shaper_family
+        self.events_topic = settings.topics["cycle_events"]
+        self.session: MrilcSession | None = node.restore(self._session_from, {"mode": "mrilc"})
+        if self.session is None and self.joint_names:
+            self.session = self._new_session(len(self.joint_names))
         inputs = MutuallyExclusiveCallbackGroup()
-        node.create_subscription(JointState, p("topics.joint_states"), self._on_joint_state, 1000,
+        node.create_subscription(JointState, settings.topics["joint_states"], self._on_joint_state, 1000,
                                  callback_group=inputs)
-        node.create_subscription(JointState, p("topics.reference"), self._on_reference, 1000, callback_group=inputs)
-        node.create_subscription(CycleEvent, p("topics.cycle_events"), self._on_event, 100)
-        target = str(p("mrilc.injection_target")).rstrip("/")
-        self._set_ff = node.create_client(SetFeedforward, f"{target}/set_feedforward",
-                                          callback_group=MutuallyExclusiveCallbackGroup())
-        shaper = str(p("shaper")).rstrip("/")
-        self._set_shaper = node.create_client(SetShaper, f"{shaper}/set_shaper",
-                                              callback_group=MutuallyExclusiveCallbackGroup())
-        self._report_pub = node.create_publisher(CycleReport, "~/reports", 10)
-        node.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup())
-        self._family = str(p("mrilc.shaper_family"))
-        self._startup = node.create_timer(0.2, self._send_initial, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.ready = False
+        node.create_subscription(JointState, settings.topics["reference"], self._on_reference, 1000,
+                                 callback_group=inputs)
+        self.feedforward = ServiceClient(node, SetFeedforward, f"{settings.injection_target.rstrip('/')}"
+                                         "/set_feedforward", node.service_timeout, node.diagnostics)
+
+    def describe(self) -> str:
+        m = self.model
+        mode = "none lightly damped" if m.mode is None else f"{m.mode.omega:.4g} rad/s, zeta {m.mode.zeta:.4g}"
+        return f"MRILC: reference model mode {mode}; law {m.law.law}: {m.convergence.describe()}"
 
     # ------------------------------------------------------------------ state
-    def _new_session(self, joints: int, doc: dict | None = None) -> MrilcSession:
+    def _new_session(self, joints: int, doc: dict[str, Any] | None = None) -> MrilcSession:
         if doc is None:
             learner = MrilcLearner(self.model, joints, self.patience, self.noise_floor)
-            learner.holding = not bool(self.node.get_parameter("mrilc.learn").value)
+            learner.holding = not self.learn
         else:
             learner = MrilcLearner.from_dict(self.model, doc, self.patience, self.noise_floor)
-        stale = float(self.node.get_parameter("stale_after").value)
-        return MrilcSession(learner, stale)
+        return MrilcSession(learner, float(self.node.get_parameter("stale_after").value))
 
-    def _restore(self) -> None:
-        if self.state_path is None or not self.state_path.exists():
-            if self.joint_names:
-                self.session = self._new_session(len(self.joint_names))
-            return
-        try:
-            doc = json.loads(self.state_path.read_text(encoding="utf-8"))
-            if not isinstance(doc, dict) or doc.get("version") != STATE_VERSION or doc.get("mode") != "mrilc":
-                raise M.MrilcError("not a version-1 MRILC state file")
-            if abs(float(doc["sample_period"]) - self.model.period) > 1e-12:
-                raise M.MrilcError(f"saved for a sample period of {doc['sample_period']} s, not {self.model.period} s")
-            names = list(doc["joint_names"])
-            if self.joint_names and names != self.joint_names:
-                raise M.MrilcError(f"saved for joints {names}, not {self.joint_names}")
-            self.joint_names = names
-            self.session = self._new_session(len(names), doc["learner"])
-        except (OSError, ValueError, KeyError, TypeError) as err:
-            aside = self.state_path.with_name(self.state_path.name + ".corrupt")
-            os.replace(self.state_path, aside)
-            self.node.get_logger().error(f"cannot load MRILC state {self.state_path}: {err}; moved to {aside};"
-                                         " starting afresh")
-            self.session = self._new_session(len(self.joint_names)) if self.joint_names else None
-            return
-        self.node.get_logger().info(f"resumed from {self.state_path} at iteration {self.session.learner.iteration}")
+    def _session_from(self, doc: dict[str, Any]) -> MrilcSession:
+        if abs(float(doc["sample_period"]) - self.model.period) > 1e-12:
+            raise MrilcError(f"saved for a sample period of {doc['sample_period']} s, not {self.model.period} s")
+        names = list(doc["joint_names"])
+        if self.joint_names and names != self.joint_names:
+            raise MrilcError(f"saved for joints {names}, not {self.joint_names}")
+        session = self._new_session(len(names), doc["learner"])
+        self.joint_names = names
+        return session
 
-    def save(self) -> None:
-        if self.state_path is None or self.session is None:
-            return
-        doc = {"version": STATE_VERSION, "mode": "mrilc", "saved_at": time.time(), "joint_names": self.joint_names,
-               "sample_period": self.model.period, "injection": self.injection,
-               "learner": self.session.learner.to_dict()}
-        try:
-            write_atomic(self.state_path, doc)
-        except OSError as err:
-            self.node.get_logger().error(f"could not save the learner state to {self.state_path}: {err}")
+    def state(self) -> dict[str, Any] | None:
+        if self.session is None:
+            return None
+        return {"mode": "mrilc", "joint_names": self.joint_names, "sample_period": self.model.period,
+                "injection": self.injection, "learner": self.session.learner.to_dict()}
+
+    def latest(self) -> float:
+        return float(self.session.latest) if self.session is not None else float("inf")
 
     # ------------------------------------------------------------------ outputs
-    async def _send_initial(self) -> None:
-        if not (self._set_ff.service_is_ready() and (not self._family or self._set_shaper.service_is_ready())):
-            return
-        self._startup.cancel()
-        if self._family:
-            try:
-                shaper = design(self._family, [self.model.mode])
-            except ShaperError as err:
-                self.node.get_logger().error(f"cannot design {self._family} on the reference model: {err}")
-                shaper = None
-            if shaper is not None:
-                msg = shaper_to_msg(shaper, SOURCE, 0, self.node.get_clock().now().to_msg())
-                msg.family = "custom"  # the designed impulses exactly
-                resp = await self.node._call(self._set_shaper, SetShaper.Request(shaper=msg),
-                                             float(self.node.get_parameter("service_timeout").value))
-                if resp is None or not resp.success:
-                    why = "no answer" if resp is None else resp.message
-                    self.node.get_logger().error(f"the shaper node refused the {self._family} shaper: {why}")
-        ok, why = await self._install(self.session.learner.profile if self.session else np.zeros((0, 0)))
-        if not ok:
-            self.node.get_logger().error(f"the injection point refused the profile: {why}")
-        self.ready = True
+    def ready(self) -> bool:
+        return self.feedforward.service_is_ready() and (not self.family or self.node.shaper.service_is_ready())
 
-    async def _install(self, profile: np.ndarray) -> tuple[bool, str]:
-        timeout = float(self.node.get_parameter("service_timeout").value)
-        if not self._set_ff.wait_for_service(timeout_sec=timeout):
-            return False, f"service {self._set_ff.srv_name} not available within {timeout:g} s"
-        msg = FeedforwardProfile(source=SOURCE, injection=self.injection, joint_names=self.joint_names,
-                                 sample_period=self.model.period)
+    async def start(self) -> bool:
+        answered = True
+        if self.family:
+            answered = await self._send_shaper()
+        ok, why, answer = await self._install(self.session.learner.profile if self.session else np.zeros((0, 0)))
+        if answer is not None and not ok:
+            self.node.get_logger().error(f"the injection point refused the profile: {why}")
+        return answered and answer is not None
+
+    async def _send_shaper(self) -> bool:
+        """The shaper designed on the reference model's mode, to the shaper node; whether it answered."""
+        try:
+            if self.model.mode is None:
+                raise ShaperError("the reference model has no lightly damped mode")
+            shaper = design(self.family, [self.model.mode])
+        except ShaperError as err:
+            self.node.get_logger().error(f"cannot design {self.family} on the reference model: {err}")
+            return True
+        msg = shaper_to_msg(shaper, self.node.shaper.source, 0, self.node.get_clock().now().to_msg())
+        ok, why, answer = await self.node.shaper.send(msg, exact=True)  # the designed impulses exactly
+        if answer.response is not None and not ok:
+            self.node.get_logger().error(f"the shaper node refused the {self.family} shaper: {why}")
+        return answer.response is not None
+
+    async def _install(self, profile: np.ndarray) -> tuple[bool, str, Any]:
+        """Install ``profile`` at the injection point: (accepted, why, the response or None)."""
+        msg = FeedforwardProfile(source=self.node.shaper.source, injection=self.injection,
+                                 joint_names=self.joint_names, sample_period=self.model.period)
         msg.iteration = self.session.learner.iteration if self.session else 1
         msg.header.stamp = self.node.get_clock().now().to_msg()
         msg.data = np.asarray(profile, dtype=float).ravel().tolist()
         if self.session:
             self.session.profile_ready = False
-        resp = await self.node._call(self._set_ff, SetFeedforward.Request(profile=msg), timeout)
-        if resp is None:
-            return False, f"{self._set_ff.srv_name} did not answer within {timeout:g} s"
+        answer = await self.feedforward.call(SetFeedforward.Request(profile=msg))
+        if answer.response is None:
+            return False, answer.error, None
         if self.session:
-            self.session.profile_ready = bool(resp.success)
-        return bool(resp.success), str(resp.message)
+            self.session.profile_ready = bool(answer.response.success)
+        return bool(answer.response.success), str(answer.response.message), answer.response
 
     # ------------------------------------------------------------------ inputs
-    def _select(self, msg: JointState, field: str):
-        values = getattr(msg, field)
-        if len(values) != len(msg.name):
+    def _select(self, msg: JointState, field: str) -> list[float] | None:
+        vals = getattr(msg, field)
+        if len(vals) != len(msg.name):
             return None
         index = {n: i for i, n in enumerate(msg.name)}
         try:
-            return [values[index[n]] for n in self.joint_names]
+            return [vals[index[n]] for n in self.joint_names]
         except KeyError:
             self.node.get_logger().error(f"joint states lack joints {sorted(set(self.joint_names) - set(index))}",
                                          throttle_duration_sec=5.0)
@@ -266,56 +232,45 @@ class MrilcMode:
         if pos is not None:
             self.session.on_reference(time_to_sec(msg.header.stamp), pos)
 
-    async def _on_hold(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
+    async def hold(self, on: bool) -> tuple[bool, str]:
         if self.session is None:
-            resp.success, resp.message = False, "no cycle seen yet"
-            return resp
+            return False, "no cycle seen yet"
         learner = self.session.learner
-        if req.data:
-            ok, why = await self._install(learner.hold())
-            resp.success, resp.message = ok, "holding at the best profile" + ("" if ok else f"; refused: {why}")
-        else:
+        if not on:
             learner.resume()
-            resp.success, resp.message = True, "learning resumed"
-        self.save()
-        self.node.get_logger().info(resp.message)
-        return resp
+            return True, "learning resumed"
+        ok, why, _ = await self._install(learner.hold())
+        return ok, "holding at the best profile" + ("" if ok else f"; refused: {why}")
 
-    async def _on_event(self, msg: CycleEvent) -> None:
-        stamp = time_to_sec(msg.header.stamp)
+    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
         if self.session is None:
-            if msg.event != CycleEvent.START:
-                return
-            self.joint_names = list(msg.joint_names)
-            self.session = self._new_session(len(self.joint_names))
-            self.session.profile_ready = False  # learn from the next cycle, once a profile is installed
-            ok, why = await self._install(self.session.learner.profile)
-            if not ok:
-                self.node.get_logger().error(f"the injection point refused the profile: {why}")
-            return
-        if msg.event == CycleEvent.END:
-            deadline = time.monotonic() + float(self.node.get_parameter("end_wait").value)
-            while self.session.latest < stamp and time.monotonic() < deadline:
-                await self.node._sleep(0.01)
+            if msg.event == CycleEvent.START:
+                await self._first_start(msg)
+            return None
         result = self.session.on_event(msg.event, msg.cycle, stamp)
         if result is None:
-            return
-        report = CycleReport(source=SOURCE, cycle=int(msg.cycle), window_start=result.start, window_end=result.end)
-        report.header.stamp = msg.header.stamp
+            return None
+        window = (result.start, result.end)
         update = result.update
         if update is None:
-            self.node.get_logger().warning(f"cycle {msg.cycle} not learned from: {result.skipped}")
-            report.metric_names, report.metric_values = ["skipped"], [1.0]
-            self._report_pub.publish(report)
-            return
-        ok, why = await self._install(update.next_profile)
-        self.save()
-        report.residual_rms = float(update.rms_e)
-        report.metric_names = ["iteration", "rms_e", "rms_u1", "rms_u2", "residual", "applied",
-                               f"action.{update.action}"]
-        report.metric_values = [float(update.iteration), update.rms_e, update.rms_u1, update.rms_u2, update.residual,
-                                1.0 if ok else 0.0, 1.0]
-        self._report_pub.publish(report)
+            return self.node.skipped(msg, window, result.skipped)
+        ok, why, _ = await self._install(update.next_profile)
+        self.node.save()
+        names = ["iteration", "rms_e", "rms_u1", "rms_u2", "residual", "applied", f"action.{update.action}"]
+        values_ = [float(update.iteration), update.rms_e, update.rms_u1, update.rms_u2, update.residual,
+                   1.0 if ok else 0.0, 1.0]
         log = self.node.get_logger().info if ok else self.node.get_logger().error
         log(f"cycle {msg.cycle} (iteration {update.iteration}): RMS e {update.rms_e:.4g}, u1 {update.rms_u1:.4g},"
-            f" u2 {update.rms_u2:.4g}, residual {update.residual:.4g}; {update.action}" + ("" if ok else f"; injection point refused: {why}"))
+            f" u2 {update.rms_u2:.4g}, residual {update.residual:.4g}; {update.action}"
+            + ("" if ok else f"; injection point refused: {why}"))
+        return self.node.report(msg, window, names, values_, residual=update.rms_e)
+
+    async def _first_start(self, msg: CycleEvent) -> None:
+        """The joints of the first START (when none are configured): a session, and its profile installed;
+        learning starts with the next cycle."""
+        self.joint_names = list(msg.joint_names)
+        self.session = self._new_session(len(self.joint_names))
+        self.session.profile_ready = False
+        ok, why, _ = await self._install(self.session.learner.profile)
+        if not ok:
+            self.node.get_logger().error(f"the injection point refused the profile: {why}")

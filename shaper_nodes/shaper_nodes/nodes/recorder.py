@@ -12,32 +12,38 @@ from __future__ import annotations
 import collections
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from std_srvs.srv import Trigger
 
 from shaper_nodes.ros.bag_writer import BagWriter, message_class
 from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.parameters import Spec, declare_all
+
+#: the recorder node's parameters
+PARAMETERS: tuple[Spec, ...] = (
+    Spec("output", "recording", "rosbag2 folder to create (must not exist).", read_only=True),
+    Spec("topics", ["/joint_states", "/tip_imu", "/cycle_events"], "Topics to record (fully qualified names).",
+         read_only=True),
+    Spec("discovery_period", 0.2, "How often to look for requested topics not yet subscribed, s.", read_only=True),
+)
 
 
 class RecorderNode(Node):
     """See the module docstring. Extra arguments go to ``Node``."""
 
-    def __init__(self, *args, **kwargs) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("recorder", *args, **kwargs)
-        self.declare_parameter("output", "recording", ParameterDescriptor(
-            description="rosbag2 folder to create (must not exist).", read_only=True))
-        self.declare_parameter("topics", ["/joint_states", "/tip_imu", "/cycle_events"], ParameterDescriptor(
-            description="Topics to record (fully qualified names).", read_only=True))
-        self.declare_parameter("discovery_period", 0.2, ParameterDescriptor(
-            description="How often to look for requested topics not yet subscribed, s.", read_only=True))
+        declare_all(self, PARAMETERS)
         self.wanted = [t if t.startswith("/") else "/" + t for t in self.get_parameter("topics").value]
         self.bag = BagWriter(self.get_parameter("output").value)
-        self._queue: collections.deque = collections.deque()
-        self._subs: dict[str, object] = {}
+        self._queue: collections.deque[tuple[str, int, bytes]] = collections.deque()
+        self._subs: dict[str, Subscription] = {}
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._drain_loop, name="bag-writer", daemon=True)
@@ -78,10 +84,15 @@ class RecorderNode(Node):
             except (ImportError, AttributeError, KeyError) as err:
                 self.get_logger().error(f"cannot record {topic} ({type_name}): {err}", throttle_duration_sec=10.0)
                 continue
-            self._subs[topic] = self.create_subscription(
-                cls, topic, lambda data, t=topic: self._queue.append((t, self.get_clock().now().nanoseconds, data)),
-                self._qos_for(topic), raw=True)
+            self._subs[topic] = self.create_subscription(cls, topic, self._queuer(topic), self._qos_for(topic),
+                                                         raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
+
+    def _queuer(self, topic: str) -> Callable[[bytes], None]:
+        """The subscription callback of ``topic``: queue the raw message with the receive time."""
+        def queue(data: bytes) -> None:
+            self._queue.append((topic, self.get_clock().now().nanoseconds, data))
+        return queue
 
     def _drain(self) -> None:
         with self._lock:

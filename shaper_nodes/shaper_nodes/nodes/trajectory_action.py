@@ -23,22 +23,23 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import TypeAlias
 
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.action.client import ClientGoalHandle
 from rclpy.action.server import ServerGoalHandle
-from rclpy.clock import Clock, ClockType
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.ros.shaper_client import wait_for
 
-Goal = FollowJointTrajectory.Goal
-Result = FollowJointTrajectory.Result
+Goal: TypeAlias = FollowJointTrajectory.Goal
+Result: TypeAlias = FollowJointTrajectory.Result
 POLL = 0.05  # s, how often a goal waiting for the controller's server looks again
 WATCH = 1.0  # s, how often a running goal checks that the controller's server is still there
 
@@ -115,7 +116,6 @@ class TrajectoryActionProxy:
         self._on_refused = on_refused
         self._on_forwarded = on_forwarded
         self._timeout = float(timeout)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._log = node.get_logger().get_child("follow_joint_trajectory")
         self._shaped: dict[int, tuple[Goal, Goal]] = {}  # id(request) -> (request, shaped goal)
         self._live: dict[bytes, _Forward] = {}
@@ -212,7 +212,7 @@ class TrajectoryActionProxy:
                 handle.publish_feedback(msg.feedback)
 
         sent = self._client.send_goal_async(fwd.goal, feedback_callback=relay)
-        if not await self._until(sent, self._timeout):
+        if not await wait_for(self._node, sent, self._timeout):
             sent.add_done_callback(_cancel_if_accepted)  # do not leave it running if it comes late
             return self._abort(fwd, f"controller {name} did not answer the goal request within {self._timeout:g} s")
         fwd.controller = sent.result()
@@ -223,7 +223,7 @@ class TrajectoryActionProxy:
         if fwd.stop:
             self._cancel_at_controller(fwd)
         done = fwd.controller.get_result_async()
-        while not await self._until(done, WATCH):
+        while not await wait_for(self._node, done, WATCH):
             if not self._client.server_is_ready():
                 return self._abort(fwd, f"controller action server {name} went away while the goal was running")
         response = done.result()
@@ -234,29 +234,8 @@ class TrajectoryActionProxy:
         while not self._client.server_is_ready():
             if fwd.stop or time.monotonic() >= end:
                 return False
-            await self._until(Future(), POLL)
+            await wait_for(self._node, Future(), POLL)
         return True
-
-    async def _until(self, future: Future, timeout: float) -> bool:
-        """Await ``future`` for at most ``timeout`` s (steady clock); whether it is done.
-
-        A coroutine, so the executor goes on serving the node meanwhile.
-        """
-        if future.done():
-            return True
-        wake = Future()
-
-        def fire(*_) -> None:
-            if not wake.done():
-                wake.set_result(None)
-
-        timer = self._node.create_timer(timeout, fire, clock=self._steady)
-        future.add_done_callback(fire)
-        try:
-            await wake
-        finally:
-            self._node.destroy_timer(timer)
-        return future.done()
 
     # ------------------------------------------------------------------ endings
     def _finish(self, fwd: _Forward, status: int, result: Result) -> Result:
@@ -307,7 +286,7 @@ def _to_canceling(handle: ServerGoalHandle) -> bool:
         return True
     try:
         handle._update_state(_rclpy.GoalEvent.CANCEL_GOAL)
-    except Exception:  # noqa: BLE001 - any failure: fall back to abort
+    except Exception:
         return False
     return handle.is_cancel_requested
 

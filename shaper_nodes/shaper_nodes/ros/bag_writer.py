@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import importlib
 import pathlib
+from typing import Any
 
+from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
 
 OWN_PACKAGES = ("shaper_msgs",)
 
@@ -25,7 +28,7 @@ def msg_files(package: str) -> list[pathlib.Path]:
     return sorted(pathlib.Path(get_package_share_directory(package), "msg").glob("*.msg"))
 
 
-def typestore_with_own_types():
+def typestore_with_own_types() -> Typestore:
     """rosbags' Jazzy typestore plus this suite's message types."""
     store = get_typestore(Stores.ROS2_JAZZY)
     types: dict = {}
@@ -36,7 +39,7 @@ def typestore_with_own_types():
     return store
 
 
-def message_class(type_name: str):
+def message_class(type_name: str) -> Any:
     """The Python class of a ROS type name such as ``sensor_msgs/msg/Imu``."""
     pkg, kind, name = type_name.split("/")
     return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
@@ -53,7 +56,7 @@ class BagWriter:
         self._store = typestore_with_own_types()
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
-        self._connections: dict[str, object] = {}
+        self._connections: dict[str, Connection] = {}
         self.counts: dict[str, int] = {}
 
     def add_topic(self, topic: str, type_name: str) -> None:

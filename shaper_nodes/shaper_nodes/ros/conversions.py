@@ -1,12 +1,18 @@
-"""Conversions between messages and the core's arrays and objects (the nodes' edge)."""
+"""Conversions between messages and the core's arrays and objects (the nodes' edge), written once:
+shapers, stamps and durations, trajectories."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_nodes.core.checks import InputError, finite_array, joint_permutation, strictly_increasing
 from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_VIBRATION_TOLERANCE,
@@ -59,8 +65,8 @@ def shaper_from_msg(msg: ShaperMsg) -> Shaper:
         derivative_order=int(msg.derivative_order) if family == "zvdn" else 1,
         vibration_tolerance=_or_default(msg.vibration_tolerance, DEFAULT_VIBRATION_TOLERANCE),
         insensitivity=_or_default(msg.insensitivity, DEFAULT_INSENSITIVITY),
-        amplitudes=np.asarray(msg.amplitudes, dtype=float) if family == "custom" else None,
-        times=np.asarray(msg.times, dtype=float) if family == "custom" else None,
+        amplitudes=[float(a) for a in msg.amplitudes] if family == "custom" else None,
+        times=[float(t) for t in msg.times] if family == "custom" else None,
     )
 
 
@@ -99,3 +105,55 @@ def ns_to_time(ns: int) -> Time:
 def sec_to_time(t: float) -> Time:
     """``t`` s as a builtin_interfaces/Time (rounded to the nanosecond)."""
     return ns_to_time(int(round(t * 1e9)))
+
+
+# ----------------------------------------------------------------------------- trajectories
+#: the fields of a JointTrajectoryPoint that are shaped (positions always; the others when given)
+TRAJ_FIELDS = ("positions", "velocities", "accelerations")
+
+
+def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_times: bool
+                      ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A JointTrajectory as arrays in the configured joint order: (times (N,) s, {field: (N, joints)}).
+
+    Joints may come in any order. Every point needs positions; velocities and accelerations are
+    taken when every point has them. Times must increase strictly when ``require_times`` or when
+    there are several points.
+
+    Raises
+    ------
+    InputError
+        Unknown, missing or duplicate joints, no points, a field on some points only, wrong sizes,
+        non-finite values or non-increasing times (the error's ``kind`` names the class).
+    """
+    perm = joint_permutation(joint_names, msg.joint_names)
+    if not msg.points:
+        raise InputError("empty", "trajectory has no points")
+    n = len(joint_names)
+    times = np.array([duration_to_sec(p.time_from_start) for p in msg.points])
+    if require_times or len(times) > 1:
+        strictly_increasing("time_from_start", times)
+    fields: dict[str, np.ndarray] = {}
+    for f in TRAJ_FIELDS:
+        present = [len(getattr(p, f)) > 0 for p in msg.points]
+        if f == "positions" and not all(present):
+            raise InputError("empty", "every point needs positions")
+        if any(present) and not all(present):
+            raise InputError("inconsistent_fields", f"{f} given for some points but not all")
+        if all(present):
+            rows = [finite_array(f"point {i} {f}", getattr(p, f), size=n) for i, p in enumerate(msg.points)]
+            fields[f] = np.vstack(rows)[:, perm]
+    return times, fields
+
+
+def trajectory_msg(header: Header, joint_names: Sequence[str], times: Sequence[Duration] | np.ndarray,
+                   fields: Mapping[str, np.ndarray]) -> JointTrajectory:
+    """A JointTrajectory with one point per row of ``fields`` (arrays (N, joints)); ``times`` are the
+    points' time_from_start, as Durations or in s."""
+    out = JointTrajectory(header=header, joint_names=list(joint_names))
+    for k, t in enumerate(times):
+        pt = JointTrajectoryPoint(time_from_start=t if isinstance(t, Duration) else sec_to_duration(float(t)))
+        for f, v in fields.items():
+            setattr(pt, f, v[k].tolist())
+        out.points.append(pt)
+    return out

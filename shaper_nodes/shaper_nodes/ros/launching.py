@@ -12,6 +12,7 @@ import pathlib
 import signal
 import subprocess
 from collections.abc import Mapping
+from typing import IO
 
 
 def executable(package: str, name: str) -> pathlib.Path:
@@ -44,7 +45,7 @@ class ChildProcess:
         self.env = {**os.environ, **(env or {})}
         self.cwd = cwd
         self.proc: subprocess.Popen | None = None
-        self._log = None
+        self._log: IO[str] | None = None
 
     def start(self) -> ChildProcess:
         self._log = open(self.log_path, "w") if self.log_path else None  # noqa: SIM115

@@ -111,9 +111,10 @@ def declare_all(node: Node, table: Iterable[Spec]) -> None:
             node.declare_parameter(spec.name, spec.type, spec.descriptor())
         else:
             node.declare_parameter(spec.name, spec.default, spec.descriptor())
-        why = spec.refusal(node.get_parameter(spec.name).value)
-        if why:
-            raise ValueError(why)
+        if spec.choices:
+            why = spec.refusal(node.get_parameter(spec.name).value)
+            if why:
+                raise ValueError(why)
 
     def on_set(params: list[Parameter]) -> SetParametersResult:
         for p in params:

@@ -2,21 +2,23 @@
 
 A service reply can be lost (a reply sent before DDS has matched the reply reader is dropped)
 and a server can stop answering; a node that awaits such a reply without a bound hangs in that
-callback for good. :class:`ServiceClient` bounds both waits: for the service to appear and for
+callback for good. :class:`ServiceClient` bounds both waits, for the service to appear and for
 its reply, in wall time (with ``use_sim_time`` the node clock may stand still), without blocking
-the executor (it sleeps on a steady-clock timer in a callback group of its own, so the reply,
-other subscriptions and timers keep running). A call that times out is given up (its pending
-request removed) and returned as an :class:`Answer` without a response and with the reason, which
-is also reported on the log and ``/diagnostics`` (kind ``timeout``) when the client has a
-:class:`~.diagnostics.Diagnostics`. Callers retry where that is right (the learners' start-up,
-the scheduler) and report where it is not.
+the executor: :func:`wait_for` awaits a future until it is done or a steady-clock timer fires,
+whichever comes first (the timer in a callback group of the client's own, so that it runs while
+the caller's coroutine holds its group), and the executor serves the node meanwhile.
+
+A call that times out is given up (its pending request removed) and returned as an
+:class:`Answer` without a response and with the reason, which is also reported on the log and
+``/diagnostics`` (kind ``timeout``) when the client has a :class:`~.diagnostics.Diagnostics`.
+Callers retry where that is right (the learners' start-up, the scheduler) and report where it is
+not (the identifier's ``apply``).
 
 :class:`ShaperClient` is the client of a shaper node's ``~/set_shaper`` (and ``~/get_shaper``)
 that the identifier, both learners and the scheduler use: it fills in the source and the family
-``custom`` for exact impulses, and says what the shaper node answered.
-
-Callers that cannot await (a timer callback that must not hold its callback group) use
-:meth:`ServiceClient.start`, which returns a :class:`PendingCall` to poll.
+``custom`` for exact impulses, and says what the shaper node answered. Callers that cannot await
+(a timer callback that must not hold its callback group) use :meth:`ServiceClient.start`, which
+returns a :class:`PendingCall` to poll.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
@@ -36,10 +38,31 @@ from shaper_msgs.srv import GetShaper, SetShaper
 
 from .diagnostics import WARN, Diagnostics
 
-#: how often a waiting call looks at its reply, s (wall time)
-POLL = 0.002
-#: how often a call waiting for its service looks again, s
+#: how often a call waiting for its service looks again, s (wall time)
 DISCOVERY_POLL = 0.02
+
+
+async def wait_for(node: Node, future: Future, timeout: float, group: CallbackGroup | None = None) -> bool:
+    """Await ``future`` for at most ``timeout`` s of wall time; whether it is done.
+
+    A coroutine: the executor goes on serving the node meanwhile. ``group`` is the callback group
+    of the timer that bounds the wait (it must not be one the awaiting callback holds).
+    """
+    if future.done():
+        return True
+    wake = Future()
+
+    def fire(*_: object) -> None:
+        if not wake.done():
+            wake.set_result(None)
+
+    timer = node.create_timer(timeout, fire, callback_group=group, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    future.add_done_callback(fire)
+    try:
+        await wake
+    finally:
+        node.destroy_timer(timer)
+    return future.done()
 
 
 @dataclass(frozen=True)
@@ -98,7 +121,7 @@ class ServiceClient:
         self._diagnostics = diagnostics
         # its own callback group: the caller's coroutine holds its group while it awaits the reply
         self._client = node.create_client(srv_type, name, callback_group=MutuallyExclusiveCallbackGroup())
-        self._sleep_group = MutuallyExclusiveCallbackGroup()
+        self._timer_group = MutuallyExclusiveCallbackGroup()
         self.timeouts = 0
 
     @property
@@ -113,14 +136,7 @@ class ServiceClient:
 
     async def sleep(self, seconds: float) -> None:
         """Wait ``seconds`` of wall time without blocking the executor."""
-        done = Future()
-        timer = self.node.create_timer(seconds, lambda: done.done() or done.set_result(True),
-                                       callback_group=self._sleep_group,
-                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
-        try:
-            await done
-        finally:
-            self.node.destroy_timer(timer)
+        await wait_for(self.node, Future(), seconds, self._timer_group)
 
     async def call(self, request: Any, timeout: float | None = None) -> Answer:
         """Call the service: the response, or no response and why (not there, or no reply)."""
@@ -131,10 +147,7 @@ class ServiceClient:
                 return Answer(None, f"service {self.srv_name} not available within {limit:g} s")
             await self.sleep(DISCOVERY_POLL)
         future = self._client.call_async(request)
-        deadline = time.monotonic() + limit
-        while not future.done() and time.monotonic() < deadline:
-            await self.sleep(POLL)
-        if not future.done():
+        if not await wait_for(self.node, future, limit, self._timer_group):
             return self._gave_up(future, limit)
         return Answer(future.result())
 

@@ -1,0 +1,218 @@
+"""The learner node's LIST mode: learn the shaper from each cycle's residual vibration (seed 003).
+
+After each cycle of a repeated task it measures the residual vibration of the tip
+accelerometer (M) and its phase against the unshaped vibration (phi), updates the 2-impulse
+shaper (A1, T2) by the Learning Input Shaping Technique (:mod:`shaper_nodes.core.learning.list`)
+and sends it to the shaper node with source "learner". Started as ``learner`` with ``mode:=list``
+(the default; see :mod:`.learner` for what both modes share, and config/learner.yaml).
+
+Interfaces (names are parameters)
+---------------------------------
+topics.imu (sensor_msgs/Imu, sensor QoS), topics.cycle_events, ``<shaper>/active_shaper``
+    Inputs. A cycle is learned from only if it ran with the shaper the learner sent (or
+    unshaped: the reference) from START to END; missing, stale, gappy, saturated or
+    non-finite accelerometer data is reported and skipped, never learned from.
+``<shaper>/set_shaper``
+    Where the learned shaper goes (family "custom", source "learner").
+~/hold (std_srvs/SetBool)
+    true: stop exploring and apply the best parameters so far (held until false, or until M at
+    them rises above ``list.rollback_factor`` times the best); false: learn again.
+~/reports (shaper_msgs/CycleReport)
+    One per finished cycle, published after the new shaper was accepted: M (residual_rms and
+    metric "M"), phi, the parameters used and next, the action taken.
+state_file
+    ``{"version": 1, "structure", "saved_at", "learner"}``.
+
+Start-up: with a saved state the learner sends its shaper at once; otherwise it sets the
+identity shaper so that the next cycle runs unshaped and becomes the phase reference, and the
+initial guess unless one is given (``initial.frequency_hz`` > 0).
+
+Parameters: :data:`PARAMETERS` (``list.*``: the core's :class:`ListConfig`, ``list.*`` ranges
+held against it by the tests).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from sensor_msgs.msg import Imu
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession, list_config
+from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
+from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
+from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
+from shaper_nodes.ros.qos import IMU_QOS, LATCHED
+
+if TYPE_CHECKING:
+    from .learner import LearnerNode
+
+_D = ListConfig()
+
+
+def _check(key: str) -> Any:
+    """The core's check of one ``list.*`` value."""
+    return lambda v: list_config({key: v})
+
+
+#: the LIST mode's parameters (see config/learner.yaml)
+PARAMETERS: tuple[Spec, ...] = (
+    Spec("initial.frequency_hz", 0.0, "Initial guess: mode frequency, Hz (0 = from the first, unshaped, cycle).",
+         (0.0, 1000.0), read_only=True),
+    Spec("initial.damping_ratio", 0.0, "Initial guess: damping ratio.", (0.0, 0.95), read_only=True,
+         check=lambda v: ListParams.from_mode(Mode.from_hz(10.0, v))),
+    Spec("list.structure", _D.structure, "Impulse structure: 'zv2' (the paper's 2 impulses) or 'zvd3' (the learned"
+         " pair convolved with itself).", read_only=True, check=_check("structure")),
+    Spec("list.rule", _D.rule, "Update rule: 'components' (signed M sin/cos phi) or 'paper'.", read_only=True,
+         check=_check("rule")),
+    Spec("list.highpass_hz", _D.highpass_hz, "High-pass cut-off removing drift before M and phi, Hz (0 = none).",
+         (0.0, 1000.0), read_only=True, check=_check("highpass_hz")),
+    Spec("list.window_delay", 0.0, "Residual window starts this long after MOTION_END, s (0 = the T2 upper"
+         " bound).", (0.0, 60.0), read_only=True, check=_check("window_delay")),
+    Spec("list.a1_bounds", list(_D.a1_bounds), "Bounds of A1, [low, high].", read_only=True,
+         check=_check("a1_bounds")),
+    Spec("list.t2_bounds", [0.0, 0.0], "Bounds of T2, s ([0, 0] = 0.5 to 2 times the initial T2).",
+         read_only=True, check=_check("t2_bounds")),
+    Spec("list.max_step_a1", _D.max_step_a1, "Largest change of A1 per cycle.", (1e-6, 1.0), read_only=True,
+         check=_check("max_step_a1")),
+    Spec("list.max_step_t2", _D.max_step_t2, "Largest change of T2 per cycle, fraction of T2.", (1e-6, 10.0),
+         read_only=True, check=_check("max_step_t2")),
+    Spec("list.phase_trials", _D.phase_trials, "Most cycles varying one parameter before switching to the other.",
+         (1, 100), read_only=True, check=_check("phase_trials")),
+    Spec("list.switch_tol", _D.switch_tol, "Relative step below which a parameter counts as converged.",
+         (0.0, 0.99), read_only=True, check=_check("switch_tol")),
+    Spec("list.rollback_factor", _D.rollback_factor, "Roll back to the best parameters when M exceeds this times"
+         " the best M.", (1.0, 100.0), read_only=True, check=_check("rollback_factor")),
+    Spec("list.patience", _D.patience, "Hold at the best parameters after this many trials in a row without a"
+         " better M (0 = never).", (0, 1000), read_only=True, check=_check("patience")),
+    Spec("list.saturation", 0.0, "Accelerometer full scale, m/s^2: a cycle reaching it is rejected (0 = no"
+         " limit).", (0.0, 1e6), read_only=True, check=_check("saturation")),
+    Spec("list.min_samples", _D.min_samples, "Fewest accelerometer samples in the residual window.", (2, 10**7),
+         read_only=True, check=_check("min_samples")),
+    *topics({"imu": "/tip_imu", "cycle_events": "/cycle_events"}),
+)
+
+
+def _describe(params: ListParams | None) -> str:
+    return "no shaping (reference cycle next)" if params is None else f"A1 {params.a1:.5f}, T2 {params.t2:.5f} s"
+
+
+class ListMode:
+    """The LIST adapter of the learner node (see the module docstring)."""
+
+    def __init__(self, node: LearnerNode) -> None:
+        self.node = node
+        declare_all(node, PARAMETERS)
+        v = values(node, PARAMETERS)
+        try:
+            self.config = list_config(values(node, PARAMETERS, prefix="list."))
+        except ListError as err:
+            raise ValueError(str(err)) from None
+        self.structure = self.config.structure
+        learner = node.restore(self._learner_from, {"structure": self.structure})
+        self.session = ListSession(learner or ListLearner(self.config, self._initial_params(v)), self.structure,
+                                   float(node.get_parameter("stale_after").value))
+        self.events_topic = str(v["topics.cycle_events"])
+        self.imu_topic = str(v["topics.imu"])
+        inputs = MutuallyExclusiveCallbackGroup()  # taken while an END's update awaits the shaper node
+        node.create_subscription(Imu, self.imu_topic, self._on_imu, IMU_QOS, callback_group=inputs)
+        node.create_subscription(ShaperMsg, f"{node.shaper.srv_name.rsplit('/', 1)[0]}/active_shaper",
+                                 self._on_active, LATCHED, callback_group=inputs)
+
+    @staticmethod
+    def _learner_from(doc: dict[str, Any]) -> ListLearner:
+        return ListLearner.from_dict(doc.get("learner"))
+
+    @staticmethod
+    def _initial_params(v: dict[str, Any]) -> ListParams | None:
+        hz = float(v["initial.frequency_hz"])
+        if hz <= 0.0:
+            return None
+        try:
+            return ListParams.from_mode(Mode.from_hz(hz, float(v["initial.damping_ratio"])))
+        except ShaperError as err:
+            raise ValueError(f"invalid initial mode: {err}") from None
+
+    def describe(self) -> str:
+        learner = self.session.learner
+        resumed = learner.reference is not None
+        return (f"LIST ({self.structure}, rule {self.config.rule}) on {self.imu_topic};"
+                f" {'resuming' if resumed else 'starting'} with {_describe(learner.params if resumed else None)}")
+
+    def state(self) -> dict[str, Any]:
+        return {"structure": self.structure, "learner": self.session.learner.to_dict()}
+
+    def latest(self) -> float:
+        return float(self.session.latest_imu)
+
+    def ready(self) -> bool:
+        return self.node.shaper.service_is_ready()
+
+    # ----------------------------------------------------------------- the shaper node
+    async def start(self) -> bool:
+        learner = self.session.learner
+        ok, why, answer = await self._send(learner.params if learner.reference is not None else None)
+        if answer.response is not None and not ok:
+            self.node.get_logger().error(f"the shaper node refused the initial shaper: {why}")
+        return answer.response is not None
+
+    async def _send(self, params: ListParams | None) -> tuple[bool, str, Any]:
+        if params is None:
+            msg = ShaperMsg(family="none")
+        else:
+            msg = shaper_to_msg(params.shaper(self.structure), self.node.shaper.source, 0,
+                                self.node.get_clock().now().to_msg())
+        self.session.sent(params)
+        return await self.node.shaper.send(msg, exact=params is not None)  # the learned impulses exactly
+
+    # ----------------------------------------------------------------- inputs
+    def _on_imu(self, msg: Imu) -> None:
+        a = msg.linear_acceleration
+        self.session.on_imu(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+
+    def _on_active(self, msg: ShaperMsg) -> None:
+        self.session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
+
+    async def hold(self, on: bool) -> tuple[bool, str]:
+        learner = self.session.learner
+        if not on:
+            learner.resume()
+            return True, "learning resumed"
+        params = learner.hold()
+        ok, why = True, ""
+        if params is not None:
+            ok, why, _ = await self._send(params)
+        return ok, f"holding at {_describe(params)}" + ("" if ok else f"; shaper node refused: {why}")
+
+    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+        result = self.session.on_event(msg.event, msg.cycle, stamp, msg.start_positions, msg.goal_positions)
+        if result is None:
+            return None
+        window = (result.start, result.end)
+        update = result.update
+        if update is None or update.action == "rejected" or update.next is None:
+            return self.node.skipped(msg, window, result.skipped or (update.reason if update else ""))
+        applied, why = True, ""
+        if update.next != update.used:
+            applied, why, _ = await self._send(update.next)
+        self.node.save()
+        used = update.used or ListParams(math.nan, math.nan)
+        names = ["M", "phi", "iteration", "a1_used", "t2_used", "a1_next", "t2_next", "applied",
+                 f"action.{update.action}", f"parameter.{update.parameter}"]
+        values_ = [update.m, update.phi, float(update.iteration), used.a1, used.t2, update.next.a1, update.next.t2,
+                   1.0 if applied else 0.0, 1.0, 1.0]
+        report = self.node.report(msg, window, names, values_, residual=update.m)
+        report.shaper_used = self._shaper_msg(update.used)
+        report.shaper_next = self._shaper_msg(update.next)
+        log = self.node.get_logger().info if applied else self.node.get_logger().error
+        log(f"cycle {msg.cycle}: M {update.m:.4g}, phi {math.degrees(update.phi):.1f} deg, {update.action}"
+            f" ({update.parameter}): {_describe(update.used)} -> {_describe(update.next)}"
+            + ("" if applied else f"; shaper node refused: {why}"))
+        return report
+
+    def _shaper_msg(self, params: ListParams | None) -> ShaperMsg:
+        shaper = none_shaper() if params is None else params.shaper(self.structure)
+        return shaper_to_msg(shaper, self.node.shaper.source, 0)
