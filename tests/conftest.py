@@ -12,7 +12,12 @@ import os
 
 import pytest
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.task import Future
 
+from shaper_msgs.srv import GetShaper, SetFeedforward, SetShaper
 from shaper_nodes.ros.launching import NodeProcess
 
 _counter = itertools.count()
@@ -69,3 +74,43 @@ class Starter:
 def starter(start_node) -> Starter:
     """Like start_node, with ``stop_all()`` to stop the nodes started so far."""
     return Starter(start_node)
+
+
+class SilentShaper(Node):
+    """Plays a shaper node whose replies are lost: it takes ``~/set_shaper`` and ``~/get_shaper``
+    requests (and counts them) but never answers, as when a reply is dropped before DDS has matched
+    the reply reader, or the node is stuck. Optionally it also plays an injection point that does
+    answer (``/sim_plant/set_feedforward``), for the MRILC learner."""
+
+    def __init__(self, context, feedforward: bool = False) -> None:
+        super().__init__("shaper", context=context)
+        self.requests: list = []
+        self.feedforward: list = []
+        self._never = Future()  # never done: the replies are never sent
+        group = ReentrantCallbackGroup()
+        self.create_service(SetShaper, "~/set_shaper", self._swallow, callback_group=group)
+        self.create_service(GetShaper, "~/get_shaper", self._swallow, callback_group=group)
+        if feedforward:
+            self.create_service(SetFeedforward, "/sim_plant/set_feedforward", self._on_feedforward)
+
+    async def _swallow(self, request, response):
+        self.requests.append(request)
+        await self._never
+        return response
+
+    def _on_feedforward(self, request, response):
+        self.feedforward.append(request)
+        response.success, response.message = True, "installed"
+        return response
+
+
+class Diagnosed:
+    """Collects /diagnostics statuses."""
+
+    def __init__(self, node: Node) -> None:
+        self.statuses: list = []
+        node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
+
+    def find(self, node_name: str, words: str):
+        """The first status of ``node_name`` whose message contains ``words`` (None if none yet)."""
+        return next((s for s in self.statuses if s.name.startswith(f"{node_name}:") and words in s.message), None)

@@ -1,7 +1,8 @@
 """The identifier node in-process with a probe over real DDS: stale, gappy or bad sensor data.
 
 A cycle whose accelerometer data is missing, has a gap or non-finite samples is reported and
-never identified from; a good cycle after it is.
+never identified from; a good cycle after it is. A shaper node that never answers the request to
+apply the recommendation is reported and does not hang the identifier.
 """
 
 from __future__ import annotations
@@ -13,7 +14,9 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
+from conftest import Diagnosed, SilentShaper
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
 
@@ -33,14 +36,17 @@ def stamp(t: float) -> Time:
 
 
 class Rig:
-    def __init__(self, ctx):
-        self.node = IdentifierNode(context=ctx, parameter_overrides=[Parameter("min_samples", value=50)])
+    def __init__(self, ctx, *extra: Node, **params):
+        overrides = [Parameter(k, value=v) for k, v in {"min_samples": 50, **params}.items()]
+        self.node = IdentifierNode(context=ctx, parameter_overrides=overrides)
         self.probe = rclpy.create_node("probe", context=ctx)
+        self.diag = Diagnosed(self.probe)
+        self.extra = extra
         self.imu = self.probe.create_publisher(Imu, "/tip_imu", IMU_QOS)
         self.events = self.probe.create_publisher(CycleEvent, "/cycle_events", 100)
         self.ex = SingleThreadedExecutor(context=ctx)
-        self.ex.add_node(self.node)
-        self.ex.add_node(self.probe)
+        for n in (self.node, self.probe, *extra):
+            self.ex.add_node(n)
         self.spin_until(lambda: self.imu.get_subscription_count() and self.events.get_subscription_count(),
                         "discovery")
         self.t = 0.0
@@ -92,8 +98,8 @@ class Rig:
 
     def close(self):
         self.ex.shutdown()
-        self.node.destroy_node()
-        self.probe.destroy_node()
+        for n in (self.node, self.probe, *self.extra):
+            n.destroy_node()
 
 
 def decay(t: float) -> float:
@@ -134,3 +140,21 @@ def test_bad_requests_are_refused_with_the_reason(rig):
     assert not rig.identify(method="nope").success
     bad = rig.identify(target_vibration=1.5)
     assert not bad.success and "target_vibration" in bad.message
+
+
+def test_a_shaper_node_that_never_answers_is_reported_and_the_identifier_keeps_going(ros_context):
+    peer = SilentShaper(ros_context)
+    rig = Rig(ros_context, peer, service_timeout=0.5)
+    try:
+        rig.cycle(0, accel=decay)
+        resp = rig.identify(apply=True)  # answered although the shaper node swallowed the request
+        assert resp.success and not resp.applied, resp.message
+        assert "not applied" in resp.message and "did not answer within 0.5 s" in resp.message
+        assert len(peer.requests) == 1 and peer.requests[0].shaper.source == "identification"
+        rig.spin_until(lambda: rig.diag.find("identifier", "did not answer within"), "the timeout on /diagnostics")
+        rig.cycle(1, accel=decay)  # and it goes on: the next cycle is buffered, identify answers again
+        again = rig.identify(apply=True)
+        assert again.success and not again.applied and len(rig.node.cycles) == 2
+        assert len(peer.requests) == 2
+    finally:
+        rig.close()
