@@ -48,6 +48,7 @@ from shaper_nodes.core.learning.mrilc import (
     MrilcSession,
     model_from_params,
 )
+from shaper_nodes.core.learning.mrilc.learner import _number  # TODO(merge): public per-parameter check
 from shaper_nodes.core.shaping import ShaperError, design
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.parameters import Spec, declare_all, values
@@ -90,7 +91,10 @@ DESCRIPTIONS = {
 
 
 def _check(name: str) -> Any:
-    """The core's check of one value (the model is built, its convergence not required)."""
+    """The core's check of one value: its range, or else the model built with it (convergence not
+    required)."""
+    if name in RANGES:
+        return lambda v: _number(name, v)
     return lambda v: model_from_params({name: v}, require_convergence=False)
 
 
