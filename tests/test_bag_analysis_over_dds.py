@@ -46,7 +46,7 @@ def test_demo_recording_analysis_matches_the_demo_and_the_plant(tmp_path, domain
     with Bag(out / "recording") as bag:
         decode = bag.deserializer("shaper_msgs/msg/CycleReport")
         plant = [decode(raw).residual_rms for _, _, _, raw in bag.messages(["/cycle_reports"])]
-    for row, live, shown, own in zip(an.cycles, per_cycle, printed, plant):
+    for row, live, shown, own in zip(an.cycles, per_cycle, printed, plant, strict=False):
         assert row.rms == pytest.approx(live, rel=0.01)
         assert row.rms == pytest.approx(shown, rel=0.01)
         assert row.rms == pytest.approx(own, rel=0.01)
@@ -122,7 +122,7 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
     an = analyze(read_recording(bag), Options(learner_params={**LEARNER, **CASES["case2"].learner}))
     offline = an.replays["list"].rows
     assert len(offline) == len(live)
-    for row, it in zip(offline[:clean], live[:clean]):
+    for row, it in zip(offline[:clean], live[:clean], strict=True):
         assert row["M"] == pytest.approx(it.m, rel=1e-12)
         assert (row["a1_next"], row["t2_next"]) == pytest.approx((it.a1_next, it.t2_next), rel=1e-12)
 
@@ -161,7 +161,7 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
         stand_in.node.destroy_node()
 
     assert len(reports) == len(live)
-    for k, (rep, it) in enumerate(zip(reports[:clean], live[:clean])):
+    for k, (rep, it) in enumerate(zip(reports[:clean], live[:clean], strict=True)):
         assert "skipped" not in rep.metric_names, k
         for name, value in (("M", it.m), ("a1_next", it.a1_next), ("t2_next", it.t2_next), ("phi", it.phi)):
             got = _metric(rep, name)

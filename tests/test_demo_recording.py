@@ -29,7 +29,7 @@ def test_demo_prints_table_and_writes_a_decodable_recording(tmp_path, domain_id)
     types = Counter()
     with open(mcaps[0], "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for schema, channel, message, decoded in reader.iter_decoded_messages():
+        for schema, _channel, _message, decoded in reader.iter_decoded_messages():
             types[schema.name] += 1
             assert decoded is not None
     for t in ("sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray",

@@ -263,7 +263,7 @@ def test_a_new_goal_preempts_the_running_one(rig, controller):
     first = rig.send(goal_of(trajectory()))
     rig.spin_until(lambda: len(controller.goals) == 1, "first goal at the controller")
     second = rig.send(goal_of(trajectory(points=((0.0, (1, 2, -1)), (0.4, (0, 0, 0))))))
-    status, result = first.wait_result()
+    status, _ = first.wait_result()
     assert status == GoalStatus.STATUS_CANCELED and controller.cancels == 1
     rig.spin_until(lambda: len(controller.goals) == 2, "second goal at the controller")
     controller.release()

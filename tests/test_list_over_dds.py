@@ -78,7 +78,7 @@ def test_replaying_the_recorded_bag_gives_the_live_updates(start_node, ros_conte
     results = replay(bag, LEARNER)
     learned = [r for r in results if r.update is not None]
     assert len(learned) == len(rows)
-    for live, offline in zip(rows, learned):
+    for live, offline in zip(rows, learned, strict=True):
         assert offline.update.m == pytest.approx(live.m, rel=1e-12, abs=1e-15)
         assert offline.update.next.a1 == pytest.approx(live.a1_next, rel=1e-12)
         assert offline.update.next.t2 == pytest.approx(live.t2_next, rel=1e-12)

@@ -103,7 +103,7 @@ def test_a_recorded_mrilc_run_replays_offline_to_the_live_updates(starter, ros_c
                                       )).replays["mrilc"]
         rows = [r for r in replay.rows if "skipped" not in r]
         assert len(rows) == expected, replay
-        for row, it in zip(rows, live):
+        for row, it in zip(rows, live, strict=False):
             assert row["iteration"] == it.iteration
             assert (row["rms_e"], row["rms_u1"], row["rms_u2"], row["residual"]) == pytest.approx(
                 (it.rms_e, it.rms_u1, it.rms_u2, it.residual), rel=1e-12)

@@ -202,7 +202,7 @@ def test_live_change_mid_motion_is_bumpless(rig):
             assert rig.node.set_parameters([Parameter("shaper.family", value="zvd")])[0].successful
         n = len(rig.array_out)
         rig.array_in.publish(Float64MultiArray(data=[v] * 3))
-        rig.spin_until(lambda: len(rig.array_out) > n, "output")
+        rig.spin_until(lambda n=n: len(rig.array_out) > n, "output")
         outputs.append(rig.array_out[-1][0])
     steps = np.abs(np.diff(outputs))
     assert steps.max() <= 2 * (1 / 59) + 1e-12
