@@ -1,0 +1,16 @@
+"""The vibration-suppression suite's Python package: input shaping that learns, for ROS 2.
+
+Layers, each importing only from those above it in this list:
+
+core/
+    The science, free of ROS: shaping, identification, learning (LIST, MRILC), scheduling (Takagi-
+    Sugeno), closed-loop analysis, and the checks and cycle bookkeeping they share.
+ros/
+    The glue between messages and the core, written once: QoS profiles, conversions, diagnostics,
+    parameter tables, the service clients with bounded waits, the node ``main``, the bag writer,
+    and starting installed executables.
+nodes/, cli/, analysis/
+    Thin nodes (one concept each), the command-line tools, and the offline analysis of recordings.
+
+README.md's "Where is the code" table names the one module that holds each algorithm and node.
+"""

@@ -1,1 +1,24 @@
-"""TODO"""
+"""The ROS glue of the suite, written once; nodes build on it, the core never imports it.
+
+Modules
+-------
+qos
+    The QoS profiles: ``LATCHED`` (state for late joiners) and ``IMU_QOS`` (the accelerometer).
+conversions
+    Messages to and from the core's objects and arrays: shapers, stamps and durations,
+    trajectories.
+diagnostics
+    Throttled refusals and summaries on the log and ``/diagnostics``.
+parameters
+    Parameter tables (``Spec``), ``declare_all`` and ``values``: each node declares its
+    parameters from one table.
+shaper_client
+    Service calls with bounded waits (``ServiceClient``) and the one client of ``set_shaper``
+    (``ShaperClient``): a lost reply is reported or retried, never a hang.
+node_main
+    The Jazzy ``main`` of every node.
+bag_writer
+    rosbag2 folders with MCAP storage, written with rosbags (the suite's own types included).
+launching
+    Installed node executables started as ``ros2 run`` starts them, for tests and tools.
+"""
