@@ -1,33 +1,32 @@
 """ROS-free core of the vibration-suppression suite.
 
-Nothing in this package imports rclpy or message types: nodes convert messages to numpy
-arrays at the edge and call these functions and classes.
+Nothing in this package imports rclpy or message types: nodes convert messages to numpy arrays
+at the edge (``shaper_nodes.ros.conversions``) and call these functions and classes. Each
+subpackage's ``__init__`` lists its modules and exports its API.
 
-Modules
--------
-shapers
-    Impulse sequences (ZV, ZVD, ZV-D^n, MZV, EI, two- and three-hump EI, SI, custom) behind a
-    registry of named designs.
-vibration
-    The percentage vibration V(omega, zeta) of an impulse sequence, sensitivity curves, and
-    residual-vibration metrics of measured cycles.
-fir
-    Discretisation of an impulse sequence to a causal FIR at the command rate, and the
-    streaming multi-joint FIR with bumpless coefficient changes.
-trajectory
-    Whole-trajectory shaping (resampling, convolution, derivatives) for
-    joint_trajectory_controller.
+Subpackages and modules
+-----------------------
+shaping
+    Impulse sequences behind a registry of named designs (ZV, ZVD, ZV-D^n, MZV, EI, two- and
+    three-hump EI, SI, custom), their percentage vibration, their causal FIR at the command rate
+    with bumpless switching, whole-trajectory shaping, and the shaper node's update policy.
 identification
     Vibration modes (frequency, damping, uncertainty) from free decays, and the shaper
     recommendation by worst-case vibration over the uncertainty band.
-list_learning, list_session
-    The Learning Input Shaping Technique (seed 003), and the bookkeeping the learner node and
-    the offline replay share.
+learning
+    The Learning Input Shaping Technique (seed 003, ``learning.list``), Model-Reference Iterative
+    Learning Control (seed 000, ``learning.mrilc``), and their state files.
+scheduling
+    Takagi-Sugeno fuzzy interpolation of linear models (seed 004), the scheduler's learner
+    corrections per region, and its rate limit.
+closed_loop
+    Closed-loop shaping analysis: the time-delay feedback controller (seed 001) and QFT model
+    matching (seed 002).
 cycles
-    Per-cycle buffering and the residual-vibration window every component measures alike.
-time_delay, qft
-    Closed-loop shaping: the time-delay feedback controller's stability analysis (seed 001) and
-    QFT model matching with bounds on the Nichols chart (seed 002).
-validation
-    Checks of incoming data with errors that name the problem.
+    Per-cycle buffering and the residual-vibration window every component measures alike; the
+    cycle event codes (those of shaper_msgs/CycleEvent).
+checks
+    The one home of the number and array checks, with errors that name the problem.
 """
+
+__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "scheduling", "shaping"]
