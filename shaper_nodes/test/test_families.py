@@ -4,6 +4,7 @@ The assertions are the families' defining properties (the physics), checked on t
 curve computed independently of how each design was found.
 """
 
+import itertools
 import json
 import math
 
@@ -12,15 +13,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
+
 from shaper_nodes.cli.shaper_design import main
-from shaper_nodes.core.shaping.families import (
-    FAMILIES,
-    Mode,
-    ShaperError,
-    design,
-    family_info,
-    family_properties,
-)
+from shaper_nodes.core.shaping.families import FAMILIES, design, family_info, family_properties
+from shaper_nodes.core.shaping.types import Mode, ShaperError
 from shaper_nodes.core.shaping.vibration import percentage_vibration
 
 FAST = settings(max_examples=40, deadline=None)
@@ -78,7 +74,7 @@ def test_insensitivity_ranks_zv_zvd_ei_2hump_3hump(hz, zeta):
     """The 5 % insensitivity grows with each step of robustness (and with the duration)."""
     m = Mode.from_hz(hz, zeta)
     widths = [family_properties(f, m).insensitivity_5pct for f in ("zv", "zvd", "ei", "2hump_ei", "3hump_ei")]
-    assert all(a < b for a, b in zip(widths, widths[1:])), widths
+    assert all(a < b for a, b in itertools.pairwise(widths)), widths
     # MZV sits between ZV and ZVD in duration and in robustness
     zv, mz, zvd = (family_properties(f, m) for f in ("zv", "mzv", "zvd"))
     assert zv.duration < mz.duration < zvd.duration

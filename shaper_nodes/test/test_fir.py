@@ -7,8 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from shaper_nodes.core.shaping.families import Mode, design
+
+from shaper_nodes.core.shaping.families import design
 from shaper_nodes.core.shaping.fir import MAX_STAGES, RetimingShaper, StreamingShaper, discretize
+from shaper_nodes.core.shaping.types import Mode
 
 SETTINGS = settings(max_examples=40, deadline=None)
 shaper_st = st.builds(
@@ -50,7 +52,7 @@ def test_switching_mid_motion_is_bumpless(a, b, k_switch):
     fa, fb = discretize(a, rate), discretize(b, rate)
     x = ramp_and_hold()
     s = StreamingShaper(fa, 1)
-    y = np.vstack([s.process(x[:k_switch])] + [s.switch(fb) or s.process(x[k_switch:])])
+    y = np.vstack([s.process(x[:k_switch]), s.switch(fb) or s.process(x[k_switch:])])
     dx = np.max(np.abs(np.diff(x[:, 0])))
     # every output increment is a convex mix of input increments of the two filters: at most 2 of them
     assert np.max(np.abs(np.diff(y[:, 0]))) <= 2 * dx + 1e-12
@@ -107,8 +109,12 @@ def test_retiming_shaper_without_retime_is_the_bumpless_streaming_shaper(a, b, k
     rate = 250.0
     fa, fb = discretize(a, rate), discretize(b, rate)
     ref, sh = StreamingShaper(fa, 2), RetimingShaper(fa, 2)
-    y_ref = np.vstack([ref.process(x[:k_switch]), *([] if ref.switch(fb) else []), ref.process(x[k_switch:])])
-    y = np.vstack([sh.process(x[:k_switch]), *([] if sh.switch(fb) else []), sh.process(x[k_switch:])])
+    before_ref = ref.process(x[:k_switch])
+    ref.switch(fb)
+    y_ref = np.vstack([before_ref, ref.process(x[k_switch:])])
+    before = sh.process(x[:k_switch])
+    sh.switch(fb)
+    y = np.vstack([before, sh.process(x[k_switch:])])
     np.testing.assert_allclose(y, y_ref, atol=1e-9)
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from shaper_nodes.core.scheduling.fuzzy import (
     FuzzyError,
     Gaussian,
@@ -70,14 +71,14 @@ def partitions(draw):
         lo = np.concatenate([[pts[0] - 1], pts[:-1]])
         hi = np.concatenate([pts[1:], [pts[-1] + 1]])
         mfs = [Trapezoidal(float(a), float(a + 0.4 * (p - a)), float(p + 0.4 * (h - p)), float(h))
-               for a, p, h in zip(lo, pts, hi)]
+               for a, p, h in zip(lo, pts, hi, strict=True)]
     return pts, mfs
 
 
 @FAST
 @given(partitions(), partitions(), st.floats(0, 1), st.floats(0, 1))
 def test_weights_sum_to_one_everywhere_in_range(p1, p2, s1, s2):
-    (pts1, mf1), (pts2, mf2) = p1, p2
+    (_, mf1), (_, mf2) = p1, p2
     a, b = mck(1.0, 0.1, 1.0)
     rules = [Rule((f, g), a, b) for f in mf1 for g in mf2]  # a grid over two premises
     base = RuleBase(("q1", "q2"), tuple(rules))
@@ -91,8 +92,8 @@ def test_interpolated_model_is_the_weighted_mean_and_exact_at_operating_points()
     pts = [0.0, 1.0, 2.0]
     models = [mck(1.0 + p, 0.1, 4.0) for p in pts]
     base = RuleBase(("q",), tuple(Rule((mf,), a, b, name=str(p))
-                                   for mf, p, (a, b) in zip(triangular_partition(pts), pts, models)))
-    for p, (a, b) in zip(pts, models):
+                                   for mf, p, (a, b) in zip(triangular_partition(pts), pts, models, strict=True)))
+    for p, (a, b) in zip(pts, models, strict=True):
         out = base.evaluate([p])
         np.testing.assert_allclose(out.a, a, rtol=0, atol=1e-15)
         np.testing.assert_allclose(out.b, b, rtol=0, atol=1e-15)
@@ -168,5 +169,5 @@ def test_rule_base_from_dict_checks_everything():
 def test_a_gap_between_membership_functions_is_an_error_that_names_the_value():
     a, b = mck(1.0, 0.1, 1.0)
     base = RuleBase(("q",), (Rule((Triangular(0, 0, 1),), a, b), Rule((Triangular(2, 3, 3),), a, b)))
-    with pytest.raises(FuzzyError, match="no rule fires at q = 1.5"):
+    with pytest.raises(FuzzyError, match=r"no rule fires at q = 1\.5"):
         base.evaluate([1.5])

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.closed_loop.qft import (
     DELTA_M,
     GAIN_FB,
@@ -28,7 +29,7 @@ def test_nominal_plant_is_the_papers():
     assert p.omega_n == pytest.approx(40 * math.pi, rel=1e-4)
     assert p.zeta == pytest.approx(0.1, rel=1e-4)
     for q in corners():  # every corner is 35 % off the nominal in each parameter
-        for x, x0 in zip((q.m, q.c, q.k), (p.m, p.c, p.k)):
+        for x, x0 in zip((q.m, q.c, q.k), (p.m, p.c, p.k), strict=True):
             assert abs(x / x0 - 1) == pytest.approx(0.35, abs=2e-3)
 
 

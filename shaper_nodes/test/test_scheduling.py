@@ -4,15 +4,17 @@ import math
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.scheduling.fuzzy import Rule, RuleBase, Triangular, triangular_partition
 from shaper_nodes.core.scheduling.scheduler import Scheduler, relative_change
-from shaper_nodes.core.shaping.families import Mode, Shaper, ShaperError, design
+from shaper_nodes.core.shaping.families import design
+from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
 
 def base():
     pts = [0.0, 1.0, 2.0]
     rules = []
-    for mf, p in zip(triangular_partition(pts), pts):
+    for mf, p in zip(triangular_partition(pts), pts, strict=True):
         w, z = 2.0 - 0.5 * p, 0.05
         a = np.array([[0.0, 1.0], [-w * w, -2 * z * w]])
         rules.append(Rule((mf,), a, np.array([[0.0], [1.0]]), name=f"r{int(p)}"))

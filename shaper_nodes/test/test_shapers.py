@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shaper_nodes.core.shaping.families import FAMILIES, Mode, ShaperError, design, zvdn
+
+from shaper_nodes.core.shaping.families import FAMILIES, design, zvdn
+from shaper_nodes.core.shaping.types import Mode, ShaperError
 from shaper_nodes.core.shaping.vibration import percentage_vibration, sensitivity_curve
 
 freqs = st.floats(min_value=0.2, max_value=80.0)

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.closed_loop.time_delay import (
     TimeDelayError,
     assumed_frequency_range,

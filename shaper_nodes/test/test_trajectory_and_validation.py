@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.checks import InputError, finite_array, joint_permutation, strictly_increasing
-from shaper_nodes.core.shaping.families import Mode, design
+from shaper_nodes.core.shaping.families import design
 from shaper_nodes.core.shaping.fir import discretize
 from shaper_nodes.core.shaping.trajectory import shape_trajectory
+from shaper_nodes.core.shaping.types import Mode
 
 FIR = discretize(design("zvd", [Mode.from_hz(4.0, 0.02)]), 250.0)
 

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shaper_nodes.core.shaping.families import Mode, design
+
+from shaper_nodes.core.shaping.families import design
 from shaper_nodes.core.shaping.fir import discretize, fir_impulses
+from shaper_nodes.core.shaping.types import Mode
 from shaper_nodes.core.shaping.vibration import (
     insensitivity_width,
     percentage_vibration,
@@ -32,7 +34,7 @@ def test_v_is_the_ratio_of_residual_amplitudes(impulses, omega, zeta):
     wd = omega * math.sqrt(1 - zeta**2)
     tn = times[-1]
     t = tn + np.linspace(0.0, 2 * math.pi / wd, 4001)
-    y = sum(a * np.exp(-zeta * omega * (t - ti)) * np.sin(wd * (t - ti)) for a, ti in zip(amps, times))
+    y = sum(a * np.exp(-zeta * omega * (t - ti)) * np.sin(wd * (t - ti)) for a, ti in zip(amps, times, strict=True))
     single = np.exp(-zeta * omega * (t - tn))  # envelope of one unit impulse applied at t_n
     measured = np.max(np.abs(y) / single)
     assert abs(measured - percentage_vibration(amps, times, omega, zeta)) < 2e-3 * max(1.0, measured)

@@ -13,10 +13,14 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
-from shaper_nodes.core.shaping import ResidualVibration, residual_vibration, settle_time
+from shaper_nodes.core.shaping.vibration import ResidualVibration, residual_vibration, settle_time
 
 START, MOTION_END, END = 0, 1, 2
+
+#: stamped samples (time in s, values) in order of arrival
+_Samples = deque[tuple[float, np.ndarray]]
 
 
 @dataclass(frozen=True)
@@ -59,13 +63,13 @@ class CycleMonitor:
     def in_cycle(self) -> bool:
         return self._cycle is not None
 
-    def add_accel(self, t: float, accel) -> None:
+    def add_accel(self, t: float, accel: npt.ArrayLike) -> None:
         """An accelerometer sample (m/s^2, 1 to 3 axes) at time t (s)."""
         if self._cycle is not None:
             self._acc_t.append(float(t))
             self._acc.append(np.asarray(accel, dtype=float).ravel())
 
-    def add_positions(self, t: float, positions) -> None:
+    def add_positions(self, t: float, positions: npt.ArrayLike) -> None:
         """Joint positions (rad or m) at time t (s)."""
         if self._cycle is not None:
             self._pos_t.append(float(t))
@@ -133,16 +137,16 @@ class StampedCycleMonitor:
         self.settle_tolerance = float(settle_tolerance)
         self.remove_mean = remove_mean
         self.max_wait = float(max_wait)
-        self._acc: deque = deque(maxlen=keep)
-        self._pos: deque = deque(maxlen=keep)
+        self._acc: _Samples = deque(maxlen=keep)
+        self._pos: _Samples = deque(maxlen=keep)
         self._open: tuple[int, float, float | None] | None = None
         self._pending: list[tuple[int, float, float, float, float]] = []  # ..., wall time END arrived
 
-    def add_accel(self, t: float, accel) -> None:
+    def add_accel(self, t: float, accel: npt.ArrayLike) -> None:
         """An accelerometer sample (m/s^2, 1 to 3 axes) stamped t (s)."""
         self._acc.append((float(t), np.asarray(accel, dtype=float).ravel()))
 
-    def add_positions(self, t: float, positions) -> None:
+    def add_positions(self, t: float, positions: npt.ArrayLike) -> None:
         """Joint positions (rad or m) stamped t (s)."""
         self._pos.append((float(t), np.asarray(positions, dtype=float).ravel()))
 
@@ -178,7 +182,7 @@ class StampedCycleMonitor:
         return out
 
     @staticmethod
-    def _select(buf: deque, start: float, end: float, width: int) -> tuple[np.ndarray, np.ndarray]:
+    def _select(buf: _Samples, start: float, end: float, width: int) -> tuple[np.ndarray, np.ndarray]:
         items = sorted(((t, v) for t, v in buf if start <= t <= end), key=lambda item: item[0])
         if not items:
             return np.zeros(0), np.zeros((0, width))

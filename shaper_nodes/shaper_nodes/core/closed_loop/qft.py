@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import control
 import numpy as np
+import numpy.typing as npt
 
 #: nominal plant, kg, N s/m, N/m
 NOMINAL = (1.0, 25.1327, 1.5791e4)
@@ -112,8 +113,8 @@ def design_gain(design: str) -> float:
     return GAIN_FB if design == "fb" else GAIN_FFB
 
 
-def _freq(sys: control.TransferFunction, omega: np.ndarray) -> np.ndarray:
-    return np.asarray(sys(1j * np.asarray(omega, dtype=float)), dtype=complex).ravel()
+def _freq(sys: control.TransferFunction, omega: npt.ArrayLike) -> npt.NDArray[np.complex128]:
+    return np.asarray(sys(1j * np.asarray(omega, dtype=float)), dtype=np.complex128).ravel()
 
 
 def closed_loop(design: str, p: MckParams, gain: float | None = None) -> control.TransferFunction:
@@ -127,26 +128,26 @@ def closed_loop(design: str, p: MckParams, gain: float | None = None) -> control
     return control.minreal(num / (1 + pp * g), verbose=False)
 
 
-def matching_error(design: str, p: MckParams, omega, gain: float | None = None) -> np.ndarray:
+def matching_error(design: str, p: MckParams, omega: npt.ArrayLike, gain: float | None = None) -> np.ndarray:
     """|M - Y/R| at the frequencies ``omega`` (rad/s), M = P0, evaluated in closed form (7) / (9)."""
-    omega = np.atleast_1d(np.asarray(omega, dtype=float))
-    pw, p0w = _freq(plant_tf(p), omega), _freq(plant_tf(nominal()), omega)
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    pw, p0w = _freq(plant_tf(p), w), _freq(plant_tf(nominal()), w)
     if design == "open":
         return np.abs(p0w - pw)
-    gw = _freq(controller_tf(design_gain(design) if gain is None else gain), omega)
+    gw = _freq(controller_tf(design_gain(design) if gain is None else gain), w)
     num = p0w if design == "fb" else p0w - pw
     return np.abs(num / (1.0 + pw * gw))
 
 
-def loop_specs(design: str, p: MckParams, omega, gain: float | None = None) -> dict[str, np.ndarray]:
+def loop_specs(design: str, p: MckParams, omega: npt.ArrayLike, gain: float | None = None) -> dict[str, np.ndarray]:
     """Section 3.2's magnitudes at ``omega``: output disturbance |1/(1+PG)|, input disturbance
     |P/(1+PG)|, noise |PG/(1+PG)| (for 'open': 1, |P|, 0)."""
-    omega = np.atleast_1d(np.asarray(omega, dtype=float))
-    pw = _freq(plant_tf(p), omega)
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    pw = _freq(plant_tf(p), w)
     if design == "open":
-        return {"output_disturbance": np.ones_like(omega), "input_disturbance": np.abs(pw),
-                "noise": np.zeros_like(omega)}
-    lw = pw * _freq(controller_tf(design_gain(design) if gain is None else gain), omega)
+        return {"output_disturbance": np.ones_like(w), "input_disturbance": np.abs(pw),
+                "noise": np.zeros_like(w)}
+    lw = pw * _freq(controller_tf(design_gain(design) if gain is None else gain), w)
     return {"output_disturbance": np.abs(1.0 / (1.0 + lw)), "input_disturbance": np.abs(pw / (1.0 + lw)),
             "noise": np.abs(lw / (1.0 + lw))}
 
@@ -160,25 +161,28 @@ class MatchRow:
     violations: tuple[float, ...]
 
 
-def matching_table(design: str, omega=WORKING_FREQUENCIES, plants: list[MckParams] | None = None,
+def matching_table(design: str, omega: npt.ArrayLike = WORKING_FREQUENCIES, plants: list[MckParams] | None = None,
                    delta: float = DELTA_M, gain: float | None = None) -> list[MatchRow]:
     """Per plant (default: the eight corners), |M - Y/R| at each frequency and where it exceeds delta."""
     if not (math.isfinite(delta) and delta > 0):
         raise QftError(f"delta_m must be finite and > 0, got {delta!r}")
-    omega = np.atleast_1d(np.asarray(omega, dtype=float))
-    if omega.size == 0 or not np.all(np.isfinite(omega)) or np.any(omega <= 0):
-        raise QftError(f"frequencies must be finite and > 0 rad/s, got {omega.tolist()}")
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    if w.size == 0 or not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise QftError(f"frequencies must be finite and > 0 rad/s, got {w.tolist()}")
     rows = []
     for p in plants or corners():
-        e = matching_error(design, p, omega, gain)
-        rows.append(MatchRow(p, tuple(float(x) for x in e), tuple(float(w) for w, x in zip(omega, e) if x > delta)))
+        e = matching_error(design, p, w, gain)
+        rows.append(MatchRow(p, tuple(float(x) for x in e),
+                             tuple(float(wi) for wi, x in zip(w, e, strict=True) if x > delta)))
     return rows
 
 
-def worst_case(design: str, omega, plants: list[MckParams] | None = None, gain: float | None = None) -> np.ndarray:
+def worst_case(design: str, omega: npt.ArrayLike, plants: list[MckParams] | None = None,
+               gain: float | None = None) -> np.ndarray:
     """max over plants of |M - Y/R| at each frequency."""
-    omega = np.atleast_1d(np.asarray(omega, dtype=float))
-    return np.max([matching_error(design, p, omega, gain) for p in plants or plant_grid(5)], axis=0)
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    worst: np.ndarray = np.max([matching_error(design, p, w, gain) for p in plants or plant_grid(5)], axis=0)
+    return worst
 
 
 # ------------------------------------------------------------------------------------------------

@@ -33,10 +33,13 @@ Performance (beyond the paper, which only reads overshoots off its figures): the
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from scipy.linalg import expm
 
 
@@ -62,25 +65,28 @@ def ppusmd_gains(omega_a: float, delay: float) -> tuple[float, float, float]:
     return a0, -2.0 * c * a0, a0
 
 
-def g_ff(s, omega_a: float, delay: float) -> np.ndarray:
+def g_ff(s: npt.ArrayLike, omega_a: float, delay: float) -> np.ndarray:
     """G_FF(s) of eq. (8) at complex s (array), for w_A (rad/s) and T (s)."""
     a0, a1, a2 = ppusmd_gains(omega_a, delay)
-    s = np.asarray(s, dtype=complex)
-    return a0 + a1 * np.exp(-s * delay) + a2 * np.exp(-2.0 * s * delay)
+    z = np.asarray(s, dtype=complex)
+    g: np.ndarray = a0 + a1 * np.exp(-z * delay) + a2 * np.exp(-2.0 * z * delay)
+    return g
 
 
-def controller_response(s, omega_a: float, delay: float) -> np.ndarray:
+def controller_response(s: npt.ArrayLike, omega_a: float, delay: float) -> np.ndarray:
     """G_C(s) = G_FF / (1 - G_FF G_PA) (eqs. 3, 12) at complex s."""
-    s = np.asarray(s, dtype=complex)
-    g = g_ff(s, omega_a, delay)
-    return g * (s**2 + omega_a**2) / ((s**2 + omega_a**2) - omega_a**2 * g)
+    z = np.asarray(s, dtype=complex)
+    g = g_ff(z, omega_a, delay)
+    gc: np.ndarray = g * (z**2 + omega_a**2) / ((z**2 + omega_a**2) - omega_a**2 * g)
+    return gc
 
 
-def characteristic(s, omega_a: float, delay: float, omega_r: float) -> np.ndarray:
+def characteristic(s: npt.ArrayLike, omega_a: float, delay: float, omega_r: float) -> np.ndarray:
     """The characteristic quasi-polynomial F(s) of eq. (18) at complex s."""
-    s = np.asarray(s, dtype=complex)
-    g = g_ff(s, omega_a, delay)
-    return s**2 * (s**2 + omega_a**2 * (1.0 - g)) + omega_r**2 * (omega_a**2 + s**2 * (1.0 + g))
+    z = np.asarray(s, dtype=complex)
+    g = g_ff(z, omega_a, delay)
+    f: np.ndarray = z**2 * (z**2 + omega_a**2 * (1.0 - g)) + omega_r**2 * (omega_a**2 + z**2 * (1.0 + g))
+    return f
 
 
 @dataclass(frozen=True)
@@ -180,10 +186,8 @@ def upper_bound_curve(omega_a: np.ndarray, delay: float) -> np.ndarray:
     NaN where the gains are undefined."""
     out = np.full(np.shape(omega_a), np.nan)
     for i, wa in enumerate(np.ravel(omega_a)):
-        try:
+        with contextlib.suppress(TimeDelayError):
             out.flat[i] = stable_interval(float(wa), delay).upper
-        except TimeDelayError:
-            pass
     return out
 
 
@@ -353,7 +357,7 @@ class StepResponse:
 
 
 def _method_of_steps(omega_a: float, delay: float, omega_r: float, intervals: int, points_per_delay: int,
-                     coef: tuple[float, float, float]):
+                     coef: tuple[float, float, float]) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
     """Yield, for each interval n = 0 .. intervals - 1 of length T, (n, m, taus, xs): the stacked-state
     matrix m of that interval (blocks z_0 .. z_n of [y, y', yhat, yhat'] and the constant reference as
     the last state), the grid taus in [0, T] and the states xs on it (one row per tau). The output y of
@@ -389,6 +393,24 @@ def _method_of_steps(omega_a: float, delay: float, omega_r: float, intervals: in
             xs[i] = step @ xs[i - 1]
         yield n, m, taus, xs
         prev_end = xs[-1, :4 * (n + 1)]
+
+
+def _advance(m: np.ndarray, x: np.ndarray, dtau: float) -> np.ndarray:
+    """The state ``dtau`` later of x' = m x from ``x`` (matrix exponential)."""
+    out: np.ndarray = expm(m * dtau) @ x
+    return out
+
+
+def _cell_maximum(m: np.ndarray, x: np.ndarray, t0: float, t1: float, index: int) -> tuple[float, float]:
+    """(tau, y) of the local maximum of state ``index`` (y) inside the grid cell [t0, t1] whose state
+    at t0 is ``x``: where its derivative (state ``index + 1``) passes zero, found by Brent."""
+    from scipy.optimize import brentq
+
+    def slope(tau: float) -> float:
+        return float(_advance(m, x, tau - t0)[index + 1])
+
+    tau = brentq(slope, t0, t1, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    return tau, float(_advance(m, x, tau - t0)[index])
 
 
 def _check_band(band: float) -> None:
@@ -434,9 +456,6 @@ def exact_step_response(omega_a: float, delay: float, omega_r: float, intervals:
     rounding, limited = 0.0, False
     prev_y_ends = np.zeros(0)
 
-    def at(m: np.ndarray, x: np.ndarray, dtau: float) -> np.ndarray:
-        return expm(m * dtau) @ x
-
     for n, m, taus, xs in _method_of_steps(omega_a, delay, omega_r, intervals, points_per_delay, coef):
         last = 4 * n
         y, dy = xs[:, last], xs[:, last + 1]
@@ -455,23 +474,20 @@ def exact_step_response(omega_a: float, delay: float, omega_r: float, intervals:
         # local maxima inside a cell: y' from > 0 to <= 0; with y' decreasing over the (short) cell,
         # y <= y_i + h y'_i there, so only cells whose bound passes the best value need refining
         for i in np.nonzero((dy[:-1] > 0) & (dy[1:] <= 0) & (y[:-1] + h * dy[:-1] > best[1] + 1e-14))[0]:
-            def slope(tau, i=i):
-                return float(at(m, xs[i], tau - taus[i])[last + 1])
-            tau = brentq(slope, taus[i], taus[i + 1], xtol=1e-15, rtol=4 * np.finfo(float).eps)
-            val = float(at(m, xs[i], tau - taus[i])[last])
+            tau, val = _cell_maximum(m, xs[i], taus[i], taus[i + 1], last)
             if val > best[1]:
                 best = (n * delay + tau, val)
         out = np.nonzero(np.abs(y - 1.0) > band)[0]
         if out.size and out[-1] < y.size - 1:
-            i = int(out[-1])
-            exit_cell = (n, m, taus[i], taus[i + 1], xs[i].copy())
+            j = int(out[-1])
+            exit_cell = (n, m, taus[j], taus[j + 1], xs[j].copy())
     t, yy = np.concatenate(ts), np.concatenate(ys)
     settling: float | None = None
     if abs(yy[-1] - 1.0) <= band and exit_cell is not None:
         n, m, t0, t1, x0 = exit_cell
 
         def excess(tau: float) -> float:
-            return abs(float(at(m, x0, tau - t0)[4 * n]) - 1.0) - band
+            return abs(float(_advance(m, x0, tau - t0)[4 * n]) - 1.0) - band
 
         settling = n * delay + brentq(excess, t0, t1, xtol=1e-13)
     # tail windows: the last quarter of the horizon, but at least one period of the slower of w_A, w_R
@@ -491,9 +507,13 @@ MAX_ROUNDING_ERROR = 1e-8
 """Largest accepted :attr:`StepResponse.rounding_error`: a longer horizon is not used beyond it."""
 
 
+def _captured_and_settled(r: StepResponse) -> bool:
+    return r.peak_captured and r.settled
+
+
 def step_response_with_horizon(omega_a: float, delay: float, omega_r: float, band: float = DEFAULT_BAND,
                                min_periods: float = 6.0, max_intervals: int = 120, points_per_delay: int = 400,
-                               enough=None) -> StepResponse:
+                               enough: Callable[[StepResponse], bool] | None = None) -> StepResponse:
     """:func:`exact_step_response` over a horizon chosen so that its overshoot and settling time can be
     trusted.
 
@@ -510,15 +530,13 @@ def step_response_with_horizon(omega_a: float, delay: float, omega_r: float, ban
     _check_band(band)
     if int(max_intervals) < 1:
         raise TimeDelayError(f"max_intervals must be >= 1, got {max_intervals!r}")
-    if enough is None:
-        def enough(r: StepResponse) -> bool:
-            return r.peak_captured and r.settled
+    decided = _captured_and_settled if enough is None else enough
     period = 2.0 * math.pi / min(omega_a, omega_r)
     n = min(int(max_intervals), max(30, math.ceil(min_periods * period / delay)))
     while True:
         r = exact_step_response(omega_a, delay, omega_r, n, points_per_delay, band=band,
                                 max_rounding_error=MAX_ROUNDING_ERROR)
-        if enough(r) or n >= int(max_intervals) or r.accuracy_limited:
+        if decided(r) or n >= int(max_intervals) or r.accuracy_limited:
             return r  # decided, or as long as allowed, or as long as accurate
         n = min(2 * n, int(max_intervals))
 
@@ -656,5 +674,6 @@ def overshoot_interval(omega_a: float, delay: float, max_overshoot: float, grid:
             low = None
     if low is not None:  # meets up to the last point, just inside the upper edge
         segments.append(OvershootSegment(low[0], si.upper, low[1], "stability"))
-    scan = [(float(w), cache[float(w)].overshoot, cache[float(w)].overshoot_bound, c) for w, c in zip(ws, classes)]
+    scan = [(float(w), cache[float(w)].overshoot, cache[float(w)].overshoot_bound, c)
+            for w, c in zip(ws, classes, strict=True)]
     return OvershootInterval(omega_a, delay, limit, si, segments, scan)

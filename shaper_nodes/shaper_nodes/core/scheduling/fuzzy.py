@@ -36,12 +36,15 @@ gaussian (mean, sigma)
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from shaper_nodes.core.shaping import MAX_DAMPING, Mode
+from shaper_nodes.core.checks import finite_values
+from shaper_nodes.core.shaping.types import MAX_DAMPING, Mode
 
 #: default largest damping ratio of a "lightly damped" mode
 LIGHT_DAMPING = 0.3
@@ -49,13 +52,6 @@ LIGHT_DAMPING = 0.3
 
 class FuzzyError(ValueError):
     """An invalid rule base, membership function or premise value; the message names it."""
-
-
-def _finite(name: str, values: Sequence[float]) -> np.ndarray:
-    v = np.asarray(values, dtype=float).ravel()
-    if not np.all(np.isfinite(v)):
-        raise FuzzyError(f"{name} must be finite, got {v.tolist()}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -67,7 +63,7 @@ class Triangular:
     c: float
 
     def __post_init__(self) -> None:
-        _finite("triangular parameters", (self.a, self.b, self.c))
+        finite_values("triangular parameters", (self.a, self.b, self.c), FuzzyError)
         if not (self.a <= self.b <= self.c and self.a < self.c):
             raise FuzzyError(f"triangular needs a <= b <= c and a < c, got ({self.a}, {self.b}, {self.c})")
 
@@ -94,7 +90,7 @@ class Trapezoidal:
     d: float
 
     def __post_init__(self) -> None:
-        _finite("trapezoidal parameters", (self.a, self.b, self.c, self.d))
+        finite_values("trapezoidal parameters", (self.a, self.b, self.c, self.d), FuzzyError)
         if not (self.a <= self.b <= self.c <= self.d):
             raise FuzzyError(f"trapezoidal needs a <= b <= c <= d, got ({self.a}, {self.b}, {self.c}, {self.d})")
 
@@ -120,7 +116,7 @@ class Gaussian:
     sigma: float
 
     def __post_init__(self) -> None:
-        _finite("gaussian parameters", (self.mean, self.sigma))
+        finite_values("gaussian parameters", (self.mean, self.sigma), FuzzyError)
         if not self.sigma > 0:
             raise FuzzyError(f"gaussian needs sigma > 0, got {self.sigma}")
 
@@ -133,17 +129,18 @@ class Gaussian:
 
 
 Membership = Triangular | Trapezoidal | Gaussian
-MEMBERSHIPS: dict[str, tuple[type, int]] = {"triangular": (Triangular, 3), "trapezoidal": (Trapezoidal, 4),
-                                            "gaussian": (Gaussian, 2)}
+#: the membership functions by name: the class and its number of parameters
+MEMBERSHIPS: dict[str, tuple[Callable[..., Membership], int]] = {
+    "triangular": (Triangular, 3), "trapezoidal": (Trapezoidal, 4), "gaussian": (Gaussian, 2)}
 
 
-def membership(kind: str, params: Sequence[float]) -> Membership:
+def membership(kind: str, params: Sequence[float] | npt.NDArray[np.float64]) -> Membership:
     """A membership function by name ('triangular', 'trapezoidal', 'gaussian') and parameters."""
     key = str(kind).strip().lower()
     if key not in MEMBERSHIPS:
         raise FuzzyError(f"unknown membership function {kind!r}; use one of {', '.join(MEMBERSHIPS)}")
     cls, n = MEMBERSHIPS[key]
-    p = _finite(f"{key} parameters", params)
+    p = finite_values(f"{key} parameters", params, FuzzyError)
     if p.size != n:
         raise FuzzyError(f"{key} needs {n} parameters, got {p.size}")
     return cls(*p.tolist())
@@ -179,7 +176,7 @@ class Rule:
     def grade(self, z: np.ndarray) -> float:
         """Firing strength: the product of the membership grades (product t-norm)."""
         g = 1.0
-        for mf, zi in zip(self.memberships, z):
+        for mf, zi in zip(self.memberships, z, strict=True):
             g *= mf(float(zi))
         return g
 
@@ -200,6 +197,10 @@ class Interpolation:
     def dominant(self) -> int:
         """Index of the rule with the largest weight (the operating region)."""
         return int(np.argmax(self.weights))
+
+
+def _shape(matrix: np.ndarray | None) -> tuple[int, ...] | None:
+    return None if matrix is None else matrix.shape
 
 
 @dataclass
@@ -242,9 +243,9 @@ class RuleBase:
         if all(with_model):
             a0, b0 = self.rules[0].a, self.rules[0].b
             for r in self.rules:
-                if r.a.shape != a0.shape or r.b is None or r.b.shape != b0.shape:
+                if _shape(r.a) != _shape(a0) or r.b is None or _shape(r.b) != _shape(b0):
                     raise FuzzyError(f"rule {r.name}: A and B must have the sizes of the first rule's "
-                                     f"{a0.shape} and {b0.shape}")
+                                     f"{_shape(a0)} and {_shape(b0)}")
         counts = {len(r.modes) for r in self.rules}
         if not all(with_model) and (len(counts) != 1 or 0 in counts):
             raise FuzzyError("rules without models need the same number (>= 1) of modes each")
@@ -281,7 +282,7 @@ class RuleBase:
         mu = np.array([r.grade(zc) for r in self.rules])
         total = float(mu.sum())
         if not total > 0.0:
-            where = ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.premises, zc))
+            where = ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.premises, zc, strict=True))
             raise FuzzyError(f"no rule fires at {where}: the membership functions leave a gap there")
         return mu / total
 
@@ -292,8 +293,9 @@ class RuleBase:
         w = self._weights(zc)
         a = b = None
         if self.has_models:
-            a = np.tensordot(w, np.stack([r.a for r in self.rules]), axes=1)
-            b = np.tensordot(w, np.stack([r.b for r in self.rules]), axes=1)
+            # every rule has both (checked at construction)
+            a = np.tensordot(w, np.stack([r.a for r in self.rules if r.a is not None]), axes=1)
+            b = np.tensordot(w, np.stack([r.b for r in self.rules if r.b is not None]), axes=1)
         if method == "model":
             if a is None:
                 raise FuzzyError("method 'model' needs rules with models (A, B)")
@@ -307,7 +309,9 @@ class RuleBase:
     def rule_modes(self, i: int) -> tuple[Mode, ...]:
         """Mode parameters of rule i: as given, else from its model."""
         r = self.rules[i]
-        return r.modes if r.modes else tuple(modes_of(r.a, self.max_damping))
+        if r.modes or r.a is None:  # a rule without a model has modes (checked at construction)
+            return r.modes
+        return tuple(modes_of(r.a, self.max_damping))
 
     def interpolate_modes(self, w: np.ndarray) -> tuple[Mode, ...]:
         """Weighted mean of the rules' mode parameters (k-th mode with k-th mode)."""
@@ -315,11 +319,11 @@ class RuleBase:
         n = min(len(m) for m in per_rule)
         if n == 0:
             raise FuzzyError("a rule has no lightly damped mode to interpolate")
-        return tuple(Mode(float(sum(wi * m[k].omega for wi, m in zip(w, per_rule))),
-                          float(sum(wi * m[k].zeta for wi, m in zip(w, per_rule)))) for k in range(n))
+        return tuple(Mode(float(sum(wi * m[k].omega for wi, m in zip(w, per_rule, strict=True))),
+                          float(sum(wi * m[k].zeta for wi, m in zip(w, per_rule, strict=True)))) for k in range(n))
 
 
-def rule_base_from_dict(spec: Mapping) -> RuleBase:
+def rule_base_from_dict(spec: Mapping[str, Any]) -> RuleBase:
     """A rule base from a plain mapping (a YAML file, or the scheduler node's parameters).
 
     ``spec`` holds ``premises`` (list of names), optional ``range`` (flat [lo1, hi1, lo2, hi2...]),
@@ -332,7 +336,7 @@ def rule_base_from_dict(spec: Mapping) -> RuleBase:
     rules = []
     for name, r in dict(spec.get("rules") or {}).items():
         kinds = [str(k) for k in r.get("membership") or []]
-        params = _finite(f"rule {name} membership_params", r.get("membership_params") or [])
+        params = finite_values(f"rule {name} membership_params", r.get("membership_params") or [], FuzzyError)
         mfs, pos = [], 0
         for kind in kinds:
             n = MEMBERSHIPS.get(kind.strip().lower(), (None, 0))[1]
@@ -345,20 +349,20 @@ def rule_base_from_dict(spec: Mapping) -> RuleBase:
             raise FuzzyError(f"rule {name}: membership_params has {params.size} values, its functions take {pos}")
         a = b = None
         if len(r.get("a_matrix") or []):
-            av = _finite(f"rule {name} a_matrix", r["a_matrix"])
+            av = finite_values(f"rule {name} a_matrix", r["a_matrix"], FuzzyError)
             n = int(round(math.sqrt(av.size)))
             if n * n != av.size:
                 raise FuzzyError(f"rule {name}: a_matrix needs n*n values, got {av.size}")
-            bv = _finite(f"rule {name} b_matrix", r.get("b_matrix") or [])
+            bv = finite_values(f"rule {name} b_matrix", r.get("b_matrix") or [], FuzzyError)
             if bv.size == 0 or bv.size % n:
                 raise FuzzyError(f"rule {name}: b_matrix needs n*m values (n = {n}), got {bv.size}")
             a, b = av.reshape(n, n), bv.reshape(n, -1)
-        freqs = _finite(f"rule {name} natural_frequency", r.get("natural_frequency") or [])
-        zetas = _finite(f"rule {name} damping_ratio", r.get("damping_ratio") or [])
+        freqs = finite_values(f"rule {name} natural_frequency", r.get("natural_frequency") or [], FuzzyError)
+        zetas = finite_values(f"rule {name} damping_ratio", r.get("damping_ratio") or [], FuzzyError)
         if freqs.size != zetas.size:
             raise FuzzyError(f"rule {name}: {freqs.size} natural frequencies but {zetas.size} damping ratios")
         try:
-            modes = tuple(Mode(float(f), float(z)) for f, z in zip(freqs, zetas))
+            modes = tuple(Mode(float(f), float(z)) for f, z in zip(freqs, zetas, strict=True))
         except ValueError as err:
             raise FuzzyError(f"rule {name}: {err}") from None
         rules.append(Rule(tuple(mfs), a, b, modes, str(name)))
@@ -371,7 +375,7 @@ def rule_base_from_dict(spec: Mapping) -> RuleBase:
 def triangular_partition(points: Sequence[float]) -> list[Triangular]:
     """Triangles peaking at each of the increasing ``points``, each reaching 0 at its neighbours'
     peaks (shoulders at the ends): grades sum to 1 everywhere between the first and last point."""
-    p = _finite("points", points)
+    p = finite_values("points", points, FuzzyError)
     if p.size < 1 or np.any(np.diff(p) <= 0):
         raise FuzzyError(f"points must increase strictly, got {p.tolist()}")
     if p.size == 1:

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shaper_nodes.core.shaping import Mode, Shaper, ShaperError, design
+from shaper_nodes.core.shaping.families import design
+from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
 from .fuzzy import FuzzyError, Interpolation, RuleBase
 
@@ -36,7 +37,7 @@ def relative_change(old: Sequence[Mode], new: Sequence[Mode]) -> float:
     if len(old) != len(new):
         return math.inf
     change = 0.0
-    for a, b in zip(old, new):
+    for a, b in zip(old, new, strict=True):
         change = max(change, abs(b.omega - a.omega) / a.omega, abs(b.zeta - a.zeta) / max(a.zeta, 0.01))
     return change
 
@@ -61,7 +62,7 @@ class Scheduler:
         out = self.rule_base.evaluate(z, self.method)
         if not out.modes:
             raise FuzzyError("the interpolated model has no lightly damped mode at "
-                             + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.rule_base.premises, out.z)))
+                             + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.rule_base.premises, out.z, strict=True)))
         return out
 
     def correction(self, interp: Interpolation) -> tuple[float, float]:

@@ -2,9 +2,18 @@
 
 Modules
 -------
+types
+    The mode and shaper types (:class:`Mode`, :class:`Shaper`, :class:`ShaperError`), the
+    limits of a design (damping, duration, parameter ranges) and the checks of its parameters.
 families
     The registry of named designs (:data:`FAMILIES`, :func:`design`), the closed-form families
-    (ZV, ZVD, ZV-D^n, MZV), the shaper and mode types, and custom sequences.
+    (ZV, ZVD, ZV-D^n, MZV), custom sequences, and each family's description and figures of merit.
+ei
+    The extra-insensitive families with one, two or three humps (EI, 2-hump EI, 3-hump EI),
+    solved numerically for the mode's damping ratio.
+si
+    The specified-insensitivity family: the shortest sequence keeping V <= V_tol over a band
+    around every mode (linear programming, then SQP).
 vibration
     The percentage vibration V(omega, zeta) of an impulse sequence, sensitivity curves and
     insensitivity widths, and the residual vibration of measured cycles.
@@ -16,22 +25,18 @@ trajectory
     joint_trajectory_controller.
 """
 
-from .families import (
+from .families import FAMILIES, design, family_info, family_params, none_shaper
+from .fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize, fir_impulses
+from .trajectory import shape_trajectory
+from .types import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_VIBRATION_TOLERANCE,
-    FAMILIES,
     MAX_DAMPING,
     MAX_DURATION,
     Mode,
     Shaper,
     ShaperError,
-    design,
-    family_info,
-    family_params,
-    none_shaper,
 )
-from .fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize, fir_impulses
-from .trajectory import shape_trajectory
 from .vibration import (
     ResidualVibration,
     insensitivity_width,

@@ -59,7 +59,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .families import Shaper
+from .types import Shaper
 
 #: most filters alive at once (the active one plus those whose tails are still running)
 MAX_STAGES = 16
@@ -163,7 +163,7 @@ def _exact_taps(shaper: Shaper, rate: float, split: np.ndarray, base: np.ndarray
         """Least change from the split on ``taps`` meeting the conditions (and >= 0 for a positive shaper)."""
         a, b = system(taps)
         g0 = split[taps]
-        g = g0 + np.linalg.lstsq(a, b - a @ g0, rcond=None)[0]
+        g: np.ndarray = g0 + np.linalg.lstsq(a, b - a @ g0, rcond=None)[0]
         if np.max(np.abs(a @ g - b)) > 1e-9:
             return None
         if not positive or np.min(g) >= -1e-12:
@@ -212,7 +212,7 @@ def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
 class _Stage:
     """One FIR running on its own input stream (deviation from ``origin``)."""
 
-    __slots__ = ("fir", "origin", "history", "held", "held_samples")
+    __slots__ = ("fir", "held", "held_samples", "history", "origin")
 
     def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
         self.fir = fir
@@ -226,7 +226,7 @@ class _Stage:
         hist_len = self.history.shape[0]
         ext = np.concatenate([self.history, block]) if hist_len else block
         out = np.zeros_like(block)
-        for d, g in zip(self.fir.delays, self.fir.gains):
+        for d, g in zip(self.fir.delays, self.fir.gains, strict=True):
             start = hist_len - int(d)
             out += g * ext[start : start + n]
         if hist_len:
@@ -234,7 +234,29 @@ class _Stage:
         return out
 
 
-class StreamingShaper:
+class _ChannelShaper:
+    """What the streaming shapers share: the number of channels, the active filter, and the
+    last input sample (None until the first sample after construction or a reset)."""
+
+    def __init__(self, fir: SparseFir, channels: int) -> None:
+        if channels < 1:
+            raise ValueError("channels must be >= 1")
+        self.channels = int(channels)
+        self._fir = fir
+        self._last: np.ndarray | None = None
+
+    @property
+    def fir(self) -> SparseFir:
+        """The active filter."""
+        return self._fir
+
+    @property
+    def started(self) -> bool:
+        """Whether a sample has been seen since construction or :meth:`reset`."""
+        return self._last is not None
+
+
+class StreamingShaper(_ChannelShaper):
     """Causal multi-channel FIR on streamed samples, with bumpless filter changes.
 
     Parameters
@@ -252,23 +274,9 @@ class StreamingShaper:
     """
 
     def __init__(self, fir: SparseFir, channels: int) -> None:
-        if channels < 1:
-            raise ValueError("channels must be >= 1")
-        self.channels = int(channels)
-        self._fir = fir
+        super().__init__(fir, channels)
         self._stages: list[_Stage] = []
         self._offset = np.zeros(self.channels)
-        self._last: np.ndarray | None = None
-
-    @property
-    def fir(self) -> SparseFir:
-        """The active filter."""
-        return self._fir
-
-    @property
-    def started(self) -> bool:
-        """Whether a sample has been seen since construction or :meth:`reset`."""
-        return self._last is not None
 
     @property
     def stages(self) -> int:
@@ -339,7 +347,7 @@ class StreamingShaper:
         return out.reshape(x.shape) if single else out
 
 
-class RetimingShaper:
+class RetimingShaper(_ChannelShaper):
     """Causal multi-channel shaper whose filter can be re-timed for pending motion (see the
     module docstring), or switched bumplessly as :class:`StreamingShaper`.
 
@@ -352,21 +360,9 @@ class RetimingShaper:
     """
 
     def __init__(self, fir: SparseFir, channels: int) -> None:
-        if channels < 1:
-            raise ValueError("channels must be >= 1")
-        self.channels = int(channels)
-        self._fir = fir
+        super().__init__(fir, channels)
         self._filters: list[np.ndarray] = []  # step responses s(0..length-1) of the filters in use
         self.reset()
-
-    @property
-    def fir(self) -> SparseFir:
-        """The active filter."""
-        return self._fir
-
-    @property
-    def started(self) -> bool:
-        return self._last is not None
 
     @property
     def stages(self) -> int:
@@ -375,7 +371,7 @@ class RetimingShaper:
 
     def reset(self, value: np.ndarray | None = None) -> None:
         """Forget all history; with ``value``, rest there (output = value)."""
-        self._last: np.ndarray | None = None
+        self._last = None
         self._base = np.zeros(self.channels)
         self._filters = [np.cumsum(self._fir.dense())]
         self._active = 0

@@ -52,7 +52,8 @@ def percentage_vibration(
     decay = np.exp(sigma * (ts - ts.max()))
     c = np.sum(amps * decay * np.cos(wd * ts), axis=-1)
     s = np.sum(amps * decay * np.sin(wd * ts), axis=-1)
-    return np.sqrt(c * c + s * s)
+    v: np.ndarray = np.sqrt(c * c + s * s)
+    return v
 
 
 def sensitivity_curve(
@@ -204,7 +205,8 @@ def residual_vibration(
     if remove_mean:
         w = w - w.mean(axis=0)
     mag = np.linalg.norm(w, axis=1)
-    return ResidualVibration(float(start), float(end), float(np.sqrt(np.mean(mag**2))), float(mag.max()), int(w.shape[0]))
+    return ResidualVibration(float(start), float(end), float(np.sqrt(np.mean(mag**2))), float(mag.max()),
+                             int(w.shape[0]))
 
 
 def settling_time(times: np.ndarray, accel: np.ndarray, start: float, end: float, band: float,
