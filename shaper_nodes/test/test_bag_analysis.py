@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import Bag, BagError, mcap_chunks
 from shaper_nodes.analysis.streams import JointStateDecoder, imu_fast, joint_state_fast, read_recording

@@ -19,6 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import cont2discrete, dlsim
+
 from shaper_nodes.core.learning.list.learner import (
     ACTIONS,
     ListConfig,

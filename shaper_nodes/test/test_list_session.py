@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.cycles import END, MOTION_END, START
 from shaper_nodes.core.learning.list.learner import ListConfig, ListError, ListLearner, ListParams
 from shaper_nodes.core.learning.list.session import ListSession, list_config

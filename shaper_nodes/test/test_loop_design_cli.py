@@ -4,6 +4,7 @@ import json
 import math
 
 import pytest
+
 from shaper_nodes.cli.loop_design import main
 from shaper_nodes.core.closed_loop.time_delay import exact_step_response, growth_rate, step_response_with_horizon
 

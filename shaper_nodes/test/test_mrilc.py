@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.mrilc import model as M
 from shaper_nodes.core.learning.mrilc.learner import MrilcLearner, MrilcSession

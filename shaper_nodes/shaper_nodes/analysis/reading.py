@@ -107,7 +107,7 @@ def mcap_files(path: pathlib.Path) -> tuple[list[pathlib.Path], int | None, bool
             info = doc.get("rosbag2_bagfile_information", {})
             expected = int(info.get("message_count")) if info.get("message_count") is not None else None
             files = [path / f for f in info.get("relative_file_paths", [])]
-        except Exception as err:  # noqa: BLE001 - a broken metadata.yaml is reported, the files are scanned
+        except Exception as err:
             raise BagError(f"{meta}: unreadable metadata ({err})") from None
     else:
         files = []
@@ -142,7 +142,7 @@ class Bag:
             self._open_rosbags()
         except BagError:
             raise
-        except Exception as err:  # noqa: BLE001 - rosbags raises several error types; recovery decides
+        except Exception as err:
             files, expected, has_meta = mcap_files(self.path)
             if not files:
                 raise BagError(f"cannot read {self.path}: {err}") from None
@@ -243,7 +243,7 @@ def _default_typestore():
         from shaper_nodes.ros.bag_writer import typestore_with_own_types
 
         return typestore_with_own_types()
-    except Exception:  # noqa: BLE001 - no ament index or no shaper_msgs here: standard types only
+    except Exception:
         from rosbags.typesys import Stores, get_typestore
 
         return get_typestore(Stores.ROS2_JAZZY)
@@ -334,7 +334,7 @@ class _Recovered:
                     elif op in (OP_FOOTER, OP_DATA_END):
                         self._stop(collect, self.size, "")
                         return
-                except Exception as err:  # noqa: BLE001 - an unparsable record ends the readable part
+                except Exception as err:
                     self._stop(collect, good, f"unreadable {_OPNAMES.get(op, hex(op))} record at byte {good}: {err}")
                     return
                 good += 9 + length
@@ -370,7 +370,7 @@ class _Recovered:
             else:
                 raise BagError(f"schema encoding {encoding!r} is not supported")
             self.store.register(types)
-        except Exception as err:  # noqa: BLE001 - a type that does not parse is reported, its topic skipped
+        except Exception as err:
             self.bad_types[name] = f"its definition does not parse ({err})"
 
 
@@ -387,7 +387,7 @@ def _chunk_records(chunk) -> tuple[list, str]:
     try:
         stream, size = get_chunk_data_stream(chunk, validate_crc=True)
         data = stream.read(size)
-    except Exception as err:  # noqa: BLE001 - decompression or CRC failure: the whole chunk is lost
+    except Exception as err:
         return [], f"its data is corrupt ({type(err).__name__}: {err})"
     records: list = []
     pos = 0
@@ -404,7 +404,7 @@ def _chunk_records(chunk) -> tuple[list, str]:
                 records.append(Message.read(body, length))
             elif op in parsers:
                 records.append(parsers[op](body))
-        except Exception as err:  # noqa: BLE001 - an unparsable record ends the chunk
+        except Exception as err:
             return records, f"unreadable record at offset {pos} of the chunk ({err})"
         pos += 9 + length
     return records, ""

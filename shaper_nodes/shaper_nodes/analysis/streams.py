@@ -364,7 +364,7 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
                 topic, msgtype, log_ns, raw = next(messages)
             except StopIteration:
                 break
-            except Exception as err:  # noqa: BLE001 - rosbags' errors on a corrupt record: read again
+            except Exception as err:
                 if recover:
                     raise BagError(f"{path}: reading failed after {seq + 1} messages: {err}") from None
                 raise _ReadFailed(seq + 1, f"{type(err).__name__}: {err}") from None
@@ -442,7 +442,7 @@ def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
                     shapers.times.append(tuple(float(x) for x in m.times))
                     shapers.source.append(str(m.source))
                     shapers.revision.append(int(m.revision))
-            except Exception as err:  # noqa: BLE001 - a corrupt message is counted and skipped
+            except Exception as err:
                 bad[topic] = bad.get(topic, 0) + 1
                 first_error.setdefault(topic, f"{type(err).__name__}: {err}")
         show.close()

@@ -52,7 +52,7 @@ class UsageError(Exception):
     """Bad command-line input; the message names the problem (exit status 2)."""
 
 
-def _number(what: str, positive: bool = False):  # noqa: ANN202 - argparse type factory
+def _number(what: str, positive: bool = False):
     """An argparse type: a finite float (and > 0 if ``positive``), else an error naming ``what``."""
 
     def parse(text: str) -> float:

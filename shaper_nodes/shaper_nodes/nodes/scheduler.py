@@ -53,8 +53,7 @@ from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper
-from shaper_nodes.core.scheduling import FuzzyError, Interpolation, Scheduler, rule_base_from_dict
-from shaper_nodes.core.scheduling.rate_limit import RateLimit
+from shaper_nodes.core.scheduling import FuzzyError, Interpolation, RateLimit, Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics

@@ -50,17 +50,19 @@ from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.shaping import (
     FAMILIES,
     Mode,
+    PolicyError,
     RetimingShaper,
     Shaper,
     ShaperError,
     SparseFir,
     StreamingShaper,
+    UpdatePolicy,
     design,
     discretize,
     none_shaper,
     shape_trajectory,
 )
-from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE, PolicyError, UpdatePolicy
+from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
 from shaper_nodes.ros.conversions import TRAJ_FIELDS, shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node

@@ -6,16 +6,20 @@ fuzzy
     Membership functions, the rule base over one or more premises, the interpolated linear
     model and its lightly damped modes (or the mode parameters interpolated directly).
 scheduler
-    The shaper at the present pose, the rate limiter (relative change), and the learner's
-    corrections kept per operating region.
+    The shaper at the present pose, and the learner's corrections kept per operating region.
+rate_limit
+    When a new scheduled shaper is sent: enough change of a mode, not too soon after the last,
+    never faster than the shaper node retires shapers.
 """
 
 from .fuzzy import FuzzyError, Interpolation, RuleBase, modes_of, rule_base_from_dict, triangular_partition
+from .rate_limit import RateLimit
 from .scheduler import Scheduler, relative_change
 
 __all__ = [
     "FuzzyError",
     "Interpolation",
+    "RateLimit",
     "RuleBase",
     "Scheduler",
     "modes_of",

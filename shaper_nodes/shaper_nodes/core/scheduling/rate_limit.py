@@ -14,7 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from shaper_nodes.core.checks import in_range
-from shaper_nodes.core.shaping import MAX_STAGES, Mode
+from shaper_nodes.core.shaping.fir import MAX_STAGES
+from shaper_nodes.core.shaping.types import Mode
 
 from .fuzzy import FuzzyError
 from .scheduler import relative_change

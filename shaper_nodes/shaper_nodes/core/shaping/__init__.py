@@ -23,10 +23,14 @@ fir
 trajectory
     Whole-trajectory shaping (resampling, convolution, derivatives) for
     joint_trajectory_controller.
+policy
+    The shaper node's update policy: who may change the active shaper, and whether a change
+    switches bumplessly or re-times the motion already commanded (the stage limit).
 """
 
 from .families import FAMILIES, design, family_info, family_params, none_shaper
 from .fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize, fir_impulses
+from .policy import PolicyError, UpdatePolicy
 from .trajectory import shape_trajectory
 from .types import (
     DEFAULT_INSENSITIVITY,
@@ -54,12 +58,14 @@ __all__ = [
     "MAX_DURATION",
     "MAX_STAGES",
     "Mode",
+    "PolicyError",
     "ResidualVibration",
     "RetimingShaper",
     "Shaper",
     "ShaperError",
     "SparseFir",
     "StreamingShaper",
+    "UpdatePolicy",
     "design",
     "discretize",
     "family_info",

@@ -27,8 +27,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal
 
-from .families import Shaper
 from .fir import MAX_STAGES
+from .types import Shaper
 
 #: the source of a request that names none
 DEFAULT_SOURCE = "service"
