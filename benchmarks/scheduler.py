@@ -35,7 +35,7 @@ from shaper_nodes.core.shaping import Mode, design
 
 
 def _spec() -> dict:
-    from sim_plant_node.two_mass import rule_base_spec
+    from reproductions.scheduler_cases import rule_base_spec
 
     return rule_base_spec(np.linspace(0.0, 0.7, 8))
 
@@ -88,7 +88,7 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, progress: Callable[[str
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
-    from sim_plant_node.two_mass import scheduler_parameters
+    from reproductions.scheduler_cases import scheduler_parameters
 
     from .latency import proc_cpu_seconds
 

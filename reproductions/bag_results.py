@@ -1,6 +1,6 @@
 """Bag analysis results: the demo's recording, a robot-style recording, and both cut short.
 
-``python -m sim_plant_node.bag_results`` (``./run exec python -m sim_plant_node.bag_results``)
+``python -m reproductions.bag_results`` (``./run exec python -m reproductions.bag_results``)
 runs the demo (sim plant, shaper and recorder as processes; plant mode 6.5 Hz, shapers designed
 at 5 Hz), analyses its recording with :mod:`shaper_nodes.analysis`, and compares the per-cycle
 residual vibration with what the demo measured live and what the sim plant reported; analyses a
@@ -20,6 +20,8 @@ import subprocess
 import sys
 import time
 
+from reproductions.common import docs_option
+
 
 def _cut(src: pathlib.Path, dst: pathlib.Path) -> int:
     """Copy ``src`` cut in the middle of its last chunk; returns the bytes kept."""
@@ -33,8 +35,7 @@ def _cut(src: pathlib.Path, dst: pathlib.Path) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="bag_results", description=__doc__.split("\n\n")[0])
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where bag_analysis_results.md and img/bag_*.png go (default docs)")
+    docs_option(p, "bag_analysis_results.md and img/bag_*.png")
     p.add_argument("--cycles", type=int, default=2, help="demo cycles per shaper (default 2)")
     args = p.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -85,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         shutil.copy(work / src, img / dst)
 
     md = ["# Bag analysis results (generated)", "",
-          f"Regenerate with `./run exec python -m sim_plant_node.bag_results` ({time.monotonic() - t0:.0f} s here)."
+          f"Regenerate with `./run exec python -m reproductions.bag_results` ({time.monotonic() - t0:.0f} s here)."
           " See [bag_analysis.md](bag_analysis.md) for the method.", "",
           "## The demo's recording", "",
           f"The demo ran the sim plant with its mode at 6.5 Hz, damping 0.01 (the shapers designed at 5 Hz),"

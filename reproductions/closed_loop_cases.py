@@ -11,7 +11,7 @@ the shaper node with ZV (or ZVD) designed on the nominal plant (w_n = 40 pi rad/
 ``qft_ffb``, ``qft_fb`` and the open loop ``qft_open``; then a unit-step plant-output disturbance
 and a unit-step measurement noise, 0.5 s after the step.
 
-``python -m sim_plant_node.closed_loop_cases`` regenerates docs/closed_loop_results.md and
+``python -m reproductions.closed_loop_cases`` regenerates docs/closed_loop_results.md and
 docs/img/closed_loop_*.png; the integration tests call :func:`run_seed001` and :func:`run_seed002`.
 """
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import pathlib
 import subprocess
 import sys
@@ -29,6 +28,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from reproductions.common import docs_option, logs_folder
 
 # ------------------------------------------------------------------ seed 001
 OMEGA_A = 3.0
@@ -48,7 +49,7 @@ WHITE_NOISE = 1e-3  # white measurement noise, m (one sigma per loop sample)
 
 def tdf_interval_from_cli(omega_a: float = OMEGA_A, delay: float = DELAY_USED) -> tuple[float, float]:
     """The stable interval as the design CLI prints it (``loop_design tdf-interval --json``)."""
-    out = subprocess.run([sys.executable, "-m", "shaper_nodes.loop_design_cli", "tdf-interval", "--omega-a",
+    out = subprocess.run([sys.executable, "-m", "shaper_nodes.cli.loop_design", "tdf-interval", "--omega-a",
                           repr(omega_a), "--delay", repr(delay), "--json"], check=True, capture_output=True, text=True)
     lo, hi = json.loads(out.stdout)["stable_interval"]
     return float(lo), float(hi)
@@ -483,31 +484,19 @@ def report002(traces: dict[str, Traces]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="closed_loop_cases", description=__doc__.split("\n\n")[0])
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where closed_loop_results.md and img/closed_loop_*.png go (default docs)")
+    docs_option(p, "closed_loop_results.md and img/closed_loop_*.png")
     p.add_argument("--seeds", default="001,002", help="which seeds to run (default 001,002)")
     args = p.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.ros.launching import NodeProcess
-    from sim_plant_node.conductor import spin_context
+    logs = logs_folder("closed_loop_cases")
+    from sim_plant_node.conductor import node_session
 
-    logs = pathlib.Path("out") / "closed_loop_cases"
-    logs.mkdir(parents=True, exist_ok=True)
     (args.docs / "img").mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     text = ["# Closed-loop input shaping through the ROS graph (generated)", "",
-            "Regenerate with `./run exec python -m sim_plant_node.closed_loop_cases` (sim plant and shaper as"
+            "Regenerate with `./run exec python -m reproductions.closed_loop_cases` (sim plant and shaper as"
             " separate processes, lockstep). See [closed_loop.md](closed_loop.md) for the methods.", ""]
     for seed in args.seeds.split(","):
-        procs: list = []
-
-        def start(package, executable, params, procs=procs, seed=seed):
-            proc = NodeProcess(package, executable, params, log_path=logs / f"{seed}-{executable}.log")
-            procs.append(proc.start())
-            return proc
-
-        ctx = spin_context()
-        try:
+        with node_session(logs, seed) as (start, ctx):
             if seed == "001":
                 interval = tdf_interval_from_cli()
                 cases, tr = run_seed001(start, ctx, interval)
@@ -525,10 +514,6 @@ def main(argv: list[str] | None = None) -> int:
                          f"seed 002 Fig. 10: unit-step output disturbance / measurement noise at {EVENT_TIME:g} s",
                          ("output", "measured"))
             print(f"seed {seed} done ({time.monotonic() - t0:.0f} s)", flush=True)
-        finally:
-            ctx.try_shutdown()
-            for proc in reversed(procs):
-                proc.stop()
     (args.docs / "closed_loop_results.md").write_text("\n".join(text))
     print(f"wrote {args.docs / 'closed_loop_results.md'} ({time.monotonic() - t0:.0f} s)")
     return 0

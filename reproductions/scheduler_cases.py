@@ -14,7 +14,7 @@ steps, triangular memberships) and (c-modes) case (c) interpolating the mode par
 The residual vibration of a step is the largest |x1 - x0| (m) from WINDOW s after the step to
 the next step (the longest ZV here lasts 8.9 s).
 
-``python -m sim_plant_node.scheduler_cases`` regenerates docs/scheduler_results.md and
+``python -m reproductions.scheduler_cases`` regenerates docs/scheduler_results.md and
 docs/img/scheduler_*.png (see --help); the integration test calls :func:`run_case`.
 """
 
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import pathlib
 import sys
 import time
@@ -30,14 +29,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from sim_plant_node.two_mass import (
-    STEP_LEVELS,
-    STEP_POSES,
-    m1_of,
-    rule_base_spec,
-    scheduler_parameters,
-    two_mass_matrices,
-)
+from sim_plant_node.two_mass import STEP_LEVELS, STEP_POSES, m1_of, two_mass_matrices
+
+from reproductions.common import docs_option, logs_folder
 
 RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz)
 DWELL = 30.0      # s per step
@@ -51,6 +45,37 @@ def _mode_at(m1: float):
     from shaper_nodes.core.scheduling import modes_of
 
     return modes_of(two_mass_matrices(m1)[0])[0]
+
+
+def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangular",
+                   with_models: bool = True, with_modes: bool = True) -> dict:
+    """A rule base (the mapping core.fuzzy.rule_base_from_dict takes) with one rule per pose x0
+    in ``points`` (m): eq. (1) linearised at m1 = 10 x0 + 1 and/or its mode, and triangles
+    peaking at each point (shoulders at the ends)."""
+    from shaper_nodes.core.scheduling import modes_of, triangular_partition
+
+    rules = {}
+    for i, (x, mf) in enumerate(zip(points, triangular_partition(points))):
+        a, b = two_mass_matrices(float(m1_of(x)))
+        rule: dict = {"membership": [membership], "membership_params": [mf.a, mf.b, mf.c]}
+        if with_models:
+            rule.update(a_matrix=a.ravel().tolist(), b_matrix=b.ravel().tolist())
+        if with_modes:
+            (mode,) = modes_of(a)
+            rule.update(natural_frequency=[mode.omega], damping_ratio=[mode.zeta])
+        rules[f"x{i}"] = rule
+    return {"premises": [premise], "rules": rules}
+
+
+def scheduler_parameters(spec: dict) -> dict:
+    """The scheduler node's parameters (flat names) for a rule base mapping (see rule_base_spec)."""
+    out: dict = {"premises": list(spec["premises"]), "rule_names": list(spec["rules"])}
+    if spec.get("range"):
+        out["range"] = [float(v) for v in spec["range"]]
+    for name, rule in spec["rules"].items():
+        for key, value in rule.items():
+            out[f"rules.{name}.{key}"] = [v if isinstance(v, str) else float(v) for v in value]
+    return out
 
 
 def switch_spec() -> dict:
@@ -124,8 +149,8 @@ def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
-    from shaper_nodes.nodes.shaper import LATCHED
     from shaper_nodes.ros.conversions import time_to_sec
+    from shaper_nodes.ros.qos import LATCHED
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import Trigger
 
@@ -313,36 +338,20 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="scheduler_cases", description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default="a,b,c", help="cases to run (default a,b,c; also c2, c-modes)")
     p.add_argument("--extra", action="store_true", help="also run c2 and c-modes")
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where scheduler_results.md and img/scheduler_*.png go (default docs)")
+    docs_option(p, "scheduler_results.md and img/scheduler_*.png")
     args = p.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.ros.launching import NodeProcess
-    from sim_plant_node.conductor import spin_context
+    logs = logs_folder("scheduler_cases")
+    from sim_plant_node.conductor import node_session
 
     names = [n.strip() for n in args.cases.split(",")] + (["c2", "c-modes"] if args.extra else [])
-    logs = pathlib.Path("out") / "scheduler_cases"
-    logs.mkdir(parents=True, exist_ok=True)
     runs: dict[str, Run] = {}
     t_start = time.monotonic()
     for name in dict.fromkeys(names):
         case = CASES[name]
-        procs: list = []
-
-        def start(package, executable, params, case=case, procs=procs):
-            proc = NodeProcess(package, executable, params, log_path=logs / f"{case.name}-{executable}.log")
-            procs.append(proc.start())
-            return proc
-
-        ctx = spin_context()
-        print(f"({case.name}) {case.title}", flush=True)
-        t_case = time.monotonic()
-        try:
+        with node_session(logs, case.name) as (start, ctx):
+            print(f"({case.name}) {case.title}", flush=True)
+            t_case = time.monotonic()
             runs[name] = run_case(case, start, ctx, progress=lambda s: print("  " + s, flush=True))
-        finally:
-            ctx.try_shutdown()
-            for proc in reversed(procs):
-                proc.stop()
         print("  residual (mm): " + ", ".join(f"{1e3 * r:.3f}" for r in runs[name].residual)
               + f" ({time.monotonic() - t_case:.0f} s)", flush=True)
     args.docs.mkdir(parents=True, exist_ok=True)
@@ -352,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
     ratio = "".join(f" sum(a) / sum({n}) = {a.residual.sum() / r.residual.sum():.1f}."
                     for n, r in runs.items() if a is not None and n != "a")
     text = ["# Seed 004 through the ROS graph: fixed, switched and fuzzy-scheduled ZV (generated)", "",
-            "Regenerate with `./run exec python -m sim_plant_node.scheduler_cases` (add `--extra` for the paper's"
+            "Regenerate with `./run exec python -m reproductions.scheduler_cases` (add `--extra` for the paper's"
             " two-rule base and for interpolating mode parameters). Sim plant (`plant.model: two_mass`, lockstep at"
             f" {RATE:g} Hz), shaper node and scheduler node run as separate processes; five velocity steps of"
             f" {DWELL:g} s each put x0 at {', '.join(f'{x:g}' for x in STEP_POSES)} m. Residual: the largest"

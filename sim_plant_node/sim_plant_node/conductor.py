@@ -11,7 +11,8 @@ from __future__ import annotations
 import contextlib
 import pathlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -147,23 +148,27 @@ def rms(results: list[CycleResult]) -> float:
     return float(np.mean([r.residual.rms for r in results]))
 
 
-def spin_context(domain_id: int | None = None):
+def spin_context(domain_id: int | None = None) -> rclpy.context.Context:
     """A fresh rclpy context (optionally on a given ROS domain)."""
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain_id)
     return ctx
 
 
+#: ``start(package, executable, params)``: start a node process (what :func:`node_session` yields)
+StartNode = Callable[[str, str, dict[str, Any]], Any]
+
+
 @contextlib.contextmanager
-def node_session(logs: pathlib.Path, prefix: str):
+def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, rclpy.context.Context]]:
     """Yield ``(start, ctx)``: ``start(package, executable, params)`` starts a node process (log in
     ``logs/<prefix>-<executable>.log``), ``ctx`` a fresh rclpy context; at exit the context is
     shut down and every process started is stopped (in reverse order)."""
-    from shaper_nodes.ros.launching import NodeProcess
+    from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
-    procs: list = []
+    procs: list[ChildProcess] = []
 
-    def start(package: str, executable: str, params: dict):
+    def start(package: str, executable: str, params: dict[str, Any]) -> NodeProcess:
         proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log")
         procs.append(proc.start())
         return proc

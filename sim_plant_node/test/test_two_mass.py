@@ -15,8 +15,9 @@ from sim_plant_node.two_mass import (
     StaircaseTask,
     TwoMassPlant,
     m1_of,
-    rule_base_spec,
 )
+
+from reproductions.scheduler_cases import rule_base_spec
 
 
 def eq1(t, s, f):
