@@ -18,14 +18,12 @@ the end of the period). ``natural_frequency`` and ``damping_ratio`` are the plan
 
 from __future__ import annotations
 
-import math
-
 import control as ct
 import numpy as np
 from scipy.linalg import expm
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER, MrilcError, controller
 
-from .plants import MckMode
+from .plants import MckMode, check_rate
 
 
 class PidLoopPlant(MckMode):
@@ -49,8 +47,7 @@ class PidLoopPlant(MckMode):
             raise ValueError("mass, damping, stiffness must be finite and of one size per joint")
         if np.any(m <= 0) or np.any(k <= 0) or np.any(c < 0):
             raise ValueError("plant parameters need mass > 0, stiffness > 0, damping >= 0")
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
+        check_rate(rate)
         try:
             cs = ct.ss(controller(numerator, denominator))
         except MrilcError as err:
