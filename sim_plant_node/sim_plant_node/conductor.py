@@ -9,6 +9,7 @@ what it receives, with the same core code (``CycleMonitor``) that the plant's re
 from __future__ import annotations
 
 import contextlib
+import functools
 import pathlib
 import time
 from collections.abc import Callable, Iterator
@@ -22,14 +23,14 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
-from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
-from shaper_nodes.ros.conversions import time_to_sec
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
+from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
+from shaper_nodes.ros.conversions import time_to_sec
 
 from .plants import mck_from_mode
 
@@ -89,8 +90,10 @@ class Conductor(Node):
         for cli in (self.set_shaper_cli, self.plant_params_cli, self.start_cli):
             self.spin_until(cli.service_is_ready, timeout, f"service {cli.srv_name}")
         for topic, n in (subscribers or {}).items():
-            self.spin_until(lambda t=topic, k=n: self.count_subscribers(t) >= k, timeout,
-                            f"{n} subscribers on {topic}")
+            self.spin_until(functools.partial(self._has_subscribers, topic, n), timeout, f"{n} subscribers on {topic}")
+
+    def _has_subscribers(self, topic: str, n: int) -> bool:
+        return self.count_subscribers(topic) >= n
 
     def set_shaper(self, family: str, omega: float = 1.0, zeta: float = 0.0, source: str = "user",
                    **extra) -> SetShaper.Response:

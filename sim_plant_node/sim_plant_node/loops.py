@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 from scipy.linalg import expm, null_space
+
 from shaper_nodes.core.closed_loop import ppusmd_gains, qft
 
 from .plants import MckMode, _JointState, check_rate, plant_values

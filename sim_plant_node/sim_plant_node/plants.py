@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm
+
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
 
@@ -136,7 +137,7 @@ class MckPlant(_JointState, MckMode):
         self.rate = check_rate(rate)
         self.dt = 1.0 / self.rate
         self.joints = m.size
-        self._phi = np.stack([self._transition(*p) for p in zip(m, c, k)])
+        self._phi = np.stack([self._transition(*p) for p in zip(m, c, k, strict=True)])
         # state per joint: x2, v2, x1, r (base slope)
         self.state = np.zeros((self.joints, 4))
         self.cycle_time: float | None = None
@@ -180,7 +181,7 @@ class MckPlant(_JointState, MckMode):
 #: the ListPlant models (seed 003 cases 1 to 4)
 LIST_MODELS = ("linear", "time_varying", "hardening", "saturation")
 #: every plant model a node can ask :func:`make_plant` for
-PLANT_MODELS = ("mck",) + tuple("list_" + m for m in LIST_MODELS)
+PLANT_MODELS = ("mck", *("list_" + m for m in LIST_MODELS))
 #: time-varying mass: m(t) = m (1 + t / MASS_RAMP_TIME) until MASS_RAMP_TIME (s), then 2 m
 MASS_RAMP_TIME = 1.0
 #: default cubic stiffness (N/m^3): k^3 / (m a)^2 for m = 1 kg, k = 100 N/m, a = 2 m/s^2

@@ -59,6 +59,12 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_msgs.srv import SetFeedforward
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
@@ -66,12 +72,6 @@ from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.qos import LATCHED
-from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import Trigger
-
-from shaper_msgs.msg import CycleEvent, CycleReport
-from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_msgs.srv import SetFeedforward
 
 from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, check_loop_value, make_loop_plant
 from .pid_loop import PidLoopPlant
@@ -257,7 +257,7 @@ class SimPlantNode(Node):
         self.get_logger().info(
             f"{self.n} joints, plant {self.get_parameter('plant.model').value}, modes " + ", ".join(
                 f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(self.plant.natural_frequency,
-                                                                          self.plant.damping_ratio))
+                                                                          self.plant.damping_ratio, strict=True))
             + f", {self.mode} at {self.rate:g} Hz")
 
     # ----------------------------------------------------------------- configuration

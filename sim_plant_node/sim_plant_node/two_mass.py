@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
 from .plants import TaskEvent, check_rate

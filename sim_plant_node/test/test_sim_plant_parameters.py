@@ -3,6 +3,7 @@
 import math
 
 import pytest
+
 from sim_plant_node.loops import LOOP_PARAMS
 from sim_plant_node.sim_plant import PARAMETERS, PLANT_KEYS, PLANT_PARAMS
 
