@@ -26,10 +26,14 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from reproductions.common import docs_option, logs_folder
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 # ------------------------------------------------------------------ seed 001
 OMEGA_A = 3.0
@@ -77,7 +81,9 @@ class Traces:
 
 class _Recorder:
     def __init__(self, joints: int) -> None:
-        self.joints, self.rows, self.times = joints, [], []
+        self.joints = joints
+        self.rows: list[np.ndarray] = []
+        self.times: list[float] = []
 
     def __call__(self, msg) -> None:
         from shaper_nodes.ros.conversions import time_to_sec
@@ -92,8 +98,9 @@ class _Recorder:
         return Traces(t[keep], *(a[keep, i, :] for i in range(4)))
 
 
-def _session(start: Callable[[str, str, dict], object], ctx, joints: list[str], rate: float, plant: dict):
+def _session(start: StartNode, ctx, joints: list[str], rate: float, plant: dict):
     from sensor_msgs.msg import JointState
+
     from sim_plant_node.conductor import Conductor
 
     # a generous lockstep timeout: on a loaded machine the plant waits for the shaper instead of holding
@@ -120,7 +127,7 @@ def _run(conductor, rec: _Recorder, timeout: float = 600.0) -> Traces:
     return rec.traces(result.start)
 
 
-def run_seed001(start: Callable[[str, str, dict], object], ctx, interval: tuple[float, float],
+def run_seed001(start: StartNode, ctx, interval: tuple[float, float],
                 dwell: float = DWELL_001) -> tuple[dict[str, float], Traces]:
     """One lockstep run of every seed 001 case (one joint each); returns the cases and traces."""
     cases = seed001_plants(interval)
@@ -185,7 +192,7 @@ def shaper_duration(family: str) -> float:
     return float(design(family, [Mode(p.omega_n, p.zeta)]).duration)
 
 
-def run_seed002(start: Callable[[str, str, dict], object], ctx, runs=RUNS_002,
+def run_seed002(start: StartNode, ctx, runs=RUNS_002,
                 progress: Callable[[str], None] | None = None) -> dict[str, Traces]:
     """Every seed 002 run on the eight corner plants (one joint each), processes started once."""
     from shaper_nodes.core.closed_loop import corners, nominal
@@ -307,6 +314,7 @@ def shaper_floor(tr: Traces, until: float = DWELL_002) -> float:
     floor of every scheme on a plant equal to P0."""
     import control
     from scipy.linalg import expm
+
     from shaper_nodes.core.closed_loop import nominal, plant_tf
 
     sys_ = control.ss(plant_tf(nominal()))
@@ -331,7 +339,8 @@ def noise_effect(noisy: Traces, clean: Traces) -> np.ndarray:
     """Per joint RMS of the true output's deviation caused by white noise (noisy run minus the same run
     without noise) over the last half of the dwell, m."""
     w = noisy.t >= EVENT_TIME
-    diff = [noisy.output[w, j] - np.interp(noisy.t[w], clean.t, clean.output[:, j]) for j in range(noisy.output.shape[1])]
+    diff = [noisy.output[w, j] - np.interp(noisy.t[w], clean.t, clean.output[:, j])
+            for j in range(noisy.output.shape[1])]
     return np.sqrt(np.mean(np.square(diff), axis=1))
 
 
@@ -376,8 +385,8 @@ def _plot002(path: pathlib.Path, traces: dict[str, Traces], names: list[str], ti
 
     fig, axes = plt.subplots(len(signals), len(names), figsize=(4 * len(names), 3.6 * len(signals)), sharey=True,
                              squeeze=False)
-    for row, signal in zip(axes, signals):
-        for ax, name in zip(row, names):
+    for row, signal in zip(axes, signals, strict=True):
+        for ax, name in zip(row, names, strict=True):
             tr = traces[name]
             ax.plot(tr.t, getattr(tr, signal), lw=0.8)
             ax.plot(tr.t, tr.reference[:, 0], "k--", lw=1, label="shaped reference")
@@ -467,10 +476,12 @@ def report002(traces: dict[str, Traces]) -> str:
               f" White measurement noise of {1e3 * WHITE_NOISE:g} mm per loop sample: RMS of the deviation of the true"
               " output from the same run without noise, over 0.5-1 s, mm.",
               "", "| plant (m, c, k) | disturbance, open | disturbance, FFB | noise step, open: true (measured) |"
-              " noise step, FFB: true (measured) | white noise, open | white noise, FFB |", "|---|---|---|---|---|---|---|"]
+              " noise step, FFB: true (measured) | white noise, open | white noise, FFB |",
+              "|---|---|---|---|---|---|---|"]
     wo = noise_effect(traces["white noise, open loop ZV"], traces["open loop, ZV"])
     wf = noise_effect(traces["white noise, ZV + feedforward-feedback"], traces["ZV + feedforward-feedback"])
-    do, df = event_effect(traces["disturbance, open loop ZV"]), event_effect(traces["disturbance, ZV + feedforward-feedback"])
+    do = event_effect(traces["disturbance, open loop ZV"])
+    df = event_effect(traces["disturbance, ZV + feedforward-feedback"])
     no, nf = event_effect(traces["noise, open loop ZV"]), event_effect(traces["noise, ZV + feedforward-feedback"])
     nom = event_effect(traces["noise, open loop ZV"], "measured")
     nfm = event_effect(traces["noise, ZV + feedforward-feedback"], "measured")

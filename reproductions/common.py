@@ -58,11 +58,10 @@ class LearnerDriver:
     """A :class:`Conductor` on ``ctx`` that also collects the learner's reports and the active shaper."""
 
     def __init__(self, ctx: Any) -> None:
-        from shaper_nodes.ros.qos import LATCHED
-        from sim_plant_node.conductor import Conductor
-
         from shaper_msgs.msg import CycleReport
         from shaper_msgs.msg import Shaper as ShaperMsg
+        from shaper_nodes.ros.qos import LATCHED
+        from sim_plant_node.conductor import Conductor
 
         self.conductor = Conductor(context=ctx)
         self.reports: list[Any] = []

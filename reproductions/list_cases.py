@@ -19,8 +19,12 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from reproductions.common import LearnerDriver, action, docs_option, logs_folder, metric
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 #: the paper's plant m x'' + b x' + k (x - u) = 0, m = 1, b = 1, k = 100
 OMEGA_N = 10.0
@@ -71,7 +75,7 @@ class Iteration:
     residual_rms: float  # the driver's own measure (CycleMonitor), m/s^2
 
 
-def run_case(case: Case, cycles: int, start: Callable[[str, str, dict], object], ctx,
+def run_case(case: Case, cycles: int, start: StartNode, ctx,
              state_file: pathlib.Path, noise: float = 0.0, progress: Callable[[Iteration], None] | None = None,
              listeners: int = 2, hold_after: int | None = None) -> list[Iteration]:
     """Run ``cycles`` cycles (the first unshaped, unless the learner resumes a saved state) of
@@ -136,7 +140,7 @@ def plot(path: pathlib.Path, results: dict[str, list[Iteration]]) -> None:
         axes[0].semilogy([r.index for r in shaped], [r.m for r in shaped], "o-", ms=3, label=name)
         axes[1].plot([r.index for r in shaped], [r.a1 for r in shaped], "o-", ms=3, label=name)
         axes[2].plot([r.index for r in shaped], [r.t2 for r in shaped], "o-", ms=3, label=name)
-    for ax, title in zip(axes, ("M (m/s², RMS of the filtered residual)", "A1", "T2 (s)")):
+    for ax, title in zip(axes, ("M (m/s², RMS of the filtered residual)", "A1", "T2 (s)"), strict=True):
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("cycle (0 = unshaped reference)")
         ax.grid(alpha=0.3)

@@ -22,10 +22,13 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-
-from sim_plant_node.plants import mck_from_mode
+from typing import TYPE_CHECKING
 
 from reproductions.common import LearnerDriver, action, docs_option, logs_folder, metric
+from sim_plant_node.plants import mck_from_mode
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 #: sample rate of the graph runs, Hz (see docs/mrilc.md: why not 1 kHz)
 RATE = 200.0
@@ -52,13 +55,13 @@ def plant_params(mode: tuple[float, float]) -> dict:
     return {"plant.model": "mck_pid", "plant.mass": [m], "plant.damping": [c], "plant.stiffness": [k]}
 
 
-def _nodes(start: Callable, plant_mode: tuple[float, float]) -> None:
+def _nodes(start: StartNode, plant_mode: tuple[float, float]) -> None:
     start("sim_plant_node", "sim_plant", {"joint_names": JOINT, "rate": RATE, "mode": "lockstep",
                                           "imu.axes": [0, -1, -1], **plant_params(plant_mode), **TASK})
     start("shaper_nodes", "shaper_node", {"joint_names": JOINT, "command_rate": RATE, "use_sim_time": True})
 
 
-def run_learning(plant_mode: tuple[float, float], iterations: int, start: Callable, ctx, learner: dict | None = None,
+def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartNode, ctx, learner: dict | None = None,
                  progress: Callable[[Iteration], None] | None = None) -> list[Iteration]:
     """``iterations`` cycles with the MRILC learner on the plant (omega, zeta); one Iteration each."""
     _nodes(start, plant_mode)
@@ -82,7 +85,7 @@ def run_learning(plant_mode: tuple[float, float], iterations: int, start: Callab
     return out
 
 
-def run_shaper_only(plant_mode: tuple[float, float], cycles: int, start: Callable, ctx) -> list[Iteration]:
+def run_shaper_only(plant_mode: tuple[float, float], cycles: int, start: StartNode, ctx) -> list[Iteration]:
     """``cycles`` cycles with the ZVD shaper on the reference model alone: the learner only
     measures (``mrilc.learn`` false, u2 = 0)."""
     return run_learning(plant_mode, cycles, start, ctx, {"mrilc.learn": False})
@@ -106,7 +109,8 @@ def plot(path: pathlib.Path, runs: dict[str, list[Iteration]]) -> None:
         axes[0].semilogy(it, [r.rms_e for r in rows], label=name)
         axes[1].plot(it, [r.rms_u1 for r in rows], label=name)
         axes[2].plot(it, [r.rms_u2 for r in rows], label=name)
-    for ax, title in zip(axes, ("RMS of e = y_m - y", "RMS of u1 (feedback effort)", "RMS of u2 (ILC effort)")):
+    for ax, title in zip(axes, ("RMS of e = y_m - y", "RMS of u1 (feedback effort)", "RMS of u2 (ILC effort)"),
+                         strict=True):
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
@@ -159,9 +163,10 @@ def main(argv: list[str] | None = None) -> int:
             f"| nominal plant, ZVD alone | {nominal[-1].residual:.4g} |",
             f"| perturbed plant, ZVD alone | {perturbed[-1].residual:.4g} |"]
     for name, rows in runs.items():
-        text.append(f"| perturbed plant, ZVD + MRILC {name}, iteration {rows[-1].iteration} | {rows[-1].residual:.4g} |")
-    text += ["", "Learning curves:", "", "| law | RMS e it. 1 | iterations to 2 % | RMS e last | ratio last | RMS u1 first"
-             " -> last | RMS u2 last |", "|---|---|---|---|---|---|---|"]
+        text.append(f"| perturbed plant, ZVD + MRILC {name}, iteration {rows[-1].iteration} |"
+                    f" {rows[-1].residual:.4g} |")
+    text += ["", "Learning curves:", "", "| law | RMS e it. 1 | iterations to 2 % | RMS e last | ratio last |"
+             " RMS u1 first -> last | RMS u2 last |", "|---|---|---|---|---|---|---|"]
     for name, rows in runs.items():
         text.append(f"| {name} | {rows[0].rms_e:.4g} | {iterations_to(rows, 0.02)} | {rows[-1].rms_e:.3g}"
                     f" (it. {rows[-1].iteration}) | {rows[-1].rms_e / rows[0].rms_e:.2e} | {rows[0].rms_u1:.4g} ->"

@@ -18,12 +18,12 @@ import sys
 import time
 
 import pytest
-from shaper_nodes.analysis.analyze import Options, analyze
-from shaper_nodes.analysis.reading import Bag, mcap_chunks
-from shaper_nodes.analysis.streams import read_recording
 
 from reproductions.common import metric as _metric
 from reproductions.list_cases import CASES, LEARNER, run_case
+from shaper_nodes.analysis.analyze import Options, analyze
+from shaper_nodes.analysis.reading import Bag, mcap_chunks
+from shaper_nodes.analysis.streams import read_recording
 
 pytestmark = pytest.mark.integration
 
@@ -94,9 +94,9 @@ class _ShaperStandIn:
 
 def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_context, tmp_path, domain_id):
     from rclpy.executors import SingleThreadedExecutor
-    from shaper_nodes.ros.launching import NodeProcess
 
     from shaper_msgs.msg import CycleReport
+    from shaper_nodes.ros.launching import NodeProcess
 
     # 1. a live LIST run, recorded
     bag = tmp_path / "bag"

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from shaper_nodes.core.closed_loop.qft import corners, nominal
-from shaper_nodes.core.closed_loop.time_delay import exact_step_response
 
 from reproductions.closed_loop_cases import (
     DELAY_USED,
@@ -28,6 +26,8 @@ from reproductions.closed_loop_cases import (
     tdf_interval_from_cli,
     vibration,
 )
+from shaper_nodes.core.closed_loop.qft import corners, nominal
+from shaper_nodes.core.closed_loop.time_delay import exact_step_response
 
 #: allowed excess of the sim's overshoot over the exact continuous one (fraction): the 1 kHz zero-order-hold
 #: loop's error is first order in the step (1.13e-3 at 1 ms, halving with the step: test_loops.py), doubled

@@ -11,9 +11,9 @@ import math
 import time
 
 import pytest
-from shaper_nodes.cli.list_replay import replay
 
 from reproductions.list_cases import CASES, LEARNER, run_case
+from shaper_nodes.cli.list_replay import replay
 
 pytestmark = pytest.mark.integration
 CYCLES = 11  # cycle 0 unshaped (reference), cycles 1..10 learning

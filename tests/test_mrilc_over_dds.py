@@ -8,11 +8,11 @@ from __future__ import annotations
 import time
 
 import pytest
-from sim_plant_node.conductor import Conductor
 
 from reproductions.mrilc_cases import JOINT, NOMINAL, PERTURBED, RATE, plant_params, run_learning, run_shaper_only
 from shaper_msgs.msg import FeedforwardProfile
 from shaper_msgs.srv import SetFeedforward
+from sim_plant_node.conductor import Conductor
 
 pytestmark = pytest.mark.integration
 

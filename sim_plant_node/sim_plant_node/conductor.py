@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import rclpy
 from rcl_interfaces.srv import SetParameters
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -33,6 +33,15 @@ from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
 from shaper_nodes.ros.conversions import time_to_sec
 
 from .plants import mck_from_mode
+
+
+def spin_until(executor: Executor, done: Callable[[], bool], timeout: float, what: str) -> None:
+    """Spin ``executor`` until ``done()``; ``TimeoutError`` (naming ``what``) after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+        executor.spin_once(timeout_sec=0.05)
 
 
 class Conductor(Node):
@@ -73,11 +82,7 @@ class Conductor(Node):
 
     # ----------------------------------------------------------------- driving
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not done():
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
-            self.executor_.spin_once(timeout_sec=0.05)
+        spin_until(self.executor_, done, timeout, what)
 
     def call(self, client, request, timeout: float = 10.0):
         self.spin_until(client.service_is_ready, timeout, f"service {client.srv_name}")
