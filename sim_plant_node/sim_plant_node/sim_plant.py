@@ -1,6 +1,7 @@
 """Simulated plant node: flexible joints with a tip accelerometer, running a repeated task.
 
 Stands in for a robot and its ros2_control forward position controller in tests and the demo.
+Its parameters (names, defaults, ranges, units) are the table :data:`PARAMETERS`.
 
 Each step the task runner publishes the raw setpoint (``topics.command_out``, to the shaper),
 the plant takes the shaped setpoint (``topics.command_in``, std_msgs/Float64MultiArray as
