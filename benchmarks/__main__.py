@@ -6,6 +6,7 @@ See :mod:`benchmarks` for what is measured, and ``--help`` for the options.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import os
@@ -16,6 +17,8 @@ import sys
 import tempfile
 import textwrap
 import time
+from collections.abc import Callable
+from typing import Any
 
 #: outside load (percent of one core) above which the latency table carries a warning
 BUSY_WARNING_PCT = 25.0
@@ -135,24 +138,6 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
               f"{_fmt(q['extra_p99_us'], '+.0f'):>9}")
 
 
-def print_fir(fir: dict) -> None:
-    """FIR throughput table."""
-    s = fir["shaper"]
-    print(f"FIR throughput: ZVD {s['frequency_hz']:g} Hz, damping {s['damping_ratio']:g}, at {s['rate_hz']:g} Hz"
-          f" ({s['impulses']} impulses -> {s['dense_taps']} dense taps, {s['nonzero_taps']} non-zero),"
-          f" {fir['joints']} joints, best of {fir['repeats']}")
-    head = (f"  {'method':<34}{'samples':>8}{'us/call':>9}{'joint-samples/s':>17}{'vs lfilter':>11}"
-            f"{'max |diff|':>11}  agree")
-    print(head)
-    print("  " + "-" * (len(head) - 2))
-    for m in fir["methods"]:
-        print(f"  {m['method']:<34}{m['samples']:>8}{m['best_s'] / m['calls'] * 1e6:>9.1f}"
-              f"{m['joint_samples_per_s']:>17,.0f}{m['ratio_to_lfilter']:>11.3g}"
-              f"{m['max_abs_diff']:>11.1e}  {'yes' if m['agrees'] else 'NO'}")
-    print(f"  reference: {fir['reference']}; outputs agree to {fir['tolerance']:g}:"
-          f" {'yes' if fir['all_agree'] else 'NO'}")
-
-
 def _terminate(signum: int, frame: object) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
@@ -168,6 +153,44 @@ def _json_safe(value: object) -> object:
     return value
 
 
+#: the benchmarks after the latency measurements, in order: (key in the report, the --skip-*
+#: option that leaves it out, its module (with ``run`` and ``print_table``), the options it takes)
+BENCHMARKS: tuple[tuple[str, str, str, Callable[[argparse.Namespace], dict[str, Any]]], ...] = (
+    ("fir", "skip_fir", "fir_throughput", lambda a: {"joints": a.joints, "repeats": a.fir_repeats}),
+    ("list_update", "skip_list", "list_update", lambda a: {}),
+    ("mrilc_update", "skip_mrilc", "mrilc_update", lambda a: {}),
+    ("scheduler", "skip_scheduler", "scheduler", lambda a: {"seconds": a.seconds}),
+    ("discretization", "skip_discretization", "discretization", lambda a: {}),
+    ("bag_analysis", "skip_bag", "bag_analysis", lambda a: {"messages": a.bag_messages}),
+)
+
+
+def _module(name: str) -> Any:
+    return importlib.import_module(f".{name}", __package__)
+
+
+def run_all(args: argparse.Namespace, report: dict) -> None:
+    """Run every benchmark the options do not skip; their figures go into ``report``."""
+    if not args.skip_latency:
+        report["latency"] = run_latency(args)
+    for key, skip, module, options in BENCHMARKS:
+        if not getattr(args, skip):
+            report[key] = _module(module).run(**options(args), progress=_progress)
+
+
+def print_report(report: dict, args: argparse.Namespace) -> None:
+    """Every table of ``report``, then the run's machine and duration."""
+    print()
+    if "latency" in report:
+        print_latency(report["latency"], args)
+        print()
+    for key, _, module, _ in BENCHMARKS:
+        if key in report:
+            _module(module).print_table(report[key])
+            print()
+    print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = parse_args(argv)
@@ -181,32 +204,7 @@ def main(argv: list[str] | None = None) -> int:
                  "argv": sys.argv[1:] if argv is None else argv},
     }
     try:
-        if not args.skip_latency:
-            report["latency"] = run_latency(args)
-        if not args.skip_fir:
-            from .fir_throughput import run as run_fir
-
-            report["fir"] = run_fir(joints=args.joints, repeats=args.fir_repeats, progress=_progress)
-        if not args.skip_list:
-            from .list_update import run as run_list
-
-            report["list_update"] = run_list(progress=_progress)
-        if not args.skip_mrilc:
-            from .mrilc_update import run as run_mrilc
-
-            report["mrilc_update"] = run_mrilc(progress=_progress)
-        if not args.skip_scheduler:
-            from .scheduler import run as run_scheduler
-
-            report["scheduler"] = run_scheduler(seconds=args.seconds, progress=_progress)
-        if not args.skip_discretization:
-            from .discretization import run as run_discretization
-
-            report["discretization"] = run_discretization(progress=_progress)
-        if not args.skip_bag:
-            from .bag_analysis import run as run_bag
-
-            report["bag_analysis"] = run_bag(messages=args.bag_messages, progress=_progress)
+        run_all(args, report)
     except KeyboardInterrupt:
         _progress("interrupted")
         return 130
@@ -214,40 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         _progress(f"error: {err}")
         return 1
     report["meta"]["elapsed_s"] = time.time() - started
-
-    print()
-    if "latency" in report:
-        print_latency(report["latency"], args)
-        print()
-    if "fir" in report:
-        print_fir(report["fir"])
-        print()
-    if "list_update" in report:
-        from .list_update import print_table as print_list
-
-        print_list(report["list_update"])
-        print()
-    if "mrilc_update" in report:
-        from .mrilc_update import print_table as print_mrilc
-
-        print_mrilc(report["mrilc_update"])
-        print()
-    if "scheduler" in report:
-        from .scheduler import print_table as print_scheduler
-
-        print_scheduler(report["scheduler"])
-        print()
-    if "discretization" in report:
-        from .discretization import print_table as print_discretization
-
-        print_discretization(report["discretization"])
-        print()
-    if "bag_analysis" in report:
-        from .bag_analysis import print_table as print_bag
-
-        print_bag(report["bag_analysis"])
-        print()
-    print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
+    print_report(report, args)
     if args.json:
         args.json.write_text(json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")
         print(f"figures written to {args.json}")

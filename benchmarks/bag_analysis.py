@@ -31,6 +31,7 @@ from collections.abc import Callable
 def run(*, messages: int = 1_000_000, progress: Callable[[str], None] = lambda s: None) -> dict:
     """Write the bag, time the methods once each (the bag is large), return the figures."""
     from rosbags.highlevel import AnyReader
+
     from shaper_nodes.analysis.analyze import Options, analyze
     from shaper_nodes.analysis.streams import read_recording
     from shaper_nodes.analysis.synthetic import simulate, write_bag
@@ -77,7 +78,8 @@ def run(*, messages: int = 1_000_000, progress: Callable[[str], None] = lambda s
     base = timings["baseline: rosbags reader"]
     return {
         "messages": written, "bag_mb": size / 1e6, "recorded_s": float(t[-1] - t[0]), "write_s": write_s,
-        "cycles": len(an.cycles), "mode_hz": an.modes[0].hz if an.modes else float("nan"), "true_mode_hz": truth.mode_hz,
+        "cycles": len(an.cycles), "mode_hz": an.modes[0].hz if an.modes else float("nan"),
+        "true_mode_hz": truth.mode_hz,
         "read_messages": rec.messages_read,
         "methods": [{"method": k, "seconds": v, "messages_per_s": written / v, "ratio_to_baseline": v / base}
                     for k, v in timings.items()],

@@ -18,6 +18,7 @@ Run it with ``python -m benchmarks.discretization`` or as part of ``python -m be
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Callable
 
@@ -41,9 +42,9 @@ def run(number: int = 50, repeats: int = 5, progress: Callable[[str], None] | No
         if progress:
             progress(f"discretisation: {label}")
         shaper = design(family, modes)
-        t_design = _best(lambda: design(family, modes), number, repeats)
-        t_split = _best(lambda: discretize(shaper, rate, "split"), number, repeats)
-        t_exact = _best(lambda: discretize(shaper, rate, "exact"), number, repeats)
+        t_design = _best(functools.partial(design, family, modes), number, repeats)
+        t_split = _best(functools.partial(discretize, shaper, rate, "split"), number, repeats)
+        t_exact = _best(functools.partial(discretize, shaper, rate, "exact"), number, repeats)
         taps = (discretize(shaper, rate, "split").delays.size, discretize(shaper, rate, "exact").delays.size)
         rows.append({"case": label, "design_us": 1e6 * t_design, "split_us": 1e6 * t_split,
                      "exact_us": 1e6 * t_exact, "exact_over_split": t_exact / t_split,
@@ -57,7 +58,8 @@ def print_table(rows: list[dict]) -> None:
           f" {'exact/design':>13s} {'taps':>7s}")
     for r in rows:
         print(f"  {r['case']:34s} {r['design_us']:10.1f} {r['split_us']:9.1f} {r['exact_us']:9.1f}"
-              f" {r['exact_over_split']:12.1f} {r['exact_over_design']:13.2f} {r['taps_split']:>3d}/{r['taps_exact']:<3d}")
+              f" {r['exact_over_split']:12.1f} {r['exact_over_design']:13.2f}"
+              f" {r['taps_split']:>3d}/{r['taps_exact']:<3d}")
 
 
 def main() -> int:

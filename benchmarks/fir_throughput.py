@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
+
 from shaper_nodes.core.shaping import Mode, SparseFir, StreamingShaper, design, discretize
 
 #: outputs must agree with lfilter to this (absolute, data of order 1)
@@ -147,3 +148,21 @@ def run(*, hz: float = 8.0, zeta: float = 0.03, rate: float = 1000.0, joints: in
         "all_agree": all(r.agrees for r in results),
         "methods": [asdict(r) for r in results],
     }
+
+
+def print_table(fir: dict) -> None:
+    """FIR throughput table."""
+    s = fir["shaper"]
+    print(f"FIR throughput: ZVD {s['frequency_hz']:g} Hz, damping {s['damping_ratio']:g}, at {s['rate_hz']:g} Hz"
+          f" ({s['impulses']} impulses -> {s['dense_taps']} dense taps, {s['nonzero_taps']} non-zero),"
+          f" {fir['joints']} joints, best of {fir['repeats']}")
+    head = (f"  {'method':<34}{'samples':>8}{'us/call':>9}{'joint-samples/s':>17}{'vs lfilter':>11}"
+            f"{'max |diff|':>11}  agree")
+    print(head)
+    print("  " + "-" * (len(head) - 2))
+    for m in fir["methods"]:
+        print(f"  {m['method']:<34}{m['samples']:>8}{m['best_s'] / m['calls'] * 1e6:>9.1f}"
+              f"{m['joint_samples_per_s']:>17,.0f}{m['ratio_to_lfilter']:>11.3g}"
+              f"{m['max_abs_diff']:>11.1e}  {'yes' if m['agrees'] else 'NO'}")
+    print(f"  reference: {fir['reference']}; outputs agree to {fir['tolerance']:g}:"
+          f" {'yes' if fir['all_agree'] else 'NO'}")

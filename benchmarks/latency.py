@@ -52,15 +52,17 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 import rclpy
 import rclpy.context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+
 from shaper_nodes.core.shaping import SparseFir, StreamingShaper
 from shaper_nodes.ros.launching import ChildProcess
-from std_msgs.msg import Float64MultiArray
 
 from .echo_node import DEPTH
 
@@ -91,7 +93,7 @@ class Target:
     """
 
     label: str
-    make_process: Callable[[pathlib.Path], object]
+    make_process: Callable[[pathlib.Path], ChildProcess]
     in_topic: str
     out_topic: str
     fir: SparseFir
@@ -299,11 +301,12 @@ def measure(target: Target, *, seconds: float = 5.0, rate: float = 1000.0, joint
     executor = SingleThreadedExecutor(context=context)
     driver = None
     try:
-        proc.start()
+        popen = proc.start().proc
+        assert popen is not None  # (start() sets it)
 
         def alive() -> None:
             if not proc.running():
-                raise RuntimeError(f"{target.label}: node exited ({proc.proc.returncode});"
+                raise RuntimeError(f"{target.label}: node exited ({popen.returncode});"
                                    f" log {log_path}:\n{log_tail(log_path)}")
 
         driver = Driver(target.in_topic, target.out_topic, context)
@@ -332,7 +335,7 @@ def measure(target: Target, *, seconds: float = 5.0, rate: float = 1000.0, joint
 
         # measurement: the ramp 1..n
         stamps = np.zeros(n, dtype=np.int64)
-        pid = proc.proc.pid
+        pid = popen.pid
         node_cpu0, driver_cpu0, busy0 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
         wall0 = time.perf_counter()
         sender = threading.Thread(target=driver.send_paced, args=(data[1:], rate),
@@ -429,7 +432,7 @@ def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_
     return Target("echo (baseline)", make, in_topic, out_topic, identity_fir())
 
 
-def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, object] | None = None) -> Target:
+def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any] | None = None) -> Target:
     """The real shaper node (``shaper_nodes shaper_node``) with ``joints`` joints at ``rate``.
 
     ``params`` are extra node parameters (``shaper.*``, ``discretization``); the FIR used for

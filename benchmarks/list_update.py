@@ -31,6 +31,7 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.signal import butter, cont2discrete, dlsim, filtfilt, hilbert
+
 from shaper_nodes.core.learning.list import ListConfig, ListLearner, ListParams
 from shaper_nodes.core.shaping import Mode
 
@@ -52,7 +53,7 @@ def cycle_data(hz: float = 8.0, zeta: float = 0.03, rate: float = 1000.0, second
                            np.array([[-w * w, -2.0 * zeta * w]]), np.array([[w * w]])), 1.0 / rate, method="foh")
     t = np.arange(int(round(seconds * rate))) / rate
     move = lambda tt: _trapezoid(tt, 0.5, 1.0, 4.0)[0]  # noqa: E731
-    u = move(t) if params is None else sum(a * move(t - ti) for a, ti in zip(*params.impulses()))
+    u = move(t) if params is None else sum(a * move(t - ti) for a, ti in zip(*params.impulses(), strict=True))
     y = dlsim(plant, u, t)[1][:, 0]
     axis = np.array([0.6, 0.7, 0.3]) / np.linalg.norm([0.6, 0.7, 0.3])
     rng = np.random.default_rng(seed)

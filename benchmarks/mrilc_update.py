@@ -28,8 +28,10 @@ import math
 import time
 from collections.abc import Callable
 
+import control as ct
 import numpy as np
 from scipy.signal import fftconvolve
+
 from shaper_nodes.core.learning.mrilc import MrilcLearner
 from shaper_nodes.core.learning.mrilc import model as M
 
@@ -48,13 +50,15 @@ def run(*, rate: float = 1000.0, seconds: float = 10.0, joints: int = 7, repeats
     r = np.zeros(n)
     r[int(rate):int(5 * rate)] = 1.0
     mode = model.mode
+    if mode is None:
+        raise RuntimeError("the MRILC reference model has no lightly damped mode to shape")
     wd = mode.omega * math.sqrt(1 - mode.zeta**2)
     k = math.exp(-mode.zeta * math.pi / math.sqrt(1 - mode.zeta**2))
     r_s = sum(a * np.roll(r, int(round(t * rate))) for a, t in
-              zip(np.array([1, 2 * k, k * k]) / (1 + k) ** 2, (0.0, math.pi / wd, 2 * math.pi / wd)))
+              zip(np.array([1, 2 * k, k * k]) / (1 + k) ** 2, (0.0, math.pi / wd, 2 * math.pi / wd), strict=True))
     plant = M.mck_plant(5.0, 0.15)
     y = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "command"), period))(r_s)
-    u = M.SampledFilter(M.discretise(M.ct.feedback(model.c, plant), period))(r_s)
+    u = M.SampledFilter(M.discretise(ct.feedback(model.c, plant), period))(r_s)
     r_s, y, u = (np.repeat(x[:, None], joints, axis=1) for x in (r_s, y, u))
     h = model.reference_filter.impulse(n)
 
@@ -71,7 +75,8 @@ def run(*, rate: float = 1000.0, seconds: float = 10.0, joints: int = 7, repeats
         fftconvolve(r_s, h[:, None], axes=0)
         timings["floor: fftconvolve"].append(time.perf_counter() - begin)
 
-    learn("p"), learn("robust"), floor()  # warm-up (caches: the impulse response, FFT plans)
+    for warm_up in (lambda: learn("p"), lambda: learn("robust"), floor):  # caches: the impulse response, FFT plans
+        warm_up()
     timings = {key: [] for key in timings}
     for i in range(repeats):
         progress(f"MRILC update: pass {i + 1}/{repeats}")

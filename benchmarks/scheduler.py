@@ -30,12 +30,13 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+
 from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import Mode, design
 
 
 def _spec() -> dict:
-    from sim_plant_node.two_mass import rule_base_spec
+    from reproductions.scheduler_cases import rule_base_spec
 
     return rule_base_spec(np.linspace(0.0, 0.7, 8))
 
@@ -87,8 +88,9 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, progress: Callable[[str
     import rclpy
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
+
+    from reproductions.scheduler_cases import scheduler_parameters
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
-    from sim_plant_node.two_mass import scheduler_parameters
 
     from .latency import proc_cpu_seconds
 
@@ -110,7 +112,8 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, progress: Callable[[str
                     ("scheduler", NodeProcess("shaper_nodes", "scheduler", scheduler_parameters(_spec()),
                                               log_path=log / "scheduler.log", env=env))):
                 progress(f"scheduler: CPU of the {label} at {rate:g} Hz joint states ({seconds:g} s)")
-                proc.start()
+                popen = proc.start().proc
+                assert popen is not None  # (start() sets it)
                 deadline = time.monotonic() + 30.0
                 while pub.get_subscription_count() < 1:
                     if time.monotonic() > deadline or not proc.running():
@@ -119,14 +122,14 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, progress: Callable[[str
                 time.sleep(1.0)  # discovery settles, the node warms up
                 msg = JointState(name=["joint_1"], position=[0.0])
                 n = int(seconds * rate)
-                c0, t0 = proc_cpu_seconds(proc.proc.pid), time.monotonic()
+                c0, t0 = proc_cpu_seconds(popen.pid), time.monotonic()
                 for k in range(n):
                     msg.position = [0.35 + 0.35 * math.sin(2 * math.pi * 0.2 * k / rate)]
                     pub.publish(msg)
                     wait = t0 + (k + 1) / rate - time.monotonic()
                     if wait > 0:
                         time.sleep(wait)
-                c1, t1 = proc_cpu_seconds(proc.proc.pid), time.monotonic()
+                c1, t1 = proc_cpu_seconds(popen.pid), time.monotonic()
                 out[label] = {"cpu_pct": 100.0 * (c1 - c0) / (t1 - t0), "sent_hz": n / (t1 - t0)}
                 proc.stop()
                 while pub.get_subscription_count() > 0 and time.monotonic() < t1 + 10.0:

@@ -1,6 +1,6 @@
 """Bag analysis results: the demo's recording, a robot-style recording, and both cut short.
 
-``python -m sim_plant_node.bag_results`` (``./run exec python -m sim_plant_node.bag_results``)
+``python -m reproductions.bag_results`` (``./run exec python -m reproductions.bag_results``)
 runs the demo (sim plant, shaper and recorder as processes; plant mode 6.5 Hz, shapers designed
 at 5 Hz), analyses its recording with :mod:`shaper_nodes.analysis`, and compares the per-cycle
 residual vibration with what the demo measured live and what the sim plant reported; analyses a
@@ -20,6 +20,8 @@ import subprocess
 import sys
 import time
 
+from reproductions.common import docs_option
+
 
 def _cut(src: pathlib.Path, dst: pathlib.Path) -> int:
     """Copy ``src`` cut in the middle of its last chunk; returns the bytes kept."""
@@ -33,8 +35,7 @@ def _cut(src: pathlib.Path, dst: pathlib.Path) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="bag_results", description=__doc__.split("\n\n")[0])
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where bag_analysis_results.md and img/bag_*.png go (default docs)")
+    docs_option(p, "bag_analysis_results.md and img/bag_*.png")
     p.add_argument("--cycles", type=int, default=2, help="demo cycles per shaper (default 2)")
     args = p.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -79,13 +80,14 @@ def main(argv: list[str] | None = None) -> int:
 
     img = args.docs / "img"
     img.mkdir(parents=True, exist_ok=True)
-    for src, dst in (("demo_report/traces.png", "bag_demo_traces.png"), ("demo_report/spectrum.png", "bag_demo_spectrum.png"),
-                     ("demo_report/sensitivity.png", "bag_demo_sensitivity.png"),
-                     ("robot_report/traces.png", "bag_robot_traces.png")):
-        shutil.copy(work / src, img / dst)
+    for plot, dst in (("demo_report/traces.png", "bag_demo_traces.png"),
+                      ("demo_report/spectrum.png", "bag_demo_spectrum.png"),
+                      ("demo_report/sensitivity.png", "bag_demo_sensitivity.png"),
+                      ("robot_report/traces.png", "bag_robot_traces.png")):
+        shutil.copy(work / plot, img / dst)
 
     md = ["# Bag analysis results (generated)", "",
-          f"Regenerate with `./run exec python -m sim_plant_node.bag_results` ({time.monotonic() - t0:.0f} s here)."
+          f"Regenerate with `./run exec python -m reproductions.bag_results` ({time.monotonic() - t0:.0f} s here)."
           " See [bag_analysis.md](bag_analysis.md) for the method.", "",
           "## The demo's recording", "",
           f"The demo ran the sim plant with its mode at 6.5 Hz, damping 0.01 (the shapers designed at 5 Hz),"
@@ -93,22 +95,27 @@ def main(argv: list[str] | None = None) -> int:
           f" `analyze_bag` on the recording ({an.recording.messages_read} messages, {1e3 * demo_s:.0f} ms):", "",
           "| # | shaper | demo, live (m/s²) | sim plant's report (m/s²) | analysis (m/s²) | analysis vs demo |"
           " peak (m/s²) | settling to 5 % of peak (s) |", "|---|---|---|---|---|---|---|---|"]
-    for i, (r, lv, pl) in enumerate(zip(an.cycles, live, plant)):
+    # three sources (the analysis, the demo's results.csv, the plant's reports): their counts need not agree
+    for i, (r, lv, pl) in enumerate(zip(an.cycles, live, plant, strict=False)):
         settle = f"{r.settling_time:.3f}" if r.settling_time == r.settling_time else f"> {r.end - r.window_start:.2f}"
         md.append(f"| {i} | {r.shaper} | {lv:.6g} | {pl:.6g} | {r.rms:.6g} | {100 * (r.rms / lv - 1):+.3f} % |"
                   f" {r.peak:.4g} | {settle} |")
     means = [sum(r.rms for r in an.cycles[k * args.cycles:(k + 1) * args.cycles]) / args.cycles
              for k in range(len(printed))]
     m = an.modes[0]
-    best = an.recommendation.best
+    best = an.recommendation.best if an.recommendation is not None else None
+    if best is None:
+        print("the analysis of the demo's recording recommends no shaper", file=sys.stderr)
+        return 1
     md += ["", "The demo prints the mean over a shaper's cycles: "
-           + ", ".join(f"{x:.4g} (analysis {y:.4g}, {100 * (y / x - 1):+.2f} %)" for x, y in zip(printed, means))
+           + ", ".join(f"{x:.4g} (analysis {y:.4g}, {100 * (y / x - 1):+.2f} %)"
+                       for x, y in zip(printed, means, strict=True))
            + " m/s²; the per-cycle values are from its results.csv.", "",
-           f"Identified mode: {m.hz:.5g} Hz ± {m.omega_std / 6.283185307179586:.2g}, damping {m.zeta:.4g} ± {m.zeta_std:.2g}"
-           f" (true: 6.5 Hz, 0.01; {100 * (m.hz / 6.5 - 1):+.3f} %).", "",
-           f"Recommended: {best.family}, {1e3 * best.duration:.1f} ms, V {100 * best.nominal_vibration:.2g} % at the mode"
-           f" ({100 * best.worst_vibration:.2g} % worst case); predicted residual {an.predicted['rms_nominal']:.3g} m/s²"
-           f" plus noise, against {an.cycles[0].rms:.3g} m/s² unshaped.", "",
+           f"Identified mode: {m.hz:.5g} Hz ± {m.omega_std / 6.283185307179586:.2g}, damping {m.zeta:.4g}"
+           f" ± {m.zeta_std:.2g} (true: 6.5 Hz, 0.01; {100 * (m.hz / 6.5 - 1):+.3f} %).", "",
+           f"Recommended: {best.family}, {1e3 * best.duration:.1f} ms, V {100 * best.nominal_vibration:.2g} % at the"
+           f" mode ({100 * best.worst_vibration:.2g} % worst case); predicted residual"
+           f" {an.predicted['rms_nominal']:.3g} m/s² plus noise, against {an.cycles[0].rms:.3g} m/s² unshaped.", "",
            "![traces](img/bag_demo_traces.png)", "", "![spectrum](img/bag_demo_spectrum.png)", "",
            "![sensitivity](img/bag_demo_sensitivity.png)", "",
            "## A recording by another writer, without cycle events", "",
@@ -117,8 +124,8 @@ def main(argv: list[str] | None = None) -> int:
            f" of a 4 Hz, 2 % damped mode; no commands, no events. Cycles from {robot.segmentation}:", "",
            "| # | start (s) | true start | motion end (s) | true end | RMS (m/s²) |", "|---|---|---|---|---|---|"]
     for i, r in enumerate(robot.cycles):
-        md.append(f"| {i} | {r.start - robot.origin:.3f} | {truth.move_starts[i]:.3f} | {r.motion_end - robot.origin:.3f} |"
-                  f" {truth.move_ends[i]:.3f} | {r.rms:.4g} |")
+        md.append(f"| {i} | {r.start - robot.origin:.3f} | {truth.move_starts[i]:.3f} |"
+                  f" {r.motion_end - robot.origin:.3f} | {truth.move_ends[i]:.3f} | {r.rms:.4g} |")
     rm = robot.modes[0]
     rows = [x for x in robot.replays["list"].rows if "skipped" not in x]
     md += ["", f"Identified mode {rm.hz:.5g} Hz, damping {rm.zeta:.4g} (true 4 Hz, 0.02); the offset"

@@ -11,7 +11,7 @@ the shaper node with ZV (or ZVD) designed on the nominal plant (w_n = 40 pi rad/
 ``qft_ffb``, ``qft_fb`` and the open loop ``qft_open``; then a unit-step plant-output disturbance
 and a unit-step measurement noise, 0.5 s after the step.
 
-``python -m sim_plant_node.closed_loop_cases`` regenerates docs/closed_loop_results.md and
+``python -m reproductions.closed_loop_cases`` regenerates docs/closed_loop_results.md and
 docs/img/closed_loop_*.png; the integration tests call :func:`run_seed001` and :func:`run_seed002`.
 """
 
@@ -20,15 +20,20 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import pathlib
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from reproductions.common import docs_option, logs_folder
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 # ------------------------------------------------------------------ seed 001
 OMEGA_A = 3.0
@@ -48,7 +53,7 @@ WHITE_NOISE = 1e-3  # white measurement noise, m (one sigma per loop sample)
 
 def tdf_interval_from_cli(omega_a: float = OMEGA_A, delay: float = DELAY_USED) -> tuple[float, float]:
     """The stable interval as the design CLI prints it (``loop_design tdf-interval --json``)."""
-    out = subprocess.run([sys.executable, "-m", "shaper_nodes.loop_design_cli", "tdf-interval", "--omega-a",
+    out = subprocess.run([sys.executable, "-m", "shaper_nodes.cli.loop_design", "tdf-interval", "--omega-a",
                           repr(omega_a), "--delay", repr(delay), "--json"], check=True, capture_output=True, text=True)
     lo, hi = json.loads(out.stdout)["stable_interval"]
     return float(lo), float(hi)
@@ -76,7 +81,9 @@ class Traces:
 
 class _Recorder:
     def __init__(self, joints: int) -> None:
-        self.joints, self.rows, self.times = joints, [], []
+        self.joints = joints
+        self.rows: list[np.ndarray] = []
+        self.times: list[float] = []
 
     def __call__(self, msg) -> None:
         from shaper_nodes.ros.conversions import time_to_sec
@@ -91,8 +98,9 @@ class _Recorder:
         return Traces(t[keep], *(a[keep, i, :] for i in range(4)))
 
 
-def _session(start: Callable[[str, str, dict], object], ctx, joints: list[str], rate: float, plant: dict):
+def _session(start: StartNode, ctx, joints: list[str], rate: float, plant: dict):
     from sensor_msgs.msg import JointState
+
     from sim_plant_node.conductor import Conductor
 
     # a generous lockstep timeout: on a loaded machine the plant waits for the shaper instead of holding
@@ -119,7 +127,7 @@ def _run(conductor, rec: _Recorder, timeout: float = 600.0) -> Traces:
     return rec.traces(result.start)
 
 
-def run_seed001(start: Callable[[str, str, dict], object], ctx, interval: tuple[float, float],
+def run_seed001(start: StartNode, ctx, interval: tuple[float, float],
                 dwell: float = DWELL_001) -> tuple[dict[str, float], Traces]:
     """One lockstep run of every seed 001 case (one joint each); returns the cases and traces."""
     cases = seed001_plants(interval)
@@ -184,7 +192,7 @@ def shaper_duration(family: str) -> float:
     return float(design(family, [Mode(p.omega_n, p.zeta)]).duration)
 
 
-def run_seed002(start: Callable[[str, str, dict], object], ctx, runs=RUNS_002,
+def run_seed002(start: StartNode, ctx, runs=RUNS_002,
                 progress: Callable[[str], None] | None = None) -> dict[str, Traces]:
     """Every seed 002 run on the eight corner plants (one joint each), processes started once."""
     from shaper_nodes.core.closed_loop import corners, nominal
@@ -306,6 +314,7 @@ def shaper_floor(tr: Traces, until: float = DWELL_002) -> float:
     floor of every scheme on a plant equal to P0."""
     import control
     from scipy.linalg import expm
+
     from shaper_nodes.core.closed_loop import nominal, plant_tf
 
     sys_ = control.ss(plant_tf(nominal()))
@@ -330,7 +339,8 @@ def noise_effect(noisy: Traces, clean: Traces) -> np.ndarray:
     """Per joint RMS of the true output's deviation caused by white noise (noisy run minus the same run
     without noise) over the last half of the dwell, m."""
     w = noisy.t >= EVENT_TIME
-    diff = [noisy.output[w, j] - np.interp(noisy.t[w], clean.t, clean.output[:, j]) for j in range(noisy.output.shape[1])]
+    diff = [noisy.output[w, j] - np.interp(noisy.t[w], clean.t, clean.output[:, j])
+            for j in range(noisy.output.shape[1])]
     return np.sqrt(np.mean(np.square(diff), axis=1))
 
 
@@ -375,8 +385,8 @@ def _plot002(path: pathlib.Path, traces: dict[str, Traces], names: list[str], ti
 
     fig, axes = plt.subplots(len(signals), len(names), figsize=(4 * len(names), 3.6 * len(signals)), sharey=True,
                              squeeze=False)
-    for row, signal in zip(axes, signals):
-        for ax, name in zip(row, names):
+    for row, signal in zip(axes, signals, strict=True):
+        for ax, name in zip(row, names, strict=True):
             tr = traces[name]
             ax.plot(tr.t, getattr(tr, signal), lw=0.8)
             ax.plot(tr.t, tr.reference[:, 0], "k--", lw=1, label="shaped reference")
@@ -466,10 +476,12 @@ def report002(traces: dict[str, Traces]) -> str:
               f" White measurement noise of {1e3 * WHITE_NOISE:g} mm per loop sample: RMS of the deviation of the true"
               " output from the same run without noise, over 0.5-1 s, mm.",
               "", "| plant (m, c, k) | disturbance, open | disturbance, FFB | noise step, open: true (measured) |"
-              " noise step, FFB: true (measured) | white noise, open | white noise, FFB |", "|---|---|---|---|---|---|---|"]
+              " noise step, FFB: true (measured) | white noise, open | white noise, FFB |",
+              "|---|---|---|---|---|---|---|"]
     wo = noise_effect(traces["white noise, open loop ZV"], traces["open loop, ZV"])
     wf = noise_effect(traces["white noise, ZV + feedforward-feedback"], traces["ZV + feedforward-feedback"])
-    do, df = event_effect(traces["disturbance, open loop ZV"]), event_effect(traces["disturbance, ZV + feedforward-feedback"])
+    do = event_effect(traces["disturbance, open loop ZV"])
+    df = event_effect(traces["disturbance, ZV + feedforward-feedback"])
     no, nf = event_effect(traces["noise, open loop ZV"]), event_effect(traces["noise, ZV + feedforward-feedback"])
     nom = event_effect(traces["noise, open loop ZV"], "measured")
     nfm = event_effect(traces["noise, ZV + feedforward-feedback"], "measured")
@@ -483,31 +495,19 @@ def report002(traces: dict[str, Traces]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="closed_loop_cases", description=__doc__.split("\n\n")[0])
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where closed_loop_results.md and img/closed_loop_*.png go (default docs)")
+    docs_option(p, "closed_loop_results.md and img/closed_loop_*.png")
     p.add_argument("--seeds", default="001,002", help="which seeds to run (default 001,002)")
     args = p.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.ros.launching import NodeProcess
-    from sim_plant_node.conductor import spin_context
+    logs = logs_folder("closed_loop_cases")
+    from sim_plant_node.conductor import node_session
 
-    logs = pathlib.Path("out") / "closed_loop_cases"
-    logs.mkdir(parents=True, exist_ok=True)
     (args.docs / "img").mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     text = ["# Closed-loop input shaping through the ROS graph (generated)", "",
-            "Regenerate with `./run exec python -m sim_plant_node.closed_loop_cases` (sim plant and shaper as"
+            "Regenerate with `./run exec python -m reproductions.closed_loop_cases` (sim plant and shaper as"
             " separate processes, lockstep). See [closed_loop.md](closed_loop.md) for the methods.", ""]
     for seed in args.seeds.split(","):
-        procs: list = []
-
-        def start(package, executable, params, procs=procs, seed=seed):
-            proc = NodeProcess(package, executable, params, log_path=logs / f"{seed}-{executable}.log")
-            procs.append(proc.start())
-            return proc
-
-        ctx = spin_context()
-        try:
+        with node_session(logs, seed) as (start, ctx):
             if seed == "001":
                 interval = tdf_interval_from_cli()
                 cases, tr = run_seed001(start, ctx, interval)
@@ -525,10 +525,6 @@ def main(argv: list[str] | None = None) -> int:
                          f"seed 002 Fig. 10: unit-step output disturbance / measurement noise at {EVENT_TIME:g} s",
                          ("output", "measured"))
             print(f"seed {seed} done ({time.monotonic() - t0:.0f} s)", flush=True)
-        finally:
-            ctx.try_shutdown()
-            for proc in reversed(procs):
-                proc.stop()
     (args.docs / "closed_loop_results.md").write_text("\n".join(text))
     print(f"wrote {args.docs / 'closed_loop_results.md'} ({time.monotonic() - t0:.0f} s)")
     return 0

@@ -6,7 +6,7 @@ the initial guess), and then every cycle is one learning iteration. The driver r
 cycle at a time and waits for the learner's report before the next, as a robot cell whose
 next cycle starts once the update is in.
 
-``python -m sim_plant_node.list_cases`` regenerates docs/list_results.md and
+``python -m reproductions.list_cases`` regenerates docs/list_results.md and
 docs/img/list_cases.png (see --help); the integration test calls :func:`run_case`.
 """
 
@@ -14,12 +14,17 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import pathlib
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from reproductions.common import LearnerDriver, action, docs_option, logs_folder, metric
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 #: the paper's plant m x'' + b x' + k (x - u) = 0, m = 1, b = 1, k = 100
 OMEGA_N = 10.0
@@ -70,18 +75,7 @@ class Iteration:
     residual_rms: float  # the driver's own measure (CycleMonitor), m/s^2
 
 
-def _metric(report, name: str) -> float:
-    try:
-        return float(report.metric_values[list(report.metric_names).index(name)])
-    except ValueError:
-        return float("nan")
-
-
-def _action(report) -> str:
-    return next((n.split(".", 1)[1] for n in report.metric_names if n.startswith("action.")), "skipped")
-
-
-def run_case(case: Case, cycles: int, start: Callable[[str, str, dict], object], ctx,
+def run_case(case: Case, cycles: int, start: StartNode, ctx,
              state_file: pathlib.Path, noise: float = 0.0, progress: Callable[[Iteration], None] | None = None,
              listeners: int = 2, hold_after: int | None = None) -> list[Iteration]:
     """Run ``cycles`` cycles (the first unshaped, unless the learner resumes a saved state) of
@@ -89,12 +83,7 @@ def run_case(case: Case, cycles: int, start: Callable[[str, str, dict], object],
     subscribers of the accelerometer and events are awaited first (driver and learner, plus a
     recorder if one runs). With ``hold_after``, the learner is told to hold at its best
     parameters (``~/hold``) after that many cycles. Returns one Iteration per cycle, in order."""
-    from shaper_nodes.nodes.shaper import LATCHED
-    from sim_plant_node.conductor import Conductor
     from std_srvs.srv import SetBool
-
-    from shaper_msgs.msg import CycleReport
-    from shaper_msgs.msg import Shaper as ShaperMsg
 
     joint = ["joint_1"]
     start("sim_plant_node", "sim_plant", {
@@ -103,39 +92,27 @@ def run_case(case: Case, cycles: int, start: Callable[[str, str, dict], object],
     start("shaper_nodes", "shaper_node", {"joint_names": joint, "command_rate": RATE, "use_sim_time": True})
     start("shaper_nodes", "learner", {"state_file": str(state_file), **LEARNER,
                                       "use_sim_time": True, **case.learner})
-    conductor = Conductor(context=ctx)
-    reports: list = []
-    active: list = []
-    conductor.create_subscription(CycleReport, "/learner/reports", reports.append, 100)
-    conductor.create_subscription(ShaperMsg, "/shaper/active_shaper", active.append, LATCHED)
+    driver = LearnerDriver(ctx)
     out: list[Iteration] = []
     try:
-        conductor.wait_ready(60.0, {"/shaper/commands": 1, "/forward_position_controller/commands": 1,
-                                    "/tip_imu": listeners, "/cycle_events": listeners})
-        conductor.spin_until(lambda: bool(active) and active[-1].source == "learner", 60.0,
-                             "the learner's first shaper")
-        # the driver has discovered every node; give the plant's publishers a moment to match the
-        # learner's subscriptions too (else the learner may miss the first START and skip a cycle)
-        settle = time.monotonic() + 1.0
-        conductor.spin_until(lambda: time.monotonic() > settle, 5.0, "discovery to settle")
-        hold = conductor.create_client(SetBool, "/learner/hold")
+        driver.wait_ready({"/shaper/commands": 1, "/forward_position_controller/commands": 1,
+                           "/tip_imu": listeners, "/cycle_events": listeners}, "the learner's first shaper")
+        hold = driver.conductor.create_client(SetBool, "/learner/hold")
         for k in range(cycles):
             if k == hold_after:
-                answer = conductor.call(hold, SetBool.Request(data=True), timeout=30.0)
+                answer = driver.conductor.call(hold, SetBool.Request(data=True), timeout=30.0)
                 if not answer.success:
                     raise RuntimeError(f"the learner did not hold: {answer.message}")
-            result = conductor.run_cycles(1, timeout=300.0)[0]
-            conductor.spin_until(lambda: len(reports) > k, 120.0, f"the learner's report of cycle {k}")
-            r = reports[k]
+            result, r = driver.cycle(k)
             skipped = "skipped" in r.metric_names
-            it = Iteration(k, skipped, _metric(r, "M"), _metric(r, "phi"), _metric(r, "a1_used"),
-                           _metric(r, "t2_used"), _metric(r, "a1_next"), _metric(r, "t2_next"), _action(r),
+            it = Iteration(k, skipped, metric(r, "M"), metric(r, "phi"), metric(r, "a1_used"),
+                           metric(r, "t2_used"), metric(r, "a1_next"), metric(r, "t2_next"), action(r),
                            result.residual.rms)
             out.append(it)
             if progress:
                 progress(it)
     finally:
-        conductor.close()
+        driver.close()
     return out
 
 
@@ -163,7 +140,7 @@ def plot(path: pathlib.Path, results: dict[str, list[Iteration]]) -> None:
         axes[0].semilogy([r.index for r in shaped], [r.m for r in shaped], "o-", ms=3, label=name)
         axes[1].plot([r.index for r in shaped], [r.a1 for r in shaped], "o-", ms=3, label=name)
         axes[2].plot([r.index for r in shaped], [r.t2 for r in shaped], "o-", ms=3, label=name)
-    for ax, title in zip(axes, ("M (m/s², RMS of the filtered residual)", "A1", "T2 (s)")):
+    for ax, title in zip(axes, ("M (m/s², RMS of the filtered residual)", "A1", "T2 (s)"), strict=True):
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("cycle (0 = unshaped reference)")
         ax.grid(alpha=0.3)
@@ -178,14 +155,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cases", default=",".join(CASES), help=f"cases to run (default {','.join(CASES)})")
     p.add_argument("--cycles", type=int, default=13, help="cycles per case, the first unshaped (default 13)")
     p.add_argument("--noise", type=float, default=0.0, help="accelerometer noise, m/s^2 (default 0)")
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where list_results.md and img/list_cases.png go (default docs)")
+    docs_option(p, "list_results.md and img/list_cases.png")
     args = p.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    logs = logs_folder("list_cases")
     from sim_plant_node.conductor import node_session
 
-    logs = pathlib.Path("out") / "list_cases"
-    logs.mkdir(parents=True, exist_ok=True)
     results: dict[str, list[Iteration]] = {}
     t0 = time.monotonic()
     for name in args.cases.split(","):
@@ -198,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
                                           progress=lambda r: print(
                 f"  cycle {r.index:2d}: M {r.m:9.4g}  A1 {r.a1:.5f}  T2 {r.t2:.5f}  {r.action}", flush=True))
     text = ["# LIST on seed 003's four cases (generated)", "",
-            f"Regenerate with `./run exec python -m sim_plant_node.list_cases` ({args.cycles} cycles per case,"
+            f"Regenerate with `./run exec python -m reproductions.list_cases` ({args.cycles} cycles per case,"
             f" accelerometer noise {args.noise:g} m/s²; sim plant, shaper and learner as separate processes in"
             " lockstep). Cycle 0 runs unshaped: it is the phase reference (and the initial guess for cases 2-4);"
             " before the last cycle the learner is told to hold (`~/hold`), so the last row runs the best"

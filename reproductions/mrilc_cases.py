@@ -8,7 +8,7 @@ reference and back (``task.round_trip``), each followed by a dwell, from rest (t
 put at rest at the start pose before every cycle, the paper's repeated initial condition).
 The driver runs one cycle at a time and waits for the learner's report before the next.
 
-``python -m sim_plant_node.mrilc_cases`` regenerates docs/mrilc_results.md and
+``python -m reproductions.mrilc_cases`` regenerates docs/mrilc_results.md and
 docs/img/mrilc_learning.png (see --help); the integration test calls :func:`run_learning`
 and :func:`run_shaper_only`.
 """
@@ -17,14 +17,18 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import pathlib
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
+from reproductions.common import LearnerDriver, action, docs_option, logs_folder, metric
 from sim_plant_node.plants import mck_from_mode
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 #: sample rate of the graph runs, Hz (see docs/mrilc.md: why not 1 kHz)
 RATE = 200.0
@@ -45,72 +49,43 @@ class Iteration:
     residual: float          # RMS of y - r after the shaped return step has come to rest (learner's)
 
 
-def _metric(report, name: str) -> float:
-    try:
-        return float(report.metric_values[list(report.metric_names).index(name)])
-    except ValueError:
-        return float("nan")
-
-
 def plant_params(mode: tuple[float, float]) -> dict:
     """Sim plant parameters of the paper's loop around the plant (omega, zeta)."""
     m, c, k = mck_from_mode(*mode)
     return {"plant.model": "mck_pid", "plant.mass": [m], "plant.damping": [c], "plant.stiffness": [k]}
 
 
-def _nodes(start: Callable, plant_mode: tuple[float, float]) -> None:
+def _nodes(start: StartNode, plant_mode: tuple[float, float]) -> None:
     start("sim_plant_node", "sim_plant", {"joint_names": JOINT, "rate": RATE, "mode": "lockstep",
                                           "imu.axes": [0, -1, -1], **plant_params(plant_mode), **TASK})
     start("shaper_nodes", "shaper_node", {"joint_names": JOINT, "command_rate": RATE, "use_sim_time": True})
 
 
-def _settle(conductor, seconds: float = 1.0) -> None:
-    # the driver has discovered every node; give the plant's publishers a moment to match the
-    # learner's subscriptions too (else the learner may miss the first START)
-    settle = time.monotonic() + seconds
-    conductor.spin_until(lambda: time.monotonic() > settle, seconds + 5.0, "discovery to settle")
-
-
-def run_learning(plant_mode: tuple[float, float], iterations: int, start: Callable, ctx, learner: dict | None = None,
+def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartNode, ctx, learner: dict | None = None,
                  progress: Callable[[Iteration], None] | None = None) -> list[Iteration]:
     """``iterations`` cycles with the MRILC learner on the plant (omega, zeta); one Iteration each."""
-    from shaper_nodes.nodes.shaper import LATCHED
-    from sim_plant_node.conductor import Conductor
-
-    from shaper_msgs.msg import CycleReport
-    from shaper_msgs.msg import Shaper as ShaperMsg
-
     _nodes(start, plant_mode)
     start("shaper_nodes", "learner", {"mode": "mrilc", "mrilc.rate": RATE, "use_sim_time": True,
                                       "joint_names": JOINT, **(learner or {})})
-    conductor = Conductor(context=ctx)
-    reports: list = []
-    active: list = []
-    conductor.create_subscription(CycleReport, "/learner/reports", reports.append, 100)
-    conductor.create_subscription(ShaperMsg, "/shaper/active_shaper", active.append, LATCHED)
+    driver = LearnerDriver(ctx)
     out: list[Iteration] = []
     try:
-        conductor.wait_ready(60.0, {"/shaper/commands": 1, "/forward_position_controller/commands": 1,
-                                    "/joint_states": 2, "/sim_plant/reference": 1, "/cycle_events": 2})
-        conductor.spin_until(lambda: bool(active) and active[-1].source == "learner", 60.0,
-                             "the learner's shaper")
-        _settle(conductor)
+        driver.wait_ready({"/shaper/commands": 1, "/forward_position_controller/commands": 1,
+                           "/joint_states": 2, "/sim_plant/reference": 1, "/cycle_events": 2}, "the learner's shaper")
         for k in range(iterations):
-            conductor.run_cycles(1, timeout=300.0)
-            conductor.spin_until(lambda: len(reports) > k, 120.0, f"the learner's report of cycle {k}")
-            r = reports[k]
-            action = next((n.split(".", 1)[1] for n in r.metric_names if n.startswith("action.")), "skipped")
-            it = Iteration(int(_metric(r, "iteration")) if action != "skipped" else -1, _metric(r, "rms_e"),
-                           _metric(r, "rms_u1"), _metric(r, "rms_u2"), action, _metric(r, "residual"))
+            _, r = driver.cycle(k)
+            done = action(r)
+            it = Iteration(int(metric(r, "iteration")) if done != "skipped" else -1, metric(r, "rms_e"),
+                           metric(r, "rms_u1"), metric(r, "rms_u2"), done, metric(r, "residual"))
             out.append(it)
             if progress:
                 progress(it)
     finally:
-        conductor.close()
+        driver.close()
     return out
 
 
-def run_shaper_only(plant_mode: tuple[float, float], cycles: int, start: Callable, ctx) -> list[Iteration]:
+def run_shaper_only(plant_mode: tuple[float, float], cycles: int, start: StartNode, ctx) -> list[Iteration]:
     """``cycles`` cycles with the ZVD shaper on the reference model alone: the learner only
     measures (``mrilc.learn`` false, u2 = 0)."""
     return run_learning(plant_mode, cycles, start, ctx, {"mrilc.learn": False})
@@ -134,7 +109,8 @@ def plot(path: pathlib.Path, runs: dict[str, list[Iteration]]) -> None:
         axes[0].semilogy(it, [r.rms_e for r in rows], label=name)
         axes[1].plot(it, [r.rms_u1 for r in rows], label=name)
         axes[2].plot(it, [r.rms_u2 for r in rows], label=name)
-    for ax, title in zip(axes, ("RMS of e = y_m - y", "RMS of u1 (feedback effort)", "RMS of u2 (ILC effort)")):
+    for ax, title in zip(axes, ("RMS of e = y_m - y", "RMS of u1 (feedback effort)", "RMS of u2 (ILC effort)"),
+                         strict=True):
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
@@ -148,14 +124,11 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="mrilc_cases", description=__doc__.split("\n\n")[0])
     p.add_argument("--iterations", type=int, default=400, help="iterations of the P-type run (default 400)")
     p.add_argument("--robust-iterations", type=int, default=60, help="iterations of the robust-law run (default 60)")
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where mrilc_results.md and img/mrilc_learning.png go (default docs)")
+    docs_option(p, "mrilc_results.md and img/mrilc_learning.png")
     args = p.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    logs = logs_folder("mrilc_cases")
     from sim_plant_node.conductor import node_session
 
-    logs = pathlib.Path("out") / "mrilc_cases"
-    logs.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
 
     def session(name: str, fn):
@@ -180,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         "robust", lambda s, c: run_learning(PERTURBED, args.robust_iterations, s, c,
                                             {"mrilc.law": "robust"}, progress=show))
     text = ["# MRILC on seed 000's example (generated)", "",
-            f"Regenerate with `./run exec python -m sim_plant_node.mrilc_cases` (sim plant, shaper and learner as"
+            f"Regenerate with `./run exec python -m reproductions.mrilc_cases` (sim plant, shaper and learner as"
             f" separate processes in lockstep at {RATE:g} Hz; every cycle a unit step and back, {TASK['task.dwell']} s"
             " each; the perturbed plant w = 5 rad/s, zeta = 0.15; the ZVD shaper designed on the reference model's"
             " mode). See [mrilc.md](mrilc.md) for the method.", "",
@@ -190,9 +163,10 @@ def main(argv: list[str] | None = None) -> int:
             f"| nominal plant, ZVD alone | {nominal[-1].residual:.4g} |",
             f"| perturbed plant, ZVD alone | {perturbed[-1].residual:.4g} |"]
     for name, rows in runs.items():
-        text.append(f"| perturbed plant, ZVD + MRILC {name}, iteration {rows[-1].iteration} | {rows[-1].residual:.4g} |")
-    text += ["", "Learning curves:", "", "| law | RMS e it. 1 | iterations to 2 % | RMS e last | ratio last | RMS u1 first"
-             " -> last | RMS u2 last |", "|---|---|---|---|---|---|---|"]
+        text.append(f"| perturbed plant, ZVD + MRILC {name}, iteration {rows[-1].iteration} |"
+                    f" {rows[-1].residual:.4g} |")
+    text += ["", "Learning curves:", "", "| law | RMS e it. 1 | iterations to 2 % | RMS e last | ratio last |"
+             " RMS u1 first -> last | RMS u2 last |", "|---|---|---|---|---|---|---|"]
     for name, rows in runs.items():
         text.append(f"| {name} | {rows[0].rms_e:.4g} | {iterations_to(rows, 0.02)} | {rows[-1].rms_e:.3g}"
                     f" (it. {rows[-1].iteration}) | {rows[-1].rms_e / rows[0].rms_e:.2e} | {rows[0].rms_u1:.4g} ->"

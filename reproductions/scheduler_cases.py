@@ -14,30 +14,30 @@ steps, triangular memberships) and (c-modes) case (c) interpolating the mode par
 The residual vibration of a step is the largest |x1 - x0| (m) from WINDOW s after the step to
 the next step (the longest ZV here lasts 8.9 s).
 
-``python -m sim_plant_node.scheduler_cases`` regenerates docs/scheduler_results.md and
+``python -m reproductions.scheduler_cases`` regenerates docs/scheduler_results.md and
 docs/img/scheduler_*.png (see --help); the integration test calls :func:`run_case`.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import math
-import os
 import pathlib
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from sim_plant_node.two_mass import (
-    STEP_LEVELS,
-    STEP_POSES,
-    m1_of,
-    rule_base_spec,
-    scheduler_parameters,
-    two_mass_matrices,
-)
+
+from reproductions.common import docs_option, logs_folder
+from shaper_nodes.core.cycles import END, START
+from sim_plant_node.two_mass import STEP_LEVELS, STEP_POSES, m1_of, two_mass_matrices
+
+if TYPE_CHECKING:
+    from sim_plant_node.conductor import StartNode
 
 RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz)
 DWELL = 30.0      # s per step
@@ -51,6 +51,37 @@ def _mode_at(m1: float):
     from shaper_nodes.core.scheduling import modes_of
 
     return modes_of(two_mass_matrices(m1)[0])[0]
+
+
+def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangular",
+                   with_models: bool = True, with_modes: bool = True) -> dict:
+    """A rule base (the mapping core.fuzzy.rule_base_from_dict takes) with one rule per pose x0
+    in ``points`` (m): eq. (1) linearised at m1 = 10 x0 + 1 and/or its mode, and triangles
+    peaking at each point (shoulders at the ends)."""
+    from shaper_nodes.core.scheduling import modes_of, triangular_partition
+
+    rules = {}
+    for i, (x, mf) in enumerate(zip(points, triangular_partition(points), strict=True)):
+        a, b = two_mass_matrices(float(m1_of(x)))
+        rule: dict = {"membership": [membership], "membership_params": [mf.a, mf.b, mf.c]}
+        if with_models:
+            rule.update(a_matrix=a.ravel().tolist(), b_matrix=b.ravel().tolist())
+        if with_modes:
+            (mode,) = modes_of(a)
+            rule.update(natural_frequency=[mode.omega], damping_ratio=[mode.zeta])
+        rules[f"x{i}"] = rule
+    return {"premises": [premise], "rules": rules}
+
+
+def scheduler_parameters(spec: dict) -> dict:
+    """The scheduler node's parameters (flat names) for a rule base mapping (see rule_base_spec)."""
+    out: dict = {"premises": list(spec["premises"]), "rule_names": list(spec["rules"])}
+    if spec.get("range"):
+        out["range"] = [float(v) for v in spec["range"]]
+    for name, rule in spec["rules"].items():
+        for key, value in rule.items():
+            out[f"rules.{name}.{key}"] = [v if isinstance(v, str) else float(v) for v in value]
+    return out
 
 
 def switch_spec() -> dict:
@@ -110,28 +141,88 @@ class Run:
 
 def residuals(t: np.ndarray, x0: np.ndarray, x1: np.ndarray, step_times: np.ndarray) -> np.ndarray:
     """Largest |x1 - x0| from WINDOW s after each step to the next step (or the end), m."""
-    ends = list(step_times[1:]) + [t[-1] + 1e-9]
+    ends = [*step_times[1:], t[-1] + 1e-9]
     out = []
-    for ts, te in zip(step_times, ends):
+    for ts, te in zip(step_times, ends, strict=True):
         sel = (t >= ts + WINDOW) & (t < te)
         out.append(float(np.max(np.abs(x1[sel] - x0[sel]))) if np.any(sel) else float("nan"))
     return np.array(out)
 
 
-def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout: float = 900.0,
-             progress: Callable[[str], None] | None = None) -> Run:
-    """Run the five steps of ``case``; ``start(package, executable, params)`` starts a node process."""
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from sensor_msgs.msg import JointState
-    from shaper_nodes.nodes.shaper import LATCHED
-    from shaper_nodes.ros.conversions import time_to_sec
-    from std_msgs.msg import Float64MultiArray
-    from std_srvs.srv import Trigger
+class _Recorder:
+    """What a case's run publishes, as it arrives (times in s of simulated time)."""
 
-    from shaper_msgs.msg import CycleEvent, ModeEstimate
-    from shaper_msgs.msg import Shaper as ShaperMsg
+    def __init__(self, node: Any) -> None:
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
 
+        from shaper_msgs.msg import CycleEvent, ModeEstimate
+        from shaper_msgs.msg import Shaper as ShaperMsg
+        from shaper_nodes.ros.conversions import time_to_sec
+        from shaper_nodes.ros.qos import LATCHED
+
+        self._sec = time_to_sec
+        self.js: list[tuple[float, float]] = []       # time, x0
+        self.tip: list[tuple[float, float]] = []      # time, x1
+        self.cmd: list[float] = []                    # shaped commands v_s, in order
+        self.modes: list[tuple[float, float, float]] = []  # time, rad/s, -
+        self.events: list[tuple[int, int, float]] = []     # kind, cycle, time
+        self.active: list[tuple[float, str, str]] = []     # time, source, family
+        node.create_subscription(JointState, "/joint_states", self._on_js, 1000)
+        node.create_subscription(JointState, "/sim_plant/tip_state", self._on_tip, 1000)
+        node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self._on_cmd, 1000)
+        node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, LATCHED)
+        node.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
+        node.create_subscription(ShaperMsg, "/shaper/active_shaper", self._on_shaper, LATCHED)
+
+    def _on_js(self, m: Any) -> None:
+        self.js.append((self._sec(m.header.stamp), m.position[0]))
+
+    def _on_tip(self, m: Any) -> None:
+        self.tip.append((self._sec(m.header.stamp), m.position[0]))
+
+    def _on_cmd(self, m: Any) -> None:
+        self.cmd.append(m.data[0])
+
+    def _on_mode(self, m: Any) -> None:
+        self.modes.append((self._sec(m.header.stamp), m.modes[0].natural_frequency, m.modes[0].damping_ratio))
+
+    def _on_event(self, m: Any) -> None:
+        self.events.append((int(m.event), int(m.cycle), self._sec(m.header.stamp)))
+
+    def _on_shaper(self, m: Any) -> None:
+        self.active.append((self._sec(m.header.stamp), m.source, m.family))
+
+    def ends(self) -> list[float]:
+        """Times of the END events so far."""
+        return [t for k, _, t in self.events if k == END]
+
+    def complete(self, steps: int) -> bool:
+        """Whether ``steps`` steps have ended and the joint and tip states up to the last END are in."""
+        ends = self.ends()
+        last_end = max(ends, default=math.inf)
+        return (len(ends) >= steps and bool(self.js) and self.js[-1][0] >= last_end and bool(self.tip)
+                and self.tip[-1][0] >= last_end)
+
+    def run(self, case: Case) -> Run:
+        """The recording as a :class:`Run`: joint and tip states paired by stamp, residuals per step."""
+        # a loaded machine may starve this driver and let a few messages go (the plant keeps 10); what
+        # arrived is paired by stamp, and a run that lost more than 10 % is an error
+        t_js, x0_all = np.array(self.js).T
+        t_tip, x1_all = np.array(self.tip).T
+        t0, i0, i1 = np.intersect1d(t_js, t_tip, return_indices=True)
+        x0, x1 = x0_all[i0], x1_all[i1]
+        expected = int(round((PREROLL + len(STEP_LEVELS) * DWELL) * RATE))
+        if t0.size < 0.9 * expected:
+            raise RuntimeError(f"only {t0.size} of {expected} joint and tip states arrived")
+        v = np.array(self.cmd)  # the k-th shaped command is integrated over the k-th step (if none was lost)
+        step_times = np.array(sorted(t for k, _, t in self.events if k == START))
+        m = np.array(self.modes).reshape(-1, 3).T if self.modes else np.zeros((3, 0))
+        return Run(case, t0, x0, x1, v, m[0], m[1], m[2], step_times, residuals(t0, x0, x1, step_times),
+                   self.active)
+
+
+def _start_nodes(case: Case, start: StartNode) -> None:
     start("sim_plant_node", "sim_plant", {
         "joint_names": [JOINT], "rate": RATE, "mode": "lockstep", "plant.model": "two_mass",
         "imu.axes": [0, -1, -1], "task.start": [0.0], "task.levels": [float(v) for v in STEP_LEVELS],
@@ -142,53 +233,50 @@ def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout
         start("shaper_nodes", "scheduler", {"use_sim_time": True, **case.scheduler})
     start("shaper_nodes", "shaper_node", shaper)
 
+
+def _wait_for_nodes(case: Case, node: Any, until: Callable[[Callable[[], bool], float, str], None],
+                    rec: _Recorder, start_cli: Any) -> None:
+    """Wait for the services, the subscribers and the first active shaper, then let discovery settle."""
+    until(start_cli.service_is_ready, 60.0, "the sim plant")
+    need = {"/shaper/commands": 1, "/forward_position_controller/commands": 2, "/joint_states": 1,
+            "/sim_plant/tip_state": 1}
+    if case.scheduler is not None:
+        need["/joint_states"] = 2
+        from shaper_msgs.srv import GetShaper
+
+        sched = node.create_client(GetShaper, "/scheduler/get_shaper")
+        until(sched.service_is_ready, 60.0, "the scheduler")
+    for topic, n in need.items():
+        until(functools.partial(_has_subscribers, node, topic, n), 60.0, f"{n} subscribers on {topic}")
+    until(lambda: bool(rec.active), 60.0, "the shaper's active shaper")
+    settle = time.monotonic() + 1.0
+    until(lambda: time.monotonic() > settle, 5.0, "discovery to settle")
+
+
+def _has_subscribers(node: Any, topic: str, n: int) -> bool:
+    return bool(node.count_subscribers(topic) >= n)
+
+
+def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
+             progress: Callable[[str], None] | None = None) -> Run:
+    """Run the five steps of ``case``; ``start(package, executable, params)`` starts a node process."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_srvs.srv import Trigger
+
+    from sim_plant_node.conductor import spin_until
+
+    _start_nodes(case, start)
     node = Node("scheduler_cases", context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    js: list = []
-    tip: list = []
-    cmd: list = []
-    modes: list = []
-    events: list = []
-    active: list = []
-    node.create_subscription(JointState, "/joint_states", lambda m: js.append(
-        (time_to_sec(m.header.stamp), m.position[0])), 1000)
-    node.create_subscription(JointState, "/sim_plant/tip_state", lambda m: tip.append(
-        (time_to_sec(m.header.stamp), m.position[0])), 1000)
-    node.create_subscription(Float64MultiArray, "/forward_position_controller/commands",
-                             lambda m: cmd.append(m.data[0]), 1000)
-    node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", lambda m: modes.append(
-        (time_to_sec(m.header.stamp), m.modes[0].natural_frequency, m.modes[0].damping_ratio)), LATCHED)
-    node.create_subscription(CycleEvent, "/cycle_events", lambda m: events.append(
-        (int(m.event), int(m.cycle), time_to_sec(m.header.stamp))), 100)
-    node.create_subscription(ShaperMsg, "/shaper/active_shaper", lambda m: active.append(
-        (time_to_sec(m.header.stamp), m.source, m.family)), LATCHED)
+    rec = _Recorder(node)
     start_cli = node.create_client(Trigger, "/sim_plant/start_task")
-
-    def spin_until(done, limit, what):
-        deadline = time.monotonic() + limit
-        while not done():
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"timed out after {limit:g} s waiting for {what}")
-            ex.spin_once(timeout_sec=0.05)
-
+    until = functools.partial(spin_until, ex)
     try:
-        spin_until(start_cli.service_is_ready, 60.0, "the sim plant")
-        need = {"/shaper/commands": 1, "/forward_position_controller/commands": 2, "/joint_states": 1,
-                "/sim_plant/tip_state": 1}
-        if case.scheduler is not None:
-            need["/joint_states"] = 2
-            from shaper_msgs.srv import GetShaper
-
-            sched = node.create_client(GetShaper, "/scheduler/get_shaper")
-            spin_until(sched.service_is_ready, 60.0, "the scheduler")
-        for topic, n in need.items():
-            spin_until(lambda t=topic, k=n: node.count_subscribers(t) >= k, 60.0, f"{n} subscribers on {topic}")
-        spin_until(lambda: bool(active), 60.0, "the shaper's active shaper")
-        settle = time.monotonic() + 1.0
-        spin_until(lambda: time.monotonic() > settle, 5.0, "discovery to settle")
+        _wait_for_nodes(case, node, until, rec, start_cli)
         future = start_cli.call_async(Trigger.Request())
-        spin_until(future.done, 30.0, "the task to start")
+        until(future.done, 30.0, "the task to start")
         if not future.result().success:
             raise RuntimeError(f"sim plant did not start: {future.result().message}")
         n_steps = len(STEP_LEVELS)
@@ -196,32 +284,19 @@ def run_case(case: Case, start: Callable[[str, str, dict], object], ctx, timeout
 
         def finished() -> bool:
             nonlocal seen
-            ends = sum(1 for k, _, _ in events if k == 2)
+            ends = len(rec.ends())
             if progress and ends > seen:
                 seen = ends
                 progress(f"step {ends} of {n_steps} done")
-            last_end = max((t for k, _, t in events if k == 2), default=math.inf)
-            return ends >= n_steps and bool(js) and js[-1][0] >= last_end and bool(tip) and tip[-1][0] >= last_end
+            return rec.complete(n_steps)
 
-        spin_until(finished, timeout, "the five steps")
+        until(finished, timeout, "the five steps")
         settle = time.monotonic() + 0.5
-        spin_until(lambda: time.monotonic() > settle, 5.0, "the last messages")
+        until(lambda: time.monotonic() > settle, 5.0, "the last messages")
     finally:
         ex.shutdown()
         node.destroy_node()
-    # a loaded machine may starve this driver and let a few messages go (the plant keeps 10); what
-    # arrived is paired by stamp, and a run that lost more than 10 % is an error
-    t_js, x0_all = np.array(js).T
-    t_tip, x1_all = np.array(tip).T
-    t0, i0, i1 = np.intersect1d(t_js, t_tip, return_indices=True)
-    x0, x1 = x0_all[i0], x1_all[i1]
-    expected = int(round((PREROLL + len(STEP_LEVELS) * DWELL) * RATE))
-    if t0.size < 0.9 * expected:
-        raise RuntimeError(f"only {t0.size} of {expected} joint and tip states arrived")
-    v = np.array(cmd)  # the k-th shaped command is integrated over the k-th step (if none was lost)
-    step_times = np.array(sorted(t for k, _, t in events if k == 0))
-    m = np.array(modes).reshape(-1, 3).T if modes else np.zeros((3, 0))
-    return Run(case, t0, x0, x1, v, m[0], m[1], m[2], step_times, residuals(t0, x0, x1, step_times), active)
+    return rec.run(case)
 
 
 # --------------------------------------------------------------------------------------------- docs
@@ -232,7 +307,7 @@ def interpolation_table() -> str:
 
     xs = np.linspace(0.0, 0.7, 281)
     true = np.array([_mode_at(float(m1)).omega for m1 in m1_of(xs)])
-    mids = [0.5 * (a + b) for a, b in zip((0.0,) + STEP_POSES[:-1], STEP_POSES)]
+    mids = [0.5 * (a + b) for a, b in zip((0.0, *STEP_POSES[:-1]), STEP_POSES, strict=True)]
     lines = ["| operating points x0 (m) | interpolating | largest error | error at the steps' midpoints"
              f" x0 = {', '.join(f'{m:.3g}' for m in mids)} m |", "|---|---|---|---|"]
     for label, pts in (("0.02, 0.7 (the paper's two)", STEP_POSES[::4]),
@@ -306,43 +381,27 @@ def plot(docs: pathlib.Path, runs: dict[str, Run]) -> list[pathlib.Path]:
     path = docs / "img" / "scheduler_modes.png"
     fig.savefig(path, dpi=100)
     plt.close(fig)
-    return paths + [path]
+    return [*paths, path]
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="scheduler_cases", description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default="a,b,c", help="cases to run (default a,b,c; also c2, c-modes)")
     p.add_argument("--extra", action="store_true", help="also run c2 and c-modes")
-    p.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                   help="where scheduler_results.md and img/scheduler_*.png go (default docs)")
+    docs_option(p, "scheduler_results.md and img/scheduler_*.png")
     args = p.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from shaper_nodes.ros.launching import NodeProcess
-    from sim_plant_node.conductor import spin_context
+    logs = logs_folder("scheduler_cases")
+    from sim_plant_node.conductor import node_session
 
     names = [n.strip() for n in args.cases.split(",")] + (["c2", "c-modes"] if args.extra else [])
-    logs = pathlib.Path("out") / "scheduler_cases"
-    logs.mkdir(parents=True, exist_ok=True)
     runs: dict[str, Run] = {}
     t_start = time.monotonic()
     for name in dict.fromkeys(names):
         case = CASES[name]
-        procs: list = []
-
-        def start(package, executable, params, case=case, procs=procs):
-            proc = NodeProcess(package, executable, params, log_path=logs / f"{case.name}-{executable}.log")
-            procs.append(proc.start())
-            return proc
-
-        ctx = spin_context()
-        print(f"({case.name}) {case.title}", flush=True)
-        t_case = time.monotonic()
-        try:
+        with node_session(logs, case.name) as (start, ctx):
+            print(f"({case.name}) {case.title}", flush=True)
+            t_case = time.monotonic()
             runs[name] = run_case(case, start, ctx, progress=lambda s: print("  " + s, flush=True))
-        finally:
-            ctx.try_shutdown()
-            for proc in reversed(procs):
-                proc.stop()
         print("  residual (mm): " + ", ".join(f"{1e3 * r:.3f}" for r in runs[name].residual)
               + f" ({time.monotonic() - t_case:.0f} s)", flush=True)
     args.docs.mkdir(parents=True, exist_ok=True)
@@ -352,7 +411,7 @@ def main(argv: list[str] | None = None) -> int:
     ratio = "".join(f" sum(a) / sum({n}) = {a.residual.sum() / r.residual.sum():.1f}."
                     for n, r in runs.items() if a is not None and n != "a")
     text = ["# Seed 004 through the ROS graph: fixed, switched and fuzzy-scheduled ZV (generated)", "",
-            "Regenerate with `./run exec python -m sim_plant_node.scheduler_cases` (add `--extra` for the paper's"
+            "Regenerate with `./run exec python -m reproductions.scheduler_cases` (add `--extra` for the paper's"
             " two-rule base and for interpolating mode parameters). Sim plant (`plant.model: two_mass`, lockstep at"
             f" {RATE:g} Hz), shaper node and scheduler node run as separate processes; five velocity steps of"
             f" {DWELL:g} s each put x0 at {', '.join(f'{x:g}' for x in STEP_POSES)} m. Residual: the largest"

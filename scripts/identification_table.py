@@ -14,6 +14,7 @@ import sys
 import time
 
 import numpy as np
+
 from shaper_nodes.core.identification import METHODS, IdentificationError, identify
 
 RATE = 1000.0

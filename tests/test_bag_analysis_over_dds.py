@@ -19,7 +19,8 @@ import time
 
 import pytest
 
-from reproductions.list_cases import CASES, LEARNER, _metric, run_case
+from reproductions.common import metric as _metric
+from reproductions.list_cases import CASES, LEARNER, run_case
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import Bag, mcap_chunks
 from shaper_nodes.analysis.streams import read_recording

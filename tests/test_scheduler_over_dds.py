@@ -18,7 +18,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from reproductions.scheduler_cases import CASES, run_case
+from reproductions.scheduler_cases import CASES, rule_base_spec, run_case, scheduler_parameters
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
@@ -26,7 +26,7 @@ from shaper_nodes.core.scheduling.fuzzy import modes_of
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.nodes.scheduler import SchedulerNode
 from shaper_nodes.ros.qos import LATCHED
-from sim_plant_node.two_mass import m1_of, rule_base_spec, scheduler_parameters, two_mass_matrices
+from sim_plant_node.two_mass import m1_of, two_mass_matrices
 
 pytestmark = pytest.mark.integration
 

@@ -9,28 +9,39 @@ what it receives, with the same core code (``CycleMonitor``) that the plant's re
 from __future__ import annotations
 
 import contextlib
+import functools
 import pathlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 import rclpy
 from rcl_interfaces.srv import SetParameters
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
-from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
-from shaper_nodes.ros.conversions import time_to_sec
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
+from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
+from shaper_nodes.ros.conversions import time_to_sec
 
 from .plants import mck_from_mode
+
+
+def spin_until(executor: Executor, done: Callable[[], bool], timeout: float, what: str) -> None:
+    """Spin ``executor`` until ``done()``; ``TimeoutError`` (naming ``what``) after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not done():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+        executor.spin_once(timeout_sec=0.05)
 
 
 class Conductor(Node):
@@ -71,11 +82,7 @@ class Conductor(Node):
 
     # ----------------------------------------------------------------- driving
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not done():
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
-            self.executor_.spin_once(timeout_sec=0.05)
+        spin_until(self.executor_, done, timeout, what)
 
     def call(self, client, request, timeout: float = 10.0):
         self.spin_until(client.service_is_ready, timeout, f"service {client.srv_name}")
@@ -88,8 +95,10 @@ class Conductor(Node):
         for cli in (self.set_shaper_cli, self.plant_params_cli, self.start_cli):
             self.spin_until(cli.service_is_ready, timeout, f"service {cli.srv_name}")
         for topic, n in (subscribers or {}).items():
-            self.spin_until(lambda t=topic, k=n: self.count_subscribers(t) >= k, timeout,
-                            f"{n} subscribers on {topic}")
+            self.spin_until(functools.partial(self._has_subscribers, topic, n), timeout, f"{n} subscribers on {topic}")
+
+    def _has_subscribers(self, topic: str, n: int) -> bool:
+        return self.count_subscribers(topic) >= n
 
     def set_shaper(self, family: str, omega: float = 1.0, zeta: float = 0.0, source: str = "user",
                    **extra) -> SetShaper.Response:
@@ -147,23 +156,27 @@ def rms(results: list[CycleResult]) -> float:
     return float(np.mean([r.residual.rms for r in results]))
 
 
-def spin_context(domain_id: int | None = None):
+def spin_context(domain_id: int | None = None) -> rclpy.context.Context:
     """A fresh rclpy context (optionally on a given ROS domain)."""
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain_id)
     return ctx
 
 
+#: ``start(package, executable, params)``: start a node process (what :func:`node_session` yields)
+StartNode = Callable[[str, str, dict[str, Any]], Any]
+
+
 @contextlib.contextmanager
-def node_session(logs: pathlib.Path, prefix: str):
+def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, rclpy.context.Context]]:
     """Yield ``(start, ctx)``: ``start(package, executable, params)`` starts a node process (log in
     ``logs/<prefix>-<executable>.log``), ``ctx`` a fresh rclpy context; at exit the context is
     shut down and every process started is stopped (in reverse order)."""
-    from shaper_nodes.ros.launching import NodeProcess
+    from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
-    procs: list = []
+    procs: list[ChildProcess] = []
 
-    def start(package: str, executable: str, params: dict):
+    def start(package: str, executable: str, params: dict[str, Any]) -> NodeProcess:
         proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log")
         procs.append(proc.start())
         return proc

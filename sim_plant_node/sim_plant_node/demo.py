@@ -49,7 +49,7 @@ def plot(path: pathlib.Path, traces: dict, offsets: list[float], shapers: list[s
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(len(offsets), 1, figsize=(10, 2.8 * len(offsets)), sharex=True, squeeze=False)
-    for ax, off in zip(axes[:, 0], offsets):
+    for ax, off in zip(axes[:, 0], offsets, strict=True):
         for fam in shapers:
             r = traces[(off, fam)]
             ax.plot(r.accel_times - r.start, r.accel[:, 0], lw=0.8, label=fam)

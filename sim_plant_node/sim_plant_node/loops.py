@@ -3,8 +3,9 @@
 The reference r of the loop is the (shaped) command the sim plant receives; the controller
 output u drives the base x1, the tip x2 is the plant output. As for the seed 000 loop
 (``mck_pid``), /joint_states carries the output y (position), y' (velocity) and the control u
-(effort), and ~/tip_state y and y'; ~/loop_state adds the measured output and the reference. Per joint, x2 / x1 = (c s + k) / (m s^2 + c s + k) (c = 0: the undamped
-plant w_R^2 / (s^2 + w_R^2) of seed 001). The controller runs ``substeps`` times per command
+(effort), and ~/tip_state y and y'; ~/loop_state adds the measured output and the reference.
+Per joint, x2 / x1 = (c s + k) / (m s^2 + c s + k) (c = 0: the undamped plant
+w_R^2 / (s^2 + w_R^2) of seed 001). The controller runs ``substeps`` times per command
 period (loop rate = rate x substeps); at each loop sample k
 
     y_k  = x2(t_k) + d_o(t_k)            plant output with the plant-output disturbance
@@ -40,12 +41,14 @@ the first START): d_o = ``disturbance_step`` once ``cycle_time >= disturbance_ti
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from scipy.linalg import expm, null_space
+
 from shaper_nodes.core.closed_loop import ppusmd_gains, qft
 
-from .plants import MckMode, _JointState, _per_joint
+from .plants import MckMode, _JointState, check_rate, plant_values
 
 LOOP_MODELS = ("delay_loop", "qft_open", "qft_fb", "qft_ffb")
 #: the loop parameters of the sim plant node: name -> (default, description)
@@ -62,6 +65,42 @@ LOOP_PARAMS: dict[str, tuple[object, str]] = {
     "loop.noise_stddev": (0.0, "Loop models: white measurement noise, m (one sigma, per loop sample)."),
     "loop.seed": (1, "Loop models: seed of the measurement-noise generator."),
 }
+
+
+#: loop parameters that must be finite, and those that must also be >= 0
+_FINITE = ("loop.disturbance_step", "loop.noise_step")
+_NON_NEGATIVE = ("loop.disturbance_time", "loop.noise_time", "loop.noise_stddev")
+
+
+def check_loop_value(name: str, value: Any) -> Any:
+    """The loop plants' check of the value of the loop parameter ``name`` (one of :data:`LOOP_PARAMS`);
+    returns it as the plants use it (an int, a float, an array) or raises ``ValueError``."""
+    if name == "loop.substeps":
+        if isinstance(value, bool) or int(value) != value or int(value) < 1:
+            raise ValueError(f"loop.substeps must be an integer >= 1, got {value!r}")
+        return int(value)
+    if name in _FINITE or name in _NON_NEGATIVE:
+        v = float(value)
+        if not math.isfinite(v) or (name in _NON_NEGATIVE and v < 0):
+            raise ValueError(f"{name} must be finite{' and >= 0' if name in _NON_NEGATIVE else ''}, got {value!r}")
+        return v
+    if name in ("loop.assumed_frequency", "loop.delay"):
+        v = float(value)
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be finite and > 0 {'rad/s' if name == 'loop.assumed_frequency' else 's'},"
+                             f" got {v!r}")
+        return v
+    if name == "loop.gain":
+        v = float(value)
+        if not math.isfinite(v) or v < 0:
+            raise ValueError(f"loop.gain must be finite and >= 0 (0: the paper's), got {v!r}")
+        return v
+    if name == "loop.nominal":
+        nom = np.asarray(value, dtype=float).ravel()
+        if nom.size != 3 or not np.all(np.isfinite(nom)) or nom[0] <= 0 or nom[1] < 0 or nom[2] <= 0:
+            raise ValueError(f"loop.nominal must be [m > 0, c >= 0, k > 0], got {nom.tolist()}")
+        return nom
+    return value
 
 
 def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -84,27 +123,19 @@ class LoopPlant(_JointState, MckMode):
     SIGNALS = ("output", "measured", "control", "reference")
 
     def __init__(self, mass, damping, stiffness, rate: float, params: dict) -> None:
-        self.m = _per_joint("mass", mass, None, "kg")
+        self.m = plant_values("mass", mass)
         n = self.m.size
-        self.c = _per_joint("damping", damping, n, "N s/m", positive=False)
-        self.k = _per_joint("stiffness", stiffness, n, "N/m")
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
+        self.c = plant_values("damping", damping, n)
+        self.k = plant_values("stiffness", stiffness, n)
+        self.rate = check_rate(rate)
         p = {name: params.get(name, default) for name, (default, _) in LOOP_PARAMS.items()}
-        sub = p["loop.substeps"]
-        if isinstance(sub, bool) or int(sub) != sub or int(sub) < 1:
-            raise ValueError(f"loop.substeps must be an integer >= 1, got {sub!r}")
+        self.substeps = check_loop_value("loop.substeps", p["loop.substeps"])
         for name in ("loop.disturbance_step", "loop.disturbance_time", "loop.noise_step", "loop.noise_time",
                      "loop.noise_stddev"):
-            v = float(p[name])
-            if not math.isfinite(v) or (name.endswith(("time", "stddev")) and v < 0):
-                raise ValueError(f"{name} must be finite{' and >= 0' if name.endswith(('time', 'stddev')) else ''},"
-                                 f" got {p[name]!r}")
+            check_loop_value(name, p[name])
         self.params = p
         self.joints = n
-        self.rate = float(rate)
         self.dt = 1.0 / self.rate
-        self.substeps = int(sub)
         self.h = self.dt / self.substeps
         a = np.zeros((n, 3, 3))
         a[:, 0, 1] = 1.0
@@ -208,11 +239,8 @@ class DelayLoopPlant(LoopPlant):
 
     def __init__(self, mass, damping, stiffness, rate: float, params: dict) -> None:
         super().__init__(mass, damping, stiffness, rate, params)
-        wa, t = float(self.params["loop.assumed_frequency"]), float(self.params["loop.delay"])
-        if not (math.isfinite(wa) and wa > 0):
-            raise ValueError(f"loop.assumed_frequency must be finite and > 0 rad/s, got {wa!r}")
-        if not (math.isfinite(t) and t > 0):
-            raise ValueError(f"loop.delay must be finite and > 0 s, got {t!r}")
+        wa = check_loop_value("loop.assumed_frequency", self.params["loop.assumed_frequency"])
+        t = check_loop_value("loop.delay", self.params["loop.delay"])
         self.delay_samples = max(1, int(round(t / self.h)))
         self.delay = self.delay_samples * self.h
         self.omega_a = wa
@@ -252,13 +280,9 @@ class QftLoopPlant(LoopPlant):
         self.model = model
         if model == "qft_open":
             return
-        gain = float(self.params["loop.gain"])
-        if not math.isfinite(gain) or gain < 0:
-            raise ValueError(f"loop.gain must be finite and >= 0 (0: the paper's), got {gain!r}")
+        gain = check_loop_value("loop.gain", self.params["loop.gain"])
         gain = gain or (qft.GAIN_FB if model == "qft_fb" else qft.GAIN_FFB)
-        nom = np.asarray(self.params["loop.nominal"], dtype=float).ravel()
-        if nom.size != 3 or not np.all(np.isfinite(nom)) or nom[0] <= 0 or nom[1] < 0 or nom[2] <= 0:
-            raise ValueError(f"loop.nominal must be [m > 0, c >= 0, k > 0], got {nom.tolist()}")
+        nom = check_loop_value("loop.nominal", self.params["loop.nominal"])
         self.gain, self.gr = gain, (1.0 if model == "qft_ffb" else 0.0)
         import control
 

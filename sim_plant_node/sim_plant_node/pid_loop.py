@@ -18,14 +18,13 @@ the end of the period). ``natural_frequency`` and ``damping_ratio`` are the plan
 
 from __future__ import annotations
 
-import math
-
 import control as ct
 import numpy as np
 from scipy.linalg import expm
+
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER, MrilcError, controller
 
-from .plants import MckMode
+from .plants import MckMode, check_rate
 
 
 class PidLoopPlant(MckMode):
@@ -49,8 +48,7 @@ class PidLoopPlant(MckMode):
             raise ValueError("mass, damping, stiffness must be finite and of one size per joint")
         if np.any(m <= 0) or np.any(k <= 0) or np.any(c < 0):
             raise ValueError("plant parameters need mass > 0, stiffness > 0, damping >= 0")
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
+        check_rate(rate)
         try:
             cs = ct.ss(controller(numerator, denominator))
         except MrilcError as err:
@@ -58,20 +56,20 @@ class PidLoopPlant(MckMode):
         self.m, self.c, self.k = m, c, k
         self.rate, self.dt, self.joints = float(rate), 1.0 / float(rate), m.size
         self.numerator, self.denominator = list(numerator), list(denominator)
-        loops = [self._loop(ct.ss(ct.tf([ci, ki], [mi, ci, ki])), cs) for mi, ci, ki in zip(m, c, k)]
+        loops = [self._loop(ct.ss(ct.tf([ci, ki], [mi, ci, ki])), cs) for mi, ci, ki in zip(m, c, k, strict=True)]
         self._a = np.stack([lp[0] for lp in loops])      # continuous closed loop, per joint
         self._b = np.stack([lp[1] for lp in loops])      # inputs (r, u2)
         self._cy = np.stack([lp[2] for lp in loops])     # y = cy x
         self._cu, self._du = np.stack([lp[3] for lp in loops]), np.stack([lp[4] for lp in loops])  # u
         n = self._a.shape[1]
-        self._phi, self._gam = [], []
-        for a, b in zip(self._a, self._b):
+        phi, gam = [], []
+        for a, b in zip(self._a, self._b, strict=True):
             big = np.zeros((n + 2, n + 2))
             big[:n, :n], big[:n, n:] = a, b
             e = expm(big * self.dt)
-            self._phi.append(e[:n, :n])
-            self._gam.append(e[:n, n:])
-        self._phi, self._gam = np.stack(self._phi), np.stack(self._gam)
+            phi.append(e[:n, :n])
+            gam.append(e[:n, n:])
+        self._phi, self._gam = np.stack(phi), np.stack(gam)
         self.x = np.zeros((self.joints, n))
         self.w = np.zeros((self.joints, 2))   # inputs held over the last period: r, u2
         self.feedforward = np.zeros(self.joints)  # u2 for the next period (set by the node)
@@ -109,7 +107,7 @@ class PidLoopPlant(MckMode):
         """Every joint at rest at ``position``: y = r = u = position, u2 = 0."""
         p = np.broadcast_to(np.asarray(position, dtype=float), (self.joints,))
         self.w = np.column_stack([p, np.zeros(self.joints)])
-        self.x = np.stack([-np.linalg.solve(a, b @ w) for a, b, w in zip(self._a, self._b, self.w)])
+        self.x = np.stack([-np.linalg.solve(a, b @ w) for a, b, w in zip(self._a, self._b, self.w, strict=True)])
 
     def step(self, command, cycle_time: float | None = None) -> None:
         """One period with the reference ``command`` and u2 = ``self.feedforward`` held."""

@@ -52,6 +52,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
+from shaper_nodes.core.cycles import END, MOTION_END, START
+
+
+def check_rate(rate: float) -> float:
+    """The plants' check of the command (integration) rate: finite and > 0 Hz; returns it as a float."""
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
+    return float(rate)
+
 
 def mck_from_mode(omega: float, zeta: float, mass: float = 1.0) -> tuple[float, float, float]:
     """Mass (kg), damping (N s/m) and stiffness (N/m) of an m-c-k system with this mode."""
@@ -124,13 +133,11 @@ class MckPlant(_JointState, MckMode):
             raise ValueError("plant parameters must be finite")
         if np.any(m <= 0) or np.any(k <= 0) or np.any(c < 0):
             raise ValueError("plant parameters need mass > 0, stiffness > 0, damping >= 0")
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
         self.m, self.c, self.k = m, c, k
-        self.rate = float(rate)
+        self.rate = check_rate(rate)
         self.dt = 1.0 / self.rate
         self.joints = m.size
-        self._phi = np.stack([self._transition(*p) for p in zip(m, c, k)])
+        self._phi = np.stack([self._transition(*p) for p in zip(m, c, k, strict=True)])
         # state per joint: x2, v2, x1, r (base slope)
         self.state = np.zeros((self.joints, 4))
         self.cycle_time: float | None = None
@@ -174,7 +181,7 @@ class MckPlant(_JointState, MckMode):
 #: the ListPlant models (seed 003 cases 1 to 4)
 LIST_MODELS = ("linear", "time_varying", "hardening", "saturation")
 #: every plant model a node can ask :func:`make_plant` for
-PLANT_MODELS = ("mck",) + tuple("list_" + m for m in LIST_MODELS)
+PLANT_MODELS = ("mck", *("list_" + m for m in LIST_MODELS))
 #: time-varying mass: m(t) = m (1 + t / MASS_RAMP_TIME) until MASS_RAMP_TIME (s), then 2 m
 MASS_RAMP_TIME = 1.0
 #: default cubic stiffness (N/m^3): k^3 / (m a)^2 for m = 1 kg, k = 100 N/m, a = 2 m/s^2
@@ -205,6 +212,24 @@ def _per_joint(name: str, value, joints: int | None, unit: str, *, positive: boo
         rule = "> 0" if positive else ">= 0"
         raise ValueError(f"{name} must be {'' if allow_inf else 'finite and '}{rule} {unit}, got {v.tolist()}")
     return v
+
+
+#: the per-joint parameters of the plants: name -> (unit, must be > 0 (else >= 0), may be infinite)
+PLANT_VALUES: dict[str, tuple[str, bool, bool]] = {
+    "mass": ("kg", True, False),
+    "damping": ("N s/m", False, False),
+    "stiffness": ("N/m", True, False),
+    "stiffness_cubic": ("N/m^3", False, False),
+    "gain": ("N/m", True, False),
+    "force_limit": ("N", True, True),
+}
+
+
+def plant_values(name: str, value, joints: int | None = None) -> np.ndarray:
+    """The per-joint parameter ``name`` (one of :data:`PLANT_VALUES`) as a float array of ``joints``
+    entries (one value is spread; any number of values if None), checked as the plants check it."""
+    unit, positive, allow_inf = PLANT_VALUES[name]
+    return _per_joint(name, value, joints, unit, positive=positive, allow_inf=allow_inf)
 
 
 class ListPlant(_JointState):
@@ -245,16 +270,14 @@ class ListPlant(_JointState):
         if model not in LIST_MODELS:
             raise ValueError(f"model must be one of {', '.join(LIST_MODELS)}; got {model!r}")
         self.model = model
-        self.m = _per_joint("mass", mass, None, "kg")
+        self.m = plant_values("mass", mass)
         n = self.m.size
-        self.c = _per_joint("damping", damping, n, "N s/m", positive=False)
-        self.k = _per_joint("stiffness", stiffness, n, "N/m")
-        self.k3 = _per_joint("stiffness_cubic", stiffness_cubic, n, "N/m^3", positive=False)
-        self.kp = _per_joint("gain", gain, n, "N/m")
-        self.f_max = _per_joint("force_limit", force_limit, n, "N", allow_inf=True)
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
-        self.rate = float(rate)
+        self.c = plant_values("damping", damping, n)
+        self.k = plant_values("stiffness", stiffness, n)
+        self.k3 = plant_values("stiffness_cubic", stiffness_cubic, n)
+        self.kp = plant_values("gain", gain, n)
+        self.f_max = plant_values("force_limit", force_limit, n)
+        self.rate = check_rate(rate)
         self.dt = 1.0 / self.rate
         self.joints = n
         if substeps is None:
@@ -434,7 +457,17 @@ class TaskEvent:
     goal: np.ndarray
 
 
-START, MOTION_END, END = 0, 1, 2
+#: the move profiles of :class:`CycleTask`
+PROFILES = ("trapezoid", "step", "ramp")
+
+
+def check_task(*, max_velocity: float = 1.0, max_acceleration: float = 1.0, dwell: float = 0.0, rate: float = 1.0,
+               cycles: int = 1, profile: str = "trapezoid") -> None:
+    """:class:`CycleTask`'s checks of its settings (one alone: the others keep valid defaults)."""
+    if not (max_velocity > 0 and max_acceleration > 0 and dwell >= 0 and rate > 0 and cycles >= 1):
+        raise ValueError("task needs max_velocity > 0, max_acceleration > 0, dwell >= 0, cycles >= 1")
+    if profile not in PROFILES:
+        raise ValueError(f"task profile must be one of {', '.join(PROFILES)}; got {profile!r}")
 
 
 class CycleTask:
@@ -468,18 +501,14 @@ class CycleTask:
         Every cycle is start -> goal -> start (see above).
     """
 
-    PROFILES = ("trapezoid", "step", "ramp")
-
     def __init__(self, start, goal, max_velocity: float, max_acceleration: float, dwell: float,
                  rate: float, cycles: int, profile: str = "trapezoid", round_trip: bool = False) -> None:
         self.start = np.asarray(start, dtype=float).ravel()
         self.goal = np.asarray(goal, dtype=float).ravel()
         if self.start.shape != self.goal.shape:
             raise ValueError("start and goal poses differ in size")
-        if not (max_velocity > 0 and max_acceleration > 0 and dwell >= 0 and rate > 0 and cycles >= 1):
-            raise ValueError("task needs max_velocity > 0, max_acceleration > 0, dwell >= 0, cycles >= 1")
-        if profile not in self.PROFILES:
-            raise ValueError(f"task profile must be one of {', '.join(self.PROFILES)}; got {profile!r}")
+        check_task(max_velocity=max_velocity, max_acceleration=max_acceleration, dwell=dwell, rate=rate,
+                   cycles=cycles, profile=profile)
         dist = float(np.max(np.abs(self.goal - self.start)))
         self.profile, self.round_trip = profile, bool(round_trip)
         if profile == "trapezoid":

@@ -1,6 +1,7 @@
 """Simulated plant node: flexible joints with a tip accelerometer, running a repeated task.
 
 Stands in for a robot and its ros2_control forward position controller in tests and the demo.
+Its parameters (names, defaults, ranges, units) are the table :data:`PARAMETERS`.
 
 Each step the task runner publishes the raw setpoint (``topics.command_out``, to the shaper),
 the plant takes the shaped setpoint (``topics.command_in``, std_msgs/Float64MultiArray as
@@ -44,30 +45,36 @@ realtime
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from shaper_nodes.core.checks import InputError, finite_array
-from shaper_nodes.core.cycles import CycleMonitor
-from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
-from shaper_nodes.ros.node_main import run_node
-from shaper_nodes.ros.parameters import describe as _desc
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetFeedforward
+from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.core.cycles import CycleMonitor
+from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
+from shaper_nodes.ros.conversions import sec_to_time
+from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
+from shaper_nodes.ros.qos import LATCHED
 
-from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, make_loop_plant
+from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, check_loop_value, make_loop_plant
 from .pid_loop import PidLoopPlant
 from .plants import (
     LIST_FORCE_LIMIT,
@@ -77,23 +84,110 @@ from .plants import (
     CycleTask,
     ListPlant,
     MckPlant,
+    check_rate,
+    check_task,
     make_plant,
+    plant_values,
 )
 from .two_mass import StaircaseTask, TwoMassPlant
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: the plant models the node runs
+Plant = MckPlant | ListPlant | PidLoopPlant | LoopPlant | TwoMassPlant
 # per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
                 "plant.force_limit")
-PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator") + PLANT_PARAMS + tuple(LOOP_PARAMS)
-MODELS = PLANT_MODELS + ("mck_pid",) + LOOP_MODELS + ("two_mass",)
+PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator", *PLANT_PARAMS, *LOOP_PARAMS)
+MODELS = (*PLANT_MODELS, "mck_pid", *LOOP_MODELS, "two_mass")
 
 
-def _stamp(t: float):
-    from builtin_interfaces.msg import Time
+def check_model(model: str) -> str:
+    """The node's check of ``plant.model``: one of :data:`MODELS`."""
+    if model not in MODELS:
+        raise ValueError(f"plant.model must be one of {', '.join(MODELS)}; got {model!r}")
+    return model
 
-    ns = int(round(t * 1e9))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+def _task_check(setting: str) -> Callable[[Any], None]:
+    """:func:`check_task` on a value of one of its settings."""
+    return lambda value: check_task(**{setting: value})
+
+
+def _levels_check(levels: Any) -> None:
+    """:class:`StaircaseTask`'s check of ``task.levels`` (for one joint)."""
+    StaircaseTask([0.0], levels, 1.0, 1.0)
+
+
+#: every parameter of the node, declared from here (``check``: the plant's own check of one value)
+PARAMETERS: tuple[Spec, ...] = (
+    Spec("joint_names", ["joint_1"], "Joint names, one m-c-k plant each.", read_only=True),
+    Spec("rate", 500.0, "Integration and command rate, Hz.", (1.0, 10000.0), read_only=True, check=check_rate),
+    Spec("mode", "lockstep", "'lockstep' (simulated time, /clock) or 'realtime' (wall clock).", read_only=True),
+    Spec("lockstep_timeout", 2.0, "Lockstep: wall time to wait for the shaped setpoint, s.", (0.01, 600.0)),
+    Spec("plant.model", "mck",
+         "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
+         " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
+         " seed 000), or the closed loops of seeds 001, 002 (see loop.*) 'delay_loop', 'qft_open', 'qft_fb',"
+         " 'qft_ffb', or seed 004's two-mass system 'two_mass' (m1 = 10 x0 + 1). Changes live, keeping the"
+         " state when the models share it.", check=check_model),
+    *(Spec(name, default, text, check=functools.partial(check_loop_value, name))
+      for name, (default, text) in LOOP_PARAMS.items()),
+    Spec("controller.numerator", list(PAPER_CONTROLLER[0]),
+         "mck_pid: feedback controller C(s) numerator, highest power first (default seed 000 eq. 13)."),
+    Spec("controller.denominator", list(PAPER_CONTROLLER[1]), "mck_pid: C(s) denominator."),
+    Spec("plant.mass", [1.0],
+         "Tip mass per joint (one value for all), kg (or kg m^2), > 0; list_time_varying: the mass at a"
+         " cycle's START, m(t) = mass (1 + t) for t < 1 s, 2 mass after.",
+         check=functools.partial(plant_values, "mass")),
+    Spec("plant.damping", [0.6283185307179586],
+         "Damping per joint, N s/m (or N m s/rad), >= 0: between base and tip for mck, to ground for list_*.",
+         check=functools.partial(plant_values, "damping")),
+    Spec("plant.stiffness", [986.96044010893586],
+         "Linear stiffness per joint, N/m (or N m/rad), > 0 (unused by list_saturation).",
+         check=functools.partial(plant_values, "stiffness")),
+    Spec("plant.stiffness_cubic", [LIST_STIFFNESS_CUBIC],
+         "list_hardening: cubic stiffness k3 per joint, spring force k d + k3 d^3 (d = u - x),"
+         " N/m^3 (or N m/rad^3), >= 0.",
+         check=functools.partial(plant_values, "stiffness_cubic")),
+    Spec("plant.gain", [LIST_GAIN],
+         "list_saturation: P gain Kp per joint, force Kp (u - x) before the limit, N/m (or N m/rad), > 0.",
+         check=functools.partial(plant_values, "gain")),
+    Spec("plant.force_limit", [LIST_FORCE_LIMIT],
+         "list_saturation: actuator force limit f_max per joint, N (or N m), > 0 (.inf: none).",
+         check=functools.partial(plant_values, "force_limit")),
+    Spec("imu.axes", [0, 1, 2], "Joint index whose tip acceleration each IMU axis x, y, z measures (-1: none)."),
+    Spec("imu.noise_stddev", 0.0, "Accelerometer white noise, m/s^2 (one sigma).", (0.0, 1000.0)),
+    Spec("imu.bias", [0.0, 0.0, 0.0], "Accelerometer constant offset per axis, m/s^2."),
+    Spec("imu.frame_id", "tool0", "frame_id of the Imu messages.", read_only=True),
+    Spec("imu.seed", 1, "Seed of the noise generator.", read_only=True),
+    Spec("task.name", "point_to_point", "Task name in cycle events."),
+    Spec("task.start", [0.0], "Start pose, one value per joint (or one for all), rad or m."),
+    Spec("task.goal", [0.5], "Goal pose, rad or m."),
+    Spec("task.max_velocity", 1.0, "Largest joint velocity of a move, rad/s or m/s.", (1e-6, 1e6),
+         check=_task_check("max_velocity")),
+    Spec("task.max_acceleration", 10.0, "Largest joint acceleration of a move, rad/s^2 or m/s^2.", (1e-6, 1e9),
+         check=_task_check("max_acceleration")),
+    Spec("task.dwell", 2.0, "Dwell after each move (the residual-vibration window), s.", (0.0, 3600.0),
+         check=_task_check("dwell")),
+    Spec("task.levels", None,
+         "If set, a staircase instead of moves: the command steps to each level in turn (one cycle per step,"
+         " task.dwell each; steps x joints values), e.g. seed 004's velocity steps (plant.model two_mass).",
+         type=Parameter.Type.DOUBLE_ARRAY, check=_levels_check),
+    Spec("task.profile", "trapezoid",
+         "Move profile: 'trapezoid' (within max_velocity and max_acceleration), 'step' (jump to the target)"
+         " or 'ramp' (constant max_velocity).", check=_task_check("profile")),
+    Spec("task.round_trip", False,
+         "Every cycle goes start -> goal -> start (each with a dwell), so all cycles are the same;"
+         " otherwise cycles alternate between the poses."),
+    Spec("task.cycles", 4, "Cycles per run (started by ~/start_task).", check=_task_check("cycles")),
+    Spec("task.preroll", 1.0, "Rest at the start pose before the first cycle, s.", (0.0, 3600.0)),
+    Spec("task.autostart", False, "Start a run as soon as the node is up.", read_only=True),
+    Spec("settle_tolerance", 1e-6, "Joint positions within this of their final value count as at rest, rad or m.",
+         (0.0, 1.0)),
+    *topics({"command_out": "/shaper/commands", "command_in": "/forward_position_controller/commands",
+             "joint_states": "/joint_states", "tip_state": "~/tip_state", "imu": "/tip_imu",
+             "cycle_events": "/cycle_events", "cycle_reports": "/cycle_reports",
+             "active_shaper": "/shaper/active_shaper", "reference": "~/reference"}),
+)
 
 
 class SimPlantNode(Node):
@@ -101,66 +195,7 @@ class SimPlantNode(Node):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__("sim_plant", *args, **kwargs)
-        d = self.declare_parameter
-        d("joint_names", ["joint_1"], _desc("Joint names, one m-c-k plant each.", read_only=True))
-        d("rate", 500.0, _desc("Integration and command rate, Hz.", 1.0, 10000.0, read_only=True))
-        d("mode", "lockstep", _desc("'lockstep' (simulated time, /clock) or 'realtime' (wall clock).", read_only=True))
-        d("lockstep_timeout", 2.0, _desc("Lockstep: wall time to wait for the shaped setpoint, s.", 0.01, 600.0))
-        d("plant.model", "mck", _desc(
-            "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
-            " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
-            " seed 000), or the closed loops of seeds 001, 002 (see loop.*) 'delay_loop', 'qft_open', 'qft_fb',"
-            " 'qft_ffb', or seed 004's two-mass system 'two_mass' (m1 = 10 x0 + 1). Changes live, keeping the"
-            " state when the models share it."))
-        for name, (default, text) in LOOP_PARAMS.items():
-            d(name, default, _desc(text))
-        d("controller.numerator", list(PAPER_CONTROLLER[0]), _desc(
-            "mck_pid: feedback controller C(s) numerator, highest power first (default seed 000 eq. 13)."))
-        d("controller.denominator", list(PAPER_CONTROLLER[1]), _desc("mck_pid: C(s) denominator."))
-        d("plant.mass", [1.0], _desc(
-            "Tip mass per joint (one value for all), kg (or kg m^2), > 0; list_time_varying: the mass at a"
-            " cycle's START, m(t) = mass (1 + t) for t < 1 s, 2 mass after."))
-        d("plant.damping", [0.6283185307179586], _desc(
-            "Damping per joint, N s/m (or N m s/rad), >= 0: between base and tip for mck, to ground for list_*."))
-        d("plant.stiffness", [986.96044010893586], _desc(
-            "Linear stiffness per joint, N/m (or N m/rad), > 0 (unused by list_saturation)."))
-        d("plant.stiffness_cubic", [LIST_STIFFNESS_CUBIC], _desc(
-            "list_hardening: cubic stiffness k3 per joint, spring force k d + k3 d^3 (d = u - x),"
-            " N/m^3 (or N m/rad^3), >= 0."))
-        d("plant.gain", [LIST_GAIN], _desc(
-            "list_saturation: P gain Kp per joint, force Kp (u - x) before the limit, N/m (or N m/rad), > 0."))
-        d("plant.force_limit", [LIST_FORCE_LIMIT], _desc(
-            "list_saturation: actuator force limit f_max per joint, N (or N m), > 0 (.inf: none)."))
-        d("imu.axes", [0, 1, 2], _desc("Joint index whose tip acceleration each IMU axis x, y, z measures (-1: none)."))
-        d("imu.noise_stddev", 0.0, _desc("Accelerometer white noise, m/s^2 (one sigma).", 0.0, 1000.0))
-        d("imu.bias", [0.0, 0.0, 0.0], _desc("Accelerometer constant offset per axis, m/s^2."))
-        d("imu.frame_id", "tool0", _desc("frame_id of the Imu messages.", read_only=True))
-        d("imu.seed", 1, _desc("Seed of the noise generator.", read_only=True))
-        d("task.name", "point_to_point", _desc("Task name in cycle events."))
-        d("task.start", [0.0], _desc("Start pose, one value per joint (or one for all), rad or m."))
-        d("task.goal", [0.5], _desc("Goal pose, rad or m."))
-        d("task.max_velocity", 1.0, _desc("Largest joint velocity of a move, rad/s or m/s.", 1e-6, 1e6))
-        d("task.max_acceleration", 10.0, _desc("Largest joint acceleration of a move, rad/s^2 or m/s^2.", 1e-6, 1e9))
-        d("task.dwell", 2.0, _desc("Dwell after each move (the residual-vibration window), s.", 0.0, 3600.0))
-        d("task.levels", Parameter.Type.DOUBLE_ARRAY, _desc(
-            "If set, a staircase instead of moves: the command steps to each level in turn (one cycle per step,"
-            " task.dwell each; steps x joints values), e.g. seed 004's velocity steps (plant.model two_mass)."))
-        d("task.profile", "trapezoid", _desc(
-            "Move profile: 'trapezoid' (within max_velocity and max_acceleration), 'step' (jump to the target)"
-            " or 'ramp' (constant max_velocity)."))
-        d("task.round_trip", False, _desc(
-            "Every cycle goes start -> goal -> start (each with a dwell), so all cycles are the same;"
-            " otherwise cycles alternate between the poses."))
-        d("task.cycles", 4, _desc("Cycles per run (started by ~/start_task)."))
-        d("task.preroll", 1.0, _desc("Rest at the start pose before the first cycle, s.", 0.0, 3600.0))
-        d("task.autostart", False, _desc("Start a run as soon as the node is up.", read_only=True))
-        d("settle_tolerance", 1e-6, _desc("Joint positions within this of their final value count as at rest, rad or m.",
-                                          0.0, 1.0))
-        for key, default in {"command_out": "/shaper/commands", "command_in": "/forward_position_controller/commands",
-                             "joint_states": "/joint_states", "tip_state": "~/tip_state", "imu": "/tip_imu",
-                             "cycle_events": "/cycle_events", "cycle_reports": "/cycle_reports",
-                             "active_shaper": "/shaper/active_shaper", "reference": "~/reference"}.items():
-            d(f"topics.{key}", default, _desc(f"Topic name ({key}).", read_only=True))
+        declare_all(self, PARAMETERS)
 
         self.joint_names = list(self.get_parameter("joint_names").value)
         self.n = len(self.joint_names)
@@ -175,21 +210,21 @@ class SimPlantNode(Node):
         self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value))
         self._active_shaper = ShaperMsg()
 
-        tp = lambda k: self.get_parameter(f"topics.{k}").value  # noqa: E731
-        self._cmd_pub = self.create_publisher(Float64MultiArray, tp("command_out"), 10)
-        self._js_pub = self.create_publisher(JointState, tp("joint_states"), 10)
-        self._tip_pub = self.create_publisher(JointState, tp("tip_state"), 10)
+        tp = values(self, PARAMETERS, "topics.")
+        self._cmd_pub = self.create_publisher(Float64MultiArray, tp["command_out"], 10)
+        self._js_pub = self.create_publisher(JointState, tp["joint_states"], 10)
+        self._tip_pub = self.create_publisher(JointState, tp["tip_state"], 10)
         self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
-        self._imu_pub = self.create_publisher(Imu, tp("imu"), qos_profile_sensor_data)
-        self._event_pub = self.create_publisher(CycleEvent, tp("cycle_events"), 10)
-        self._report_pub = self.create_publisher(CycleReport, tp("cycle_reports"), 10)
+        self._imu_pub = self.create_publisher(Imu, tp["imu"], qos_profile_sensor_data)
+        self._event_pub = self.create_publisher(CycleEvent, tp["cycle_events"], 10)
+        self._report_pub = self.create_publisher(CycleReport, tp["cycle_reports"], 10)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
-        self._ref_pub = self.create_publisher(JointState, tp("reference"), 10)
+        self._ref_pub = self.create_publisher(JointState, tp["reference"], 10)
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward)
         self._ff_pending: tuple[str, np.ndarray] | None = None
         self._ff: tuple[str, np.ndarray] | None = None  # (injection, samples x joints) of this cycle
-        self.create_subscription(Float64MultiArray, tp("command_in"), self._on_command, 10)
-        self.create_subscription(ShaperMsg, tp("active_shaper"), self._on_shaper, LATCHED)
+        self.create_subscription(Float64MultiArray, tp["command_in"], self._on_command, 10)
+        self.create_subscription(ShaperMsg, tp["active_shaper"], self._on_shaper, LATCHED)
         self.create_service(Trigger, "~/start_task", self._on_start)
         self.create_service(Trigger, "~/stop_task", self._on_stop)
         self.add_on_set_parameters_callback(self._validate_params)
@@ -197,7 +232,7 @@ class SimPlantNode(Node):
         self.step_index = 0
         self.sim_time = 0.0
         self._cycle_start_step: int | None = None  # step_index at the current cycle's START
-        self.task: CycleTask | None = None
+        self.task: CycleTask | StaircaseTask | None = None
         self._preroll_left = 0
         self._raw = np.zeros(self.n)
         self._applied = np.zeros(self.n)
@@ -218,7 +253,7 @@ class SimPlantNode(Node):
         self.get_logger().info(
             f"{self.n} joints, plant {self.get_parameter('plant.model').value}, modes " + ", ".join(
                 f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(self.plant.natural_frequency,
-                                                                          self.plant.damping_ratio))
+                                                                          self.plant.damping_ratio, strict=True))
             + f", {self.mode} at {self.rate:g} Hz")
 
     # ----------------------------------------------------------------- configuration
@@ -235,16 +270,14 @@ class SimPlantNode(Node):
     def _pose(self, name: str, overrides: dict) -> np.ndarray:
         return self._vector(name, overrides)
 
-    def _make_plant(self, overrides: dict) -> MckPlant | ListPlant | PidLoopPlant | LoopPlant:
-        model = str(overrides.get("plant.model", self.get_parameter("plant.model").value))
-        if model not in MODELS:
-            raise ValueError(f"plant.model must be one of {', '.join(MODELS)}; got {model!r}")
+    def _make_plant(self, overrides: dict) -> Plant:
+        model = check_model(str(overrides.get("plant.model", self.get_parameter("plant.model").value)))
         if model == "two_mass":  # seed 004's two-mass system, m1 = 10 x0 + 1 (two_mass.py)
             return TwoMassPlant(self.n, self.rate)
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
         if model in LOOP_MODELS:
-            return make_loop_plant(model, m, c, k, self.rate, {p: overrides.get(p, self.get_parameter(p).value)
-                                                               for p in LOOP_PARAMS})
+            loop = values(self, LOOP_PARAMS)
+            return make_loop_plant(model, m, c, k, self.rate, {p: overrides.get(p, loop[p]) for p in LOOP_PARAMS})
         try:
             plant = make_plant("mck" if model == "mck_pid" else model, m, c, k, self.rate, stiffness_cubic=k3,
                                gain=kp, force_limit=f_max)
@@ -280,28 +313,31 @@ class SimPlantNode(Node):
         return SetParametersResult(successful=True)
 
     # ----------------------------------------------------------------- task
+    def _make_task(self) -> CycleTask | StaircaseTask:
+        """The task the parameters describe: a staircase (seed 004) when task.levels is set, else moves."""
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
+        task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
+                         float(g("task.max_acceleration")), float(g("task.dwell")), self.rate, int(g("task.cycles")),
+                         str(g("task.profile")), bool(g("task.round_trip")))
+        with contextlib.suppress(ParameterUninitializedException):
+            return StaircaseTask(self._pose("task.start", {}), g("task.levels"), float(g("task.dwell")), self.rate)
+        return task
+
     def _start_task(self) -> tuple[bool, str]:
         if self.task is not None:
             return False, "a task is already running"
-        g = lambda n: self.get_parameter(n).value  # noqa: E731
         try:
-            self.task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
-                                  float(g("task.max_acceleration")), float(g("task.dwell")), self.rate,
-                                  int(g("task.cycles")), str(g("task.profile")), bool(g("task.round_trip")))
-            try:  # a staircase (seed 004) when task.levels is set
-                self.task = StaircaseTask(self._pose("task.start", {}), g("task.levels"), float(g("task.dwell")),
-                                          self.rate)
-            except ParameterUninitializedException:
-                pass
+            task = self.task = self._make_task()
         except ValueError as err:
             return False, str(err)
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
         self._preroll_left = int(round(float(g("task.preroll")) * self.rate))
         self._cycle_start_step = None  # the preroll belongs to no cycle
         self._preroll_total = self._preroll_left
         if self.mode == "lockstep" and self._waiting_since is None:
             self._publish_next()
-        return True, (f"{self.task.cycles} cycles of {self.task.samples_per_cycle / self.rate:.3f} s"
-                      f" (move {self.task.move_duration:.3f} s) after {self._preroll_left / self.rate:.3f} s preroll")
+        return True, (f"{task.cycles} cycles of {task.samples_per_cycle / self.rate:.3f} s"
+                      f" (move {task.move_duration:.3f} s) after {self._preroll_left / self.rate:.3f} s preroll")
 
     def _on_start(self, req, resp):
         resp.success, resp.message = self._start_task()
@@ -329,7 +365,7 @@ class SimPlantNode(Node):
     # ----------------------------------------------------------------- stepping
     def _publish_clock(self) -> None:
         if self._clock_pub is not None:
-            self._clock_pub.publish(Clock(clock=_stamp(self.sim_time)))
+            self._clock_pub.publish(Clock(clock=sec_to_time(self.sim_time)))
 
     def _now(self) -> float:
         if self.mode == "lockstep":
@@ -349,7 +385,7 @@ class SimPlantNode(Node):
         msg = CycleEvent(event=ev.kind, cycle=ev.cycle, task=str(self.get_parameter("task.name").value),
                          joint_names=self.joint_names, start_positions=ev.start.tolist(),
                          goal_positions=ev.goal.tolist())
-        msg.header.stamp = _stamp(t)
+        msg.header.stamp = sec_to_time(t)
         self._event_pub.publish(msg)
         if ev.kind == CycleEvent.START:
             self._cycle_start_step = self.step_index  # the next period is the cycle's first
@@ -367,7 +403,7 @@ class SimPlantNode(Node):
         msg = CycleReport(source="sim_plant", cycle=result.cycle, window_start=r.window_start, window_end=r.window_end,
                           residual_rms=r.rms, residual_peak=r.peak, shaper_used=self._active_shaper,
                           shaper_next=self._active_shaper)
-        msg.header.stamp = _stamp(self._now())
+        msg.header.stamp = sec_to_time(self._now())
         self._report_pub.publish(msg)
 
     def _feedforward(self) -> tuple[str, np.ndarray] | None:
@@ -381,7 +417,7 @@ class SimPlantNode(Node):
         self._applied = command
         if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; costly at every step)
             ref = JointState(name=self.joint_names, position=command.tolist())
-            ref.header.stamp = _stamp(self._now())  # the start of the period the setpoint applies to
+            ref.header.stamp = sec_to_time(self._now())  # the start of the period the setpoint applies to
             self._ref_pub.publish(ref)
         ff = self._feedforward()
         if ff is not None and ff[0] == "command":
@@ -392,7 +428,7 @@ class SimPlantNode(Node):
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
         t = self._now()
-        stamp = _stamp(t)
+        stamp = sec_to_time(t)
         js = JointState(name=self.joint_names, position=self.plant.base_position.tolist(),
                         velocity=self.plant.base_velocity.tolist(),
                         effort=getattr(self.plant, "effort", np.zeros(0)).tolist())

@@ -37,7 +37,9 @@ import math
 
 import numpy as np
 
-from .plants import END, MOTION_END, START, TaskEvent
+from shaper_nodes.core.cycles import END, MOTION_END, START
+
+from .plants import TaskEvent, check_rate
 
 #: seed 004's parameters: c (kg/s), m0 (kg), c0 (kg/s), k (N/m), m1 = M1_SLOPE x0 + M1_OFFSET (kg)
 C, M0, C0, K = 0.1, 2.0, 30.0, 1.0
@@ -81,10 +83,8 @@ class TwoMassPlant:
     def __init__(self, joints: int, rate: float) -> None:
         if int(joints) < 1:
             raise ValueError(f"joints must be >= 1, got {joints!r}")
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate must be > 0 Hz, got {rate!r}")
         self.joints = int(joints)
-        self.rate = float(rate)
+        self.rate = check_rate(rate)
         self.dt = 1.0 / self.rate
         self.substeps = max(1, math.ceil(self.dt * (C + C0) / M0 / SUBSTEP_SPEED))
         # per joint: x0, w = m0 x0' - v, x1, x1', command v at the end of the last period, its slope
@@ -258,34 +258,3 @@ class StaircaseTask:
 STEP_POSES = (0.02, 0.19, 0.36, 0.53, 0.70)
 #: the velocity levels that put x0 at STEP_POSES at rest (x0 = v / c0), m/s
 STEP_LEVELS = tuple(C0 * x for x in STEP_POSES)
-
-
-def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangular",
-                   with_models: bool = True, with_modes: bool = True) -> dict:
-    """A rule base (the mapping core.fuzzy.rule_base_from_dict takes) with one rule per pose x0
-    in ``points`` (m): eq. (1) linearised at m1 = 10 x0 + 1 and/or its mode, and triangles
-    peaking at each point (shoulders at the ends)."""
-    from shaper_nodes.core.scheduling import modes_of, triangular_partition
-
-    rules = {}
-    for i, (x, mf) in enumerate(zip(points, triangular_partition(points))):
-        a, b = two_mass_matrices(float(m1_of(x)))
-        rule: dict = {"membership": [membership], "membership_params": [mf.a, mf.b, mf.c]}
-        if with_models:
-            rule.update(a_matrix=a.ravel().tolist(), b_matrix=b.ravel().tolist())
-        if with_modes:
-            (mode,) = modes_of(a)
-            rule.update(natural_frequency=[mode.omega], damping_ratio=[mode.zeta])
-        rules[f"x{i}"] = rule
-    return {"premises": [premise], "rules": rules}
-
-
-def scheduler_parameters(spec: dict) -> dict:
-    """The scheduler node's parameters (flat names) for a rule base mapping (see rule_base_spec)."""
-    out: dict = {"premises": list(spec["premises"]), "rule_names": list(spec["rules"])}
-    if spec.get("range"):
-        out["range"] = [float(v) for v in spec["range"]]
-    for name, rule in spec["rules"].items():
-        for key, value in rule.items():
-            out[f"rules.{name}.{key}"] = [v if isinstance(v, str) else float(v) for v in value]
-    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import pathlib
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 from scipy import signal
 from scipy.integrate import solve_ivp
+
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.core.shaping.fir import StreamingShaper, discretize
 from sim_plant_node.plants import (
@@ -82,8 +84,8 @@ def reference(rhs, u: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     for i in range(1, u.size):
         t0, t1 = (i - 1) / rate, i / rate
         slope = (u[i] - u[i - 1]) * rate
-        sol = solve_ivp(lambda t, s: [s[1], rhs(t, s[0], s[1], u[i - 1] + slope * (t - t0))], (t0, t1), y,
-                        method="DOP853", rtol=1e-12, atol=1e-14)
+        sol = solve_ivp(lambda t, s, u0=u[i - 1], slope=slope, t0=t0: [s[1], rhs(t, s[0], s[1], u0 + slope * (t - t0))],
+                        (t0, t1), y, method="DOP853", rtol=1e-12, atol=1e-14)
         y = sol.y[:, -1]
         xs.append(y[0])
         vs.append(y[1])
@@ -110,7 +112,7 @@ def test_each_model_matches_solve_ivp(model):
     rate = 200.0
     raw = default_task(rate, dwell=0.5)[:500]  # 2.5 s: the mass ramps, the move saturates
     commands = np.column_stack([raw, 0.6 * raw])
-    m, b, k, k3, kp, f_max = (np.array(p) for p in zip(*JOINTS))
+    m, b, k, k3, kp, f_max = (np.array(p) for p in zip(*JOINTS, strict=True))
     plant = ListPlant(model, m, b, k, rate, stiffness_cubic=k3, gain=kp, force_limit=f_max)
     plant.reset([0.0, 0.0])
     out = run(plant, commands)
@@ -118,7 +120,8 @@ def test_each_model_matches_solve_ivp(model):
     for j, params in enumerate(JOINTS):
         rhs = RHS[model](*params)
         x, v = reference(rhs, u[:, j], rate)
-        a = np.array([rhs((i + 1) / rate, xi, vi, ui) for i, (xi, vi, ui) in enumerate(zip(x, v, u[1:, j]))])
+        a = np.array([rhs((i + 1) / rate, xi, vi, ui)
+                      for i, (xi, vi, ui) in enumerate(zip(x, v, u[1:, j], strict=True))])
         for name, got, want in (("x", out["x"][:, j], x), ("v", out["v"][:, j], v), ("a", out["a"][:, j], a)):
             err = np.max(np.abs(got - want)) / np.max(np.abs(want))
             assert err < (1e-6 if name == "a" else 1e-7), (model, j, name, err)
@@ -191,7 +194,7 @@ def test_hardening_frequency_rises_with_amplitude():
     freqs = [free_vibration_frequency(ListPlant("hardening", M, 0.0, K, RATE, stiffness_cubic=k3), amp)
              for amp in (1e-4, 0.005, 0.01, 0.02)]
     assert freqs[0] == pytest.approx(10.0, rel=1e-3)  # small amplitude: the linearised mode
-    assert all(f2 > f1 for f1, f2 in zip(freqs, freqs[1:]))
+    assert all(f2 > f1 for f1, f2 in itertools.pairwise(freqs))
     assert freqs[-1] > 1.25 * freqs[0]
     # first-order (Lindstedt) estimate for the Duffing oscillator: omega0 (1 + 3 k3 A^2 / (8 k))
     assert freqs[1] == pytest.approx(10.0 * (1 + 3 * k3 * 0.005**2 / (8 * K)), rel=5e-3)
@@ -199,7 +202,7 @@ def test_hardening_frequency_rises_with_amplitude():
 
 def test_default_cubic_stiffness_is_significant_in_the_default_task():
     """k3 = k^3 / (m a)^2: the cubic force reaches the linear one during the move; ZV at 10 rad/s fails."""
-    assert LIST_STIFFNESS_CUBIC == pytest.approx(K**3 / (M * 2.0) ** 2)
+    assert pytest.approx(K**3 / (M * 2.0) ** 2) == LIST_STIFFNESS_CUBIC
     raw = default_task()
     hard = run(ListPlant("hardening", M, B, K, RATE), raw)
     d = raw - hard["x"][:, 0]
@@ -286,9 +289,9 @@ def test_invalid_parameters_name_the_parameter(bad, name):
 
 
 def test_make_plant_checks_every_parameter_whatever_the_model():
-    with pytest.raises(ValueError, match="^force_limit "):
+    with pytest.raises(ValueError, match=r"^force_limit "):
         make_plant("mck", [1.0], [1.0], [100.0], 100.0, force_limit=[-1.0])
-    with pytest.raises(ValueError, match="^model "):
+    with pytest.raises(ValueError, match=r"^model "):
         make_plant("list_quadratic", [1.0], [1.0], [100.0], 100.0)
 
 
@@ -311,6 +314,7 @@ def ros_context():
 
 def make_node(ctx, params: dict | None = None, config: str | None = None):
     from rclpy.parameter import Parameter
+
     from sim_plant_node.sim_plant import SimPlantNode
 
     cli = ["--ros-args", "--params-file", str(CONFIG / config)] if config else None

@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.closed_loop import qft
 from shaper_nodes.core.closed_loop.time_delay import growth_rate, sampled_loop_matrix
 from sim_plant_node.loops import LOOP_MODELS, DelayLoopPlant, QftLoopPlant, make_loop_plant
@@ -49,7 +50,7 @@ def test_delay_loop_equals_the_sampled_data_matrix_of_the_core():
     x = np.zeros(m.shape[0])
     x[0] = 0.1
     ys = []
-    for i in range(400):
+    for _ in range(400):
         p.step(np.array([0.0]), None)
         x = m @ x
         ys.append((p.output[0], x[0]))
@@ -118,9 +119,9 @@ def test_bad_loop_parameters_are_named(params, words):
 
 
 def test_bad_qft_parameters_are_named():
-    with pytest.raises(ValueError, match="loop.nominal"):
+    with pytest.raises(ValueError, match=r"loop.nominal"):
         QftLoopPlant("qft_fb", [1.0], [1.0], [1.0], 1000.0, {"loop.nominal": [1.0, 2.0]})
-    with pytest.raises(ValueError, match="loop.gain"):
+    with pytest.raises(ValueError, match=r"loop.gain"):
         QftLoopPlant("qft_fb", [1.0], [1.0], [1.0], 1000.0, {"loop.gain": -3.0})
     with pytest.raises(ValueError, match="loop model"):
         make_loop_plant("pid", [1.0], [1.0], [1.0], 1000.0, {})
@@ -142,6 +143,7 @@ def ros_context():
 @pytest.mark.integration
 def test_node_builds_loop_plants_and_refuses_bad_loop_parameters(ros_context):
     from rclpy.parameter import Parameter
+
     from sim_plant_node.sim_plant import SimPlantNode
 
     node = SimPlantNode(context=ros_context, parameter_overrides=[Parameter("plant.model", value="delay_loop")])
@@ -203,7 +205,7 @@ def test_taking_over_a_state_puts_the_controller_at_rest_at_the_tip():
     p = delay_loop(3.0)
     p.state = np.array([[0.3, 0.0, 0.3, 0.0]])
     assert p.base_position[0] == 0.3 and p.effort[0] == 0.3
-    for i in range(300):
+    for _ in range(300):
         p.step(np.array([0.3]), None)
     assert abs(p.output[0] - 0.3) < 1e-12  # at rest: nothing moves
 
@@ -233,7 +235,7 @@ def test_modal_split_separates_settling_from_vibration():
     t = np.arange(900) * dt
     creep = 3e-4 * np.exp(-7.3 * t)
     ring = 2e-4 * np.exp(-60.0 * t) * np.cos(627.0 * t + 0.3)
-    osc, slow, poles = modal_split(creep + ring, dt)
+    osc, slow, _ = modal_split(creep + ring, dt)
     assert np.allclose(osc, ring, atol=1e-12) and np.allclose(slow, creep, atol=1e-12)
     omega, zeta = dominant_oscillation(creep + ring, dt)
     assert omega == pytest.approx(math.hypot(60.0, 627.0), rel=1e-6)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from shaper_nodes.core.learning.mrilc import model as M
 from sim_plant_node.pid_loop import PidLoopPlant
 from sim_plant_node.plants import mck_from_mode

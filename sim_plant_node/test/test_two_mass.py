@@ -3,6 +3,8 @@
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+
+from reproductions.scheduler_cases import rule_base_spec
 from shaper_nodes.core.identification.modes import identify
 from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
 from sim_plant_node.two_mass import (
@@ -15,7 +17,6 @@ from sim_plant_node.two_mass import (
     StaircaseTask,
     TwoMassPlant,
     m1_of,
-    rule_base_spec,
 )
 
 
