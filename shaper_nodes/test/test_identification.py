@@ -405,7 +405,7 @@ def test_bad_input_is_refused_with_a_named_problem(times, signal, match):
 
 def test_too_short_and_noise_only_records():
     t = np.arange(200) / RATE
-    with pytest.raises(IdentificationError, match="record too short: .* 2.00 periods"):
+    with pytest.raises(IdentificationError, match=r"record too short: .* 2.00 periods"):
         identify(t, decay(t, 10.0, 0.02))
     rng = np.random.default_rng(13)
     with pytest.raises(IdentificationError, match="no mode found"):

@@ -20,20 +20,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import cont2discrete, dlsim
 
-from shaper_nodes.core.learning.list.learner import (
-    ACTIONS,
+from shaper_nodes.core.learning.list.learner import ListLearner
+from shaper_nodes.core.learning.list.measure import Reference, make_reference, measure
+from shaper_nodes.core.learning.list.params import (
     ListConfig,
     ListError,
-    ListLearner,
     ListParams,
-    ListUpdate,
-    Reference,
     lti_factor,
-    make_reference,
-    measure,
     paper_step,
     secant_step,
 )
+from shaper_nodes.core.learning.list.trials import ACTIONS, ListUpdate
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.core.shaping.vibration import percentage_vibration
 
@@ -75,7 +72,7 @@ def command(params, structure="zv2"):
     if params is None:
         return trapezoid(TIMES)
     amps, times = params.impulses(structure)
-    return sum(a * trapezoid(TIMES - ti) for a, ti in zip(amps, times))
+    return sum(a * trapezoid(TIMES - ti) for a, ti in zip(amps, times, strict=True))
 
 
 def cycle(params, structure="zv2", direction=1.0, noise=0.0, rng=None):
@@ -245,7 +242,7 @@ def test_converges_with_a_wrong_reference_mode():
     the learner still converges (the zero of rho does not depend on it)."""
     wrong = lambda ref: dataclasses.replace(ref, omega=1.2 * ref.omega, zeta=1.2 * ref.zeta)  # noqa: E731
     for rule in ("components", "paper"):
-        learner, run = learn(ListConfig(highpass_hz=0.5, rule=rule), reference=wrong, cycles=12)
+        learner, _run = learn(ListConfig(highpass_hz=0.5, rule=rule), reference=wrong, cycles=12)
         assert error(learner.params) < 0.01, rule
 
 
@@ -364,7 +361,7 @@ def test_shaped_cycle_without_reference_is_rejected():
 
 
 def test_rollback_when_m_jumps_then_no_worse():
-    learner, run = learn(cycles=2)
+    learner, _run = learn(cycles=2)
     best_params, best_m = learner.best
     used = learner.params
     t, y = cycle(used)
@@ -532,7 +529,7 @@ def test_reference_and_measure_checks():
         measure(TIMES[::2], cycle(HIGH)[1][::2], MOTION_END, END, ref, config=CONFIG)
     with pytest.raises(ListError, match="Nyquist"):
         measure(*cycle(HIGH), MOTION_END, END, ref, config=ListConfig(highpass_hz=240.0))
-    with pytest.raises(ListError, match="too short|incomplete"):
+    with pytest.raises(ListError, match=r"too short|incomplete"):
         measure(*cycle(HIGH), MOTION_END, END, ref, config=ListConfig(highpass_hz=0.5, window_delay=4.9))
     with pytest.raises(ListError, match="not strictly increasing"):
         measure(TIMES[::-1], cycle(HIGH)[1], MOTION_END, END, ref, config=CONFIG)
@@ -643,8 +640,8 @@ def test_patience_holds_at_the_best_until_m_rises_there():
     """patience = 1: the first trial that is not a new best (worse, but not by the rollback
     factor) parks the learner at the best point; it stays until M there rises."""
     config = ListConfig(highpass_hz=0.5, patience=1)
-    learner, run = learn(config=config, cycles=1)
-    best_params, best_m = learner.best
+    learner, _run = learn(config=config, cycles=1)
+    best_params, _best_m = learner.best
     used = learner.params
     assert used != best_params
     t, y = cycle(best_params)  # the trial measures 1.2 x the best point's vibration
@@ -660,8 +657,8 @@ def test_patience_holds_at_the_best_until_m_rises_there():
 
 
 def test_hold_on_request_applies_the_best_and_survives_a_save():
-    learner, run = learn(cycles=3)
-    best_params, best_m = learner.best
+    learner, _run = learn(cycles=3)
+    best_params, _best_m = learner.best
     assert learner.hold() == best_params and learner.holding
     restored = ListLearner.from_dict(learner.to_dict())
     assert restored.holding and restored.params == best_params

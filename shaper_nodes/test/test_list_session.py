@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
-from shaper_nodes.core.learning.list.learner import ListConfig, ListError, ListLearner, ListParams
+from shaper_nodes.core.learning.list.learner import ListLearner
+from shaper_nodes.core.learning.list.params import ListConfig, ListError, ListParams
 from shaper_nodes.core.learning.list.session import ListSession, list_config
 
 RATE = 200.0

@@ -9,7 +9,8 @@ import pytest
 
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.mrilc import model as M
-from shaper_nodes.core.learning.mrilc.learner import MrilcLearner, MrilcSession
+from shaper_nodes.core.learning.mrilc.learner import MrilcLearner
+from shaper_nodes.core.learning.mrilc.session import MrilcSession
 
 RATE = 200.0
 PERIOD = 1.0 / RATE
@@ -24,7 +25,7 @@ def _zvd_step_and_back(mode, samples: int) -> np.ndarray:
     r = np.zeros(samples)
     r[: samples // 2] = 1.0
     out = np.zeros(samples)
-    for a, t in zip(amps, times):
+    for a, t in zip(amps, times, strict=True):
         k0, f = int(t * RATE), t * RATE - int(t * RATE)
         out[k0:] += a * (1 - f) * r[: samples - k0]
         out[k0 + 1:] += a * f * r[: samples - k0 - 1]
@@ -221,7 +222,7 @@ def test_session_builds_cycles_on_the_grid_and_skips_gaps(paper_model):
 
 
 def test_model_from_params_builds_the_nodes_model_and_refuses_bad_values(paper_model):
-    from shaper_nodes.core.learning.mrilc.learner import DEFAULTS, model_from_params
+    from shaper_nodes.core.learning.mrilc.params import DEFAULTS, model_from_params
 
     model, settings = model_from_params({"mrilc.check.min_frequency_hz": 0.5, "list.gain": 3})
     assert model.period == PERIOD and model.law == M.LawConfig()

@@ -17,7 +17,8 @@ import numpy as np
 from shaper_nodes.core.shaping.families import FAMILIES, Shaper, ShaperError, design
 from shaper_nodes.core.shaping.vibration import percentage_vibration
 
-from .modes import IdentificationError, ModeFit
+from .modes import ModeFit
+from .record import IdentificationError
 
 #: fraction of the tolerance used when designing tolerance-based shapers (ei, si, ...)
 DESIGN_MARGIN = 0.8

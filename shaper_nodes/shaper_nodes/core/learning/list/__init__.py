@@ -2,16 +2,28 @@
 
 Modules
 -------
+params
+    The two-impulse parameters (:class:`ListParams`), their structures and residual factor,
+    the update formulas, and the learner's settings (:class:`ListConfig`, :class:`ListError`).
+measure
+    The unshaped reference cycle (:class:`Reference`, :func:`make_reference`), the residual
+    window, and M, phi and rho of a shaped cycle (:func:`.measure.measure`, :class:`Measurement`).
+trials
+    What the learner records of a cycle: :class:`ListUpdate` (the outcome it reports), its
+    trials and steps, and the search of the minimum of M.
 learner
-    The two-impulse parameters, the measurement of M and phi, and :class:`ListLearner`, the
-    state machine that updates A1 and T2 cycle by cycle (with rollback, patience and hold).
+    :class:`ListLearner`, the state machine that updates A1 and T2 cycle by cycle (with
+    rollback, patience and hold), and its state as a dictionary.
 session
     The bookkeeping the learner node and the offline replay share: which shaper a cycle ran
     with, the accelerometer buffer, and cycle events.
 """
 
-from .learner import ListConfig, ListError, ListLearner, ListParams, ListUpdate
+from .learner import ListLearner
+from .measure import Measurement, Reference, make_reference
+from .params import ListConfig, ListError, ListParams, lti_factor
 from .session import ListSession, SessionResult, list_config
+from .trials import ListUpdate
 
 __all__ = [
     "ListConfig",
@@ -20,6 +32,10 @@ __all__ = [
     "ListParams",
     "ListSession",
     "ListUpdate",
+    "Measurement",
+    "Reference",
     "SessionResult",
     "list_config",
+    "lti_factor",
+    "make_reference",
 ]

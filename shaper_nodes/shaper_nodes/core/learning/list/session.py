@@ -1,4 +1,4 @@
-"""The learner's bookkeeping around :class:`~shaper_nodes.core.list_learning.ListLearner`, free of ROS.
+"""The learner's bookkeeping around :class:`~.learner.ListLearner`, free of ROS.
 
 One class, fed the same stream of events whether it runs live in the learner node or offline
 over a recorded bag, so that both give the same updates bit for bit:
@@ -16,14 +16,18 @@ skipped with the reason, as are cycles whose START was missed.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
-from .learner import ListConfig, ListError, ListLearner, ListParams, ListUpdate
+from .learner import ListLearner
+from .params import ListConfig, ListError, ListParams
+from .trials import ListUpdate
 
 #: samples kept between cycles (those stamped after a START may arrive before it)
 KEEP_BEFORE_START = 1000
@@ -31,7 +35,7 @@ KEEP_BEFORE_START = 1000
 MATCH_TOL = 1e-9
 
 
-def list_config(values: Mapping[str, object]) -> ListConfig:
+def list_config(values: Mapping[str, Any]) -> ListConfig:
     """The ListConfig of the learner node's ``list.*`` parameters (keys without the prefix).
 
     Parameters use 0 (or [0, 0]) for "not set": ``window_delay`` 0 -> None, ``t2_bounds``
@@ -43,7 +47,7 @@ def list_config(values: Mapping[str, object]) -> ListConfig:
         An invalid value; the message names it.
     """
     v = dict(values)
-    kw: dict[str, object] = {}
+    kw: dict[str, Any] = {}
     for key in ("structure", "rule"):
         if key in v:
             kw[key] = str(v[key])
@@ -124,8 +128,8 @@ class ListSession:
         self._at_start: ActiveShaper | None = None
         self._direction = 1.0
         self._t: list[float] = []
-        self._a: list[np.ndarray] = []
-        self._ref_displacement: np.ndarray | None = None
+        self._a: list[npt.NDArray[np.float64]] = []
+        self._ref_displacement: npt.NDArray[np.float64] | None = None
         self._latest = -math.inf
 
     # ----------------------------------------------------------------- inputs
@@ -133,7 +137,7 @@ class ListSession:
         """The learner's parameters were sent to the shaper node (None: the identity)."""
         self._previous, self._sent = self._sent, params
 
-    def on_shaper(self, amplitudes, times, source: str, revision: int) -> None:
+    def on_shaper(self, amplitudes: Iterable[float], times: Iterable[float], source: str, revision: int) -> None:
         self.active = ActiveShaper(tuple(float(a) for a in amplitudes), tuple(float(t) for t in times),
                                    str(source), int(revision))
 
@@ -142,7 +146,7 @@ class ListSession:
         """Stamp of the latest accelerometer sample received (s), -inf before the first."""
         return self._latest
 
-    def on_imu(self, t: float, accel) -> None:
+    def on_imu(self, t: float, accel: npt.ArrayLike) -> None:
         """An accelerometer sample. Kept by its stamp: at END the cycle takes the samples stamped
         between its START and END, whatever order they arrived in relative to the events."""
         self._t.append(float(t))
@@ -151,8 +155,8 @@ class ListSession:
         if self._cycle is None and len(self._t) > 2 * KEEP_BEFORE_START:
             del self._t[:-KEEP_BEFORE_START], self._a[:-KEEP_BEFORE_START]
 
-    def on_event(self, kind: int, cycle: int, t: float, start_positions=(), goal_positions=()
-                 ) -> SessionResult | None:
+    def on_event(self, kind: int, cycle: int, t: float, start_positions: npt.ArrayLike = (),
+                 goal_positions: npt.ArrayLike = ()) -> SessionResult | None:
         """A cycle event; returns the result at a cycle's END, else None."""
         t = float(t)
         if kind == START:
@@ -174,8 +178,11 @@ class ListSession:
             return None
         cycle, self._cycle = self._cycle, None
         motion_end = self._motion_end if self._motion_end is not None else 0.0
-        result = lambda update, why="": SessionResult(  # noqa: E731
-            cycle, self._start, self._start + motion_end, t, update, why)
+        start = self._start
+
+        def result(update: ListUpdate | None, why: str = "") -> SessionResult:
+            return SessionResult(cycle, start, start + motion_end, t, update, why)
+
         if self._motion_end is None:
             return result(None, "no MOTION_END event in the cycle")
         used, why = self._used(self._at_start)
@@ -186,9 +193,9 @@ class ListSession:
         stamps = np.asarray(self._t)
         mine = stamps <= t
         times = stamps[mine] - self._start
-        accel = np.vstack([a for a, m in zip(self._a, mine) if m]) if mine.any() else np.zeros((0, 3))
+        accel = np.vstack([a for a, m in zip(self._a, mine, strict=True) if m]) if mine.any() else np.zeros((0, 3))
         self._t = stamps[~mine].tolist()
-        self._a = [a for a, m in zip(self._a, mine) if not m]
+        self._a = [a for a, m in zip(self._a, mine, strict=True) if not m]
         if times.size == 0:
             return result(None, "no accelerometer data in the cycle (sensor missing or stale)")
         if (t - self._start) - times[-1] > self.stale_after:
@@ -201,7 +208,7 @@ class ListSession:
         return result(update)
 
     # ----------------------------------------------------------------- helpers
-    def _direction_of(self, start_positions, goal_positions) -> float:
+    def _direction_of(self, start_positions: npt.ArrayLike, goal_positions: npt.ArrayLike) -> float:
         d = np.asarray(goal_positions, dtype=float) - np.asarray(start_positions, dtype=float)
         if d.size == 0 or not np.all(np.isfinite(d)) or not np.any(d):
             return 1.0

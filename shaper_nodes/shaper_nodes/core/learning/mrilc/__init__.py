@@ -6,22 +6,32 @@ model
     The reference model G_m = C P_nom / (1 + C P_nom), the exact ZOH sampled loop, the
     convergence check of eq. (11) over a plant set, the learning laws and the Q filter.
 learner
-    :class:`MrilcLearner` (the profile u2 and its divergence guard), :class:`MrilcSession`
-    (whole cycles on the sample grid from the streams), and the node's parameters
-    (:data:`DEFAULTS`, :data:`RANGES`, :func:`model_from_params`).
+    :class:`MrilcLearner`: the profile u2, learned cycle by cycle, and its divergence guard.
+session
+    :class:`MrilcSession`: whole cycles on the sample grid from the streams (joint states, the
+    applied reference, cycle events), handed to the learner.
+params
+    The learner node's parameters (:data:`DEFAULTS`, :data:`RANGES`, :data:`DESCRIPTIONS`) and
+    the model and settings they build (:func:`model_from_params`, :class:`MrilcSettings`).
 """
 
-from .learner import DEFAULTS, RANGES, MrilcLearner, MrilcSession, model_from_params
+from .learner import MrilcLearner, MrilcUpdate
 from .model import PAPER_CONTROLLER, MrilcError, MrilcModel, controller
+from .params import DEFAULTS, DESCRIPTIONS, RANGES, MrilcSettings, model_from_params
+from .session import MrilcCycle, MrilcSession
 
 __all__ = [
     "DEFAULTS",
+    "DESCRIPTIONS",
     "PAPER_CONTROLLER",
     "RANGES",
+    "MrilcCycle",
     "MrilcError",
     "MrilcLearner",
     "MrilcModel",
     "MrilcSession",
+    "MrilcSettings",
+    "MrilcUpdate",
     "controller",
     "model_from_params",
 ]

@@ -47,10 +47,13 @@ command  the correction is added to the position setpoint after the shaper (robo
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import control as ct
 import numpy as np
+import numpy.typing as npt
 from scipy import optimize, signal
 
 from shaper_nodes.core.shaping import Mode
@@ -77,12 +80,14 @@ def mck_plant(omega: float, zeta: float) -> ct.TransferFunction:
     return ct.tf([2 * zeta * omega, omega**2], [1.0, 2 * zeta * omega, omega**2])
 
 
-def controller(numerator=PAPER_CONTROLLER[0], denominator=PAPER_CONTROLLER[1]) -> ct.TransferFunction:
+def controller(numerator: Sequence[float] = PAPER_CONTROLLER[0], denominator: Sequence[float] = PAPER_CONTROLLER[1]
+               ) -> ct.TransferFunction:
     """A proper continuous controller C(s) from its coefficients (highest power first)."""
     num = np.trim_zeros(np.asarray(numerator, dtype=float), "f")
     den = np.trim_zeros(np.asarray(denominator, dtype=float), "f")
     if num.size == 0 or den.size == 0 or not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
-        raise MrilcError(f"controller coefficients must be finite and not all zero: {list(numerator)} / {list(denominator)}")
+        raise MrilcError(f"controller coefficients must be finite and not all zero: {list(numerator)}"
+                         f" / {list(denominator)}")
     if num.size > den.size:
         raise MrilcError(f"controller must be proper (numerator degree {num.size - 1} > denominator {den.size - 1})")
     return ct.tf(num, den)
@@ -124,9 +129,11 @@ def discretise(system: ct.LTI, period: float) -> ct.StateSpace:
     return ct.c2d(ct.ss(system), period, "zoh")
 
 
-def _freq(system_d: ct.StateSpace, omega: np.ndarray) -> np.ndarray:
+def _freq(system_d: ct.StateSpace, omega: npt.NDArray[np.float64]) -> npt.NDArray[np.complex128]:
     """Frequency response of a SISO discrete system at e^{j w T}."""
-    return np.asarray(system_d(np.exp(1j * omega * system_d.dt)), dtype=complex).reshape(-1)
+    response: npt.NDArray[np.complex128] = np.asarray(system_d(np.exp(1j * omega * system_d.dt)),
+                                                      dtype=complex).reshape(-1)
+    return response
 
 
 class SampledFilter:
@@ -139,7 +146,7 @@ class SampledFilter:
         self.dc_gain = float(np.real(ct.dcgain(system_d)))
         self._h = np.zeros(0)
 
-    def impulse(self, n: int) -> np.ndarray:
+    def impulse(self, n: int) -> npt.NDArray[np.float64]:
         if self._h.size < n:
             h = np.empty(n)
             h[0] = self.d
@@ -150,11 +157,12 @@ class SampledFilter:
             self._h = h
         return self._h[:n]
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
+    def __call__(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]:
         x = np.asarray(x, dtype=float)
         h = self.impulse(x.shape[0])
         shape = (-1,) + (1,) * (x.ndim - 1)
-        return signal.fftconvolve(x, h.reshape(shape), axes=0)[: x.shape[0]]
+        y: npt.NDArray[np.float64] = signal.fftconvolve(x, h.reshape(shape), axes=0)[: x.shape[0]]
+        return y
 
 
 # ----------------------------------------------------------------------------- laws
@@ -184,25 +192,29 @@ class LawConfig:
             raise MrilcError(f"q_order must be 1-8, got {self.q_order!r}")
 
 
-def _q_sos(config: LawConfig, period: float):
+def _q_sos(config: LawConfig, period: float) -> npt.NDArray[np.float64] | None:
     if config.q_cutoff_hz <= 0:
         return None
     nyquist = 0.5 / period
     if config.q_cutoff_hz >= nyquist:
         raise MrilcError(f"Q cut-off {config.q_cutoff_hz:g} Hz must be below the Nyquist frequency {nyquist:g} Hz")
-    return signal.butter(int(config.q_order), config.q_cutoff_hz, fs=1.0 / period, output="sos")
+    sos: npt.NDArray[np.float64] = signal.butter(int(config.q_order), config.q_cutoff_hz, fs=1.0 / period,
+                                                 output="sos")
+    return sos
 
 
-def q_response(config: LawConfig, omega: np.ndarray, period: float) -> np.ndarray:
+def q_response(config: LawConfig, omega: npt.NDArray[np.floating[Any]], period: float) -> npt.NDArray[np.float64]:
     """|Q(e^{jwT})|^2: the zero-phase (forward-backward) Q filter's gain."""
     sos = _q_sos(config, period)
     if sos is None:
         return np.ones_like(omega)
     _, h = signal.sosfreqz(sos, worN=omega * period)
-    return np.abs(h) ** 2
+    gain: npt.NDArray[np.float64] = np.abs(h) ** 2
+    return gain
 
 
-def minimax_learning_filter(paths: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def minimax_learning_filter(paths: list[npt.NDArray[np.complex128]]
+                            ) -> tuple[npt.NDArray[np.complex128], npt.NDArray[np.float64]]:
     """Per frequency, the L minimising max_p |1 - L H_p| over the frequency responses ``paths``
     (one array per plant), and that minimum (the best worst-case contraction)."""
     h = np.asarray(paths)  # plants x frequencies
@@ -213,7 +225,7 @@ def minimax_learning_filter(paths: list[np.ndarray]) -> tuple[np.ndarray, np.nda
         if np.all(np.abs(hp) < 1e-300):
             continue
 
-        def worst(x, hp=hp):
+        def worst(x: npt.NDArray[np.float64], hp: npt.NDArray[np.complex128] = hp) -> float:
             return float(np.max(np.abs(1.0 - (x[0] + 1j * x[1]) * hp)))
 
         # start from the inverse of the plant-set mean; the problem is convex in (Re L, Im L)
@@ -232,50 +244,57 @@ class LearningFilter:
 
     config: LawConfig
     period: float
-    design_omega: np.ndarray | None = None   # robust: frequencies of the minimax design, rad/s
-    design_l: np.ndarray | None = None       # robust: L there (already scaled by gain)
-    _q: object = field(default=None, repr=False)
+    design_omega: npt.NDArray[np.float64] | None = None  # robust: frequencies of the minimax design, rad/s
+    design_l: npt.NDArray[np.complex128] | None = None  # robust: L there (already scaled by gain)
+    _q: npt.NDArray[np.float64] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         self._q = _q_sos(self.config, self.period)
         if self.config.law == "robust" and (self.design_omega is None or self.design_l is None):
             raise MrilcError("the robust law needs its design (use design_learning_filter)")
 
-    def response(self, omega: np.ndarray) -> np.ndarray:
+    def response(self, omega: npt.NDArray[np.floating[Any]]) -> npt.NDArray[np.complex128]:
         """L(e^{jwT}) at the frequencies ``omega`` (rad/s)."""
         z = np.exp(1j * omega * self.period)
         c = self.config
+        l_z: npt.NDArray[np.complex128]
         if c.law == "p":
-            return c.gamma * z
+            l_z = c.gamma * z
+            return l_z
         if c.law == "pd":
-            return c.gamma * z + c.lam * (z - 1.0)
+            l_z = c.gamma * z + c.lam * (z - 1.0)
+            return l_z
+        assert self.design_omega is not None and self.design_l is not None  # robust: checked on construction
         w = np.clip(np.abs(omega), self.design_omega[0], self.design_omega[-1])
         lw = np.log(self.design_omega)
         re = np.interp(np.log(w), lw, self.design_l.real)
         im = np.interp(np.log(w), lw, self.design_l.imag)
-        return np.where(omega >= 0, re + 1j * im, re - 1j * im)
+        l_z = np.where(omega >= 0, re + 1j * im, re - 1j * im)
+        return l_z
 
-    def apply_l(self, e: np.ndarray) -> np.ndarray:
+    def apply_l(self, e: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """L e over a cycle (samples x channels)."""
         e = np.asarray(e, dtype=float)
         c = self.config
         if c.law in ("p", "pd"):
             ahead = np.concatenate([e[1:], e[-1:]], axis=0)  # e(k + 1), the last sample held
-            return c.gamma * ahead + c.lam * (ahead - e)
+            l_e: npt.NDArray[np.float64] = c.gamma * ahead + c.lam * (ahead - e)
+            return l_e
         n = e.shape[0]
         m = 1 << int(math.ceil(math.log2(max(2 * n, 2))))
         omega = 2 * math.pi * np.fft.rfftfreq(m, self.period)
         spectrum = np.fft.rfft(e, n=m, axis=0) * self.response(omega)[:, None]
-        return np.fft.irfft(spectrum, n=m, axis=0)[:n]
+        out: npt.NDArray[np.float64] = np.fft.irfft(spectrum, n=m, axis=0)[:n]
+        return out
 
-    def update(self, u2: np.ndarray, e: np.ndarray) -> np.ndarray:
+    def update(self, u2: npt.ArrayLike, e: npt.ArrayLike) -> npt.NDArray[np.float64]:
         out = np.asarray(u2, dtype=float) + self.apply_l(e)
         if self._q is not None and out.shape[0] > 3 * (2 * self._q.shape[0] + 1):
             out = signal.sosfiltfilt(self._q, out, axis=0)
         return out
 
 
-def frequency_grid(period: float, omega_min: float, points: int = 400) -> np.ndarray:
+def frequency_grid(period: float, omega_min: float, points: int = 400) -> npt.NDArray[np.float64]:
     """Log-spaced frequencies from omega_min to just below the Nyquist frequency, rad/s."""
     nyquist = math.pi / period
     if not 0 < omega_min < nyquist:
@@ -290,8 +309,8 @@ def design_learning_filter(config: LawConfig, period: float, paths_d: list[ct.St
     if config.law != "robust":
         return LearningFilter(config, period)
     omega = frequency_grid(period, omega_min)
-    l, _ = minimax_learning_filter([_freq(h, omega) for h in paths_d])
-    return LearningFilter(config, period, omega, config.gain * l)
+    l_best, _ = minimax_learning_filter([_freq(h, omega) for h in paths_d])
+    return LearningFilter(config, period, omega, config.gain * l_best)
 
 
 # ----------------------------------------------------------------------------- convergence check
@@ -301,7 +320,7 @@ class ConvergenceReport:
 
     ok: bool
     per_plant: dict[str, float]
-    worst_plant: str
+    worst_plant: str | None  # None only when no plant was checked
     worst_omega: float      # rad/s
     worst_value: float
 
@@ -323,7 +342,8 @@ def check_convergence(learning: LearningFilter, paths_d: dict[str, ct.StateSpace
     omega = frequency_grid(learning.period, omega_min, points)
     lq = learning.response(omega)
     q = q_response(learning.config, omega, learning.period)
-    per, worst = {}, (None, -1.0, 0.0)
+    per: dict[str, float] = {}
+    worst: tuple[str | None, float, float] = (None, -1.0, 0.0)
     for name, h in paths_d.items():
         g = q * np.abs(1.0 - lq * _freq(h, omega))
         i = int(np.argmax(g))
@@ -387,19 +407,21 @@ class MrilcModel:
             raise MrilcError(f"learning refused: the law {self.law.law} (gamma {self.law.gamma:g}) "
                              f"{self.convergence.describe()}{hint}")
 
-    def reference_response(self, r_s: np.ndarray, rest=None) -> np.ndarray:
+    def reference_response(self, r_s: npt.ArrayLike, rest: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
         """y_m over a cycle (samples x joints) of the reference model at rest at ``rest`` (per
         joint; default the first reference sample) when the cycle starts."""
         r_s = np.asarray(r_s, dtype=float)
         r0 = r_s[:1] if rest is None else np.asarray(rest, dtype=float).reshape(1, -1)
-        return r0 * self.reference_filter.dc_gain + self.reference_filter(r_s - r0)
+        y_m: npt.NDArray[np.float64] = r0 * self.reference_filter.dc_gain + self.reference_filter(r_s - r0)
+        return y_m
 
 
-def paper_plant_set(omegas=PAPER_OMEGAS, zetas=PAPER_ZETAS) -> dict[str, ct.TransferFunction]:
+def paper_plant_set(omegas: Sequence[float] = PAPER_OMEGAS, zetas: Sequence[float] = PAPER_ZETAS
+                    ) -> dict[str, ct.TransferFunction]:
     """The plants of a grid of modes, named 'w=5 zeta=0.15' etc."""
     return {f"w={w:g} zeta={z:g}": mck_plant(w, z) for w in omegas for z in zetas}
 
 
-def rms(x: np.ndarray) -> float:
+def rms(x: npt.ArrayLike) -> float:
     x = np.asarray(x, dtype=float)
     return float(np.sqrt(np.mean(x**2))) if x.size else 0.0
