@@ -42,13 +42,14 @@ from shaper_msgs.msg import CycleEvent, CycleReport, FeedforwardProfile
 from shaper_msgs.srv import SetFeedforward
 from shaper_nodes.core.learning.mrilc import (
     DEFAULTS,
+    DESCRIPTIONS,
     RANGES,
     MrilcError,
     MrilcLearner,
     MrilcSession,
+    check_parameter,
     model_from_params,
 )
-from shaper_nodes.core.learning.mrilc.learner import _number  # TODO(merge): public per-parameter check
 from shaper_nodes.core.shaping import ShaperError, design
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.parameters import Spec, declare_all, values
@@ -57,45 +58,10 @@ from shaper_nodes.ros.shaper_client import ServiceClient
 if TYPE_CHECKING:
     from .learner import LearnerNode
 
-#: what each parameter means (names, defaults and ranges: core.mrilc_learning.DEFAULTS, RANGES)
-DESCRIPTIONS = {
-    "mrilc.rate": "Sample rate of the loop and of the profile, Hz.",
-    "mrilc.controller.numerator": "Feedback controller C(s) numerator, highest power first (default seed 000 eq. 13).",
-    "mrilc.controller.denominator": "Feedback controller C(s) denominator.",
-    "mrilc.nominal.omega": "Nominal plant natural frequency, rad/s.",
-    "mrilc.nominal.zeta": "Nominal plant damping ratio.",
-    "mrilc.check.omegas": "Plant set of the convergence check: natural frequencies, rad/s (every pair with"
-                          " check.zetas).",
-    "mrilc.check.zetas": "Plant set: damping ratios.",
-    "mrilc.check.min_frequency_hz": "Lowest frequency of the check (and of the robust design), Hz: about"
-                                    " 1 / (cycle duration).",
-    "mrilc.law": "Learning law: 'p' (gamma z), 'pd' (gamma z + lambda (z - 1)), 'robust'.",
-    "mrilc.gamma": "P/PD learning gain.",
-    "mrilc.lambda": "PD derivative learning gain.",
-    "mrilc.robust_gain": "Robust law: fraction of the minimax L applied.",
-    "mrilc.q_cutoff_hz": "Q filter cut-off (zero-phase Butterworth), Hz (0 = Q = 1).",
-    "mrilc.q_order": "Q filter order.",
-    "mrilc.injection": "'effort' (added to the controller output) or 'command' (added to the setpoint after the"
-                       " shaper).",
-    "mrilc.injection_target": "Node offering ~/set_feedforward at the injection point.",
-    "mrilc.shaper_family": "Shaper designed on the reference model's mode and sent to the shaper node ('' = leave"
-                           " it).",
-    "mrilc.learn": "Learn (true) or only measure and report with the profile held (false).",
-    "mrilc.patience": "Divergence guard: iterations of growing RMS(e) before rollback.",
-    "mrilc.noise_floor": "RMS(e) below which growth is not divergence (output units).",
-    "joint_names": "Joints learned, in profile order ([''] = those of the first START).",
-    "topics.joint_states": "Topic name (joint_states).",
-    "topics.reference": "Topic name (reference).",
-    "topics.cycle_events": "Topic name (cycle_events).",
-}
-
 
 def _check(name: str) -> Any:
-    """The core's check of one value: its range, or else the model built with it (convergence not
-    required)."""
-    if name in RANGES:
-        return lambda v: _number(name, v)
-    return lambda v: model_from_params({name: v}, require_convergence=False)
+    """The core's check of one value of parameter ``name``."""
+    return lambda v: check_parameter(name, v)
 
 
 #: the MRILC mode's parameters: the core's names, defaults and ranges (see config/mrilc.yaml)

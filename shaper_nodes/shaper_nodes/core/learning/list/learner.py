@@ -23,11 +23,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from shaper_nodes.core.checks import finite
 from shaper_nodes.core.shaping import MAX_DURATION
 
 from .measure import Measurement, Reference, direction_sign, make_reference, measure, reference_m, residual_window
-from .params import ListConfig, ListError, ListParams, int_at_least, paper_step, secant_step
+from .params import ListConfig, ListError, ListParams, finite_value, int_at_least, paper_step, secant_step
 from .trials import (
     ListUpdate,
     Step,
@@ -57,9 +56,6 @@ _STATE_KEYS = {"format", "version", "config", "params", "t2_bounds", "reference"
 #: what the learner decides after a cycle: (next parameters, parameter varied, action, reason)
 _Decision = tuple[ListParams, str, str, str]
 
-
-def _finite(name: str, value: Any) -> float:
-    return finite(name, value, ListError)
 
 
 class ListLearner:
@@ -247,7 +243,7 @@ class ListLearner:
         if self._params is None:  # a reference given without parameters cannot happen; keep safe
             self._set_initial(used)
         try:
-            window = self._window(self._reference, _finite("motion_end", motion_end))
+            window = self._window(self._reference, finite_value("motion_end", motion_end))
             meas = measure(times, accel, motion_end, end, self._reference, sign, self._config, window_start=window[0])
         except ListError as err:
             return self._record(math.nan, math.nan, used, self._params, "none", "rejected", f"cycle rejected: {err}")
@@ -640,7 +636,7 @@ class ListLearner:
         if not isinstance(scale, dict) or set(scale) != set(_PARAMS):
             raise ListError("step_scale must be a dictionary with keys t2, a1")
         for name in _PARAMS:
-            x = _finite("step_scale", scale[name])
+            x = finite_value("step_scale", scale[name])
             if not MIN_STEP_SCALE <= x <= 1.0:
                 raise ListError(f"step_scale must be in [{MIN_STEP_SCALE:g}, 1], got {x!r}")
             self._scale[name] = x

@@ -28,11 +28,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.signal import butter, sosfiltfilt
 
-from shaper_nodes.core.checks import finite
 from shaper_nodes.core.identification import IdentificationError, identify
 from shaper_nodes.core.shaping import Mode
 
-from .params import ListConfig, ListError
+from .params import ListConfig, ListError, finite_value
 
 #: order of the Butterworth high-pass (applied forwards and backwards: zero phase)
 HIGHPASS_ORDER = 2
@@ -44,9 +43,6 @@ MAX_MOTION_SHIFT = 0.05
 _GRID_EPS = 1e-6
 
 
-def _finite(name: str, value: Any) -> float:
-    return finite(name, value, ListError)
-
 
 # ---------------------------------------------------------------------------------------------
 # Signals: checks, resampling, filtering
@@ -55,7 +51,7 @@ def _finite(name: str, value: Any) -> float:
 
 def direction_sign(direction: Any) -> float:
     """The sign (+1 or -1) of a move's direction; 0 or a non-number is refused."""
-    d = _finite("direction", direction)
+    d = finite_value("direction", direction)
     if d == 0.0:
         raise ListError("direction must be +1 or -1 (its sign is used), got 0")
     return math.copysign(1.0, d)
@@ -192,7 +188,7 @@ class Reference:
 
     def __post_init__(self) -> None:
         for name in ("t0", "dt", "motion_end", "end", "omega", "zeta", "m_u", "highpass_hz"):
-            object.__setattr__(self, name, _finite(f"reference {name}", getattr(self, name)))
+            object.__setattr__(self, name, finite_value(f"reference {name}", getattr(self, name)))
         sig = np.array(self.signal, dtype=float).ravel()
         axis = np.array(self.axis, dtype=float).ravel()
         if not (self.dt > 0.0 and self.omega > 0.0 and 0.0 <= self.zeta < 1.0 and self.m_u > 0.0
@@ -272,7 +268,7 @@ def make_reference(times: Any, accel: Any, motion_end: float, end: float, direct
     """
     config = ListConfig() if config is None else config
     d = direction_sign(direction)
-    me, en = _finite("motion_end", motion_end), _finite("end", end)
+    me, en = finite_value("motion_end", motion_end), finite_value("end", end)
     if en <= me:
         raise ListError(f"end {en!r} s must come after motion_end {me!r} s")
     t, a = _arrays(times, accel)
@@ -387,9 +383,9 @@ def measure(times: Any, accel: Any, motion_end: float, end: float, reference: Re
     if not isinstance(reference, Reference):
         raise ListError(f"reference must be a Reference, got {type(reference).__name__}")
     d = direction_sign(direction)
-    me, en = _finite("motion_end", motion_end), _finite("end", end)
+    me, en = finite_value("motion_end", motion_end), finite_value("end", end)
     start, last = residual_window(me, reference, config, config.t2_bounds)
-    w0 = start if window_start is None else _finite("window_start", window_start)
+    w0 = start if window_start is None else finite_value("window_start", window_start)
     if en <= w0:
         raise ListError(f"end {en:.6g} s must come after the window start {w0:.6g} s")
     ref, dt = reference, reference.dt

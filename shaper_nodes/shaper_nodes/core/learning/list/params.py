@@ -58,11 +58,13 @@ class ListError(ValueError):
     """Bad input to the learner, or a cycle it cannot learn from; the message names the problem."""
 
 
-def _number(name: str, value: Any) -> float:
+def number_value(name: str, value: Any) -> float:
+    """``value`` as a float (:func:`~shaper_nodes.core.checks.number`), or :class:`ListError`."""
     return number(name, value, ListError)
 
 
-def _finite(name: str, value: Any) -> float:
+def finite_value(name: str, value: Any) -> float:
+    """``value`` as a finite float (:func:`~shaper_nodes.core.checks.finite`), or :class:`ListError`."""
     return finite(name, value, ListError)
 
 
@@ -97,8 +99,8 @@ class ListParams:
     t2: float
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "a1", _number("a1", self.a1))
-        object.__setattr__(self, "t2", _number("t2", self.t2))
+        object.__setattr__(self, "a1", number_value("a1", self.a1))
+        object.__setattr__(self, "t2", number_value("t2", self.t2))
 
     @property
     def a2(self) -> float:
@@ -261,12 +263,12 @@ class ListConfig:
 
     def __post_init__(self) -> None:
         put = self._set
-        hp = _finite("highpass_hz", self.highpass_hz)
+        hp = finite_value("highpass_hz", self.highpass_hz)
         if hp < 0.0:
             raise ListError(f"highpass_hz must be >= 0, got {hp!r}")
         put("highpass_hz", hp)
         if self.window_delay is not None:
-            wd = _finite("window_delay", self.window_delay)
+            wd = finite_value("window_delay", self.window_delay)
             if wd < 0.0:
                 raise ListError(f"window_delay must be >= 0 s, got {wd!r}")
             put("window_delay", wd)
@@ -274,29 +276,29 @@ class ListConfig:
         if self.t2_bounds is not None:
             put("t2_bounds", self._bounds("t2_bounds", self.t2_bounds, 0.0, MAX_DURATION / 2.0))
         for name, hi in (("max_step_a1", 1.0), ("max_step_t2", 10.0)):
-            v = _finite(name, getattr(self, name))
+            v = finite_value(name, getattr(self, name))
             if not 0.0 < v <= hi:
                 raise ListError(f"{name} must be in (0, {hi:g}], got {v!r}")
             put(name, v)
         put("phase_trials", int_at_least("phase_trials", self.phase_trials, 1))
         put("patience", int_at_least("patience", self.patience, 0))
-        tol = _finite("switch_tol", self.switch_tol)
+        tol = finite_value("switch_tol", self.switch_tol)
         if not 0.0 <= tol < 1.0:
             raise ListError(f"switch_tol must be in [0, 1), got {tol!r}")
         put("switch_tol", tol)
         if self.rule not in RULES:
             raise ListError(f"unknown rule {self.rule!r}; known: {', '.join(RULES)}")
         _power(self.structure)
-        rf = _finite("rollback_factor", self.rollback_factor)
+        rf = finite_value("rollback_factor", self.rollback_factor)
         if rf < 1.0:
             raise ListError(f"rollback_factor must be >= 1, got {rf!r}")
         put("rollback_factor", rf)
-        sat = _number("saturation", self.saturation)
+        sat = number_value("saturation", self.saturation)
         if not sat > 0.0:  # also NaN
             raise ListError(f"saturation must be > 0 m/s^2 (inf: no limit), got {self.saturation!r}")
         put("saturation", sat)
         put("min_samples", int_at_least("min_samples", self.min_samples, 2))
-        gap = _finite("max_gap_periods", self.max_gap_periods)
+        gap = finite_value("max_gap_periods", self.max_gap_periods)
         if gap <= 1.0:
             raise ListError(f"max_gap_periods must be > 1, got {gap!r}")
         put("max_gap_periods", gap)
@@ -311,7 +313,7 @@ class ListConfig:
             a, b = value
         except (TypeError, ValueError):
             raise ListError(f"{name} must be (low, high), got {value!r}") from None
-        a, b = _finite(name, a), _finite(name, b)
+        a, b = finite_value(name, a), finite_value(name, b)
         if not lo < a < b or b > hi or (hi == 1.0 and b >= hi):
             raise ListError(f"{name} must satisfy {lo:g} < low < high {'<' if hi == 1.0 else '<='} {hi:g},"
                             f" got {value!r}")

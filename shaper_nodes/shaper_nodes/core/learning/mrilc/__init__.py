@@ -12,12 +12,13 @@ session
     applied reference, cycle events), handed to the learner.
 params
     The learner node's parameters (:data:`DEFAULTS`, :data:`RANGES`, :data:`DESCRIPTIONS`) and
-    the model and settings they build (:func:`model_from_params`, :class:`MrilcSettings`).
+    the model and settings they build (:func:`model_from_params`, :class:`MrilcSettings`), and the check of one value
+    (:func:`check_parameter`).
 """
 
 from .learner import MrilcLearner, MrilcUpdate
 from .model import PAPER_CONTROLLER, MrilcError, MrilcModel, controller
-from .params import DEFAULTS, DESCRIPTIONS, RANGES, MrilcSettings, model_from_params
+from .params import DEFAULTS, DESCRIPTIONS, RANGES, MrilcSettings, check_parameter, model_from_params
 from .session import MrilcCycle, MrilcSession
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "MrilcSession",
     "MrilcSettings",
     "MrilcUpdate",
+    "check_parameter",
     "controller",
     "model_from_params",
 ]

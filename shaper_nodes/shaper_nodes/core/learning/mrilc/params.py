@@ -136,6 +136,40 @@ def _text(name: str, value: Any) -> str:
     return value
 
 
+#: the list-valued parameters (non-empty lists of finite numbers)
+_LISTS = ("mrilc.controller.numerator", "mrilc.controller.denominator", "mrilc.check.omegas", "mrilc.check.zetas")
+
+
+def check_parameter(name: str, value: Any) -> None:
+    """Check one parameter's value on its own: its type, and its range (:data:`RANGES`) or choices.
+
+    What depends on several parameters together (a controller that does not stabilise the nominal
+    plant, a Q cut-off above Nyquist, convergence) is checked by :func:`model_from_params`.
+
+    Raises
+    ------
+    MrilcError
+        An unknown name, or a value of the wrong type, out of range or not one of the choices.
+    """
+    if name not in DEFAULTS:
+        raise MrilcError(f"unknown MRILC parameter {name}")
+    if name in RANGES:
+        _number(name, value)
+    elif name in _LISTS:
+        _numbers(name, value)
+    elif name == "mrilc.learn":
+        if not isinstance(value, bool):
+            raise MrilcError(f"parameter mrilc.learn must be true or false, got {value!r}")
+    elif name == "joint_names":
+        if isinstance(value, str) or not all(isinstance(n, str) for n in value):
+            raise MrilcError(f"parameter joint_names must be a list of strings, got {value!r}")
+    else:
+        text = _text(name, value)
+        choices = {"mrilc.law": M.LAWS, "mrilc.injection": M.INJECTIONS}.get(name)
+        if choices is not None and text not in choices:
+            raise MrilcError(f"parameter {name} must be one of {', '.join(choices)}, got {text!r}")
+
+
 def model_from_params(params: Mapping[str, object] | None = None, require_convergence: bool = True
                       ) -> tuple[MrilcModel, MrilcSettings]:
     """The MRILC model and settings from the learner node's parameters (:data:`DEFAULTS` for
@@ -156,18 +190,10 @@ def model_from_params(params: Mapping[str, object] | None = None, require_conver
         raise MrilcError(f"unknown MRILC parameter(s) {', '.join(unknown)} (known: "
                          f"{', '.join(k for k in DEFAULTS if k.startswith('mrilc.'))})")
     p: dict[str, Any] = {k: given.get(k, v) for k, v in DEFAULTS.items()}
+    for name, value in p.items():
+        check_parameter(name, value)
     num = {k: _number(k, p[k]) for k in RANGES}
-    law_name = _text("mrilc.law", p["mrilc.law"])
-    if law_name not in M.LAWS:
-        raise MrilcError(f"parameter mrilc.law must be one of {', '.join(M.LAWS)}, got {law_name!r}")
-    injection = _text("mrilc.injection", p["mrilc.injection"])
-    if injection not in M.INJECTIONS:
-        raise MrilcError(f"parameter mrilc.injection must be one of {', '.join(M.INJECTIONS)}, got {injection!r}")
-    if not isinstance(p["mrilc.learn"], bool):
-        raise MrilcError(f"parameter mrilc.learn must be true or false, got {p['mrilc.learn']!r}")
-    names = p["joint_names"]
-    if isinstance(names, str) or not all(isinstance(n, str) for n in names):
-        raise MrilcError(f"parameter joint_names must be a list of strings, got {names!r}")
+    law_name, injection, names = p["mrilc.law"], p["mrilc.injection"], p["joint_names"]
     law = M.LawConfig(law=law_name, gamma=num["mrilc.gamma"], lam=num["mrilc.lambda"], gain=num["mrilc.robust_gain"],
                       q_cutoff_hz=num["mrilc.q_cutoff_hz"], q_order=int(num["mrilc.q_order"]))
     plant_set = M.paper_plant_set(_numbers("mrilc.check.omegas", p["mrilc.check.omegas"]),
