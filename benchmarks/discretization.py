@@ -4,11 +4,11 @@ Timing (ROS-free, best of ``repeats`` passes of ``number`` calls each), per case
 command rate):
 
 ``design``
-    ``core.shapers.design``: what any shaper change costs already (the baseline).
+    ``core.shaping.families.design``: what any shaper change costs already (the baseline).
 ``split``
-    ``core.fir.discretize(..., "split")``.
+    ``core.shaping.fir.discretize(..., "split")``.
 ``exact``
-    ``core.fir.discretize(..., "exact")``: the split plus the least-change solve at the modes
+    ``core.shaping.fir.discretize(..., "exact")``: the split plus the least-change solve at the modes
     (and, when the split's taps would go negative, the bounded QP).
 
 Both are paid once per shaper change, never per sample: the streaming cost is the FIR's (see

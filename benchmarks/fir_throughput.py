@@ -3,7 +3,7 @@
 Methods (each over the same data, each started at rest at the first sample):
 
 ``shaper, sample by sample``
-    :class:`shaper_nodes.core.fir.StreamingShaper.process` called with one ``(joints,)`` sample
+    :meth:`shaper_nodes.core.shaping.fir.StreamingShaper.process` called with one ``(joints,)`` sample
     per call, as the shaper node does for every message.
 ``shaper, blocks``
     The same with ``(block, joints)`` blocks.

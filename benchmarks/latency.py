@@ -15,7 +15,7 @@ The send time of every message is kept in an array indexed by its sequence numbe
 * in the data, as the ramp ``x_j(k) = k (1 + j / 8)`` on joint ``j``. The node under test may
   filter the data (the shaper does, and the sequence number cannot simply be read back), so a
   reply is decoded by comparing its joint 0 with the node's *expected* output for the ramp,
-  computed here with the same causal FIR (:class:`shaper_nodes.core.fir.StreamingShaper`,
+  computed here with the same causal FIR (:class:`shaper_nodes.core.shaping.fir.StreamingShaper`,
   designed from the parameters given to the node; identity for the echo node and for shaper
   family ``none``). A causal FIR with non-negative taps and a positive first tap (every shaper
   family here) maps a ramp to a strictly increasing sequence, so the inverse is a
@@ -85,7 +85,7 @@ class Target:
     make_process : callable
         ``make_process(log_path)`` returns an unstarted process object with ``start()``,
         ``stop()``, ``running()`` and a ``proc`` attribute (a :class:`subprocess.Popen` once
-        started); :class:`ChildProcess` and :class:`shaper_nodes.launching.NodeProcess` fit.
+        started); :class:`ChildProcess` and :class:`shaper_nodes.ros.launching.NodeProcess` fit.
     in_topic, out_topic : str
         The node's input and output topics.
     fir : SparseFir

@@ -1,4 +1,4 @@
-"""Time of one LIST update (:meth:`shaper_nodes.core.list_learning.ListLearner.update`) against a floor.
+"""Time of one LIST update (:meth:`shaper_nodes.core.learning.list.learner.ListLearner.update`) against a floor.
 
 Data: one 10 s cycle of a 3-axis accelerometer at 1 kHz: a base-excited 8 Hz, 3 % damped mode
 moved 0.5 m by a trapezoid (1 m/s, 4 m/s^2, MOTION_END at 0.75 s), simulated exactly

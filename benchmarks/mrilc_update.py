@@ -1,4 +1,4 @@
-"""Time of one MRILC update (:meth:`shaper_nodes.core.mrilc_learning.MrilcLearner.learn`) against a floor.
+"""Time of one MRILC update (:meth:`shaper_nodes.core.learning.mrilc.learner.MrilcLearner.learn`) against a floor.
 
 Data: one 10 s cycle at 1 kHz of 7 joints, each seed 000's loop (PID of eq. 13) around the
 perturbed plant w = 5 rad/s, zeta = 0.15: the reference a ZVD-shaped unit step at 1 s and back

@@ -7,7 +7,7 @@ Timing (ROS-free, best of ``repeats`` passes of ``number`` calls each):
     two-mass system, eight rules, 4x4 models) evaluated at a pose (weights, interpolated model,
     its eigenvalues and lightly damped modes), and the ZV shaper designed on the mode.
 ``baseline: design``
-    The ZV design alone (``core.shapers.design``), what any shaper change costs.
+    The ZV design alone (``core.shaping.families.design``), what any shaper change costs.
 
 CPU share: the scheduler node (config/scheduler.yaml's rule base, evaluating every 0.05 s, a shaper
 node answering its requests) gets ``/joint_states`` at 500 Hz for ``seconds`` s, the pose

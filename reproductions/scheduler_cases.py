@@ -55,7 +55,7 @@ def _mode_at(m1: float):
 
 def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangular",
                    with_models: bool = True, with_modes: bool = True) -> dict:
-    """A rule base (the mapping core.fuzzy.rule_base_from_dict takes) with one rule per pose x0
+    """A rule base (the mapping core.scheduling.fuzzy.rule_base_from_dict takes) with one rule per pose x0
     in ``points`` (m): eq. (1) linearised at m1 = 10 x0 + 1 and/or its mode, and triangles
     peaking at each point (shoulders at the ends)."""
     from shaper_nodes.core.scheduling import modes_of, triangular_partition

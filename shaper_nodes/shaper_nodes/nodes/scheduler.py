@@ -2,7 +2,7 @@
 
 From /joint_states it takes the premise variables (the positions of the joints named in
 ``premises``), evaluates the rule base (operating points with their linear models and/or mode
-parameters, in the parameter file, see config/scheduler.yaml and core/fuzzy.py), and sends the
+parameters, in the parameter file, see config/scheduler.yaml and core/scheduling/fuzzy.py), and sends the
 shaper designed on the interpolated mode(s) to the shaper node (``<shaper>/set_shaper``, source
 "scheduler").
 

@@ -344,7 +344,7 @@ class FamilyProperties:
         Percentage vibration at the design mode, fraction.
     insensitivity_5pct : float
         Width of the band around the design frequency where V <= 5 %, as a fraction of it
-        (:func:`~shaper_nodes.core.vibration.insensitivity_width`).
+        (:func:`~shaper_nodes.core.shaping.vibration.insensitivity_width`).
     damping_assumed : str
         The registry's statement of the damping the design assumes.
     """
