@@ -19,6 +19,7 @@ import math
 import pathlib
 import sys
 from collections.abc import Iterable, Iterator, Mapping
+from typing import Any
 
 from shaper_nodes.core.cycles import END
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams, ListSession, SessionResult, list_config
@@ -41,12 +42,13 @@ def session_for(params: Mapping[str, object] | None = None) -> ListSession:
     ListError
         Invalid parameters.
     """
-    params = dict(params or {})
-    config = list_config({k[len("list."):]: v for k, v in params.items() if k.startswith("list.")})
-    hz = float(params.get("initial.frequency_hz", 0.0))
-    initial = (ListParams.from_mode(Mode.from_hz(hz, float(params.get("initial.damping_ratio", 0.0))))
+    # values as parsed from JSON or given as text: float() below checks the numeric ones
+    values: dict[str, Any] = dict(params or {})
+    config = list_config({k[len("list."):]: v for k, v in values.items() if k.startswith("list.")})
+    hz = float(values.get("initial.frequency_hz", 0.0))
+    initial = (ListParams.from_mode(Mode.from_hz(hz, float(values.get("initial.damping_ratio", 0.0))))
                if hz > 0 else None)
-    session = ListSession(ListLearner(config, initial), config.structure, float(params.get("stale_after", 0.1)))
+    session = ListSession(ListLearner(config, initial), config.structure, float(values.get("stale_after", 0.1)))
     session.sent(None)
     return session
 
@@ -128,7 +130,8 @@ def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
 
         def items() -> Iterator[tuple[str, tuple]]:
             for conn, _, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
+                # typed only at run time (built from the recorded definition); the topic says which fields it has
+                msg: Any = reader.deserialize(raw, conn.msgtype)
                 if conn.topic == names["imu"]:
                     a = msg.linear_acceleration
                     yield "imu", (_sec(msg.header.stamp), (a.x, a.y, a.z))
@@ -146,6 +149,7 @@ def _row(r: SessionResult) -> dict:
     if u is None or u.action == "rejected":
         return {"cycle": r.cycle, "skipped": r.skipped or (u.reason if u else "")}
     used = u.used or ListParams(math.nan, math.nan)
+    assert u.next is not None  # None only before an initial guess, and such a cycle is rejected
     return {"cycle": r.cycle, "iteration": u.iteration, "M": u.m, "phi": u.phi, "action": u.action,
             "parameter": u.parameter, "a1_used": used.a1, "t2_used": used.t2, "a1_next": u.next.a1,
             "t2_next": u.next.t2}

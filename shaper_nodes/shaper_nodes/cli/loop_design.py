@@ -190,23 +190,23 @@ def _cmd_tdf_step(args: argparse.Namespace) -> str:
 
 def _cmd_tdf_select(args: argparse.Namespace) -> str:
     ranges = td.assumed_frequency_range(args.omega_r, args.delay)
-    rows = []
-    for r in ranges:
+    rows: list[dict[str, Any]] = []
+    for rng in ranges:
         ends = []
-        for wa in (r.low, r.high):
+        for wa in (rng.low, rng.high):
             try:
                 ends.append(td.stable_interval(wa, args.delay).upper if wa > 0 else float("nan"))
             except td.TimeDelayError:
                 ends.append(float("nan"))
         # which w_A of the range keep w_R inside its stable interval, and which gives the largest margin
-        grid = np.linspace(r.low, r.high, 401)[1:] if r.low == 0 else np.linspace(r.low, r.high, 401)
+        grid = np.linspace(rng.low, rng.high, 401)[1:] if rng.low == 0 else np.linspace(rng.low, rng.high, 401)
         ups = np.array([_upper(float(wa), args.delay) for wa in grid])
         ok = (grid <= args.omega_r) & (ups >= args.omega_r)
         # two-sided margin: how far (as a ratio) w_R is from both edges w_A and the upper bound
         with np.errstate(divide="ignore", invalid="ignore"):
             margin = np.minimum(args.omega_r / grid, ups / args.omega_r)
         best = int(np.nanargmax(np.where(ok, margin, np.nan))) if ok.any() else None
-        rows.append({"k": r.k, "omega_a_low": r.low, "omega_a_high": r.high,
+        rows.append({"k": rng.k, "omega_a_low": rng.low, "omega_a_high": rng.high,
                      "upper_bound_at_low": ends[0], "upper_bound_at_high": ends[1],
                      "stable_omega_a": [float(grid[ok].min()), float(grid[ok].max())] if ok.any() else None,
                      "best_omega_a": None if best is None else float(grid[best]),
@@ -217,7 +217,8 @@ def _cmd_tdf_select(args: argparse.Namespace) -> str:
     out = [f"w_R = {args.omega_r:g} rad/s, T = {args.delay:g} s: choose w_A in (eqs. 28-30)",
            _table(("k", "w_A from", "w_A to", "upper w_R bound there (from)", "(to)"),
                   [(r["k"], f"{r['omega_a_low']:.5g}", f"{r['omega_a_high']:.5g}",
-                    *("-" if math.isnan(b) else f"{b:.5g}" for b in (r["upper_bound_at_low"], r["upper_bound_at_high"])))
+                    *("-" if math.isnan(b) else f"{b:.5g}"
+                      for b in (r["upper_bound_at_low"], r["upper_bound_at_high"])))
                    for r in rows]),
            "then check the margin with tdf-interval (the lower bound is always w_R = w_A)."]
     for r in rows:
@@ -327,7 +328,7 @@ def _failing_bands(design: str, delta: float, gain: float | None) -> list[list[f
 
 
 def _cmd_qft_table(args: argparse.Namespace) -> str:
-    rows = qft.matching_table(args.design, args.frequencies, qft.corners() + [qft.nominal()], args.delta, args.gain)
+    rows = qft.matching_table(args.design, args.frequencies, [*qft.corners(), qft.nominal()], args.delta, args.gain)
     gain = None if args.design == "open" else (args.gain or qft.design_gain(args.design))
     specs = {}
     for name in ("output_disturbance", "input_disturbance", "noise"):
@@ -353,7 +354,7 @@ def _cmd_qft_table(args: argparse.Namespace) -> str:
                    [[("nominal " if r.plant == qft.nominal() else "") + r.plant.label()]
                     + [f"{e:.4f}{'*' if e > args.delta else ' '}" for e in r.errors] for r in rows],
                    right=[False] + [True] * len(args.frequencies))
-    out = head + [table, ""]
+    out = [*head, table, ""]
     if failing:
         out.append("FAILS at " + ", ".join(f"{w:g}" for w in failing) + " rad/s: " + "; ".join(
             f"{w:g} rad/s by " + ", ".join(r.plant.label() for r in rows if w in r.violations) for w in failing))
@@ -367,7 +368,8 @@ def _cmd_qft_table(args: argparse.Namespace) -> str:
                    right=[False] + [True] * len(args.frequencies))]
     if marg:
         worst = min(marg, key=lambda x: x.phase_margin)
-        out += ["", f"loop L = P G on the corners: {'all stable' if all(x.stable for x in marg) else 'UNSTABLE for some'};"
+        stability = "all stable" if all(x.stable for x in marg) else "UNSTABLE for some"
+        out += ["", f"loop L = P G on the corners: {stability};"
                 f" crossover {min(x.crossover for x in marg):.4g}-{max(x.crossover for x in marg):.4g} rad/s;"
                 f" smallest phase margin {worst.phase_margin:.3g} deg ({worst.plant.label()}),"
                 f" smallest gain margin {min(x.gain_margin for x in marg):.3g}"]
@@ -385,12 +387,12 @@ def _cmd_qft_plot(args: argparse.Namespace) -> str:
                   (f"feedback, G gain {qft.GAIN_FB:g}, spec (7)", "fb", qft.GAIN_FB),
                   (f"feedforward-feedback, G gain {qft.GAIN_FFB:g}, spec (9)", "ffb", qft.GAIN_FFB)]
         colors = plt.cm.viridis(np.linspace(0, 0.9, len(qft.WORKING_FREQUENCIES)))
-        for ax, (title, spec, gain) in zip(axes, shapes):
+        for ax, (title, spec, gain) in zip(axes, shapes, strict=True):
             l0 = p0 if gain is None else qft.controller_tf(gain) * p0
             ph, mag = qft.nichols(l0(1j * w))
             ax.plot(np.unwrap(np.radians(ph)) * 180 / math.pi, mag, "k", lw=1.2, label="L0")
-            for col, om in zip(colors, qft.WORKING_FREQUENCIES):
-                lo, up = qft.bounds(spec, om, phases)
+            for col, om in zip(colors, qft.WORKING_FREQUENCIES, strict=True):
+                _, up = qft.bounds(spec, om, phases)
                 ax.plot(phases, up, color=col, lw=1, label=f"{om:g} rad/s")
                 tph, tmag = qft.nichols(qft.template(om, qft.plant_grid(5)) * (l0(1j * om) / p0(1j * om)))
                 ax.plot(tph, tmag, ".", color=col, ms=1.5)
@@ -407,7 +409,8 @@ def _cmd_qft_plot(args: argparse.Namespace) -> str:
     elif args.figure == 7:
         fig, ax = plt.subplots(figsize=(7.5, 4.5), dpi=110)
         for gain, style, name in ((qft.GAIN_FB, "-", "feedback"), (qft.GAIN_FFB, "--", "feedforward-feedback")):
-            ax.semilogx(w, 20 * np.log10(np.abs(qft.controller_tf(gain)(1j * w))), style, label=f"{name} (K = {gain:g})")
+            ax.semilogx(w, 20 * np.log10(np.abs(qft.controller_tf(gain)(1j * w))), style,
+                        label=f"{name} (K = {gain:g})")
         ax.set_xlabel("frequency (rad/s)")
         ax.set_ylabel("|G| (dB)")
         ax.set_title("Seed 002 Fig. 7: controller magnitudes")
@@ -433,8 +436,8 @@ def _cmd_qft_plot(args: argparse.Namespace) -> str:
     return json.dumps({"out": args.out}) if args.json else f"wrote {args.out}"
 
 
-COMMANDS = {"tdf-interval": _cmd_tdf_interval, "tdf-step": _cmd_tdf_step, "tdf-select": _cmd_tdf_select, "tdf-plot": _cmd_tdf_plot,
-            "qft-table": _cmd_qft_table, "qft-plot": _cmd_qft_plot}
+COMMANDS = {"tdf-interval": _cmd_tdf_interval, "tdf-step": _cmd_tdf_step, "tdf-select": _cmd_tdf_select,
+            "tdf-plot": _cmd_tdf_plot, "qft-table": _cmd_qft_table, "qft-plot": _cmd_qft_plot}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -81,10 +81,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     def common(p: argparse.ArgumentParser, repeat_frequency: bool) -> None:
         action = "append" if repeat_frequency else "store"
-        p.add_argument("--frequency", "-f", type=_number("--frequency (Hz)", positive=True), required=True, action=action,
+        p.add_argument("--frequency", "-f", type=_number("--frequency (Hz)", positive=True), required=True,
+                       action=action,
                        help="natural frequency of the mode, Hz" + (" (repeat for several modes)" * repeat_frequency))
         p.add_argument("--damping", "-z", type=_number("--damping"), required=True, action=action,
-                       help="damping ratio, in [0, 0.95]" + (" (one for all, or one per --frequency)" * repeat_frequency))
+                       help="damping ratio, in [0, 0.95]"
+                       + (" (one for all, or one per --frequency)" * repeat_frequency))
         p.add_argument("--tolerance", type=_number("--tolerance"), default=DEFAULT_VIBRATION_TOLERANCE,
                        help="vibration tolerance V_tol of ei, 2hump_ei, 3hump_ei, si, fraction (default %(default)s)")
         p.add_argument("--insensitivity", type=_number("--insensitivity"), default=DEFAULT_INSENSITIVITY,
@@ -100,7 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
     common(p_show, repeat_frequency=True)
     p_show.add_argument("--amplitudes", type=_number("--amplitudes"), nargs="+", help="custom family: amplitudes")
     p_show.add_argument("--times", type=_number("--times"), nargs="+", help="custom family: impulse times, s")
-    p_show.add_argument("--rate", type=_number("--rate (Hz)", positive=True), help="command rate, Hz: also show the discretised FIR")
+    p_show.add_argument("--rate", type=_number("--rate (Hz)", positive=True),
+                        help="command rate, Hz: also show the discretised FIR")
     p_show.add_argument("--discretization", choices=("split", "round", "exact"), default="split",
                         help="impulse times between samples (default %(default)s)")
 
@@ -125,7 +128,7 @@ def _modes(frequencies: Sequence[float], dampings: Sequence[float]) -> list[Mode
         raise UsageError(f"give one --damping for all modes or one per --frequency"
                          f" ({len(frequencies)} frequencies, {len(dampings)} dampings)")
     zetas = list(dampings) * len(frequencies) if len(dampings) == 1 else list(dampings)
-    return [Mode.from_hz(f, z) for f, z in zip(frequencies, zetas)]
+    return [Mode.from_hz(f, z) for f, z in zip(frequencies, zetas, strict=True)]
 
 
 def _family(name: str) -> str:
@@ -156,7 +159,7 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]], right: Sequenc
     if right is None:
         right = [all(_is_number(r[i]) for r in cells) for i in range(len(headers))]
     def line(items: Sequence[str]) -> str:
-        return "  ".join(s.rjust(w) if r else s.ljust(w) for s, w, r in zip(items, widths, right)).rstrip()
+        return "  ".join(s.rjust(w) if r else s.ljust(w) for s, w, r in zip(items, widths, right, strict=True)).rstrip()
     return "\n".join([line(headers), line(["-" * w for w in widths])] + [line(r) for r in cells])
 
 
@@ -204,7 +207,8 @@ def _cmd_show(args: argparse.Namespace) -> str:
         "family": shaper.family,
         "damping_assumed": family_info(shaper.family).damping,
         "params": _params(shaper),
-        "impulses": [{"time_s": float(t), "amplitude": float(a)} for a, t in zip(shaper.amplitudes, shaper.times)],
+        "impulses": [{"time_s": float(t), "amplitude": float(a)}
+                     for a, t in zip(shaper.amplitudes, shaper.times, strict=True)],
         "duration_s": shaper.duration,
         "modes": per_mode,
     }
@@ -215,7 +219,7 @@ def _cmd_show(args: argparse.Namespace) -> str:
         doc["fir"] = {
             "rate_hz": args.rate, "discretization": args.discretization,
             "taps": [{"index": int(d), "time_s": float(d) / args.rate, "weight": float(g)}
-                     for d, g in zip(fir.delays, fir.gains)],
+                     for d, g in zip(fir.delays, fir.gains, strict=True)],
             "v_at_design": [_v((fa, ft), m) for m in modes],
         }
     if args.json:
@@ -223,7 +227,8 @@ def _cmd_show(args: argparse.Namespace) -> str:
     params = ", ".join(f"{k}={v:g}" for k, v in doc["params"].items())
     out = [f"family {shaper.family}{f' ({params})' if params else ''}; {doc['damping_assumed']}", ""]
     out.append(_table(("#", "time (s)", "amplitude"),
-                      [(i, f"{t:.6f}", f"{a:.6f}") for i, (a, t) in enumerate(zip(shaper.amplitudes, shaper.times))]))
+                      [(i, f"{t:.6f}", f"{a:.6f}")
+                       for i, (a, t) in enumerate(zip(shaper.amplitudes, shaper.times, strict=True))]))
     out += ["", f"duration {shaper.duration:.6f} s", ""]
     out.append(_table(("mode (Hz)", "damping", "V at mode (%)", f"{100 * LEVEL:g} % insensitivity"),
                       [(f"{m['frequency_hz']:g}", f"{m['damping_ratio']:g}", _pct(m["v_at_design"]),
@@ -245,7 +250,7 @@ def _compare_rows(args: argparse.Namespace) -> tuple[Mode, list[dict[str, Any]]]
             raise UsageError("family 'custom' cannot be compared (it has no design); use 'show custom'")
         family_params(fam, derivative_order=args.derivative_order, vibration_tolerance=args.tolerance,
                       insensitivity=args.insensitivity)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for fam in families:
         try:
             s = _design(fam, [mode], args)
@@ -277,7 +282,10 @@ def _cmd_compare(args: argparse.Namespace) -> str:
     head = (f"mode {mode.hz:g} Hz, damping {mode.zeta:g} (T_d = {mode.damped_period:.5f} s);"
             f" V_tol {args.tolerance:g}, si insensitivity {args.insensitivity:g}")
     notes = [f"{r['family']}: {r['error']}" for r in rows if "error" in r]
-    return "\n".join([head, "", table] + ([""] + notes if notes else []))
+    out = [head, "", table]
+    if notes:
+        out += ["", *notes]
+    return "\n".join(out)
 
 
 def _cmd_plot(args: argparse.Namespace) -> str:

@@ -62,6 +62,19 @@ PARAMETERS: tuple[Spec, ...] = (
 )
 
 
+def _cdr(raw: object) -> bytes:
+    """The recorded CDR bytes of one message, as :meth:`Bag.messages` yields it (bytes, or another buffer).
+
+    Raises
+    ------
+    TypeError
+        ``raw`` is not a buffer (worded as ``bytes(raw)`` words it).
+    """
+    if isinstance(raw, bytes | bytearray | memoryview):
+        return bytes(raw)
+    raise TypeError(f"cannot convert '{type(raw).__name__}' object to bytes")
+
+
 class BagPlayNode(Node):
     """See the module docstring. Extra arguments go to ``Node``."""
 
@@ -128,7 +141,7 @@ class BagPlayNode(Node):
             return f"message type not installed here ({err})"
         for _, _, _, raw in self.bag.messages([topic]):
             try:
-                deserialize_message(bytes(raw), cls)
+                deserialize_message(_cdr(raw), cls)
             except Exception as err:
                 return f"the recorded messages do not match the installed {msgtype} ({err})"
             break
@@ -181,7 +194,7 @@ class BagPlayNode(Node):
                 return
             if self._clock_pub is not None:
                 self._clock_pub.publish(Clock(clock=ns_to_time(log_ns)))
-            self._pubs[topic].publish(bytes(raw))
+            self._pubs[topic].publish(_cdr(raw))
             self.published[topic] += 1
             last = time.monotonic()
             if topic in self.pause_topics and self.pause > 0.0:
