@@ -29,25 +29,16 @@ import numpy as np
 from shaper_nodes.core.closed_loop import qft
 from shaper_nodes.core.closed_loop import time_delay as td
 
-from .shaper_design import _number, _table
+from .common import Parser, UsageError, number, run, text_table
 
 PROG = "loop_design"
 
 
-class UsageError(Exception):
-    """Bad command-line input (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message}")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog=PROG, description="Closed-loop input shaping design: time-delay feedback (seed 001)"
+    parser = Parser(prog=PROG, description="Closed-loop input shaping design: time-delay feedback (seed 001)"
                                             " and QFT model matching (seed 002).")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    pos = lambda what: _number(what, positive=True)  # noqa: E731
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    pos = lambda what: number(what, positive=True)  # noqa: E731
 
     p = sub.add_parser("tdf-interval", help="stable interval of the real plant frequency w_R (eq. 27)")
     p.add_argument("--omega-a", type=pos("--omega-a (rad/s)"), required=True, help="assumed frequency w_A, rad/s")
@@ -126,7 +117,7 @@ def _cmd_tdf_interval(args: argparse.Namespace) -> str:
     if oi is not None:
         out.append(_overshoot_lines(oi))
     out += ["", "possible changes of stability (eq. 15; k = 0 is w_R = w_A, eq. 17):",
-           _table(("k", "phi (rad/s)", "w_R (rad/s)"), [(x.k, f"{x.phi:.5g}", f"{x.omega_r:.6g}") for x in pts])]
+           text_table(("k", "phi (rad/s)", "w_R (rad/s)"), [(x.k, f"{x.phi:.5g}", f"{x.omega_r:.6g}") for x in pts])]
     return "\n".join(out)
 
 
@@ -215,7 +206,7 @@ def _cmd_tdf_select(args: argparse.Namespace) -> str:
     if args.json:
         return json.dumps({"omega_r": args.omega_r, "delay": args.delay, "ranges": rows}, indent=2)
     out = [f"w_R = {args.omega_r:g} rad/s, T = {args.delay:g} s: choose w_A in (eqs. 28-30)",
-           _table(("k", "w_A from", "w_A to", "upper w_R bound there (from)", "(to)"),
+           text_table(("k", "w_A from", "w_A to", "upper w_R bound there (from)", "(to)"),
                   [(r["k"], f"{r['omega_a_low']:.5g}", f"{r['omega_a_high']:.5g}",
                     *("-" if math.isnan(b) else f"{b:.5g}"
                       for b in (r["upper_bound_at_low"], r["upper_bound_at_high"])))
@@ -350,7 +341,7 @@ def _cmd_qft_table(args: argparse.Namespace) -> str:
              "open": "open loop (Fig. 1)"}[args.design]
     head = [f"{label}" + (f", G of eq. (10) with gain {gain:g}" if gain else "") + f", F = P0, Gr = 1;"
             f" |M - Y/R| with M = P0, delta_m = {args.delta:g} ('*' = above delta_m)", ""]
-    table = _table(["plant (m kg, c N s/m, k N/m)"] + [f"{w:g}" for w in args.frequencies],
+    table = text_table(["plant (m kg, c N s/m, k N/m)"] + [f"{w:g}" for w in args.frequencies],
                    [[("nominal " if r.plant == qft.nominal() else "") + r.plant.label()]
                     + [f"{e:.4f}{'*' if e > args.delta else ' '}" for e in r.errors] for r in rows],
                    right=[False] + [True] * len(args.frequencies))
@@ -363,7 +354,7 @@ def _cmd_qft_table(args: argparse.Namespace) -> str:
     out.append("dense grid 1..1e4 rad/s over the parameter box: " + (
         "fails in " + ", ".join(f"{a:.4g}-{b:.4g}" for a, b in bands) + " rad/s" if bands else "meets everywhere"))
     out += ["", "worst case over the parameter box (section 3.2):",
-            _table(["spec"] + [f"{w:g}" for w in args.frequencies],
+            text_table(["spec"] + [f"{w:g}" for w in args.frequencies],
                    [[n] + [f"{v:.4g}" for v in vals] for n, vals in specs.items()],
                    right=[False] + [True] * len(args.frequencies))]
     if marg:
@@ -442,21 +433,7 @@ COMMANDS = {"tdf-interval": _cmd_tdf_interval, "tdf-step": _cmd_tdf_step, "tdf-s
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        text = COMMANDS[args.command](args)
-    except UsageError as exc:
-        msg = str(exc)
-        print(msg if msg.startswith(PROG) else f"{PROG}: error: {msg}", file=sys.stderr)
-        return 2
-    except ValueError as exc:  # TimeDelayError, QftError
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
-    print(text)
-    return 0
+    return run(PROG, build_parser(), COMMANDS, argv)
 
 
 if __name__ == "__main__":

@@ -40,6 +40,8 @@ from shaper_nodes.core.shaping import (
     percentage_vibration,
 )
 
+from .common import Parser, UsageError, number, run, text_table
+
 #: families compared and plotted when --families is not given
 DEFAULT_FAMILIES = ("zv", "zvd", "zvdd", "mzv", "ei", "2hump_ei", "3hump_ei", "si")
 #: level of the insensitivity column and of the plot's reference line, fraction
@@ -48,48 +50,22 @@ LEVEL = 0.05
 PROG = "shaper_design"
 
 
-class UsageError(Exception):
-    """Bad command-line input; the message names the problem (exit status 2)."""
-
-
-def _number(what: str, positive: bool = False):
-    """An argparse type: a finite float (and > 0 if ``positive``), else an error naming ``what``."""
-
-    def parse(text: str) -> float:
-        try:
-            x = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what} must be a number, got {text!r}") from None
-        if not (math.isfinite(x) and (x > 0.0 or not positive)):
-            raise argparse.ArgumentTypeError(f"{what} must be finite{' and > 0' if positive else ''}, got {text!r}")
-        return x
-
-    return parse
-
-
-class _Parser(argparse.ArgumentParser):
-    """ArgumentParser that raises UsageError instead of exiting, so main() returns the status."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message}")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation and tests)."""
-    parser = _Parser(prog=PROG, description="Design and compare input shapers (no ROS needed).")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parser = Parser(prog=PROG, description="Design and compare input shapers (no ROS needed).")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def common(p: argparse.ArgumentParser, repeat_frequency: bool) -> None:
         action = "append" if repeat_frequency else "store"
-        p.add_argument("--frequency", "-f", type=_number("--frequency (Hz)", positive=True), required=True,
+        p.add_argument("--frequency", "-f", type=number("--frequency (Hz)", positive=True), required=True,
                        action=action,
                        help="natural frequency of the mode, Hz" + (" (repeat for several modes)" * repeat_frequency))
-        p.add_argument("--damping", "-z", type=_number("--damping"), required=True, action=action,
+        p.add_argument("--damping", "-z", type=number("--damping"), required=True, action=action,
                        help="damping ratio, in [0, 0.95]"
                        + (" (one for all, or one per --frequency)" * repeat_frequency))
-        p.add_argument("--tolerance", type=_number("--tolerance"), default=DEFAULT_VIBRATION_TOLERANCE,
+        p.add_argument("--tolerance", type=number("--tolerance"), default=DEFAULT_VIBRATION_TOLERANCE,
                        help="vibration tolerance V_tol of ei, 2hump_ei, 3hump_ei, si, fraction (default %(default)s)")
-        p.add_argument("--insensitivity", type=_number("--insensitivity"), default=DEFAULT_INSENSITIVITY,
+        p.add_argument("--insensitivity", type=number("--insensitivity"), default=DEFAULT_INSENSITIVITY,
                        help="si band width / design frequency (default %(default)s)")
         p.add_argument("--derivative-order", type=int, default=1, help="n of zvdn (default %(default)s)")
         p.add_argument("--json", action="store_true", help="print one JSON document")
@@ -100,9 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     p_show = sub.add_parser("show", help="impulses, duration, V and insensitivity of one design")
     p_show.add_argument("family", help="family name (see 'list')")
     common(p_show, repeat_frequency=True)
-    p_show.add_argument("--amplitudes", type=_number("--amplitudes"), nargs="+", help="custom family: amplitudes")
-    p_show.add_argument("--times", type=_number("--times"), nargs="+", help="custom family: impulse times, s")
-    p_show.add_argument("--rate", type=_number("--rate (Hz)", positive=True),
+    p_show.add_argument("--amplitudes", type=number("--amplitudes"), nargs="+", help="custom family: amplitudes")
+    p_show.add_argument("--times", type=number("--times"), nargs="+", help="custom family: impulse times, s")
+    p_show.add_argument("--rate", type=number("--rate (Hz)", positive=True),
                         help="command rate, Hz: also show the discretised FIR")
     p_show.add_argument("--discretization", choices=("split", "round", "exact"), default="split",
                         help="impulse times between samples (default %(default)s)")
@@ -115,7 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
     common(p_plot, repeat_frequency=False)
     p_plot.add_argument("--families", nargs="+", default=list(DEFAULT_FAMILIES), help="families to plot")
     p_plot.add_argument("--out", required=True, help="output image file (.png)")
-    p_plot.add_argument("--max-ratio", type=_number("--max-ratio", positive=True), default=2.0,
+    p_plot.add_argument("--max-ratio", type=number("--max-ratio", positive=True), default=2.0,
                         help="plot up to this multiple of the frequency (default %(default)s)")
     return parser
 
@@ -152,25 +128,6 @@ def _pct(x: float) -> str:
     return f"{100.0 * x:.3g}"
 
 
-def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]], right: Sequence[bool] | None = None) -> str:
-    """Aligned text table; numbers right-aligned unless ``right`` says otherwise."""
-    cells = [[str(c) for c in row] for row in rows]
-    widths = [max([len(h)] + [len(r[i]) for r in cells]) for i, h in enumerate(headers)]
-    if right is None:
-        right = [all(_is_number(r[i]) for r in cells) for i in range(len(headers))]
-    def line(items: Sequence[str]) -> str:
-        return "  ".join(s.rjust(w) if r else s.ljust(w) for s, w, r in zip(items, widths, right, strict=True)).rstrip()
-    return "\n".join([line(headers), line(["-" * w for w in widths])] + [line(r) for r in cells])
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 def _params(shaper: Shaper) -> dict[str, float]:
     return {k: (int(v) if k == "derivative_order" else float(v)) for k, v in shaper.params.items()}
 
@@ -186,7 +143,7 @@ def _cmd_list(args: argparse.Namespace) -> str:
              "parameters": list(i.params), "modes": "joint" if i.joint else "convolution"}
             for n, i in infos.items()]}, indent=2)
     rows = [(n, i.impulses, i.description) for n, i in infos.items()]
-    out = [_table(("family", "impulses", "description"), rows, right=(False, False, False)), "", "damping assumed:"]
+    out = [text_table(("family", "impulses", "description"), rows, right=(False, False, False)), "", "damping assumed:"]
     out += [f"  {n:9s} {i.damping}" for n, i in infos.items()]
     return "\n".join(out)
 
@@ -226,17 +183,17 @@ def _cmd_show(args: argparse.Namespace) -> str:
         return json.dumps(doc, indent=2)
     params = ", ".join(f"{k}={v:g}" for k, v in doc["params"].items())
     out = [f"family {shaper.family}{f' ({params})' if params else ''}; {doc['damping_assumed']}", ""]
-    out.append(_table(("#", "time (s)", "amplitude"),
+    out.append(text_table(("#", "time (s)", "amplitude"),
                       [(i, f"{t:.6f}", f"{a:.6f}")
                        for i, (a, t) in enumerate(zip(shaper.amplitudes, shaper.times, strict=True))]))
     out += ["", f"duration {shaper.duration:.6f} s", ""]
-    out.append(_table(("mode (Hz)", "damping", "V at mode (%)", f"{100 * LEVEL:g} % insensitivity"),
+    out.append(text_table(("mode (Hz)", "damping", "V at mode (%)", f"{100 * LEVEL:g} % insensitivity"),
                       [(f"{m['frequency_hz']:g}", f"{m['damping_ratio']:g}", _pct(m["v_at_design"]),
                         f"{m['insensitivity_5pct']:.4f}") for m in per_mode]))
     if fir is not None:
         out += ["", f"FIR at {args.rate:g} Hz ({args.discretization}): {fir.length} taps,"
                 f" {len(fir.delays)} non-zero", ""]
-        out.append(_table(("sample", "time (s)", "weight"),
+        out.append(text_table(("sample", "time (s)", "weight"),
                           [(t["index"], f"{t['time_s']:.6f}", f"{t['weight']:.6f}") for t in doc["fir"]["taps"]]))
         out += ["", "V of the FIR at each mode (%): " + ", ".join(_pct(v) for v in doc["fir"]["v_at_design"])]
     return "\n".join(out)
@@ -273,7 +230,7 @@ def _cmd_compare(args: argparse.Namespace) -> str:
             "frequency_hz": mode.hz, "damping_ratio": mode.zeta, "vibration_tolerance": args.tolerance,
             "insensitivity": args.insensitivity, "level": LEVEL,
             "families": [{k: v for k, v in r.items() if k != "shaper"} for r in rows]}, indent=2)
-    table = _table(
+    table = text_table(
         ("family", "impulses", "duration (s)", "duration (T_d)", "V at mode (%)", f"{100 * LEVEL:g} % insensitivity"),
         [(r["family"], "-", "-", "-", "-", "not designed") if "error" in r else
          (r["family"], r["impulses"], f"{r['duration_s']:.5f}", f"{r['duration_periods']:.4f}",
@@ -334,21 +291,7 @@ COMMANDS = {"list": _cmd_list, "show": _cmd_show, "compare": _cmd_compare, "plot
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        text = COMMANDS[args.command](args)
-    except UsageError as exc:
-        msg = str(exc)
-        print(msg if msg.startswith(PROG) else f"{PROG}: error: {msg}", file=sys.stderr)
-        return 2
-    except (ShaperError, ValueError) as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
-    print(text)
-    return 0
+    return run(PROG, build_parser(), COMMANDS, argv)
 
 
 if __name__ == "__main__":
