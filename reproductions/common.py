@@ -71,8 +71,12 @@ class LearnerDriver:
 
     def wait_ready(self, subscribers: dict[str, int], what: str) -> None:
         """Wait for the services and ``subscribers`` (topic: at least that many), then for the shaper
-        the learner sets (``what`` names it in the error on a time-out), then let discovery settle."""
+        the learner sets (``what`` names it in the error on a time-out), then let discovery settle.
+        The plant is told to start a run only once its cycle events have as many matched
+        subscriptions (``task.subscribers``), so that the learner cannot miss the first START."""
         self.conductor.wait_ready(60.0, subscribers)
+        if subscribers.get("/cycle_events"):
+            self.conductor.set_plant(task__subscribers=int(subscribers["/cycle_events"]))
         self.conductor.spin_until(lambda: bool(self.active) and self.active[-1].source == "learner", 60.0, what)
         settle(self.conductor)
 

@@ -33,6 +33,11 @@ from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
 from shaper_nodes.ros.conversions import time_to_sec
 
 from .plants import mck_from_mode
+from .sim_plant import WAITING
+
+
+def _past(t: float) -> bool:
+    return time.monotonic() > t
 
 
 def spin_until(executor: Executor, done: Callable[[], bool], timeout: float, what: str) -> None:
@@ -130,9 +135,7 @@ class Conductor(Node):
         """Start a run of ``cycles`` cycles on the plant and return their results."""
         self.set_plant(task__cycles=int(cycles))
         first = len(self.results)
-        resp = self.call(self.start_cli, Trigger.Request())
-        if not resp.success:
-            raise RuntimeError(f"sim plant did not start: {resp.message}")
+        self.start_task(timeout)
         seen = first
 
         def done() -> bool:
@@ -145,6 +148,18 @@ class Conductor(Node):
 
         self.spin_until(done, timeout, f"{cycles} cycles")
         return self.results[first:]
+
+    def start_task(self, timeout: float = 60.0) -> str:
+        """Start a run on the plant; while the plant waits for its ``task.subscribers`` to match, ask
+        again (every 50 ms of spinning, up to ``timeout`` s). Returns the plant's message."""
+        end = time.monotonic() + timeout
+        while True:
+            resp = self.call(self.start_cli, Trigger.Request())
+            if resp.success:
+                return str(resp.message)
+            if not resp.message.startswith(WAITING) or time.monotonic() > end:
+                raise RuntimeError(f"sim plant did not start: {resp.message}")
+            self.spin_until(functools.partial(_past, time.monotonic() + 0.05), 5.0, "the next start request")
 
     def close(self) -> None:
         self.executor_.shutdown()

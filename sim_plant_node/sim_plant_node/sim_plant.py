@@ -98,6 +98,8 @@ PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffne
                 "plant.force_limit")
 PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator", *PLANT_PARAMS, *LOOP_PARAMS)
 MODELS = (*PLANT_MODELS, "mck_pid", *LOOP_MODELS, "two_mass")
+#: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
+WAITING = "waiting for subscribers"
 
 
 def check_model(model: str) -> str:
@@ -181,6 +183,10 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("task.cycles", 4, "Cycles per run (started by ~/start_task).", check=_task_check("cycles")),
     Spec("task.preroll", 1.0, "Rest at the start pose before the first cycle, s.", (0.0, 3600.0)),
     Spec("task.autostart", False, "Start a run as soon as the node is up.", read_only=True),
+    Spec("task.subscribers", 0,
+         "Start a run only once the cycle events reach at least this many matched subscriptions (0: at once);"
+         " until then ~/start_task refuses with 'waiting for subscribers'. A test driver sets it so that a learner"
+         " started just before cannot miss the first START.", (0, 64)),
     Spec("settle_tolerance", 1e-6, "Joint positions within this of their final value count as at rest, rad or m.",
          (0.0, 1.0)),
     *topics({"command_out": "/shaper/commands", "command_in": "/forward_position_controller/commands",
@@ -326,6 +332,10 @@ class SimPlantNode(Node):
     def _start_task(self) -> tuple[bool, str]:
         if self.task is not None:
             return False, "a task is already running"
+        need = int(self.get_parameter("task.subscribers").value)
+        have = self._event_pub.get_subscription_count()  # matched, not only discovered
+        if have < need:
+            return False, f"{WAITING}: the cycle events have {have} matched subscriptions, task.subscribers is {need}"
         try:
             task = self.task = self._make_task()
         except ValueError as err:
