@@ -77,14 +77,14 @@ def test_synthetic_writer_patches_what_rosbags_reads(robot_bag):
 
 
 def test_a_robot_recording_without_events_is_segmented_from_the_motion(robot_bag):
-    path, t, u, a, truth = robot_bag
+    path, t, _u, a, truth = robot_bag
     rec = read_recording(path)
     assert rec.topics["accel"] == "/imu/data" and rec.topics["events"] == "" and rec.topics["commands"] == ""
     an = analyze(rec, Options(learners=()))
     assert an.segmentation.startswith("motion end of the joint states")
     assert len(an.cycles) == len(truth.move_starts)
     rate = 1.0 / (t[1] - t[0])
-    for row, start, end in zip(an.cycles, truth.move_starts, truth.move_ends):
+    for row, start, end in zip(an.cycles, truth.move_starts, truth.move_ends, strict=True):
         assert abs(row.start - 1.7e9 - start) <= 1.5 / rate
         assert abs(row.motion_end - 1.7e9 - end) <= 1.5 / rate
     # the offset (gravity) is found and removed; the residual matches an independent computation
@@ -138,7 +138,7 @@ def test_cut_mid_chunk_is_analysed_up_to_the_cut_with_what_was_lost(robot_bag, t
 def test_a_corrupt_record_skips_its_chunk_and_reading_goes_on(robot_bag, tmp_path):
     path = robot_bag[0]
     data = bytearray(next(path.glob("*.mcap")).read_bytes())
-    start, length = mcap_chunks(bytes(data))[1]
+    start, _length = mcap_chunks(bytes(data))[1]
     records = start + 9 + 8 + 8 + 8 + 4 + 4 + 8  # chunk header with no compression name
     struct.pack_into("<Q", data, records + 1, 10**12)  # the chunk's first record claims 1 TB
     (tmp_path / "bad.mcap").write_bytes(bytes(data))
@@ -171,7 +171,7 @@ def test_unknown_types_are_noted_and_empty_or_wrong_bags_are_refused(tmp_path):
     with pytest.raises(BagError, match="no recording"):
         read_recording(tmp_path / "missing")
     (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
-    with pytest.raises(BagError, match="bad magic|not an MCAP"):
+    with pytest.raises(BagError, match=r"bad magic|not an MCAP"):
         read_recording(tmp_path / "junk.mcap")
     with pytest.raises(BagError, match="--accel-topic /nope"):
         read_recording(tmp_path / "ok", {"accel": "/nope"})
@@ -199,7 +199,7 @@ def bag_analysis_cli_output(argv: list[str]) -> str:
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = bag_analysis_cli.main(argv + ["--no-progress"])
+        code = bag_analysis_cli.main([*argv, "--no-progress"])
     assert code == 0, err.getvalue()
     return out.getvalue() + err.getvalue()
 
@@ -241,7 +241,7 @@ def test_stamped_monitor_does_not_depend_on_the_order_of_arrival():
     # themselves, as one topic's messages arrive)
     rng = np.random.default_rng(0)
     delay = np.maximum.accumulate(rng.integers(0, 30, len(stream)) / 200.0)
-    late = [(ti + (d if what == 0 else 0.0), what, i, ti) for (ti, what, i), d in zip(stream, delay)]
+    late = [(ti + (d if what == 0 else 0.0), what, i, ti) for (ti, what, i), d in zip(stream, delay, strict=True)]
     mon = StampedCycleMonitor()
     got = []
     for _, what, i, ti in sorted(late):
@@ -253,14 +253,14 @@ def test_stamped_monitor_does_not_depend_on_the_order_of_arrival():
             mon.event(kind, k, ti)
         got += mon.poll()
     assert len(got) == len(expected) == 2
-    for g, e in zip(got, expected):
+    for g, e in zip(got, expected, strict=True):
         assert g.residual == e.residual
 
 
 def test_a_writer_that_never_finished_is_read_as_far_as_it_wrote(tmp_path):
     # rosbags' writer abandoned mid-recording, as a killed recorder leaves it: complete chunks in the
     # file, the chunk being filled lost, no summary, no footer, no metadata.yaml
-    t, u, a, truth = simulate(cycles=8, mode_hz=MODE_HZ, zeta=ZETA)
+    t, u, a, _truth = simulate(cycles=8, mode_hz=MODE_HZ, zeta=ZETA)
     written = write_bag(tmp_path / "killed", t, u, a, finish=False)
     assert not (tmp_path / "killed" / "metadata.yaml").exists()
     rec = read_recording(tmp_path / "killed")

@@ -30,6 +30,7 @@ import heapq
 import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,7 +47,10 @@ from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_tim
 
 from .reading import BagError
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
-from .streams import REFERENCE_SUFFIX, Recording
+from .streams import REFERENCE_SUFFIX, Events, Recording, Signal
+
+if TYPE_CHECKING:
+    from shaper_nodes.core.learning.mrilc import MrilcModel, MrilcSession
 
 #: active shapers that let through at least this V count for the unshaped level
 MIN_V_FOR_LEVEL = 0.2
@@ -153,64 +157,15 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
     if remove_mean and opt.remove_mean == "auto":
         notes.append(f"the accelerometer has an offset of {np.linalg.norm(np.nanmedian(acc.values, axis=0)):.3g} m/s^2"
                      " (gravity, bias): each window's mean is removed")
-    pos = _positions(rec, opt)
-    step = float(np.median(np.diff(acc.t))) if len(acc) > 1 else 0.0
-    rows, traces, windows = [], [], []
-    for span in spans:
-        a0, a1 = np.searchsorted(acc.t, span.start, side="left"), np.searchsorted(acc.t, span.end, side="right")
-        at, av = acc.t[a0:a1], acc.values[a0:a1]
-        if pos is not None:
-            p0, p1 = np.searchsorted(pos.t, span.start, "left"), np.searchsorted(pos.t, span.end, "right")
-            pt, pv = pos.t[p0:p1], pos.values[p0:p1]
-        else:
-            pt, pv = np.zeros(0), np.zeros((0, 1))
-        res = evaluate_cycle(span.cycle, span.start, span.motion_end, span.end, at, av, pt, pv,
-                             opt.settle_tolerance, remove_mean).residual
-        band = _band(opt.band, res.peak)
-        settle = (settling_time(at, av, res.window_start, res.window_end, band, remove_mean)
-                  if res.samples and band > 0 else float("nan"))
-        label, impulses = _active_shaper(rec, span)
-        issue = ""
-        if res.samples == 0:
-            issue = "no accelerometer sample in the residual window"
-        elif step > 0:
-            edges = np.concatenate([[span.start], at, [span.end]])
-            gap = float(np.max(np.diff(edges)))
-            if gap > GAP_FACTOR * step:
-                issue = f"a {gap:.3g} s gap in the accelerometer data"
-        rows.append(CycleRow(span.cycle, span.start, span.motion_end, res.window_start, span.end, res.rms,
-                             res.peak, res.samples, settle, label, impulses, span.complete, issue=issue))
-        traces.append((at - span.start, av))
-        inside = (at >= res.window_start) & (at < res.window_end)  # as residual_vibration selects
-        windows.append((at[inside], av[inside]) if not issue else (np.zeros(0), np.zeros((0, av.shape[1]))))
+    rows, traces, windows = _cycles(rec, spans, opt, remove_mean)
     for i, r in enumerate(rows):
         if r.issue:
             notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
     spectrum = _spectrum(windows)
     modes, id_notes = _identify(windows, rows, opt)
     notes += id_notes
-    recommendation, level, predicted = None, float("nan"), {}
-    if modes:
-        top = modes[0]
-        for r in rows:
-            if r.shaper_impulses is not None:
-                r.v_active = float(percentage_vibration(r.shaper_impulses[0], r.shaper_impulses[1], top.omega,
-                                                        top.zeta))
-        try:
-            recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas)
-            notes += list(recommendation.notes)
-        except IdentificationError as err:
-            notes.append(f"no recommendation: {err}")
-        level, predicted = _prediction(rows, modes, recommendation, opt)
-        if predicted.get("note"):
-            notes.append(predicted["note"])
-    replays: dict[str, LearnerReplay] = {}
-    for name in opt.learners:
-        fn = LEARNER_REPLAYS.get(name)
-        if fn is None:
-            notes.append(f"learner replay {name!r}: not available (known: {sorted(LEARNER_REPLAYS)})")
-            continue
-        replays[name] = fn(rec, spans, segmentation, opt.learner_params)
+    recommendation, level, predicted = _recommend(rows, modes, opt, notes)
+    replays = _replays(rec, spans, segmentation, opt, notes)
     return Analysis(rec, opt, segmentation, rows, traces, spectrum, modes, recommendation, level, predicted,
                     replays, notes, remove_mean)
 
@@ -232,11 +187,94 @@ def _segment(rec: Recording, opt: Options) -> tuple[list[CycleSpan], str, list[s
     return spans, f"motion end of the {kind} ({source.topic})", notes
 
 
-def _positions(rec: Recording, opt: Options):
+def _positions(rec: Recording, opt: Options) -> Signal | None:
     """Where the time the positions come to rest is taken from: the joint states, else the commands."""
     if opt.positions == "commands" or (opt.positions == "auto" and rec.joints is None):
         return rec.commands
     return rec.joints
+
+
+def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: bool
+            ) -> tuple[list[CycleRow], list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
+    """Per cycle: its figures, its trace (time from START in s, acceleration in m/s^2) and its residual
+    window (time in s, acceleration in m/s^2; empty for a cycle with an issue)."""
+    acc = rec.accel
+    pos = _positions(rec, opt)
+    step = float(np.median(np.diff(acc.t))) if len(acc) > 1 else 0.0
+    rows: list[CycleRow] = []
+    traces: list[tuple[np.ndarray, np.ndarray]] = []
+    windows: list[tuple[np.ndarray, np.ndarray]] = []
+    for span in spans:
+        a0, a1 = np.searchsorted(acc.t, span.start, side="left"), np.searchsorted(acc.t, span.end, side="right")
+        at, av = acc.t[a0:a1], acc.values[a0:a1]
+        if pos is not None:
+            p0, p1 = np.searchsorted(pos.t, span.start, "left"), np.searchsorted(pos.t, span.end, "right")
+            pt, pv = pos.t[p0:p1], pos.values[p0:p1]
+        else:
+            pt, pv = np.zeros(0), np.zeros((0, 1))
+        res = evaluate_cycle(span.cycle, span.start, span.motion_end, span.end, at, av, pt, pv,
+                             opt.settle_tolerance, remove_mean).residual
+        band = _band(opt.band, res.peak)
+        settle = (settling_time(at, av, res.window_start, res.window_end, band, remove_mean)
+                  if res.samples and band > 0 else float("nan"))
+        label, impulses = _active_shaper(rec, span)
+        issue = _cycle_issue(span, at, res.samples, step)
+        rows.append(CycleRow(span.cycle, span.start, span.motion_end, res.window_start, span.end, res.rms,
+                             res.peak, res.samples, settle, label, impulses, span.complete, issue=issue))
+        traces.append((at - span.start, av))
+        inside = (at >= res.window_start) & (at < res.window_end)  # as residual_vibration selects
+        windows.append((at[inside], av[inside]) if not issue else (np.zeros(0), np.zeros((0, av.shape[1]))))
+    return rows, traces, windows
+
+
+def _cycle_issue(span: CycleSpan, at: np.ndarray, samples: int, step: float) -> str:
+    """Why a cycle is left out over the bag ("" if it is not): no sample in its residual window, or a
+    gap longer than :data:`GAP_FACTOR` median steps ``step`` (s) in its accelerometer times ``at`` (s)."""
+    if samples == 0:
+        return "no accelerometer sample in the residual window"
+    if step > 0:
+        edges = np.concatenate([[span.start], at, [span.end]])
+        gap = float(np.max(np.diff(edges)))
+        if gap > GAP_FACTOR * step:
+            return f"a {gap:.3g} s gap in the accelerometer data"
+    return ""
+
+
+def _recommend(rows: list[CycleRow], modes: list[ModeFit], opt: Options, notes: list[str]
+               ) -> tuple[Recommendation | None, float, dict]:
+    """The recommended shaper, the unshaped level (m/s^2) and the prediction for the identified ``modes``
+    (None, NaN and nothing without modes); sets each row's V of its active shaper at the first mode."""
+    if not modes:
+        return None, float("nan"), {}
+    recommendation = None
+    top = modes[0]
+    for r in rows:
+        if r.shaper_impulses is not None:
+            r.v_active = float(percentage_vibration(np.asarray(r.shaper_impulses[0], dtype=float),
+                                                    np.asarray(r.shaper_impulses[1], dtype=float), top.omega,
+                                                    top.zeta))
+    try:
+        recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas)
+        notes += list(recommendation.notes)
+    except IdentificationError as err:
+        notes.append(f"no recommendation: {err}")
+    level, predicted = _prediction(rows, modes, recommendation, opt)
+    if predicted.get("note"):
+        notes.append(predicted["note"])
+    return recommendation, level, predicted
+
+
+def _replays(rec: Recording, spans: list[CycleSpan], segmentation: str, opt: Options, notes: list[str]
+             ) -> dict[str, LearnerReplay]:
+    """learner name -> its replay, for the learners asked for (unknown ones are noted)."""
+    replays: dict[str, LearnerReplay] = {}
+    for name in opt.learners:
+        fn = LEARNER_REPLAYS.get(name)
+        if fn is None:
+            notes.append(f"learner replay {name!r}: not available (known: {sorted(LEARNER_REPLAYS)})")
+            continue
+        replays[name] = fn(rec, spans, segmentation, opt.learner_params)
+    return replays
 
 
 def _remove_mean(values: np.ndarray, mode: str) -> bool:
@@ -269,7 +307,8 @@ def _active_shaper(rec: Recording, span: CycleSpan) -> tuple[str, tuple | None]:
         return "unknown", None
     i = before[-1]
     amps, times = s.amplitudes[i], s.times[i]
-    label = s.family[i] if len(amps) <= 1 or not times else f"{s.family[i]} ({len(amps)} imp., {1e3 * max(times):.1f} ms)"
+    label = (s.family[i] if len(amps) <= 1 or not times
+             else f"{s.family[i]} ({len(amps)} imp., {1e3 * max(times):.1f} ms)")
     if s.source[i] and s.source[i] not in ("parameters", "user"):
         label += f" [{s.source[i]}]"
     if during:
@@ -349,7 +388,7 @@ def _list_items(rec: Recording, spans: list[CycleSpan], from_events: bool, assum
     acc = rec.accel
 
     def imu():
-        for q, t, a in zip(acc.seq.tolist(), acc.t.tolist(), acc.values.tolist()):
+        for q, t, a in zip(acc.seq.tolist(), acc.t.tolist(), acc.values.tolist(), strict=True):
             yield q, "imu", (t, a)
 
     def shapers():
@@ -404,7 +443,10 @@ def list_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, param
         used = u.used
         rows.append({"cycle": r.cycle, "iteration": u.iteration, "M": u.m, "phi": u.phi, "action": u.action,
                      "parameter": u.parameter, "a1_used": used.a1 if used else float("nan"),
-                     "t2_used": used.t2 if used else float("nan"), "a1_next": u.next.a1, "t2_next": u.next.t2})
+                     "t2_used": used.t2 if used else float("nan"),
+                     # a learned-from cycle always has next parameters (None only before any initial guess)
+                     "a1_next": u.next.a1 if u.next else float("nan"),
+                     "t2_next": u.next.t2 if u.next else float("nan")})
     learned = sum(1 for r in rows if "skipped" not in r)
     notes.append(f"{learned} of {len(rows)} cycles learned from")
     return LearnerReplay("list", rows, notes)
@@ -428,6 +470,46 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     def refused(why: str) -> LearnerReplay:
         return LearnerReplay("mrilc", [], [f"not possible: {why}"])
 
+    missing = _mrilc_missing(rec)
+    if missing or rec.joints is None or rec.reference is None:  # (the same: the missing ones are named)
+        return refused("the recording has no " + "; no ".join(missing))
+    joints, reference = rec.joints, rec.reference
+    learned_run = params.get("replay.learned_run", False)
+    if not isinstance(learned_run, bool):
+        return refused(f"parameter replay.learned_run must be true or false, got {learned_run!r}")
+    try:
+        model, settings = model_from_params(params)
+    except MrilcError as err:
+        return refused(str(err))
+    names = _mrilc_joint_names(rec.events, joints, settings.joint_names)
+    cols = {}
+    for label, sig in (("joint states", joints), ("reference", reference)):
+        absent = [n for n in names if n not in sig.names]
+        if absent:
+            return refused(f"the {label} ({sig.topic}) lack joint(s) {absent} (they have {list(sig.names)})")
+        cols[label] = [sig.names.index(n) for n in names]
+    efforts = _efforts_by_seq(rec.efforts, names)
+    stale = params.get("stale_after", 0.1)
+    if isinstance(stale, bool) or not isinstance(stale, (int, float)) or not stale > 0:
+        return refused(f"parameter stale_after must be a number > 0 s, got {stale!r}")
+    learner = MrilcLearner(model, len(names), settings.patience, settings.noise_floor)
+    learner.holding = not settings.learn
+    session = MrilcSession(learner, float(stale))
+    notes = [_mrilc_setup(names, joints, reference, bool(efforts), model)]
+    stream = heapq.merge(_joint_samples(joints, cols["joint states"], efforts),
+                         _reference_samples(reference, cols["reference"]), _event_samples(rec.events),
+                         key=lambda x: x[0])
+    rows = _mrilc_rows(session, stream, learned_run)
+    learned = sum(1 for r in rows if "skipped" not in r)
+    notes.append(f"{learned} of {len(rows)} cycles learned from")
+    if not learned_run and learned:
+        notes.append("a recording made without learning gives only the first update: later cycles did not run"
+                     " with the learned profile")
+    return LearnerReplay("mrilc", rows, notes)
+
+
+def _mrilc_missing(rec: Recording) -> list[str]:
+    """What the MRILC replay needs and the recording lacks."""
     missing = []
     if not rec.events.kind:
         missing.append("cycle events (shaper_msgs/CycleEvent)")
@@ -436,58 +518,62 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     if rec.reference is None:
         missing.append(f"applied reference (a sensor_msgs/JointState topic ending in '{REFERENCE_SUFFIX}',"
                        " or --reference-topic)")
-    if missing:
-        return refused("the recording has no " + "; no ".join(missing))
-    learned_run = params.get("replay.learned_run", False)
-    if not isinstance(learned_run, bool):
-        return refused(f"parameter replay.learned_run must be true or false, got {learned_run!r}")
-    try:
-        model, settings = model_from_params(params)
-    except MrilcError as err:
-        return refused(str(err))
-    names = list(settings.joint_names)
+    return missing
+
+
+def _mrilc_joint_names(events: Events, joints: Signal, configured: tuple[str, ...]) -> list[str]:
+    """The learner's joints: ``configured``, else those of the first START, else the joint states'."""
+    names = list(configured)
     if not names:
-        first = [n for k, n in zip(rec.events.kind, rec.events.joint_names) if k == START and n]
-        names = list(first[0]) if first else list(rec.joints.names)
-    cols = {}
-    for label, sig in (("joint states", rec.joints), ("reference", rec.reference)):
-        absent = [n for n in names if n not in sig.names]
-        if absent:
-            return refused(f"the {label} ({sig.topic}) lack joint(s) {absent} (they have {list(sig.names)})")
-        cols[label] = [sig.names.index(n) for n in names]
-    efforts = {}
-    if rec.efforts is not None:
-        e_cols = [rec.efforts.names.index(n) for n in names]
-        efforts = dict(zip(rec.efforts.seq.tolist(), rec.efforts.values[:, e_cols]))
-    stale = params.get("stale_after", 0.1)
-    if isinstance(stale, bool) or not isinstance(stale, (int, float)) or not stale > 0:
-        return refused(f"parameter stale_after must be a number > 0 s, got {stale!r}")
-    learner = MrilcLearner(model, len(names), settings.patience, settings.noise_floor)
-    learner.holding = not settings.learn
-    session = MrilcSession(learner, float(stale))
+        # joint_names is filled last for each event: one decoded with an older CycleEvent definition
+        # (without joint_names) leaves it shorter than kind
+        first = [n for k, n in zip(events.kind, events.joint_names, strict=False) if k == START and n]
+        names = list(first[0]) if first else list(joints.names)
+    return names
 
-    def joints():
-        j = rec.joints
-        for q, t, v in zip(j.seq.tolist(), j.t.tolist(), j.values[:, cols["joint states"]]):
-            yield q, 0, (t, v, efforts.get(q))
 
-    def reference():
-        r = rec.reference
-        for q, t, v in zip(r.seq.tolist(), r.t.tolist(), r.values[:, cols["reference"]]):
-            yield q, 1, (t, v)
+def _efforts_by_seq(efforts: Signal | None, names: list[str]) -> dict[int, np.ndarray]:
+    """Recording-order index -> efforts of the joints ``names`` (nothing if no efforts were recorded)."""
+    if efforts is None:
+        return {}
+    e_cols = [efforts.names.index(n) for n in names]
+    return dict(zip(efforts.seq.tolist(), efforts.values[:, e_cols], strict=True))
 
-    def events():
-        e = rec.events
-        for i in np.argsort(np.asarray(e.seq), kind="stable"):
-            yield e.seq[i], 2, (e.kind[i], e.cycle[i], e.t[i])
 
+def _mrilc_setup(names: list[str], joints: Signal, reference: Signal, with_efforts: bool, model: MrilcModel) -> str:
+    """The replay's first note: joints, topics, and the reference model (its mode in rad/s)."""
+    mode = (f"{model.mode.omega:.4g} rad/s, zeta {model.mode.zeta:.4g}" if model.mode is not None
+            else "none lightly damped")
+    return (f"joints {names}; joint states {joints.topic}, reference {reference.topic}"
+            + ("" if with_efforts else " (no efforts recorded: RMS(u1) not available)")
+            + f"; model: reference mode {mode}, law {model.law.law}, {1 / model.period:g} Hz")
+
+
+def _joint_samples(joints: Signal, cols: list[int], efforts: dict[int, np.ndarray]
+                   ) -> Iterator[tuple[int, int, tuple[Any, ...]]]:
+    """(recording order, 0, (time s, positions of the learner's joints, efforts or None)) per joint state."""
+    for q, t, v in zip(joints.seq.tolist(), joints.t.tolist(), joints.values[:, cols], strict=True):
+        yield q, 0, (t, v, efforts.get(q))
+
+
+def _reference_samples(reference: Signal, cols: list[int]) -> Iterator[tuple[int, int, tuple[Any, ...]]]:
+    """(recording order, 1, (time s, reference of the learner's joints)) per reference sample."""
+    for q, t, v in zip(reference.seq.tolist(), reference.t.tolist(), reference.values[:, cols], strict=True):
+        yield q, 1, (t, v)
+
+
+def _event_samples(events: Events) -> Iterator[tuple[int, int, tuple[Any, ...]]]:
+    """(recording order, 2, (kind, cycle, time s)) per cycle event, in recording order."""
+    for i in np.argsort(np.asarray(events.seq), kind="stable"):
+        yield events.seq[i], 2, (events.kind[i], events.cycle[i], events.t[i])
+
+
+def _mrilc_rows(session: MrilcSession, stream: Iterator[tuple[int, int, tuple[Any, ...]]], learned_run: bool
+                ) -> list[dict]:
+    """Feed the merged samples and events to ``session``: one row per cycle it reports (an update, or why not)."""
     unapplied = ("ran without the learned profile (a recording made without learning; --param"
                  " replay.learned_run=true for a recording of a live MRILC run)")
     rows: list[dict] = []
-    notes = [f"joints {names}; joint states {rec.joints.topic}, reference {rec.reference.topic}"
-             + ("" if efforts else " (no efforts recorded: RMS(u1) not available)")
-             + f"; model: reference mode {model.mode.omega:.4g} rad/s, zeta {model.mode.zeta:.4g}, law"
-             f" {model.law.law}, {1 / model.period:g} Hz"]
 
     def handle(event) -> None:
         result = session.on_event(*event)
@@ -507,7 +593,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
     # as the node waits at an END for the samples stamped up to it (they may be logged after the
     # END), an END and the events after it wait until both streams have reached its stamp
     pending: list[tuple[int, int, float]] = []
-    for _, kind, payload in heapq.merge(joints(), reference(), events(), key=lambda x: x[0]):
+    for _, kind, payload in stream:
         if kind == 0:
             session.on_joint_state(*payload)
         elif kind == 1:
@@ -518,12 +604,7 @@ def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, para
             handle(pending.pop(0))
     for event in pending:  # the recording ended: what is still missing is missing
         handle(event)
-    learned = sum(1 for r in rows if "skipped" not in r)
-    notes.append(f"{learned} of {len(rows)} cycles learned from")
-    if not learned_run and learned:
-        notes.append("a recording made without learning gives only the first update: later cycles did not run"
-                     " with the learned profile")
-    return LearnerReplay("mrilc", rows, notes)
+    return rows
 
 
 #: learner name -> replay function (recording, cycles, segmentation, parameters) -> LearnerReplay

@@ -18,8 +18,14 @@ from __future__ import annotations
 import io
 import pathlib
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, BinaryIO
+
+if TYPE_CHECKING:
+    from mcap.data_stream import ReadDataStream
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys.store import Typestore
 
 #: MCAP magic (start and end of a file)
 MAGIC = b"\x89MCAP0\r\n"
@@ -134,7 +140,7 @@ class Bag:
         self.notes: list[str] = []
         self.damage: list[Damage] = []
         self.reader_name = ""
-        self._reader = None
+        self._reader: AnyReader | None = None
         self._recovered: list[_Recovered] = []
         try:
             if recover:
@@ -222,6 +228,7 @@ class Bag:
         BagError
             The type's definition is missing from the recording or does not parse.
         """
+        store: Typestore | None
         if self._reader is not None:
             store = self._reader.typestore
         else:
@@ -271,73 +278,99 @@ class _Recovered:
 
     # ----------------------------------------------------------------- scanning
     def _records(self, wanted: set[str], collect: bool) -> Iterator[tuple[str, str, int, bytes]]:
+        """The messages of ``wanted`` topics, up to the first record that is cut off or unreadable.
+
+        With ``collect``, also take the schemas and channels and note where and why reading stopped.
+        """
         from mcap.data_stream import ReadDataStream
-        from mcap.records import Channel, Chunk, Message, Schema
 
         with open(self.path, "rb") as f:
             if f.read(8) != MAGIC:
                 raise BagError(f"{self.path} is not an MCAP file (bad magic)")
             good = 8
             while True:
-                head = f.read(9)
-                if len(head) == 0:
-                    self._stop(collect, good, "the file ends without a footer")
+                record = self._next_record(f, good, collect)
+                if record is None:
                     return
-                if len(head) < 9:
-                    self._stop(collect, good, "cut inside a record header")
-                    return
-                op, length = head[0], struct.unpack("<Q", head[1:])[0]
-                if length > self.size:
-                    self._stop(collect, good, f"corrupt record header at byte {good} (length {length})")
-                    return
-                body = f.read(length)
-                if len(body) < length:
-                    lost = None
-                    if op == OP_CHUNK and len(body) >= 16:
-                        lost = struct.unpack("<QQ", body[:16])
-                    self._stop(collect, good, f"cut inside a {_OPNAMES.get(op, hex(op))} record"
-                               f" ({len(body)} of {length} bytes)", lost)
-                    return
+                op, length, body = record
                 stream = ReadDataStream(io.BytesIO(body))
                 try:
-                    if op == OP_SCHEMA:
-                        if collect:
-                            s = Schema.read(stream)
-                            self._add_schema(s.id, s.name, s.encoding, s.data)
-                    elif op == OP_CHANNEL:
-                        if collect:
-                            c = Channel.read(stream)
-                            self._add_channel(c.id, c.topic, c.schema_id)
-                    elif op == OP_MESSAGE:
-                        m = Message.read(stream, length)
-                        item = self._message(m, wanted)
-                        if item is not None:
-                            yield item
-                    elif op == OP_CHUNK:
-                        chunk = Chunk.read(stream)
-                        records, err = _chunk_records(chunk)
-                        if err and collect:
-                            self.damage.skipped_chunks.append(
-                                f"chunk at byte {good} ({_sec(chunk.message_start_time):.3f}-"
-                                f"{_sec(chunk.message_end_time):.3f} s): {err}; {len(records)} records before it kept")
-                        for rec in records:
-                            if isinstance(rec, Schema):
-                                if collect:
-                                    self._add_schema(rec.id, rec.name, rec.encoding, rec.data)
-                            elif isinstance(rec, Channel):
-                                if collect:
-                                    self._add_channel(rec.id, rec.topic, rec.schema_id)
-                            elif isinstance(rec, Message):
-                                item = self._message(rec, wanted)
-                                if item is not None:
-                                    yield item
-                    elif op in (OP_FOOTER, OP_DATA_END):
-                        self._stop(collect, self.size, "")
-                        return
+                    end = yield from self._record_items(op, length, stream, wanted, collect, good)
                 except Exception as err:
                     self._stop(collect, good, f"unreadable {_OPNAMES.get(op, hex(op))} record at byte {good}: {err}")
                     return
+                if end:
+                    return
                 good += 9 + length
+
+    def _next_record(self, f: BinaryIO, good: int, collect: bool) -> tuple[int, int, bytes] | None:
+        """(opcode, length, body) of the record at ``good`` (bytes), or None where reading stops (noted)."""
+        head = f.read(9)
+        if len(head) == 0:
+            self._stop(collect, good, "the file ends without a footer")
+            return None
+        if len(head) < 9:
+            self._stop(collect, good, "cut inside a record header")
+            return None
+        op, length = head[0], struct.unpack("<Q", head[1:])[0]
+        if length > self.size:
+            self._stop(collect, good, f"corrupt record header at byte {good} (length {length})")
+            return None
+        body = f.read(length)
+        if len(body) < length:
+            lost = None
+            if op == OP_CHUNK and len(body) >= 16:
+                lost = struct.unpack("<QQ", body[:16])
+            self._stop(collect, good, f"cut inside a {_OPNAMES.get(op, hex(op))} record"
+                       f" ({len(body)} of {length} bytes)", lost)
+            return None
+        return op, length, body
+
+    def _record_items(self, op: int, length: int, stream: ReadDataStream, wanted: set[str], collect: bool,
+                      good: int) -> Generator[tuple[str, str, int, bytes], None, bool]:
+        """The messages of one record (a message, or those of a chunk); returns True at the end of the data."""
+        from mcap.records import Channel, Chunk, Message, Schema
+
+        if op == OP_SCHEMA:
+            if collect:
+                s = Schema.read(stream)
+                self._add_schema(s.id, s.name, s.encoding, s.data)
+        elif op == OP_CHANNEL:
+            if collect:
+                c = Channel.read(stream)
+                self._add_channel(c.id, c.topic, c.schema_id)
+        elif op == OP_MESSAGE:
+            m = Message.read(stream, length)
+            item = self._message(m, wanted)
+            if item is not None:
+                yield item
+        elif op == OP_CHUNK:
+            yield from self._chunk_items(Chunk.read(stream), wanted, collect, good)
+        elif op in (OP_FOOTER, OP_DATA_END):
+            self._stop(collect, self.size, "")
+            return True
+        return False
+
+    def _chunk_items(self, chunk, wanted: set[str], collect: bool, good: int) -> Iterator[tuple[str, str, int, bytes]]:
+        """The messages of the chunk at ``good`` (bytes) up to its first corrupt record (noted)."""
+        from mcap.records import Channel, Message, Schema
+
+        records, err = _chunk_records(chunk)
+        if err and collect:
+            self.damage.skipped_chunks.append(
+                f"chunk at byte {good} ({_sec(chunk.message_start_time):.3f}-"
+                f"{_sec(chunk.message_end_time):.3f} s): {err}; {len(records)} records before it kept")
+        for rec in records:
+            if isinstance(rec, Schema):
+                if collect:
+                    self._add_schema(rec.id, rec.name, rec.encoding, rec.data)
+            elif isinstance(rec, Channel):
+                if collect:
+                    self._add_channel(rec.id, rec.topic, rec.schema_id)
+            elif isinstance(rec, Message):
+                item = self._message(rec, wanted)
+                if item is not None:
+                    yield item
 
     def _stop(self, collect: bool, good: int, reason: str, lost: tuple[int, int] | None = None) -> None:
         if collect:

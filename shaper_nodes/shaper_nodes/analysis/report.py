@@ -19,7 +19,7 @@ import pathlib
 
 import numpy as np
 
-from shaper_nodes.core.shaping import percentage_vibration
+from shaper_nodes.core.shaping import Shaper, percentage_vibration
 
 from .analyze import Analysis, shaper_of
 from .reading import describe_damage
@@ -53,11 +53,13 @@ def summary(an: Analysis) -> dict:
                     "skipped_chunks": d.skipped_chunks, "text": describe_damage(d)} for d in rec.damage],
         "time_origin_s": an.origin,
         "cycles": [{"cycle": r.cycle, "start_s": r.start - an.origin, "motion_end_s": r.motion_end - an.origin,
-                    "window_start_s": r.window_start - an.origin, "end_s": r.end - an.origin, "residual_rms": r.rms, "residual_peak": r.peak, "samples": r.samples,
+                    "window_start_s": r.window_start - an.origin, "end_s": r.end - an.origin, "residual_rms": r.rms,
+                    "residual_peak": r.peak, "samples": r.samples,
                     "settling_time_s": r.settling_time, "shaper": r.shaper, "v_active": r.v_active,
                     "complete": r.complete, "issue": r.issue} for r in an.cycles],
-        "modes": [{"frequency_hz": m.hz, "omega": m.omega, "zeta": m.zeta, "frequency_std_hz": m.omega_std / (2 * math.pi),
-                   "zeta_std": m.zeta_std, "amplitude": m.amplitude, "method": m.method} for m in an.modes],
+        "modes": [{"frequency_hz": m.hz, "omega": m.omega, "zeta": m.zeta,
+                   "frequency_std_hz": m.omega_std / (2 * math.pi), "zeta_std": m.zeta_std, "amplitude": m.amplitude,
+                   "method": m.method} for m in an.modes],
         "spectrum_peak_hz": (float(an.spectrum[0][int(np.argmax(an.spectrum[1][1:])) + 1])
                              if an.spectrum is not None and an.spectrum[0].size > 1 else None),
         "recommendation": None,
@@ -99,8 +101,9 @@ def table(an: Analysis) -> str:
     rcm = an.recommendation
     if rcm is not None and rcm.best is not None:
         p = an.predicted
-        lines.append(f"recommended: {rcm.best.family} ({1e3 * rcm.best.duration:.1f} ms), V {100 * rcm.best.nominal_vibration:.2g} %"
-                     f" at the mode, {100 * rcm.best.worst_vibration:.2g} % worst case;"
+        lines.append(f"recommended: {rcm.best.family} ({1e3 * rcm.best.duration:.1f} ms),"
+                     f" V {100 * rcm.best.nominal_vibration:.2g} % at the mode,"
+                     f" {100 * rcm.best.worst_vibration:.2g} % worst case;"
                      f" predicted residual {_f(p.get('rms_nominal', float('nan')))} m/s2"
                      f" (worst {_f(p.get('rms_worst', float('nan')))}) + noise, from an unshaped level of"
                      f" {_f(an.unshaped_level)} m/s2")
@@ -172,7 +175,8 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     md += ["## Cycles", "", "Residual vibration: RMS and peak of the tip acceleration magnitude (m/s²) from the"
            " time the positions have come to rest after the move until the cycle's end; settling: time after"
            f" that until the magnitude stays within {an.options.band} (of the cycle's peak, or m/s²).", "",
-           "| # | cycle | RMS (m/s²) | peak (m/s²) | settling (s) | window (s) | shaper |", "|---|---|---|---|---|---|---|"]
+           "| # | cycle | RMS (m/s²) | peak (m/s²) | settling (s) | window (s) | shaper |",
+           "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(an.cycles):
         md.append(f"| {i} | {r.cycle} | {_f(r.rms)} | {_f(r.peak)} | {_settle(r)} |"
                   f" {r.window_start - an.origin:.3f}-{r.end - an.origin:.3f} | {r.shaper}"
@@ -188,9 +192,10 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     if doc["recommendation"]:
         r, p = doc["recommendation"], an.predicted
         md += [f"Recommended: **{r['family']}**, {1e3 * r['duration']:.1f} ms, impulses "
-               + ", ".join(f"{a:.4f} at {1e3 * t:.2f} ms" for a, t in zip(r["amplitudes"], r["times"]))
+               + ", ".join(f"{a:.4f} at {1e3 * t:.2f} ms" for a, t in zip(r["amplitudes"], r["times"], strict=True))
                + f"; V {100 * r['v_nominal']:.3g} % at the mode, {100 * r['v_worst']:.3g} % worst case over ±"
-               f"{an.options.sigmas:g} σ. Predicted residual vibration {_f(p.get('rms_nominal', float('nan')))} m/s²"
+               f"{an.options.sigmas:g} \N{GREEK SMALL LETTER SIGMA}. Predicted residual vibration"
+               f" {_f(p.get('rms_nominal', float('nan')))} m/s²"
                f" (worst {_f(p.get('rms_worst', float('nan')))}) plus the sensor noise, from an unshaped level of"
                f" {_f(an.unshaped_level)} m/s² (median over {p.get('cycles_used', 0)} cycles of RMS / V of the"
                " active shaper).", "", "| family | duration (ms) | V at mode (%) | worst V (%) | meets target |",
@@ -207,23 +212,23 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
                    " applied reference); efforts in the effort's units.", "",
                    "| cycle | iteration | RMS(e) | RMS(u1) | RMS(u2) | residual | action |",
                    "|---|---|---|---|---|---|---|"]
-            for r in rep.rows:
-                md.append(f"| {r['cycle']} | skipped: {r['skipped']} | | | | | |" if "skipped" in r else
-                          f"| {r['cycle']} | {r['iteration']} | {_f(r['rms_e'])} | {_f(r['rms_u1'])} |"
-                          f" {_f(r['rms_u2'])} | {_f(r['residual'])} | {r['action']} |")
+            for row in rep.rows:
+                md.append(f"| {row['cycle']} | skipped: {row['skipped']} | | | | | |" if "skipped" in row else
+                          f"| {row['cycle']} | {row['iteration']} | {_f(row['rms_e'])} | {_f(row['rms_u1'])} |"
+                          f" {_f(row['rms_u2'])} | {_f(row['residual'])} | {row['action']} |")
             md.append("")
             continue
         if learned:
             md += ["| cycle | M (m/s²) | phi (deg) | action | A1 used | T2 used (s) | A1 next | T2 next (s) |",
                    "|---|---|---|---|---|---|---|---|"]
-        for r in rep.rows:
-            if "skipped" in r:
-                md.append(f"| {r['cycle']} | skipped: {r['skipped']} | | | | | | |" if learned else
-                          f"- cycle {r['cycle']}: skipped: {r['skipped']}")
+        for row in rep.rows:
+            if "skipped" in row:
+                md.append(f"| {row['cycle']} | skipped: {row['skipped']} | | | | | | |" if learned else
+                          f"- cycle {row['cycle']}: skipped: {row['skipped']}")
             else:
-                md.append(f"| {r['cycle']} | {_f(r['M'])} | {math.degrees(r['phi']):.1f} | {r['action']} |"
-                          f" {_f(r['a1_used'], '.5f')} | {_f(r['t2_used'], '.5f')} | {r['a1_next']:.5f} |"
-                          f" {r['t2_next']:.5f} |")
+                md.append(f"| {row['cycle']} | {_f(row['M'])} | {math.degrees(row['phi']):.1f} | {row['action']} |"
+                          f" {_f(row['a1_used'], '.5f')} | {_f(row['t2_used'], '.5f')} | {row['a1_next']:.5f} |"
+                          f" {row['t2_next']:.5f} |")
         md.append("")
     if plots:
         md += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
@@ -238,14 +243,29 @@ def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    files = []
-    # per-cycle traces, overlaid, coloured by shaper
+    files = [_plot_traces(plt, an, out)]
+    if an.spectrum is not None:
+        files.append(_plot_spectrum(plt, an, an.spectrum, out))
+    rcm = an.recommendation
+    if an.modes and rcm is not None and rcm.best is not None:
+        files.append(_plot_sensitivity(plt, an, rcm.best.shaper, rcm.target, out))
+    curves = {name: [r for r in rep.rows if "skipped" not in r and "M" in r] for name, rep in an.replays.items()}
+    mrilc = {name: [r for r in rep.rows if "skipped" not in r and "rms_e" in r] for name, rep in an.replays.items()}
+    if any(mrilc.values()):
+        files.append(_plot_mrilc_learning(plt, mrilc, out))
+    if any(curves.values()):
+        files.append(_plot_list_learning(plt, curves, out))
+    return files
+
+
+def _plot_traces(plt, an: Analysis, out: pathlib.Path) -> pathlib.Path:
+    """traces.png: the per-cycle acceleration (m/s^2) on its most varying axis, overlaid, coloured by shaper."""
     axis = int(np.argmax(np.nanvar(an.recording.accel.values, axis=0)))
     fig, ax = plt.subplots(figsize=(10, 4))
     labels = sorted({r.shaper for r in an.cycles})
     colors = {lab: plt.cm.tab10(i % 10) for i, lab in enumerate(labels)}
     shown = set()
-    for (t, a), r in zip(an.traces, an.cycles):
+    for (t, a), r in zip(an.traces, an.cycles, strict=True):
         if t.size:
             ax.plot(t, a[:, axis], lw=0.6, color=colors[r.shaper], alpha=0.8,
                     label=None if r.shaper in shown else r.shaper)
@@ -256,78 +276,88 @@ def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
     ax.set_title(f"{len(an.cycles)} cycles overlaid", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper right")
-    files.append(_save(fig, out / "traces.png"))
-    if an.spectrum is not None:
-        f, p = an.spectrum
-        fig, ax = plt.subplots(figsize=(8, 3.6))
-        ax.semilogy(f[1:], p[1:], lw=0.8)
-        for i, m in enumerate(an.modes):
-            ax.axvline(m.hz, color="C3", ls="--", lw=0.8, label=f"mode {i + 1}: {m.hz:.4g} Hz, ζ {m.zeta:.3g}")
-        ax.set_xlabel("frequency (Hz)")
-        ax.set_ylabel("PSD ((m/s²)²/Hz)")
-        ax.set_title("residual windows, Welch, averaged over cycles", fontsize=9)
+    return _save(fig, out / "traces.png")
+
+
+def _plot_spectrum(plt, an: Analysis, spectrum: tuple[np.ndarray, np.ndarray], out: pathlib.Path) -> pathlib.Path:
+    """spectrum.png: the residual windows' PSD ((m/s^2)^2/Hz against Hz) with the identified modes."""
+    f, p = spectrum
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    ax.semilogy(f[1:], p[1:], lw=0.8)
+    for i, m in enumerate(an.modes):
+        ax.axvline(m.hz, color="C3", ls="--", lw=0.8, label=f"mode {i + 1}: {m.hz:.4g} Hz, ζ {m.zeta:.3g}")
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("PSD ((m/s²)²/Hz)")
+    ax.set_title("residual windows, Welch, averaged over cycles", fontsize=9)
+    ax.grid(alpha=0.3)
+    if an.modes:
+        ax.legend(fontsize=8)
+        ax.set_xlim(0, min(f[-1], 4 * max(m.hz for m in an.modes)))
+    return _save(fig, out / "spectrum.png")
+
+
+def _plot_sensitivity(plt, an: Analysis, best: Shaper, target: float, out: pathlib.Path) -> pathlib.Path:
+    """sensitivity.png: V (%) against frequency (Hz) of the recommended shaper ``best`` and of the recorded
+    ones, at the first mode's damping, its band shaded and the ``target`` V (fraction) marked."""
+    top = an.modes[0]
+    hz = np.linspace(0.01, 2.0 * top.hz, 600)
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    ax.plot(hz, 100 * percentage_vibration(best.amplitudes, best.times, 2 * np.pi * hz, top.zeta),
+            lw=1.5, label=f"recommended: {best.family}")
+    seen = set()
+    for r in an.cycles:
+        if r.shaper_impulses is not None and r.shaper not in seen and len(r.shaper_impulses[0]) > 1:
+            seen.add(r.shaper)
+            ax.plot(hz, 100 * percentage_vibration(np.asarray(r.shaper_impulses[0], dtype=float),
+                                                   np.asarray(r.shaper_impulses[1], dtype=float), 2 * np.pi * hz,
+                                                   top.zeta), lw=0.8, ls="--", label=f"recorded: {r.shaper}")
+    s = an.options.sigmas * top.omega_std / (2 * math.pi)
+    ax.axvspan(top.hz - s, top.hz + s, color="C3", alpha=0.15,
+               label=f"mode ±{an.options.sigmas:g}\N{GREEK SMALL LETTER SIGMA}")
+    ax.axvline(top.hz, color="C3", lw=0.8)
+    ax.axhline(100 * target, color="0.5", lw=0.6, ls=":")
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("V (%)")
+    ax.set_title(f"sensitivity at damping {top.zeta:.3g}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, out / "sensitivity.png")
+
+
+def _plot_mrilc_learning(plt, mrilc: dict[str, list[dict]], out: pathlib.Path) -> pathlib.Path:
+    """learning_mrilc.png: RMS(e) (joint units), RMS(u1) and RMS(u2) (effort units) per iteration."""
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
+    for name, rows in mrilc.items():
+        if not rows:
+            continue
+        it = [r["iteration"] for r in rows]
+        axes[0].semilogy(it, [r["rms_e"] for r in rows], "o-", ms=3, label=f"{name} RMS(e)")
+        axes[1].plot(it, [r["rms_u1"] for r in rows], "o-", ms=3, label=f"{name} RMS(u1)")
+        axes[1].plot(it, [r["rms_u2"] for r in rows], "s-", ms=3, label=f"{name} RMS(u2)")
+    for ax, title in zip(axes, ("RMS(e) (joint units)", "efforts"), strict=True):
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("iteration")
         ax.grid(alpha=0.3)
-        if an.modes:
-            ax.legend(fontsize=8)
-            ax.set_xlim(0, min(f[-1], 4 * max(m.hz for m in an.modes)))
-        files.append(_save(fig, out / "spectrum.png"))
-    rcm = an.recommendation
-    if an.modes and rcm is not None and rcm.best is not None:
-        top = an.modes[0]
-        hz = np.linspace(0.01, 2.0 * top.hz, 600)
-        fig, ax = plt.subplots(figsize=(8, 3.6))
-        best = rcm.best.shaper
-        ax.plot(hz, 100 * percentage_vibration(best.amplitudes, best.times, 2 * np.pi * hz, top.zeta),
-                lw=1.5, label=f"recommended: {best.family}")
-        seen = set()
-        for r in an.cycles:
-            if r.shaper_impulses is not None and r.shaper not in seen and len(r.shaper_impulses[0]) > 1:
-                seen.add(r.shaper)
-                ax.plot(hz, 100 * percentage_vibration(r.shaper_impulses[0], r.shaper_impulses[1], 2 * np.pi * hz,
-                                                       top.zeta), lw=0.8, ls="--", label=f"recorded: {r.shaper}")
-        s = an.options.sigmas * top.omega_std / (2 * math.pi)
-        ax.axvspan(top.hz - s, top.hz + s, color="C3", alpha=0.15, label=f"mode ±{an.options.sigmas:g}σ")
-        ax.axvline(top.hz, color="C3", lw=0.8)
-        ax.axhline(100 * rcm.target, color="0.5", lw=0.6, ls=":")
-        ax.set_xlabel("frequency (Hz)")
-        ax.set_ylabel("V (%)")
-        ax.set_title(f"sensitivity at damping {top.zeta:.3g}", fontsize=9)
+        ax.legend(fontsize=8)
+    return _save(fig, out / "learning_mrilc.png")
+
+
+def _plot_list_learning(plt, curves: dict[str, list[dict]], out: pathlib.Path) -> pathlib.Path:
+    """learning.png: LIST's M (m/s^2), next A1 and next T2 (s) per cycle."""
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
+    for name, rows in curves.items():
+        if not rows:
+            continue
+        c = [r["cycle"] for r in rows]
+        axes[0].semilogy(c, [r["M"] for r in rows], "o-", ms=3, label=name)
+        axes[1].plot(c, [r["a1_next"] for r in rows], "o-", ms=3, label=name)
+        axes[2].plot(c, [r["t2_next"] for r in rows], "o-", ms=3, label=name)
+    for ax, title in zip(axes, ("M (m/s²)", "A1 next", "T2 next (s)"), strict=True):
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("cycle")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        files.append(_save(fig, out / "sensitivity.png"))
-    curves = {name: [r for r in rep.rows if "skipped" not in r and "M" in r] for name, rep in an.replays.items()}
-    mrilc = {name: [r for r in rep.rows if "skipped" not in r and "rms_e" in r] for name, rep in an.replays.items()}
-    if any(mrilc.values()):
-        fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
-        for name, rows in mrilc.items():
-            if not rows:
-                continue
-            it = [r["iteration"] for r in rows]
-            axes[0].semilogy(it, [r["rms_e"] for r in rows], "o-", ms=3, label=f"{name} RMS(e)")
-            axes[1].plot(it, [r["rms_u1"] for r in rows], "o-", ms=3, label=f"{name} RMS(u1)")
-            axes[1].plot(it, [r["rms_u2"] for r in rows], "s-", ms=3, label=f"{name} RMS(u2)")
-        for ax, title in zip(axes, ("RMS(e) (joint units)", "efforts")):
-            ax.set_title(title, fontsize=9)
-            ax.set_xlabel("iteration")
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=8)
-        files.append(_save(fig, out / "learning_mrilc.png"))
-    if any(curves.values()):
-        fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
-        for name, rows in curves.items():
-            if not rows:
-                continue
-            c = [r["cycle"] for r in rows]
-            axes[0].semilogy(c, [r["M"] for r in rows], "o-", ms=3, label=name)
-            axes[1].plot(c, [r["a1_next"] for r in rows], "o-", ms=3, label=name)
-            axes[2].plot(c, [r["t2_next"] for r in rows], "o-", ms=3, label=name)
-        for ax, title in zip(axes, ("M (m/s²)", "A1 next", "T2 next (s)")):
-            ax.set_title(title, fontsize=9)
-            ax.set_xlabel("cycle")
-            ax.grid(alpha=0.3)
-        axes[0].legend(fontsize=8)
-        files.append(_save(fig, out / "learning.png"))
-    return files
+    axes[0].legend(fontsize=8)
+    return _save(fig, out / "learning.png")
 
 
 def _save(fig, path: pathlib.Path) -> pathlib.Path:

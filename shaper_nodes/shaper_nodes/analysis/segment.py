@@ -127,14 +127,14 @@ def from_motion(signal: Signal, end_time: float | None = None, threshold: float 
         while stops[k] < hi and speed[stops[k]] > floor:
             stops[k] += 1
     moves: list[list[int]] = []
-    for a, b in zip(starts, stops):
+    for a, b in zip(starts, stops, strict=True):
         if moves and t[a] - t[moves[-1][1]] < min_rest:
             moves[-1][1] = int(b)
         else:
             moves.append([int(a), int(b)])
     size = [float(np.nanmax(np.abs(p[b] - p[a]))) for a, b in moves]
     biggest = max(size)
-    kept = [m for m, s in zip(moves, size) if s >= MIN_MOVE_FRACTION * biggest]
+    kept = [m for m, s in zip(moves, size, strict=True) if s >= MIN_MOVE_FRACTION * biggest]
     if len(kept) < len(moves):
         notes.append(f"{len(moves) - len(kept)} move(s) smaller than {100 * MIN_MOVE_FRACTION:g} % of the"
                      " largest ignored")

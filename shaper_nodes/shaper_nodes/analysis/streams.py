@@ -22,12 +22,13 @@ from __future__ import annotations
 import struct
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from .reading import Bag, BagError, ReadResult
+from .reading import Bag, BagError, Damage, ReadResult, TopicInfo
 
 IMU, JOINT_STATE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"
 ARRAY, TRAJECTORY = "std_msgs/msg/Float64MultiArray", "trajectory_msgs/msg/JointTrajectory"
@@ -101,21 +102,21 @@ class Recording:
 
     path: str
     topics: dict[str, str]  # role -> topic ("" if none)
-    accel: Signal | None
+    accel: Signal  # never empty: a recording without accelerometer samples is refused
     joints: Signal | None
     commands: Signal | None
     events: Events
     shapers: Shapers
     messages_read: int
     notes: list[str]
-    damage: list  # reading.Damage
+    damage: list[Damage]
     reader: str
     all_topics: dict[str, str]  # topic -> type
     reference: Signal | None = None  # the applied reference's positions (role "reference")
     efforts: Signal | None = None    # the joint states' efforts (read with a reference), joints' names
 
 
-def choose_topics(topics: Mapping[str, object], overrides: Mapping[str, str] | None = None
+def choose_topics(topics: Mapping[str, TopicInfo], overrides: Mapping[str, str] | None = None
                   ) -> tuple[dict[str, str], list[str]]:
     """role -> topic for every role (``""`` if the bag has none), and notes on the choices.
 
@@ -215,7 +216,7 @@ class JointStateDecoder:
 
     def __call__(self, raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
         n = len(self._prefix)
-        if n and raw[12:12 + n] == self._prefix:
+        if n and self._layout is not None and raw[12:12 + n] == self._prefix:  # a prefix comes with its layout
             offset, fmt = self._layout
             sec, nsec = _I32U32.unpack_from(raw, 4)
             return sec + 1e-9 * nsec, self._names, fmt.unpack_from(raw, offset)
@@ -235,6 +236,8 @@ class JointStateDecoder:
     @property
     def positions_end(self) -> int:
         """Where the positions of the message last decoded end (for :func:`joint_state_efforts`)."""
+        if self._layout is None:
+            raise TypeError("JointStateDecoder.positions_end: no message decoded yet")
         return self._layout[0] + self._layout[1].size
 
 
@@ -272,7 +275,8 @@ class Progress:
             frac = min(done / self.total, 1.0)
             bar = "#" * int(30 * frac)
             eta = (self.total - done) / rate if rate > 0 else 0.0
-            text = f"\rreading [{bar:<30}] {100 * frac:5.1f} % {done}/{self.total} messages, {rate:,.0f}/s, {eta:.0f} s left"
+            text = (f"\rreading [{bar:<30}] {100 * frac:5.1f} % {done}/{self.total} messages, {rate:,.0f}/s,"
+                    f" {eta:.0f} s left")
         else:
             text = f"\rreading {done} messages, {rate:,.0f}/s"
         self.stream.write(text)
@@ -319,150 +323,247 @@ class _ReadFailed(Exception):
 def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
     with Bag(path, recover=recover) as bag:
         infos = bag.topics
-        if not infos:
-            raise BagError(f"{path}: the recording has no topics (empty bag)")
-        chosen, notes = choose_topics(infos, overrides)
-        notes = list(bag.notes) + notes
-        if not chosen["accel"]:
-            raise BagError(f"{path}: no accelerometer topic (sensor_msgs/msg/Imu); topics: "
-                           + ", ".join(f"{t} [{i.msgtype}]" for t, i in sorted(infos.items())))
-        if chosen["reference"] and chosen["reference"] == chosen["joints"]:
-            raise BagError(f"{path}: {chosen['reference']} cannot be both the joint states and the reference"
-                           " (choose another with --joints-topic or --reference-topic)")
-        roles = {topic: role for role, topic in chosen.items() if topic}
-        with_efforts = bool(chosen["reference"])
-        unused = sorted(f"{t} [{i.msgtype}]" for t, i in infos.items() if t not in roles)
-        if unused:
-            notes.append("not used: " + ", ".join(unused))
-        decoders: dict[str, Callable] = {}
-        for topic in roles:
-            msgtype = infos[topic].msgtype
-            try:
-                decoders[topic] = bag.deserializer(msgtype)
-            except BagError as err:
-                notes.append(f"{topic} skipped: {err}")
+        chosen, roles, notes = _roles(path, bag, infos, overrides)
+        decoders = _decoders(bag, roles, infos, notes)
         wanted = set(decoders)
         total = sum(infos[t].count or 0 for t in wanted) or None
         show = Progress(total, progress)
-        acc_seq: list[int] = []
-        acc_t: list[float] = []
-        acc: list[float] = []  # flat x, y, z, x, ...
-        js_fast = JointStateDecoder()
-        js = {"seq": [], "t": [], "p": [], "names": None}
-        ref = {"seq": [], "t": [], "p": [], "names": None}
-        eff = {"seq": [], "t": [], "p": []}
-        decoders_fast = {"joints": js_fast, "reference": JointStateDecoder()}
-        cmd = {"seq": [], "t": [], "p": []}
-        events, shapers = Events(), Shapers()
-        bad: dict[str, int] = {}
-        first_error: dict[str, str] = {}
+        got = _Collector(decoders, with_efforts=bool(chosen["reference"]))
         result = ReadResult()
-        seq = -1
-        messages = bag.messages(wanted, result)
-        while True:
-            try:
-                topic, msgtype, log_ns, raw = next(messages)
-            except StopIteration:
-                break
-            except Exception as err:
-                if recover:
-                    raise BagError(f"{path}: reading failed after {seq + 1} messages: {err}") from None
-                raise _ReadFailed(seq + 1, f"{type(err).__name__}: {err}") from None
-            seq += 1
-            if seq % 4096 == 0:
-                show(seq)
-                if on_progress:
-                    on_progress(seq)
-            role = roles[topic]
-            try:
-                if role == "accel":
-                    if _little_endian(raw):
-                        t, a = imu_fast(raw)
-                        if t == 0.0:
-                            t = log_ns * 1e-9
-                    else:
-                        m = decoders[topic](raw)
-                        t, la = _stamp(m, log_ns), m.linear_acceleration
-                        a = (la.x, la.y, la.z)
-                    acc_seq.append(seq)
-                    acc_t.append(t)
-                    acc.extend(a)
-                elif role in ("joints", "reference"):
-                    e = None
-                    if _little_endian(raw):
-                        fast = decoders_fast[role]
-                        t, names, p = fast(raw)
-                        if role == "joints" and with_efforts:
-                            e = joint_state_efforts(raw, fast.positions_end)
-                        if t == 0.0:
-                            t = log_ns * 1e-9
-                    else:
-                        m = decoders[topic](raw)
-                        t, names, p = _stamp(m, log_ns), tuple(m.name), tuple(m.position)
-                        e = tuple(m.effort) if role == "joints" and with_efforts else None
-                    d = js if role == "joints" else ref
-                    if d["names"] is None:
-                        d["names"] = names
-                    if e is not None and len(e) == len(names):  # a message without efforts has none
-                        eff["seq"].append(seq)
-                        eff["t"].append(t)
-                        eff["p"].append(e if names == d["names"] else _reorder(d["names"], names, e))
-                    if names != d["names"] or len(p) != len(names):
-                        p = _reorder(d["names"], names, p)
-                    d["seq"].append(seq)
-                    d["t"].append(t)
-                    d["p"].append(p)
-                elif role == "commands":
-                    m = decoders[topic](raw)
-                    if msgtype == ARRAY:
-                        cmd["seq"].append(seq)
-                        cmd["t"].append(log_ns * 1e-9)
-                        cmd["p"].append(tuple(float(x) for x in m.data))
-                    else:  # JointTrajectory: each point at stamp + time_from_start
-                        t0 = _stamp(m, log_ns)
-                        for pt in m.points:
-                            cmd["seq"].append(seq)
-                            cmd["t"].append(t0 + pt.time_from_start.sec + 1e-9 * pt.time_from_start.nanosec)
-                            cmd["p"].append(tuple(float(x) for x in pt.positions))
-                elif role == "events":
-                    m = decoders[topic](raw)
-                    events.seq.append(seq)
-                    events.t.append(_stamp(m, log_ns))
-                    events.kind.append(int(m.event))
-                    events.cycle.append(int(m.cycle))
-                    events.start.append(tuple(float(x) for x in m.start_positions))
-                    events.goal.append(tuple(float(x) for x in m.goal_positions))
-                    events.joint_names.append(tuple(str(x) for x in m.joint_names))
-                else:
-                    m = decoders[topic](raw)
-                    shapers.seq.append(seq)
-                    shapers.t.append(_stamp(m, log_ns))
-                    shapers.family.append(str(m.family))
-                    shapers.amplitudes.append(tuple(float(x) for x in m.amplitudes))
-                    shapers.times.append(tuple(float(x) for x in m.times))
-                    shapers.source.append(str(m.source))
-                    shapers.revision.append(int(m.revision))
-            except Exception as err:
-                bad[topic] = bad.get(topic, 0) + 1
-                first_error.setdefault(topic, f"{type(err).__name__}: {err}")
-        show.close()
-        for topic, n in bad.items():
-            notes.append(f"{topic}: {n} message(s) could not be decoded and were skipped (first: {first_error[topic]})")
+        seq = _read_messages(bag.messages(wanted, result), roles, got, show, on_progress, path, recover, notes)
         if seq < 0:
             raise BagError(f"{path}: no messages could be read on {sorted(wanted)}")
-        accel = _finite(_signal(chosen["accel"], acc_seq, acc_t, np.array(acc).reshape(-1, 3)), notes) if acc else None
-        if accel is None or len(accel) == 0:
-            raise BagError(f"{path}: no accelerometer message could be read on {chosen['accel']}")
-        joints = _finite(_signal(chosen["joints"], js["seq"], js["t"], js["p"], js["names"] or ()), notes) \
-            if js["t"] else None
-        commands = _finite(_signal(chosen["commands"], cmd["seq"], cmd["t"], cmd["p"]), notes) if cmd["t"] else None
-        reference = _finite(_signal(chosen["reference"], ref["seq"], ref["t"], ref["p"], ref["names"] or ()), notes) \
-            if ref["t"] else None
-        efforts = _finite(_signal(f"{chosen['joints']} (efforts)", eff["seq"], eff["t"], eff["p"], js["names"] or ()),
-                          notes) if eff["t"] else None
-        return Recording(str(path), chosen, accel, joints, commands, events, shapers, result.messages, notes,
+        accel, joints, commands, reference, efforts = got.signals(path, chosen, notes)
+        return Recording(str(path), chosen, accel, joints, commands, got.events, got.shapers, result.messages, notes,
                          list(bag.damage), bag.reader_name, {t: i.msgtype for t, i in infos.items()},
                          reference, efforts)
+
+
+def _roles(path, bag: Bag, infos: dict[str, TopicInfo], overrides: Mapping[str, str] | None
+           ) -> tuple[dict[str, str], dict[str, str], list[str]]:
+    """role -> topic, topic -> role of the topics read, and the notes so far (the bag's, the choices').
+
+    Raises
+    ------
+    BagError
+        The bag has no topics or no accelerometer topic, or one topic is taken for two roles.
+    """
+    if not infos:
+        raise BagError(f"{path}: the recording has no topics (empty bag)")
+    chosen, notes = choose_topics(infos, overrides)
+    notes = list(bag.notes) + notes
+    if not chosen["accel"]:
+        raise BagError(f"{path}: no accelerometer topic (sensor_msgs/msg/Imu); topics: "
+                       + ", ".join(f"{t} [{i.msgtype}]" for t, i in sorted(infos.items())))
+    if chosen["reference"] and chosen["reference"] == chosen["joints"]:
+        raise BagError(f"{path}: {chosen['reference']} cannot be both the joint states and the reference"
+                       " (choose another with --joints-topic or --reference-topic)")
+    roles = {topic: role for role, topic in chosen.items() if topic}
+    unused = sorted(f"{t} [{i.msgtype}]" for t, i in infos.items() if t not in roles)
+    if unused:
+        notes.append("not used: " + ", ".join(unused))
+    return chosen, roles, notes
+
+
+def _decoders(bag: Bag, roles: dict[str, str], infos: dict[str, TopicInfo], notes: list[str]
+              ) -> dict[str, Callable[[Any], Any]]:
+    """topic -> deserialiser of the topics read; a topic whose type cannot be decoded is noted and skipped."""
+    decoders: dict[str, Callable[[Any], Any]] = {}
+    for topic in roles:
+        msgtype = infos[topic].msgtype
+        try:
+            decoders[topic] = bag.deserializer(msgtype)
+        except BagError as err:
+            notes.append(f"{topic} skipped: {err}")
+    return decoders
+
+
+def _read_messages(messages: Iterator[tuple[str, str, int, Any]], roles: dict[str, str], got: _Collector,
+                   show: Progress, on_progress: Callable[[int], None] | None, path, recover: bool,
+                   notes: list[str]) -> int:
+    """Feed every message to ``got``, noting the topics whose messages could not be decoded.
+
+    Returns the recording-order index of the last message read (-1: none).
+
+    Raises
+    ------
+    BagError
+        Reading failed, in a record-by-record read (``recover``).
+    _ReadFailed
+        Reading failed, in a read with rosbags.
+    """
+    bad: dict[str, int] = {}
+    first_error: dict[str, str] = {}
+    seq = -1
+    while True:
+        try:
+            topic, msgtype, log_ns, raw = next(messages)
+        except StopIteration:
+            break
+        except Exception as err:
+            if recover:
+                raise BagError(f"{path}: reading failed after {seq + 1} messages: {err}") from None
+            raise _ReadFailed(seq + 1, f"{type(err).__name__}: {err}") from None
+        seq += 1
+        if seq % 4096 == 0:
+            show(seq)
+            if on_progress:
+                on_progress(seq)
+        role = roles[topic]
+        try:
+            got.add(role, topic, msgtype, seq, log_ns, raw)
+        except Exception as err:
+            bad[topic] = bad.get(topic, 0) + 1
+            first_error.setdefault(topic, f"{type(err).__name__}: {err}")
+    show.close()
+    for topic, n in bad.items():
+        notes.append(f"{topic}: {n} message(s) could not be decoded and were skipped (first: {first_error[topic]})")
+    return seq
+
+
+@dataclass
+class _Rows:
+    """Samples of one topic as read: order in the recording, time (s), values, names (of the first message)."""
+
+    seq: list[int] = field(default_factory=list)
+    t: list[float] = field(default_factory=list)
+    p: list[tuple[float, ...]] = field(default_factory=list)
+    names: tuple[str, ...] | None = None
+
+
+class _Collector:
+    """The samples of every role, gathered message by message (:meth:`add`), then as arrays (:meth:`signals`).
+
+    Parameters
+    ----------
+    decoders : dict
+        topic -> deserialiser (messages not in little-endian CDR, and the types without a direct parser).
+    with_efforts : bool
+        Read the joint states' efforts too (when a reference topic is read).
+    """
+
+    def __init__(self, decoders: dict[str, Callable[[Any], Any]], with_efforts: bool) -> None:
+        self.decoders = decoders
+        self.with_efforts = with_efforts
+        self.acc_seq: list[int] = []
+        self.acc_t: list[float] = []
+        self.acc: list[float] = []  # flat x, y, z, x, ...
+        self.js, self.ref, self.eff, self.cmd = _Rows(), _Rows(), _Rows(), _Rows()
+        self.fast = {"joints": JointStateDecoder(), "reference": JointStateDecoder()}
+        self.events, self.shapers = Events(), Shapers()
+
+    def add(self, role: str, topic: str, msgtype: str, seq: int, log_ns: int, raw: Any) -> None:
+        """Decode one message of ``topic`` (logged at ``log_ns``, ns) and keep what its role uses."""
+        if role == "accel":
+            self._accel(topic, seq, log_ns, raw)
+        elif role in ("joints", "reference"):
+            self._joint_state(role, topic, seq, log_ns, raw)
+        elif role == "commands":
+            self._commands(topic, msgtype, seq, log_ns, raw)
+        elif role == "events":
+            self._event(topic, seq, log_ns, raw)
+        else:
+            self._shaper(topic, seq, log_ns, raw)
+
+    def _accel(self, topic: str, seq: int, log_ns: int, raw: Any) -> None:
+        if _little_endian(raw):
+            t, a = imu_fast(raw)
+            if t == 0.0:
+                t = log_ns * 1e-9
+        else:
+            m = self.decoders[topic](raw)
+            t, la = _stamp(m, log_ns), m.linear_acceleration
+            a = (la.x, la.y, la.z)
+        self.acc_seq.append(seq)
+        self.acc_t.append(t)
+        self.acc.extend(a)
+
+    def _joint_state(self, role: str, topic: str, seq: int, log_ns: int, raw: Any) -> None:
+        e: tuple[float, ...] | None = None
+        if _little_endian(raw):
+            fast = self.fast[role]
+            t, names, p = fast(raw)
+            if role == "joints" and self.with_efforts:
+                e = joint_state_efforts(raw, fast.positions_end)
+            if t == 0.0:
+                t = log_ns * 1e-9
+        else:
+            m = self.decoders[topic](raw)
+            t, names, p = _stamp(m, log_ns), tuple(m.name), tuple(m.position)
+            e = tuple(m.effort) if role == "joints" and self.with_efforts else None
+        d = self.js if role == "joints" else self.ref
+        if d.names is None:
+            d.names = names
+        if e is not None and len(e) == len(names):  # a message without efforts has none
+            self.eff.seq.append(seq)
+            self.eff.t.append(t)
+            self.eff.p.append(e if names == d.names else _reorder(d.names, names, e))
+        if names != d.names or len(p) != len(names):
+            p = _reorder(d.names, names, p)
+        d.seq.append(seq)
+        d.t.append(t)
+        d.p.append(p)
+
+    def _commands(self, topic: str, msgtype: str, seq: int, log_ns: int, raw: Any) -> None:
+        m = self.decoders[topic](raw)
+        cmd = self.cmd
+        if msgtype == ARRAY:
+            cmd.seq.append(seq)
+            cmd.t.append(log_ns * 1e-9)
+            cmd.p.append(tuple(float(x) for x in m.data))
+        else:  # JointTrajectory: each point at stamp + time_from_start
+            t0 = _stamp(m, log_ns)
+            for pt in m.points:
+                cmd.seq.append(seq)
+                cmd.t.append(t0 + pt.time_from_start.sec + 1e-9 * pt.time_from_start.nanosec)
+                cmd.p.append(tuple(float(x) for x in pt.positions))
+
+    def _event(self, topic: str, seq: int, log_ns: int, raw: Any) -> None:
+        m = self.decoders[topic](raw)
+        events = self.events
+        events.seq.append(seq)
+        events.t.append(_stamp(m, log_ns))
+        events.kind.append(int(m.event))
+        events.cycle.append(int(m.cycle))
+        events.start.append(tuple(float(x) for x in m.start_positions))
+        events.goal.append(tuple(float(x) for x in m.goal_positions))
+        events.joint_names.append(tuple(str(x) for x in m.joint_names))
+
+    def _shaper(self, topic: str, seq: int, log_ns: int, raw: Any) -> None:
+        m = self.decoders[topic](raw)
+        shapers = self.shapers
+        shapers.seq.append(seq)
+        shapers.t.append(_stamp(m, log_ns))
+        shapers.family.append(str(m.family))
+        shapers.amplitudes.append(tuple(float(x) for x in m.amplitudes))
+        shapers.times.append(tuple(float(x) for x in m.times))
+        shapers.source.append(str(m.source))
+        shapers.revision.append(int(m.revision))
+
+    def signals(self, path, chosen: dict[str, str], notes: list[str]
+                ) -> tuple[Signal, Signal | None, Signal | None, Signal | None, Signal | None]:
+        """Accelerometer, joint states, commands, reference and efforts, without non-finite samples (noted).
+
+        Raises
+        ------
+        BagError
+            No accelerometer sample could be read.
+        """
+        accel = _finite(_signal(chosen["accel"], self.acc_seq, self.acc_t, np.array(self.acc).reshape(-1, 3)),
+                        notes) if self.acc else None
+        if accel is None or len(accel) == 0:
+            raise BagError(f"{path}: no accelerometer message could be read on {chosen['accel']}")
+        joints = _rows_signal(chosen["joints"], self.js, notes, self.js.names)
+        commands = _rows_signal(chosen["commands"], self.cmd, notes)
+        reference = _rows_signal(chosen["reference"], self.ref, notes, self.ref.names)
+        efforts = _rows_signal(f"{chosen['joints']} (efforts)", self.eff, notes, self.js.names)
+        return accel, joints, commands, reference, efforts
+
+
+def _rows_signal(topic: str, rows: _Rows, notes: list[str], names: tuple[str, ...] | None = None
+                 ) -> Signal | None:
+    """The rows as a :class:`Signal` without non-finite samples (noted), or None if there are none."""
+    return _finite(_signal(topic, rows.seq, rows.t, rows.p, names or ()), notes) if rows.t else None
 
 
 def _finite(sig: Signal, notes: list[str]) -> Signal:
@@ -475,11 +576,12 @@ def _finite(sig: Signal, notes: list[str]) -> Signal:
 
 
 def _reorder(names: tuple[str, ...], got: tuple[str, ...], p: tuple[float, ...]) -> tuple[float, ...]:
-    index = dict(zip(got, p))
+    index = dict(zip(got, p, strict=False))  # a malformed message may have fewer values than names
     return tuple(index.get(n, float("nan")) for n in names)
 
 
-def _signal(topic: str, seq: list[int], t: list[float], values: list, names=()) -> Signal:
+def _signal(topic: str, seq: list[int], t: list[float], values: Sequence[Sequence[float]] | np.ndarray,
+            names: Iterable[str] = ()) -> Signal:
     try:
         if isinstance(values, np.ndarray):
             vals = values

@@ -16,8 +16,12 @@ import math
 import pathlib
 import struct
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from rosbags.rosbag2.storage_mcap import McapWriter
 
 
 @dataclass(frozen=True)
@@ -163,5 +167,5 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
         if finish:
             writer.close()
         else:  # what the process had handed to the OS is in the file; the rest is lost
-            writer.storage.bio.close()
+            cast("McapWriter", writer.storage).bio.close()  # the storage plugin asked for: MCAP
     return count
