@@ -13,7 +13,7 @@ import time
 import pytest
 
 from reproductions.list_cases import CASES, LEARNER, run_case
-from shaper_nodes.cli.list_replay import replay
+from shaper_nodes.analysis.replay import replay
 
 pytestmark = pytest.mark.integration
 CYCLES = 11  # cycle 0 unshaped (reference), cycles 1..10 learning

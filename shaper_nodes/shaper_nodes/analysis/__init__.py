@@ -6,8 +6,11 @@
   by type and extract them into arrays.
 - :mod:`.segment`: cycles from the cycle events, or from the commands' motion when there are none.
 - :mod:`.analyze`: per-cycle residual vibration and settling, spectrum, modes, recommended shaper,
-  learner replays (a registry: LIST now, MRILC to be added).
+  and the learner replays the options ask for.
+- :mod:`.replay`: what the learners (LIST, MRILC) would have done over a recording, fed as the live
+  nodes are fed; the registry ``LEARNER_REPLAYS``.
 - :mod:`.report`: terminal table, Markdown, CSV, JSON and PNG plots.
 
-The CLI is :mod:`shaper_nodes.bag_analysis_cli` (``analyze_bag``); see docs/bag_analysis.md.
+The CLIs are :mod:`shaper_nodes.cli.analyze_bag` (``analyze_bag``) and :mod:`shaper_nodes.cli.list_replay`
+(``list_replay``); see docs/bag_analysis.md.
 """

@@ -16,25 +16,20 @@ median of RMS / V_active over the cycles whose active shaper lets V >= 0.2 throu
 prediction is U V_recommended (at the identified mode and at the worst point of its uncertainty
 box), on top of which comes the sensor noise.
 
-Learner replays (:data:`LEARNER_REPLAYS`, name -> function): LIST runs
-:func:`shaper_nodes.list_replay.replay_items` over the recording; MRILC (:func:`mrilc_replay`)
-feeds the joint states, the applied reference and the cycle events to a
-:class:`~shaper_nodes.core.mrilc_learning.MrilcSession` where the recording has them. A replay
-function takes the recording, its cycles and the parameters given with ``--param`` and returns a
-:class:`LearnerReplay`.
+Learner replays: those of :data:`~.replay.LEARNER_REPLAYS` that the options ask for
+(:mod:`.replay`: LIST and MRILC fed the recording as the live nodes are fed).
 """
 
 from __future__ import annotations
 
-import heapq
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from shaper_nodes.core.cycles import END, MOTION_END, START, evaluate_cycle
+from shaper_nodes.core.cycles import evaluate_cycle
 from shaper_nodes.core.identification import (
     IdentificationError,
     ModeFit,
@@ -46,11 +41,12 @@ from shaper_nodes.core.identification import (
 from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_time
 
 from .reading import BagError
+from .replay import LEARNER_REPLAYS, LearnerReplay
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
-from .streams import REFERENCE_SUFFIX, Events, Recording, Signal
+from .streams import Recording, Signal
 
 if TYPE_CHECKING:
-    from shaper_nodes.core.learning.mrilc import MrilcModel, MrilcSession
+    pass
 
 #: active shapers that let through at least this V count for the unshaped level
 MIN_V_FOR_LEVEL = 0.2
@@ -105,15 +101,6 @@ class CycleRow:
     complete: bool = True
     v_active: float = float("nan")  # V of the active shaper at the identified mode
     issue: str = ""  # why the cycle is not used over the bag ("" if it is)
-
-
-@dataclass
-class LearnerReplay:
-    """What a learner would have done over the recording, cycle by cycle."""
-
-    name: str
-    rows: list[dict]
-    notes: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -382,238 +369,6 @@ def _prediction(rows: list[CycleRow], modes: list[ModeFit], rec: Recommendation 
 
 
 # ------------------------------------------------------------------------------ learner replays
-def _list_items(rec: Recording, spans: list[CycleSpan], from_events: bool, assume_unshaped: bool
-                ) -> Iterator[tuple[str, tuple]]:
-    """The recording as the LIST learner's input stream, in recording order."""
-    acc = rec.accel
-
-    def imu():
-        for q, t, a in zip(acc.seq.tolist(), acc.t.tolist(), acc.values.tolist(), strict=True):
-            yield q, "imu", (t, a)
-
-    def shapers():
-        s = rec.shapers
-        if assume_unshaped:
-            yield -1, "shaper", ((1.0,), (0.0,), "assumed", 0)
-        for i, q in enumerate(s.seq):
-            yield q, "shaper", (s.amplitudes[i], s.times[i], s.source[i], s.revision[i])
-
-    def events():
-        if from_events:
-            e = rec.events
-            for i in np.argsort(np.asarray(e.seq), kind="stable"):
-                yield e.seq[i], "event", (e.kind[i], e.cycle[i], e.t[i], e.start[i], e.goal[i])
-            return
-        for s in spans:
-            yield s.start_seq, "event", (START, s.cycle, s.start, s.start_positions, s.goal_positions)
-            yield s.motion_end_seq, "event", (MOTION_END, s.cycle, s.motion_end, (), ())
-            if s.complete:
-                yield s.end_seq, "event", (END, s.cycle, s.end, (), ())
-
-    for _, kind, payload in heapq.merge(imu(), shapers(), events(), key=lambda x: x[0]):
-        yield kind, payload
-
-
-def list_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, params: Mapping[str, object]
-                ) -> LearnerReplay:
-    """LIST over the recording: the learner node's per-cycle updates (:mod:`shaper_nodes.list_replay`)."""
-    from shaper_nodes.cli.list_replay import replay_items, session_for
-    from shaper_nodes.core.learning.list import ListError
-
-    notes = []
-    params = {k: v for k, v in params.items()}
-    try:
-        session_for(params)
-    except ListError as err:
-        return LearnerReplay("list", [], [f"not run: {err}"])
-    by_events = segmentation.startswith("cycle events")
-    assume = not rec.shapers.seq
-    if not by_events:
-        notes.append("cycle boundaries from the motion, not from events")
-    if assume:
-        notes.append("no active-shaper topic: the first cycle is taken as unshaped; later cycles ran"
-                     " without the learner's shaper, so the learner could only make its first update")
-    results = replay_items(_list_items(rec, spans, by_events, assume), params)
-    rows = []
-    for r in results:
-        u = r.update
-        if u is None or u.action == "rejected":
-            rows.append({"cycle": r.cycle, "skipped": r.skipped or (u.reason if u else "")})
-            continue
-        used = u.used
-        rows.append({"cycle": r.cycle, "iteration": u.iteration, "M": u.m, "phi": u.phi, "action": u.action,
-                     "parameter": u.parameter, "a1_used": used.a1 if used else float("nan"),
-                     "t2_used": used.t2 if used else float("nan"),
-                     # a learned-from cycle always has next parameters (None only before any initial guess)
-                     "a1_next": u.next.a1 if u.next else float("nan"),
-                     "t2_next": u.next.t2 if u.next else float("nan")})
-    learned = sum(1 for r in rows if "skipped" not in r)
-    notes.append(f"{learned} of {len(rows)} cycles learned from")
-    return LearnerReplay("list", rows, notes)
-
-
-def mrilc_replay(rec: Recording, spans: list[CycleSpan], segmentation: str, params: Mapping[str, object]
-                 ) -> LearnerReplay:
-    """MRILC over the recording: the learner node's per-cycle updates, where the data allows.
-
-    Needs the cycle events, the joint states' positions (y; efforts optional, for RMS(u1)) and the
-    applied reference (role "reference", ``--reference-topic``) for the learner's joints
-    (``joint_names``, else those of the first START, as the node takes them). The model is built
-    from the node's ``mrilc.*`` parameters (:func:`~shaper_nodes.core.mrilc_learning.model_from_params`).
-    With ``replay.learned_run`` false (default: a recording made without the learner), only the
-    first cycle learned from gives a valid update (the later ones did not run with the learned
-    profile) and the rest are listed as skipped; true replays every cycle, as for a recording of a
-    live MRILC run.
-    """
-    from shaper_nodes.core.learning.mrilc import MrilcError, MrilcLearner, MrilcSession, model_from_params
-
-    def refused(why: str) -> LearnerReplay:
-        return LearnerReplay("mrilc", [], [f"not possible: {why}"])
-
-    missing = _mrilc_missing(rec)
-    if missing or rec.joints is None or rec.reference is None:  # (the same: the missing ones are named)
-        return refused("the recording has no " + "; no ".join(missing))
-    joints, reference = rec.joints, rec.reference
-    learned_run = params.get("replay.learned_run", False)
-    if not isinstance(learned_run, bool):
-        return refused(f"parameter replay.learned_run must be true or false, got {learned_run!r}")
-    try:
-        model, settings = model_from_params(params)
-    except MrilcError as err:
-        return refused(str(err))
-    names = _mrilc_joint_names(rec.events, joints, settings.joint_names)
-    cols = {}
-    for label, sig in (("joint states", joints), ("reference", reference)):
-        absent = [n for n in names if n not in sig.names]
-        if absent:
-            return refused(f"the {label} ({sig.topic}) lack joint(s) {absent} (they have {list(sig.names)})")
-        cols[label] = [sig.names.index(n) for n in names]
-    efforts = _efforts_by_seq(rec.efforts, names)
-    stale = params.get("stale_after", 0.1)
-    if isinstance(stale, bool) or not isinstance(stale, (int, float)) or not stale > 0:
-        return refused(f"parameter stale_after must be a number > 0 s, got {stale!r}")
-    learner = MrilcLearner(model, len(names), settings.patience, settings.noise_floor)
-    learner.holding = not settings.learn
-    session = MrilcSession(learner, float(stale))
-    notes = [_mrilc_setup(names, joints, reference, bool(efforts), model)]
-    stream = heapq.merge(_joint_samples(joints, cols["joint states"], efforts),
-                         _reference_samples(reference, cols["reference"]), _event_samples(rec.events),
-                         key=lambda x: x[0])
-    rows = _mrilc_rows(session, stream, learned_run)
-    learned = sum(1 for r in rows if "skipped" not in r)
-    notes.append(f"{learned} of {len(rows)} cycles learned from")
-    if not learned_run and learned:
-        notes.append("a recording made without learning gives only the first update: later cycles did not run"
-                     " with the learned profile")
-    return LearnerReplay("mrilc", rows, notes)
-
-
-def _mrilc_missing(rec: Recording) -> list[str]:
-    """What the MRILC replay needs and the recording lacks."""
-    missing = []
-    if not rec.events.kind:
-        missing.append("cycle events (shaper_msgs/CycleEvent)")
-    if rec.joints is None or not rec.joints.names:
-        missing.append("joint states with named positions (sensor_msgs/JointState)")
-    if rec.reference is None:
-        missing.append(f"applied reference (a sensor_msgs/JointState topic ending in '{REFERENCE_SUFFIX}',"
-                       " or --reference-topic)")
-    return missing
-
-
-def _mrilc_joint_names(events: Events, joints: Signal, configured: tuple[str, ...]) -> list[str]:
-    """The learner's joints: ``configured``, else those of the first START, else the joint states'."""
-    names = list(configured)
-    if not names:
-        # joint_names is filled last for each event: one decoded with an older CycleEvent definition
-        # (without joint_names) leaves it shorter than kind
-        first = [n for k, n in zip(events.kind, events.joint_names, strict=False) if k == START and n]
-        names = list(first[0]) if first else list(joints.names)
-    return names
-
-
-def _efforts_by_seq(efforts: Signal | None, names: list[str]) -> dict[int, np.ndarray]:
-    """Recording-order index -> efforts of the joints ``names`` (nothing if no efforts were recorded)."""
-    if efforts is None:
-        return {}
-    e_cols = [efforts.names.index(n) for n in names]
-    return dict(zip(efforts.seq.tolist(), efforts.values[:, e_cols], strict=True))
-
-
-def _mrilc_setup(names: list[str], joints: Signal, reference: Signal, with_efforts: bool, model: MrilcModel) -> str:
-    """The replay's first note: joints, topics, and the reference model (its mode in rad/s)."""
-    mode = (f"{model.mode.omega:.4g} rad/s, zeta {model.mode.zeta:.4g}" if model.mode is not None
-            else "none lightly damped")
-    return (f"joints {names}; joint states {joints.topic}, reference {reference.topic}"
-            + ("" if with_efforts else " (no efforts recorded: RMS(u1) not available)")
-            + f"; model: reference mode {mode}, law {model.law.law}, {1 / model.period:g} Hz")
-
-
-def _joint_samples(joints: Signal, cols: list[int], efforts: dict[int, np.ndarray]
-                   ) -> Iterator[tuple[int, int, tuple[Any, ...]]]:
-    """(recording order, 0, (time s, positions of the learner's joints, efforts or None)) per joint state."""
-    for q, t, v in zip(joints.seq.tolist(), joints.t.tolist(), joints.values[:, cols], strict=True):
-        yield q, 0, (t, v, efforts.get(q))
-
-
-def _reference_samples(reference: Signal, cols: list[int]) -> Iterator[tuple[int, int, tuple[Any, ...]]]:
-    """(recording order, 1, (time s, reference of the learner's joints)) per reference sample."""
-    for q, t, v in zip(reference.seq.tolist(), reference.t.tolist(), reference.values[:, cols], strict=True):
-        yield q, 1, (t, v)
-
-
-def _event_samples(events: Events) -> Iterator[tuple[int, int, tuple[Any, ...]]]:
-    """(recording order, 2, (kind, cycle, time s)) per cycle event, in recording order."""
-    for i in np.argsort(np.asarray(events.seq), kind="stable"):
-        yield events.seq[i], 2, (events.kind[i], events.cycle[i], events.t[i])
-
-
-def _mrilc_rows(session: MrilcSession, stream: Iterator[tuple[int, int, tuple[Any, ...]]], learned_run: bool
-                ) -> list[dict]:
-    """Feed the merged samples and events to ``session``: one row per cycle it reports (an update, or why not)."""
-    unapplied = ("ran without the learned profile (a recording made without learning; --param"
-                 " replay.learned_run=true for a recording of a live MRILC run)")
-    rows: list[dict] = []
-
-    def handle(event) -> None:
-        result = session.on_event(*event)
-        if result is None:
-            return
-        u = result.update
-        if u is None:
-            not_installed = not learned_run and result.skipped.startswith("the cycle started before")
-            rows.append({"cycle": result.cycle, "skipped": unapplied if not_installed else result.skipped})
-            return
-        rows.append({"cycle": result.cycle, "iteration": u.iteration, "rms_e": u.rms_e, "rms_u1": u.rms_u1,
-                     "rms_u2": u.rms_u2, "residual": u.residual, "action": u.action})
-        # the node installs the new profile before the next START; a recording made without
-        # learning never ran with it, so its later cycles are not learned from
-        session.profile_ready = learned_run
-
-    # as the node waits at an END for the samples stamped up to it (they may be logged after the
-    # END), an END and the events after it wait until both streams have reached its stamp
-    pending: list[tuple[int, int, float]] = []
-    for _, kind, payload in stream:
-        if kind == 0:
-            session.on_joint_state(*payload)
-        elif kind == 1:
-            session.on_reference(*payload)
-        else:
-            pending.append(payload)
-        while pending and (pending[0][0] != END or session.latest >= pending[0][2]):
-            handle(pending.pop(0))
-    for event in pending:  # the recording ended: what is still missing is missing
-        handle(event)
-    return rows
-
-
-#: learner name -> replay function (recording, cycles, segmentation, parameters) -> LearnerReplay
-LEARNER_REPLAYS: dict[str, Callable[[Recording, list[CycleSpan], str, Mapping[str, object]], LearnerReplay]] = {
-    "list": list_replay,
-    "mrilc": mrilc_replay,
-}
-
-
 def shaper_of(candidate_shaper: Shaper) -> dict:
     """Impulses of a shaper, for reports."""
     return {"family": candidate_shaper.family, "amplitudes": [float(a) for a in candidate_shaper.amplitudes],

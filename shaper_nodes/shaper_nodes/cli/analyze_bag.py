@@ -19,8 +19,9 @@ import json
 import pathlib
 import sys
 
-from shaper_nodes.analysis.analyze import LEARNER_REPLAYS, Options, analyze
+from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.reading import BagError
+from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
 
