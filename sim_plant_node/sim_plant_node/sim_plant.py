@@ -74,6 +74,10 @@ from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.qos import LATCHED
 
+from .arm.description import JOINT_NAMES as ARM_JOINTS
+from .arm.jtc import JointTrajectoryController
+from .arm.plant import ArmPlant
+from .jtc_server import ControllerServer, tolerances_from
 from .loops import LOOP_MODELS, LOOP_PARAMS, LoopPlant, check_loop_value, make_loop_plant
 from .pid_loop import PidLoopPlant
 from .plants import (
@@ -92,12 +96,12 @@ from .plants import (
 from .two_mass import StaircaseTask, TwoMassPlant
 
 #: the plant models the node runs
-Plant = MckPlant | ListPlant | PidLoopPlant | LoopPlant | TwoMassPlant
+Plant = MckPlant | ListPlant | PidLoopPlant | LoopPlant | TwoMassPlant | ArmPlant
 # per-joint plant values, in make_plant's order; with plant.model, what rebuilds the plant
 PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffness_cubic", "plant.gain",
                 "plant.force_limit")
 PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator", *PLANT_PARAMS, *LOOP_PARAMS)
-MODELS = (*PLANT_MODELS, "mck_pid", *LOOP_MODELS, "two_mass")
+MODELS = (*PLANT_MODELS, "mck_pid", *LOOP_MODELS, "two_mass", "arm")
 #: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
 WAITING = "waiting for subscribers"
 
@@ -129,8 +133,22 @@ PARAMETERS: tuple[Spec, ...] = (
          "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
          " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
          " seed 000), or the closed loops of seeds 001, 002 (see loop.*) 'delay_loop', 'qft_open', 'qft_fb',"
-         " 'qft_ffb', or seed 004's two-mass system 'two_mass' (m1 = 10 x0 + 1). Changes live, keeping the"
-         " state when the models share it.", check=check_model),
+         " 'qft_ffb', or seed 004's two-mass system 'two_mass' (m1 = 10 x0 + 1), or the six-axis elastic-joint arm"
+         " 'arm' (docs/arm.md; chosen at start-up only, with joint_names its six joints or left at the default)."
+         " Changes live, keeping the state when the models share it.", check=check_model),
+    Spec("arm.substeps", 2, "plant.model arm: physics steps per period; the flange IMU publishes at each,"
+         " rate x arm.substeps Hz (1 kHz by default).", (1, 100), read_only=True),
+    Spec("jtc.trajectory_tolerance", [0.0],
+         "plant.model arm, the joint_trajectory_controller emulation: path position tolerance per joint (or one"
+         " for all), rad, 0 unchecked (constraints.<joint>.trajectory).", read_only=True),
+    Spec("jtc.goal_tolerance", [0.0], "Goal position tolerance per joint, rad, 0 unchecked (constraints.<joint>.goal).",
+         read_only=True),
+    Spec("jtc.goal_time", 0.0, "Time after the trajectory's end to reach the goal tolerance, s, 0: wait indefinitely"
+         " (constraints.goal_time).", (0.0, 3600.0), read_only=True),
+    Spec("joint_states.noise_stddev", 0.0, "White noise on the reported joint positions, rad or m (one sigma).",
+         (0.0, 1.0)),
+    Spec("joint_states.resolution", 0.0, "Encoder quantum of the reported joint positions, rad or m (0: none).",
+         (0.0, 1.0)),
     *(Spec(name, default, text, check=functools.partial(check_loop_value, name))
       for name, (default, text) in LOOP_PARAMS.items()),
     Spec("controller.numerator", list(PAPER_CONTROLLER[0]),
@@ -156,9 +174,12 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("plant.force_limit", [LIST_FORCE_LIMIT],
          "list_saturation: actuator force limit f_max per joint, N (or N m), > 0 (.inf: none).",
          check=functools.partial(plant_values, "force_limit")),
-    Spec("imu.axes", [0, 1, 2], "Joint index whose tip acceleration each IMU axis x, y, z measures (-1: none)."),
+    Spec("imu.axes", [0, 1, 2], "Joint index whose tip acceleration each IMU axis x, y, z measures (-1: none);"
+         " plant.model arm: the flange's specific force (gravity included) in the flange frame."),
     Spec("imu.noise_stddev", 0.0, "Accelerometer white noise, m/s^2 (one sigma).", (0.0, 1000.0)),
     Spec("imu.bias", [0.0, 0.0, 0.0], "Accelerometer constant offset per axis, m/s^2."),
+    Spec("imu.gyro_noise_stddev", 0.0, "plant.model arm: gyro white noise, rad/s (one sigma).", (0.0, 100.0)),
+    Spec("imu.gyro_bias", [0.0, 0.0, 0.0], "plant.model arm: gyro constant offset per axis, rad/s."),
     Spec("imu.frame_id", "tool0", "frame_id of the Imu messages.", read_only=True),
     Spec("imu.seed", 1, "Seed of the noise generator.", read_only=True),
     Spec("task.name", "point_to_point", "Task name in cycle events."),
@@ -192,7 +213,9 @@ PARAMETERS: tuple[Spec, ...] = (
     *topics({"command_out": "/shaper/commands", "command_in": "/forward_position_controller/commands",
              "joint_states": "/joint_states", "tip_state": "~/tip_state", "imu": "/tip_imu",
              "cycle_events": "/cycle_events", "cycle_reports": "/cycle_reports",
-             "active_shaper": "/shaper/active_shaper", "reference": "~/reference"}),
+             "active_shaper": "/shaper/active_shaper", "reference": "~/reference",
+             "jtc_action": "/joint_trajectory_controller/follow_joint_trajectory",
+             "jtc_topic": "/joint_trajectory_controller/joint_trajectory"}),
 )
 
 
@@ -204,6 +227,11 @@ class SimPlantNode(Node):
         declare_all(self, PARAMETERS)
 
         self.joint_names = list(self.get_parameter("joint_names").value)
+        self.arm = self.get_parameter("plant.model").value == "arm"
+        if self.arm and self.joint_names == ["joint_1"]:
+            self.joint_names = list(ARM_JOINTS)
+        if self.arm and len(self.joint_names) != len(ARM_JOINTS):
+            raise ValueError(f"plant.model arm has {len(ARM_JOINTS)} joints; joint_names has {len(self.joint_names)}")
         self.n = len(self.joint_names)
         self.rate = float(self.get_parameter("rate").value)
         self.mode = str(self.get_parameter("mode").value)
@@ -213,7 +241,7 @@ class SimPlantNode(Node):
         axes = [int(a) for a in self.get_parameter("imu.axes").value][:3]
         self._axes = [a if 0 <= a < self.n else -1 for a in axes] + [-1] * (3 - len(axes))
         self._rng = np.random.default_rng(int(self.get_parameter("imu.seed").value))
-        self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value))
+        self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value), remove_mean=self.arm)
         self._active_shaper = ShaperMsg()
 
         tp = values(self, PARAMETERS, "topics.")
@@ -247,8 +275,18 @@ class SimPlantNode(Node):
         self.timeouts = 0
         self.refused = 0
         self.plant.reset(self._pose("task.start", {}))
-        self._applied = self.plant.base_position
+        self._applied = self._pose("task.start", {}) if self.arm else self.plant.base_position
         self._raw = self._applied.copy()
+        self.jtc: ControllerServer | None = None
+        if self.arm:
+            g = lambda n: self.get_parameter(n).value  # noqa: E731
+            defaults = tolerances_from(tuple(self.joint_names), list(g("jtc.trajectory_tolerance")),
+                                       list(g("jtc.goal_tolerance")), float(g("jtc.goal_time")))
+            controller = JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate, defaults, self._applied)
+            self.jtc = ControllerServer(self, controller, self._now, self._measured, self._jtc_busy, tp["jtc_action"],
+                                        tp["jtc_topic"])
+            if self.mode == "lockstep":
+                self.create_timer(0.002, self._free_run)
         if self.mode == "lockstep":
             self.create_timer(0.05, self._watchdog)
             self._publish_clock()
@@ -280,6 +318,8 @@ class SimPlantNode(Node):
         model = check_model(str(overrides.get("plant.model", self.get_parameter("plant.model").value)))
         if model == "two_mass":  # seed 004's two-mass system, m1 = 10 x0 + 1 (two_mass.py)
             return TwoMassPlant(self.n, self.rate)
+        if model == "arm":
+            return ArmPlant(self.rate, int(self.get_parameter("arm.substeps").value))
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
         if model in LOOP_MODELS:
             loop = values(self, LOOP_PARAMS)
@@ -302,6 +342,11 @@ class SimPlantNode(Node):
 
     def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
+        if self.arm and any(p in changes for p in PLANT_KEYS):
+            return SetParametersResult(successful=False, reason="the arm (plant.model arm) is chosen at start-up; "
+                                       "its model and plant.* do not change live")
+        if changes.get("plant.model") == "arm":
+            return SetParametersResult(successful=False, reason="plant.model arm is chosen at start-up only")
         try:
             new = self._make_plant(changes) if any(p in changes for p in PLANT_KEYS) else None
             for pose in ("task.start", "task.goal"):
@@ -332,6 +377,8 @@ class SimPlantNode(Node):
     def _start_task(self) -> tuple[bool, str]:
         if self.task is not None:
             return False, "a task is already running"
+        if self.jtc is not None and self.jtc.running:
+            return False, "joint_trajectory_controller is executing a trajectory"
         need = int(self.get_parameter("task.subscribers").value)
         have = self._event_pub.get_subscription_count()  # matched, not only discovered
         if have < need:
@@ -423,7 +470,11 @@ class SimPlantNode(Node):
         k = self.step_index - self._cycle_start_step
         return (self._ff[0], self._ff[1][k]) if 0 <= k < self._ff[1].shape[0] else None
 
-    def _integrate(self, command: np.ndarray) -> None:
+    def _integrate(self, command: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        """One period: apply ``command`` (and, from the trajectory controller, its ``velocity``), publish the state."""
+        if self.jtc is not None and velocity is None and not self.jtc.running:
+            self.jtc.controller.hold(command)  # the forward command's setpoint is held when it stops
+        t_start = self._now()
         self._applied = command
         if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; costly at every step)
             ref = JointState(name=self.joint_names, position=command.tolist())
@@ -434,12 +485,15 @@ class SimPlantNode(Node):
             command = command + ff[1]
         if isinstance(self.plant, PidLoopPlant):
             self.plant.feedforward = ff[1] if ff is not None and ff[0] == "effort" else np.zeros(self.n)
-        self.plant.step(command, cycle_time=self._cycle_time())
+        if isinstance(self.plant, ArmPlant):
+            self.plant.step(command, velocity=velocity)
+        else:
+            self.plant.step(command, cycle_time=self._cycle_time())
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
         t = self._now()
         stamp = sec_to_time(t)
-        js = JointState(name=self.joint_names, position=self.plant.base_position.tolist(),
+        js = JointState(name=self.joint_names, position=self._reported(self.plant.base_position).tolist(),
                         velocity=self.plant.base_velocity.tolist(),
                         effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
         js.header.stamp = stamp
@@ -454,23 +508,74 @@ class SimPlantNode(Node):
                               position=np.concatenate([p.output, p.measured, p.control, p.reference]).tolist())
             loop.header.stamp = stamp
             self._loop_pub.publish(loop)
-        acc_joint = self.plant.tip_acceleration
-        acc = np.array([acc_joint[a] if a >= 0 else 0.0 for a in self._axes])
-        acc += np.asarray(self.get_parameter("imu.bias").value, dtype=float)[:3]
+        if isinstance(self.plant, ArmPlant):  # the flange IMU at every physics step
+            for t_sub, force, rate in self.plant.imu_samples:
+                self._publish_imu(t_start + t_sub - self.plant.imu_samples[-1][0] + 1.0 / self.rate, force, rate)
+        else:
+            acc_joint = self.plant.tip_acceleration
+            self._publish_imu(t, np.array([acc_joint[a] if a >= 0 else 0.0 for a in self._axes]), None)
+        self._monitor.add_positions(t, self._applied)
+
+    def _reported(self, position: np.ndarray) -> np.ndarray:
+        """Joint positions as the encoders report them: noise and quantisation as the parameters say."""
+        sigma = float(self.get_parameter("joint_states.noise_stddev").value)
+        quantum = float(self.get_parameter("joint_states.resolution").value)
+        if sigma > 0:
+            position = position + self._rng.normal(0.0, sigma, position.size)
+        if quantum > 0:
+            position = np.round(position / quantum) * quantum
+        return position
+
+    def _publish_imu(self, t: float, acc: np.ndarray, rate: np.ndarray | None) -> None:
+        """One Imu message at ``t``: specific force ``acc`` (m/s^2), angular rate ``rate`` (rad/s; None: none)."""
+        acc = acc + np.asarray(self.get_parameter("imu.bias").value, dtype=float)[:3]
         sigma = float(self.get_parameter("imu.noise_stddev").value)
         if sigma > 0:
             acc += self._rng.normal(0.0, sigma, 3)
         imu = Imu()
-        imu.header.stamp = stamp
+        imu.header.stamp = sec_to_time(t)
         imu.header.frame_id = str(self.get_parameter("imu.frame_id").value)
         imu.orientation_covariance[0] = -1.0
         imu.angular_velocity_covariance[0] = -1.0
+        if rate is not None:
+            gyro_sigma = float(self.get_parameter("imu.gyro_noise_stddev").value)
+            rate = rate + np.asarray(self.get_parameter("imu.gyro_bias").value, dtype=float)[:3]
+            if gyro_sigma > 0:
+                rate = rate + self._rng.normal(0.0, gyro_sigma, 3)
+            imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = rate.tolist()
+            imu.angular_velocity_covariance = [gyro_sigma**2, 0.0, 0.0, 0.0, gyro_sigma**2, 0.0, 0.0, 0.0,
+                                               gyro_sigma**2]
         imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = acc.tolist()
         imu.linear_acceleration_covariance[0] = imu.linear_acceleration_covariance[4] = \
             imu.linear_acceleration_covariance[8] = sigma**2
         self._imu_pub.publish(imu)
         self._monitor.add_accel(t, acc)
-        self._monitor.add_positions(t, self._applied)  # the commanded positions (what "at rest" means)
+
+    # ----------------------------------------------------------------- the trajectory controller (arm)
+    def _measured(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the controller's state interfaces read: motor-side positions and velocities."""
+        return self.plant.base_position, self.plant.base_velocity
+
+    def _jtc_busy(self) -> str | None:
+        if self.task is not None:
+            return "a task is running: forward_position_controller drives the joints (~/stop_task first)"
+        return None
+
+    def _jtc_step(self) -> None:
+        """One controller period and one plant period (arm, no task)."""
+        assert self.jtc is not None
+        self.jtc.update(self._now())
+        c = self.jtc.controller
+        self._integrate(c.command, c.command_velocity)
+
+    def _free_run(self) -> None:
+        """Lockstep: step while the controller executes a trajectory (no task runs), ~20 ms of wall time a call."""
+        if self.jtc is None or self.task is not None or self._waiting_since is not None:
+            return
+        deadline = time.monotonic() + 0.02
+        while self.jtc.running and time.monotonic() < deadline:
+            self._jtc_step()
+            self._publish_clock()  # the commanded positions (what "at rest" means)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         try:
@@ -480,6 +585,10 @@ class SimPlantNode(Node):
             self.get_logger().error(f"refused setpoint: {err}; holding the last one", throttle_duration_sec=1.0)
             command = None
         if self.mode == "realtime":
+            if self.jtc is not None and self.task is None:  # the arm, no task: the forward controller holds it
+                if command is not None and not self.jtc.running:
+                    self.jtc.controller.hold(command)
+                return
             if command is not None:
                 self._latest_shaped = command
             return
@@ -505,6 +614,9 @@ class SimPlantNode(Node):
             self._publish_next()
 
     def _realtime_tick(self) -> None:
+        if self.jtc is not None and self.task is None:
+            self._jtc_step()
+            return
         events = self._next_raw() if self.task is not None else []
         t = self._now()
         for ev in events:

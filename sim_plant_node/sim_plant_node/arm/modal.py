@@ -1,0 +1,103 @@
+"""Modal analysis of the elastic-joint arm, linearised at rest at a pose.
+
+About a static equilibrium the arm of :mod:`.dynamics` is, with x = (q, theta),
+
+    Mb x'' + Cb x' + (Kb + G) x = 0,
+    Mb = diag(M(q0), B),  Cb = [[D, -D], [-D, D + F + Kd]],  Kb = [[K, -K], [-K, K + Kp]],
+    G = [[dg/dq (q0), 0], [0, 0]]
+
+(the gravity feedforward g(r) is constant at a fixed setpoint; the Coriolis terms vanish at
+rest). Its eigenvalues lambda = -zeta w +- i w sqrt(1 - zeta^2) give the modes: natural
+frequency |lambda|, damping ratio -Re(lambda) / |lambda|, and the eigenvector's first half the
+mode shape (links, then motors). Overdamped (real) eigenvalues are not vibration modes and are
+left out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dynamics import ArmModel
+
+
+@dataclass(frozen=True)
+class ArmMode:
+    """One vibration mode of the linearised arm.
+
+    Attributes
+    ----------
+    omega : float
+        Natural frequency, rad/s.
+    zeta : float
+        Damping ratio.
+    shape : ndarray
+        Mode shape, (2 n,) complex: link angles then motor angles, largest entry 1.
+    """
+
+    omega: float
+    zeta: float
+    shape: np.ndarray
+
+    @property
+    def hz(self) -> float:
+        """Natural frequency, Hz."""
+        return self.omega / (2 * math.pi)
+
+    @property
+    def link_shape(self) -> np.ndarray:
+        """Real link-side mode shape (largest entry 1), the pattern of joint angles that swings."""
+        n = self.shape.size // 2
+        s = self.shape[:n]
+        s = np.real(s * np.exp(-1j * np.angle(s[np.argmax(np.abs(s))])))
+        return s / np.max(np.abs(s))
+
+
+def linearised(model: ArmModel, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mass, damping and stiffness matrices (2 n x 2 n) of the arm at rest holding setpoint ``pose``."""
+    n = model.n
+    q, _ = model.rest(np.asarray(pose, dtype=float))
+    k, d = np.diag(model.stiffness), np.diag(model.damping)
+    mb = np.zeros((2 * n, 2 * n))
+    mb[:n, :n] = model.mass(q)
+    mb[n:, n:] = np.diag(model.motor_inertia)
+    cb = np.block([[d, -d], [-d, d + np.diag(model.kd + model.motor_friction)]])
+    kb = np.block([[k, -k], [-k, k + np.diag(model.kp)]])
+    kb[:n, :n] += model.gravity_stiffness(q)
+    return mb, cb, kb
+
+
+def modes(model: ArmModel, pose: np.ndarray) -> list[ArmMode]:
+    """The vibration modes at ``pose`` (joint setpoint, rad), lowest frequency first."""
+    mb, cb, kb = linearised(model, pose)
+    m = mb.shape[0]
+    minv = np.linalg.inv(mb)
+    a = np.block([[np.zeros((m, m)), np.eye(m)], [-minv @ kb, -minv @ cb]])
+    values, vectors = np.linalg.eig(a)
+    out = []
+    for lam, vec in zip(values, vectors.T, strict=True):
+        if lam.imag <= 1e-9 * max(1.0, abs(lam)):  # one of each conjugate pair; no real (overdamped) roots
+            continue
+        w = abs(lam)
+        shape = vec[:m] / vec[:m][np.argmax(np.abs(vec[:m]))]
+        out.append(ArmMode(float(w), float(-lam.real / w), shape))
+    return sorted(out, key=lambda mode: mode.omega)
+
+
+def lowest(model: ArmModel, pose: np.ndarray) -> ArmMode:
+    """The lowest-frequency vibration mode at ``pose``."""
+    return modes(model, pose)[0]
+
+
+def mode_map(model: ArmModel, base_pose: np.ndarray, joints: tuple[int, int], grid_a: np.ndarray,
+             grid_b: np.ndarray) -> np.ndarray:
+    """Lowest-mode frequency (Hz) over a grid of two joints, the others at ``base_pose``: (len(a), len(b))."""
+    out = np.empty((len(grid_a), len(grid_b)))
+    pose = np.asarray(base_pose, dtype=float).copy()
+    for i, qa in enumerate(grid_a):
+        for j, qb in enumerate(grid_b):
+            pose[joints[0]], pose[joints[1]] = qa, qb
+            out[i, j] = lowest(model, pose).hz
+    return out

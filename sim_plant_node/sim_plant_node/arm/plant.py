@@ -1,0 +1,109 @@
+"""The arm as one of the simulated plant node's models (``plant.model: arm``), free of ROS.
+
+:class:`ArmPlant` gives the node what every plant gives (``step``, ``reset``, ``base_position``
+and ``base_velocity`` for ``/joint_states``, ``tip_position``/``tip_velocity``, the modes) and
+what only the arm has: the flange IMU sampled at every physics step (``imu_samples``), the
+motor torques (``effort``) and the flange position.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .dynamics import ArmModel, ElasticArm
+from .modal import modes
+
+
+class ArmPlant:
+    """The elastic-joint arm stepped at ``rate`` Hz, ``substeps`` physics steps per period.
+
+    Parameters
+    ----------
+    rate : float
+        Command (controller update) rate, Hz.
+    substeps : int
+        Physics steps per command period (the IMU's rate is rate x substeps).
+    model : ArmModel, optional
+        The arm (default: the UR5e-based arm of :mod:`.description`).
+    """
+
+    def __init__(self, rate: float, substeps: int = 2, model: ArmModel | None = None) -> None:
+        if not (isinstance(substeps, int) and 1 <= substeps <= 100):
+            raise ValueError(f"arm.substeps must be an integer in [1, 100], got {substeps!r}")
+        if not (math.isfinite(rate) and rate > 0):
+            raise ValueError(f"rate must be finite and > 0 Hz, got {rate!r}")
+        self.model = model or ArmModel()
+        self.n = self.model.n
+        self.substeps = substeps
+        self.arm = ElasticArm(self.model, 1.0 / (rate * substeps))
+        self.cycle_time: float | None = None
+        self.imu_samples: list[tuple[float, np.ndarray, np.ndarray]] = []  # (time since reset s, f m/s^2, w rad/s)
+        self._modes = modes(self.model, np.zeros(self.n))
+
+    def reset(self, position) -> None:
+        """At rest holding ``position`` (rad); the modes are those of that pose."""
+        p = np.asarray(position, dtype=float)
+        self.arm.reset(p)
+        self._modes = modes(self.model, p)
+
+    @property
+    def state(self) -> np.ndarray:
+        raise ValueError("the arm's state is its own")  # another model starts at rest (sim_plant)
+
+    @state.setter
+    def state(self, value) -> None:
+        raise ValueError("the arm's state is its own")
+
+    def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
+        """One command period holding the position setpoint ``command`` (rad), velocity ``velocity`` (rad/s)."""
+        r = np.asarray(command, dtype=float)
+        rd = None if velocity is None else np.asarray(velocity, dtype=float)
+        self.imu_samples = []
+        for _ in range(self.substeps):
+            self.arm.step(r, rd)
+            f, w = self.arm.imu()
+            self.imu_samples.append((self.arm.time, f, w))
+
+    @property
+    def base_position(self) -> np.ndarray:
+        """Motor-side joint positions, rad (what the encoders report)."""
+        return self.arm.motor_position.copy()
+
+    @property
+    def base_velocity(self) -> np.ndarray:
+        return self.arm.motor_velocity.copy()
+
+    @property
+    def effort(self) -> np.ndarray:
+        """Motor torques, N m."""
+        return self.arm.torque.copy()
+
+    @property
+    def tip_position(self) -> np.ndarray:
+        """Link angles, rad (after the springs)."""
+        return self.arm.q.copy()
+
+    @property
+    def tip_velocity(self) -> np.ndarray:
+        return self.arm.v.copy()
+
+    @property
+    def tip_acceleration(self) -> np.ndarray:
+        """The last IMU specific force (x, y, z of the flange, m/s^2), padded to the joint count."""
+        f = self.imu_samples[-1][1] if self.imu_samples else np.zeros(3)
+        return np.concatenate([f, np.zeros(max(self.n - 3, 0))])
+
+    @property
+    def natural_frequency(self) -> np.ndarray:
+        """The n lowest modes at the last reset pose, rad/s."""
+        return np.array([m.omega for m in self._modes[:self.n]])
+
+    @property
+    def damping_ratio(self) -> np.ndarray:
+        return np.array([m.zeta for m in self._modes[:self.n]])
+
+    def tool_position(self) -> np.ndarray:
+        """The flange's position, m."""
+        return self.arm.tool_position()

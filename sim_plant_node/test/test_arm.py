@@ -1,0 +1,104 @@
+"""The six-axis arm: its URDF from the published figures, its dynamics, and its modes."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from shaper_nodes.core.identification import identify
+from sim_plant_node.arm.description import DH_A, DH_D, LINK_MASSES, PAYLOAD_MASS, ArmSpec, urdf
+from sim_plant_node.arm.dynamics import GRAVITY, ArmModel, ElasticArm
+from sim_plant_node.arm.modal import lowest, mode_map, modes
+from sim_plant_node.arm.splines import Point, Trajectory
+
+HOME = np.array([0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
+#: three poses from folded to stretched (elbow angle), the far ones at the ends of the reach
+POSES = {"near": [0.0, -1.2, 2.4, -2.77, -1.57, 0.0], "home": HOME.tolist(), "far": [0.0, -1.9, 0.5, -0.17, -1.57, 0.0]}
+
+
+@pytest.fixture(scope="module")
+def model():
+    return ArmModel()
+
+
+def test_urdf_has_the_published_kinematics_and_masses(model):
+    """At zero angles the UR5e's flange sits at (a2 + a3, -(d4 + d6), d1 - d5) by its DH table."""
+    expected = np.array([DH_A[1] + DH_A[2], -(DH_D[3] + DH_D[5]), DH_D[0] - DH_D[4]])
+    np.testing.assert_allclose(model.tool_position(np.zeros(6)), expected, atol=1e-9)
+    total = sum(inertia.mass for inertia in model.model.inertias)
+    assert total == pytest.approx(sum(LINK_MASSES) + PAYLOAD_MASS)
+    assert model.model.nq == model.model.nv == 6
+    assert pin.buildModelFromXML(urdf(ArmSpec(payload_mass=0.0))).nv == 6
+
+
+def test_at_rest_the_imu_reads_gravity_and_nothing_moves(model):
+    arm = ElasticArm(model, 1e-3, HOME)
+    start = arm.x.copy()
+    for _ in range(500):
+        arm.step(HOME)
+    f, w = arm.imu()
+    assert np.linalg.norm(f) == pytest.approx(GRAVITY, rel=1e-6)
+    np.testing.assert_allclose(w, 0.0, atol=1e-9)
+    np.testing.assert_allclose(arm.x, start, atol=1e-9)
+    # the motors hold the setpoint; the links sag under gravity by K^-1 g
+    np.testing.assert_allclose(arm.motor_position, HOME, atol=1e-4)
+    np.testing.assert_allclose(model.stiffness * (arm.motor_position - arm.q), model.gravity(arm.q), rtol=1e-6,
+                               atol=1e-9)
+
+
+def test_lowest_mode_moves_with_the_reach_by_more_than_30_percent(model):
+    hz = mode_map(model, HOME, (1, 2), np.linspace(-math.pi, 0.0, 4), np.linspace(-2.6, 2.6, 9))
+    assert hz.max() / hz.min() > 1.3
+    assert hz.min() > 3.0 and hz.max() < 20.0  # where arms of this size have their lowest modes
+
+
+@pytest.mark.parametrize("pose", POSES)
+def test_free_decay_identified_from_the_simulation_agrees_with_modal_analysis(model, pose):
+    """A small step of the setpoint; the flange IMU's free decay identified by the suite's fit."""
+    q = np.array(POSES[pose])
+    expected = lowest(model, q)
+    arm = ElasticArm(model, 1e-3, q)
+    target = q + np.array([0.0, 0.004, 0.008, 0.0, 0.0, 0.0])
+    times, accel = [], []
+    for _ in range(4000):
+        arm.step(target)
+        times.append(arm.time)
+        accel.append(arm.imu()[0])
+    t = np.array(times)
+    window = t > 0.3  # the faster, better damped modes have died out
+    fits = identify(t[window], np.array(accel)[window], max_modes=3)
+    fit = min(fits, key=lambda f: abs(f.omega - expected.omega))
+    assert fit.omega == pytest.approx(expected.omega, rel=0.02)
+    assert fit.zeta == pytest.approx(expected.zeta, rel=0.20)
+
+
+def test_modes_are_sorted_and_lightly_damped_at_the_bottom(model):
+    ms = modes(model, HOME)
+    assert [m.omega for m in ms] == sorted(m.omega for m in ms)
+    assert 0.01 < ms[0].zeta < 0.1
+    assert np.max(np.abs(ms[0].link_shape)) == pytest.approx(1.0)
+
+
+def _point(t, p, v=None, a=None):
+    arr = lambda x: None if x is None else np.asarray(x, dtype=float)  # noqa: E731
+    return Point(t, arr(p), arr(v), arr(a))
+
+
+@pytest.mark.parametrize("fields", ["p", "pv", "pva"])
+def test_segments_meet_their_points(fields):
+    """Every spline passes through the points with the fields given (linear, cubic, quintic)."""
+    pts = [_point(1.0, [1.0], [0.5], [0.0]), _point(2.5, [2.0], [0.0], [-1.0]), _point(3.0, [2.0], [0.0], [0.0])]
+    pts = [Point(p.time, p.positions, p.velocities if "v" in fields else None,
+                 p.accelerations if "a" in fields else None) for p in pts]
+    traj = Trajectory(_point(0.0, [0.0], [0.0], [0.0]), pts)
+    for p in pts:
+        pos, vel, acc = traj.sample(p.time - 1e-9)
+        assert pos == pytest.approx(p.positions, abs=1e-6)
+        if p.velocities is not None:
+            assert vel == pytest.approx(p.velocities, abs=1e-5)
+        if p.accelerations is not None:
+            assert acc == pytest.approx(p.accelerations, abs=1e-4)
+    if fields == "p":  # linear: constant slope between points
+        assert traj.sample(1.5)[1] == pytest.approx([1.0 / 1.5])
+    assert traj.sample(10.0)[0] == pytest.approx([2.0])
