@@ -108,7 +108,8 @@ def _log_has(sim, text: str) -> bool:
 
 
 BAD = {
-    "too few joints": (lambda t: t.joint_names.pop(), "Joints on incoming trajectory don't match the controller joints."),
+    "too few joints": (lambda t: t.joint_names.pop(),
+                       "Joints on incoming trajectory don't match the controller joints."),
     "no points": (lambda t: t.points.clear(), "Empty trajectory received."),
     "ended in the past": (lambda t: setattr(t.header, "stamp", sec_to_time(1e-3)),
                           "that ends in the past"),
@@ -147,7 +148,7 @@ def test_invalid_goals_are_rejected_with_the_controllers_reasons(arm):
 
 
 def test_valid_goal_reaches_its_goal_tolerance_with_feedback(arm):
-    sim, client = arm
+    _sim, client = arm
     target = [0.4, -1.3, 1.2, -1.4, -1.57, 0.3]
     goal = Goal(trajectory=move(target, 1.5, 1.0),
                 goal_tolerance=[JointTolerance(name=j, position=0.002) for j in JOINT_NAMES],
@@ -170,7 +171,7 @@ def test_valid_goal_reaches_its_goal_tolerance_with_feedback(arm):
 
 
 def test_path_tolerance_violation_aborts_and_holds(arm):
-    sim, client = arm
+    _sim, client = arm
     goal = Goal(trajectory=move([0.5, *HOME[1:]], 0.3, 0.2),
                 path_tolerance=[JointTolerance(name=j, position=1e-5) for j in JOINT_NAMES])
     res = client.result(client.send(goal))
@@ -180,7 +181,7 @@ def test_path_tolerance_violation_aborts_and_holds(arm):
 
 
 def test_goal_time_exceeded_aborts_with_the_overshoot(arm):
-    sim, client = arm
+    _sim, client = arm
     goal = Goal(trajectory=move([0.3, *HOME[1:]], 0.3, 0.02),
                 goal_tolerance=[JointTolerance(name=j, position=1e-9) for j in JOINT_NAMES],
                 goal_time_tolerance=duration(0.05))
@@ -191,7 +192,7 @@ def test_goal_time_exceeded_aborts_with_the_overshoot(arm):
 
 
 def test_a_new_goal_preempts_the_running_one(arm):
-    sim, client = arm
+    _sim, client = arm
     first = client.send(Goal(trajectory=move([1.0, *HOME[1:]], 30.0, 1.0)))
     assert first.accepted
     client.spin_until(lambda: len(client.states) > 10, "the first goal to run")
@@ -207,7 +208,7 @@ def test_a_new_goal_preempts_the_running_one(arm):
 
 
 def test_cancel_holds_where_the_arm_is(arm):
-    sim, client = arm
+    _sim, client = arm
     handle = client.send(Goal(trajectory=move([1.0, *HOME[1:]], 20.0, 1.0)))
     client.spin_until(lambda: len(client.states) > 50, "the goal to run")
     cancel = handle.cancel_goal_async()
@@ -219,7 +220,7 @@ def test_cancel_holds_where_the_arm_is(arm):
 
 
 def test_trajectory_topic_moves_the_arm(arm):
-    sim, client = arm
+    _sim, client = arm
     client.spin_until(lambda: client.node.count_subscribers(TOPIC) > 0, "the controller's trajectory subscription")
     target = [-0.3, -1.4, 1.4, -1.5, -1.57, 0.0]
     client.topic.publish(move(target, 0.5, 0.2))

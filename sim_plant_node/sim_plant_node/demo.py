@@ -1,5 +1,7 @@
 """Demo: input shaping on the simulated plant, end to end over DDS.
 
+``demo arm`` runs the six-axis arm demo instead (sim_plant_node.arm_demo, ``demo arm --help``).
+
 Starts the sim plant (lockstep), the shaper and the recorder as separate processes, then for
 every plant case (true mode at the nominal frequency and off it) and every shaper (none, ZV,
 ZVD, all designed at the nominal mode) runs a few cycles of a point-to-point move, measures
@@ -66,6 +68,11 @@ def plot(path: pathlib.Path, traces: dict, offsets: list[float], shapers: list[s
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["arm"]:  # the six-axis arm behind joint_trajectory_controller (arm_demo.py)
+        from .arm_demo import main as arm_main
+
+        return arm_main(argv[1:])
     args = parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from shaper_nodes.ros.launching import NodeProcess

@@ -73,7 +73,8 @@ def test_path_and_goal_violations_abort_and_hold():
     ctl.accept(list(JOINTS), [RawPoint(0.5, [0.5, 0.0])], 0.0)
     ctl.start_goal(strict)
     _, out = run(ctl, 3.0, follow=False)
-    assert out.code == GOAL_TOLERANCE_VIOLATED and out.text.startswith("Aborted due to goal_time_tolerance exceeding by")
+    assert out.code == GOAL_TOLERANCE_VIOLATED
+    assert out.text.startswith("Aborted due to goal_time_tolerance exceeding by")
 
 
 def test_first_segment_starts_from_the_measured_state_and_a_future_stamp_starts_now():

@@ -62,7 +62,7 @@ SHORT_LINK_LENGTH = 0.12
 PAYLOAD_MASS = 2.0
 PAYLOAD_OFFSET = 0.08
 #: chosen: torsional joint stiffness, N m/rad (see the module docstring)
-JOINT_STIFFNESS = (2.0e4, 2.0e4, 1.2e4, 4.0e3, 4.0e3, 4.0e3)
+JOINT_STIFFNESS = (1.0e4, 2.0e4, 1.2e4, 1.5e4, 1.5e4, 1.5e4)
 #: chosen: joint damping = DAMPING_TIME x stiffness, s
 DAMPING_TIME = 0.5e-3
 #: chosen: reflected motor (rotor) inertia, kg m^2, and motor viscous friction, N m s/rad

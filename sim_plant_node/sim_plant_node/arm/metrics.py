@@ -1,0 +1,91 @@
+"""Per-move measures of the arm demo, free of ROS.
+
+For one move, from what the demo records (flange IMU, link angles through forward
+kinematics, the commanded joint positions):
+
+- residual vibration: RMS and peak of the specific force's deviation from its mean (gravity
+  and the sensor's bias removed) over a fixed window after the commanded motion ends, m/s^2
+  (:func:`shaper_nodes.core.shaping.vibration.residual_vibration`);
+- peak tool displacement in that window: the largest distance of the flange from where it
+  comes to rest, mm;
+- settling time: from the planned (unshaped) end of the move until the flange stays within
+  :data:`SETTLE_TOLERANCE` of where it comes to rest, s;
+- the shaper's delay: how much later the commanded motion ends than the planned one, s;
+- path deviation: the largest distance of the commanded tool path (forward kinematics of the
+  commanded joint positions) from the unshaped one, mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from shaper_nodes.core.shaping.vibration import residual_vibration, settle_time
+
+#: the settling band of the flange, m: 0.05 mm, a little over the UR5e's specified pose
+#: repeatability (+-0.03 mm, ISO 9283), so that a settled tool is as still as the arm can place it
+SETTLE_TOLERANCE = 0.05e-3
+#: length of the residual-vibration window after the commanded motion's end, s
+RESIDUAL_WINDOW = 1.0
+
+
+@dataclass(frozen=True)
+class MoveMeasures:
+    """One move's measures (units in the names)."""
+
+    move: str
+    residual_rms: float
+    residual_peak: float
+    peak_mm: float
+    settling_s: float
+    move_s: float
+    delay_s: float
+    path_deviation_mm: float
+
+    @property
+    def move_and_settle_s(self) -> float:
+        return self.move_s + self.settling_s
+
+
+def motion_end(times: np.ndarray, commanded: np.ndarray, tolerance: float = 1e-9) -> float:
+    """The time the commanded positions stop changing (last change larger than ``tolerance``)."""
+    c = np.asarray(commanded, dtype=float)
+    moving = np.flatnonzero(np.any(np.abs(np.diff(c, axis=0)) > tolerance, axis=1))
+    return float(times[moving[-1] + 1]) if moving.size else float(times[0])
+
+
+def path_deviation(path: np.ndarray, reference: np.ndarray) -> float:
+    """Largest distance of the points of ``path`` (N, 3) from the polyline ``reference`` (M, 3), same units."""
+    p = np.asarray(path, dtype=float)
+    a = np.asarray(reference, dtype=float)
+    if a.shape[0] == 1:
+        return float(np.max(np.linalg.norm(p - a[0], axis=1)))
+    seg_a, seg_b = a[:-1], a[1:]
+    d = seg_b - seg_a
+    length2 = np.maximum(np.sum(d * d, axis=1), 1e-300)
+    worst = 0.0
+    for chunk in np.array_split(p, max(1, p.shape[0] // 256)):
+        rel = chunk[:, None, :] - seg_a[None, :, :]
+        u = np.clip(np.sum(rel * d[None], axis=2) / length2[None], 0.0, 1.0)
+        dist = np.linalg.norm(rel - u[..., None] * d[None], axis=2)
+        worst = max(worst, float(np.max(np.min(dist, axis=1))))
+    return worst
+
+
+def measure_move(move: str, planned_start: float, planned_duration: float, commanded_end: float, window_end: float,
+                 imu_times: np.ndarray, imu: np.ndarray, tool_times: np.ndarray, tool: np.ndarray,
+                 path: np.ndarray | None = None, reference_path: np.ndarray | None = None) -> MoveMeasures:
+    """The measures of one move (module docstring); times in s, tool positions in m, imu (N, 3) m/s^2."""
+    res = residual_vibration(imu_times, imu, commanded_end, commanded_end + RESIDUAL_WINDOW, remove_mean=True)
+    planned_end = planned_start + planned_duration
+    sel = (tool_times >= planned_end) & (tool_times <= window_end)
+    t, p = tool_times[sel], tool[sel]
+    dist = np.linalg.norm(p - p[-1], axis=1) if p.shape[0] else np.zeros(0)
+    in_window = (t >= commanded_end) & (t < commanded_end + RESIDUAL_WINDOW)
+    peak = float(np.max(dist[in_window])) if np.any(in_window) else float("nan")
+    settled = settle_time(t, dist[:, None], planned_end, SETTLE_TOLERANCE) if t.size else planned_end
+    deviation = (path_deviation(path, reference_path) if path is not None and reference_path is not None
+                 else float("nan"))
+    return MoveMeasures(move, res.rms, res.peak, 1e3 * peak, settled - planned_end, planned_duration,
+                        commanded_end - planned_end, 1e3 * deviation)

@@ -1,0 +1,416 @@
+"""Arm demo: input shaping on the six-axis arm behind joint_trajectory_controller, over DDS.
+
+Starts the sim plant (``plant.model: arm``, lockstep, with its joint_trajectory_controller
+emulation), the shaper node (its FollowJointTrajectory proxy in front of the controller), the
+identifier and the recorder as separate processes. A MoveIt-like client sends the
+pick-and-place cycle of :mod:`sim_plant_node.arm.task` move by move to the shaper's action and
+marks each cycle on ``/cycle_events``. Cases: unshaped; ZV and ZVD designed at the home pose's
+lowest mode (modal analysis of the arm); the identifier's recommendation from the unshaped
+cycles (applied through its ``~/identify``); LIST learning over the cycles (the learner node).
+For every move and case it measures (:mod:`sim_plant_node.arm.metrics`) the residual vibration
+at the tool, the settling time, the move time plus settling time, the shaper's delay and the
+tool-path deviation the shaping causes, and writes them as CSV, Markdown and a PNG plot.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import itertools
+import math
+import os
+import pathlib
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/shaper/active_shaper", "/diagnostics",
+            "/learner/reports"]
+RATE = 500.0
+DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
+CASES = ("none", "zv", "zvd", "identified", "list")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="demo arm", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=pathlib.Path, default=None,
+                   help="output folder (default: out/demo-arm-<date-time> in the current folder)")
+    p.add_argument("--cycles", type=int, default=2, help="pick-and-place cycles per fixed-shaper case (default 2)")
+    p.add_argument("--list-cycles", type=int, default=8, help="cycles of LIST learning (default 8)")
+    p.add_argument("--cases", default=",".join(CASES), help=f"cases to run (default {','.join(CASES)})")
+    p.add_argument("--noise", type=float, default=0.01, help="accelerometer noise, m/s^2 (default 0.01)")
+    return p.parse_args(argv)
+
+
+@dataclass
+class Streams:
+    """Stamped samples received by the client (times in simulated s)."""
+
+    imu_t: list[float] = field(default_factory=list)
+    imu: list[tuple[float, float, float]] = field(default_factory=list)
+    link_t: list[float] = field(default_factory=list)
+    link: list[list[float]] = field(default_factory=list)
+    cmd_t: list[float] = field(default_factory=list)
+    cmd: list[list[float]] = field(default_factory=list)
+    clock: float = 0.0
+
+    def window(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """Samples of one move that started at ``t0`` and ended at ``t1``. Commands are stamped at the start of
+        their period, so [t0, t1) (the next move's first command is stamped t1); states and the IMU at its end,
+        so (t0, t1]."""
+        t = np.asarray(getattr(self, which + "_t"))
+        v = np.asarray(getattr(self, which))
+        sel = (t >= t0) & (t < t1) if which == "cmd" else (t > t0) & (t <= t1)
+        order = np.argsort(t[sel], kind="stable")
+        return t[sel][order], v[sel][order]
+
+
+@dataclass
+class MoveRun:
+    """One executed move: name, simulated start and end, the planned duration."""
+
+    index: int
+    name: str
+    start: float
+    planned: float
+    end: float
+
+
+class ArmClient:
+    """The MoveIt-like client and the demo's measurements, on a :class:`Conductor` node."""
+
+    def __init__(self, conductor: Any) -> None:
+        from control_msgs.action import FollowJointTrajectory
+        from rclpy.action import ActionClient
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import Imu, JointState
+
+        from shaper_msgs.msg import CycleEvent, CycleReport
+        from shaper_nodes.ros.conversions import time_to_sec
+
+        from .arm.dynamics import ArmModel
+
+        self.c = conductor
+        self.model = ArmModel()
+        self.s = Streams()
+        self.reports: list[Any] = []
+        deep = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
+        sec = time_to_sec
+
+        def on_imu(m: Any) -> None:
+            self.s.imu_t.append(sec(m.header.stamp))
+            a = m.linear_acceleration
+            self.s.imu.append((a.x, a.y, a.z))
+
+        def on_link(m: Any) -> None:
+            self.s.link_t.append(sec(m.header.stamp))
+            self.s.link.append(list(m.position))
+
+        def on_cmd(m: Any) -> None:
+            self.s.cmd_t.append(sec(m.header.stamp))
+            self.s.cmd.append(list(m.position))
+
+        def on_clock(m: Any) -> None:
+            self.s.clock = max(self.s.clock, sec(m.clock))
+
+        reliable = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+        conductor.create_subscription(Imu, "/tip_imu", on_imu, deep)
+        conductor.create_subscription(JointState, "/sim_plant/tip_state", on_link, reliable)
+        conductor.create_subscription(JointState, "/sim_plant/reference", on_cmd, reliable)
+        conductor.create_subscription(Clock, "/clock", on_clock, 100)
+        conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        self.events = conductor.create_publisher(CycleEvent, "/cycle_events", 10)
+        self.action = ActionClient(conductor, FollowJointTrajectory, "/shaper/follow_joint_trajectory")
+        self._Goal = FollowJointTrajectory.Goal
+        self._CycleEvent = CycleEvent
+
+    # ------------------------------------------------------------------ driving
+    def wait_listeners(self, n: int, timeout: float = 60.0) -> None:
+        """Wait until the cycle events reach ``n`` matched subscriptions (this node's own among them)."""
+        self.c.spin_until(lambda: self.events.get_subscription_count() >= n, timeout,
+                          f"{n} matched subscriptions of /cycle_events")
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        self.c.spin_until(self.action.server_is_ready, timeout, "the shaper's FollowJointTrajectory server")
+        self.wait_listeners(3, timeout)  # this node, the identifier and the recorder
+        self.c.spin_until(lambda: self.c.count_subscribers("/sim_plant/reference") > 0, timeout,
+                          "the sim plant's reference subscription")
+
+    def _goal(self, move: Any) -> Any:
+        from builtin_interfaces.msg import Duration
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+        from .arm.description import JOINT_NAMES
+
+        def dur(t: float) -> Duration:
+            return Duration(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)) % 1_000_000_000)
+
+        pts = [JointTrajectoryPoint(positions=p.tolist(), velocities=v.tolist(), accelerations=a.tolist(),
+                                    time_from_start=dur(t))
+               for t, p, v, a in zip(move.times[1:], move.positions[1:], move.velocities[1:], move.accelerations[1:],
+                                     strict=True)]
+        last = move.positions[-1].tolist()
+        pts.append(JointTrajectoryPoint(positions=last, velocities=[0.0] * 6, accelerations=[0.0] * 6,
+                                        time_from_start=dur(move.duration + DWELL)))
+        return self._Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES), points=pts))
+
+    def _event(self, kind: int, cycle: int, t: float, start: np.ndarray, goal: np.ndarray) -> None:
+        from shaper_nodes.ros.conversions import sec_to_time
+
+        msg = self._CycleEvent(event=kind, cycle=cycle, task="pick_and_place", joint_names=[],
+                               start_positions=start.tolist(), goal_positions=goal.tolist())
+        msg.header.stamp = sec_to_time(t)
+        self.events.publish(msg)
+
+    def run_move(self, index: int, move: Any) -> MoveRun:
+        """Send one move and wait for its end. Its start is the stamp of its first feedback (the controller's
+        first update: exact in simulated time, whatever the lag of /clock here)."""
+        from shaper_nodes.ros.conversions import time_to_sec
+
+        stamps: list[float] = []
+        future = self.action.send_goal_async(self._goal(move),
+                                             feedback_callback=lambda m: stamps.append(time_to_sec(
+                                                 m.feedback.header.stamp)))
+        self.c.spin_until(future.done, 60.0, f"the answer to the goal of {move.name}")
+        handle = future.result()
+        if not handle.accepted:
+            raise RuntimeError(f"the goal of {move.name} was rejected (see the shaper's and the sim's logs)")
+        result = handle.get_result_async()
+        self.c.spin_until(result.done, 300.0, f"the result of {move.name}")
+        res = result.result()
+        if res.result.error_code != 0:
+            raise RuntimeError(f"{move.name}: {res.result.error_code} {res.result.error_string}")
+        if not stamps:
+            raise RuntimeError(f"{move.name}: no feedback from the controller")
+        start = min(stamps)
+        end = start + move.duration + DWELL
+        self.c.spin_until(lambda: min(self.s.clock, *(getattr(self.s, f)[-1] if getattr(self.s, f) else 0.0
+                                                      for f in ("imu_t", "link_t", "cmd_t"))) >= end - 0.0025,
+                          60.0, f"the samples up to the end of {move.name}")
+        return MoveRun(index, move.name, start, move.duration, end)
+
+    def run_cycle(self, cycle: int, moves: list[Any], progress: Callable[[], None]) -> list[MoveRun]:
+        from .arm.task import CYCLE
+
+        first, last = CYCLE[0][1], CYCLE[-1][1]
+        t0 = self.s.clock
+        self._event(self._CycleEvent.START, cycle, t0, first, last)
+        runs = []
+        for i, move in enumerate(moves):
+            runs.append(self.run_move(i, move))
+            progress()
+        for run, nxt in itertools.pairwise(runs):
+            run.end = nxt.start  # the sim is idle between goals: a move ends where the next one starts
+        self._event(self._CycleEvent.MOTION_END, cycle, runs[-1].start + runs[-1].planned, first, last)
+        self._event(self._CycleEvent.END, cycle, runs[-1].end, first, last)
+        return runs
+
+    # ------------------------------------------------------------------ measuring
+    def tool_path(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        t, q = self.window(which, t0, t1)
+        return t, self.model.tool_positions(q) if q.size else np.zeros((0, 3))
+
+    def window(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        return self.s.window(which, t0, t1)
+
+    def measure(self, run: MoveRun, reference_path: np.ndarray) -> tuple[Any, np.ndarray]:
+        from .arm.metrics import measure_move, motion_end
+
+        ct, cq = self.window("cmd", run.start, run.end)
+        commanded_end = motion_end(ct, cq)
+        _, path = self.tool_path("cmd", run.start, run.end)
+        it, imu = self.window("imu", run.start, run.end)
+        lt, tool = self.tool_path("link", run.start, run.end)
+        m = measure_move(run.name, run.start, run.planned, commanded_end, run.end, it, imu, lt, tool, path,
+                         reference_path)
+        return m, path
+
+
+def _table(rows: list[dict[str, Any]]) -> list[str]:
+    head = ["case", "move", "residual RMS m/s^2", "% of unshaped", "peak mm", "settling s", "move+settle s",
+            "shaper delay s", "path deviation mm"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        out.append(f"| {r['case']} | {r['move']} | {r['residual_rms']:.4f} | {r['percent']:.1f} | {r['peak_mm']:.4f} |"
+                   f" {r['settling_s']:.3f} | {r['move_and_settle_s']:.3f} | {r['delay_s']:.3f} |"
+                   f" {r['path_deviation_mm']:.3f} |")
+    return out
+
+
+def plot(path: pathlib.Path, traces: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]], cases: list[str],
+         moves: list[str]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(moves), 1, figsize=(10, 2.2 * len(moves)), sharex=True, squeeze=False)
+    for ax, move in zip(axes[:, 0], moves, strict=True):
+        for case in cases:
+            if (case, move) in traces:
+                t, d = traces[(case, move)]
+                ax.plot(t, d, lw=0.8, label=case)
+        ax.set_title(move, fontsize=9)
+        ax.set_ylabel("tool dev. (mm)")
+        ax.grid(alpha=0.3)
+        ax.set_yscale("symlog", linthresh=0.01)
+    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=len(cases))
+    axes[-1, 0].set_xlabel("time from the planned end of the move (s): distance of the flange from where it comes"
+                           " to rest")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def identify(conductor: Any, identifier_cli: Any, cycles: int) -> tuple[Any, str]:
+    """The identifier's recommendation from the last ``cycles`` cycles (not applied), and its summary."""
+    from shaper_msgs.srv import Identify
+
+    deadline = time.monotonic() + 60.0
+    while True:  # the identifier closes a cycle once samples after its END came, or after its max wait
+        resp = conductor.call(identifier_cli, Identify.Request(cycles=int(cycles), max_modes=3, apply=False),
+                              timeout=120.0)
+        if resp.success or "buffered" not in resp.message or time.monotonic() > deadline:
+            break
+        pause = time.monotonic() + 0.5
+        conductor.spin_until(lambda: time.monotonic() > pause, 5.0, "the identifier's buffer")  # noqa: B023
+    if not resp.success:
+        raise RuntimeError(f"identification failed: {resp.message}")
+    modes = ", ".join(f"{m.natural_frequency / (2 * math.pi):.3f} Hz zeta {m.damping_ratio:.3f}"
+                      for m in resp.estimate.modes)
+    return resp.recommended, f"{resp.recommended.family} for {modes}"
+
+
+def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | None, home_mode: Any,
+                start: Callable[..., Any]) -> str:
+    """Install the case's shaper (or start its learner); returns what was installed, for the log."""
+    from shaper_msgs.srv import SetShaper
+
+    conductor = client.c
+    if case in ("none", "zv", "zvd"):
+        conductor.set_shaper(case, home_mode.omega, home_mode.zeta)
+        return case if case == "none" else f"{case} at {home_mode.hz:.3f} Hz, zeta {home_mode.zeta:.3f}"
+    if case == "identified":
+        if recommended is None:
+            raise RuntimeError("the identified case needs the unshaped case's cycles first")
+        shaper = recommended[0]
+        shaper.source, shaper.family = "identification", "custom"  # its impulses as identified, as the identifier sends
+        resp = conductor.call(conductor.set_shaper_cli, SetShaper.Request(shaper=shaper))
+        if not resp.success:
+            raise RuntimeError(f"the shaper refused the recommendation: {resp.message}")
+        return recommended[1]
+    conductor.set_shaper("none")
+    start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2"})
+    client.wait_listeners(4)  # and the learner
+    return "LIST (zv2), from unshaped"
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    from shaper_msgs.srv import Identify
+
+    from .arm.description import JOINT_NAMES
+    from .arm.dynamics import ArmModel
+    from .arm.modal import lowest
+    from .arm.task import HOME, cycle_moves
+    from .conductor import Conductor, node_session
+
+    cases = [c.strip() for c in args.cases.split(",")]
+    unknown = sorted(set(cases) - set(CASES))
+    if unknown or "none" not in cases:
+        print(f"demo arm: --cases must include none and be among {', '.join(CASES)}; got {args.cases}", file=sys.stderr)
+        return 2
+    out = args.out or pathlib.Path("out") / datetime.datetime.now().strftime("demo-arm-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    moves = cycle_moves()
+    home_mode = lowest(ArmModel(), HOME)
+    print(f"demo arm: UR5e-based elastic arm, home lowest mode {home_mode.hz:.3f} Hz (zeta {home_mode.zeta:.3f});"
+          f" {len(moves)} moves a cycle; cases {', '.join(cases)}; output in {out}", flush=True)
+    t_wall = time.monotonic()
+    rows: list[dict[str, Any]] = []
+    traces: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    reference_paths: dict[int, np.ndarray] = {}
+    with node_session(out, "arm") as (start, ctx):
+        start("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
+                                              "task.start": HOME.tolist(), "imu.noise_stddev": args.noise,
+                                              "lockstep_timeout": 60.0})
+        start("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": RATE,
+                                              "use_sim_time": True, "action.server_timeout": 30.0})
+        start("shaper_nodes", "identifier", {"use_sim_time": True, "buffer_cycles": 20, "settle_tolerance": 1e-4,
+                                             "max_modes": 3})
+        start("shaper_nodes", "recorder", {"output": str(out / "recording"), "topics": RECORDED,
+                                           "use_sim_time": True})
+        conductor = Conductor(context=ctx)
+        client = ArmClient(conductor)
+        identifier_cli = conductor.create_client(Identify, "/identifier/identify")
+        try:
+            conductor.wait_ready(60.0, {"/cycle_events": 2})
+            client.wait_ready()
+            cycle_index = 0
+            recommended = None
+            for case in cases:
+                installed = _apply_case(case, client, recommended, home_mode, start)
+                n = args.list_cycles if case == "list" else args.cycles
+                print(f"{case:>10}: {installed}; {n} cycles ", end="", flush=True)
+                for _ in range(n):
+                    runs = client.run_cycle(cycle_index, moves, lambda: print(".", end="", flush=True))
+                    if case == "list":
+                        client.c.spin_until(lambda c=cycle_index: any(r.cycle == c for r in client.reports), 120.0,
+                                            "the learner's report")
+                    cycle_index += 1
+                print(f" ({time.monotonic() - t_wall:.0f} s)", flush=True)
+                if case == "none" and "identified" in cases:
+                    recommended = identify(conductor, identifier_cli, n)
+                for run in runs:  # the case's last cycle
+                    if case == "none":
+                        reference_paths[run.index] = client.tool_path("cmd", run.start, run.end)[1]
+                    m, _ = client.measure(run, reference_paths[run.index])
+                    lt, tool = client.tool_path("link", run.start, run.end)
+                    planned_end = run.start + run.planned
+                    traces[(case, f"{run.index + 1}. {run.name}")] = (
+                        lt - planned_end, 1e3 * np.linalg.norm(tool - tool[-1], axis=1))
+                    rows.append({"case": case, "move": f"{run.index + 1}. {run.name}", **m.__dict__,
+                                 "move_and_settle_s": m.move_and_settle_s, "installed": installed})
+        finally:
+            arrays: dict[str, Any] = {k: np.asarray(v) for k, v in client.s.__dict__.items()}
+            np.savez_compressed(out / "streams.npz", **arrays)
+            conductor.close()
+    for r in rows:
+        base = next(x for x in rows if x["case"] == "none" and x["move"] == r["move"])
+        r["percent"] = 100.0 * r["residual_rms"] / base["residual_rms"] if base["residual_rms"] > 0 else math.nan
+    keys = ["case", "move", "residual_rms", "percent", "residual_peak", "peak_mm", "settling_s", "move_s",
+            "move_and_settle_s", "delay_s", "path_deviation_mm", "installed"]
+    with open(out / "results.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    table = _table(rows)
+    from .arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
+
+    note = (f"Residual vibration: the flange IMU's specific force minus its mean, over {RESIDUAL_WINDOW:g} s after"
+            f" the commanded motion ends (accelerometer noise {args.noise:g} m/s^2); peak: the flange's largest"
+            f" distance from where it comes to rest in that window; settling: from the planned end of the move until"
+            f" the flange stays within {SETTLE_TOLERANCE * 1e3:g} mm; delay: commanded motion end minus planned end;"
+            " path deviation: commanded tool path against the unshaped one. Last cycle of each case.")
+    (out / "results.md").write_text("# Arm demo\n\n" + note + "\n\n" + "\n".join(table) + "\n")
+    plot(out / "tool_deviation.png", traces, cases, [f"{i + 1}. {m.name}" for i, m in enumerate(moves)])
+    print()
+    print(note)
+    print("\n".join(table))
+    print()
+    print(f"results:   {out / 'results.csv'}, {out / 'results.md'}")
+    print(f"plot:      {out / 'tool_deviation.png'}")
+    print(f"recording: {out / 'recording'}  (rosbag2, MCAP storage)")
+    print(f"node logs: {out}/*.log   ({time.monotonic() - t_wall:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
