@@ -54,6 +54,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-scheduler", action="store_true", help="skip the scheduler timing and CPU share")
     p.add_argument("--skip-discretization", action="store_true", help="skip the shaper discretisation timing")
     p.add_argument("--skip-bag", action="store_true", help="skip the bag analysis throughput measurement")
+    p.add_argument("--skip-arm", action="store_true", help="skip the arm's lockstep speed")
     p.add_argument("--bag-messages", type=int, default=1_000_000,
                    help="messages in the bag analysis benchmark's recording (default 1000000)")
     p.add_argument("--json", metavar="PATH", type=pathlib.Path, help="also write the figures to this JSON file")
@@ -162,6 +163,7 @@ BENCHMARKS: tuple[tuple[str, str, str, Callable[[argparse.Namespace], dict[str, 
     ("scheduler", "skip_scheduler", "scheduler", lambda a: {"seconds": a.seconds}),
     ("discretization", "skip_discretization", "discretization", lambda a: {}),
     ("bag_analysis", "skip_bag", "bag_analysis", lambda a: {"messages": a.bag_messages}),
+    ("arm_lockstep", "skip_arm", "arm_lockstep", lambda a: {}),
 )
 
 

@@ -168,15 +168,19 @@ class ArmClient:
         msg.header.stamp = sec_to_time(t)
         self.events.publish(msg)
 
-    def run_move(self, index: int, move: Any) -> MoveRun:
+    def run_move(self, index: int, move: Any, on_start: Callable[[float], None] | None = None) -> MoveRun:
         """Send one move and wait for its end. Its start is the stamp of its first feedback (the controller's
-        first update: exact in simulated time, whatever the lag of /clock here)."""
+        first update: exact in simulated time, whatever the lag of /clock here); ``on_start`` gets it."""
         from shaper_nodes.ros.conversions import time_to_sec
 
         stamps: list[float] = []
-        future = self.action.send_goal_async(self._goal(move),
-                                             feedback_callback=lambda m: stamps.append(time_to_sec(
-                                                 m.feedback.header.stamp)))
+
+        def on_feedback(msg: Any) -> None:
+            stamps.append(time_to_sec(msg.feedback.header.stamp))
+            if len(stamps) == 1 and on_start is not None:
+                on_start(stamps[0])
+
+        future = self.action.send_goal_async(self._goal(move), feedback_callback=on_feedback)
         self.c.spin_until(future.done, 60.0, f"the answer to the goal of {move.name}")
         handle = future.result()
         if not handle.accepted:
@@ -196,19 +200,24 @@ class ArmClient:
         return MoveRun(index, move.name, start, move.duration, end)
 
     def run_cycle(self, cycle: int, moves: list[Any], progress: Callable[[], None]) -> list[MoveRun]:
+        """One pick-and-place cycle. Its last move (the reach back home) is what ``/cycle_events`` marks as the
+        learners' and the identifier's cycle: its timing from START is the same whatever the shaper, where the
+        whole cycle's grows by the shaper's delay at every move."""
         from .arm.task import CYCLE
 
-        first, last = CYCLE[0][1], CYCLE[-1][1]
-        t0 = self.s.clock
-        self._event(self._CycleEvent.START, cycle, t0, first, last)
+        start, goal = CYCLE[-2][1], CYCLE[-1][1]
         runs = []
         for i, move in enumerate(moves):
-            runs.append(self.run_move(i, move))
+            mark = None
+            if i == len(moves) - 1:
+                def mark(t: float) -> None:
+                    self._event(self._CycleEvent.START, cycle, t, start, goal)
+            runs.append(self.run_move(i, move, mark))
             progress()
         for run, nxt in itertools.pairwise(runs):
             run.end = nxt.start  # the sim is idle between goals: a move ends where the next one starts
-        self._event(self._CycleEvent.MOTION_END, cycle, runs[-1].start + runs[-1].planned, first, last)
-        self._event(self._CycleEvent.END, cycle, runs[-1].end, first, last)
+        self._event(self._CycleEvent.MOTION_END, cycle, runs[-1].start + runs[-1].planned, start, goal)
+        self._event(self._CycleEvent.END, cycle, runs[-1].end, start, goal)
         return runs
 
     # ------------------------------------------------------------------ measuring

@@ -102,6 +102,9 @@ PLANT_PARAMS = ("plant.mass", "plant.damping", "plant.stiffness", "plant.stiffne
                 "plant.force_limit")
 PLANT_KEYS = ("plant.model", "controller.numerator", "controller.denominator", *PLANT_PARAMS, *LOOP_PARAMS)
 MODELS = (*PLANT_MODELS, "mck_pid", *LOOP_MODELS, "two_mass", "arm")
+#: sensor settings read at every sample: cached, and refreshed when they are set
+SENSOR_PARAMS = ("imu.bias", "imu.noise_stddev", "imu.gyro_noise_stddev", "imu.gyro_bias", "imu.frame_id",
+                 "joint_states.noise_stddev", "joint_states.resolution")
 #: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
 WAITING = "waiting for subscribers"
 
@@ -241,6 +244,8 @@ class SimPlantNode(Node):
         axes = [int(a) for a in self.get_parameter("imu.axes").value][:3]
         self._axes = [a if 0 <= a < self.n else -1 for a in axes] + [-1] * (3 - len(axes))
         self._rng = np.random.default_rng(int(self.get_parameter("imu.seed").value))
+        self._sensor = {name: self.get_parameter(name).value for name in SENSOR_PARAMS}
+        self._imu_msg = Imu()  # reused: publish() serialises it at once
         self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value), remove_mean=self.arm)
         self._active_shaper = ShaperMsg()
 
@@ -354,6 +359,7 @@ class SimPlantNode(Node):
                     self._pose(pose, changes)
         except ValueError as err:
             return SetParametersResult(successful=False, reason=str(err))
+        self._sensor.update({k: v for k, v in changes.items() if k in SENSOR_PARAMS})
         if new is not None:  # all checks passed: takes effect at the next step
             try:
                 new.state = self.plant.state.copy()
@@ -498,10 +504,11 @@ class SimPlantNode(Node):
                         effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
         js.header.stamp = stamp
         self._js_pub.publish(js)
-        tip = JointState(name=self.joint_names, position=self.plant.tip_position.tolist(),
-                         velocity=self.plant.tip_velocity.tolist())
-        tip.header.stamp = stamp
-        self._tip_pub.publish(tip)
+        if self._tip_pub.get_subscription_count() > 0:
+            tip = JointState(name=self.joint_names, position=self.plant.tip_position.tolist(),
+                             velocity=self.plant.tip_velocity.tolist())
+            tip.header.stamp = stamp
+            self._tip_pub.publish(tip)
         if isinstance(self.plant, LoopPlant):  # per joint: output y (with d_o), measured y + n, control u, reference r
             p = self.plant
             loop = JointState(name=[f"{j}/{s}" for s in p.SIGNALS for j in self.joint_names],
@@ -518,8 +525,8 @@ class SimPlantNode(Node):
 
     def _reported(self, position: np.ndarray) -> np.ndarray:
         """Joint positions as the encoders report them: noise and quantisation as the parameters say."""
-        sigma = float(self.get_parameter("joint_states.noise_stddev").value)
-        quantum = float(self.get_parameter("joint_states.resolution").value)
+        sigma = float(self._sensor["joint_states.noise_stddev"])
+        quantum = float(self._sensor["joint_states.resolution"])
         if sigma > 0:
             position = position + self._rng.normal(0.0, sigma, position.size)
         if quantum > 0:
@@ -528,18 +535,19 @@ class SimPlantNode(Node):
 
     def _publish_imu(self, t: float, acc: np.ndarray, rate: np.ndarray | None) -> None:
         """One Imu message at ``t``: specific force ``acc`` (m/s^2), angular rate ``rate`` (rad/s; None: none)."""
-        acc = acc + np.asarray(self.get_parameter("imu.bias").value, dtype=float)[:3]
-        sigma = float(self.get_parameter("imu.noise_stddev").value)
+        sensor = self._sensor
+        acc = acc + np.asarray(sensor["imu.bias"], dtype=float)[:3]
+        sigma = float(sensor["imu.noise_stddev"])
         if sigma > 0:
             acc += self._rng.normal(0.0, sigma, 3)
-        imu = Imu()
+        imu = self._imu_msg
         imu.header.stamp = sec_to_time(t)
-        imu.header.frame_id = str(self.get_parameter("imu.frame_id").value)
+        imu.header.frame_id = str(sensor["imu.frame_id"])
         imu.orientation_covariance[0] = -1.0
         imu.angular_velocity_covariance[0] = -1.0
         if rate is not None:
-            gyro_sigma = float(self.get_parameter("imu.gyro_noise_stddev").value)
-            rate = rate + np.asarray(self.get_parameter("imu.gyro_bias").value, dtype=float)[:3]
+            gyro_sigma = float(sensor["imu.gyro_noise_stddev"])
+            rate = rate + np.asarray(sensor["imu.gyro_bias"], dtype=float)[:3]
             if gyro_sigma > 0:
                 rate = rate + self._rng.normal(0.0, gyro_sigma, 3)
             imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = rate.tolist()

@@ -50,12 +50,14 @@ def _coefficients(a: Point, b: Point, duration: float) -> np.ndarray:
     return c
 
 
+_EXPONENTS = np.arange(6)
+_DV = np.arange(1.0, 6.0)
+_DA = np.array([2.0, 6.0, 12.0, 20.0])
+
+
 def _evaluate(c: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    powers = s ** np.arange(6)
-    p = powers @ c
-    v = (np.arange(1, 6) * powers[:5]) @ c[1:]
-    a = (np.array([2.0, 6.0, 12.0, 20.0]) * powers[:4]) @ c[2:]
-    return p, v, a
+    powers = s**_EXPONENTS
+    return powers @ c, (_DV * powers[:5]) @ c[1:], (_DA * powers[:4]) @ c[2:]
 
 
 class Trajectory:

@@ -1,0 +1,163 @@
+"""Lockstep speed of the six-axis arm: simulated seconds per wall second, six joints, 1 kHz physics.
+
+Methods:
+
+``baseline: pinocchio aba``
+    One call of Pinocchio's articulated-body algorithm per 1 ms step (forward dynamics of the
+    rigid arm): the least any Pinocchio-based simulation of this arm spends per step.
+``ElasticArm step``
+    The elastic-joint arm's step (mass matrix, nonlinear terms, the trapezoidal rule's 12 x 12
+    solve), 1 kHz.
+``ElasticArm step + IMU``
+    The same plus the flange IMU (forward kinematics with accelerations) at every step.
+``ArmPlant + controller``
+    The controller emulation at 500 Hz sampling a trajectory, two physics steps and IMU
+    readings per period: what the sim plant node computes per period.
+``sim plant node over DDS``
+    The sim plant node (``plant.model: arm``, lockstep) executing a FollowJointTrajectory goal
+    sent over DDS, with /joint_states (500 Hz), the IMU (1 kHz) and /clock published and one
+    subscriber on each; wall time from the goal's acceptance to its result.
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import tempfile
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+HOME = np.array([0.0, -1.57, 1.57, -1.57, -1.57, 0.0])
+
+
+def _rate(fn: Callable[[], None], sim_step: float, steps: int, repeats: int = 3) -> float:
+    """Best simulated seconds per wall second of ``steps`` calls of ``fn`` (each ``sim_step`` s simulated)."""
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            fn()
+        best = min(best, time.perf_counter() - t0)
+    return steps * sim_step / best
+
+
+def core(seconds: float = 2.0) -> dict:
+    import pinocchio as pin
+
+    from sim_plant_node.arm.dynamics import ArmModel, ElasticArm
+    from sim_plant_node.arm.jtc import JointTrajectoryController, RawPoint, Tolerances
+    from sim_plant_node.arm.plant import ArmPlant
+
+    model = ArmModel()
+    steps = int(seconds * 1000)
+    q, v, tau = HOME.copy(), np.zeros(6), np.zeros(6)
+    out = {"baseline: pinocchio aba": _rate(lambda: pin.aba(model.model, model.data, q, v, tau), 1e-3, steps)}
+    arm = ElasticArm(model, 1e-3, HOME)
+    target = HOME + 0.01
+    out["ElasticArm step"] = _rate(lambda: arm.step(target), 1e-3, steps)
+
+    def with_imu() -> None:
+        arm.step(target)
+        arm.imu()
+
+    out["ElasticArm step + IMU"] = _rate(with_imu, 1e-3, steps)
+    plant = ArmPlant(500.0, 2)
+    plant.reset(HOME)
+    names = [f"j{i}" for i in range(6)]
+    ctl = JointTrajectoryController(tuple(names), 2e-3, Tolerances(np.zeros(6), np.zeros(6)), HOME)
+    far = 10 * seconds * 4
+    ctl.accept(names, [RawPoint(far, (HOME + 0.5).tolist(), [0.0] * 6)], 0.0)
+    clock = [0.0]
+
+    def period() -> None:
+        ctl.update(clock[0], plant.base_position, plant.base_velocity)
+        plant.step(ctl.command, velocity=ctl.command_velocity)
+        clock[0] += 2e-3
+
+    out["ArmPlant + controller"] = _rate(period, 2e-3, steps // 2)
+    return out
+
+
+def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict:
+    import rclpy
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionClient
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Imu, JointState
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from shaper_nodes.ros.launching import NodeProcess
+    from sim_plant_node.arm.description import JOINT_NAMES
+
+    env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    with tempfile.TemporaryDirectory(prefix="arm_bench_") as tmp:
+        sim = NodeProcess("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist()},
+                          log_path=pathlib.Path(tmp) / "sim.log", env=env).start()
+        ctx = rclpy.context.Context()
+        rclpy.init(context=ctx)
+        n = rclpy.create_node("arm_bench", context=ctx)
+        counts = {"joint_states": 0, "imu": 0, "clock": 0}
+
+        def count(key: str) -> Callable[[object], None]:
+            return lambda _m: counts.__setitem__(key, counts[key] + 1)
+
+        n.create_subscription(JointState, "/joint_states", count("joint_states"), 1000)
+        n.create_subscription(Imu, "/tip_imu", count("imu"), qos_profile_sensor_data)
+        n.create_subscription(Clock, "/clock", count("clock"), 1000)
+        client = ActionClient(n, FollowJointTrajectory, "/joint_trajectory_controller/follow_joint_trajectory")
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(n)
+        try:
+            deadline = time.monotonic() + 60
+            while not client.server_is_ready():
+                if time.monotonic() > deadline or not sim.running():
+                    raise RuntimeError("the sim plant's action server did not appear")
+                ex.spin_once(timeout_sec=0.05)
+            progress(f"arm: sim plant node executing a {seconds:g} s trajectory")
+            target = (HOME + 0.3).tolist()
+            point = JointTrajectoryPoint(positions=target, velocities=[0.0] * 6,
+                                         time_from_start=Duration(sec=int(seconds)))
+            goal = FollowJointTrajectory.Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES),
+                                                                         points=[point]))
+            sent = client.send_goal_async(goal)
+            while not sent.done():
+                ex.spin_once(timeout_sec=0.05)
+            t0 = time.perf_counter()
+            result = sent.result().get_result_async()
+            while not result.done():
+                ex.spin_once(timeout_sec=0.01)
+            wall = time.perf_counter() - t0
+        finally:
+            ex.shutdown()
+            client.destroy()
+            n.destroy_node()
+            ctx.try_shutdown()
+            sim.stop()
+    return {"sim plant node over DDS": seconds / wall, "received": counts}
+
+
+def run(*, progress: Callable[[str], None] = print) -> dict:
+    progress("arm: core stepping rates")
+    out = core()
+    out.update(node(progress=progress))
+    return out
+
+
+def print_table(fig: dict) -> None:
+    base = fig["baseline: pinocchio aba"]
+    print("\nLockstep speed of the arm (6 joints, 1 kHz physics): simulated s per wall s, and against one"
+          " Pinocchio aba call per step")
+    print(f"{'method':>28} | {'sim s / wall s':>14} | {'x of baseline':>13}")
+    print("-" * 62)
+    for key, value in fig.items():
+        if isinstance(value, float):
+            print(f"{key:>28} | {value:14.1f} | {value / base:13.3f}")
+    rec = fig.get("received", {})
+    if rec:
+        print(f"(the node run: received {rec['joint_states']} joint states, {rec['imu']} IMU messages and"
+              f" {rec['clock']} clock ticks; IMU and clock are best effort or lossy under load)")
