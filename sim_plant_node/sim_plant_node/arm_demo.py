@@ -136,11 +136,13 @@ class ArmClient:
         self.c.spin_until(lambda: self.events.get_subscription_count() >= n, timeout,
                           f"{n} matched subscriptions of /cycle_events")
 
-    def wait_ready(self, timeout: float = 60.0) -> None:
+    def wait_ready(self, listeners: int, timeout: float = 60.0) -> None:
+        """Wait for the shaper's action server, ``listeners`` matched subscriptions of the cycle events (this
+        node's own among them) and the sim plant's reference and tip state publishers."""
         self.c.spin_until(self.action.server_is_ready, timeout, "the shaper's FollowJointTrajectory server")
-        self.wait_listeners(3, timeout)  # this node, the identifier and the recorder
-        self.c.spin_until(lambda: self.c.count_subscribers("/sim_plant/reference") > 0, timeout,
-                          "the sim plant's reference subscription")
+        self.wait_listeners(listeners, timeout)
+        for topic in ("/sim_plant/reference", "/sim_plant/tip_state"):  # published only to subscribers
+            self.c.spin_until(lambda t=topic: self.c.count_publishers(t) > 0, timeout, f"the sim plant's {topic}")
 
     def _goal(self, move: Any) -> Any:
         from builtin_interfaces.msg import Duration
@@ -361,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
         identifier_cli = conductor.create_client(Identify, "/identifier/identify")
         try:
             conductor.wait_ready(60.0, {"/cycle_events": 2})
-            client.wait_ready()
+            client.wait_ready(3)  # this node, the identifier and the recorder
             cycle_index = 0
             recommended = None
             for case in cases:
