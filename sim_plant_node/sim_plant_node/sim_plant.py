@@ -24,6 +24,14 @@ mck_pid
     (``controller.numerator``/``denominator``, default seed 000's PID), with a feedforward
     effort u2 (seed 000, MRILC): /joint_states carries the output y and the total effort u,
     ``~/reference`` the applied (shaped) reference. See sim_plant_node.pid_loop.
+arm
+    The six-axis elastic-joint arm (UR5e figures, Pinocchio; docs/arm.md), chosen at start-up,
+    behind an emulation of joint_trajectory_controller: FollowJointTrajectory on
+    ``topics.jtc_action``, JointTrajectory on ``topics.jtc_topic`` (sim_plant_node.jtc_server),
+    and the forward command topic while a task runs. /joint_states carries the motor-side
+    positions, velocities and torques, ``~/tip_state`` the link angles, the IMU the flange's
+    specific force (gravity included) and angular rate at every physics step (rate x
+    ``arm.substeps``). In lockstep the arm steps while the controller executes a trajectory.
 
 Feedforward (``~/set_feedforward``, shaper_msgs/SetFeedforward)
 --------------------------------------------------------------
