@@ -89,11 +89,23 @@ class Conductor(Node):
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
         spin_until(self.executor_, done, timeout, what)
 
-    def call(self, client, request, timeout: float = 10.0):
+    def call(self, client, request, timeout: float = 10.0, attempts: int = 3):
+        """Call a service and return its answer. A request sent just after discovery may lose its answer (the
+        server has not matched this client's reply reader yet), so an unanswered request is sent again, up to
+        ``attempts`` times, ``timeout`` s each; only for requests that may be repeated."""
         self.spin_until(client.service_is_ready, timeout, f"service {client.srv_name}")
-        future = client.call_async(request)
-        self.spin_until(future.done, timeout, f"answer of {client.srv_name}")
-        return future.result()
+        for attempt in range(1, attempts + 1):
+            future = client.call_async(request)
+            try:
+                self.spin_until(future.done, timeout, f"answer of {client.srv_name}")
+            except TimeoutError:
+                client.remove_pending_request(future)
+                if attempt == attempts:
+                    raise
+                self.get_logger().warning(f"no answer of {client.srv_name} within {timeout:g} s; asking again")
+                continue
+            return future.result()
+        raise AssertionError("unreachable")
 
     def wait_ready(self, timeout: float = 30.0, subscribers: dict[str, int] | None = None) -> None:
         """Wait for the services and for the given topics to have at least N subscribers."""
@@ -154,7 +166,7 @@ class Conductor(Node):
         again (every 50 ms of spinning, up to ``timeout`` s). Returns the plant's message."""
         end = time.monotonic() + timeout
         while True:
-            resp = self.call(self.start_cli, Trigger.Request())
+            resp = self.call(self.start_cli, Trigger.Request(), attempts=1)  # not repeatable
             if resp.success:
                 return str(resp.message)
             if not resp.message.startswith(WAITING) or time.monotonic() > end:
