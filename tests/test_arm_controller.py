@@ -226,3 +226,26 @@ def test_trajectory_topic_moves_the_arm(arm):
     client.topic.publish(move(target, 0.5, 0.2))
     client.spin_until(lambda: client.states and np.all(np.abs(client.position() - target) < 1e-3),
                       "joint states at the topic trajectory's end")
+
+
+def test_joint_states_as_encoders_report_them(start_node, ros_context):
+    """Motor-side positions quantised to the encoder's resolution, velocities and torques, at 500 Hz."""
+    sim = start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME,
+                                                     "joint_states.resolution": 1e-3,
+                                                     "joint_states.noise_stddev": 2e-4})
+    client = Client(ros_context)
+    try:
+        client.wait_ready(sim)
+        res = client.result(client.send(Goal(trajectory=move([0.3, *HOME[1:]], 0.5, 0.2))))
+        assert res.status == GoalStatus.STATUS_SUCCEEDED
+        client.spin_until(lambda: len(client.states) >= 300, "the joint states of the move")
+        positions = np.array([m.position for m in client.states])
+        np.testing.assert_allclose(positions / 1e-3, np.round(positions / 1e-3), atol=1e-6)
+        assert len(np.unique(positions[:, 0])) > 10  # it moved, in steps of the resolution
+        m = client.states[-1]
+        assert list(m.name) == list(JOINT_NAMES) and len(m.velocity) == 6 and len(m.effort) == 6
+        stamps = np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in client.states])
+        assert np.median(np.diff(np.sort(stamps))) == pytest.approx(1 / 500.0)
+        assert abs(m.effort[1]) > 10.0  # the shoulder holds the arm against gravity, N m
+    finally:
+        client.close()
