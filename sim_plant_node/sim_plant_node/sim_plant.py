@@ -369,6 +369,7 @@ class SimPlantNode(Node):
             return SetParametersResult(successful=False, reason=str(err))
         self._sensor.update({k: v for k, v in changes.items() if k in SENSOR_PARAMS})
         if new is not None:  # all checks passed: takes effect at the next step
+            assert not isinstance(self.plant, ArmPlant) and not isinstance(new, ArmPlant)  # refused above
             try:
                 new.state = self.plant.state.copy()
             except ValueError:  # another state layout: start the new model at rest where the output is

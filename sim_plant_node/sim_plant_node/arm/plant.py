@@ -48,14 +48,6 @@ class ArmPlant:
         self.arm.reset(p)
         self._modes = modes(self.model, p)
 
-    @property
-    def state(self) -> np.ndarray:
-        raise ValueError("the arm's state is its own")  # another model starts at rest (sim_plant)
-
-    @state.setter
-    def state(self, value) -> None:
-        raise ValueError("the arm's state is its own")
-
     def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """One command period holding the position setpoint ``command`` (rad), velocity ``velocity`` (rad/s)."""
         r = np.asarray(command, dtype=float)
