@@ -177,6 +177,12 @@ def test_set_shaper_service_validates_and_policy_applies(rig):
     req = SetShaper.Request(shaper=ShaperMsg(family="custom", amplitudes=[0.6, 0.6], times=[0.0, 0.1], source="user"))
     resp = rig.call(SetShaper, "/shaper/set_shaper", req)
     assert not resp.success and "sum to 1" in resp.message and resp.active.family == "zv"
+    # finite, summing to 1, but amplifying 1999 times: refused unless shaper.max_gain allows it
+    req = SetShaper.Request(shaper=ShaperMsg(family="custom", amplitudes=[1000.0, -999.0], times=[0.0, 0.1],
+                                             source="user"))
+    resp = rig.call(SetShaper, "/shaper/set_shaper", req)
+    assert not resp.success and "gain sum |A| = 1999 exceeds max_gain 1" in resp.message
+    assert resp.active.family == "zv"
     req = SetShaper.Request(shaper=ShaperMsg(family="zvd", source="intruder",
                                              design_modes=[ModeMsg(natural_frequency=20.0, damping_ratio=0.1)]))
     resp = rig.call(SetShaper, "/shaper/set_shaper", req)

@@ -48,7 +48,9 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.shaping import (
+    DEFAULT_MAX_GAIN,
     FAMILIES,
+    MAX_GAIN,
     Mode,
     PolicyError,
     RetimingShaper,
@@ -106,6 +108,10 @@ PARAMETERS: tuple[Spec, ...] = (
          " (default), 'round', or 'exact' (the split corrected so the FIR meets the shaper's conditions at its"
          " modes exactly).", choices=DISCRETIZATIONS,
          check=lambda v: discretize(design("zv", [_PROBE]), 500.0, v)),
+    Spec("shaper.max_gain", DEFAULT_MAX_GAIN, "Largest gain sum |A| of a custom shaper sent to ~/set_shaper:"
+         " 1 (default) admits non-negative impulses only; larger allows negative impulses, whose output may"
+         f" overshoot the input by up to this factor. In [1, {MAX_GAIN:g}].", (1.0, MAX_GAIN),
+         check=lambda v: design("custom", amplitudes=[1.0], times=[0.0], max_gain=v)),
     Spec("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"],
          "Sources allowed to change the active shaper (update policy).", read_only=True),
     Spec("retime_sources", None, "Sources whose changes re-time the motion already commanded (time-varying"
@@ -277,7 +283,7 @@ class ShaperNode(Node):
     def _on_set_shaper(self, req: SetShaper.Request, resp: SetShaper.Response) -> SetShaper.Response:
         source = UpdatePolicy.source_of(req.shaper.source)
         try:
-            shaper = shaper_from_msg(req.shaper)
+            shaper = shaper_from_msg(req.shaper, float(self.get_parameter("shaper.max_gain").value))
             resp.success, resp.message = self.request(shaper, source)
         except ShaperError as err:
             resp.success, resp.message = False, f"invalid shaper: {err}"

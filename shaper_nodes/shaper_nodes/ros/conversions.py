@@ -15,6 +15,7 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_nodes.core.checks import InputError, finite_array, joint_permutation, strictly_increasing
 from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
+    DEFAULT_MAX_GAIN,
     DEFAULT_VIBRATION_TOLERANCE,
     Mode,
     Shaper,
@@ -41,8 +42,8 @@ def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None
     return msg
 
 
-def shaper_from_msg(msg: ShaperMsg) -> Shaper:
-    """Design or validate the shaper a shaper_msgs/Shaper asks for.
+def shaper_from_msg(msg: ShaperMsg, max_gain: float = DEFAULT_MAX_GAIN) -> Shaper:
+    """Design or validate the shaper a shaper_msgs/Shaper asks for (a custom one within ``max_gain``).
 
     ``vibration_tolerance`` and ``insensitivity`` equal to 0 mean the family default (5 % and
     0.4); any other value is passed on and checked by the design (families that do not use a
@@ -67,6 +68,7 @@ def shaper_from_msg(msg: ShaperMsg) -> Shaper:
         insensitivity=_or_default(msg.insensitivity, DEFAULT_INSENSITIVITY),
         amplitudes=[float(a) for a in msg.amplitudes] if family == "custom" else None,
         times=[float(t) for t in msg.times] if family == "custom" else None,
+        max_gain=max_gain,
     )
 
 

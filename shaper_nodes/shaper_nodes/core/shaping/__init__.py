@@ -34,9 +34,13 @@ from .policy import PolicyError, UpdatePolicy
 from .trajectory import shape_trajectory
 from .types import (
     DEFAULT_INSENSITIVITY,
+    DEFAULT_MAX_GAIN,
     DEFAULT_VIBRATION_TOLERANCE,
     MAX_DAMPING,
+    MAX_DESIGN_MODES,
     MAX_DURATION,
+    MAX_GAIN,
+    MAX_IMPULSES,
     Mode,
     Shaper,
     ShaperError,
@@ -52,10 +56,14 @@ from .vibration import (
 
 __all__ = [
     "DEFAULT_INSENSITIVITY",
+    "DEFAULT_MAX_GAIN",
     "DEFAULT_VIBRATION_TOLERANCE",
     "FAMILIES",
     "MAX_DAMPING",
+    "MAX_DESIGN_MODES",
     "MAX_DURATION",
+    "MAX_GAIN",
+    "MAX_IMPULSES",
     "MAX_STAGES",
     "Mode",
     "PolicyError",

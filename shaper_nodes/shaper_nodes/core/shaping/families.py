@@ -51,7 +51,11 @@ from .ei import ei, hump_ei
 from .si import si
 from .types import (
     DEFAULT_INSENSITIVITY,
+    DEFAULT_MAX_GAIN,
     DEFAULT_VIBRATION_TOLERANCE,
+    MAX_DESIGN_MODES,
+    MAX_GAIN,
+    MAX_IMPULSES,
     Impulses,
     Mode,
     Shaper,
@@ -273,6 +277,7 @@ def design(
     insensitivity: float = DEFAULT_INSENSITIVITY,
     amplitudes: Sequence[float] | None = None,
     times: Sequence[float] | None = None,
+    max_gain: float = DEFAULT_MAX_GAIN,
 ) -> Shaper:
     """Design a shaper of a registry family, or validate a custom sequence.
 
@@ -293,7 +298,11 @@ def design(
         Width of the ``si`` band where V <= V_tol, as a fraction of each design frequency
         (0.4: from 0.8 to 1.2 omega), in (0, 1.5].
     amplitudes, times : sequence of float
-        The impulse sequence of a ``custom`` shaper (times in s).
+        The impulse sequence of a ``custom`` shaper (times in s), at most
+        :data:`~.types.MAX_IMPULSES` impulses.
+    max_gain : float
+        Largest gain sum |A| a ``custom`` shaper may have, in [1, :data:`~.types.MAX_GAIN`]; the
+        default 1 admits non-negative impulses only, so no input is amplified.
 
     Only the parameters a family uses are checked and recorded in ``Shaper.params``.
 
@@ -306,15 +315,15 @@ def design(
     name = str(family).strip().lower()
     info = family_info(name)
     modes = tuple(modes)
+    if len(modes) > MAX_DESIGN_MODES:
+        raise ShaperError(f"{len(modes)} design modes exceed the limit of {MAX_DESIGN_MODES}")
     for m in modes:
         if not isinstance(m, Mode):
             raise ShaperError(f"modes must be Mode objects, got {type(m).__name__}")
     if name == "none":
         return none_shaper()
     if name == "custom":
-        if amplitudes is None or times is None:
-            raise ShaperError("a custom shaper needs amplitudes and times")
-        return Shaper(np.asarray(amplitudes, float), np.asarray(times, float), "custom", modes)
+        return _custom(amplitudes, times, modes, max_gain)
     if not modes:
         raise ShaperError(f"shaper family {name!r} needs at least one mode")
     params = family_params(name, derivative_order=derivative_order, vibration_tolerance=vibration_tolerance,
@@ -325,8 +334,28 @@ def design(
     else:
         amps, ts = info.design(modes[0], **params)
         for mode in modes[1:]:
-            amps, ts = convolve((amps, ts), info.design(mode, **params))
+            more = info.design(mode, **params)
+            if amps.size * more[0].size > MAX_IMPULSES:  # refused before the convolution's work
+                raise ShaperError(f"{name} for {len(modes)} modes needs more than {MAX_IMPULSES} impulses")
+            amps, ts = convolve((amps, ts), more)
     return Shaper(amps / amps.sum(), ts, name, modes, params)
+
+
+def _custom(amplitudes: Sequence[float] | None, times: Sequence[float] | None, modes: tuple[Mode, ...],
+            max_gain: float) -> Shaper:
+    """A custom sequence, validated, whose gain sum |A| stays within ``max_gain``."""
+    if not (math.isfinite(max_gain) and 1.0 <= max_gain <= MAX_GAIN):
+        raise ShaperError(f"max_gain must be in [1, {MAX_GAIN:g}], got {max_gain!r}")
+    if amplitudes is None or times is None:
+        raise ShaperError("a custom shaper needs amplitudes and times")
+    if len(amplitudes) > MAX_IMPULSES:  # before any conversion of a long sequence
+        raise ShaperError(f"{len(amplitudes)} impulses exceed the limit of {MAX_IMPULSES}")
+    shaper = Shaper(np.asarray(amplitudes, float), np.asarray(times, float), "custom", modes)
+    if shaper.gain > max_gain * (1.0 + 1e-9):
+        raise ShaperError(f"the impulses amplify: their gain sum |A| = {shaper.gain:.6g} exceeds max_gain"
+                          f" {max_gain:g} (a unit step would peak at {shaper.step_peak:.6g}); negative impulses"
+                          " need a larger max_gain")
+    return shaper
 
 
 @dataclass(frozen=True)

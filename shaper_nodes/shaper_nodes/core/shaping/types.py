@@ -23,6 +23,14 @@ SUM_TOL = 1e-9
 MAX_DAMPING = 0.95
 #: shaper durations longer than this (s) are refused as almost surely a unit mistake
 MAX_DURATION = 60.0
+#: most impulses a shaper may have, designed or custom: each change does bounded work and memory
+MAX_IMPULSES = 1000
+#: most modes one design may cover (a convolved design has the product of the single-mode counts)
+MAX_DESIGN_MODES = 8
+#: a custom shaper's default gain bound, sum |A|: 1 admits non-negative impulses only (no overshoot)
+DEFAULT_MAX_GAIN = 1.0
+#: the largest gain bound that may be allowed (``max_gain``), for shapers with negative impulses
+MAX_GAIN = 100.0
 #: default tolerated percentage vibration of the ei, 2hump_ei, 3hump_ei and si families (fraction)
 DEFAULT_VIBRATION_TOLERANCE = 0.05
 #: default width of the si band, as a fraction of the design frequency (0.4 = +-20 %)
@@ -107,6 +115,8 @@ class Shaper:
             raise ShaperError("a shaper needs at least one impulse")
         if amps.size != times.size:
             raise ShaperError(f"{amps.size} amplitudes but {times.size} times")
+        if amps.size > MAX_IMPULSES:
+            raise ShaperError(f"{amps.size} impulses exceed the limit of {MAX_IMPULSES}")
         if not (np.all(np.isfinite(amps)) and np.all(np.isfinite(times))):
             raise ShaperError("amplitudes and times must be finite")
         if abs(times[0]) > 1e-12:
@@ -128,6 +138,16 @@ class Shaper:
     def duration(self) -> float:
         """Time of the last impulse, s: how much the shaper lengthens a move."""
         return float(self.times[-1])
+
+    @property
+    def gain(self) -> float:
+        """sum |A|: the most the shaper amplifies any bounded input (1 for non-negative impulses)."""
+        return float(np.abs(self.amplitudes).sum())
+
+    @property
+    def step_peak(self) -> float:
+        """The largest |partial sum| of the amplitudes: the peak of its response to a unit step."""
+        return float(np.max(np.abs(np.cumsum(self.amplitudes))))
 
     def __len__(self) -> int:
         return int(self.amplitudes.size)
