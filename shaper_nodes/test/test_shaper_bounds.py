@@ -63,3 +63,50 @@ def test_too_many_custom_impulses_are_refused():
 def test_designed_shapers_have_unit_gain():
     for family in ("zv", "zvd", "mzv", "ei", "2hump_ei", "si"):
         assert design(family, [MODE]).gain == pytest.approx(1.0), family
+
+
+def test_many_duplicate_joint_names_are_refused_in_linear_time():
+    from shaper_nodes.core.checks import InputError, joint_permutation
+
+    names = ["j1"] * 40_000
+    with pytest.raises(InputError, match=r"duplicate joint names \['j1'\] \(40000 names\)") as err:
+        joint_permutation(["j1", "j2"], names)
+    assert err.value.kind == "duplicate_joint"
+    unknown = [f"x{k}" for k in range(50_000)]
+    with pytest.raises(InputError, match="and 49990 more"):
+        joint_permutation(["j1"], unknown)
+
+
+def test_a_trajectory_too_long_to_shape_is_refused_before_resampling():
+    from shaper_nodes.core.checks import InputError
+    from shaper_nodes.core.shaping import discretize
+    from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_SAMPLES, shape_trajectory
+
+    fir = discretize(design("zv", [MODE]), 500.0)
+    for span in (1e5, 3600.0):  # the node once died (1.1 GiB) or stalled 46 s on these
+        with pytest.raises(InputError, match=f"exceed the limit of {MAX_TRAJECTORY_SAMPLES}") as err:
+            shape_trajectory(np.array([0.0, span]), np.array([[0.0], [1.0]]), fir, 500.0)
+        assert err.value.kind == "too_large"
+    out = shape_trajectory(np.array([0.0, 2.0]), np.array([[0.0], [1.0]]), fir, 500.0)
+    assert out.positions[-1, 0] == pytest.approx(1.0)
+    with pytest.raises(InputError, match="time_from_start of point 0 is negative"):
+        shape_trajectory(np.array([-1.0, 2.0]), np.array([[0.0], [1.0]]), fir, 500.0)
+
+
+def test_a_message_with_too_many_points_or_negative_times_is_refused():
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from shaper_nodes.core.checks import InputError
+    from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
+    from shaper_nodes.ros.conversions import trajectory_arrays
+
+    many = [JointTrajectoryPoint(positions=[0.0])] * (MAX_TRAJECTORY_POINTS + 1)
+    msg = JointTrajectory(joint_names=["j1"], points=many)
+    with pytest.raises(InputError, match="points exceed the limit"):
+        trajectory_arrays(msg, ["j1"], require_times=True)
+    msg = JointTrajectory(joint_names=["j1"], points=[
+        JointTrajectoryPoint(positions=[0.0], time_from_start=Duration(sec=-1)),
+        JointTrajectoryPoint(positions=[1.0], time_from_start=Duration(sec=1))])
+    with pytest.raises(InputError, match="time_from_start of point 0 is negative"):
+        trajectory_arrays(msg, ["j1"], require_times=True)

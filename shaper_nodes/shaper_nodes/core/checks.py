@@ -14,6 +14,7 @@ Two kinds of checks live here:
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,6 +32,7 @@ KINDS = (
     "inconsistent_fields",
     "invalid_shaper",
     "unsupported",
+    "too_large",
 )
 
 
@@ -83,17 +85,24 @@ def joint_permutation(configured: Sequence[str], received: Sequence[str]) -> np.
     received = list(received)
     if not received:
         raise InputError("empty", "joint_names is empty")
-    if len(set(received)) != len(received):
-        dups = sorted({n for n in received if received.count(n) > 1})
-        raise InputError("duplicate_joint", f"duplicate joint names {dups}")
-    unknown = [n for n in received if n not in configured]
+    counts = Counter(received)  # O(n): a message of many names must not stall the node
+    if len(counts) != len(received):
+        dups = sorted(n for n, c in counts.items() if c > 1)
+        raise InputError("duplicate_joint", f"duplicate joint names {_few(dups)} ({len(received)} names)")
+    known = set(configured)
+    unknown = [n for n in received if n not in known]
     if unknown:
-        raise InputError("unknown_joint", f"unknown joint names {unknown}; expected {list(configured)}")
-    missing = [n for n in configured if n not in received]
+        raise InputError("unknown_joint", f"unknown joint names {_few(unknown)}; expected {list(configured)}")
+    missing = [n for n in configured if n not in counts]
     if missing:
         raise InputError("missing_joint", f"missing joint names {missing}")
     index = {n: i for i, n in enumerate(received)}
     return np.array([index[n] for n in configured], dtype=int)
+
+
+def _few(names: list[str], most: int = 10) -> str:
+    """At most ``most`` names for a message, and how many more there are."""
+    return str(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
 
 
 def strictly_increasing(name: str, times: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ from shaper_nodes.core.shaping import (
     ShaperError,
     design,
 )
+from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
 
 
 def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None = None) -> ShaperMsg:
@@ -128,11 +129,16 @@ def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_
         Unknown, missing or duplicate joints, no points, a field on some points only, wrong sizes,
         non-finite values or non-increasing times (the error's ``kind`` names the class).
     """
+    if len(msg.points) > MAX_TRAJECTORY_POINTS:  # before any work on them
+        raise InputError("too_large", f"{len(msg.points)} points exceed the limit of {MAX_TRAJECTORY_POINTS}")
     perm = joint_permutation(joint_names, msg.joint_names)
     if not msg.points:
         raise InputError("empty", "trajectory has no points")
     n = len(joint_names)
     times = np.array([duration_to_sec(p.time_from_start) for p in msg.points])
+    if np.any(times < 0):
+        k = int(np.argmax(times < 0))
+        raise InputError("non_increasing_time", f"time_from_start of point {k} is negative ({times[k]:g} s)")
     if require_times or len(times) > 1:
         strictly_increasing("time_from_start", times)
     fields: dict[str, np.ndarray] = {}

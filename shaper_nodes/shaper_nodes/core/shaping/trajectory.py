@@ -16,6 +16,33 @@ from shaper_nodes.core.checks import InputError, finite_array, strictly_increasi
 
 from .fir import SparseFir, StreamingShaper
 
+#: most points of one trajectory (a message or a request), refused before any work
+MAX_TRAJECTORY_POINTS = 100_000
+#: most samples of a shaped trajectory (its span x the command rate, plus the shaper): 10 min at
+#: 500 Hz; bounds the memory and time of one request (about 17 MB per joint)
+MAX_TRAJECTORY_SAMPLES = 300_000
+
+
+def check_extent(times: np.ndarray, rate: float, extra: int = 0) -> None:
+    """Refuse a trajectory whose times are negative or whose resampling would pass the limits.
+
+    Raises
+    ------
+    InputError
+        ``too_large`` (too many points or samples) or ``non_increasing_time`` (a negative time).
+    """
+    t = np.asarray(times, dtype=float)
+    if t.size > MAX_TRAJECTORY_POINTS:
+        raise InputError("too_large", f"{t.size} points exceed the limit of {MAX_TRAJECTORY_POINTS}")
+    if t.size and np.any(t < 0):
+        k = int(np.argmax(t < 0))
+        raise InputError("non_increasing_time", f"time_from_start of point {k} is negative ({t[k]:g} s)")
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    samples = span * rate + 2 + extra
+    if not samples <= MAX_TRAJECTORY_SAMPLES:
+        raise InputError("too_large", f"the trajectory spans {span:.6g} s: {samples:.6g} samples at {rate:g} Hz"
+                         f" exceed the limit of {MAX_TRAJECTORY_SAMPLES}")
+
 
 @dataclass(frozen=True)
 class SampledTrajectory:
@@ -85,6 +112,7 @@ def shape_trajectory(
     p = finite_array("positions", positions)
     if p.ndim != 2:
         raise InputError("wrong_size", "positions must be an (N, J) array")
+    check_extent(strictly_increasing("time_from_start", times), rate, fir.length)
     if velocities is not None:
         velocities = finite_array("velocities", velocities, size=p.size).reshape(p.shape)
     grid, sampled = resample(times, p, velocities, rate)
