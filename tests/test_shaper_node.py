@@ -108,6 +108,7 @@ ARRAY_CASES = [
     ([1.0, math.inf, 0.0], "non_finite", "non-finite"),
     ([1.0, 2.0], "wrong_size", "has 2 values, expected 3"),
     ([], "empty", "empty"),
+    ([1.7e308, 0.0, 0.0], "too_large", "beyond the limit of 1e+06 in magnitude"),  # finite, overflows a sum
 ]
 
 
@@ -171,6 +172,16 @@ def test_invalid_parameters_are_refused_and_the_old_shaper_stays(rig):
     assert rig.active[-1].family == "zvd" and rig.active[-1].source == "parameters"
     assert rig.node.set_parameters_atomically([Parameter("discretization", value="exact")]).successful
     rig.spin_until(lambda: rig.active[-1].revision == rev + 2, "the same shaper, discretised exactly")
+
+
+def test_a_huge_finite_sample_cannot_poison_the_filter(rig):
+    """One sample of 1e17 used to leave the filter's state without precision (a steady 0.3 came out as 0)."""
+    send_valid_array_and_expect_output(rig, 0.0)
+    rig.array_in.publish(Float64MultiArray(data=[1e17, 0.0, 0.0]))
+    rig.spin_until(lambda: rig.node.rejections["too_large"] == 1, "the refusal of 1e17")
+    for _ in range(60):  # longer than the shaper (zv at 5 Hz: 0.1 s, 10 samples at 100 Hz)
+        send_valid_array_and_expect_output(rig, 0.3)
+    assert rig.array_out[-1] == pytest.approx([0.3] * 3, abs=1e-12)
 
 
 def test_set_shaper_service_validates_and_policy_applies(rig):

@@ -110,3 +110,18 @@ def test_a_message_with_too_many_points_or_negative_times_is_refused():
         JointTrajectoryPoint(positions=[1.0], time_from_start=Duration(sec=1))])
     with pytest.raises(InputError, match="time_from_start of point 0 is negative"):
         trajectory_arrays(msg, ["j1"], require_times=True)
+
+
+def test_finite_input_that_would_overflow_the_output_is_refused():
+    from shaper_nodes.core.checks import InputError, finite_array
+    from shaper_nodes.core.shaping import discretize
+    from shaper_nodes.core.shaping.trajectory import shape_trajectory
+
+    fir = discretize(design("zv", [MODE]), 500.0)
+    with pytest.raises(InputError, match="accelerations are not finite") as err:  # 0 to 1e308 in 1 s
+        shape_trajectory(np.array([0.0, 1.0]), np.array([[0.0], [1e308]]), fir, 500.0)
+    assert err.value.kind == "non_finite"
+    with pytest.raises(InputError, match=r"data has -1.7e\+308 at index 1, beyond the limit of 1e\+06") as err:
+        finite_array("data", [0.0, -1.7e308], limit=1e6)
+    assert err.value.kind == "too_large"
+    assert finite_array("data", [1e6, -1e6], limit=1e6).tolist() == [1e6, -1e6]

@@ -46,8 +46,9 @@ class InputError(ValueError):
         self.kind = kind
 
 
-def finite_array(name: str, values: Sequence[float] | np.ndarray, size: int | None = None) -> np.ndarray:
-    """Return ``values`` as a float array after checking its size and that all are finite.
+def finite_array(name: str, values: Sequence[float] | np.ndarray, size: int | None = None,
+                 limit: float = math.inf) -> np.ndarray:
+    """Return ``values`` as a float array after checking its size, that all are finite and within ``limit``.
 
     Parameters
     ----------
@@ -57,6 +58,9 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, size: int | No
         The values.
     size : int, optional
         Required number of values.
+    limit : float, optional
+        Largest magnitude allowed (``too_large`` beyond it): finite values so large that they are
+        implausible, refused before they reach a filter's state or overflow its sums.
     """
     arr = np.asarray(values, dtype=float)
     if arr.size == 0:
@@ -71,6 +75,12 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, size: int | No
             f"{name} has non-finite values at index {idx[:5].tolist()}"
             f" ({float(arr.ravel()[idx[0]])!r} first)",
         )
+    if limit < math.inf:
+        over = np.abs(arr) > limit
+        if over.any():
+            k = int(np.flatnonzero(over.ravel())[0])
+            raise InputError("too_large", f"{name} has {float(arr.ravel()[k])!r} at index {k}, beyond the limit"
+                             f" of {limit:g} in magnitude")
     return arr
 
 

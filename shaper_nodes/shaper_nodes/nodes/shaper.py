@@ -112,6 +112,9 @@ PARAMETERS: tuple[Spec, ...] = (
          " 1 (default) admits non-negative impulses only; larger allows negative impulses, whose output may"
          f" overshoot the input by up to this factor. In [1, {MAX_GAIN:g}].", (1.0, MAX_GAIN),
          check=lambda v: design("custom", amplitudes=[1.0], times=[0.0], max_gain=v)),
+    Spec("limits.max_abs_value", 1e6, "Largest magnitude of any input value (position rad or m, velocity,"
+         " acceleration in their SI units): a larger, finite value is implausible and refused before it reaches"
+         " the filters, so their state keeps its precision and no sum overflows.", (1e-3, 1e12)),
     Spec("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"],
          "Sources allowed to change the active shaper (update policy).", read_only=True),
     Spec("retime_sources", None, "Sources whose changes re-time the motion already commanded (time-varying"
@@ -157,6 +160,7 @@ class ShaperNode(Node):
         self._stream_filters = {f: filt(self._fir, n) for f in TRAJ_FIELDS}
         self._stream_fields: tuple[str, ...] | None = None
         self._pending_params: tuple[Shaper, str] | None = None
+        self._max_abs = float(p("limits.max_abs_value").value)
 
         self.rejections: Counter[str] = Counter()
         self.forwarded: Counter[str] = Counter()
@@ -248,6 +252,9 @@ class ShaperNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_params(self, params: list[Parameter]) -> None:
+        for param in params:
+            if param.name == "limits.max_abs_value":
+                self._max_abs = float(param.value)
         pending, self._pending_params = self._pending_params, None
         if pending is not None:
             self._commit(pending[0], PARAMETERS_SOURCE, pending[1])
@@ -316,9 +323,13 @@ class ShaperNode(Node):
         self.diagnostics.publish("shaper", level, msg, values)
 
     # ----------------------------------------------------------------- data paths
+    def _limit(self) -> float:
+        """limits.max_abs_value (cached: read on every sample)."""
+        return self._max_abs
+
     def _on_array(self, msg: Float64MultiArray) -> None:
         try:
-            x = finite_array("data", msg.data, size=len(self.joint_names))
+            x = finite_array("data", msg.data, size=len(self.joint_names), limit=self._limit())
         except InputError as err:
             self._reject(self._in_topics["array_in"], err)
             return
@@ -330,7 +341,7 @@ class ShaperNode(Node):
     def _on_stream(self, msg: JointTrajectory) -> None:
         topic = self._in_topics["stream_in"]
         try:
-            _, fields = trajectory_arrays(msg, self.joint_names, require_times=False)
+            _, fields = trajectory_arrays(msg, self.joint_names, require_times=False, limit=self._limit())
             names = tuple(fields)
             if self._stream_fields is not None and names != self._stream_fields:
                 raise InputError("inconsistent_fields",
@@ -346,7 +357,7 @@ class ShaperNode(Node):
 
     def shape_whole(self, msg: JointTrajectory) -> JointTrajectory:
         """Shape a whole trajectory (raises InputError on bad input)."""
-        times, fields = trajectory_arrays(msg, self.joint_names, require_times=True)
+        times, fields = trajectory_arrays(msg, self.joint_names, require_times=True, limit=self._limit())
         result = shape_trajectory(times, fields["positions"], self._fir, self.rate, fields.get("velocities"))
         return trajectory_msg(msg.header, self.joint_names, result.times,
                               {"positions": result.positions, "velocities": result.velocities,

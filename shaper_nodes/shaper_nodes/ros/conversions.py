@@ -3,6 +3,7 @@ shapers, stamps and durations, trajectories."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -115,8 +116,8 @@ def sec_to_time(t: float) -> Time:
 TRAJ_FIELDS = ("positions", "velocities", "accelerations")
 
 
-def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_times: bool
-                      ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_times: bool,
+                      limit: float = math.inf) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """A JointTrajectory as arrays in the configured joint order: (times (N,) s, {field: (N, joints)}).
 
     Joints may come in any order. Every point needs positions; velocities and accelerations are
@@ -149,7 +150,8 @@ def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_
         if any(present) and not all(present):
             raise InputError("inconsistent_fields", f"{f} given for some points but not all")
         if all(present):
-            rows = [finite_array(f"point {i} {f}", getattr(p, f), size=n) for i, p in enumerate(msg.points)]
+            rows = [finite_array(f"point {i} {f}", getattr(p, f), size=n, limit=limit)
+                    for i, p in enumerate(msg.points)]
             fields[f] = np.vstack(rows)[:, perm]
     return times, fields
 

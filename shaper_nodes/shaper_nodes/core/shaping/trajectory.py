@@ -123,8 +123,13 @@ def shape_trajectory(
     shaped[-1] = sampled[-1]
     dt = 1.0 / rate
     out_t = grid[0] + dt * np.arange(shaped.shape[0])
-    vel = np.gradient(shaped, dt, axis=0) if shaped.shape[0] > 1 else np.zeros_like(shaped)
-    acc = np.gradient(vel, dt, axis=0) if shaped.shape[0] > 1 else np.zeros_like(shaped)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, by name
+        vel = np.gradient(shaped, dt, axis=0) if shaped.shape[0] > 1 else np.zeros_like(shaped)
+        acc = np.gradient(vel, dt, axis=0) if shaped.shape[0] > 1 else np.zeros_like(shaped)
     vel[-1] = 0.0
     acc[-1] = 0.0
+    for name, values in (("positions", shaped), ("velocities", vel), ("accelerations", acc)):
+        if not np.all(np.isfinite(values)):  # finite input can still overflow here: nothing of it is passed on
+            raise InputError("non_finite", f"the shaped trajectory's {name} are not finite: the input is too large"
+                             " or too steep to pass on")
     return SampledTrajectory(out_t, shaped, vel, acc)
