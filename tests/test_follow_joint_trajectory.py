@@ -5,7 +5,9 @@ control_msgs/action/FollowJointTrajectory interface, records each goal it receiv
 few feedback messages, and then succeeds, aborts with a given error, or holds the goal until it
 is cancelled or released. The shaper node, the controller and a client node share one
 SingleThreadedExecutor (the shaper's own run_node spins the same way); one test runs the installed
-shaper_node executable as a subprocess instead.
+shaper_node executable as a subprocess instead. With ``action.scheduler``, a scheduler node (the real
+one, in the same executor, or a fake ``~/shaper_at`` server) gives the shaper for each goal's final
+pose.
 """
 
 from __future__ import annotations
@@ -20,16 +22,22 @@ from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectoryPoint
 
+from shaper_msgs.msg import Mode as ModeMsg
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_msgs.srv import ShaperAt
+from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict, triangular_partition
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.core.shaping.fir import discretize
 from shaper_nodes.core.shaping.trajectory import shape_trajectory
+from shaper_nodes.nodes.scheduler import SchedulerNode
 from shaper_nodes.nodes.shaper import ShaperNode
 from shaper_nodes.ros.conversions import duration_to_sec
 
@@ -132,6 +140,7 @@ class Rig:
         self.probe = rclpy.create_node("probe", context=ctx)
         self.client = ActionClient(self.probe, FollowJointTrajectory, SERVER)
         self.diag: list = []
+        self.statuses: list = []  # every status, not only the input refusals
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
         self.ex = SingleThreadedExecutor(context=ctx)
         for n in (self.node, self.probe) + ((controller.node,) if controller else ()):
@@ -143,6 +152,7 @@ class Rig:
 
     def _on_diag(self, msg) -> None:
         self.diag += [s for s in msg.status if s.name.endswith(": input")]
+        self.statuses += msg.status
 
     def spin_until(self, cond, what: str, timeout: float = 10.0) -> None:
         end = time.monotonic() + timeout
@@ -371,4 +381,140 @@ def test_cancel_before_the_goal_reached_the_controller(ros_context):
         assert status == GoalStatus.STATUS_CANCELED
         assert result.error_string == "canceled before it was sent to the controller"
     finally:
+        rig.close()
+
+
+# ------------------------------------------------------------------ shaping for the final pose (action.scheduler)
+#: a rule base over j1 (rad): modes of 4, 6 and 8 Hz at j1 = 0, 1, 2 rad, interpolated directly
+POSE_POINTS, POSE_HZ, POSE_ZETA = (0.0, 1.0, 2.0), (4.0, 6.0, 8.0), 0.02
+
+
+def pose_rule_base() -> dict:
+    rules = {}
+    for k, (mf, hz) in enumerate(zip(triangular_partition(POSE_POINTS), POSE_HZ, strict=True)):
+        rules[f"r{k}"] = {"membership": ["triangular"], "membership_params": [mf.a, mf.b, mf.c],
+                          "natural_frequency": [2 * math.pi * hz], "damping_ratio": [POSE_ZETA]}
+    return {"premises": ["j1"], "rules": rules}
+
+
+def pose_scheduler(ctx) -> SchedulerNode:
+    spec = pose_rule_base()
+    params = {"premises": spec["premises"], "rule_names": list(spec["rules"]), "interpolation": "modes",
+              "family": "zvd", "error_throttle": 0.0}
+    for name, rule in spec["rules"].items():
+        params.update({f"rules.{name}.{k}": v for k, v in rule.items()})
+    return SchedulerNode(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+
+def core_shaped(traj: JointTrajectory, shaper):
+    """``traj`` (joints j2, j1, j3) shaped by the core with ``shaper``, in the node's order j1, j2, j3."""
+    positions = np.array([[p.positions[1], p.positions[0], p.positions[2]] for p in traj.points])
+    return shape_trajectory(times_of(traj), positions, discretize(shaper, RATE, "split"), RATE)
+
+
+ACTIVE = design("zv", [Mode.from_hz(5.0, 0.0)])  # the Rig's active shaper
+ENDS_AT_1_5 = trajectory(points=((0.0, (0, 0, 0)), (0.5, (0.5, 1.0, 0.0)), (1.0, (1.0, 1.5, -1.0))))  # j1 -> 1.5
+
+
+def assert_forwarded_as(controller, k: int, expected) -> None:
+    sent = controller.goals[k].trajectory
+    assert_valid_for_jtc(sent)
+    np.testing.assert_allclose(times_of(sent), expected.times, atol=1e-9)
+    np.testing.assert_allclose([p.positions for p in sent.points], expected.positions, atol=1e-12)
+    np.testing.assert_allclose([p.velocities for p in sent.points], expected.velocities, atol=1e-9)
+
+
+def pose_warning(rig, words: str):
+    return next((s for s in rig.statuses if s.name == "shaper: pose_shaper" and words in s.message), None)
+
+
+def test_a_goal_is_shaped_for_the_modes_at_its_final_pose(ros_context, controller):
+    rig = Rig(ros_context, controller, **{"action.scheduler": "/scheduler"})
+    sched = pose_scheduler(ros_context)
+    rig.ex.add_node(sched)
+    try:
+        rig.spin_until(rig.node.pose_shaper.service_is_ready, "the scheduler's shaper_at")
+        status, _ = rig.send(goal_of(ENDS_AT_1_5)).wait_result()
+        assert status == GoalStatus.STATUS_SUCCEEDED
+        # the scheduler's shaper at j1 = 1.5 (the final point), from the core: zvd on the mode
+        # interpolated halfway between 6 and 8 Hz
+        _, at_end = Scheduler(rule_base_from_dict(pose_rule_base()), "modes", "zvd").at([1.5])
+        assert at_end.family == "zvd" and at_end.modes[0].hz == pytest.approx(7.0, rel=1e-12)
+        expected = core_shaped(ENDS_AT_1_5, at_end)
+        assert_forwarded_as(controller, 0, expected)
+        sent = times_of(controller.goals[0].trajectory)
+        assert sent[-1] != pytest.approx(core_shaped(ENDS_AT_1_5, ACTIVE).times[-1], abs=1e-3)  # not the active one
+        assert sent[-1] - 1.0 == pytest.approx(at_end.duration, abs=2 / RATE)  # longer by the zvd's duration
+        assert (rig.node.pose_shaper.shaped, rig.node.pose_shaper.fallbacks) == (1, 0)
+        # the active (streaming) shaper is not changed, and the scheduler sent nothing to the node
+        assert rig.node.active_msg().revision == 1 and rig.node.active_msg().family == "zv"
+        assert sched.sent == 0
+    finally:
+        sched.destroy_node()
+        rig.close()
+
+
+def test_without_the_scheduler_the_goal_is_shaped_with_the_active_shaper_and_a_warning_says_why(ros_context,
+                                                                                                controller):
+    rig = Rig(ros_context, controller, **{"action.scheduler": "/nobody", "action.server_timeout": 0.5})
+    try:
+        status, result = rig.send(goal_of(ENDS_AT_1_5)).wait_result()
+        assert status == GoalStatus.STATUS_SUCCEEDED and result.error_code == Result.SUCCESSFUL
+        assert_forwarded_as(controller, 0, core_shaped(ENDS_AT_1_5, ACTIVE))
+        rig.spin_until(lambda: pose_warning(rig, "service /nobody/shaper_at not available within 0.5 s"),
+                       "the warning on /diagnostics")
+        warning = pose_warning(rig, "not available")
+        assert warning.level == DiagnosticStatus.WARN
+        assert warning.message.startswith("goal shaped with the active shaper, not for its final pose")
+        assert (rig.node.pose_shaper.shaped, rig.node.pose_shaper.fallbacks) == (0, 1)
+    finally:
+        rig.close()
+
+
+class FakeScheduler:
+    """A ``/fake/shaper_at`` that answers as told: a response, or never (``None``)."""
+
+    def __init__(self, ctx, response) -> None:
+        self.node = rclpy.create_node("fake", context=ctx)
+        self.response = response
+        self.poses: list = []
+        self._never = Future()
+        self.node.create_service(ShaperAt, "~/shaper_at", self._on_request, callback_group=ReentrantCallbackGroup())
+
+    async def _on_request(self, request, response):
+        self.poses.append(request.pose)
+        if self.response is None:
+            await self._never
+        return self.response
+
+
+@pytest.mark.parametrize("answer, words", [
+    (ShaperAt.Response(success=False, message="no rule fires at j1 = 1.5"),
+     "/fake/shaper_at refused the final pose: no rule fires at j1 = 1.5"),
+    (ShaperAt.Response(success=True, shaper=ShaperMsg(family="custom", amplitudes=[2.0, -1.0], times=[0.0, 0.1])),
+     "is refused here: the impulses amplify: their gain sum |A| = 3 exceeds max_gain 1"),
+    (ShaperAt.Response(success=True, shaper=ShaperMsg(family="zv", design_modes=[ModeMsg(
+        natural_frequency=2 * math.pi * 1000.0, damping_ratio=0.0)])),
+     "is refused here: shaper duration 0.5 ms is shorter than one command period (10 ms)"),
+    (ShaperAt.Response(success=True, shaper=ShaperMsg(family="custom", amplitudes=[1.0 / 1001] * 1001,
+                                                      times=[k * 1e-3 for k in range(1001)])),
+     "is refused here: 1001 impulses exceed the limit of 1000"),
+    (None, "no answer from the scheduler: /fake/shaper_at did not answer within 0.5 s"),
+], ids=["refused", "gain", "too_short", "too_many_impulses", "no_answer"])
+def test_a_refused_pose_or_shaper_falls_back_to_the_active_shaper_with_a_warning(ros_context, controller, answer,
+                                                                                  words):
+    rig = Rig(ros_context, controller, **{"action.scheduler": "/fake", "action.server_timeout": 0.5})
+    fake = FakeScheduler(ros_context, answer)
+    rig.ex.add_node(fake.node)
+    try:
+        rig.spin_until(rig.node.pose_shaper.service_is_ready, "the fake shaper_at")
+        status, _ = rig.send(goal_of(ENDS_AT_1_5)).wait_result()
+        assert status == GoalStatus.STATUS_SUCCEEDED
+        assert_forwarded_as(controller, 0, core_shaped(ENDS_AT_1_5, ACTIVE))
+        rig.spin_until(lambda: pose_warning(rig, words), f"the warning {words!r}")
+        # the request named the goal's joints and its final positions
+        assert list(fake.poses[0].name) == ["j2", "j1", "j3"] and list(fake.poses[0].position) == [1.0, 1.5, -1.0]
+        assert (rig.node.pose_shaper.shaped, rig.node.pose_shaper.fallbacks) == (0, 1)
+    finally:
+        fake.node.destroy_node()
         rig.close()

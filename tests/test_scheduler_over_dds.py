@@ -3,7 +3,8 @@
 The reproduction runs sim plant, shaper and scheduler as separate processes in lockstep. The
 policy test runs the scheduler in-process with the real shaper node as a subprocess, a probe
 that publishes joint states, and a peer that speaks the learner's side of the interface
-(``/scheduler/set_shaper`` with source "learner", ``/scheduler/active_shaper``).
+(``/scheduler/set_shaper`` with source "learner", ``/scheduler/active_shaper``) and asks
+``/scheduler/shaper_at`` for the shaper at other poses.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from sensor_msgs.msg import JointState
 from reproductions.scheduler_cases import CASES, rule_base_spec, run_case, scheduler_parameters
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_msgs.srv import SetShaper
+from shaper_msgs.srv import SetShaper, ShaperAt
+from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
 from shaper_nodes.core.scheduling.fuzzy import modes_of
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.nodes.scheduler import SchedulerNode
@@ -57,6 +59,7 @@ class Peer(Node):
         super().__init__("peer", context=context)
         self.js = self.create_publisher(JointState, "/joint_states", 10)
         self.cli = self.create_client(SetShaper, "/scheduler/set_shaper")
+        self.at = self.create_client(ShaperAt, "/scheduler/shaper_at")
         self.active: list[ShaperMsg] = []
         self.real: list[ShaperMsg] = []
         self.modes: list[ModeEstimate] = []
@@ -75,6 +78,13 @@ def spin_until(ex, done, timeout: float, what: str) -> None:
         ex.spin_once(timeout_sec=0.02)
 
 
+def shaper_at(peer, ex, names, positions) -> ShaperAt.Response:
+    spin_until(ex, peer.at.service_is_ready, 30.0, "shaper_at")
+    future = peer.at.call_async(ShaperAt.Request(pose=JointState(name=list(names), position=list(positions))))
+    spin_until(ex, future.done, 30.0, "the answer of shaper_at")
+    return future.result()
+
+
 def true_mode(x: float) -> Mode:
     return modes_of(two_mass_matrices(float(m1_of(x)))[0])[0]
 
@@ -90,7 +100,8 @@ def graph(start_node, ros_context):
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(sched)
     ex.add_node(peer)
-    spin_until(ex, lambda: peer.cli.service_is_ready() and sched.shaper.service_is_ready(), 30.0, "services")
+    spin_until(ex, lambda: (peer.cli.service_is_ready() and sched.shaper.service_is_ready()
+                            and peer.at.service_is_ready()), 30.0, "services")
     yield sched, peer, ex
     ex.shutdown()
     peer.destroy_node()
@@ -153,6 +164,9 @@ def test_the_learner_correction_is_kept_per_region_and_reapplied(graph):
     assert back.source == "scheduler" and back.family == "custom"
     np.testing.assert_allclose(back.times, [0.0, t2], rtol=1e-9)
     np.testing.assert_allclose(back.amplitudes, [a1, 1 - a1], rtol=1e-9)
+    at = shaper_at(peer, ex, ["joint_1"], [0.1])  # ~/shaper_at gives the corrected shaper there too
+    assert at.success and at.shaper.family == "custom" and "(region x1)" in at.message
+    np.testing.assert_allclose(at.shaper.times, [0.0, t2], rtol=1e-9)
     # other sources are not taken here (they set the shaper node directly)
     future = peer.cli.call_async(SetShaper.Request(shaper=ShaperMsg(family="zv", source="user")))
     spin_until(ex, future.done, 10.0, "the refusal")
@@ -175,3 +189,34 @@ def test_the_real_learner_speaks_to_the_scheduler(graph, start_node):
         peer.pose(0.6)
         ex.spin_once(timeout_sec=0.02)
     assert sched.sent == sent and peer.real[-1].source == "learner"
+
+
+def test_shaper_at_gives_the_schedules_shaper_at_any_pose_and_sends_nothing(graph):
+    sched, peer, ex = graph
+    settle_at(sched, peer, ex, 0.1)
+    sent, revision, here = sched.sent, peer.real[-1].revision, peer.modes[-1].modes[0].natural_frequency
+    core = Scheduler(rule_base_from_dict(rule_base_spec(np.linspace(0.0, 0.7, 8))), "model", "zv")
+    for x, where in ((0.05, 0.05), (0.45, 0.45), (1.5, 0.7)):  # 1.5 is clamped to the range's end, 0.7
+        resp = shaper_at(peer, ex, ["elbow", "joint_1"], [9.0, x])  # other joints are ignored
+        assert resp.success, resp.message
+        interp, expected = core.at([where])
+        assert resp.shaper.family == expected.family == "zv" and resp.shaper.source == "scheduler"
+        np.testing.assert_allclose(resp.shaper.times, expected.times, rtol=1e-12)
+        np.testing.assert_allclose(resp.shaper.amplitudes, expected.amplitudes, rtol=1e-12)
+        assert [(m.natural_frequency, m.damping_ratio) for m in resp.shaper.design_modes] == \
+            [(m.omega, m.zeta) for m in interp.modes]
+        assert [(m.natural_frequency, m.damping_ratio) for m in resp.estimate.modes] == \
+            [(m.omega, m.zeta) for m in interp.modes]
+        assert resp.estimate.source == "scheduler" and f"joint_1 = {x:.6g}" in resp.message
+        assert ("joint_1 = 1.5 outside [0, 0.7]: clamped, not extrapolated" in resp.message) == (x == 1.5)
+    for names, positions, words in ((["elbow"], [0.2], "missing premise joints ['joint_1']"),
+                                    (["joint_1"], [math.nan], "non-finite premise values: joint_1 = nan"),
+                                    (["joint_1", "elbow"], [0.2], "1 positions for 2 names"),
+                                    (["joint_1", "joint_1"], [0.2, 0.3], "named more than once: ['joint_1']")):
+        resp = shaper_at(peer, ex, names, positions)
+        assert not resp.success and words in resp.message, resp.message
+        assert not resp.shaper.times and not resp.estimate.modes
+    # nothing went to the shaper node, and the schedule is still at the pose of the joint states
+    spin_until(ex, lambda: not sched._pending, 10.0, "no request in flight")
+    assert sched.sent == sent and peer.real[-1].revision == revision
+    assert peer.modes[-1].modes[0].natural_frequency == here

@@ -22,6 +22,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
+from shaper_nodes.core.shaping import design, modes_from_hz
 from shaper_nodes.nodes.shaper import ShaperNode
 from shaper_nodes.ros.qos import LATCHED
 
@@ -241,3 +242,62 @@ def test_whole_trajectory_service(rig):
     bad = stream_msg(JOINTS, [(1.0, [0, 0, 0]), (1.0, [1, 1, 1])])
     resp = rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=bad))
     assert not resp.success and "not strictly increasing" in resp.message
+
+
+def modes_of(msg):
+    return [(m.natural_frequency, m.damping_ratio) for m in msg.design_modes]
+
+
+def test_several_modes_from_parameters_give_the_convolved_shaper_and_change_live(ros_context):
+    rig = Rig(ros_context, **{"shaper.frequencies_hz": [2.0, 7.0], "shaper.damping_ratios": [0.0, 0.05]})
+    try:
+        active = rig.active[-1]
+        expected = design("zv", modes_from_hz([2.0, 7.0], [0.0, 0.05]))  # zv per mode, convolved
+        assert active.family == "zv" and len(active.times) == 4 == len(expected)
+        assert modes_of(active) == [(2 * math.pi * 2.0, 0.0), (2 * math.pi * 7.0, 0.05)]
+        np.testing.assert_allclose(active.times, expected.times, rtol=1e-12)
+        np.testing.assert_allclose(active.amplitudes, expected.amplitudes, rtol=1e-12)
+        send_valid_array_and_expect_output(rig, 0.0)
+        send_valid_array_and_expect_output(rig, 1.0)  # the streaming path uses it: the first impulse now
+        assert rig.array_out[-1][0] == pytest.approx(expected.amplitudes[0], rel=1e-12)
+
+        # live, both lists at once: three modes, like any shaper.* change (source parameters, a revision)
+        rev = active.revision
+        assert rig.node.set_parameters_atomically([Parameter("shaper.frequencies_hz", value=[2.0, 7.0, 11.0]),
+                                                   Parameter("shaper.damping_ratios", value=[0.0, 0.05, 0.1])
+                                                   ]).successful
+        rig.spin_until(lambda: rig.active[-1].revision == rev + 1, "the three-mode shaper")
+        assert len(rig.active[-1].design_modes) == 3 and len(rig.active[-1].times) == 8
+        assert rig.active[-1].source == "parameters"
+
+        # refused with a reason, the old shaper stays
+        for params, words in (
+                ([Parameter("shaper.frequencies_hz", value=[2.0, 7.0])],
+                 "shaper.frequencies_hz / shaper.damping_ratios: 2 frequencies but 3 damping ratios"),
+                ([Parameter("shaper.frequencies_hz", value=[2.0, 7.0, 30.0])],
+                 "shaper.frequencies_hz 30 Hz is too high for command_rate 100 Hz"),
+                ([Parameter("shaper.damping_ratios", value=[0.0, 0.05, 1.2])],
+                 "mode 2 (11.0 Hz, damping ratio 1.2): damping ratio must be in [0, 0.95]"),
+                ([Parameter("shaper.frequencies_hz", value=[1.0] * 9), Parameter("shaper.damping_ratios",
+                                                                                 value=[0.0] * 9)],
+                 "9 modes exceed the limit of 8")):
+            result = rig.node.set_parameters_atomically(params)
+            assert not result.successful and words in result.reason, result.reason
+        rig.settle(0.2)
+        assert rig.active[-1].revision == rev + 1
+
+        # both emptied: back to shaper.frequency_hz and shaper.damping_ratio (5 Hz, 0)
+        empty = Parameter.Type.DOUBLE_ARRAY
+        assert rig.node.set_parameters_atomically([Parameter("shaper.frequencies_hz", empty, []),
+                                                   Parameter("shaper.damping_ratios", empty, [])]).successful
+        rig.spin_until(lambda: rig.active[-1].revision == rev + 2, "the single-mode shaper")
+        assert modes_of(rig.active[-1]) == [(2 * math.pi * 5.0, 0.0)]
+    finally:
+        rig.close()
+
+
+def test_a_node_started_with_mode_lists_of_different_lengths_says_so(ros_context):
+    with pytest.raises(ValueError, match="2 frequencies but 1 damping ratios: give one damping ratio per frequency"):
+        ShaperNode(context=ros_context, parameter_overrides=[
+            Parameter("joint_names", value=JOINTS), Parameter("shaper.family", value="zv"),
+            Parameter("shaper.frequencies_hz", value=[2.0, 7.0]), Parameter("shaper.damping_ratios", value=[0.0])])

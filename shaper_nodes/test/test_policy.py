@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from shaper_nodes.core.shaping import MAX_STAGES, Mode, design, none_shaper
-from shaper_nodes.core.shaping.policy import DEFAULT_SOURCE, PolicyError, UpdatePolicy
+from shaper_nodes.core.shaping.policy import DEFAULT_SOURCE, PolicyError, UpdatePolicy, check_representable
 
 ZV = design("zv", [Mode.from_hz(5.0, 0.05)])  # 0.1 s long
 POLICY = UpdatePolicy.of(["parameters", "learner", "scheduler"], retime=["scheduler"])
@@ -35,3 +35,7 @@ def test_a_shaper_shorter_than_one_command_period_is_refused_but_the_identity_is
     with pytest.raises(PolicyError, match="shorter than one command period"):
         POLICY.decide("learner", ZV, 5.0, [0])  # 0.1 s at 5 Hz: half a period
     assert POLICY.decide("learner", none_shaper(), 5.0, [0]) == "switch"
+    check_representable(ZV, 10.0)  # one period exactly: representable
+    with pytest.raises(PolicyError, match=r"100 ms is shorter than one command period \(200 ms\)"):
+        check_representable(ZV, 5.0)  # the same check, for a shaper used on one trajectory only
+    check_representable(none_shaper(), 5.0)

@@ -1,12 +1,13 @@
-"""Scheduling core: rate-limit measure and the learner's corrections per region."""
+"""Scheduling core: rate-limit measure, the learner's corrections per region, the shaper at a pose."""
 
 import math
 
 import numpy as np
 import pytest
 
+from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.scheduling.fuzzy import Rule, RuleBase, Triangular, triangular_partition
-from shaper_nodes.core.scheduling.scheduler import Scheduler, relative_change
+from shaper_nodes.core.scheduling.scheduler import MAX_POSE_JOINTS, Scheduler, premise_values, relative_change
 from shaper_nodes.core.shaping.families import design
 from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
@@ -61,3 +62,39 @@ def test_mode_interpolation_and_family_checks():
     rb = RuleBase(("q",), (Rule((Triangular(0, 0, 1),), np.array([[-1.0]]), np.array([[1.0]])),))
     with pytest.raises(ValueError, match="no lightly damped mode"):
         Scheduler(rb).evaluate([0.5])
+
+
+def test_premise_values_are_picked_by_name_in_linear_time_and_bad_poses_are_named():
+    assert premise_values(("b", "a"), ["x", "a", "b"], [9.0, 1.0, 2.0]) == [2.0, 1.0]  # any order, extras ignored
+    cases = [
+        ((["a"], [1.0, 2.0]), "wrong_size", "2 positions for 1 names"),
+        ((["a", "x"], [1.0, 2.0]), "missing_joint", r"missing premise joints \['b'\]"),
+        ((["a", "b", "b"], [1.0, 2.0, 3.0]), "duplicate_joint", r"named more than once: \['b'\]"),
+        ((["a", "b"], [1.0, math.nan]), "non_finite", "non-finite premise values: b = nan"),
+        ((["j"] * (MAX_POSE_JOINTS + 1), [0.0]), "too_large", f"exceed the limit of {MAX_POSE_JOINTS}"),
+    ]
+    for (names, positions), kind, words in cases:
+        with pytest.raises(InputError, match=words) as err:
+            premise_values(("a", "b"), names, positions)
+        assert err.value.kind == kind
+    # a pose of the largest admitted size with the premises at its end: one pass, no quadratic search
+    names = [f"j{k}" for k in range(MAX_POSE_JOINTS - 2)] + ["b", "a"]
+    assert premise_values(("a", "b"), names, np.arange(MAX_POSE_JOINTS, dtype=float)) == \
+        [MAX_POSE_JOINTS - 1.0, MAX_POSE_JOINTS - 2.0]
+
+
+def test_the_shaper_at_a_pose_is_the_schedules_with_the_regions_correction_and_clamping_is_said():
+    s = Scheduler(base())
+    at = s.evaluate([0.3])
+    learned = Shaper(np.array([0.45, 0.55]), np.array([0.0, 1.1 * s.scheduled(at).times[1]]))
+    s.learn(at, learned)
+    for z in ([0.3], [1.4], [2.0]):
+        interp, shaper = s.at(z)
+        assert same(shaper, s.shaper(s.evaluate(z))) and interp.modes == s.evaluate(z).modes
+    np.testing.assert_allclose(s.at([0.3])[1].times, learned.times, rtol=1e-12)  # the correction applies
+    assert s.clamping(s.evaluate([1.0])) == ""
+    interp, shaper = s.at([2.5])  # beyond the last operating point: clamped to it
+    assert s.clamping(interp) == "premise q = 2.5 outside [0, 2]: clamped, not extrapolated"
+    assert same(shaper, s.shaper(s.evaluate([2.0])))
+    with pytest.raises(ValueError, match="must be finite"):
+        s.at([math.nan])

@@ -11,6 +11,7 @@ from shaper_nodes.core.shaping import (
     Shaper,
     ShaperError,
     design,
+    modes_from_hz,
 )
 
 MODE = Mode.from_hz(5.0, 0.05)
@@ -125,3 +126,28 @@ def test_finite_input_that_would_overflow_the_output_is_refused():
         finite_array("data", [0.0, -1.7e308], limit=1e6)
     assert err.value.kind == "too_large"
     assert finite_array("data", [1e6, -1e6], limit=1e6).tolist() == [1e6, -1e6]
+
+
+def test_modes_from_lists_of_frequencies_and_damping_ratios():
+    got = modes_from_hz([2.0, 7.5], [0.0, 0.05])
+    assert got == (Mode.from_hz(2.0, 0.0), Mode.from_hz(7.5, 0.05))
+    # the design on them is the convolution of the single-mode designs
+    both = design("zv", got)
+    assert len(both) == 4 and both.modes == got
+    assert both.duration == pytest.approx(got[0].damped_period / 2 + got[1].damped_period / 2)
+    assert modes_from_hz([], []) == ()
+
+
+@pytest.mark.parametrize("freqs, zetas, words", [
+    ([2.0, 7.5], [0.05], "2 frequencies but 1 damping ratios: give one damping ratio per frequency"),
+    ([2.0, -1.0], [0.05, 0.05], r"mode 1 \(-1.0 Hz, damping ratio 0.05\): natural frequency must be finite and > 0"),
+    ([2.0, 3.0], [0.05, float("nan")], r"mode 1 \(3.0 Hz, damping ratio nan\): damping ratio must be in \[0, 0.95\]"),
+    ([2.0], [0.99], r"mode 0 .*damping ratio must be in \[0, 0.95\]"),
+    ([2.0], ["x"], "damping ratio 0 must be a number"),
+    ([1.0] * (MAX_DESIGN_MODES + 1), [0.05] * (MAX_DESIGN_MODES + 1),
+     f"{MAX_DESIGN_MODES + 1} modes exceed the limit of {MAX_DESIGN_MODES}"),
+    ([1.0] * 10**6, [0.05], f"1000000 modes exceed the limit of {MAX_DESIGN_MODES}"),  # before any other work
+])
+def test_invalid_mode_lists_are_refused_naming_the_mode(freqs, zetas, words):
+    with pytest.raises(ShaperError, match=words):
+        modes_from_hz(freqs, zetas)

@@ -23,7 +23,16 @@ Interfaces
 ~/mode_estimate (shaper_msgs/ModeEstimate, latched)   the interpolated mode(s), rad/s and -
 <shaper>/set_shaper (shaper_msgs/SetShaper)           out, source "scheduler" (or "learner")
 ~/set_shaper, ~/get_shaper, ~/active_shaper           the shaper node's interface, for the learner
+~/shaper_at (shaper_msgs/ShaperAt)                    the shaper the schedule gives at any pose
 /diagnostics                                          clamping, refused input, stale data
+
+``~/shaper_at`` answers with the shaper this node would send at the request's pose (the family's
+design on the interpolated modes, times the learner's correction of that region) and the
+interpolated modes, without sending anything to the shaper node; the shaper node asks it for the
+final pose of each whole trajectory (its parameter ``action.scheduler``). The premise joints are
+picked from the pose by name; a pose without one of them, with non-finite values or with sizes
+that differ is refused with the reason, and clamping is said in the message. The work is linear
+in the pose and otherwise that of one scheduled design.
 
 Policy with the learner (core/scheduling/scheduler.py): point the learner at this node (its parameter
 ``shaper: /scheduler``). The scheduler decides the mode; the learner's shapers are taken as a
@@ -52,7 +61,8 @@ from sensor_msgs.msg import JointState
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_msgs.srv import GetShaper, SetShaper
+from shaper_msgs.srv import GetShaper, SetShaper, ShaperAt
+from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.scheduling import FuzzyError, Interpolation, RateLimit, Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
@@ -127,6 +137,7 @@ class SchedulerNode(Node):
         self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
+        self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at)
 
         self._z: list[float] | None = None         # latest premise values
         self._interp: Interpolation | None = None  # the rule base at the latest evaluation
@@ -182,17 +193,11 @@ class SchedulerNode(Node):
 
     # ----------------------------------------------------------------- inputs
     def _on_joint_states(self, msg: JointState) -> None:
-        names = list(msg.name)
-        missing = [j for j in self.premises if j not in names]
-        if missing or len(msg.position) != len(names):
+        try:
+            z = self.core.premise_values(msg.name, msg.position)
+        except InputError as err:
             self.refused += 1
-            why = f"missing joints {missing}" if missing else f"{len(msg.position)} positions for {len(names)} names"
-            self.diagnostics.report("input", ERROR, f"refused joint_states: {why}")
-            return
-        z = [float(msg.position[names.index(j)]) for j in self.premises]
-        if not all(math.isfinite(v) for v in z):
-            self.refused += 1
-            self.diagnostics.report("input", ERROR, f"refused joint_states: non-finite premise values {z}")
+            self.diagnostics.report("input", ERROR, f"refused joint_states: {err}")
             return
         self._z, self._z_stamp, self._stamp = z, self._now(), msg.header.stamp
 
@@ -223,14 +228,10 @@ class SchedulerNode(Node):
         except FuzzyError as err:
             self.diagnostics.report("rule_base", ERROR, f"rule base: {err}")
             return None
-        if any(interp.clamped):
-            out = [f"{n} = {v:.6g} outside [{lo:g}, {hi:g}]" for n, v, (lo, hi), c in
-                   zip(self.premises, interp.z_in, self.core.rule_base.ranges, interp.clamped, strict=True) if c]
-            self.diagnostics.report("clamped", WARN, "premise " + "; ".join(out) + ": clamped, not extrapolated")
-        est = ModeEstimate(source=SOURCE, modes=[ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta)
-                                                 for m in interp.modes])
-        est.header.stamp = self._stamp
-        self._mode_pub.publish(est)
+        clamped = self.core.clamping(interp)
+        if clamped:
+            self.diagnostics.report("clamped", WARN, clamped)
+        self._mode_pub.publish(_estimate(interp, self._stamp))
         self._interp = interp
         return interp
 
@@ -276,6 +277,26 @@ class SchedulerNode(Node):
                                     f"shaper node refused the scheduled shaper: {answer.response.message}")
         elif not answer.timed_out:  # a timeout was reported by the client
             self.diagnostics.report("refused", WARN, f"scheduled shaper not sent: {answer.error}")
+
+    # ----------------------------------------------------------------- the shaper at a given pose
+    def _on_shaper_at(self, req: ShaperAt.Request, resp: ShaperAt.Response) -> ShaperAt.Response:
+        """The shaper of the schedule at the request's pose (nothing is sent to the shaper node)."""
+        try:
+            interp, shaper = self.core.at(self.core.premise_values(req.pose.name, req.pose.position))
+        except (InputError, FuzzyError, ShaperError) as err:
+            resp.success, resp.message = False, f"no shaper for this pose: {err}"
+            self.diagnostics.report("shaper_at", WARN, f"~/shaper_at refused: {err}")
+            return resp
+        resp.shaper = shaper_to_msg(shaper, SOURCE, 0, self.get_clock().now().to_msg())
+        resp.estimate = _estimate(interp, req.pose.header.stamp)
+        modes = ", ".join(f"{m.hz:.4g} Hz zeta {m.zeta:.3g}" for m in interp.modes)
+        region = self.core.rule_base.rules[interp.dominant].name or str(interp.dominant)
+        clamped = self.core.clamping(interp)
+        resp.success = True
+        resp.message = (f"{shaper.family} ({len(shaper)} impulses, {shaper.duration * 1e3:.1f} ms) on {modes}"
+                        f" at " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.premises, interp.z_in, strict=True))
+                        + f" (region {region})" + (f"; {clamped}" if clamped else ""))
+        return resp
 
     # ----------------------------------------------------------------- the learner's interface
     async def _on_set_shaper(self, req: SetShaper.Request, resp: SetShaper.Response) -> SetShaper.Response:
@@ -327,6 +348,15 @@ class SchedulerNode(Node):
             resp.active = self._active or shaper_to_msg(none_shaper(), "", 0)
             return resp
         return answer.response
+
+
+def _estimate(interp: Interpolation, stamp: Any) -> ModeEstimate:
+    """The interpolated mode(s) as a ModeEstimate (source "scheduler") stamped ``stamp``."""
+    est = ModeEstimate(source=SOURCE, modes=[ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta)
+                                             for m in interp.modes])
+    if stamp is not None:
+        est.header.stamp = stamp
+    return est
 
 
 def main(args: list[str] | None = None) -> int:

@@ -14,7 +14,9 @@ topics.trajectory_in -> topics.trajectory_out, and service ~/shape_trajectory
 action.server_name (~/follow_joint_trajectory) -> action.controller
     control_msgs/action/FollowJointTrajectory: each goal's trajectory shaped as above and
     forwarded to the controller's action, feedback, result and cancel relayed; a new goal
-    preempts the running one (see trajectory_action.py).
+    preempts the running one (see trajectory_action.py). With ``action.scheduler`` set, each goal
+    is shaped with the shaper that scheduler gives for the goal's final point (see
+    ros/pose_shaper.py); the active shaper is not changed by it.
 ~/active_shaper (latched), ~/set_shaper, ~/get_shaper
     The active shaper, and changing or reading it. Changes (service or parameters) are
     validated first; a refused change leaves the active shaper as it was. Accepted changes are
@@ -39,6 +41,7 @@ from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
@@ -50,6 +53,7 @@ from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.shaping import (
     DEFAULT_MAX_GAIN,
     FAMILIES,
+    MAX_DESIGN_MODES,
     MAX_GAIN,
     Mode,
     PolicyError,
@@ -61,6 +65,7 @@ from shaper_nodes.core.shaping import (
     UpdatePolicy,
     design,
     discretize,
+    modes_from_hz,
     none_shaper,
     shape_trajectory,
 )
@@ -69,11 +74,13 @@ from shaper_nodes.ros.conversions import TRAJ_FIELDS, shaper_from_msg, shaper_to
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
+from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED
 
 from .trajectory_action import TrajectoryActionProxy
 
 DESIGN_PARAMS = ("shaper.family", "shaper.frequency_hz", "shaper.damping_ratio",
+                 "shaper.frequencies_hz", "shaper.damping_ratios",
                  "shaper.derivative_order", "shaper.vibration_tolerance", "shaper.insensitivity",
                  "discretization")
 DISCRETIZATIONS = ("split", "round", "exact")
@@ -97,6 +104,15 @@ PARAMETERS: tuple[Spec, ...] = (
          check=lambda v: design("zv", [Mode.from_hz(v, 0.05)])),
     Spec("shaper.damping_ratio", 0.05, "Damping ratio of the mode to shape for, dimensionless.", (0.0, 0.95),
          check=lambda v: design("zv", [Mode.from_hz(10.0, v)])),
+    Spec("shaper.frequencies_hz", None, "Several modes: their natural frequencies, Hz (undamped), one per entry"
+         " of shaper.damping_ratios. When set (non-empty), the family is designed on all these modes (the"
+         " single-mode designs convolved; si designs them jointly) and shaper.frequency_hz and"
+         f" shaper.damping_ratio are not used. At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
+         " A change of the number of modes sets both lists at once (ros2 param load, or one atomic set).",
+         type=Parameter.Type.DOUBLE_ARRAY, check=lambda v: modes_from_hz(v, [0.05] * len(v))),
+    Spec("shaper.damping_ratios", None, "Several modes: their damping ratios, dimensionless, in [0, 0.95], one per"
+         " entry of shaper.frequencies_hz (see there).", type=Parameter.Type.DOUBLE_ARRAY,
+         check=lambda v: modes_from_hz([10.0] * len(v), v)),
     Spec("shaper.derivative_order", 2, "n of the ZV-D^n family (family zvdn): 0 = ZV, 1 = ZVD, 2 = ZVDD.", (0, 10),
          check=lambda v: design("zvdn", [_PROBE], derivative_order=v)),
     Spec("shaper.vibration_tolerance", 0.05, "EI, multi-hump EI and SI families: tolerated percentage vibration,"
@@ -130,7 +146,14 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("action.controller", "/joint_trajectory_controller/follow_joint_trajectory", "The controller's"
          " FollowJointTrajectory action that shaped goals are forwarded to.", read_only=True),
     Spec("action.server_timeout", 2.0, "How long a goal waits for the controller's action server and for its"
-         " answer to the goal request, s.", (0.01, 3600.0), read_only=True),
+         " answer to the goal request, and (with action.scheduler) for the scheduler's answer, s.", (0.01, 3600.0),
+         read_only=True),
+    Spec("action.scheduler", "", "Fully qualified name of a scheduler node (e.g. '/scheduler'): each goal is then"
+         " shaped with the shaper <scheduler>/shaper_at gives for the goal trajectory's final point (the modes"
+         " where the move ends), not with the active shaper, which stays as it is. If the scheduler is absent,"
+         " does not answer within action.server_timeout, refuses the pose, or its shaper fails this node's checks,"
+         " the goal is shaped with the active shaper and a warning says why. Empty (default): the active shaper.",
+         read_only=True),
 )
 
 
@@ -189,14 +212,20 @@ class ShaperNode(Node):
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
         self.create_service(ShapeTrajectory, "~/shape_trajectory", self._on_shape_trajectory)
         self._action: TrajectoryActionProxy | None = None
+        self.pose_shaper: PoseShaperClient | None = None
         server_name = str(p("action.server_name").value)
         action_topic = self.resolve_topic_name(server_name) if server_name else ""
         if server_name:
+            scheduler = str(p("action.scheduler").value).strip()
+            if scheduler:
+                self.pose_shaper = PoseShaperClient(
+                    self, scheduler, float(p("action.server_timeout").value), self.shape_whole, self.diagnostics,
+                    max_gain=lambda: float(p("shaper.max_gain").value), rate=self.rate)
             self._action = TrajectoryActionProxy(
                 self, server_name, str(p("action.controller").value), self.shape_whole,
                 on_refused=lambda err: self._reject(action_topic, err),
                 on_forwarded=lambda: self.forwarded.update(["action"]),
-                timeout=float(p("action.server_timeout").value))
+                timeout=float(p("action.server_timeout").value), reshape=self.pose_shaper)
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
         self.create_timer(float(p("diagnostics_period").value), self._publish_summary,
@@ -205,7 +234,8 @@ class ShaperNode(Node):
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"
             f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}"
-            + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else ""))
+            + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else "")
+            + (f", each goal shaped for its final pose by {self.pose_shaper.srv_name}" if self.pose_shaper else ""))
 
     # ----------------------------------------------------------------- shaper changes
     def _describe(self) -> str:
@@ -215,7 +245,12 @@ class ShaperNode(Node):
 
     def _design_from_params(self, overrides: dict[str, Any]) -> tuple[Shaper, str]:
         def val(name: str) -> Any:
-            return overrides[name] if name in overrides else self.get_parameter(name).value
+            if name in overrides:
+                return overrides[name]
+            try:
+                return self.get_parameter(name).value
+            except ParameterUninitializedException:  # a list without a default, not set: empty
+                return None
 
         method = str(val("discretization"))
         if method not in DISCRETIZATIONS:
@@ -223,16 +258,30 @@ class ShaperNode(Node):
         family = str(val("shaper.family")).strip().lower()
         if family == "custom":
             raise ShaperError("family 'custom' is set through the ~/set_shaper service, not parameters")
-        freq = float(val("shaper.frequency_hz"))
-        if family != "none" and freq >= self.rate / 4.0:
+        modes, name = self._modes_from_params(val)
+        high = [m.hz for m in modes if m.hz >= self.rate / 4.0]
+        if family != "none" and high:
             raise ShaperError(
-                f"shaper.frequency_hz {freq:g} Hz is too high for command_rate {self.rate:g} Hz"
+                f"{name} {high[0]:.6g} Hz is too high for command_rate {self.rate:g} Hz"
                 f" (must be below rate / 4 = {self.rate / 4:g} Hz)")
-        shaper = design(family, [Mode.from_hz(freq, float(val("shaper.damping_ratio")))],
+        shaper = design(family, modes,
                         derivative_order=int(val("shaper.derivative_order")),
                         vibration_tolerance=float(val("shaper.vibration_tolerance")),
                         insensitivity=float(val("shaper.insensitivity")))
         return shaper, method
+
+    @staticmethod
+    def _modes_from_params(val: Any) -> tuple[tuple[Mode, ...], str]:
+        """The design modes: shaper.frequencies_hz with shaper.damping_ratios when set, else
+        shaper.frequency_hz with shaper.damping_ratio; and the name of the parameter they came from."""
+        freqs, zetas = list(val("shaper.frequencies_hz") or []), list(val("shaper.damping_ratios") or [])
+        if not freqs and not zetas:
+            return (Mode.from_hz(float(val("shaper.frequency_hz")), float(val("shaper.damping_ratio"))),), \
+                "shaper.frequency_hz"
+        try:
+            return modes_from_hz(freqs, zetas), "shaper.frequencies_hz"
+        except ShaperError as err:
+            raise ShaperError(f"shaper.frequencies_hz / shaper.damping_ratios: {err}") from None
 
     def _stages(self) -> list[int]:
         return [f.stages for f in (self._array_filter, *self._stream_filters.values())]
@@ -319,6 +368,9 @@ class ShaperNode(Node):
         self._window_rejections = 0
         values = [("revision", str(self._revision)), ("source", self._source), ("family", self._shaper.family)]
         values += [(f"forwarded.{k}", str(v)) for k, v in sorted(self.forwarded.items())]
+        if self.pose_shaper is not None:
+            values += [("action.scheduler.shaped", str(self.pose_shaper.shaped)),
+                       ("action.scheduler.fallbacks", str(self.pose_shaper.fallbacks))]
         values += [(f"refused.{k}", str(v)) for k, v in sorted(self.rejections.items())]
         self.diagnostics.publish("shaper", level, msg, values)
 
@@ -355,10 +407,13 @@ class ShaperNode(Node):
                                                 [p.time_from_start for p in msg.points], shaped))
         self.forwarded["stream"] += 1
 
-    def shape_whole(self, msg: JointTrajectory) -> JointTrajectory:
-        """Shape a whole trajectory (raises InputError on bad input)."""
+    def shape_whole(self, msg: JointTrajectory, shaper: Shaper | None = None) -> JointTrajectory:
+        """Shape a whole trajectory with the active shaper, or with ``shaper`` (discretised as the
+        active one is; the active shaper is not changed). Raises InputError on bad input, and
+        ShaperError or ValueError if ``shaper`` cannot be discretised."""
+        fir = self._fir if shaper is None else discretize(shaper, self.rate, self._method)
         times, fields = trajectory_arrays(msg, self.joint_names, require_times=True, limit=self._limit())
-        result = shape_trajectory(times, fields["positions"], self._fir, self.rate, fields.get("velocities"))
+        result = shape_trajectory(times, fields["positions"], fir, self.rate, fields.get("velocities"))
         return trajectory_msg(msg.header, self.joint_names, result.times,
                               {"positions": result.positions, "velocities": result.velocities,
                                "accelerations": result.accelerations})
@@ -377,6 +432,9 @@ class ShaperNode(Node):
         if self._action is not None:  # action servers and clients are not destroyed with the node
             self._action.destroy()
             self._action = None
+        if self.pose_shaper is not None:
+            self.pose_shaper.destroy()
+            self.pose_shaper = None
         super().destroy_node()
 
     def _on_shape_trajectory(self, req: ShapeTrajectory.Request,

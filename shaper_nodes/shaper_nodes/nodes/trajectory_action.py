@@ -9,20 +9,26 @@ does) and is a client of the controller's. For each goal:
   to the node's log and ``/diagnostics``; nothing reaches the controller.
 - accepted: a goal still running is preempted (its controller goal is cancelled), as
   joint_trajectory_controller does; one goal is active at a time.
-- execution: waits up to ``timeout`` s for the controller's action server, sends the shaped
-  trajectory with the goal's tolerances and ``goal_time_tolerance`` unchanged, relays every
-  feedback, and ends with the controller's status and result (error_code, error_string).
+- execution: with a ``reshape`` coroutine (the node's ``action.scheduler``: the trajectory shaped
+  for its final pose), first awaits it and sends what it returns instead, or keeps the trajectory
+  shaped at the goal request if it returns None; then waits up to ``timeout`` s for the
+  controller's action server, sends the shaped trajectory with the goal's tolerances and
+  ``goal_time_tolerance`` unchanged, relays every feedback, and ends with the controller's status
+  and result (error_code, error_string).
 - cancel: accepted and forwarded to the controller goal; the final status is the controller's.
 
 Everything here runs in the node's executor without blocking it: the execute callback is a
 coroutine that awaits the controller's futures, so a SingleThreadedExecutor (``rclpy.spin``) is
-enough and the shaper's streaming filters are never touched by two threads.
+enough and the shaper's streaming filters are never touched by two threads. ``reshape`` is awaited
+in the execute callback, not in the goal callback: rclpy awaits a coroutine goal callback, but
+inside the action server's callback group (the node's default group), which it would hold, and
+with it every subscription and service of the node, for as long as the wait lasts.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import TypeAlias
 
 from action_msgs.msg import GoalStatus
@@ -105,14 +111,20 @@ class TrajectoryActionProxy:
     timeout : float
         s: how long a goal waits for the controller's action server and for its answer to the
         goal request.
+    reshape : coroutine function, optional
+        ``JointTrajectory -> JointTrajectory | None``, awaited for each accepted goal (its
+        request's trajectory) before it is sent: the trajectory to send instead of the one shaped
+        at the goal request, or None to keep that one. It must bound its own wait and not raise.
     """
 
     def __init__(self, node: Node, server_name: str, controller_name: str,
                  shape: Callable[[JointTrajectory], JointTrajectory],
                  on_refused: Callable[[InputError], None], on_forwarded: Callable[[], None],
-                 timeout: float) -> None:
+                 timeout: float,
+                 reshape: Callable[[JointTrajectory], Awaitable[JointTrajectory | None]] | None = None) -> None:
         self._node = node
         self._shape = shape
+        self._reshape = reshape
         self._on_refused = on_refused
         self._on_forwarded = on_forwarded
         self._timeout = float(timeout)
@@ -145,10 +157,7 @@ class TrajectoryActionProxy:
             raise InputError("unsupported", "multi_dof_trajectory is not supported (only single-DOF joints"
                              " are shaped); send it empty")
         check_tolerances(goal)
-        return Goal(trajectory=self._shape(goal.trajectory),
-                    path_tolerance=goal.path_tolerance, component_path_tolerance=goal.component_path_tolerance,
-                    goal_tolerance=goal.goal_tolerance, component_goal_tolerance=goal.component_goal_tolerance,
-                    goal_time_tolerance=goal.goal_time_tolerance)
+        return _with_trajectory(goal, self._shape(goal.trajectory))
 
     def _on_goal(self, goal: Goal) -> GoalResponse:
         try:
@@ -197,6 +206,16 @@ class TrajectoryActionProxy:
 
     async def _run(self, fwd: _Forward) -> Result:
         name = self.controller_name
+        if self._reshape is not None:
+            try:
+                reshaped = await self._reshape(fwd.handle.request.trajectory)
+            except Exception as err:  # a fault there must not lose the goal: it keeps its shaped trajectory
+                self._log.error(f"reshaping the goal failed ({err!r}); it is sent as shaped at its request")
+                reshaped = None
+            if reshaped is not None:
+                fwd.goal = _with_trajectory(fwd.goal, reshaped)
+            if fwd.stop:
+                return self._stopped_before_sending(fwd)
         if not await self._wait_for_server(fwd):
             if fwd.stop:
                 return self._stopped_before_sending(fwd)
@@ -272,6 +291,14 @@ class TrajectoryActionProxy:
         self._log.error(f"goal aborted: {why}")
         fwd.handle.abort()
         return Result(error_code=Result.INVALID_GOAL, error_string=why)
+
+
+def _with_trajectory(goal: Goal, trajectory: JointTrajectory) -> Goal:
+    """``goal`` with ``trajectory`` and the same tolerances and goal_time_tolerance."""
+    return Goal(trajectory=trajectory,
+                path_tolerance=goal.path_tolerance, component_path_tolerance=goal.component_path_tolerance,
+                goal_tolerance=goal.goal_tolerance, component_goal_tolerance=goal.component_goal_tolerance,
+                goal_time_tolerance=goal.goal_time_tolerance)
 
 
 def _to_canceling(handle: ServerGoalHandle) -> bool:

@@ -15,6 +15,9 @@ parameters
 shaper_client
     Service calls with bounded waits (``ServiceClient``) and the one client of ``set_shaper``
     (``ShaperClient``): a lost reply is reported or retried, never a hang.
+pose_shaper
+    A whole trajectory shaped for its final pose with the shaper a scheduler's ``~/shaper_at``
+    gives (the shaper node's ``action.scheduler``), falling back to the active shaper with a warning.
 node_main
     The Jazzy ``main`` of every node.
 bag_writer

@@ -40,6 +40,8 @@ from .diagnostics import WARN, Diagnostics
 
 #: how often a call waiting for its service looks again, s (wall time)
 DISCOVERY_POLL = 0.02
+#: the shortest wait for a reply, s (a call whose time is all but spent still gets a chance)
+MIN_WAIT = 0.001
 
 
 async def wait_for(node: Node, future: Future, timeout: float, group: CallbackGroup | None = None) -> bool:
@@ -138,8 +140,13 @@ class ServiceClient:
         """Wait ``seconds`` of wall time without blocking the executor."""
         await wait_for(self.node, Future(), seconds, self._timer_group)
 
-    async def call(self, request: Any, timeout: float | None = None) -> Answer:
-        """Call the service: the response, or no response and why (not there, or no reply)."""
+    async def call(self, request: Any, timeout: float | None = None, *, total: bool = False) -> Answer:
+        """Call the service: the response, or no response and why (not there, or no reply).
+
+        The wait for the service and the wait for the reply are each bounded by ``timeout`` (the
+        client's timeout if None); with ``total`` both together are (the reply gets what the
+        discovery left).
+        """
         limit = self._timeout() if timeout is None else float(timeout)
         deadline = time.monotonic() + limit
         while not self.service_is_ready():
@@ -147,7 +154,8 @@ class ServiceClient:
                 return Answer(None, f"service {self.srv_name} not available within {limit:g} s")
             await self.sleep(DISCOVERY_POLL)
         future = self._client.call_async(request)
-        if not await wait_for(self.node, future, limit, self._timer_group):
+        wait = max(deadline - time.monotonic(), MIN_WAIT) if total else limit
+        if not await wait_for(self.node, future, wait, self._timer_group):
             return self._gave_up(future, limit)
         return Answer(future.result())
 

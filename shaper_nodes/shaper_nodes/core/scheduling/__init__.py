@@ -6,7 +6,8 @@ fuzzy
     Membership functions, the rule base over one or more premises, the interpolated linear
     model and its lightly damped modes (or the mode parameters interpolated directly).
 scheduler
-    The shaper at the present pose, and the learner's corrections kept per operating region.
+    The shaper at the present pose (or any pose), the premise values of a pose given by joint
+    names, and the learner's corrections kept per operating region.
 rate_limit
     When a new scheduled shaper is sent: enough change of a mode, not too soon after the last,
     never faster than the shaper node retires shapers.
@@ -14,15 +15,17 @@ rate_limit
 
 from .fuzzy import FuzzyError, Interpolation, RuleBase, modes_of, rule_base_from_dict, triangular_partition
 from .rate_limit import RateLimit
-from .scheduler import Scheduler, relative_change
+from .scheduler import MAX_POSE_JOINTS, Scheduler, premise_values, relative_change
 
 __all__ = [
+    "MAX_POSE_JOINTS",
     "FuzzyError",
     "Interpolation",
     "RateLimit",
     "RuleBase",
     "Scheduler",
     "modes_of",
+    "premise_values",
     "relative_change",
     "rule_base_from_dict",
     "triangular_partition",

@@ -1,6 +1,11 @@
 """Gain-scheduled shaping: the shaper from the fuzzy rule base at the present pose, rate-limited,
 with the learner's corrections kept per operating region. Free of ROS (the scheduler node wraps it).
 
+The same shaper is available for any pose, not only the present one (:meth:`Scheduler.at`): the
+scheduler node answers ``~/shaper_at`` with it, so that a whole trajectory can be shaped for the
+modes at the pose it ends at. :func:`premise_values` picks the premise joints out of a pose given
+as names and positions, in linear time, and names what is wrong with it.
+
 Policy with the learner
 -----------------------
 The scheduler decides the mode; the learner learns a correction. A correction is the ratio of
@@ -21,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.shaping.families import design
 from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
@@ -28,6 +34,56 @@ from .fuzzy import FuzzyError, Interpolation, RuleBase
 
 #: A1 of a corrected shaper stays within these bounds
 A1_BOUNDS = (0.05, 0.95)
+#: most joints a pose may name; a larger pose is refused before any work on it
+MAX_POSE_JOINTS = 10_000
+
+
+def premise_values(premises: Sequence[str], names: Sequence[str], positions: Sequence[float]) -> list[float]:
+    """The positions of the premise joints, in the order of ``premises``, from a pose.
+
+    Parameters
+    ----------
+    premises : sequence of str
+        The premise joints' names.
+    names, positions : sequences
+        The pose: joint names in any order (other joints are ignored) and one position per name
+        (rad or m).
+
+    Returns
+    -------
+    list of float
+        One finite value per premise.
+
+    Raises
+    ------
+    InputError
+        ``too_large`` (more than :data:`MAX_POSE_JOINTS` names), ``wrong_size`` (positions and
+        names differ in number), ``missing_joint``, ``duplicate_joint`` (a premise joint named
+        twice) or ``non_finite``; the message names the joints. The work is linear in the pose.
+    """
+    if len(names) > MAX_POSE_JOINTS:
+        raise InputError("too_large", f"{len(names)} joint names exceed the limit of {MAX_POSE_JOINTS}")
+    if len(positions) != len(names):
+        raise InputError("wrong_size", f"{len(positions)} positions for {len(names)} names")
+    wanted = set(premises)
+    index: dict[str, int] = {}
+    twice: list[str] = []
+    for i, name in enumerate(names):
+        if name in wanted:
+            if name in index:
+                twice.append(name)
+            else:
+                index[name] = i
+    missing = [j for j in premises if j not in index]
+    if missing:
+        raise InputError("missing_joint", f"missing premise joints {missing} (the pose names {len(names)} joints)")
+    if twice:
+        raise InputError("duplicate_joint", f"premise joints named more than once: {sorted(set(twice))}")
+    z = [float(positions[index[j]]) for j in premises]
+    bad = [f"{j} = {v!r}" for j, v in zip(premises, z, strict=True) if not math.isfinite(v)]
+    if bad:
+        raise InputError("non_finite", "non-finite premise values: " + ", ".join(bad))
+    return z
 
 
 def relative_change(old: Sequence[Mode], new: Sequence[Mode]) -> float:
@@ -64,6 +120,30 @@ class Scheduler:
             raise FuzzyError("the interpolated model has no lightly damped mode at "
                              + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.rule_base.premises, out.z, strict=True)))
         return out
+
+    def premise_values(self, names: Sequence[str], positions: Sequence[float]) -> list[float]:
+        """The premise values of a pose (see :func:`premise_values`)."""
+        return premise_values(self.rule_base.premises, names, positions)
+
+    def clamping(self, interp: Interpolation) -> str:
+        """What was clamped to the rule base's range at the pose of ``interp`` ("" if nothing)."""
+        out = [f"{n} = {v:.6g} outside [{lo:g}, {hi:g}]" for n, v, (lo, hi), c in
+               zip(self.rule_base.premises, interp.z_in, self.rule_base.ranges, interp.clamped, strict=True) if c]
+        return ("premise " + "; ".join(out) + ": clamped, not extrapolated") if out else ""
+
+    def at(self, z: Sequence[float]) -> tuple[Interpolation, Shaper]:
+        """The rule base at the premise values ``z`` and the shaper to apply there (exactly what
+        the schedule applies at that pose: :meth:`shaper` of :meth:`evaluate`).
+
+        Raises
+        ------
+        FuzzyError
+            Wrong number of values, non-finite values, no rule firing, or no lightly damped mode.
+        ShaperError
+            If the family cannot be designed on the interpolated modes.
+        """
+        interp = self.evaluate(z)
+        return interp, self.shaper(interp)
 
     def correction(self, interp: Interpolation) -> tuple[float, float]:
         """(r_T, r_A) at the pose of ``interp``."""

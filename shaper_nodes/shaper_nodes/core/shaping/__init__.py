@@ -3,8 +3,9 @@
 Modules
 -------
 types
-    The mode and shaper types (:class:`Mode`, :class:`Shaper`, :class:`ShaperError`), the
-    limits of a design (damping, duration, parameter ranges) and the checks of its parameters.
+    The mode and shaper types (:class:`Mode`, :class:`Shaper`, :class:`ShaperError`), modes from
+    lists of frequencies and damping ratios (:func:`modes_from_hz`), the limits of a design
+    (damping, duration, parameter ranges) and the checks of its parameters.
 families
     The registry of named designs (:data:`FAMILIES`, :func:`design`), the closed-form families
     (ZV, ZVD, ZV-D^n, MZV), custom sequences, and each family's description and figures of merit.
@@ -44,6 +45,7 @@ from .types import (
     Mode,
     Shaper,
     ShaperError,
+    modes_from_hz,
 )
 from .vibration import (
     ResidualVibration,
@@ -80,6 +82,7 @@ __all__ = [
     "family_params",
     "fir_impulses",
     "insensitivity_width",
+    "modes_from_hz",
     "none_shaper",
     "percentage_vibration",
     "residual_vibration",

@@ -7,7 +7,7 @@ parameters, else the request's ``source``: ``user``, ``identification``, ``learn
 - **who**: only sources in ``allowed_sources`` may change the shaper; the last accepted change
   wins;
 - **what**: a shaper shorter than one command period (other than the identity) is refused, as
-  the FIR could not represent it;
+  the FIR could not represent it (:func:`check_representable`);
 - **how**: a change from a source in ``retime_sources`` re-times the motion already commanded
   (the impulses still pending follow the new shaper: the mode moved, e.g. the scheduler's
   pose-dependent shaper), any other change switches bumplessly (the motion already commanded
@@ -40,6 +40,15 @@ How = Literal["switch", "retime"]
 
 class PolicyError(ValueError):
     """A change the update policy refuses; the message says why."""
+
+
+def check_representable(shaper: Shaper, rate: float) -> None:
+    """Raise :class:`PolicyError` if ``shaper`` (other than the identity) is shorter than one command
+    period at ``rate`` (Hz): the FIR could not represent it. Also the check of a shaper used for
+    one whole trajectory only (the shaper node's ``action.scheduler``)."""
+    if shaper.family != "none" and shaper.duration > 0 and shaper.duration * rate < 1.0:
+        raise PolicyError(f"shaper duration {shaper.duration * 1e3:.3g} ms is shorter than one"
+                          f" command period ({1e3 / rate:.3g} ms)")
 
 
 @dataclass(frozen=True)
@@ -111,9 +120,7 @@ class UpdatePolicy:
             or a switch would exceed the stage limit.
         """
         self.allow(source)
-        if shaper.family != "none" and shaper.duration > 0 and shaper.duration * rate < 1.0:
-            raise PolicyError(f"shaper duration {shaper.duration * 1e3:.3g} ms is shorter than one"
-                              f" command period ({1e3 / rate:.3g} ms)")
+        check_representable(shaper, rate)
         how = self.how(source)
         if how == "switch":
             self.settled(stages)

@@ -9,13 +9,14 @@ once, with messages that name the parameter, for the families (:mod:`.families`,
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from shaper_nodes.core.checks import in_range, integer
+from shaper_nodes.core.checks import in_range, integer, number
 
 #: tolerance on sum(amplitudes) == 1
 SUM_TOL = 1e-9
@@ -82,6 +83,32 @@ class Mode:
     def from_hz(cls, hz: float, zeta: float) -> Mode:
         """Mode from a natural frequency in Hz."""
         return cls(2.0 * math.pi * float(hz), float(zeta))
+
+
+def modes_from_hz(frequencies_hz: Sequence[float], damping_ratios: Sequence[float]) -> tuple[Mode, ...]:
+    """Modes from natural frequencies in Hz and damping ratios, one of each per mode.
+
+    Raises
+    ------
+    ShaperError
+        More than :data:`MAX_DESIGN_MODES` modes (refused before any other work), lists of
+        different lengths, or an invalid mode (the message names the mode by its index and says
+        what is wrong).
+    """
+    if len(frequencies_hz) > MAX_DESIGN_MODES or len(damping_ratios) > MAX_DESIGN_MODES:
+        raise ShaperError(f"{max(len(frequencies_hz), len(damping_ratios))} modes exceed the limit of"
+                          f" {MAX_DESIGN_MODES}")
+    if len(frequencies_hz) != len(damping_ratios):
+        raise ShaperError(f"{len(frequencies_hz)} frequencies but {len(damping_ratios)} damping ratios:"
+                          " give one damping ratio per frequency")
+    modes = []
+    for i, (hz, zeta) in enumerate(zip(frequencies_hz, damping_ratios, strict=True)):
+        try:
+            modes.append(Mode.from_hz(number(f"frequency {i}", hz, ShaperError),
+                                      number(f"damping ratio {i}", zeta, ShaperError)))
+        except ShaperError as err:
+            raise ShaperError(f"mode {i} ({hz!r} Hz, damping ratio {zeta!r}): {err}") from None
+    return tuple(modes)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,140 @@
+"""A whole trajectory shaped for the modes at its final pose, by the scheduler's ``~/shaper_at``.
+
+For a point-to-point move the residual vibration is that of the modes at the pose where the move
+ends, so a whole trajectory (a FollowJointTrajectory goal) is best shaped for them, not for the
+pose the robot is at when the goal arrives. The shaper node's parameter ``action.scheduler``
+names a scheduler node; :class:`PoseShaperClient` then, for each goal:
+
+1. asks ``<scheduler>/shaper_at`` (shaper_msgs/ShaperAt) for the shaper at the trajectory's final
+   point (its joint names and the last point's positions), waiting at most ``timeout`` s of wall
+   time for the service and its reply together;
+2. checks the answer as the shaper node checks any shaper: a family design is designed again from
+   its family, modes and parameters (as the shaper node designs the scheduler's ``set_shaper``
+   requests), a custom one (the learner's corrected ZV) is taken as its impulses within the
+   node's gain bound ``shaper.max_gain``; at most ``MAX_IMPULSES`` impulses; not shorter than one
+   command period;
+3. shapes the trajectory with it, through the node's one whole-trajectory path (the same
+   validation as every goal).
+
+If any step fails (scheduler absent, no answer in time, pose refused, shaper refused, shaped goal
+invalid) the goal keeps the trajectory shaped with the active shaper, and a warning on the log and
+``/diagnostics`` (kind ``pose_shaper``) says why. The active shaper is never changed here.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from shaper_msgs.srv import ShaperAt
+from shaper_nodes.core.shaping import Shaper, ShaperError
+from shaper_nodes.core.shaping.policy import PolicyError, check_representable
+
+from .conversions import shaper_from_msg
+from .diagnostics import WARN, Diagnostics
+from .shaper_client import ServiceClient
+
+
+@dataclass(frozen=True)
+class PoseAnswer:
+    """The shaper for a pose, or None and why not; ``message`` is the scheduler's summary."""
+
+    shaper: Shaper | None
+    message: str
+
+
+def final_pose(trajectory: JointTrajectory) -> JointState:
+    """The trajectory's final point as a pose: its joint names and the last point's positions."""
+    last = trajectory.points[-1].positions if trajectory.points else []
+    return JointState(name=list(trajectory.joint_names), position=[float(x) for x in last])
+
+
+class PoseShaperClient:
+    """Shapes whole trajectories for their final pose with a scheduler's shaper (module docstring).
+
+    Parameters
+    ----------
+    node : Node
+        The shaper node.
+    scheduler : str
+        Fully qualified name of the scheduler node (``/scheduler``).
+    timeout : float
+        Longest wait for the scheduler's service and its reply together, s (wall time).
+    shape : callable
+        ``(JointTrajectory, Shaper) -> JointTrajectory``: the node's whole-trajectory shaping with
+        an explicit shaper; raises ``ValueError`` (``InputError``, ``ShaperError``) when it cannot.
+    diagnostics : Diagnostics
+        Where fallbacks are reported (WARN, kind ``pose_shaper``).
+    max_gain : callable returning float
+        The node's gain bound for custom shapers (read at each goal: a dynamic parameter).
+    rate : float
+        The node's command rate, Hz.
+    """
+
+    def __init__(self, node: Node, scheduler: str, timeout: float,
+                 shape: Callable[[JointTrajectory, Shaper], JointTrajectory], diagnostics: Diagnostics, *,
+                 max_gain: Callable[[], float], rate: float) -> None:
+        self._log = node.get_logger().get_child("action_scheduler")
+        self._client = ServiceClient(node, ShaperAt, f"{scheduler.rstrip('/')}/shaper_at", float(timeout))
+        self._timeout = float(timeout)
+        self._shape = shape
+        self._diagnostics = diagnostics
+        self._max_gain = max_gain
+        self._rate = float(rate)
+        self.shaped = 0     # goals shaped with the scheduler's shaper
+        self.fallbacks = 0  # goals shaped with the active shaper instead
+
+    @property
+    def srv_name(self) -> str:
+        return self._client.srv_name
+
+    def service_is_ready(self) -> bool:
+        return self._client.service_is_ready()
+
+    def destroy(self) -> None:
+        self._client.destroy()
+
+    async def shaper_at(self, pose: JointState) -> PoseAnswer:
+        """The scheduler's shaper for ``pose``, checked as this node checks shapers (or None, why)."""
+        answer = await self._client.call(ShaperAt.Request(pose=pose), self._timeout, total=True)
+        if answer.response is None:
+            return PoseAnswer(None, f"no answer from the scheduler: {answer.error}")
+        resp = answer.response
+        if not resp.success:
+            return PoseAnswer(None, f"{self.srv_name} refused the final pose: {resp.message}")
+        msg = copy.deepcopy(resp.shaper)
+        family = msg.family.strip().lower()
+        if family not in ("", "custom"):  # a family design: designed here, as a scheduled set_shaper is
+            msg.amplitudes, msg.times = [], []
+        try:
+            shaper = shaper_from_msg(msg, self._max_gain())
+            check_representable(shaper, self._rate)
+        except (ShaperError, PolicyError) as err:
+            return PoseAnswer(None, f"the shaper of {self.srv_name} ({resp.shaper.family}) is refused here: {err}")
+        return PoseAnswer(shaper, resp.message)
+
+    async def __call__(self, trajectory: JointTrajectory) -> JointTrajectory | None:
+        """``trajectory`` shaped for its final pose, or None (then the caller keeps the trajectory
+        shaped with the active shaper; the reason has been reported)."""
+        answer = await self.shaper_at(final_pose(trajectory))
+        why = answer.message
+        if answer.shaper is not None:
+            try:
+                shaped = self._shape(trajectory, answer.shaper)
+            except ValueError as err:
+                why = f"the goal shaped with the shaper of {self.srv_name} is refused: {err}"
+            else:
+                self.shaped += 1
+                s = answer.shaper
+                self._log.info(f"goal shaped for its final pose: {len(s)} impulses, {s.duration * 1e3:.1f} ms"
+                               f" ({answer.message})")
+                return shaped
+        self.fallbacks += 1
+        self._diagnostics.report("pose_shaper", WARN, f"goal shaped with the active shaper, not for its final"
+                                 f" pose: {why}", values=[("service", self.srv_name)])
+        return None
