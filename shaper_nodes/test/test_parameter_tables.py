@@ -15,7 +15,17 @@ import pytest
 import yaml
 
 from shaper_nodes.core.learning.mrilc import DEFAULTS, RANGES
-from shaper_nodes.nodes import bag_play, identifier, learner, learner_list, learner_mrilc, recorder, scheduler, shaper
+from shaper_nodes.nodes import (
+    bag_play,
+    calibrate,
+    identifier,
+    learner,
+    learner_list,
+    learner_mrilc,
+    recorder,
+    scheduler,
+    shaper,
+)
 from shaper_nodes.ros.parameters import Spec
 from sim_plant_node import sim_plant
 
@@ -29,6 +39,7 @@ TABLES = {
     "recorder": recorder.PARAMETERS,
     "bag_play": bag_play.PARAMETERS,
     "sim_plant": sim_plant.PARAMETERS,
+    "calibrate": calibrate.PARAMETERS,
 }
 SPECS = [(table, spec) for table, specs in TABLES.items() for spec in specs]
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / "config"

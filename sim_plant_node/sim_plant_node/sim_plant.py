@@ -31,7 +31,9 @@ arm
     and the forward command topic while a task runs. /joint_states carries the motor-side
     positions, velocities and torques, ``~/tip_state`` the link angles, the IMU the flange's
     specific force (gravity included) and angular rate at every physics step (rate x
-    ``arm.substeps``). In lockstep the arm steps while the controller executes a trajectory.
+    ``arm.substeps``). In lockstep the arm steps while the controller executes a trajectory;
+    at rest it publishes its last joint state again every 0.1 s of wall time (simulated time
+    stands still), as a robot's joint_state_broadcaster keeps publishing.
 
 Feedforward (``~/set_feedforward``, shaper_msgs/SetFeedforward)
 --------------------------------------------------------------
@@ -62,10 +64,12 @@ from typing import Any
 
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock as RclpyClock
+from rclpy.clock import ClockType
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64MultiArray
@@ -115,6 +119,9 @@ SENSOR_PARAMS = ("imu.bias", "imu.noise_stddev", "imu.gyro_noise_stddev", "imu.g
                  "joint_states.noise_stddev", "joint_states.resolution")
 #: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
 WAITING = "waiting for subscribers"
+LOCKSTEP_IMU_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+#: s of wall time between joint states of the lockstep arm at rest
+IDLE_STATE_PERIOD = 0.1
 
 
 def check_model(model: str) -> str:
@@ -262,7 +269,10 @@ class SimPlantNode(Node):
         self._js_pub = self.create_publisher(JointState, tp["joint_states"], 10)
         self._tip_pub = self.create_publisher(JointState, tp["tip_state"], 10)
         self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
-        self._imu_pub = self.create_publisher(Imu, tp["imu"], qos_profile_sensor_data)
+        # in lockstep every sample counts (simulated time runs faster than a reader may take them): a reliable
+        # writer keeps 1000 for a reliable reader, and still matches best-effort readers as a sensor driver does
+        self._imu_pub = self.create_publisher(Imu, tp["imu"], LOCKSTEP_IMU_QOS if self.mode == "lockstep"
+                                              else qos_profile_sensor_data)
         self._event_pub = self.create_publisher(CycleEvent, tp["cycle_events"], 10)
         self._report_pub = self.create_publisher(CycleReport, tp["cycle_reports"], 10)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
@@ -300,6 +310,13 @@ class SimPlantNode(Node):
                                         tp["jtc_topic"])
             if self.mode == "lockstep":
                 self.create_timer(0.002, self._free_run)
+                # a robot's joint_state_broadcaster publishes at rest too: the last state again (time stands still)
+                self._last_js = JointState(name=self.joint_names, position=self._reported(
+                    self.plant.base_position).tolist(), velocity=self.plant.base_velocity.tolist(),
+                    effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
+                self._last_js.header.stamp = sec_to_time(self._now())
+                self.create_timer(IDLE_STATE_PERIOD, self._idle_joint_states,
+                                  clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         if self.mode == "lockstep":
             self.create_timer(0.05, self._watchdog)
             self._publish_clock()
@@ -513,6 +530,7 @@ class SimPlantNode(Node):
                         effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
         js.header.stamp = stamp
         self._js_pub.publish(js)
+        self._last_js = js
         if self._tip_pub.get_subscription_count() > 0:
             tip = JointState(name=self.joint_names, position=self.plant.tip_position.tolist(),
                              velocity=self.plant.tip_velocity.tolist())
@@ -584,6 +602,11 @@ class SimPlantNode(Node):
         self.jtc.update(self._now())
         c = self.jtc.controller
         self._integrate(c.command, c.command_velocity)
+
+    def _idle_joint_states(self) -> None:
+        """Lockstep arm at rest (no trajectory, no task): publish the last joint state again."""
+        if self.jtc is not None and not self.jtc.running and self.task is None and self._waiting_since is None:
+            self._js_pub.publish(self._last_js)
 
     def _free_run(self) -> None:
         """Lockstep: step while the controller executes a trajectory (no task runs), ~20 ms of wall time a call."""

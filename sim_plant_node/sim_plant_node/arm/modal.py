@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamics import ArmModel
+from .dynamics import ArmModel, ElasticArm
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,35 @@ def mode_map(model: ArmModel, base_pose: np.ndarray, joints: tuple[int, int], gr
             pose[joints[0]], pose[joints[1]] = qa, qb
             out[i, j] = lowest(model, pose).hz
     return out
+
+
+def simulated_modes(model: ArmModel, pose: np.ndarray, step: float, max_damping: float = 1.0,
+                    eps: float = 1e-7) -> list[tuple[float, float]]:
+    """The modes of the arm *as simulated* at ``pose``: (natural frequency rad/s, damping ratio), lowest first.
+
+    The simulator's one-step map (Newmark trapezoidal rule, step ``step`` s, state x, x', x'') is
+    linearised at rest by central differences; each eigenvalue z gives s = ln(z) / step. This is
+    what identification from the simulated arm's small free motions converges to: the
+    continuous-time :func:`modes` less the integrator's frequency warping and the terms the
+    continuous linearisation leaves out (within 0.5 % of it in damping on the UR5e-based arm).
+    """
+    pose = np.asarray(pose, dtype=float)
+    arm = ElasticArm(model, step, pose)
+    m = 2 * model.n
+
+    def advance(s: np.ndarray) -> np.ndarray:
+        arm.x, arm.xd, arm.xdd = s[:m].copy(), s[m:2 * m].copy(), s[2 * m:].copy()
+        arm.step(pose)
+        return np.concatenate([arm.x, arm.xd, arm.xdd])
+
+    rest = np.concatenate([arm.x, arm.xd, arm.xdd])
+    jac = np.empty((3 * m, 3 * m))
+    for i in range(3 * m):
+        d = np.zeros(3 * m)
+        d[i] = eps
+        jac[:, i] = (advance(rest + d) - advance(rest - d)) / (2 * eps)
+    z = np.linalg.eigvals(jac)
+    z = z[np.abs(z) > 1e-9]
+    s = np.log(z.astype(complex)) / step
+    out = [(float(abs(v)), float(-v.real / abs(v))) for v in s if v.imag > 1e-6 and -v.real / abs(v) < max_damping]
+    return sorted(out)

@@ -1,0 +1,343 @@
+"""A calibration's results from its recording: the pose map, the report, the scheduler's rule base.
+
+The recording (written by the ``calibrate`` node) is a folder of rosbag2 bags, one per completed
+pose (``pose_000``, ``pose_001``, ...), each with
+
+- ``/calibrate/setup`` (std_msgs/String): the plan's configuration and the analysis settings,
+  as JSON, so that the recording alone recomputes everything;
+- ``/calibrate/events`` (shaper_msgs/CycleEvent): per excitation (``cycle`` = repeat), START
+  when the controller began it, MOTION_END when its commanded motion ended, END when its free
+  decay is over (header stamps, the robot's clock);
+- the accelerometer (sensor_msgs/Imu; linear acceleration, m/s^2) and ``/joint_states``.
+
+:func:`compute` turns setup and per-pose samples into a :class:`Calibration`; the node calls it
+on what it recorded, and ``calibrate --from-bag`` on what it reads back, so both give the same
+report. :func:`write_outputs` writes report.json, report.md with its figures, scheduler.yaml
+(the scheduler node's parameters) and shaper.yaml (the shaper node's fallback parameters),
+each written to a temporary name and renamed, so a folder never holds half a file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import pathlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from shaper_nodes.core.calibration import (
+    Decay,
+    IdentifySettings,
+    Plan,
+    PoseResult,
+    fallback,
+    identify_pose,
+    make_plan,
+    predicted_residual,
+    rule_base_spec,
+    worst_residual,
+)
+from shaper_nodes.core.calibration.plan import PlanError, config_from_dict, config_to_dict, plan_to_dict
+from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
+from shaper_nodes.core.shaping import Shaper
+
+SETUP_TOPIC = "/calibrate/setup"
+EVENTS_TOPIC = "/calibrate/events"
+#: event kinds (shaper_msgs/CycleEvent)
+START, MOTION_END, END = 0, 1, 2
+REPORT_FORMAT = "shaper_nodes calibration report 1"
+#: significant digits of the numbers in report.json (what "the same report" is compared to)
+DIGITS = 6
+
+
+@dataclass
+class PoseData:
+    """What was recorded at one pose: excitation events (kind, repeat, stamp s) and the accelerometer."""
+
+    index: int
+    events: list[tuple[int, int, float]] = field(default_factory=list)
+    imu_t: list[float] = field(default_factory=list)
+    imu: list[tuple[float, float, float]] = field(default_factory=list)
+
+
+@dataclass
+class Calibration:
+    """The pose map and everything built from it."""
+
+    plan: Plan
+    settings: IdentifySettings
+    family: str
+    results: list[PoseResult]
+    rule_base: dict[str, Any] | None
+    notes: list[str]
+    fallback: Shaper | None
+    residuals: list[dict[str, float]]
+
+
+def setup_dict(plan: Plan, settings: IdentifySettings, family: str, premise_threshold: float) -> dict[str, Any]:
+    """The setup recorded with the calibration (plan configuration, start, analysis settings)."""
+    return {"config": config_to_dict(plan.config), "start": plan.start.tolist(),
+            "analysis": {"method": settings.method, "max_modes": settings.max_modes,
+                         "band_hz": list(settings.band_hz) if settings.band_hz else None,
+                         "agreement": settings.agreement, "max_damping": settings.max_damping,
+                         "family": family, "premise_threshold": premise_threshold}}
+
+
+def plan_from_setup(setup: dict[str, Any]) -> tuple[Plan, IdentifySettings, str, float]:
+    """Plan, identification settings, shaper family and premise threshold of a recorded setup."""
+    try:
+        plan = make_plan(config_from_dict(setup["config"]), setup["start"])
+        a = setup["analysis"]
+        band = (float(a["band_hz"][0]), float(a["band_hz"][1])) if a["band_hz"] else None
+        settings = IdentifySettings(str(a["method"]), int(a["max_modes"]), band,
+                                    float(a["agreement"]), float(a["max_damping"]))
+        return plan, settings, str(a["family"]), float(a["premise_threshold"])
+    except (KeyError, TypeError) as err:
+        raise PlanError(f"the recorded setup is incomplete: {err!r}") from None
+
+
+def decays_of(index: int, data: PoseData) -> list[Decay]:
+    """The free decays of a pose: accelerometer samples after each MOTION_END up to its END,
+    times from MOTION_END."""
+    t = np.asarray(data.imu_t, dtype=float)
+    y = np.asarray(data.imu, dtype=float).reshape(-1, 3)
+    order = np.argsort(t, kind="stable")
+    t, y = t[order], y[order]
+    ends = {rep: s for kind, rep, s in data.events if kind == END}
+    out = []
+    for kind, rep, stamp in sorted(data.events, key=lambda e: (e[1], e[0])):
+        if kind != MOTION_END or rep not in ends:
+            continue
+        sel = (t > stamp) & (t <= ends[rep])
+        out.append(Decay(index, rep, t[sel] - stamp, y[sel]))
+    return out
+
+
+def compute(setup: dict[str, Any], poses: Sequence[PoseData], workers: int = 1) -> Calibration:
+    """The pose map from the recorded samples, and the rule base, fallback and predictions it gives.
+
+    ``workers`` > 1 identifies poses in that many processes; the result does not depend on it."""
+    plan, settings, family, threshold = plan_from_setup(setup)
+    by_index = {p.index: p for p in poses}
+    jobs = [(step.index, step.name, step.pose, step.grid_index, decays_of(step.index, by_index[step.index]), settings)
+            for step in plan.steps if step.index in by_index]
+    if workers > 1 and len(jobs) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            results = list(pool.map(identify_pose, *zip(*jobs, strict=True)))
+    else:
+        results = [identify_pose(*job) for job in jobs]
+    notes: list[str] = []
+    spec = None
+    shaper = None
+    if len(results) == len(plan.steps):
+        try:
+            spec, notes = rule_base_spec(plan, results, family, threshold)
+        except PlanError as err:
+            notes.append(f"no rule base: {err}")
+        try:
+            shaper = fallback(results, family)[0]
+        except PlanError as err:
+            notes.append(f"no fallback shaper: {err}")
+    residuals = _residuals(plan, results, spec, shaper, family)
+    return Calibration(plan, settings, family, results, spec, notes, shaper, residuals)
+
+
+def _scheduler(spec: dict[str, Any], family: str) -> Scheduler:
+    return Scheduler(rule_base_from_dict(spec), "modes", family)
+
+
+def _residuals(plan: Plan, results: list[PoseResult], spec: dict[str, Any] | None, shaper: Shaper | None,
+               family: str) -> list[dict[str, float]]:
+    """Per pose: the residual vibration predicted for the fixed (home) shaper and the scheduled one,
+    on the pose's identified modes (amplitude-weighted V), and the scheduled one's worst case over
+    the modes' +-2 sigma."""
+    out = []
+    sched = _scheduler(spec, family) if spec is not None else None
+    names = list(plan.config.joint_names)
+    for r in results:
+        row: dict[str, float] = {}
+        if shaper is not None and r.modes:
+            row["fixed"] = predicted_residual(shaper, r.modes)
+        if sched is not None and r.modes:
+            z = [float(r.positions[names.index(p)]) for p in sched.rule_base.premises]
+            s = sched.shaper(sched.evaluate(z))
+            row["scheduled"] = predicted_residual(s, r.modes)
+            row["scheduled_worst_2sigma"] = worst_residual(s, r.modes, 2.0)
+        out.append(row)
+    return out
+
+
+# --------------------------------------------------------------------------- reading a recording
+def pose_folders(recording: pathlib.Path) -> list[pathlib.Path]:
+    """The completed poses' bags of a recording folder, in order (``*.partial`` are not complete)."""
+    return sorted(p for p in recording.glob("pose_[0-9][0-9][0-9]") if (p / "metadata.yaml").exists())
+
+
+def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[PoseData]]:
+    """The recorded setup and per-pose samples of a calibration recording folder (the accelerometer:
+    its sensor_msgs/Imu topic).
+
+    Raises
+    ------
+    PlanError
+        No completed pose, no setup, or poses recorded under different setups.
+    """
+    from .reading import Bag
+
+    path = pathlib.Path(recording)
+    folders = pose_folders(path)
+    if not folders:
+        raise PlanError(f"{path} holds no completed pose (pose_NNN bags with metadata.yaml)")
+    setup: dict[str, Any] | None = None
+    poses = []
+    for folder in folders:
+        data = PoseData(int(folder.name.split("_")[1]))
+        with Bag(folder) as bag:
+            imus = [t for t, i in bag.topics.items() if i.msgtype == "sensor_msgs/msg/Imu"]
+            if len(imus) != 1:
+                raise PlanError(f"{folder.name}: expected one sensor_msgs/Imu topic, found {imus}")
+            imu_topic = imus[0]
+            decode = {t: bag.deserializer(i.msgtype) for t, i in bag.topics.items()
+                      if t in (SETUP_TOPIC, EVENTS_TOPIC, imu_topic)}
+            for topic, _, _, raw in bag.messages([SETUP_TOPIC, EVENTS_TOPIC, imu_topic]):
+                msg = decode[topic](raw)
+                if topic == SETUP_TOPIC:
+                    this = json.loads(msg.data)
+                    if setup is not None and this != setup:
+                        raise PlanError(f"{folder.name} was recorded with another setup than the poses before it")
+                    setup = this
+                elif topic == EVENTS_TOPIC:
+                    data.events.append((int(msg.event), int(msg.cycle), _sec(msg.header.stamp)))
+                else:
+                    a = msg.linear_acceleration
+                    data.imu_t.append(_sec(msg.header.stamp))
+                    data.imu.append((a.x, a.y, a.z))
+        poses.append(data)
+    if setup is None:
+        raise PlanError(f"{path}: no {SETUP_TOPIC} message: not a calibration recording")
+    return setup, poses
+
+
+def _sec(stamp: Any) -> float:
+    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+
+# --------------------------------------------------------------------------- outputs
+def _r(x: float, digits: int = DIGITS) -> float:
+    return float(f"{x:.{digits}g}") if math.isfinite(x) else x
+
+
+def _mode_dict(m: Any) -> dict[str, float]:
+    return {"frequency_hz": _r(m.hz), "frequency_hz_std": _r(m.omega_std / (2 * math.pi), 3),
+            "damping_ratio": _r(m.zeta), "damping_ratio_std": _r(m.zeta_std, 3), "amplitude": _r(m.amplitude, 4)}
+
+
+def report_dict(cal: Calibration) -> dict[str, Any]:
+    """report.json: plan, settings, per pose its positions, modes (one-sigma) and flags, the choices."""
+    names = list(cal.plan.config.joint_names)
+    poses = []
+    for r, res in zip(cal.results, cal.residuals, strict=True):
+        poses.append({"index": r.index, "name": r.name,
+                      "grid_index": None if r.grid_index is None else list(r.grid_index),
+                      "positions": {j: _r(float(v)) for j, v in zip(names, r.positions, strict=True)},
+                      "modes": [_mode_dict(m) for m in r.modes],
+                      "repeats": [[{"frequency_hz": _r(m.hz), "damping_ratio": _r(m.zeta)} for m in rep]
+                                  for rep in r.repeats],
+                      "flags": list(r.flags), "ok": r.ok,
+                      "predicted_residual": {k: _r(v, 4) for k, v in res.items()}})
+    s = cal.settings
+    out: dict[str, Any] = {
+        "format": REPORT_FORMAT,
+        "complete": len(cal.results) == len(cal.plan.steps),
+        "plan": plan_to_dict(cal.plan),
+        "identification": {"method": s.method, "max_modes": s.max_modes, "band_hz": s.band_hz,
+                           "max_damping": s.max_damping, "agreement": s.agreement,
+                           "uncertainty": "one sigma: the Jacobian covariance of each decay's fit with the spread"
+                                          " over analysis variants added, and the spread between repeats"},
+        "poses": poses,
+        "flagged_poses": [r.name for r in cal.results if not r.ok or r.flags],
+        "notes": list(cal.notes),
+    }
+    if cal.rule_base is not None:
+        out["scheduler"] = {"premises": cal.rule_base["premises"], "rules": len(cal.rule_base["rules"]),
+                            "family": cal.family, "interpolation": "modes"}
+    if cal.fallback is not None:
+        out["fallback"] = {"family": cal.fallback.family, "pose": "home",
+                           "frequencies_hz": [_r(m.omega / (2 * math.pi)) for m in cal.fallback.modes],
+                           "damping_ratios": [_r(m.zeta) for m in cal.fallback.modes],
+                           "duration_s": _r(cal.fallback.duration)}
+    return out
+
+
+def scheduler_yaml(cal: Calibration, node: str = "scheduler") -> str:
+    """The scheduler node's parameter file for the calibrated rule base."""
+    assert cal.rule_base is not None
+    spec = cal.rule_base
+    lines = [f"# Scheduler rule base from a calibration ({len(cal.results)} poses): ros2 run shaper_nodes scheduler",
+             "# --ros-args --params-file scheduler.yaml. Premises: joint positions, rad; natural_frequency in",
+             "# rad/s, one per mode (sorted by frequency); damping_ratio dimensionless.",
+             f"{node}:", "  ros__parameters:",
+             f"    premises: {json.dumps(spec['premises'])}",
+             f"    range: {json.dumps([_r(x) for x in spec['range']])}",
+             "    interpolation: modes",
+             f"    family: {cal.family}",
+             f"    rule_names: {json.dumps(list(spec['rules']))}",
+             "    rules:"]
+    for name, rule in spec["rules"].items():
+        lines += [f"      {name}:",
+                  f"        membership: {json.dumps(rule['membership'])}",
+                  f"        membership_params: {json.dumps([_r(x) for x in rule['membership_params']])}",
+                  f"        natural_frequency: {json.dumps([_r(x) for x in rule['natural_frequency']])}",
+                  f"        damping_ratio: {json.dumps([_r(x) for x in rule['damping_ratio']])}"]
+    return "\n".join(lines) + "\n"
+
+
+def shaper_yaml(cal: Calibration, node: str = "shaper") -> str:
+    """The shaper node's parameters for the fallback: the family's shaper on the home pose's modes."""
+    assert cal.fallback is not None
+    modes = cal.fallback.modes
+    return "\n".join([
+        "# Fallback shaper from a calibration: the home pose's modes. ros2 run shaper_nodes shaper_node",
+        "# --ros-args --params-file shaper.yaml (with your joint_names and topics). Hz, dimensionless.",
+        f"{node}:", "  ros__parameters:", "    shaper:",
+        f"      family: {cal.fallback.family}",
+        f"      frequencies_hz: {json.dumps([_r(m.omega / (2 * math.pi)) for m in modes])}",
+        f"      damping_ratios: {json.dumps([_r(m.zeta) for m in modes])}",
+    ]) + "\n"
+
+
+def write_atomic(path: pathlib.Path, data: str | bytes) -> None:
+    """Write to ``path.tmp`` then rename: readers see the old file or the whole new one."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        f.write(data.encode() if isinstance(data, str) else data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recording") -> list[pathlib.Path]:
+    """report.json, report.md with figures, scheduler.yaml and shaper.yaml in ``out``; the paths written."""
+    from .calibration_report import figures, markdown
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    figs = figures(out, cal)
+    written += figs
+    report = report_dict(cal)
+    if cal.rule_base is not None:
+        write_atomic(out / "scheduler.yaml", scheduler_yaml(cal))
+        written.append(out / "scheduler.yaml")
+    if cal.fallback is not None:
+        write_atomic(out / "shaper.yaml", shaper_yaml(cal))
+        written.append(out / "shaper.yaml")
+    write_atomic(out / "report.md", markdown(cal, report, [f.name for f in figs], recording))
+    write_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
+    return [*written, out / "report.md", out / "report.json"]
