@@ -41,10 +41,12 @@ def ros_context(domain_id):
 def start_node(domain_id, tmp_path):
     procs: list[NodeProcess] = []
 
-    def start(package: str, executable: str, params: dict | None = None) -> NodeProcess:
+    def start(package: str, executable: str, params: dict | None = None, **kwargs) -> NodeProcess:
+        """Start a node (kwargs go to NodeProcess: params_file, args, remaps)."""
         log = tmp_path / f"{executable}-{len(procs)}.log"
         proc = NodeProcess(package, executable, params or {}, log_path=log,
-                           env={"ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+                           env={"ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"},
+                           **kwargs)
         procs.append(proc.start())
         return proc
 

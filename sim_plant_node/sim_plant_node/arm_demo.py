@@ -2,11 +2,17 @@
 
 Starts the sim plant (``plant.model: arm``, lockstep, with its joint_trajectory_controller
 emulation), the shaper node (its FollowJointTrajectory proxy in front of the controller), the
-identifier and the recorder as separate processes. A MoveIt-like client sends the
-pick-and-place cycle of :mod:`sim_plant_node.arm.task` move by move to the shaper's action and
-marks each cycle on ``/cycle_events``. Cases: unshaped; ZV and ZVD designed at the home pose's
-lowest mode (modal analysis of the arm); the identifier's recommendation from the unshaped
-cycles (applied through its ``~/identify``); LIST learning over the cycles (the learner node).
+identifier and the recorder as separate processes. The cases that need it first calibrate the
+workspace with the ``calibrate`` node (its config/calibrate.yaml: a grid over shoulder_lift and
+elbow, three excitations per pose) or reuse a calibration (``--calibration``). A MoveIt-like
+client sends the pick-and-place cycle of :mod:`sim_plant_node.arm.task` move by move to the
+shaper's action and marks each cycle on ``/cycle_events``. Cases: unshaped; ZV and ZVD designed at
+the home pose's lowest mode (modal analysis of the arm); the identifier's recommendation from the
+unshaped cycles (applied through its ``~/identify``); LIST learning over the cycles (the learner
+node); ``fixed``, the calibration's fallback (``shaper.yaml``: ZV on the home pose's modes);
+``scheduled``, the calibrated scheduler (``scheduler.yaml``) with the shaper node's
+``action.scheduler``, so each goal is shaped for the modes at its final pose; ``scheduled_list``,
+LIST learning on top of the schedule (the learner sends to the scheduler).
 For every move and case it measures (:mod:`sim_plant_node.arm.metrics`) the residual vibration
 at the tool, the settling time, the move time plus settling time, the shaper's delay and the
 tool-path deviation the shaping causes, and writes them as CSV, Markdown and a PNG plot.
@@ -18,6 +24,7 @@ import argparse
 import csv
 import datetime
 import itertools
+import json
 import math
 import os
 import pathlib
@@ -32,8 +39,15 @@ import numpy as np
 RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/shaper/active_shaper", "/diagnostics",
             "/learner/reports"]
 RATE = 500.0
+CALIBRATION_TIMEOUT = 900.0  # s of wall time the calibration may take
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
-CASES = ("none", "zv", "zvd", "identified", "list")
+CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list")
+#: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
+DEFAULT_CASES = ("none", "fixed", "scheduled")
+#: cases that need a calibration
+CALIBRATED = ("fixed", "scheduled", "scheduled_list")
+#: cases whose shaper node asks the scheduler for each goal (the shaper node is restarted for them)
+SCHEDULED = ("scheduled", "scheduled_list")
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -42,7 +56,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    help="output folder (default: out/demo-arm-<date-time> in the current folder)")
     p.add_argument("--cycles", type=int, default=2, help="pick-and-place cycles per fixed-shaper case (default 2)")
     p.add_argument("--list-cycles", type=int, default=8, help="cycles of LIST learning (default 8)")
-    p.add_argument("--cases", default=",".join(CASES), help=f"cases to run (default {','.join(CASES)})")
+    p.add_argument("--cases", default=",".join(DEFAULT_CASES),
+                   help=f"cases to run, among {','.join(CASES)} (default {','.join(DEFAULT_CASES)}); those with a"
+                   " schedule run last")
+    p.add_argument("--calibration", type=pathlib.Path, default=None,
+                   help="a calibration folder to use (scheduler.yaml, shaper.yaml) instead of calibrating first")
     p.add_argument("--noise", type=float, default=0.01, help="accelerometer noise, m/s^2 (default 0.01)")
     return p.parse_args(argv)
 
@@ -254,6 +272,16 @@ def _table(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
+def _sums(rows: list[dict[str, Any]], cases: list[str]) -> list[str]:
+    """Per case: the residual summed over the cycle's moves, and its ratio to the fixed shaper's."""
+    total = {c: sum(r["residual_rms"] for r in rows if r["case"] == c) for c in cases}
+    out = ["| case | summed residual RMS m/s^2 | % of unshaped | % of fixed |", "|---|---|---|---|"]
+    for c in cases:
+        fixed = f"{100 * total[c] / total['fixed']:.1f}" if "fixed" in total and total["fixed"] > 0 else "-"
+        out.append(f"| {c} | {total[c]:.4f} | {100 * total[c] / total['none']:.1f} | {fixed} |")
+    return out
+
+
 def plot(path: pathlib.Path, traces: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]], cases: list[str],
          moves: list[str]) -> None:
     import matplotlib
@@ -298,8 +326,73 @@ def identify(conductor: Any, identifier_cli: Any, cycles: int) -> tuple[Any, str
     return resp.recommended, f"{resp.recommended.family} for {modes}"
 
 
+def calibrate(out: pathlib.Path, noise_log: pathlib.Path) -> pathlib.Path:
+    """Run the ``calibrate`` node on the simulated arm (its installed config/calibrate.yaml) into
+    ``out``; returns ``out``. Raises RuntimeError with the log's end if it fails."""
+    from ament_index_python.packages import get_package_share_directory
+
+    from shaper_nodes.ros.launching import NodeProcess
+
+    config = pathlib.Path(get_package_share_directory("shaper_nodes")) / "config" / "calibrate.yaml"
+    proc = NodeProcess("shaper_nodes", "calibrate", {}, log_path=noise_log, params_file=config,
+                       args=["--execute", "--out", str(out)]).start()
+    assert proc.proc is not None
+    try:
+        code = proc.proc.wait(timeout=CALIBRATION_TIMEOUT)
+    except Exception:
+        proc.stop()
+        raise
+    proc.stop()
+    if code != 0:
+        tail = "\n".join(noise_log.read_text().splitlines()[-5:])
+        raise RuntimeError(f"calibration failed (exit {code}):\n{tail}")
+    return out
+
+
+def fallback_request(calibration: pathlib.Path) -> Any:
+    """The SetShaper request for the calibration's fallback shaper (shaper.yaml)."""
+    import yaml
+
+    from shaper_msgs.msg import Mode as ModeMsg
+    from shaper_msgs.msg import Shaper as ShaperMsg
+    from shaper_msgs.srv import SetShaper
+
+    (body,) = yaml.safe_load((calibration / "shaper.yaml").read_text()).values()
+    sh = body["ros__parameters"]["shaper"]
+    modes = [ModeMsg(natural_frequency=2 * math.pi * float(f), damping_ratio=float(z))
+             for f, z in zip(sh["frequencies_hz"], sh["damping_ratios"], strict=True)]
+    return SetShaper.Request(shaper=ShaperMsg(family=str(sh["family"]), design_modes=modes, source="user"))
+
+
+@dataclass
+class Session:
+    """What the cases share: the node starter, the shaper node's process, the calibration."""
+
+    start: Callable[..., Any]
+    shaper: Any
+    shaper_params: dict[str, Any]
+    out: pathlib.Path
+    calibration: pathlib.Path | None = None
+    scheduled: bool = False
+
+
+def _schedule(session: Session, client: ArmClient) -> None:
+    """Start the calibrated scheduler, and the shaper node again with action.scheduler (once)."""
+    if session.scheduled:
+        return
+    assert session.calibration is not None
+    session.shaper.stop()
+    session.start("shaper_nodes", "scheduler", {"use_sim_time": True},
+                  params_file=session.calibration / "scheduler.yaml")
+    session.shaper = session.start("shaper_nodes", "shaper_node", {**session.shaper_params,
+                                                                    "action.scheduler": "/scheduler"})
+    session.scheduled = True
+    client.c.wait_ready(60.0, {})
+    client.wait_ready(3)
+
+
 def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | None, home_mode: Any,
-                start: Callable[..., Any]) -> str:
+                session: Session) -> str:
     """Install the case's shaper (or start its learner); returns what was installed, for the log."""
     from shaper_msgs.srv import SetShaper
 
@@ -316,8 +409,24 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
         if not resp.success:
             raise RuntimeError(f"the shaper refused the recommendation: {resp.message}")
         return recommended[1]
+    if case == "fixed":
+        assert session.calibration is not None
+        req = fallback_request(session.calibration)
+        resp = conductor.call(conductor.set_shaper_cli, req)
+        if not resp.success:
+            raise RuntimeError(f"the shaper refused the calibrated fallback: {resp.message}")
+        return (f"calibrated fallback: {req.shaper.family} on the home pose's modes "
+                + ", ".join(f"{m.natural_frequency / (2 * math.pi):.3f} Hz" for m in req.shaper.design_modes))
+    if case in SCHEDULED:
+        _schedule(session, client)
+        if case == "scheduled":
+            return "calibrated schedule: each goal shaped for the modes at its final pose"
+        session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2",
+                                                   "shaper": "/scheduler"})
+        client.wait_listeners(4)  # and the learner
+        return "calibrated schedule with LIST (zv2) on top"
     conductor.set_shaper("none")
-    start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2"})
+    session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2"})
     client.wait_listeners(4)  # and the learner
     return "LIST (zv2), from unshaped"
 
@@ -334,6 +443,7 @@ def main(argv: list[str] | None = None) -> int:
     from .conductor import Conductor, node_session
 
     cases = [c.strip() for c in args.cases.split(",")]
+    cases = [c for c in cases if c not in SCHEDULED] + [c for c in cases if c in SCHEDULED]  # one shaper restart
     unknown = sorted(set(cases) - set(CASES))
     if unknown or "none" not in cases:
         print(f"demo arm: --cases must include none and be among {', '.join(CASES)}; got {args.cases}", file=sys.stderr)
@@ -352,8 +462,10 @@ def main(argv: list[str] | None = None) -> int:
         start("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
                                               "task.start": HOME.tolist(), "imu.noise_stddev": args.noise,
                                               "lockstep_timeout": 60.0})
-        start("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": RATE,
-                                              "use_sim_time": True, "action.server_timeout": 30.0})
+        shaper_params = {"joint_names": list(JOINT_NAMES), "command_rate": RATE, "use_sim_time": True,
+                         "action.server_timeout": 30.0}
+        session = Session(start, start("shaper_nodes", "shaper_node", shaper_params), shaper_params, out,
+                          args.calibration)
         start("shaper_nodes", "identifier", {"use_sim_time": True, "buffer_cycles": 20, "settle_tolerance": 1e-4,
                                              "max_modes": 3})
         start("shaper_nodes", "recorder", {"output": str(out / "recording"), "topics": RECORDED,
@@ -364,15 +476,22 @@ def main(argv: list[str] | None = None) -> int:
         try:
             conductor.wait_ready(60.0, {"/cycle_events": 2})
             client.wait_ready(3)  # this node, the identifier and the recorder
+            if session.calibration is None and any(c in CALIBRATED for c in cases):
+                print("calibrate: the workspace (config/calibrate.yaml) ... ", end="", flush=True)
+                session.calibration = calibrate(out / "calibration", out / "arm-calibrate.log")
+                report = json.loads((session.calibration / "report.json").read_text())
+                print(f"{len(report['poses'])} poses, {len(report['flagged_poses'])} flagged; scheduler over"
+                      f" {', '.join(report['scheduler']['premises'])} ({time.monotonic() - t_wall:.0f} s)", flush=True)
             cycle_index = 0
             recommended = None
             for case in cases:
-                installed = _apply_case(case, client, recommended, home_mode, start)
-                n = args.list_cycles if case == "list" else args.cycles
+                installed = _apply_case(case, client, recommended, home_mode, session)
+                learning = case in ("list", "scheduled_list")
+                n = args.list_cycles if learning else args.cycles
                 print(f"{case:>10}: {installed}; {n} cycles ", end="", flush=True)
                 for _ in range(n):
                     runs = client.run_cycle(cycle_index, moves, lambda: print(".", end="", flush=True))
-                    if case == "list":
+                    if learning:
                         client.c.spin_until(lambda c=cycle_index: any(r.cycle == c for r in client.reports), 120.0,
                                             "the learner's report")
                     cycle_index += 1
@@ -402,7 +521,7 @@ def main(argv: list[str] | None = None) -> int:
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    table = _table(rows)
+    table = [*_table(rows), "", *_sums(rows, cases)]
     from .arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
 
     note = (f"Residual vibration: the flange IMU's specific force minus its mean, over {RESIDUAL_WINDOW:g} s after"

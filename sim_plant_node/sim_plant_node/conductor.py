@@ -190,8 +190,9 @@ def spin_context(domain_id: int | None = None) -> rclpy.context.Context:
     return ctx
 
 
-#: ``start(package, executable, params)``: start a node process (what :func:`node_session` yields)
-StartNode = Callable[[str, str, dict[str, Any]], Any]
+#: ``start(package, executable, params, **kwargs)``: start a node process (what :func:`node_session` yields;
+#: kwargs go to NodeProcess: params_file, args, remaps, log_path)
+StartNode = Callable[..., Any]
 
 
 @contextlib.contextmanager
@@ -203,8 +204,8 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
 
     procs: list[ChildProcess] = []
 
-    def start(package: str, executable: str, params: dict[str, Any]) -> NodeProcess:
-        proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log")
+    def start(package: str, executable: str, params: dict[str, Any], **kwargs: Any) -> NodeProcess:
+        proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log", **kwargs)
         procs.append(proc.start())
         return proc
 

@@ -324,7 +324,7 @@ class Calibrator:
             start = self.move(approach, f"the approach to pose {step.index} ({step.name})")
             self.wait_imu(start + approach[-1].time, "the end of the rest before the excitation")
             for rep in range(step.repeats):
-                start = self.move(step.excitation, f"excitation {rep + 1} at pose {step.index}")
+                start = self.move(step.excitations[rep], f"excitation {rep + 1} at pose {step.index}")
                 motion_end = start + step.excitation_time
                 self.wait_imu(motion_end + step.decay, "the end of the free decay")
                 self.event(0, rep, step, start)

@@ -332,7 +332,11 @@ class SchedulerNode(Node):
         else:
             self.last_sent = interp
             name = self.core.rule_base.rules[region].name or str(region)
-            self.get_logger().info(f"learner correction in region {name}: T2 x {corr[0]:.4f}, A1 x {corr[1]:.4f}")
+            if self.core.factors[region] is not None:  # several modes: an extra factor (core docstring)
+                what = f"extra factor T2 = {corr[0]:.4f} s, A1 = {corr[1]:.4f}"
+            else:
+                what = f"T2 x {corr[0]:.4f}, A1 x {corr[1]:.4f}"
+            self.get_logger().info(f"learner correction in region {name}: {what}")
             resp.message = f"{answer.response.message}; kept as the correction of region {name}"
         return resp
 

@@ -11,7 +11,7 @@ import os
 import pathlib
 import signal
 import subprocess
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import IO
 
 
@@ -25,9 +25,11 @@ def executable(package: str, name: str) -> pathlib.Path:
     return path
 
 
-def ros_args(params: Mapping[str, object], remaps: Mapping[str, str] | None = None) -> list[str]:
-    """``--ros-args -p name:=value ...``; values are written as YAML (JSON), floats keep a point."""
-    args = ["--ros-args"]
+def ros_args(params: Mapping[str, object], remaps: Mapping[str, str] | None = None,
+             params_file: str | pathlib.Path | None = None) -> list[str]:
+    """``--ros-args [--params-file FILE] -p name:=value ...``; values are written as YAML (JSON), floats keep a
+    point; ``-p`` values override the file's."""
+    args = ["--ros-args"] + (["--params-file", str(params_file)] if params_file else [])
     for key, value in params.items():
         args += ["-p", f"{key}:={json.dumps(value)}"]
     for src, dst in (remaps or {}).items():
@@ -84,5 +86,7 @@ class NodeProcess(ChildProcess):
 
     def __init__(self, package: str, name: str, params: Mapping[str, object] | None = None,
                  log_path: str | pathlib.Path | None = None, env: Mapping[str, str] | None = None,
-                 remaps: Mapping[str, str] | None = None) -> None:
-        super().__init__([str(executable(package, name)), *ros_args(params or {}, remaps)], log_path, env)
+                 remaps: Mapping[str, str] | None = None, params_file: str | pathlib.Path | None = None,
+                 args: Sequence[str] = ()) -> None:
+        super().__init__([str(executable(package, name)), *args, *ros_args(params or {}, remaps, params_file)],
+                         log_path, env)

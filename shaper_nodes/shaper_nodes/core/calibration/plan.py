@@ -8,13 +8,17 @@ wrist_1 with gains (-1, -1) on shoulder_lift and elbow: q_f = base_f + sum_j g_f
 
 The excitation at a pose p is one out-and-back move of the ``excitation_joints`` by
 ``amplitude`` (rad, signed per joint): a trajectory with two waypoints, p + delta at T/2 and
-p at T, both at rest. joint_trajectory_controller joins waypoints that carry positions,
+p at T, both at rest, then p held for ``decay`` s. joint_trajectory_controller joins waypoints that carry positions,
 velocities and accelerations with quintic polynomials, so each half is the minimum-jerk-like
 quintic s(u) = 10 u^3 - 15 u^4 + 6 u^5, whose largest speed is 1.875 |delta| / (T/2) and
 largest acceleration 5.7735 |delta| / (T/2)^2 (jerk bounded). T/2 is the least time that keeps
 both within the excitation's speed and acceleration bounds. After it the arm is at p again
 and rings freely for ``decay`` s; this repeats ``repeats`` times, so every free decay is
-recorded at the pose itself. Approaches between poses are single quintic moves within the
+recorded at the pose itself. Repeats vary the mix: repeat r >= 1 halves the excursion of
+excitation joint r - 1 (cyclically), so each mode is excited in other proportions and an
+estimate pulled by what the identification's model leaves out (heavily damped modes, a close
+neighbour) moves between repeats: the spread enters the reported uncertainty and the
+repeats' agreement check. Approaches between poses are single quintic moves within the
 approach bounds, followed by ``settle`` s at rest.
 
 Order: the home pose first (its modes give the fallback shaper), then the grid in serpentine
@@ -109,7 +113,7 @@ class PoseStep:
     name: str
     pose: np.ndarray
     approach: tuple[Waypoint, ...]
-    excitation: tuple[Waypoint, ...]
+    excitations: tuple[tuple[Waypoint, ...], ...]  # one trajectory per repeat
     repeats: int
     decay: float
     settle: float
@@ -119,12 +123,12 @@ class PoseStep:
     @property
     def excitation_time(self) -> float:
         """Duration of the commanded excursion (the excitation trajectory then holds for ``decay``), s."""
-        return self.excitation[-2].time
+        return self.excitations[0][-2].time
 
     @property
     def duration(self) -> float:
         """Simulated/robot time of the step: approach with its rest, repeats x (excitation + decay), s."""
-        return self.approach[-1].time + self.repeats * self.excitation[-1].time
+        return self.approach[-1].time + sum(e[-1].time for e in self.excitations)
 
 
 @dataclass(frozen=True)
@@ -152,7 +156,8 @@ class Plan:
         ex = ", ".join(f"{j} {a:+.3g}" for j, a in zip(c.excitation_joints, c.amplitude, strict=True))
         lines = [f"calibration plan: {len(self.steps)} poses, {self.steps[0].repeats} excitations each"
                  f" (out and back: {ex} rad, {self.steps[0].excitation_time:.3f} s, then {c.decay:g} s free"
-                 f" decay); approach at <= {c.approach_velocity:g} rad/s, {c.approach_acceleration:g} rad/s^2,"
+                 " decay; from the second on one joint's excursion halved in turn); approach at <="
+                 f" {c.approach_velocity:g} rad/s, {c.approach_acceleration:g} rad/s^2,"
                  f" then {c.settle:g} s at rest",
                  f"joints: {', '.join(c.joint_names)}"]
         for s in self.steps:
@@ -168,6 +173,15 @@ def approach(pose: np.ndarray, duration: float, settle: float) -> tuple[Waypoint
     """A move to ``pose`` in ``duration`` s, then held for ``settle`` s (a rest inside the trajectory, so
     the controller keeps executing and a lockstep simulator keeps time running)."""
     return (Waypoint(duration, pose),) + ((Waypoint(duration + settle, pose),) if settle > 0 else ())
+
+
+def excursion(delta: np.ndarray, joints: Sequence[int], repeat: int) -> np.ndarray:
+    """The excursion of repeat ``repeat``: ``delta``, with excitation joint ``repeat - 1`` (cyclically) halved
+    from the second repeat on (module docstring)."""
+    d = np.asarray(delta, dtype=float).copy()
+    if repeat >= 1 and len(joints) > 1:
+        d[joints[(repeat - 1) % len(joints)]] *= 0.5
+    return d
 
 
 def quintic_time(distance: np.ndarray, velocity: np.ndarray | float, acceleration: np.ndarray | float) -> float:
@@ -327,6 +341,7 @@ def make_plan(c: PlanConfig, start: Sequence[float] | np.ndarray | None = None) 
         raise PlanError("nothing to calibrate: give grid.joints with ranges and counts, or poses")
     delta = np.zeros(n)
     delta[ei] = amp
+    deltas = [excursion(delta, ei, r) for r in range(int(c.repeats))]
     half = quintic_time(delta, c.excitation_velocity, c.excitation_acceleration)
     steps = []
     # home first: on the grid it is that grid pose, else an extra pose
@@ -341,9 +356,9 @@ def make_plan(c: PlanConfig, start: Sequence[float] | np.ndarray | None = None) 
             if low or high:
                 raise PlanError(f"{name}: the {what} leaves the joint limits: {'; '.join(low + high)}")
         t_app = quintic_time(pose - prev, c.approach_velocity, c.approach_acceleration)
-        steps.append(PoseStep(k, name, pose, approach(pose, t_app, c.settle),
-                              (Waypoint(half, pose + delta), Waypoint(2 * half, pose),
-                               Waypoint(2 * half + c.decay, pose)), int(c.repeats),
+        excitations = tuple((Waypoint(half, pose + d), Waypoint(2 * half, pose), Waypoint(2 * half + c.decay, pose))
+                            for d in deltas)
+        steps.append(PoseStep(k, name, pose, approach(pose, t_app, c.settle), excitations, int(c.repeats),
                               float(c.decay), float(c.settle), gidx, k == 0))
         prev = pose
     back = (Waypoint(quintic_time(home - prev, c.approach_velocity, c.approach_acceleration), home),)
@@ -355,7 +370,8 @@ def plan_to_dict(plan: Plan) -> dict[str, Any]:
     c = plan.config
     return {"joint_names": list(c.joint_names), "start": plan.start.tolist(),
             "excitation": {"joints": list(c.excitation_joints), "amplitude": list(map(float, c.amplitude)),
-                           "half_time": plan.steps[0].excitation[0].time, "repeats": c.repeats, "decay": c.decay},
+                           "half_time": plan.steps[0].excitations[0][0].time, "repeats": c.repeats,
+                           "decay": c.decay},
             "approach": {"max_velocity": c.approach_velocity, "max_acceleration": c.approach_acceleration,
                          "settle": c.settle},
             "grid": {"joints": list(c.grid_joints), "lower": list(map(float, c.grid_lower)),

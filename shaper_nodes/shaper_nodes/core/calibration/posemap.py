@@ -126,7 +126,7 @@ def identify_decay(d: Decay, settings: IdentifySettings) -> list[ModeFit]:
     start, extra = VARIANTS[0]
     keep = d.times >= start
     primary = identify(d.times[keep], d.signal[keep], method=settings.method,
-                       max_modes=min(8, settings.max_modes + extra), band_hz=settings.band_hz)
+                       max_modes=min(8, settings.max_modes + extra), band_hz=settings.band_hz, covariance="hac")
     primary = sorted(primary, key=lambda m: -m.amplitude)
     light = [m for m in primary if m.zeta < settings.max_damping][: settings.max_modes]
     if not light:

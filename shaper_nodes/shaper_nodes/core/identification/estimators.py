@@ -352,3 +352,31 @@ def covariance(model: PoleModel, theta: FloatArray) -> FloatArray:
     s2 = _sigma2(model, model.rss(theta), m)
     return s2 * np.linalg.pinv(jac.T @ jac)
 
+
+
+def hac_covariance(model: PoleModel, theta: FloatArray) -> FloatArray:
+    """Covariance of the poles robust to a residual that is not white (Newey & West 1987).
+
+    The sandwich (J^T J)^-1 S (J^T J)^-1 with S = sum over lags |l| <= L of the Bartlett weight
+    (1 - |l| / (L + 1)) times sum_t g_t g_{t-l}^T, g_t the score of sample t (summed over axes).
+    For white residuals it is sigma^2 (J^T J)^-1 (:func:`covariance`); a residual that holds
+    unmodelled content (a mode left out, the sensor's own dynamics) is correlated over many
+    samples, and the sandwich widens the uncertainty by as much. The bandwidth L is where the
+    residual's autocorrelation (over axes) first falls below 1/e, times 4, at most N/4.
+    """
+    m = theta.size // 2
+    jac = model.jacobian(theta).reshape(model.t.size, model.k, 2 * m)
+    resid = model.solve(theta)[2]
+    n = model.t.size
+    r = resid - resid.mean(axis=0)
+    acf = np.array([np.sum(r[lag:] * r[:n - lag]) for lag in range(min(n // 4, 200) + 1)])
+    below = np.nonzero(acf < acf[0] / math.e)[0]
+    lags = int(min(n // 4, 4 * (below[0] if below.size else n // 16)))
+    g = np.einsum("tkp,tk->tp", jac, resid)
+    s = g.T @ g
+    for lag in range(1, lags + 1):
+        c = g[lag:].T @ g[:-lag]
+        s += (1.0 - lag / (lags + 1.0)) * (c + c.T)
+    bread = np.linalg.pinv(jac.reshape(-1, 2 * m).T @ jac.reshape(-1, 2 * m))
+    cov: FloatArray = bread @ s @ bread
+    return cov

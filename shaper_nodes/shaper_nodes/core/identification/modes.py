@@ -50,7 +50,7 @@ import numpy as np
 
 from shaper_nodes.core.shaping import Mode
 
-from .estimators import ESTIMATORS, PoleModel, covariance
+from .estimators import ESTIMATORS, PoleModel, covariance, hac_covariance
 from .record import FloatArray, IdentificationError, Record, prepare
 
 #: fewest damped periods of the strongest mode a record must span
@@ -145,6 +145,7 @@ def identify(
     method: str = "fit",
     max_modes: int = 2,
     band_hz: tuple[float, float] | None = None,
+    covariance: str = "white",
 ) -> list[ModeFit]:
     """Identify the vibration modes of one record of free residual vibration.
 
@@ -162,6 +163,10 @@ def identify(
         Most modes to identify (1 to 8).
     band_hz : (float, float), optional
         Only look for natural frequencies in this band, Hz.
+    covariance : str
+        How the uncertainties are computed: ``"white"`` (default) takes the residual as white
+        noise, sigma^2 (J^T J)^-1; ``"hac"`` does not (:func:`.estimators.hac_covariance`), so
+        what the model leaves out (a mode not fitted, the start of the record) widens them.
 
     Returns
     -------
@@ -179,7 +184,11 @@ def identify(
     """
     name = _check_method(method, max_modes)
     rec = prepare(times, signal, band_hz)
+    if covariance not in ("white", "hac"):
+        raise IdentificationError(f"covariance must be 'white' or 'hac', got {covariance!r}")
     theta, cov = ESTIMATORS[name](rec, int(max_modes))
+    if covariance == "hac" and theta.size:
+        cov = hac_covariance(PoleModel(rec), theta)
     if theta.size == 0:
         raise IdentificationError(
             "no mode found: no damped oscillation significantly above the noise"

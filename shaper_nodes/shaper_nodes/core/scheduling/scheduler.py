@@ -16,6 +16,13 @@ scheduled ZV with T2 = r_T(z) T2_s(z) and A1 = r_A(z) A1_s(z). When the learner 
 at z, the dominant rule i* (largest weight: the operating region) takes the change that makes
 r(z) equal what the learner found, r_i* += (r_learned - r(z)) / w_i*, so the learner's shaper
 is exactly what is applied at that pose, and moving away and back restores it.
+
+With several modes the scheduled shaper is a convolution of one factor per mode, and a ratio of
+two impulses means nothing. The learner's two-impulse shaper is then kept as an extra factor of
+the dominant region and convolved with the scheduled shaper wherever that region dominates:
+LIST learns the residual the schedule leaves (its reference cycle is the scheduled one, since
+the learner's identity shaper keeps the factor at identity), and the schedule still follows
+the pose underneath.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.shaping.families import design
+from shaper_nodes.core.shaping.families import convolve, design
 from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
 from .fuzzy import FuzzyError, Interpolation, RuleBase
@@ -106,6 +113,8 @@ class Scheduler:
     method: str = "model"
     family: str = "zv"
     corrections: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    #: per rule, the learner's extra factor for schedules on several modes (None: none yet)
+    factors: list[Shaper | None] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if self.method not in ("model", "modes"):
@@ -113,6 +122,8 @@ class Scheduler:
         design(self.family, [Mode(1.0, 0.05)])  # the family exists and designs from a mode
         if self.corrections.size == 0:
             self.corrections = np.ones((len(self.rule_base.rules), 2))
+        if not self.factors:
+            self.factors = [None] * len(self.rule_base.rules)
 
     def evaluate(self, z: Sequence[float]) -> Interpolation:
         out = self.rule_base.evaluate(z, self.method)
@@ -157,6 +168,12 @@ class Scheduler:
     def shaper(self, interp: Interpolation) -> Shaper:
         """The shaper to apply at the pose of ``interp``: scheduled, times the region's correction."""
         base = self.scheduled(interp)
+        if len(base.modes) > 1:
+            factor = self.factors[interp.dominant]
+            if factor is None:
+                return base
+            amps, times = convolve((base.amplitudes, base.times), (factor.amplitudes, factor.times))
+            return Shaper(amps, times, "custom", base.modes)
         r_t, r_a = self.correction(interp)
         if self.family != "zv" or len(base) != 2 or (r_t == 1.0 and r_a == 1.0):
             return base
@@ -164,7 +181,8 @@ class Scheduler:
         return Shaper(np.array([a1, 1.0 - a1]), np.array([0.0, base.times[1] * r_t]), "custom", base.modes)
 
     def learn(self, interp: Interpolation, learned: Shaper) -> tuple[int, tuple[float, float]]:
-        """Take the learner's shaper at the pose of ``interp``; returns (region, its correction).
+        """Take the learner's shaper at the pose of ``interp``; returns (region, its correction): the
+        ratios (r_T, r_A) on one mode, the factor's (T2 s, A1) on several (module docstring).
 
         Raises
         ------
@@ -176,6 +194,9 @@ class Scheduler:
         if len(learned) != 2 or learned.times[1] <= 0:
             raise ShaperError(f"a learner correction is a two-impulse shaper, got {len(learned)} impulses")
         base = self.scheduled(interp)
+        if len(base.modes) > 1:
+            self.factors[interp.dominant] = learned
+            return interp.dominant, (float(learned.times[1]), float(learned.amplitudes[0]))
         wanted = np.array([learned.times[1] / base.times[1], learned.amplitudes[0] / base.amplitudes[0]])
         i = interp.dominant
         now = interp.weights @ self.corrections

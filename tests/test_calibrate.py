@@ -1,0 +1,151 @@
+"""The calibrate node against the simulated arm over DDS: accuracy, offline recomputation, resume, stops.
+
+The sim plant runs the arm in lockstep behind its joint_trajectory_controller emulation; the
+``calibrate`` executable runs as a process with the installed config/calibrate.yaml (overridden
+where a test needs a smaller plan), exactly as ``ros2 run shaper_nodes calibrate`` would.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from ament_index_python.packages import get_package_share_directory
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+
+from shaper_msgs.srv import ShaperAt
+from sim_plant_node.arm.dynamics import ArmModel
+from sim_plant_node.arm.modal import modes, simulated_modes
+from sim_plant_node.arm.task import HOME
+
+CONFIG = pathlib.Path(get_package_share_directory("shaper_nodes")) / "config" / "calibrate.yaml"
+RATE = 500.0
+#: a small plan: the elbow at three values (home's among them), two excitations each
+SMALL = {"grid.joints": ["elbow_joint"], "grid.lower": [1.0], "grid.upper": [2.0], "grid.counts": [2],
+         "follow.gains": [-1.0], "excitation.repeats": 2, "excitation.decay": 1.0, "approach.settle": 0.5}
+
+
+def sim(start_node, noise: float = 0.01, **extra) -> None:
+    start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
+                                               "task.start": HOME.tolist(), "imu.noise_stddev": noise,
+                                               "lockstep_timeout": 60.0, **extra})
+
+
+def calibrate(start_node, args: list[str], params: dict | None = None, timeout: float = 600.0
+              ) -> tuple[int, str]:
+    proc = start_node("shaper_nodes", "calibrate", params or {}, params_file=CONFIG, args=args)
+    try:
+        code = proc.proc.wait(timeout=timeout)
+    finally:
+        proc.stop()
+    return code, proc.log_path.read_text()
+
+
+def modes_of(report: dict) -> list[tuple[str, list[tuple[float, float]]]]:
+    """Per pose, its modes to the digits report.md prints (Hz to 1e-3, damping to 1e-4)."""
+    return [(p["name"], [(round(m["frequency_hz"], 3), round(m["damping_ratio"], 4)) for m in p["modes"]])
+            for p in report["poses"]]
+
+
+def test_calibration_meets_modal_analysis_and_recomputes_from_its_bag(start_node, tmp_path, ros_context):
+    sim(start_node)
+    out = tmp_path / "cal"
+    code, log = calibrate(start_node, ["--execute", "--out", str(out)])
+    assert code == 0, log
+    report = json.loads((out / "report.json").read_text())
+    assert report["complete"] and len(report["poses"]) == 9
+    model = ArmModel()
+    rows = []
+    for pose in report["poses"]:
+        q = np.array(list(pose["positions"].values()))
+        modal = [(m.hz, m.zeta) for m in modes(model, q)]
+        truth = [(w / (2 * math.pi), z) for w, z in simulated_modes(model, q, 1.0 / (2 * RATE), 0.5)]
+        assert pose["modes"], f"{pose['name']}: no mode"
+        for m in pose["modes"]:
+            f_m, z_m = min(modal, key=lambda x: abs(x[0] - m["frequency_hz"]))
+            f_t, _ = min(truth, key=lambda x: abs(x[0] - m["frequency_hz"]))
+            assert abs(m["frequency_hz"] / f_m - 1) <= 0.02, (pose["name"], m, f_m)
+            assert abs(m["damping_ratio"] / z_m - 1) <= 0.20, (pose["name"], m, z_m)
+            rows.append((pose["name"], abs(m["frequency_hz"] - f_t) <= 2 * m["frequency_hz_std"] + 5e-6))
+    covered = sum(ok for _, ok in rows) / len(rows)
+    assert covered >= 0.9, f"the true frequency is inside two sigma for {100 * covered:.0f} % of the modes"
+    # the scheduler takes scheduler.yaml as written, and schedules the home pose's modes at home
+    start_node("shaper_nodes", "scheduler", {}, params_file=out / "scheduler.yaml")
+    node = rclpy.create_node("probe", context=ros_context)
+    client = node.create_client(ShaperAt, "/scheduler/shaper_at")
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not client.service_is_ready() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        future = client.call_async(ShaperAt.Request(pose=JointState(name=list(report["plan"]["joint_names"]),
+                                                                    position=HOME.tolist())))
+        deadline = time.monotonic() + 60.0
+        while not future.done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        answer = future.result()
+        assert answer is not None and answer.success, answer
+        home = next(p for p in report["poses"] if p["name"] == "home")
+        got = sorted(m.natural_frequency / (2 * math.pi) for m in answer.shaper.design_modes)
+        assert got == pytest.approx(sorted(m["frequency_hz"] for m in home["modes"]), rel=1e-4)
+    finally:
+        node.destroy_node()
+    # offline, from the recording alone: the same report
+    again = tmp_path / "again"
+    code, log = calibrate(start_node, ["--from-bag", str(out / "recording"), "--out", str(again)])
+    assert code == 0, log
+    assert (again / "report.json").read_text() == (out / "report.json").read_text()
+
+
+def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_node, tmp_path):
+    sim(start_node, noise=0.0)
+    whole = tmp_path / "whole"
+    code, log = calibrate(start_node, ["--execute", "--out", str(whole)], SMALL)
+    assert code == 0, log
+    cut = tmp_path / "cut"
+    proc = start_node("shaper_nodes", "calibrate", SMALL, params_file=CONFIG, args=["--execute", "--out", str(cut)])
+    first = cut / "recording" / "pose_000"
+    deadline = time.monotonic() + 300.0
+    while not (first / "metadata.yaml").exists():  # killed once the first pose is complete, in the second
+        assert proc.running() and time.monotonic() < deadline, proc.log_path.read_text()
+        time.sleep(0.05)
+    proc.proc.kill()  # kill -9
+    proc.proc.wait()
+    kept = {p.name: p.read_bytes() for p in first.iterdir()}
+    assert not (cut / "report.json").exists()
+    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(cut)], SMALL)
+    assert code == 0, log
+    assert "resuming" in log
+    assert {p.name: p.read_bytes() for p in first.iterdir()} == kept  # what was measured is not lost
+    assert not list((cut / "recording").glob("*.partial"))
+    a = json.loads((whole / "report.json").read_text())
+    b = json.loads((cut / "report.json").read_text())
+    assert modes_of(b) == modes_of(a)
+    assert [p["flags"] for p in b["poses"]] == [p["flags"] for p in a["poses"]]
+
+
+def test_a_plan_outside_the_limits_is_refused_and_nothing_is_written(start_node, tmp_path):
+    sim(start_node)
+    out = tmp_path / "refused"
+    upper = [2 * math.pi, 2 * math.pi, 2.0, 2 * math.pi, 2 * math.pi, 2 * math.pi]
+    code, log = calibrate(start_node, ["--execute", "--out", str(out)], {"limits.upper": upper})
+    assert code == 2, log
+    assert "refused" in log and "elbow_joint +2.4000 > +2.0000" in log, log
+    assert not out.exists()
+
+
+def test_an_aborted_goal_stops_the_run_and_leaves_no_half_written_pose_or_report(start_node, tmp_path):
+    sim(start_node, **{"jtc.trajectory_tolerance": [1e-6]})  # every move violates the path tolerance
+    out = tmp_path / "aborted"
+    code, log = calibrate(start_node, ["--execute", "--out", str(out)], SMALL)
+    assert code == 1, log
+    assert "aborted" in log and "error_code -4" in log, log
+    assert not list((out / "recording").iterdir())  # no pose, no partial
+    assert not (out / "report.json").exists() and not (out / "scheduler.yaml").exists()
