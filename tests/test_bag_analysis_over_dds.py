@@ -31,7 +31,7 @@ pytestmark = pytest.mark.integration
 def test_demo_recording_analysis_matches_the_demo_and_the_plant(tmp_path, domain_id):
     out = tmp_path / "demo"
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    proc = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "--out", str(out), "--offsets", "0.3",
+    proc = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "joint", "--out", str(out), "--offsets", "0.3",
                            "--shapers", "none,zv", "--cycles", "1"], env=env, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr

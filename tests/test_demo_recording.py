@@ -16,7 +16,8 @@ pytestmark = pytest.mark.integration
 def test_demo_prints_table_and_writes_a_decodable_recording(tmp_path, domain_id):
     out = tmp_path / "demo"
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    proc = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "--out", str(out), "--offsets", "0,0.3",
+    proc = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "joint", "--out", str(out),
+                           "--offsets", "0,0.3",
                            "--shapers", "none,zvd", "--cycles", "1"], env=env, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -8,7 +8,7 @@ import pytest
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.scheduling.fuzzy import Rule, RuleBase, Triangular, triangular_partition
 from shaper_nodes.core.scheduling.scheduler import MAX_POSE_JOINTS, Scheduler, premise_values, relative_change
-from shaper_nodes.core.shaping.families import design
+from shaper_nodes.core.shaping.families import convolve, design
 from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
 
@@ -98,3 +98,50 @@ def test_the_shaper_at_a_pose_is_the_schedules_with_the_regions_correction_and_c
     assert same(shaper, s.shaper(s.evaluate([2.0])))
     with pytest.raises(ValueError, match="must be finite"):
         s.at([math.nan])
+
+
+def test_on_several_modes_the_learner_shaper_is_a_factor_of_its_region_and_on_one_the_ratio_policy_stays():
+    pts = [0.0, 1.0, 2.0]
+    rules = [Rule((mf,), modes=(Mode(10.0 - p, 0.02), Mode(40.0 + 5.0 * p, 0.03)), name=f"r{int(p)}")
+             for mf, p in zip(triangular_partition(pts), pts, strict=True)]
+    s = Scheduler(RuleBase(("q",), tuple(rules)), "modes", "zv")
+    at = s.evaluate([0.3])
+    assert at.dominant == 0 and len(s.scheduled(at).modes) == 2
+    assert same(s.shaper(at), s.scheduled(at))  # nothing learned yet
+    learned = Shaper(np.array([0.45, 0.55]), np.array([0.0, 0.4]))
+    region, (t2, a1) = s.learn(at, learned)
+    assert (region, t2, a1) == (0, 0.4, 0.45)
+    assert s.factors[0] is learned and s.factors[1:] == [None, None]
+    np.testing.assert_array_equal(s.corrections, np.ones((3, 2)))  # no ratio on several modes
+    for z in (0.3, 0.45, 0.0):  # region 0 dominates: the scheduled shaper there, convolved with the factor
+        interp = s.evaluate([z])
+        assert interp.dominant == 0
+        base_shaper = s.scheduled(interp)
+        amps, times = convolve((base_shaper.amplitudes, base_shaper.times), (learned.amplitudes, learned.times))
+        got = s.shaper(interp)
+        assert len(got) == len(base_shaper) * len(learned) == 8
+        np.testing.assert_allclose(got.amplitudes, amps, rtol=1e-12)
+        np.testing.assert_allclose(got.times, times, rtol=1e-12)
+        assert got.modes == base_shaper.modes and got.amplitudes.sum() == pytest.approx(1.0)
+        assert same(s.at([z])[1], got)
+    for z in (0.6, 1.0, 1.7):  # dominated by regions 1 and 2: the plain scheduled shaper
+        interp = s.evaluate([z])
+        assert interp.dominant != 0 and same(s.shaper(interp), s.scheduled(interp))
+
+    # one mode: the ratio (r_T, r_A) of the learner's shaper to the scheduled ZV, kept per rule and
+    # interpolated with the weights; no factor
+    one = Scheduler(base(), "modes")
+    at = one.evaluate([0.3])  # weights 0.7, 0.3
+    sched = one.scheduled(at)
+    learned = Shaper(np.array([0.45, 0.55]), np.array([0.0, 1.1 * sched.times[1]]))
+    region, _ = one.learn(at, learned)
+    assert region == 0 and one.factors == [None, None, None]
+    wanted = np.array([1.1, 0.45 / sched.amplitudes[0]])
+    np.testing.assert_allclose(one.corrections[0], 1.0 + (wanted - 1.0) / 0.7, rtol=1e-12)
+    np.testing.assert_array_equal(one.corrections[1:], np.ones((2, 2)))
+    mid = one.evaluate([0.6])  # weights 0.4, 0.6
+    r_t, r_a = 0.4 * one.corrections[0] + 0.6 * np.ones(2)
+    got, plain = one.shaper(mid), one.scheduled(mid)
+    np.testing.assert_allclose(got.times, [0.0, r_t * plain.times[1]], rtol=1e-12)
+    np.testing.assert_allclose(got.amplitudes, [r_a * plain.amplitudes[0], 1.0 - r_a * plain.amplitudes[0]],
+                               rtol=1e-12)

@@ -1,13 +1,16 @@
-"""Demo: input shaping on the simulated plant, end to end over DDS.
+"""Demo: input shaping end to end over DDS.
 
-``demo arm`` runs the six-axis arm demo instead (sim_plant_node.arm_demo, ``demo arm --help``).
+``demo`` (or ``demo arm``) tells the arm story (:mod:`sim_plant_node.arm_demo`, ``demo --help``):
+calibrate the six-axis arm's workspace, then its pick-and-place cycle unshaped, with the
+calibrated fixed shaper and with the calibrated schedule. ``demo joint`` runs the
+one-dimensional demo below.
 
-Starts the sim plant (lockstep), the shaper and the recorder as separate processes, then for
-every plant case (true mode at the nominal frequency and off it) and every shaper (none, ZV,
-ZVD, all designed at the nominal mode) runs a few cycles of a point-to-point move, measures
-the residual vibration of each cycle from the tip accelerometer, and prints a table. Writes
-the recording (rosbag2 folder, MCAP), a CSV of the results and a PNG plot of the accelerometer
-traces, and prints where they are.
+The one-dimensional demo (``demo joint``) starts the sim plant (lockstep), the shaper and the
+recorder as separate processes, then for every plant case (true mode at the nominal frequency
+and off it) and every shaper (none, ZV, ZVD, all designed at the nominal mode) runs a few cycles
+of a point-to-point move, measures the residual vibration of each cycle from the tip
+accelerometer, and prints a table. Writes the recording (rosbag2 folder, MCAP), a CSV of the
+results and a PNG plot of the accelerometer traces, and prints where they are.
 """
 
 from __future__ import annotations
@@ -29,7 +32,8 @@ RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/cycle_reports", "/sh
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="demo", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="demo joint", description="The one-dimensional demo: a flexible joint at its"
+                                " nominal mode and off it, unshaped, ZV and ZVD.")
     p.add_argument("--out", type=pathlib.Path, default=None,
                    help="output folder (default: out/demo-<date-time> in the current folder)")
     p.add_argument("--frequency", type=float, default=5.0, help="nominal mode natural frequency, Hz (default 5)")
@@ -69,11 +73,11 @@ def plot(path: pathlib.Path, traces: dict, offsets: list[float], shapers: list[s
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if argv[:1] == ["arm"]:  # the six-axis arm behind joint_trajectory_controller (arm_demo.py)
+    if argv[:1] != ["joint"]:  # the arm story (arm_demo.py); "demo arm ..." is the same
         from .arm_demo import main as arm_main
 
-        return arm_main(argv[1:])
-    args = parse_args(argv)
+        return arm_main(argv[1:] if argv[:1] == ["arm"] else argv)
+    args = parse_args(argv[1:])
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from shaper_nodes.ros.launching import NodeProcess
 

@@ -276,6 +276,15 @@ def report_dict(cal: Calibration) -> dict[str, Any]:
     return out
 
 
+def _floats(values: Sequence[float]) -> str:
+    """A YAML flow list of floats that every YAML reader takes as floats (1e-05 alone reads as a string)."""
+    def one(x: float) -> str:
+        text = repr(_r(float(x)))
+        mantissa, _, exponent = text.partition("e")
+        return f"{mantissa}.0e{exponent}" if exponent and "." not in mantissa else text
+    return "[" + ", ".join(one(x) for x in values) + "]"
+
+
 def scheduler_yaml(cal: Calibration, node: str = "scheduler") -> str:
     """The scheduler node's parameter file for the calibrated rule base."""
     assert cal.rule_base is not None
@@ -285,7 +294,7 @@ def scheduler_yaml(cal: Calibration, node: str = "scheduler") -> str:
              "# rad/s, one per mode (sorted by frequency); damping_ratio dimensionless.",
              f"{node}:", "  ros__parameters:",
              f"    premises: {json.dumps(spec['premises'])}",
-             f"    range: {json.dumps([_r(x) for x in spec['range']])}",
+             f"    range: {_floats(spec['range'])}",
              "    interpolation: modes",
              f"    family: {cal.family}",
              f"    rule_names: {json.dumps(list(spec['rules']))}",
@@ -293,9 +302,9 @@ def scheduler_yaml(cal: Calibration, node: str = "scheduler") -> str:
     for name, rule in spec["rules"].items():
         lines += [f"      {name}:",
                   f"        membership: {json.dumps(rule['membership'])}",
-                  f"        membership_params: {json.dumps([_r(x) for x in rule['membership_params']])}",
-                  f"        natural_frequency: {json.dumps([_r(x) for x in rule['natural_frequency']])}",
-                  f"        damping_ratio: {json.dumps([_r(x) for x in rule['damping_ratio']])}"]
+                  f"        membership_params: {_floats(rule['membership_params'])}",
+                  f"        natural_frequency: {_floats(rule['natural_frequency'])}",
+                  f"        damping_ratio: {_floats(rule['damping_ratio'])}"]
     return "\n".join(lines) + "\n"
 
 
@@ -308,8 +317,8 @@ def shaper_yaml(cal: Calibration, node: str = "shaper") -> str:
         "# --ros-args --params-file shaper.yaml (with your joint_names and topics). Hz, dimensionless.",
         f"{node}:", "  ros__parameters:", "    shaper:",
         f"      family: {cal.fallback.family}",
-        f"      frequencies_hz: {json.dumps([_r(m.omega / (2 * math.pi)) for m in modes])}",
-        f"      damping_ratios: {json.dumps([_r(m.zeta) for m in modes])}",
+        f"      frequencies_hz: {_floats([m.omega / (2 * math.pi) for m in modes])}",
+        f"      damping_ratios: {_floats([m.zeta for m in modes])}",
     ]) + "\n"
 
 

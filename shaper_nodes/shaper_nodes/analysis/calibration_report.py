@@ -63,12 +63,7 @@ def figures(out: pathlib.Path, cal: Calibration) -> list[pathlib.Path]:
                                         marker="o", ms=3, lw=0.8, capsize=2, label=label if mi == 0 else None)
                     axes[1, a].errorbar(xs, [p[1].zeta for p in pts], [2 * p[1].zeta_std for p in pts],
                                         marker="o", ms=3, lw=0.8, capsize=2)
-            axes[0, a].set_ylabel("natural frequency (Hz)")
-            axes[1, a].set_ylabel("damping ratio")
-            axes[1, a].set_xlabel(f"{joint} (rad)")
-            axes[0, a].legend(fontsize=7)
-            for ax in axes[:, a]:
-                ax.grid(alpha=0.3)
+            _label_mode_axes(axes[:, a], joint, legend=len(c.grid_joints) > 1)
         fig.suptitle("Modes against the pose (error bars: two sigma)", fontsize=10)
         fig.tight_layout()
         save(fig, "modes_vs_pose.png")
@@ -109,6 +104,18 @@ def figures(out: pathlib.Path, cal: Calibration) -> list[pathlib.Path]:
         fig.tight_layout()
         save(fig, "residual.png")
     return paths
+
+
+def _label_mode_axes(col: Any, joint: str, legend: bool) -> None:
+    """Labels of one grid joint's column of modes_vs_pose.png. The legend names the other grid joints'
+    values of each line: with one grid joint there are none (and matplotlib warns of an empty legend)."""
+    col[0].set_ylabel("natural frequency (Hz)")
+    col[1].set_ylabel("damping ratio")
+    col[1].set_xlabel(f"{joint} (rad)")
+    if legend:
+        col[0].legend(fontsize=7)
+    for ax in col:
+        ax.grid(alpha=0.3)
 
 
 def markdown(cal: Calibration, report: dict[str, Any], figs: list[str], recording: str) -> str:

@@ -123,7 +123,7 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("identification.band_hz", [2.0, 45.0], "Band searched for modes [low, high], Hz.", read_only=True),
     Spec("identification.max_damping", 0.15, "Modes damped more than this are not mapped (they do not ring).",
          (0.01, 0.9), read_only=True),
-    Spec("identification.agreement", 0.01, "Largest relative spread of a mode's frequency over the repeats"
+    Spec("identification.agreement", 0.02, "Largest relative spread of a mode's frequency over the repeats"
          " before the pose is flagged.", (1e-4, 0.5), read_only=True),
     Spec("scheduler.family", "zv", "Shaper family of the rule base and the fallback.", read_only=True),
     Spec("scheduler.premise_threshold", 0.02, "A grid joint along which the modes change less than this"

@@ -344,10 +344,12 @@ def make_plan(c: PlanConfig, start: Sequence[float] | np.ndarray | None = None) 
     deltas = [excursion(delta, ei, r) for r in range(int(c.repeats))]
     half = quintic_time(delta, c.excitation_velocity, c.excitation_acceleration)
     steps = []
-    # home first: on the grid it is that grid pose, else an extra pose
-    on_grid = [t for t in targets if np.allclose(t[1], home, atol=1e-9)]
+    # home first: on the grid it is that grid pose, else an extra pose. Absolute tolerance only: a
+    # relative one (allclose's default 1e-5) would take a grid value micro-radians from home for home
+    # too and drop that grid pose from the plan.
+    on_grid = [t for t in targets if np.allclose(t[1], home, rtol=0.0, atol=1e-9)]
     first: Target = ("home", home, on_grid[0][2] if on_grid else None)
-    visit = [first] + [t for t in targets if not np.allclose(t[1], home, atol=1e-9)]
+    visit = [first] + [t for t in targets if not np.allclose(t[1], home, rtol=0.0, atol=1e-9)]
     prev = here
     for k, (name, pose, gidx) in enumerate(visit):
         for what, p in (("pose", pose), ("excited pose", pose + delta)):

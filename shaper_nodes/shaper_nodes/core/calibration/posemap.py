@@ -44,7 +44,7 @@ from .plan import Plan, PlanError, grid_axis
 
 #: analysis variants of a decay: (record start after the commanded motion ends, s; modes fitted
 #: beyond max_modes). The first is the estimate; all give its model-error spread.
-VARIANTS = ((0.05, 0), (0.02, 0), (0.1, 0), (0.4, 0))
+VARIANTS = ((0.05, 1), (0.02, 0), (0.1, 0), (0.4, 0))
 #: where the spectrum of a pose's first decay starts, s
 DECAY_START = VARIANTS[0][0]
 
@@ -66,7 +66,7 @@ class IdentifySettings:
     method: str = "fit"
     max_modes: int = 3
     band_hz: tuple[float, float] | None = (2.0, 45.0)  # where modes are looked for, Hz
-    agreement: float = 0.01
+    agreement: float = 0.02
     max_damping: float = 0.15
 
 
@@ -177,22 +177,22 @@ def identify_pose(index: int, name: str, positions: np.ndarray, grid_index: tupl
 # --------------------------------------------------------------------------- the rule base
 def _aligned_modes(results: Sequence[PoseResult]) -> tuple[list[list[Mode]], list[str]]:
     """Every pose's modes sorted by frequency, all with the same count; notes of what was filled."""
-    counts = [len(r.modes) for r in results if r.ok]
+    counts = [len(r.modes) for r in results if r.modes]
     if not counts:
         raise PlanError("no pose of the map was identified: no rule base can be built")
     k = max(set(counts), key=lambda c: (counts.count(c), c))  # the most common count, larger on ties
-    full = [r for r in results if r.ok and len(r.modes) >= k]
+    full = [r for r in results if len(r.modes) >= k]
     notes: list[str] = []
     out: list[list[Mode]] = []
     for r in results:
         own = [m.mode for m in sorted(r.modes, key=lambda m: m.omega)]
-        if r.ok and len(own) == k:
+        if len(own) == k:  # a flagged pose keeps what it measured (its flags say how far to trust it)
             out.append(own)
             continue
         donor = min(full, key=lambda f: float(np.max(np.abs(f.positions - r.positions))))
         ref = [m.mode for m in sorted(donor.modes, key=lambda m: m.omega)][:k]
         slots: list[Mode | None] = [None] * k
-        for m in (own if r.ok else []):  # each own mode takes the nearest free slot of the donor's
+        for m in own:  # each own mode takes the nearest free slot of the donor's
             free = [i for i in range(k) if slots[i] is None]
             if not free:
                 break
