@@ -2,9 +2,11 @@
 
 At each pose every excitation leaves a free decay (the accelerometer from the end of the
 commanded motion for ``decay`` s). Each decay is identified on its own
-(:func:`shaper_nodes.core.identification.identify`, all axes jointly); the repeats are combined
-by :func:`combine_modes` (a mode kept if found in at least half of them; its uncertainty the
-larger of the per-record one-sigma and the spread between repeats). Quality flags:
+(:func:`shaper_nodes.core.identification.identify`, all axes jointly, with uncertainties robust
+to a residual that is not white and widened by the spread over analysis variants: record start
+and model order); the repeats are combined by :func:`combine_modes` (a mode kept if found in at
+least half of them), its uncertainty the larger of the per-record one-sigma and the spread
+between repeats widened for their number (Student's t, :func:`_expanded`). Quality flags:
 
 ``identification_failed``
     a repeat gave no mode (the reason is kept);
@@ -33,6 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.stats import t as student_t
 
 from shaper_nodes.core.identification import IdentificationError, ModeFit, combine_modes, identify
 from shaper_nodes.core.identification.recommend import worst_case_vibration
@@ -134,6 +137,22 @@ def identify_decay(d: Decay, settings: IdentifySettings) -> list[ModeFit]:
     return _variant_spread(d.times, d.signal, light, settings)
 
 
+def _expanded(m: ModeFit, hits: Sequence[ModeFit]) -> ModeFit:
+    """The combined mode with its spread between repeats widened for their number (GUM, Annex G): from k
+    repeats the sample standard deviation has k - 1 degrees of freedom, so it is multiplied by
+    t(0.975, k - 1) / t(0.975, inf) and a two-sigma interval keeps its 95 % coverage with few repeats.
+    The per-record uncertainty (the fit's) is kept when it is larger."""
+    k = len(hits)
+    if k < 2:
+        return m
+    factor = float(student_t.ppf(0.975, k - 1) / student_t.ppf(0.975, 1e9))
+    rms_w = math.sqrt(float(np.mean([h.omega_std**2 for h in hits])))
+    rms_z = math.sqrt(float(np.mean([h.zeta_std**2 for h in hits])))
+    sw = factor * float(np.std([h.omega for h in hits], ddof=1))
+    sz = factor * float(np.std([h.zeta for h in hits], ddof=1))
+    return ModeFit(m.omega, m.zeta, max(rms_w, sw, m.omega_std), max(rms_z, sz, m.zeta_std), m.amplitude, m.method)
+
+
 def identify_pose(index: int, name: str, positions: np.ndarray, grid_index: tuple[int, ...] | None,
                   decays: Sequence[Decay], settings: IdentifySettings) -> PoseResult:
     """Identify every decay of a pose, combine them and flag what does not agree."""
@@ -146,11 +165,13 @@ def identify_pose(index: int, name: str, positions: np.ndarray, grid_index: tupl
             per.append([])
             flags.append(f"identification_failed: repeat {d.repeat}: {err}")
     found = [p for p in per if p]
-    modes = combine_modes(found, method=settings.method, max_modes=settings.max_modes) if found else []
-    modes.sort(key=lambda m: m.omega)
-    for m in modes:
+    combined = combine_modes(found, method=settings.method, max_modes=settings.max_modes) if found else []
+    modes = []
+    for m in sorted(combined, key=lambda m: m.omega):
         near = [[r for r in rep if abs(r.omega - m.omega) / m.omega < 0.1] for rep in per]
         hits = [min(rs, key=lambda r: abs(r.omega - m.omega)) for rs in near if rs]
+        m = _expanded(m, hits)
+        modes.append(m)
         if len(hits) < len(per):
             flags.append(f"mode_not_in_every_repeat: {m.hz:.3f} Hz in {len(hits)} of {len(per)}")
         if len(hits) > 1:
