@@ -47,7 +47,21 @@ def test_every_node_starts_from_its_installed_executable(package, name, params, 
 def test_demo_executable_help():
     out = subprocess.run([str(executable("sim_plant_node", "demo")), "--help"], capture_output=True, text=True,
                          timeout=60, env=os.environ)
-    assert out.returncode == 0 and "--frequency" in out.stdout
+    assert out.returncode == 0 and "--calibration" in out.stdout and "--cases" in out.stdout  # the arm story
+    out = subprocess.run([str(executable("sim_plant_node", "demo")), "joint", "--help"], capture_output=True,
+                         text=True, timeout=60, env=os.environ)
+    assert out.returncode == 0 and "--frequency" in out.stdout  # the one-dimensional demo
+
+
+def test_calibrate_prints_its_plan_without_moving_anything(tmp_path, domain_id):
+    """Without --execute, nothing to talk to is needed: the plan (base and home poses given) and its duration."""
+    config = pathlib.Path(get_package_share_directory("shaper_nodes")) / "config" / "calibrate.yaml"
+    out = subprocess.run([str(executable("shaper_nodes", "calibrate")), "--out", str(tmp_path / "cal"),
+                          "--ros-args", "--params-file", str(config)], capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)}, cwd=tmp_path)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "calibration plan: 9 poses" in out.stdout and "add --execute" in out.stdout
+    assert not (tmp_path / "cal").exists()
 
 
 def test_design_cli_runs_from_its_installed_executable():
