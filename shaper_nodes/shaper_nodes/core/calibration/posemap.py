@@ -67,7 +67,7 @@ class IdentifySettings:
     """How each decay is identified and how repeats must agree."""
 
     method: str = "fit"
-    max_modes: int = 3
+    max_modes: int = 4
     band_hz: tuple[float, float] | None = (2.0, 45.0)  # where modes are looked for, Hz
     agreement: float = 0.02
     max_damping: float = 0.15
