@@ -382,7 +382,6 @@ class Session:
     start: Callable[..., Any]
     shaper: Any
     shaper_params: dict[str, Any]
-    out: pathlib.Path
     calibration: pathlib.Path | None = None
     scheduled: bool = False
 
@@ -475,7 +474,7 @@ def main(argv: list[str] | None = None) -> int:
                                               "lockstep_timeout": 60.0})
         shaper_params = {"joint_names": list(JOINT_NAMES), "command_rate": RATE, "use_sim_time": True,
                          "action.server_timeout": 30.0}
-        session = Session(start, start("shaper_nodes", "shaper_node", shaper_params), shaper_params, out,
+        session = Session(start, start("shaper_nodes", "shaper_node", shaper_params), shaper_params,
                           args.calibration)
         if session.calibration is None and any(c in CALIBRATED for c in cases):
             # first, alone with the sim (the other nodes' subscriptions would slow the lockstep down)

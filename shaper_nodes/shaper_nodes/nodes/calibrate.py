@@ -58,6 +58,7 @@ from shaper_nodes.analysis.calibration import (
 from shaper_nodes.core.calibration import IdentifySettings, Plan, PlanConfig, PlanError, PoseStep, Waypoint
 from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_plan, quintic_time
 from shaper_nodes.core.calibration.plan import approach as plan_approach
+from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.parameters import Spec
 
 EXIT_REFUSED, EXIT_ABORTED, EXIT_CANCELLED = 2, 1, 130
@@ -219,13 +220,11 @@ class Calibrator:
             self.writer.write(self.imu_topic, sec * 1_000_000_000 + nanosec, raw)
 
     def _on_joint_states(self, msg: Any) -> None:
-        from shaper_nodes.analysis.calibration import _sec
-
         try:
             self.position = np.array([msg.position[list(msg.name).index(j)] for j in self.names], dtype=float)
         except (ValueError, IndexError):
             return
-        self._record(self.js_topic, "sensor_msgs/msg/JointState", msg, _sec(msg.header.stamp))
+        self._record(self.js_topic, "sensor_msgs/msg/JointState", msg, time_to_sec(msg.header.stamp))
 
     # ------------------------------------------------------------------ waiting
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
@@ -251,8 +250,6 @@ class Calibrator:
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-        from shaper_nodes.analysis.calibration import _sec
-
         n = len(self.names)
 
         def dur(t: float) -> Any:
@@ -267,7 +264,7 @@ class Calibrator:
         stamps: list[float] = []
 
         def on_feedback(m: Any) -> None:
-            stamps.append(_sec(m.feedback.header.stamp))
+            stamps.append(time_to_sec(m.feedback.header.stamp))
 
         sent = self.action.send_goal_async(goal, feedback_callback=on_feedback)
         self.spin_until(sent.done, server, f"answer to the goal of {what}")
@@ -301,13 +298,12 @@ class Calibrator:
     # ------------------------------------------------------------------ one pose
     def event(self, kind: int, repeat: int, pose: PoseStep, stamp: float) -> None:
         from shaper_msgs.msg import CycleEvent
-        from shaper_nodes.analysis.calibration import _sec
         from shaper_nodes.ros.conversions import sec_to_time
 
         msg = CycleEvent(event=kind, cycle=repeat, task=f"calibration pose {pose.index} {pose.name}",
                          joint_names=self.names, start_positions=pose.pose.tolist(), goal_positions=pose.pose.tolist())
         msg.header.stamp = sec_to_time(stamp)
-        self._record(EVENTS_TOPIC, "shaper_msgs/msg/CycleEvent", msg, _sec(msg.header.stamp))
+        self._record(EVENTS_TOPIC, "shaper_msgs/msg/CycleEvent", msg, time_to_sec(msg.header.stamp))
 
     def run_pose(self, step: PoseStep, setup: dict[str, Any], folder: pathlib.Path,
                  approach: tuple[Waypoint, ...]) -> None:
