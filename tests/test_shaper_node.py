@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
@@ -301,3 +301,156 @@ def test_a_node_started_with_mode_lists_of_different_lengths_says_so(ros_context
         ShaperNode(context=ros_context, parameter_overrides=[
             Parameter("joint_names", value=JOINTS), Parameter("shaper.family", value="zv"),
             Parameter("shaper.frequencies_hz", value=[2.0, 7.0]), Parameter("shaper.damping_ratios", value=[0.0])])
+
+
+# ----------------------------------------------------------------------------- output invariants (issue 17)
+LIMITS = {"limits.position_lower": [-1.0, -1.0, -1.0], "limits.position_upper": [1.0, 1.0, 1.0]}
+
+
+def test_no_streamed_command_passes_the_position_limits_and_a_refused_one_leaves_no_trace(ros_context):
+    rig = Rig(ros_context, **LIMITS)
+    try:
+        send_valid_array_and_expect_output(rig, 0.0)
+        before = len(rig.array_out)
+        # 3 is within limits.max_abs_value but beyond the joint limit: refused before the filter (its first
+        # impulse, 1.5, would pass too; a smaller first impulse would pass, and pull every later output out)
+        rig.array_in.publish(Float64MultiArray(data=[3.0, 0.0, 0.0]))
+        rig.spin_until(lambda: any(s.values[0].value == "beyond_limits" for s in rig.diag),
+                       "the refusal of a command beyond limits on /diagnostics")
+        status = next(s for s in rig.diag if s.values[0].value == "beyond_limits")
+        assert "the command would pass the position limit of joint 'j1': 3 beyond 1" in status.message
+        rig.settle(0.2)
+        assert len(rig.array_out) == before
+        # the refused sample never reached the filter: a step 0 -> 0.8 is zv-shaped from 0
+        send_valid_array_and_expect_output(rig, 0.8)
+        assert rig.array_out[-1][0] == pytest.approx(0.4)
+        # the stream path too, with the reason
+        rig.stream_in.publish(stream_msg(JOINTS, [(0.01, [0.0, 0.0, 0.0])]))
+        rig.spin_until(lambda: rig.stream_out, "stream output")
+        rig.stream_in.publish(stream_msg(JOINTS, [(0.02, [0.0, -2.5, 0.0])]))
+        rig.spin_until(lambda: rig.node.rejections["beyond_limits"] == 2, "the stream's refusal")
+        # whole trajectories: positions, and velocities against limits.velocity
+        traj = stream_msg(JOINTS, [(0.0, [0, 0, 0]), (1.0, [1.2, 0, 0])])
+        resp = rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=traj))
+        assert not resp.success and "position limit of joint 'j1'" in resp.message and "t = " in resp.message
+    finally:
+        rig.close()
+
+
+def test_whole_trajectories_within_velocity_and_acceleration_limits(ros_context):
+    rig = Rig(ros_context, **{"limits.velocity": [2.0, 2.0, 2.0], "limits.acceleration": [50.0, 50.0, 50.0]})
+    try:
+        slow = stream_msg(JOINTS, [(0.0, [0, 0, 0]), (2.0, [1.0, 0.5, 0.0])])
+        resp = rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=slow))
+        assert resp.success, resp.message
+        vel = np.array([p.velocities for p in resp.shaped.points])
+        acc = np.array([p.accelerations for p in resp.shaped.points])
+        assert np.abs(vel).max() <= 2.0 and np.abs(acc).max() <= 50.0
+        fast = stream_msg(JOINTS, [(0.0, [0, 0, 0]), (0.2, [1.0, 0.0, 0.0])])  # 1 rad in 0.2 s: 5+ rad/s
+        resp = rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=fast))
+        assert not resp.success and "velocity limit of joint 'j1'" in resp.message, resp.message
+        assert rig.node.rejections["beyond_limits"] == 1
+    finally:
+        rig.close()
+
+
+URDF = """<robot name="three">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="l3"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <limit lower="-0.5" upper="0.5" velocity="3.0" effort="10"/></joint>
+  <joint name="j2" type="continuous"><parent link="l1"/><child link="l2"/><limit velocity="1.0" effort="10"/></joint>
+  <joint name="j3" type="prismatic"><parent link="l2"/><child link="l3"/>
+    <limit lower="0" upper="0.3" velocity="0.2" effort="10"/></joint>
+</robot>"""
+
+
+def test_limits_from_a_urdf_and_the_tighter_of_urdf_and_parameters(ros_context, tmp_path):
+    path = tmp_path / "three.urdf"
+    path.write_text(URDF)
+    rig = Rig(ros_context, **{"limits.urdf_file": str(path), "limits.position_upper": [0.4, 10.0, 10.0]})
+    try:
+        lim = rig.node.limits
+        np.testing.assert_array_equal(lim.upper, [0.4, 10.0, 0.3])  # j1, j2 (continuous): the parameter is tighter
+        np.testing.assert_array_equal(lim.lower, [-0.5, -np.inf, 0.0])
+        np.testing.assert_array_equal(lim.velocity, [3.0, 1.0, 0.2])
+        send_valid_array_and_expect_output(rig, 0.0)
+        rig.array_in.publish(Float64MultiArray(data=[0.0, 0.0, -0.1]))  # j3 below its URDF lower limit
+        rig.spin_until(lambda: rig.node.rejections["beyond_limits"] == 1, "the URDF's limit")
+    finally:
+        rig.close()
+    bad = tmp_path / "two.urdf"
+    bad.write_text(URDF.replace('name="j3"', 'name="j9"'))
+    with pytest.raises(ValueError, match="joint 'j3' is not in the URDF"):
+        ShaperNode(context=ros_context, parameter_overrides=[Parameter("joint_names", value=JOINTS),
+                                                             Parameter("limits.urdf_file", value=str(bad))])
+
+
+def test_an_unrepresentable_time_is_refused_not_wrapped(rig):
+    traj = JointTrajectory(joint_names=JOINTS, points=[JointTrajectoryPoint(
+        positions=[0.0, 0.0, 0.0], time_from_start=Duration(sec=2**31 - 1, nanosec=999_999_999))])
+    resp = rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=traj))
+    assert not resp.success and "a builtin_interfaces/Duration holds" in resp.message
+    ok = stream_msg(JOINTS, [(0.5, [0, 0, 0]), (1.0, [0.1, 0.1, 0.1])])
+    assert rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=ok)).success
+
+
+def stream_with(points, fields):
+    msg = JointTrajectory(joint_names=JOINTS)
+    for t, values in points:
+        p = JointTrajectoryPoint(time_from_start=Duration(sec=int(t), nanosec=int(round((t % 1) * 1e9))))
+        for f, v in zip(fields, values, strict=True):
+            setattr(p, f, list(v))
+        msg.points.append(p)
+    return msg
+
+
+def test_the_stream_follows_the_fields_that_arrive(rig):
+    """Positions only, then positions and velocities (as MoveIt Servo streams), then positions only:
+    every message is shaped; a field that appears starts at its first value."""
+    pos_only = ("positions",)
+    both = ("positions", "velocities")
+    for k, (fields, values) in enumerate([(pos_only, ([0.0] * 3,)), (pos_only, ([0.0] * 3,)),
+                                          (both, ([0.2] * 3, [0.4] * 3)), (both, ([0.2] * 3, [0.4] * 3)),
+                                          (pos_only, ([0.2] * 3,))]):
+        n = len(rig.stream_out)
+        rig.stream_in.publish(stream_with([(0.01 * (k + 1), values)], fields))
+        rig.spin_until(lambda n=n: len(rig.stream_out) > n, f"stream output {k}")
+        out = rig.stream_out[-1].points[0]
+        assert len(out.velocities) == (3 if "velocities" in fields else 0)
+        if k == 2:
+            assert out.positions[0] == pytest.approx(0.1)  # zv: half the step now
+            assert list(out.velocities) == pytest.approx([0.4] * 3)  # starts at its first value
+    assert rig.node.rejections["inconsistent_fields"] == 0
+
+
+def summary(rig_diag):
+    return [s for s in rig_diag if s.name.endswith(": shaper")]
+
+
+def test_drops_and_gaps_of_the_stream_are_reported(ros_context):
+    rig = Rig(ros_context, queue_depth=5, diagnostics_period=0.2)
+    statuses = []
+    rig.probe.create_subscription(DiagnosticArray, "/diagnostics",
+                                  lambda m: statuses.extend(s for s in m.status if s.name.endswith(": shaper")), 50)
+    try:
+        send_valid_array_and_expect_output(rig, 0.0)
+        before = len(rig.array_out)
+        for _ in range(60):  # a burst the node does not take while it is not spun: its queue of 5 overflows
+            rig.array_in.publish(Float64MultiArray(data=[0.0] * 3))
+
+        def drops():
+            for s in reversed(statuses):
+                kv = {k.key: k.value for k in s.values}
+                if int(kv.get("input.array.total_drops", 0)) > 0:
+                    return s, kv
+            return None
+
+        rig.spin_until(drops, "a summary with the dropped samples", timeout=20.0)
+        status, kv = drops()
+        assert status.level == DiagnosticStatus.WARN and "dropped" in status.message
+        # every sample of the burst is accounted for: shaped, or counted as dropped
+        rig.spin_until(lambda: len(rig.array_out) - before + rig.node.rate_watch["array"].total_drops == 60,
+                       "every sample shaped or counted as dropped")
+        assert rig.node.rate_watch["array"].total_drops >= 40  # the queue kept about its last 5
+    finally:
+        rig.close()

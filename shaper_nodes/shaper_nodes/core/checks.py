@@ -33,7 +33,12 @@ KINDS = (
     "invalid_shaper",
     "unsupported",
     "too_large",
+    "beyond_limits",
 )
+
+
+#: most joint names a message may carry (refused before they are looked at)
+MAX_JOINT_NAMES = 1000
 
 
 class InputError(ValueError):
@@ -62,6 +67,10 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, size: int | No
         Largest magnitude allowed (``too_large`` beyond it): finite values so large that they are
         implausible, refused before they reach a filter's state or overflow its sums.
     """
+    if size is not None and not isinstance(values, np.ndarray) and len(values) != size:  # before converting
+        if len(values) == 0:
+            raise InputError("empty", f"{name} is empty")
+        raise InputError("wrong_size", f"{name} has {len(values)} values, expected {size}")
     arr = np.asarray(values, dtype=float)
     if arr.size == 0:
         raise InputError("empty", f"{name} is empty")
@@ -92,6 +101,9 @@ def joint_permutation(configured: Sequence[str], received: Sequence[str]) -> np.
     InputError
         ``empty``, ``duplicate_joint``, ``unknown_joint`` or ``missing_joint``.
     """
+    if len(received) > MAX_JOINT_NAMES:  # before any work on them: a message of many names must not stall the node
+        raise InputError("too_large", f"{len(received)} joint names exceed the limit of {MAX_JOINT_NAMES}"
+                         f" ({len(configured)} joints are shaped here)")
     received = list(received)
     if not received:
         raise InputError("empty", "joint_names is empty")

@@ -23,7 +23,33 @@ action.server_name (~/follow_joint_trajectory) -> action.controller
     applied between two samples, bumplessly.
 /diagnostics
     diagnostic_msgs/DiagnosticArray: every refused input (its class, throttled per class) and a
-    periodic summary.
+    periodic summary, with each streamed input's rate, gaps, bursts, drops and queueing lag
+    (core/rate.py; WARN when a window saw gaps or drops).
+
+What leaves the node
+--------------------
+Every output is checked where it is made, on every path, and a violation refuses the input with
+the reason (``/diagnostics``, the log, the service's or goal's answer) and publishes nothing; a
+streamed sample that is refused leaves the filters as they were. Outputs are finite; positions
+are within the joint limits (``limits.position_*`` and the URDF's, the tighter), and whole
+trajectories' velocities and accelerations within ``limits.velocity`` / ``limits.acceleration``
+(core/shaping/limits.py); times are strictly increasing and representable. Inputs beyond
+``limits.max_abs_value`` never reach a filter's state. Requests are bounded before any work
+(points, span, joints, shaper size: core/shaping/trajectory.py, types.py).
+
+Threads
+-------
+The streamed paths (array, stream), shaper changes and parameters run in this node's executor;
+whole trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) are served,
+under the same names, by a side node ``<name>_trajectories`` on a thread of its own
+(ros/side_node.py), so that the stream never waits for a long trajectory. Shaping a whole
+trajectory only reads the active filter, never the streaming filters' state. The interpreter's
+thread switch interval is shortened (:data:`SWITCH_INTERVAL`) so that a thread doing Python work
+on a long trajectory yields within a fraction of a command period.
+
+The stream follows the fields that arrive: a field that appears (velocities, say) starts its
+filter at its first value (there was no output of it to be continuous with); a field that goes
+away stops being output, and its filter starts afresh if it comes back.
 
 Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its source;
 ``allowed_sources`` lists the sources that may change the shaper (parameters count as source
@@ -36,9 +62,16 @@ Parameters: :data:`PARAMETERS` (names, defaults, ranges and descriptions; config
 
 from __future__ import annotations
 
+import copy
+import gc
+import pathlib
+import sys
+import threading
+import time
 from collections import Counter
 from typing import Any
 
+import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterUninitializedException
@@ -50,6 +83,7 @@ from trajectory_msgs.msg import JointTrajectory
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.core.rate import RateWatch
 from shaper_nodes.core.shaping import (
     DEFAULT_MAX_GAIN,
     FAMILIES,
@@ -69,13 +103,16 @@ from shaper_nodes.core.shaping import (
     none_shaper,
     shape_trajectory,
 )
+from shaper_nodes.core.shaping.limits import JointLimits, urdf_limits
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
+from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_SAMPLES
 from shaper_nodes.ros.conversions import TRAJ_FIELDS, shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED
+from shaper_nodes.ros.side_node import SideNode
 
 from .trajectory_action import TrajectoryActionProxy
 
@@ -90,6 +127,16 @@ TOPICS = {
     "trajectory_in": "~/joint_trajectory", "trajectory_out": "/joint_trajectory_controller/joint_trajectory",
 }
 _PROBE = Mode.from_hz(10.0, 0.05)  # a mode to hold one design parameter against the core
+#: s, the interpreter's thread switch interval in this node (Python's default is 5 ms, ten command
+#: periods at 2 kHz): a thread shaping a long trajectory gives the streaming thread the interpreter
+#: within this time
+SWITCH_INTERVAL = 2e-4
+#: the collector's thresholds in this node (Python's default is (700, 10, 10)); see _tune_interpreter
+GC_THRESHOLDS = (700, 10, 1000)
+#: default of limits.max_trajectory_samples (see there)
+DEFAULT_MAX_SAMPLES = 60_000
+#: the streamed inputs (array_in, stream_in)
+STREAMS = ("array", "stream")
 
 #: the shaper node's parameters (see config/shaper.yaml)
 PARAMETERS: tuple[Spec, ...] = (
@@ -131,6 +178,31 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("limits.max_abs_value", 1e6, "Largest magnitude of any input value (position rad or m, velocity,"
          " acceleration in their SI units): a larger, finite value is implausible and refused before it reaches"
          " the filters, so their state keeps its precision and no sum overflows.", (1e-3, 1e12)),
+    Spec("limits.max_trajectory_samples", DEFAULT_MAX_SAMPLES, "Most samples of a shaped whole trajectory (its span"
+         " plus the shaper's duration, times command_rate); a longer one is refused before any work. Building and"
+         " sending a trajectory's message holds the Python interpreter in rclpy for a time that grows with it, and"
+         " the stream waits that long (docs/shaping.md: about 0.4 ms per 1000 samples on a 2-core machine);"
+         f" the default keeps that under two periods at 1 kHz. At most {MAX_TRAJECTORY_SAMPLES}.",
+         (100, MAX_TRAJECTORY_SAMPLES)),
+    Spec("limits.position_lower", None, "Lowest position of each joint (rad or m), one per joint_names entry, in"
+         " that order; empty (default): none (or the URDF's). No output passes below it.",
+         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
+    Spec("limits.position_upper", None, "Highest position of each joint (rad or m), one per joint_names entry;"
+         " empty (default): none (or the URDF's). No output passes above it.",
+         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
+    Spec("limits.velocity", None, "Largest |velocity| of each joint (rad/s or m/s), one per joint_names entry;"
+         " .inf for none on a joint; empty (default): none (or the URDF's). Whole trajectories whose shaped"
+         " velocities pass it, and streamed points whose shaped velocities pass it, are refused.",
+         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
+    Spec("limits.acceleration", None, "Largest |acceleration| of each joint (rad/s^2 or m/s^2), one per"
+         " joint_names entry; .inf for none on a joint; empty (default): none (URDF has none). As limits.velocity.",
+         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
+    Spec("limits.urdf_file", "", "A URDF file whose <limit> elements (position, velocity) hold for the joints"
+         " too; where a parameter above also sets a limit, the tighter one holds. Every joint of joint_names must"
+         " be a revolute, prismatic or continuous joint of it. Empty (default): no URDF.", read_only=True),
+    Spec("queue_depth", 100, "Depth of the streamed inputs' subscription queues (array_in, stream_in), messages:"
+         " how long a burst or a stall of the node may last without a sample being dropped (100 = 0.1 s at"
+         " 1 kHz); a dropped sample is counted on /diagnostics.", (1, 100000), read_only=True),
     Spec("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"],
          "Sources allowed to change the active shaper (update policy).", read_only=True),
     Spec("retime_sources", None, "Sources whose changes re-time the motion already commanded (time-varying"
@@ -181,14 +253,23 @@ class ShaperNode(Node):
         self._revision = 1
         self._array_filter = filt(self._fir, n)
         self._stream_filters = {f: filt(self._fir, n) for f in TRAJ_FIELDS}
-        self._stream_fields: tuple[str, ...] | None = None
+        self._stream_fields: tuple[str, ...] = ()
+        self._last_sent: dict[str, np.ndarray] = {}  # the last command passed on per filter (see _shape_checked)
         self._pending_params: tuple[Shaper, str] | None = None
         self._max_abs = float(p("limits.max_abs_value").value)
+        self._max_samples = int(p("limits.max_trajectory_samples").value)
+        self.limits = self._limits_from_params(v)
 
+        self._lock = threading.Lock()  # the counters, shared by the streaming and the whole-trajectory threads
         self.rejections: Counter[str] = Counter()
         self.forwarded: Counter[str] = Counter()
         self._window_rejections = 0
         self.diagnostics = Diagnostics(self, lambda: float(p("error_throttle").value))
+        self.rate_watch = {k: RateWatch(self.rate) for k in STREAMS}
+        self._publisher_counts = dict.fromkeys(STREAMS, 1)
+        # whole trajectories: served by a side node on a thread of its own, never in the streaming thread
+        self._side = SideNode(self, "trajectories")
+        side = self._side.node
 
         tp = {k: p(f"topics.{k}").value for k in TOPICS}
         pubs: dict[str, Any] = {}
@@ -202,15 +283,22 @@ class ShaperNode(Node):
         self._stream_pub = pub(tp["stream_out"], JointTrajectory)
         self._traj_pub = pub(tp["trajectory_out"], JointTrajectory)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
+        depth = int(p("queue_depth").value)
+        # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
-            "array_in": self.create_subscription(Float64MultiArray, tp["array_in"], self._on_array, 10),
-            "stream_in": self.create_subscription(JointTrajectory, tp["stream_in"], self._on_stream, 10),
-            "trajectory_in": self.create_subscription(JointTrajectory, tp["trajectory_in"], self._on_trajectory, 10),
+            "array_in": self.create_subscription(Float64MultiArray, tp["array_in"],
+                                                 self._on_array, depth),  # type: ignore[arg-type]
+            "stream_in": self.create_subscription(JointTrajectory, tp["stream_in"],
+                                                  self._on_stream, depth),  # type: ignore[arg-type]
+            "trajectory_in": side.create_subscription(JointTrajectory, self.resolve_topic_name(tp["trajectory_in"]),
+                                                      self._on_trajectory, 10),
         }
+        self._subs = subs
         self._in_topics = {k: sub.topic_name for k, sub in subs.items()}  # fully qualified, for messages
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
-        self.create_service(ShapeTrajectory, "~/shape_trajectory", self._on_shape_trajectory)
+        side.create_service(ShapeTrajectory, self.resolve_service_name("~/shape_trajectory"),
+                            self._on_shape_trajectory)
         self._action: TrajectoryActionProxy | None = None
         self.pose_shaper: PoseShaperClient | None = None
         server_name = str(p("action.server_name").value)
@@ -219,23 +307,42 @@ class ShaperNode(Node):
             scheduler = str(p("action.scheduler").value).strip()
             if scheduler:
                 self.pose_shaper = PoseShaperClient(
-                    self, scheduler, float(p("action.server_timeout").value), self.shape_whole, self.diagnostics,
+                    side, scheduler, float(p("action.server_timeout").value), self.shape_whole, self.diagnostics,
                     max_gain=lambda: float(p("shaper.max_gain").value), rate=self.rate)
             self._action = TrajectoryActionProxy(
-                self, server_name, str(p("action.controller").value), self.shape_whole,
+                side, action_topic, str(p("action.controller").value), self.shape_whole,
                 on_refused=lambda err: self._reject(action_topic, err),
-                on_forwarded=lambda: self.forwarded.update(["action"]),
+                on_forwarded=lambda: self._count_forwarded("action"),
                 timeout=float(p("action.server_timeout").value), reshape=self.pose_shaper)
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
         self.create_timer(float(p("diagnostics_period").value), self._publish_summary,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_active()
+        self._side.start()
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"
             f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}"
             + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else "")
-            + (f", each goal shaped for its final pose by {self.pose_shaper.srv_name}" if self.pose_shaper else ""))
+            + (f", each goal shaped for its final pose by {self.pose_shaper.srv_name}" if self.pose_shaper else "")
+            + f"; {self.limits.describe()}")
+
+    def _limits_from_params(self, v: dict[str, Any]) -> JointLimits:
+        """The joint limits: the parameters', and the URDF's when limits.urdf_file is set (the tighter)."""
+        limits = JointLimits.from_lists(self.joint_names, v["limits.position_lower"] or (),
+                                        v["limits.position_upper"] or (), v["limits.velocity"] or (),
+                                        v["limits.acceleration"] or ())
+        urdf_file = str(v["limits.urdf_file"]).strip()
+        if urdf_file:
+            try:
+                text = pathlib.Path(urdf_file).read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as err:
+                raise ValueError(f"limits.urdf_file: cannot read {urdf_file}: {err}") from None
+            try:
+                limits = limits.tighter(urdf_limits(text, self.joint_names))
+            except ValueError as err:
+                raise ValueError(f"limits.urdf_file {urdf_file}: {err}") from None
+        return limits
 
     # ----------------------------------------------------------------- shaper changes
     def _describe(self) -> str:
@@ -304,6 +411,8 @@ class ShaperNode(Node):
         for param in params:
             if param.name == "limits.max_abs_value":
                 self._max_abs = float(param.value)
+            elif param.name == "limits.max_trajectory_samples":
+                self._max_samples = int(param.value)
         pending, self._pending_params = self._pending_params, None
         if pending is not None:
             self._commit(pending[0], PARAMETERS_SOURCE, pending[1])
@@ -356,22 +465,48 @@ class ShaperNode(Node):
 
     # ----------------------------------------------------------------- bad input
     def _reject(self, topic: str, err: InputError) -> None:
-        self.rejections[err.kind] += 1
-        self._window_rejections += 1
-        self.diagnostics.report(err.kind, ERROR, f"refused {err.kind} on {topic}: {err} (not forwarded)",
-                                name="input", values=[("topic", topic), ("count", str(self.rejections[err.kind]))])
+        with self._lock:
+            self.rejections[err.kind] += 1
+            self._window_rejections += 1
+            count = self.rejections[err.kind]
+            self.diagnostics.report(err.kind, ERROR, f"refused {err.kind} on {topic}: {err} (not forwarded)",
+                                    name="input", values=[("topic", topic), ("count", str(count))])
+
+    def _count_forwarded(self, path: str) -> None:
+        with self._lock:
+            self.forwarded[path] += 1
+
+    def _arrived(self, stream: str, info: dict[str, Any] | None) -> None:
+        """Record a streamed message's stamps for the rate watch (the middleware's message info)."""
+        info = info or {}
+        self.rate_watch[stream].arrival(info.get("source_timestamp"), info.get("received_timestamp"),
+                                        time.time_ns(), info.get("publication_sequence_number"),
+                                        self._publisher_counts[stream])
 
     def _publish_summary(self) -> None:
-        level = WARN if self._window_rejections else OK
-        msg = (f"{self._window_rejections} messages refused in the last period" if self._window_rejections
-               else f"shaping with {self._describe()}")
-        self._window_rejections = 0
-        values = [("revision", str(self._revision)), ("source", self._source), ("family", self._shaper.family)]
-        values += [(f"forwarded.{k}", str(v)) for k, v in sorted(self.forwarded.items())]
+        with self._lock:
+            refused, self._window_rejections = self._window_rejections, 0
+            forwarded, rejections = dict(self.forwarded), dict(self.rejections)
+        windows = {k: w.window() for k, w in self.rate_watch.items()}
+        # sequence numbers are per publisher: drops are counted while one publisher is seen
+        self._publisher_counts = {k: self._subs[f"{k}_in"].get_publisher_count() for k in STREAMS}
+        troubled = [k for k, w in windows.items() if w.trouble]
+        level = WARN if refused or troubled else OK
+        parts = [f"{refused} messages refused in the last period"] if refused else []
+        parts += [f"{k} input: {w.gaps} gaps (largest {1e3 * w.largest_gap_s:.1f} ms), {w.drops} dropped"
+                  for k, w in windows.items() if w.trouble]
+        msg = "; ".join(parts) if parts else f"shaping with {self._describe()}"
+        values = [("revision", str(self._revision)), ("source", self._source), ("family", self._shaper.family),
+                  ("command_rate_hz", f"{self.rate:g}")]
+        values += [(f"forwarded.{k}", str(v)) for k, v in sorted(forwarded.items())]
+        for k, w in windows.items():
+            if w.messages:
+                values += w.values(f"input.{k}")
+            values.append((f"input.{k}.total_drops", str(self.rate_watch[k].total_drops)))
         if self.pose_shaper is not None:
             values += [("action.scheduler.shaped", str(self.pose_shaper.shaped)),
                        ("action.scheduler.fallbacks", str(self.pose_shaper.fallbacks))]
-        values += [(f"refused.{k}", str(v)) for k, v in sorted(self.rejections.items())]
+        values += [(f"refused.{k}", str(v)) for k, v in sorted(rejections.items())]
         self.diagnostics.publish("shaper", level, msg, values)
 
     # ----------------------------------------------------------------- data paths
@@ -379,41 +514,81 @@ class ShaperNode(Node):
         """limits.max_abs_value (cached: read on every sample)."""
         return self._max_abs
 
-    def _on_array(self, msg: Float64MultiArray) -> None:
+    def _on_array(self, msg: Float64MultiArray, info: dict[str, Any] | None) -> None:
+        self._arrived("array", info)
         try:
             x = finite_array("data", msg.data, size=len(self.joint_names), limit=self._limit())
+            y = self._shape_checked({"array": (self._array_filter, x, "positions")})["array"]
         except InputError as err:
             self._reject(self._in_topics["array_in"], err)
             return
         out = Float64MultiArray(layout=msg.layout)
-        out.data = self._array_filter.process(x).tolist()
+        out.data = y.tolist()
         self._array_pub.publish(out)
-        self.forwarded["array"] += 1
+        self._count_forwarded("array")
 
-    def _on_stream(self, msg: JointTrajectory) -> None:
+    def _shape_checked(self, work: dict[str, tuple[Any, np.ndarray, str]]) -> dict[str, np.ndarray]:
+        """Shape streamed samples with the output invariants held; ``work`` maps a key to (filter,
+        samples, field: "positions", "velocities" or "accelerations").
+
+        Inputs beyond the joint limits are refused before any filter (a sample inside them whose first
+        impulse stays inside would otherwise pull every later output out, and the stream with it).
+        Then each filter runs and its output is checked (finite, within the limits); an output can still
+        leave them although its inputs did not (a switch between shapers, a custom shaper with negative
+        impulses). Then nothing is passed on, and the filters restart at rest at the last command they
+        passed on (refusing the sample while keeping their state would refuse every later one too: the
+        state would not move on); the next sample is shaped from there. Raises the InputError."""
+        for _, (_, x, field) in work.items():
+            self.limits.check(field, "the command", x)
+        saved = {k: copy.deepcopy(f) for k, (f, _, _) in work.items()}
+        try:
+            out = {k: f.process(x) for k, (f, x, _) in work.items()}
+            for k, y in out.items():
+                if not np.all(np.isfinite(y)):
+                    raise InputError("non_finite", f"the shaped {work[k][2]} would not be finite")
+                self.limits.check(work[k][2], "the shaped command", y)
+        except InputError as err:
+            for k, (f, _, _) in work.items():
+                f.__dict__.update(saved[k].__dict__)
+                f.reset(self._last_sent.get(k))
+            raise InputError(err.kind, f"{err}; the filters restart from the last command passed on") from None
+        for k, y in out.items():
+            self._last_sent[k] = np.atleast_2d(y)[-1].copy()
+        return out
+
+    def _on_stream(self, msg: JointTrajectory, info: dict[str, Any] | None) -> None:
+        self._arrived("stream", info)
         topic = self._in_topics["stream_in"]
         try:
             _, fields = trajectory_arrays(msg, self.joint_names, require_times=False, limit=self._limit())
-            names = tuple(fields)
-            if self._stream_fields is not None and names != self._stream_fields:
-                raise InputError("inconsistent_fields",
-                                 f"fields {list(names)} differ from the stream's {list(self._stream_fields)}")
+            for f in fields:
+                if f not in self._stream_fields:  # a field that (re)appears starts at its first value
+                    self._stream_filters[f].reset()
+                    self._last_sent.pop(f"stream.{f}", None)
+            shaped = self._shape_checked({f"stream.{f}": (self._stream_filters[f], v, f) for f, v in fields.items()})
         except InputError as err:
             self._reject(topic, err)
             return
+        names = tuple(fields)
+        for f in self._stream_fields:
+            if f not in names:  # gone: if it comes back it starts afresh
+                self._stream_filters[f].reset()
+                self._last_sent.pop(f"stream.{f}", None)
         self._stream_fields = names
-        shaped = {f: self._stream_filters[f].process(v) for f, v in fields.items()}
-        self._stream_pub.publish(trajectory_msg(msg.header, self.joint_names,
-                                                [p.time_from_start for p in msg.points], shaped))
-        self.forwarded["stream"] += 1
+        self._stream_pub.publish(trajectory_msg(msg.header, self.joint_names, [p.time_from_start for p in msg.points],
+                                                {f: shaped[f"stream.{f}"] for f in names}))
+        self._count_forwarded("stream")
 
     def shape_whole(self, msg: JointTrajectory, shaper: Shaper | None = None) -> JointTrajectory:
         """Shape a whole trajectory with the active shaper, or with ``shaper`` (discretised as the
-        active one is; the active shaper is not changed). Raises InputError on bad input, and
-        ShaperError or ValueError if ``shaper`` cannot be discretised."""
+        active one is; the active shaper is not changed), and check it against the output invariants.
+        Raises InputError on bad input or output, and ShaperError or ValueError if ``shaper`` cannot
+        be discretised."""
         fir = self._fir if shaper is None else discretize(shaper, self.rate, self._method)
         times, fields = trajectory_arrays(msg, self.joint_names, require_times=True, limit=self._limit())
-        result = shape_trajectory(times, fields["positions"], fir, self.rate, fields.get("velocities"))
+        result = shape_trajectory(times, fields["positions"], fir, self.rate, fields.get("velocities"),
+                                  max_samples=self._max_samples)
+        self.limits.check_trajectory(result.times, result.positions, result.velocities, result.accelerations)
         return trajectory_msg(msg.header, self.joint_names, result.times,
                               {"positions": result.positions, "velocities": result.velocities,
                                "accelerations": result.accelerations})
@@ -426,7 +601,7 @@ class ShaperNode(Node):
             self._reject(topic, err)
             return
         self._traj_pub.publish(out)
-        self.forwarded["trajectory"] += 1
+        self._count_forwarded("trajectory")
 
     def destroy_node(self) -> None:
         if self._action is not None:  # action servers and clients are not destroyed with the node
@@ -435,6 +610,7 @@ class ShaperNode(Node):
         if self.pose_shaper is not None:
             self.pose_shaper.destroy()
             self.pose_shaper = None
+        self._side.close()
         super().destroy_node()
 
     def _on_shape_trajectory(self, req: ShapeTrajectory.Request,
@@ -448,7 +624,19 @@ class ShaperNode(Node):
         return resp
 
 
+def _tune_interpreter() -> None:
+    """Thread switches within :data:`SWITCH_INTERVAL`; no full garbage collection while a long
+    trajectory's messages are alive (each would scan them all, holding the interpreter for tens of ms):
+    the objects made at start-up are frozen out of the collector and the oldest generation is
+    collected only after :data:`GC_THRESHOLDS` [2] collections of the middle one. Messages hold no
+    reference cycles, so they are freed by reference counting as before."""
+    sys.setswitchinterval(SWITCH_INTERVAL)
+    gc.freeze()
+    gc.set_threshold(*GC_THRESHOLDS)
+
+
 def main(args: list[str] | None = None) -> int:
+    _tune_interpreter()
     return run_node(ShaperNode, "shaper_node", args)
 
 

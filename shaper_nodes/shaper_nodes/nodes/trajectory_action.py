@@ -19,7 +19,9 @@ does) and is a client of the controller's. For each goal:
 
 Everything here runs in the node's executor without blocking it: the execute callback is a
 coroutine that awaits the controller's futures, so a SingleThreadedExecutor (``rclpy.spin``) is
-enough and the shaper's streaming filters are never touched by two threads. ``reshape`` is awaited
+enough; the shaper node serves it from its side node (ros/side_node.py), on a thread of its own,
+so that shaping a long goal never delays its stream (shaping reads the active filter, it never
+touches the streaming filters). ``reshape`` is awaited
 in the execute callback, not in the goal callback: rclpy awaits a coroutine goal callback, but
 inside the action server's callback group (the node's default group), which it would hold, and
 with it every subscription and service of the node, for as long as the wait lasts.

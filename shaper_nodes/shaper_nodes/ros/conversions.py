@@ -89,9 +89,16 @@ def duration_to_sec(d: Duration) -> float:
     return float(d.sec) + 1e-9 * float(d.nanosec)
 
 
+#: the nanoseconds a builtin_interfaces/Duration or Time holds (int32 seconds)
+_NS_RANGE = (-(2**31) * 1_000_000_000, 2**31 * 1_000_000_000)
+
+
 def sec_to_duration(t: float) -> Duration:
-    """``t`` s as a builtin_interfaces/Duration (rounded to the nanosecond)."""
+    """``t`` s as a builtin_interfaces/Duration (rounded to the nanosecond); ValueError beyond its
+    int32 seconds (never a wrapped time)."""
     ns = int(round(t * 1e9))
+    if not _NS_RANGE[0] <= ns < _NS_RANGE[1]:
+        raise ValueError(f"{t!r} s is not representable as a builtin_interfaces/Duration (int32 seconds)")
     return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
@@ -103,6 +110,8 @@ def time_to_sec(t: Time) -> float:
 def ns_to_time(ns: int) -> Time:
     """``ns`` nanoseconds as a builtin_interfaces/Time."""
     ns = int(ns)
+    if not _NS_RANGE[0] <= ns < _NS_RANGE[1]:
+        raise ValueError(f"{ns} ns is not representable as a builtin_interfaces/Time (int32 seconds)")
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 

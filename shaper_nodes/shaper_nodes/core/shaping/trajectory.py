@@ -21,10 +21,13 @@ MAX_TRAJECTORY_POINTS = 100_000
 #: most samples of a shaped trajectory (its span x the command rate, plus the shaper): 10 min at
 #: 500 Hz; bounds the memory and time of one request (about 17 MB per joint)
 MAX_TRAJECTORY_SAMPLES = 300_000
+#: the latest time a shaped point may have: builtin_interfaces/Duration holds int32 seconds
+MAX_TIME_S = float(2**31 - 1)
 
 
-def check_extent(times: np.ndarray, rate: float, extra: int = 0) -> None:
-    """Refuse a trajectory whose times are negative or whose resampling would pass the limits.
+def check_extent(times: np.ndarray, rate: float, extra: int = 0, max_samples: int = MAX_TRAJECTORY_SAMPLES) -> None:
+    """Refuse a trajectory whose times are negative or whose resampling would pass the limits
+    (``max_samples``, at most :data:`MAX_TRAJECTORY_SAMPLES`).
 
     Raises
     ------
@@ -39,9 +42,14 @@ def check_extent(times: np.ndarray, rate: float, extra: int = 0) -> None:
         raise InputError("non_increasing_time", f"time_from_start of point {k} is negative ({t[k]:g} s)")
     span = float(t[-1] - t[0]) if t.size else 0.0
     samples = span * rate + 2 + extra
-    if not samples <= MAX_TRAJECTORY_SAMPLES:
+    limit = min(int(max_samples), MAX_TRAJECTORY_SAMPLES)
+    if not samples <= limit:
         raise InputError("too_large", f"the trajectory spans {span:.6g} s: {samples:.6g} samples at {rate:g} Hz"
-                         f" exceed the limit of {MAX_TRAJECTORY_SAMPLES}")
+                         f" exceed the limit of {limit}")
+    end = (float(t[-1]) if t.size else 0.0) + (extra + 2) / rate
+    if not end < MAX_TIME_S:
+        raise InputError("too_large", f"the shaped trajectory would end at {end:.10g} s, beyond the"
+                         f" {MAX_TIME_S:.0f} s a builtin_interfaces/Duration holds")
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,7 @@ def shape_trajectory(
     fir: SparseFir,
     rate: float,
     velocities: np.ndarray | None = None,
+    max_samples: int = MAX_TRAJECTORY_SAMPLES,
 ) -> SampledTrajectory:
     """Shape a whole trajectory.
 
@@ -102,6 +111,9 @@ def shape_trajectory(
         Command rate, Hz.
     velocities : (N, J) array, optional
         Waypoint velocities; if given, used for cubic Hermite resampling.
+    max_samples : int
+        Most samples of the shaped trajectory (refused before any work beyond it; at most
+        :data:`MAX_TRAJECTORY_SAMPLES`).
 
     Returns
     -------
@@ -112,7 +124,7 @@ def shape_trajectory(
     p = finite_array("positions", positions)
     if p.ndim != 2:
         raise InputError("wrong_size", "positions must be an (N, J) array")
-    check_extent(strictly_increasing("time_from_start", times), rate, fir.length)
+    check_extent(strictly_increasing("time_from_start", times), rate, fir.length, max_samples)
     if velocities is not None:
         velocities = finite_array("velocities", velocities, size=p.size).reshape(p.shape)
     grid, sampled = resample(times, p, velocities, rate)
