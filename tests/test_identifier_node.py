@@ -1,7 +1,8 @@
 """The identifier node in-process with a probe over real DDS: stale, gappy or bad sensor data.
 
-A cycle whose accelerometer data is missing, has a gap or non-finite samples is reported and
-never identified from; a good cycle after it is. A shaper node that never answers the request to
+A cycle whose accelerometer data is missing, has a gap or non-finite samples, or a sample at or
+beyond the sensor's range (saturated), is reported and never identified from; a good cycle after
+it is. A shaper node that never answers the request to
 apply the recommendation is reported and does not hang the identifier.
 """
 
@@ -133,6 +134,15 @@ def test_missing_gappy_and_non_finite_data_are_reported_and_skipped(rig):
     assert not resp.applied
     omega = np.array([m.natural_frequency for m in resp.estimate.modes])
     assert np.min(np.abs(omega / (2 * math.pi * HZ) - 1)) < 0.02, resp.message
+
+
+def test_a_saturated_sample_refuses_the_cycle_with_the_reason(rig):
+    rig.cycle(0, accel=lambda t: 1e9 if abs(t - 0.5) < 0.5 / RATE else decay(t))  # one sample of 1e9 m/s^2
+    assert len(rig.node.cycles) == 0 and rig.node.saturated == 1
+    assert "saturated accelerometer: 1 of" in rig.node.skipped[0] and "range of 160 m/s^2" in rig.node.skipped[0]
+    rig.spin_until(lambda: rig.diag.find("identifier", "saturated accelerometer"), "the refusal on /diagnostics")
+    rig.cycle(1, accel=decay)  # the next good cycle is buffered
+    assert [r.cycle for r, _ in rig.node.cycles] == [1]
 
 
 def test_bad_requests_are_refused_with_the_reason(rig):

@@ -1,4 +1,5 @@
-"""LIST through the ROS graph: seed 003's four cases, restart from the save file, bag replay.
+"""LIST through the ROS graph: seed 003's four cases, restart from the save file, bag replay, and
+a state file that can neither be loaded nor moved aside (no crash loop).
 
 Sim plant, shaper and learner run as separate processes in lockstep; the test drives cycles
 one at a time through the public services and reads the learner's reports.
@@ -11,8 +12,11 @@ import math
 import time
 
 import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 
 from reproductions.list_cases import CASES, LEARNER, run_case
+from shaper_msgs.srv import SetShaper
 from shaper_nodes.analysis.replay import replay
 
 pytestmark = pytest.mark.integration
@@ -82,3 +86,54 @@ def test_replaying_the_recorded_bag_gives_the_live_updates(start_node, ros_conte
         assert offline.update.m == pytest.approx(live.m, rel=1e-12, abs=1e-15)
         assert offline.update.next.a1 == pytest.approx(live.a1_next, rel=1e-12)
         assert offline.update.next.t2 == pytest.approx(live.t2_next, rel=1e-12)
+
+
+class AnsweringShaper(Node):
+    """Plays the shaper node's ``~/set_shaper``: accepts every request and keeps it."""
+
+    def __init__(self, context) -> None:
+        super().__init__("shaper", context=context)
+        self.requests: list = []
+        self.create_service(SetShaper, "~/set_shaper", self._on_set)
+
+    def _on_set(self, request, response):
+        self.requests.append(request)
+        response.success, response.message = True, "accepted"
+        return response
+
+
+def test_a_state_file_that_cannot_be_loaded_nor_moved_aside_never_stops_the_learner(start_node, ros_context,
+                                                                                    tmp_path):
+    """A state file nested 100k deep (json.loads recurses out) in a folder where it cannot be moved
+    aside: the learner starts afresh, twice (no crash loop), and says why each time."""
+    folder = tmp_path / "read_only"
+    folder.mkdir()
+    (folder / "state.json.corrupt").mkdir()  # a folder that is not empty: not even root can move the file there
+    (folder / "state.json.corrupt" / "keep").write_text("")
+    state = folder / "state.json"
+    state.write_text("[" * 100_000 + "]" * 100_000)
+    folder.chmod(0o555)  # read-only as well (root is not stopped by it; the folder above is)
+    shaper = AnsweringShaper(ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(shaper)
+    try:
+        for start in range(2):
+            proc = start_node("shaper_nodes", "learner", {"state_file": str(state), "service_timeout": 30.0})
+            seen = len(shaper.requests)
+            deadline = time.monotonic() + 60.0
+            while len(shaper.requests) == seen:
+                assert proc.running(), f"start {start}: the learner exited"
+                assert time.monotonic() < deadline, f"start {start}: no start-up request from the learner"
+                ex.spin_once(timeout_sec=0.05)
+            # started afresh: the identity shaper, so that the next cycle runs unshaped as the reference
+            assert shaper.requests[seen].shaper.family == "none"
+            assert proc.running(), proc.log_path.read_text()
+            code = proc.stop()
+            log = proc.log_path.read_text()
+            assert code == 0, log
+            assert "nested too deeply" in log and "could not be moved aside" in log, log
+            assert "starting afresh" in log and state.exists()
+    finally:
+        folder.chmod(0o755)
+        ex.shutdown()
+        shaper.destroy_node()

@@ -1,17 +1,24 @@
 """MRILC (seed 000) through the ROS graph: sim plant (mck_pid), shaper and learner as processes.
 
-The driver runs one cycle at a time (a unit step and back) and reads the learner's reports.
+The driver runs one cycle at a time (a unit step and back) and reads the learner's reports. The
+learner node in-process with peers that answer: a state file that cannot be used starts it afresh.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import time
 
 import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 from reproductions.mrilc_cases import JOINT, NOMINAL, PERTURBED, RATE, plant_params, run_learning, run_shaper_only
 from shaper_msgs.msg import FeedforwardProfile
-from shaper_msgs.srv import SetFeedforward
+from shaper_msgs.srv import SetFeedforward, SetShaper
+from shaper_nodes.nodes.learner import LearnerNode
 from sim_plant_node.conductor import Conductor
 
 pytestmark = pytest.mark.integration
@@ -107,3 +114,86 @@ def test_a_recorded_mrilc_run_replays_offline_to_the_live_updates(starter, ros_c
             assert row["iteration"] == it.iteration
             assert (row["rms_e"], row["rms_u1"], row["rms_u2"], row["residual"]) == pytest.approx(
                 (it.rms_e, it.rms_u1, it.rms_u2, it.residual), rel=1e-12)
+
+
+class Peers(Node):
+    """Plays the shaper node's ``~/set_shaper`` and the plant's ``/sim_plant/set_feedforward``:
+    both accept every request and keep it."""
+
+    def __init__(self, context) -> None:
+        super().__init__("shaper", context=context)
+        self.shapers: list = []
+        self.profiles: list = []
+        self.create_service(SetShaper, "~/set_shaper", self._on_shaper)
+        self.create_service(SetFeedforward, "/sim_plant/set_feedforward", self._on_profile)
+
+    def _on_shaper(self, request, response):
+        self.shapers.append(request)
+        response.success, response.message = True, "accepted"
+        return response
+
+    def _on_profile(self, request, response):
+        self.profiles.append(request.profile)
+        response.success, response.message = True, "installed"
+        return response
+
+
+def _saved(history=None, best_profile=None) -> dict:
+    """A learner node's MRILC state after one iteration at 200 Hz, one joint (edited by the cases)."""
+    profile = [[0.01 * k] for k in range(8)]
+    learner = {"joints": 1, "iteration": 2, "holding": False, "grew": 0, "last_rms": 0.1, "profile": profile,
+               "best_rms": 0.1, "best_profile": best_profile or [[0.0]] * 8,
+               "history": history or [[1, 0.1, math.nan, 0.0, "learn"]], "max_rms": 0.1}
+    return {"version": 1, "mode": "mrilc", "saved_at": 1.0, "joint_names": JOINT, "sample_period": 1.0 / 200.0,
+            "injection": "effort", "learner": learner}
+
+
+@pytest.mark.parametrize("case, doc, movable, words", [
+    ("a good state (the control)", _saved(), True, ""),
+    ("history entry [[]]", _saved(history=[[]]), False, "history entry 0 must be"),
+    ("NaN best profile", _saved(best_profile=[[0.0]] * 7 + [[math.nan]]), True, "best_profile has a non-finite"),
+    ("NaN best profile, read-only folder", _saved(best_profile=[[math.nan]] * 8), False, "non-finite"),
+])
+def test_the_learner_starts_afresh_from_a_state_it_cannot_use(ros_context, tmp_path, case, doc, movable, words):
+    folder = tmp_path / "state"
+    folder.mkdir()
+    state = folder / "mrilc.json"
+    state.write_text(json.dumps(doc))  # NaN as the JSON token NaN, as the learner writes it
+    if not movable:
+        (folder / "mrilc.json.corrupt").mkdir()  # a folder that is not empty: the file cannot be moved there
+        (folder / "mrilc.json.corrupt" / "keep").write_text("")
+        folder.chmod(0o555)
+    peers = Peers(ros_context)
+    params = {"mode": "mrilc", "state_file": str(state), "joint_names": JOINT, "mrilc.rate": 200.0}
+    node = None
+    ex = SingleThreadedExecutor(context=ros_context)
+    try:
+        for _ in range(2 if not movable else 1):  # where the file stays, the next start refuses it again
+            node = LearnerNode(context=ros_context, parameter_overrides=[Parameter(k, value=v)
+                                                                         for k, v in params.items()])
+            ex.add_node(node)
+            ex.add_node(peers)
+            seen = len(peers.profiles)
+            deadline = time.monotonic() + 30.0
+            while len(peers.profiles) == seen:
+                assert time.monotonic() < deadline, "no profile installed"
+                ex.spin_once(timeout_sec=0.05)
+            installed = peers.profiles[seen]
+            if not words:  # the control: resumed at iteration 2 with the saved profile
+                assert node.state_problem == "" and installed.iteration == 2 and len(installed.data) == 8
+                break
+            assert words in node.state_problem, node.state_problem
+            assert node.diagnostics.counts["state_file"] == 1
+            assert installed.iteration == 1 and list(installed.data) == []  # afresh: no profile
+            assert node.mode.session.learner.iteration == 1
+            assert state.exists() != movable
+            assert ("moved to" in node.state_problem) == movable
+            ex.remove_node(node)
+            node.destroy_node()
+            node = None
+    finally:
+        folder.chmod(0o755)
+        ex.shutdown()
+        if node is not None:
+            node.destroy_node()
+        peers.destroy_node()

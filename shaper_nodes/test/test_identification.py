@@ -434,3 +434,37 @@ def test_bad_recommendation_requests():
         recommend_shaper([])
     with pytest.raises(IdentificationError, match="target"):
         recommend_shaper([mode_fit(10.0, 0.02, 0.01)], 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# The identifier node's record check: a saturated accelerometer (issue 17)
+
+
+def _cycle_result(accel_x: np.ndarray):
+    from shaper_nodes.core.cycles import evaluate_cycle
+
+    t = np.arange(accel_x.size) / RATE
+    accel = np.column_stack([accel_x, np.zeros_like(accel_x), np.zeros_like(accel_x)])
+    return evaluate_cycle(3, 0.0, 0.5, float(t[-1]), t, accel, t, np.zeros((t.size, 1)))
+
+
+@pytest.mark.parametrize("value, refused", [(1e9, True), (160.0, True), (-200.0, True), (150.0, False)])
+def test_a_record_with_a_sample_at_or_beyond_the_sensors_range_is_refused_as_saturated(value, refused):
+    from shaper_nodes.nodes.identifier import SaturatedRecord, check_record
+
+    t = np.arange(3000) / RATE
+    x = decay(t, 4.0, 0.03, amplitude=5.0)
+    x[200] = value  # during the move: the sensor clipped, whatever the residual window shows
+    result = _cycle_result(x)
+    if refused:
+        with pytest.raises(SaturatedRecord) as err:
+            check_record(result, 100)  # the default range: 160 m/s^2
+        assert err.value.count == 1
+        message = str(err.value)
+        assert message.startswith("cycle 3: saturated accelerometer: 1 of 3000 accelerometer samples at or beyond")
+        assert "range of 160 m/s^2" in message and "sensor.max_abs_accel" in message
+        assert "first at sample 200" in message
+    else:
+        times, accel = check_record(result, 100)
+        assert times.size == accel.shape[0] > 100
+    assert check_record(result, 100, max_abs_accel=1e10)[0].size > 100  # a wider sensor takes it

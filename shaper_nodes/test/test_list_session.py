@@ -1,4 +1,5 @@
-"""The learner's bookkeeping (ListSession): which cycles are learned from, and why not."""
+"""The learner's bookkeeping (ListSession): which cycles are learned from, and why not; its memory
+bound (the cycle duration limit) and the accelerometer's range."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import pytest
 from shaper_nodes.core.cycles import END, MOTION_END, START
 from shaper_nodes.core.learning.list.learner import ListLearner
 from shaper_nodes.core.learning.list.params import ListConfig, ListError, ListParams
-from shaper_nodes.core.learning.list.session import ListSession, list_config
+from shaper_nodes.core.learning.list.session import KEEP_BEFORE_START, ListSession, list_config
 
 RATE = 200.0
 W, Z = 10.0, 0.05
@@ -96,3 +97,88 @@ def test_list_config_from_node_parameters():
     with pytest.raises(ListError, match="rule"):
         list_config({"rule": "magic"})
     assert ListParams(0.5, 0.3).shaper("zv2").duration == pytest.approx(0.3)
+
+
+# --------------------------------------------------------------------------------------------
+# Bounded memory and the sensor's range (issue 17)
+
+
+def test_a_cycle_past_the_duration_limit_is_refused_and_its_buffer_dropped_at_the_limit():
+    s = ListSession(ListLearner(ListConfig(highpass_hz=0.5)), "zv2", max_cycle_duration=10.0)
+    s.sent(None)
+    s.on_shaper([1.0], [0.0], "learner", 1)
+    s.on_event(START, 0, 0.0, [0.0], [1.0])
+    s.on_event(MOTION_END, 0, 1.5)
+    notices, peak = [], 0
+    for t in np.arange(0.0, 30.0, 1.0 / 1000.0):
+        notice = s.on_imu(t, (float(decay(t)), 0.0, 0.0))
+        if notice:
+            notices.append((t, notice))
+        peak = max(peak, s.buffered)
+    assert len(notices) == 1, notices  # said once
+    t_limit, text = notices[0]
+    assert 10.0 < t_limit <= 10.0 + 1.5e-3 and "longer than max_cycle_duration 10 s" in text
+    assert peak == pytest.approx(10_001, abs=2)  # buffering stopped at the limit ...
+    assert s.buffered <= 2 * KEEP_BEFORE_START  # ... and what the cycle held was dropped then, not at END
+    assert s.buffered_bytes < 200_000
+    r = s.on_event(END, 0, 30.0)
+    assert r.update is None and r.refusal == "too_long" and "lasted 30.0 s" in r.skipped
+    assert s.learner.reference is None and s.learner.to_dict()["iteration"] == 0  # nothing learned
+    assert run_cycle(s, 1, 40.0).update.action == "reference"  # the next cycle is learned from
+
+
+def test_an_end_past_the_limit_refuses_the_cycle_even_without_samples():
+    s = ListSession(ListLearner(), max_cycle_duration=5.0)
+    s.on_shaper([1.0], [0.0], "learner", 1)
+    s.on_event(START, 0, 0.0)
+    s.on_event(MOTION_END, 0, 1.0)
+    r = s.on_event(END, 0, 6.0)
+    assert r.refusal == "too_long" and "longer than max_cycle_duration 5 s" in r.skipped
+
+
+def test_without_cycle_events_the_buffer_stays_bounded():
+    s = fresh()
+    for t in np.arange(0.0, 60.0, 1.0 / 1000.0):
+        s.on_imu(t, (0.1, 0.0, 0.0))
+        assert s.buffered <= 2 * KEEP_BEFORE_START
+    assert s.buffered_bytes < 200_000
+
+
+@pytest.mark.parametrize("value, saturated", [(1e9, True), (160.0, True), (-160.0, True), (159.9, False)])
+def test_a_sample_at_or_beyond_the_sensors_range_is_saturation_and_refuses_the_cycle(value, saturated):
+    s = fresh()
+    assert s.max_abs_accel == 160.0  # the default: 16 g
+
+    def glitch(t):
+        return value if abs(t - 3.0) < 1e-9 else float(decay(t))
+
+    s.on_event(START, 0, 0.0, [0.0], [1.0])
+    s.on_event(MOTION_END, 0, 1.5)
+    for t in np.round(np.arange(0.0, 6.0 + 1e-9, 1.0 / RATE), 9):
+        s.on_imu(t, (glitch(t), 0.0, 0.0))
+    r = s.on_event(END, 0, 6.0)
+    if saturated:
+        assert r.update is None and r.refusal == "saturated" and s.saturated == 1
+        assert "1 of 1201 accelerometer samples at or beyond the sensor's range of 160 m/s^2" in r.skipped
+        assert f"peak {abs(value):.6g}" in r.skipped and "sensor.max_abs_accel" in r.skipped
+        assert s.learner.reference is None  # not learned from
+    else:
+        # below the range: handed to the learner (which may still reject such a spike on its own terms)
+        assert r.update is not None and r.refusal == "" and s.saturated == 0
+
+
+def test_samples_of_another_width_within_a_cycle_refuse_it():
+    s = fresh()
+    s.on_event(START, 0, 0.0, [0.0], [1.0])
+    s.on_event(MOTION_END, 0, 1.5)
+    for t in np.arange(0.0, 6.0 + 1e-9, 1.0 / RATE):
+        s.on_imu(t, (float(decay(t)), 0.0, 0.0) if t < 5.0 else (float(decay(t)),))
+    r = s.on_event(END, 0, 6.0)
+    assert r.update is None and r.refusal == "malformed" and "another number of axes" in r.skipped
+
+
+def test_the_session_refuses_bounds_that_are_not_positive():
+    for kw in ({"max_cycle_duration": 0.0}, {"max_cycle_duration": float("inf")}, {"max_abs_accel": 0.0},
+               {"max_abs_accel": float("nan")}):
+        with pytest.raises(ListError):
+            ListSession(ListLearner(), **kw)

@@ -11,7 +11,9 @@ Interfaces (names are parameters, see config/identifier.yaml)
 -------------------------------------------------------------
 topics.imu (sensor_msgs/Imu, sensor QoS), topics.joint_states, topics.cycle_events
     Inputs. A cycle without accelerometer samples, with a gap in them or with non-finite
-    samples is reported and not buffered (stale or missing sensor data is never identified from).
+    samples is reported and not buffered (stale or missing sensor data is never identified from);
+    so is a cycle with a sample at or beyond the sensor's range (``sensor.max_abs_accel``):
+    saturated, counted (:attr:`IdentifierNode.saturated`) and reported on ``/diagnostics`` too.
 ~/identify (shaper_msgs/srv/Identify)
     Identify from the last N buffered cycles, recommend, and optionally apply the recommendation
     through ``<shaper>/set_shaper`` with source "identification" (a shaper node that does not
@@ -19,7 +21,7 @@ topics.imu (sensor_msgs/Imu, sensor QoS), topics.joint_states, topics.cycle_even
 ~/mode_estimate (shaper_msgs/ModeEstimate, latched)
     The last identified modes with their one-sigma uncertainties.
 /diagnostics
-    A set_shaper call the shaper node did not answer.
+    A set_shaper call the shaper node did not answer; a saturated cycle.
 
 Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
@@ -40,9 +42,10 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
 from shaper_nodes.core.identification import METHODS, IdentificationError, ModeFit, identify_records, recommend_shaper
+from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
-from shaper_nodes.ros.diagnostics import Diagnostics
+from shaper_nodes.ros.diagnostics import WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
@@ -60,13 +63,24 @@ def _validate_method(method: str) -> str:
     return method
 
 
-def check_record(result: CycleResult, min_samples: int) -> tuple[np.ndarray, np.ndarray]:
+class SaturatedRecord(IdentificationError):
+    """A cycle with accelerometer samples at or beyond the sensor's range; ``count`` of them."""
+
+    def __init__(self, message: str, count: int) -> None:
+        super().__init__(message)
+        self.count = count
+
+
+def check_record(result: CycleResult, min_samples: int, max_abs_accel: float = MAX_ABS_ACCEL
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """The residual-vibration record of a finished cycle: (times (N,), accel (N, k)).
 
     Raises
     ------
     IdentificationError
-        Too few samples in the window, non-finite samples, or a gap in the samples.
+        Too few samples in the window, non-finite samples, or a gap in the samples;
+        :class:`SaturatedRecord` if any sample of the cycle is at or beyond ``max_abs_accel``
+        (m/s^2, the sensor's range).
     """
     t, a = result.accel_times, result.accel
     sel = (t >= result.residual.window_start) & (t < result.residual.window_end)
@@ -77,6 +91,10 @@ def check_record(result: CycleResult, min_samples: int) -> tuple[np.ndarray, np.
             f" [{result.residual.window_start:.3f}, {result.residual.window_end:.3f}) s, need {min_samples}")
     if not np.all(np.isfinite(a)):
         raise IdentificationError(f"cycle {result.cycle}: non-finite accelerometer samples")
+    saturated = out_of_range(result.accel, max_abs_accel)
+    if saturated is not None:
+        raise SaturatedRecord(f"cycle {result.cycle}: saturated accelerometer: "
+                              + saturated.describe("accelerometer", "m/s^2", "sensor.max_abs_accel"), saturated.count)
     dt = np.diff(t)
     if np.any(dt <= 0.0):
         raise IdentificationError(f"cycle {result.cycle}: accelerometer stamps not strictly increasing")
@@ -109,6 +127,8 @@ PARAMETERS: tuple[Spec, ...] = (
          " deviations.", (0.0, 10.0), check=lambda v: recommend_shaper([_PROBE], 0.05, sigmas=v, families=("zv",))),
     Spec("band_hz", [0.0, 0.0], "Frequency band searched, Hz ([0, 0]: up to Nyquist).", check=_check_band),
     Spec("min_samples", 100, "Fewest accelerometer samples in a cycle's residual window.", (10, 10**7)),
+    Spec("sensor.max_abs_accel", MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
+         " it is refused as saturated (default 16 g).", (1e-3, 1e6)),
     Spec("settle_tolerance", 1e-6, "Band within which the joints count as at rest after a move, rad or m.",
          (0.0, 1e3)),
     Spec("service_timeout", 5.0, "Time to wait for the shaper node's set_shaper service, and then for its"
@@ -130,6 +150,7 @@ class IdentifierNode(Node):
         self.cycles: deque[tuple[CycleResult, tuple[np.ndarray, np.ndarray]]] = deque(
             maxlen=int(p("buffer_cycles").value))
         self.skipped: list[str] = []
+        self.saturated = 0  # accelerometer samples counted as saturated (in cycles refused for it)
         self.create_subscription(Imu, p("topics.imu").value, self._on_imu, IMU_QOS)
         self.create_subscription(JointState, p("topics.joint_states").value, self._on_joints, 100)
         self.create_subscription(CycleEvent, p("topics.cycle_events").value, self._on_event, 100)
@@ -166,7 +187,12 @@ class IdentifierNode(Node):
         if result is None:
             return
         try:
-            record = check_record(result, int(self.get_parameter("min_samples").value))
+            record = check_record(result, int(self.get_parameter("min_samples").value),
+                                  float(self.get_parameter("sensor.max_abs_accel").value))
+        except SaturatedRecord as err:
+            self.saturated += err.count
+            self._skip(str(err), "saturated")
+            return
         except IdentificationError as err:
             self._skip(str(err))
             return
@@ -175,9 +201,11 @@ class IdentifierNode(Node):
             f"cycle {result.cycle}: residual RMS {result.residual.rms:.4g} m/s^2 over"
             f" {result.residual.window_end - result.residual.window_start:.3g} s buffered ({len(self.cycles)})")
 
-    def _skip(self, why: str) -> None:
+    def _skip(self, why: str, kind: str = "") -> None:
         self.skipped.append(why)
-        self.get_logger().warning(f"{why}; cycle not used for identification")
+        text = f"{why}; cycle not used for identification"
+        if not (kind and self.diagnostics.report(kind, WARN, text)):  # logged there unless throttled
+            self.get_logger().warning(text)
 
     # ----------------------------------------------------------------- service
     async def _on_identify(self, req: Identify.Request, resp: Identify.Response) -> Identify.Response:

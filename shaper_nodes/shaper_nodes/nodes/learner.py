@@ -17,12 +17,19 @@ What both share lives here, once:
   s for the samples stamped up to it (they come on other topics and may still be on their way),
   then hands the cycle to the adapter;
 - ``~/reports`` (shaper_msgs/CycleReport): one per finished cycle, after the update was sent; a
-  skipped cycle has the metric "skipped" = 1 and the reason in the log;
+  skipped cycle has the metric "skipped" = 1 and the reason in the log (a cycle too long, with
+  saturated or implausible samples also on ``/diagnostics``, throttled per kind);
 - ``~/hold`` (std_srvs/SetBool): true stops learning and applies the best so far, false learns
   again;
 - ``state_file``: the learner's whole state, saved atomically after every update and reloaded at
-  start; a file that cannot be loaded is reported, moved aside to ``<file>.corrupt`` and ignored
-  (:mod:`shaper_nodes.core.learning.state_file`);
+  start, checked fully first (size, JSON, nesting depth, then every entry by the mode's core); a
+  file that cannot be loaded is reported (log, and ``/diagnostics`` as ``learner: state_file``,
+  published again with the start-up request), moved aside to ``<file>.corrupt`` if it can be
+  (in a read-only folder it stays, and is refused again at the next start) and ignored: the
+  learner starts afresh, never fails to start (:func:`shaper_nodes.core.learning.state_file.load_state`);
+- ``max_cycle_duration``: a cycle longer than this is refused, and its samples are dropped as soon
+  as a sample stamped past the limit arrives (said once, on the log and ``/diagnostics``), so that
+  memory stays bounded whatever the cycle events do;
 - the shaper node's ``set_shaper`` (and the MRILC injection point) through clients whose waits
   are bounded by ``service_timeout``: a lost reply is reported on the log and ``/diagnostics``,
   and the start-up request is sent again until it is answered.
@@ -45,9 +52,10 @@ from rclpy.task import Future
 from std_srvs.srv import SetBool
 
 from shaper_msgs.msg import CycleEvent, CycleReport
-from shaper_nodes.core.learning.state_file import StateFileError, read_state, set_aside, write_atomic
+from shaper_nodes.core.learning.samples import MAX_CYCLE_DURATION
+from shaper_nodes.core.learning.state_file import load_state, write_atomic
 from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.diagnostics import Diagnostics
+from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all
 from shaper_nodes.ros.shaper_client import ShaperClient, wait_for
@@ -63,6 +71,8 @@ PARAMETERS: tuple[Spec, ...] = (
          " (Model-Reference Iterative Learning Control, seed 000).", choices=MODES, read_only=True),
     Spec("shaper", "/shaper", "Fully qualified name of the shaper node.", read_only=True),
     Spec("state_file", "", "Where the learner's state is saved and reloaded ('' = not saved).", read_only=True),
+    Spec("max_cycle_duration", MAX_CYCLE_DURATION, "Longest cycle, s: a longer one is refused and its samples"
+         " dropped at the limit (bounds the learner's memory).", (1.0, 86400.0), read_only=True),
     Spec("stale_after", 0.1, "A cycle whose last sample is older than this at END is stale, s.", (0.0, 60.0),
          read_only=True),
     Spec("end_wait", 0.5, "At a cycle's END, wait up to this long for samples stamped up to END, s.",
@@ -109,6 +119,8 @@ class LearnerNode(Node):
         p = self.get_parameter
         path = str(p("state_file").value)
         self.state_path = pathlib.Path(path).expanduser() if path else None
+        self.state_problem = ""  # why the state file was not loaded ("" if it was, or there was none)
+        self.max_cycle_duration = float(p("max_cycle_duration").value)
         self.diagnostics = Diagnostics(self)
         self.shaper = ShaperClient(self, str(p("shaper").value), SOURCE, self.service_timeout, self.diagnostics)
         # the END wait's sleeps (the waiting callback holds its own group; Node has its own _timers)
@@ -140,18 +152,16 @@ class LearnerNode(Node):
 
     # ----------------------------------------------------------------- state file
     def restore(self, build: Callable[[dict[str, Any]], T], expected: dict[str, Any] | None = None) -> T | None:
-        """The state saved in ``state_file``, built by ``build`` from the document; None when there is
-        none, or when it cannot be loaded (then it is reported and moved aside)."""
-        if self.state_path is None or not self.state_path.exists():
-            return None
-        try:
-            state = build(read_state(self.state_path, STATE_VERSION, "learner state", expected))
-        except (StateFileError, ValueError, KeyError, TypeError) as err:
-            aside = set_aside(self.state_path)
-            self.get_logger().error(f"{err}; not loaded, moved to {aside}; starting afresh")
-            return None
-        self.get_logger().info(f"resumed from {self.state_path}")
-        return state
+        """The state saved in ``state_file``, built by ``build`` from the document (which checks it
+        and raises on anything wrong); None when there is none, or when it cannot be loaded (then
+        it is reported and moved aside if it can be). Never raises."""
+        loaded = load_state(self.state_path, STATE_VERSION, build, "learner state", expected)
+        if loaded.problem:
+            self.state_problem = loaded.problem
+            self.diagnostics.report("state_file", ERROR, loaded.problem)
+        elif loaded.state is not None:
+            self.get_logger().info(f"resumed from {self.state_path}")
+        return loaded.state
 
     def save(self) -> None:
         """Save the learner's state (if a state file is configured); a failure is logged, not fatal."""
@@ -173,10 +183,18 @@ class LearnerNode(Node):
         report.metric_names, report.metric_values = list(names), [float(v) for v in values]
         return report
 
-    def skipped(self, msg: CycleEvent, window: tuple[float, float], why: str) -> CycleReport:
-        """The report of a cycle not learned from (logged with the reason)."""
-        self.get_logger().warning(f"cycle {msg.cycle} not learned from: {why}")
+    def skipped(self, msg: CycleEvent, window: tuple[float, float], why: str, refusal: str = "") -> CycleReport:
+        """The report of a cycle not learned from (logged with the reason; a ``refusal`` of a class
+        the core names, such as "too_long" or "saturated", also on /diagnostics)."""
+        text = f"cycle {msg.cycle} not learned from: {why}"
+        if not (refusal and self.diagnostics.report(refusal, WARN, text)):  # logged there unless throttled
+            self.get_logger().warning(text)
         return self.report(msg, window, ["skipped"], [1.0])
+
+    def notice(self, text: str | None) -> None:
+        """A notice of the core's sample bookkeeping (a cycle passing its duration limit), if any."""
+        if text:
+            self.diagnostics.report("too_long", WARN, text)
 
     # ----------------------------------------------------------------- callbacks
     async def _start(self) -> None:
@@ -187,6 +205,8 @@ class LearnerNode(Node):
                 self._waiting_logged = True
             return
         self._startup.cancel()
+        if self.state_problem:  # again, now that the graph is up (the first report may have had no listener)
+            self.diagnostics.publish("state_file", ERROR, self.state_problem, [("kind", "state_file")])
         if not await self.mode.start():
             self.get_logger().warning("start-up request unanswered; sending it again")
             self._startup.reset()

@@ -11,7 +11,9 @@ Interfaces (names are parameters)
 topics.imu (sensor_msgs/Imu, sensor QoS), topics.cycle_events, ``<shaper>/active_shaper``
     Inputs. A cycle is learned from only if it ran with the shaper the learner sent (or
     unshaped: the reference) from START to END; missing, stale, gappy, saturated or
-    non-finite accelerometer data is reported and skipped, never learned from.
+    non-finite accelerometer data is reported and skipped, never learned from. A sample at or
+    beyond the sensor's range (``sensor.max_abs_accel``) is saturated: the cycle is refused
+    with the reason (log and ``/diagnostics``).
 ``<shaper>/set_shaper``
     Where the learned shaper goes (family "custom", source "learner").
 ~/hold (std_srvs/SetBool)
@@ -21,7 +23,8 @@ topics.imu (sensor_msgs/Imu, sensor QoS), topics.cycle_events, ``<shaper>/active
     One per finished cycle, published after the new shaper was accepted: M (residual_rms and
     metric "M"), phi, the parameters used and next, the action taken.
 state_file
-    ``{"version": 1, "structure", "saved_at", "learner"}``.
+    ``{"version": 1, "structure", "saved_at", "learner"}``, checked entry by entry at start
+    (:func:`~shaper_nodes.core.learning.list.learner_from_state`).
 
 Start-up: with a saved state the learner sends its shaper at once; otherwise it sets the
 identity shaper so that the next cycle runs unshaped and becomes the phase reference, and the
@@ -41,7 +44,16 @@ from sensor_msgs.msg import Imu
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession, list_config
+from shaper_nodes.core.learning.list import (
+    ListConfig,
+    ListError,
+    ListLearner,
+    ListParams,
+    ListSession,
+    learner_from_state,
+    list_config,
+)
+from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
@@ -90,6 +102,9 @@ PARAMETERS: tuple[Spec, ...] = (
          " better M (0 = never).", (0, 1000), read_only=True, check=_check("patience")),
     Spec("list.saturation", 0.0, "Accelerometer full scale, m/s^2: a cycle reaching it is rejected (0 = no"
          " limit).", (0.0, 1e6), read_only=True, check=_check("saturation")),
+    Spec("sensor.max_abs_accel", MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
+         " it is refused as saturated (default 16 g).", (1e-3, 1e6), read_only=True,
+         check=lambda v: ListSession(ListLearner(), max_abs_accel=v)),
     Spec("list.min_samples", _D.min_samples, "Fewest accelerometer samples in the residual window.", (2, 10**7),
          read_only=True, check=_check("min_samples")),
     *topics({"imu": "/tip_imu", "cycle_events": "/cycle_events"}),
@@ -112,19 +127,16 @@ class ListMode:
         except ListError as err:
             raise ValueError(str(err)) from None
         self.structure = self.config.structure
-        learner = node.restore(self._learner_from, {"structure": self.structure})
+        learner = node.restore(learner_from_state, {"structure": self.structure})
         self.session = ListSession(learner or ListLearner(self.config, self._initial_params(v)), self.structure,
-                                   float(node.get_parameter("stale_after").value))
+                                   float(node.get_parameter("stale_after").value), node.max_cycle_duration,
+                                   float(v["sensor.max_abs_accel"]))
         self.events_topic = str(v["topics.cycle_events"])
         self.imu_topic = str(v["topics.imu"])
         inputs = MutuallyExclusiveCallbackGroup()  # taken while an END's update awaits the shaper node
         node.create_subscription(Imu, self.imu_topic, self._on_imu, IMU_QOS, callback_group=inputs)
         node.create_subscription(ShaperMsg, f"{node.shaper.srv_name.rsplit('/', 1)[0]}/active_shaper",
                                  self._on_active, LATCHED, callback_group=inputs)
-
-    @staticmethod
-    def _learner_from(doc: dict[str, Any]) -> ListLearner:
-        return ListLearner.from_dict(doc.get("learner"))
 
     @staticmethod
     def _initial_params(v: dict[str, Any]) -> ListParams | None:
@@ -171,7 +183,7 @@ class ListMode:
     # ----------------------------------------------------------------- inputs
     def _on_imu(self, msg: Imu) -> None:
         a = msg.linear_acceleration
-        self.session.on_imu(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+        self.node.notice(self.session.on_imu(time_to_sec(msg.header.stamp), (a.x, a.y, a.z)))
 
     def _on_active(self, msg: ShaperMsg) -> None:
         self.session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
@@ -194,7 +206,7 @@ class ListMode:
         window = (result.start, result.end)
         update = result.update
         if update is None or update.action == "rejected" or update.next is None:
-            return self.node.skipped(msg, window, result.skipped or (update.reason if update else ""))
+            return self.node.skipped(msg, window, result.skipped or (update.reason if update else ""), result.refusal)
         applied, why = True, ""
         if update.next != update.used:
             applied, why, _ = await self._send(update.next)

@@ -27,7 +27,10 @@ e = y_m - y with y_m = G_m r_s, updates u2 and installs it at the injection poin
 Divergence guard: when RMS(e) grows ``mrilc.patience`` iterations in a row (above
 ``mrilc.noise_floor``), learning stops and the best profile is installed (action "rollback").
 state_file: ``{"version": 1, "mode": "mrilc", "saved_at", "joint_names", "sample_period",
-"injection", "learner"}``, saved atomically after every cycle and reloaded at start.
+"injection", "learner"}``, saved atomically after every cycle and reloaded at start, checked
+entry by entry first (:func:`~shaper_nodes.core.learning.mrilc.learner_from_state`).
+Bounded memory and implausible samples: see :class:`~shaper_nodes.core.learning.mrilc.MrilcSession`
+(``max_cycle_duration``, ``sensor.max_abs_position``, ``sensor.max_abs_effort``).
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from shaper_nodes.core.learning.mrilc import (
     MrilcLearner,
     MrilcSession,
     check_parameter,
+    learner_from_state,
     model_from_params,
 )
 from shaper_nodes.core.shaping import ShaperError, design
@@ -84,6 +88,7 @@ class MrilcMode:
             raise ValueError(str(err)) from None
         self.joint_names: list[str] = list(settings.joint_names)
         self.patience, self.noise_floor, self.learn = settings.patience, settings.noise_floor, settings.learn
+        self.settings = settings
         self.injection = str(v["mrilc.injection"])
         self.family = settings.shaper_family
         self.events_topic = settings.topics["cycle_events"]
@@ -104,23 +109,18 @@ class MrilcMode:
         return f"MRILC: reference model mode {mode}; law {m.law.law}: {m.convergence.describe()}"
 
     # ------------------------------------------------------------------ state
-    def _new_session(self, joints: int, doc: dict[str, Any] | None = None) -> MrilcSession:
-        if doc is None:
+    def _new_session(self, joints: int, learner: MrilcLearner | None = None) -> MrilcSession:
+        if learner is None:
             learner = MrilcLearner(self.model, joints, self.patience, self.noise_floor)
             learner.holding = not self.learn
-        else:
-            learner = MrilcLearner.from_dict(self.model, doc, self.patience, self.noise_floor)
-        return MrilcSession(learner, float(self.node.get_parameter("stale_after").value))
+        return MrilcSession(learner, float(self.node.get_parameter("stale_after").value), self.node.max_cycle_duration,
+                            self.settings.max_abs_position, self.settings.max_abs_effort)
 
     def _session_from(self, doc: dict[str, Any]) -> MrilcSession:
-        if abs(float(doc["sample_period"]) - self.model.period) > 1e-12:
-            raise MrilcError(f"saved for a sample period of {doc['sample_period']} s, not {self.model.period} s")
-        names = list(doc["joint_names"])
-        if self.joint_names and names != self.joint_names:
-            raise MrilcError(f"saved for joints {names}, not {self.joint_names}")
-        session = self._new_session(len(names), doc["learner"])
+        learner, names = learner_from_state(doc, self.model, self.joint_names, self.injection, self.patience,
+                                            self.noise_floor)
         self.joint_names = names
-        return session
+        return self._new_session(len(names), learner)
 
     def state(self) -> dict[str, Any] | None:
         if self.session is None:
@@ -193,14 +193,15 @@ class MrilcMode:
             return
         pos = self._select(msg, "position")
         if pos is not None:
-            self.session.on_joint_state(time_to_sec(msg.header.stamp), pos, self._select(msg, "effort"))
+            self.node.notice(self.session.on_joint_state(time_to_sec(msg.header.stamp), pos,
+                                                         self._select(msg, "effort")))
 
     def _on_reference(self, msg: JointState) -> None:
         if self.session is None:
             return
         pos = self._select(msg, "position")
         if pos is not None:
-            self.session.on_reference(time_to_sec(msg.header.stamp), pos)
+            self.node.notice(self.session.on_reference(time_to_sec(msg.header.stamp), pos))
 
     async def hold(self, on: bool) -> tuple[bool, str]:
         if self.session is None:
@@ -223,7 +224,7 @@ class MrilcMode:
         window = (result.start, result.end)
         update = result.update
         if update is None:
-            return self.node.skipped(msg, window, result.skipped)
+            return self.node.skipped(msg, window, result.skipped, result.refusal)
         ok, why, _ = await self._install(update.next_profile)
         self.node.save()
         names = ["iteration", "rms_e", "rms_u1", "rms_u2", "residual", "applied", f"action.{update.action}"]

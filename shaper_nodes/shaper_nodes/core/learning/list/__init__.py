@@ -16,13 +16,14 @@ learner
     rollback, patience and hold), and its state as a dictionary.
 session
     The bookkeeping the learner node and the offline replay share: which shaper a cycle ran
-    with, the accelerometer buffer, and cycle events.
+    with, the accelerometer buffer (bounded: the cycle duration limit), the sensor's range,
+    cycle events, and the learner node's state document.
 """
 
 from .learner import ListLearner
 from .measure import Measurement, Reference, make_reference
 from .params import ListConfig, ListError, ListParams, lti_factor
-from .session import ListSession, SessionResult, list_config
+from .session import ListSession, SessionResult, learner_from_state, list_config
 from .trials import ListUpdate
 
 __all__ = [
@@ -35,6 +36,7 @@ __all__ = [
     "Measurement",
     "Reference",
     "SessionResult",
+    "learner_from_state",
     "list_config",
     "lti_factor",
     "make_reference",

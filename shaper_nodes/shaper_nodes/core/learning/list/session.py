@@ -11,6 +11,13 @@ over a recorded bag, so that both give the same updates bit for bit:
 A cycle is learned from only if it ran with the shaper the learner asked for (or unshaped,
 which makes it the reference), with the same shaper from START to END; otherwise it is
 skipped with the reason, as are cycles whose START was missed.
+
+Memory is bounded: between cycles at most ``2 KEEP_BEFORE_START`` samples are kept (those stamped
+after a START may arrive before it); a cycle that runs longer than ``max_cycle_duration`` is
+refused, and its samples are dropped the moment a sample stamped past the limit arrives (the
+session says so once, as :meth:`ListSession.on_imu`'s return value), not at its END. A cycle with
+an accelerometer sample at or beyond the sensor's range (``max_abs_accel``) is saturated: the
+samples are counted (:attr:`ListSession.saturated`) and the cycle refused with the reason.
 """
 
 from __future__ import annotations
@@ -25,12 +32,15 @@ import numpy.typing as npt
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
+from ..samples import MAX_ABS_ACCEL, MAX_CYCLE_DURATION, SampleBuffer, out_of_range
 from .learner import ListLearner
-from .params import ListConfig, ListError, ListParams
+from .params import ListConfig, ListError, ListParams, finite_value
 from .trials import ListUpdate
 
 #: samples kept between cycles (those stamped after a START may arrive before it)
 KEEP_BEFORE_START = 1000
+#: the entries of the learner node's LIST state document
+_DOC_KEYS = {"version", "structure", "saved_at", "learner"}
 #: relative tolerance when matching the active shaper with the parameters the learner sent
 MATCH_TOL = 1e-9
 
@@ -72,6 +82,27 @@ def list_config(values: Mapping[str, Any]) -> ListConfig:
         raise ListError(f"invalid learner configuration: {err}") from None
 
 
+def learner_from_state(doc: Mapping[str, Any]) -> ListLearner:
+    """The learner saved in the learner node's LIST state document (``version``, ``structure``,
+    ``saved_at``, ``learner``), every entry checked (:meth:`ListLearner.from_dict` checks the
+    learner's own state part by part).
+
+    Raises
+    ------
+    ListError
+        Entries missing or unknown, a ``saved_at`` that is not a finite number, or a learner
+        state that is corrupt or inconsistent (the message names what).
+    """
+    if not isinstance(doc, Mapping):
+        raise ListError(f"the LIST state must be a dictionary, got {type(doc).__name__}")
+    missing, unknown = {"learner"} - set(doc), set(doc) - _DOC_KEYS
+    if missing or unknown:
+        raise ListError(f"LIST state entries differ: missing {sorted(missing)}, unknown {sorted(unknown)}")
+    if "saved_at" in doc:
+        finite_value("saved_at", doc["saved_at"])
+    return ListLearner.from_dict(doc["learner"])
+
+
 @dataclass(frozen=True)
 class ActiveShaper:
     """What the shaper node reports as active: impulses, who set it, and its revision."""
@@ -96,6 +127,9 @@ class SessionResult:
     end: float
     update: ListUpdate | None
     skipped: str = ""
+    #: the class of a refusal the node reports on its diagnostics ("too_long", "saturated",
+    #: "malformed"), "" otherwise
+    refusal: str = ""
 
     @property
     def learned(self) -> bool:
@@ -113,12 +147,28 @@ class ListSession:
         The impulse structure the learner's parameters are applied as ("zv2" or "zvd3").
     stale_after : float
         A cycle whose last accelerometer sample is older than this at END (s) is stale.
+    max_cycle_duration : float
+        The longest cycle, s: a longer one is refused, its samples dropped at the limit.
+    max_abs_accel : float
+        The accelerometer's range, m/s^2: a cycle with a sample at or beyond it is refused as
+        saturated (inf: no bound).
+
+    Raises
+    ------
+    ListError
+        ``max_cycle_duration`` or ``max_abs_accel`` not > 0.
     """
 
-    def __init__(self, learner: ListLearner, structure: str = "zv2", stale_after: float = 0.1) -> None:
+    def __init__(self, learner: ListLearner, structure: str = "zv2", stale_after: float = 0.1,
+                 max_cycle_duration: float = MAX_CYCLE_DURATION, max_abs_accel: float = MAX_ABS_ACCEL) -> None:
         self.learner = learner
         self.structure = structure
         self.stale_after = float(stale_after)
+        self.max_cycle_duration = finite_value("max_cycle_duration", max_cycle_duration)
+        self.max_abs_accel = float(max_abs_accel)
+        if not self.max_cycle_duration > 0.0 or not self.max_abs_accel > 0.0:
+            raise ListError(f"max_cycle_duration and max_abs_accel must be > 0, got {max_cycle_duration!r},"
+                            f" {max_abs_accel!r}")
         self.active: ActiveShaper | None = None
         self._sent: ListParams | None = None
         self._previous: ListParams | None = None
@@ -127,10 +177,23 @@ class ListSession:
         self._motion_end: float | None = None
         self._at_start: ActiveShaper | None = None
         self._direction = 1.0
-        self._t: list[float] = []
-        self._a: list[npt.NDArray[np.float64]] = []
+        self._buf = SampleBuffer()
+        self._overlong = False     # the cycle passed max_cycle_duration: its samples are dropped
+        self._malformed = 0        # samples of the cycle with another number of axes
         self._ref_displacement: npt.NDArray[np.float64] | None = None
         self._latest = -math.inf
+        #: accelerometer samples counted as saturated, over all cycles refused for it
+        self.saturated = 0
+
+    @property
+    def buffered(self) -> int:
+        """Accelerometer samples held."""
+        return len(self._buf)
+
+    @property
+    def buffered_bytes(self) -> int:
+        """Bytes the sample buffer takes."""
+        return self._buf.nbytes
 
     # ----------------------------------------------------------------- inputs
     def sent(self, params: ListParams | None) -> None:
@@ -146,14 +209,31 @@ class ListSession:
         """Stamp of the latest accelerometer sample received (s), -inf before the first."""
         return self._latest
 
-    def on_imu(self, t: float, accel: npt.ArrayLike) -> None:
+    def on_imu(self, t: float, accel: npt.ArrayLike) -> str | None:
         """An accelerometer sample. Kept by its stamp: at END the cycle takes the samples stamped
-        between its START and END, whatever order they arrived in relative to the events."""
-        self._t.append(float(t))
-        self._a.append(np.asarray(accel, dtype=float).ravel())
-        self._latest = max(self._latest, float(t))
-        if self._cycle is None and len(self._t) > 2 * KEEP_BEFORE_START:
-            del self._t[:-KEEP_BEFORE_START], self._a[:-KEEP_BEFORE_START]
+        between its START and END, whatever order they arrived in relative to the events.
+
+        Returns a notice, once per cycle, when the cycle in progress passes ``max_cycle_duration``
+        (its samples are dropped then, and no more are kept for it); None otherwise.
+        """
+        t = float(t)
+        self._latest = max(self._latest, t)
+        buf, in_cycle = self._buf, self._cycle is not None and not self._overlong
+        if not buf.append(t, accel):
+            if in_cycle:
+                self._malformed += 1
+            else:  # samples before a START only: go on with the new layout
+                buf.clear()
+                buf.append(t, accel)
+        if in_cycle and t - self._start > self.max_cycle_duration:
+            self._overlong = True
+            buf.keep_last(KEEP_BEFORE_START)
+            return (f"cycle {self._cycle} has run {t - self._start:.1f} s, longer than max_cycle_duration"
+                    f" {self.max_cycle_duration:g} s: its samples are dropped, no more are kept for it, and it will"
+                    " not be learned from")
+        if not in_cycle and len(buf) > 2 * KEEP_BEFORE_START:
+            buf.keep_last(KEEP_BEFORE_START)
+        return None
 
     def on_event(self, kind: int, cycle: int, t: float, start_positions: npt.ArrayLike = (),
                  goal_positions: npt.ArrayLike = ()) -> SessionResult | None:
@@ -162,8 +242,8 @@ class ListSession:
         if kind == START:
             self._cycle, self._start, self._motion_end = int(cycle), t, None
             self._at_start = self.active
-            keep = [i for i, ti in enumerate(self._t) if ti >= t]
-            self._t, self._a = [self._t[i] for i in keep], [self._a[i] for i in keep]
+            self._overlong, self._malformed = False, 0
+            self._buf.keep(self._buf.times >= t)
             self._direction = self._direction_of(start_positions, goal_positions)
             return None
         if self._cycle is None or int(cycle) != self._cycle:
@@ -180,9 +260,13 @@ class ListSession:
         motion_end = self._motion_end if self._motion_end is not None else 0.0
         start = self._start
 
-        def result(update: ListUpdate | None, why: str = "") -> SessionResult:
-            return SessionResult(cycle, start, start + motion_end, t, update, why)
+        def result(update: ListUpdate | None, why: str = "", refusal: str = "") -> SessionResult:
+            return SessionResult(cycle, start, start + motion_end, t, update, why, refusal)
 
+        if self._overlong or t - start > self.max_cycle_duration:
+            self._overlong = False
+            return result(None, f"the cycle lasted {t - start:.1f} s, longer than max_cycle_duration"
+                                f" {self.max_cycle_duration:g} s (its samples were dropped at the limit)", "too_long")
         if self._motion_end is None:
             return result(None, "no MOTION_END event in the cycle")
         used, why = self._used(self._at_start)
@@ -190,17 +274,9 @@ class ListSession:
             return result(None, why)
         if self.active != self._at_start:
             return result(None, "the shaper changed during the cycle")
-        stamps = np.asarray(self._t)
-        mine = stamps <= t
-        times = stamps[mine] - self._start
-        accel = np.vstack([a for a, m in zip(self._a, mine, strict=True) if m]) if mine.any() else np.zeros((0, 3))
-        self._t = stamps[~mine].tolist()
-        self._a = [a for a, m in zip(self._a, mine, strict=True) if not m]
-        if times.size == 0:
-            return result(None, "no accelerometer data in the cycle (sensor missing or stale)")
-        if (t - self._start) - times[-1] > self.stale_after:
-            return result(None, f"stale accelerometer: its last sample is {(t - self._start) - times[-1]:.3f} s"
-                                f" before the cycle's END (limit {self.stale_after:g} s)")
+        times, accel, why, refusal = self._cycle_samples(t)
+        if why:
+            return result(None, why, refusal)
         try:
             update = self.learner.update(times, accel, motion_end, t - self._start, used, self._direction)
         except ListError as err:
@@ -208,6 +284,29 @@ class ListSession:
         return result(update)
 
     # ----------------------------------------------------------------- helpers
+    def _cycle_samples(self, t: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], str, str]:
+        """The samples stamped up to the END at ``t`` (times from START, accel), taken out of the
+        buffer, and why they cannot be learned from with the class of the refusal ("" if they can)."""
+        buf = self._buf
+        mine = buf.times <= t
+        times = buf.times[mine] - self._start
+        accel = buf.values[mine] if mine.any() else np.zeros((0, 3))
+        buf.keep(~mine)
+        if times.size == 0:
+            return times, accel, "no accelerometer data in the cycle (sensor missing or stale)", ""
+        if self._malformed:
+            return times, accel, (f"{self._malformed} accelerometer samples of the cycle had another number of axes"
+                                  f" than its others ({accel.shape[1]})"), "malformed"
+        saturated = out_of_range(accel, self.max_abs_accel)
+        if saturated is not None:
+            self.saturated += saturated.count
+            why = "saturated accelerometer: " + saturated.describe("accelerometer", "m/s^2", "sensor.max_abs_accel")
+            return times, accel, why, "saturated"
+        if (t - self._start) - times[-1] > self.stale_after:
+            return times, accel, (f"stale accelerometer: its last sample is {(t - self._start) - times[-1]:.3f} s"
+                                  f" before the cycle's END (limit {self.stale_after:g} s)"), ""
+        return times, accel, "", ""
+
     def _direction_of(self, start_positions: npt.ArrayLike, goal_positions: npt.ArrayLike) -> float:
         d = np.asarray(goal_positions, dtype=float) - np.asarray(start_positions, dtype=float)
         if d.size == 0 or not np.all(np.isfinite(d)) or not np.any(d):

@@ -6,17 +6,19 @@ model
     The reference model G_m = C P_nom / (1 + C P_nom), the exact ZOH sampled loop, the
     convergence check of eq. (11) over a plant set, the learning laws and the Q filter.
 learner
-    :class:`MrilcLearner`: the profile u2, learned cycle by cycle, and its divergence guard.
+    :class:`MrilcLearner`: the profile u2, learned cycle by cycle, and its divergence guard; its
+    saved state checked fully (:func:`learner_from_state`).
 session
     :class:`MrilcSession`: whole cycles on the sample grid from the streams (joint states, the
-    applied reference, cycle events), handed to the learner.
+    applied reference, cycle events), handed to the learner; memory bounded (the cycle duration
+    limit, a margin between cycles), implausible samples refused.
 params
     The learner node's parameters (:data:`DEFAULTS`, :data:`RANGES`, :data:`DESCRIPTIONS`) and
     the model and settings they build (:func:`model_from_params`, :class:`MrilcSettings`), and the check of one value
     (:func:`check_parameter`).
 """
 
-from .learner import MrilcLearner, MrilcUpdate
+from .learner import MrilcLearner, MrilcUpdate, learner_from_state
 from .model import PAPER_CONTROLLER, MrilcError, MrilcModel, controller
 from .params import DEFAULTS, DESCRIPTIONS, RANGES, MrilcSettings, check_parameter, model_from_params
 from .session import MrilcCycle, MrilcSession
@@ -35,5 +37,6 @@ __all__ = [
     "MrilcUpdate",
     "check_parameter",
     "controller",
+    "learner_from_state",
     "model_from_params",
 ]

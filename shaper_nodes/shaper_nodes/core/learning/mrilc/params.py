@@ -4,7 +4,8 @@
 ``joint_names`` and ``topics.*`` parameters of the learner node; :func:`model_from_params`
 builds the model (:class:`~.model.MrilcModel`) and the learner's settings
 (:class:`MrilcSettings`) from them, so that the node and offline replays configure the
-learner the same way.
+learner the same way. The ``sensor.*`` bounds are the session's
+(:class:`~.session.MrilcSession`: samples at or beyond them are implausible).
 """
 
 from __future__ import annotations
@@ -18,6 +19,11 @@ from shaper_nodes.core.checks import in_range, integer
 
 from . import model as M
 from .model import MrilcError, MrilcModel
+
+#: default bound of joint state and reference positions, rad or m (implausible at or beyond it)
+MAX_ABS_POSITION = 100.0
+#: default bound of measured efforts, N or N m (implausible at or beyond it)
+MAX_ABS_EFFORT = 1e5
 
 #: the learner node's MRILC parameters and their defaults (the node declares exactly these)
 DEFAULTS: dict[str, object] = {
@@ -41,6 +47,8 @@ DEFAULTS: dict[str, object] = {
     "mrilc.learn": True,
     "mrilc.patience": 3,
     "mrilc.noise_floor": 1e-9,
+    "sensor.max_abs_position": MAX_ABS_POSITION,
+    "sensor.max_abs_effort": MAX_ABS_EFFORT,
     "joint_names": [""],
     "topics.joint_states": "/joint_states",
     "topics.reference": "/sim_plant/reference",
@@ -59,6 +67,8 @@ RANGES: dict[str, tuple[float, float, bool]] = {
     "mrilc.q_order": (1, 8, True),
     "mrilc.patience": (1, 1000, True),
     "mrilc.noise_floor": (0.0, 1e9, False),
+    "sensor.max_abs_position": (1e-3, 1e9, False),
+    "sensor.max_abs_effort": (1e-3, 1e12, False),
 }
 
 
@@ -88,6 +98,10 @@ DESCRIPTIONS: dict[str, str] = {
     "mrilc.learn": "Learn (true) or only measure and report with the profile held (false).",
     "mrilc.patience": "Divergence guard: iterations of growing RMS(e) before rollback.",
     "mrilc.noise_floor": "RMS(e) below which growth is not divergence (output units).",
+    "sensor.max_abs_position": "Bound of the joint state and reference positions, rad or m: a cycle with a sample"
+                               " at or beyond it is refused as implausible (the joints' range with a margin).",
+    "sensor.max_abs_effort": "Bound of the measured efforts, N or N m: a cycle with a sample at or beyond it is"
+                             " refused as implausible (the actuators' range with a margin).",
     "joint_names": "Joints learned, in profile order ([''] = those of the first START).",
     "topics.joint_states": "Topic name (joint_states).",
     "topics.reference": "Topic name (reference).",
@@ -106,6 +120,8 @@ class MrilcSettings:
     injection_target: str
     shaper_family: str
     topics: dict[str, str]            # joint_states, reference, cycle_events
+    max_abs_position: float = MAX_ABS_POSITION   # rad or m: a sample at or beyond it is implausible
+    max_abs_effort: float = MAX_ABS_EFFORT       # N or N m
 
 
 def _number(name: str, value: Any) -> float:
@@ -173,7 +189,7 @@ def check_parameter(name: str, value: Any) -> None:
 def model_from_params(params: Mapping[str, object] | None = None, require_convergence: bool = True
                       ) -> tuple[MrilcModel, MrilcSettings]:
     """The MRILC model and settings from the learner node's parameters (:data:`DEFAULTS` for
-    those not given; keys not starting with ``mrilc.``, ``topics.`` or ``joint_names`` are ignored,
+    those not given; keys not starting with ``mrilc.``, ``sensor.``, ``topics.`` or ``joint_names`` are ignored,
     so a mixed parameter set can be passed).
 
     Raises
@@ -209,6 +225,7 @@ def model_from_params(params: Mapping[str, object] | None = None, require_conver
                              tuple(n for n in names if n), _text("mrilc.injection_target", p["mrilc.injection_target"]),
                              _text("mrilc.shaper_family", p["mrilc.shaper_family"]),
                              {k: _text(f"topics.{k}", p[f"topics.{k}"])
-                              for k in ("joint_states", "reference", "cycle_events")})
+                              for k in ("joint_states", "reference", "cycle_events")},
+                             num["sensor.max_abs_position"], num["sensor.max_abs_effort"])
     return model, settings
 
