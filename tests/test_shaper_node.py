@@ -446,7 +446,7 @@ def test_drops_and_gaps_of_the_stream_are_reported(ros_context):
             return None
 
         rig.spin_until(drops, "a summary with the dropped samples", timeout=20.0)
-        status, kv = drops()
+        status, _ = drops()
         assert status.level == DiagnosticStatus.WARN and "dropped" in status.message
         # every sample of the burst is accounted for: shaped, or counted as dropped
         rig.spin_until(lambda: len(rig.array_out) - before + rig.node.rate_watch["array"].total_drops == 60,

@@ -119,3 +119,17 @@ def test_rate_watch_counts_rate_gaps_bursts_drops_and_lag():
     w.arrival(t + ms, t + ms, t + ms, 7, publishers=2)  # several publishers: their numbers interleave
     win = w.window()
     assert win.drops == 0 and not win.drops_counted and w.total_drops == 1
+
+
+def test_a_cycle_without_end_is_abandoned_at_the_sample_bound():
+    from shaper_nodes.core.cycles import END, START, CycleMonitor
+
+    m = CycleMonitor(max_samples=100)
+    m.event(START, 1, 0.0)
+    for k in range(250):
+        m.add_accel(0.001 * k, [0.0, 0.0, 0.0])
+    assert not m.in_cycle and m.abandoned == 1 and not m._acc_t
+    assert m.event(END, 1, 1.0) is None  # its END, if it comes, finds no cycle
+    m.event(START, 2, 2.0)
+    m.add_accel(2.1, [1.0, 0.0, 0.0])
+    assert m.in_cycle and m.abandoned == 1

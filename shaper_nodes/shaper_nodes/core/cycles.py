@@ -46,11 +46,17 @@ class CycleMonitor:
         Band (rad or m) within which the joint positions count as at rest.
     remove_mean : bool
         Remove the window mean of the acceleration (sensor offset, gravity) before the RMS.
+    max_samples : int
+        Most samples kept per stream in one cycle: a cycle that passes it (its END lost, say) is
+        abandoned and its samples dropped, so memory stays bounded; :attr:`abandoned` counts them.
     """
 
-    def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False) -> None:
+    def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False,
+                 max_samples: int = 2_000_000) -> None:
         self.settle_tolerance = float(settle_tolerance)
         self.remove_mean = remove_mean
+        self.max_samples = int(max_samples)
+        self.abandoned = 0
         self._cycle: int | None = None
         self._start = 0.0
         self._motion_end: float | None = None
@@ -68,12 +74,20 @@ class CycleMonitor:
         if self._cycle is not None:
             self._acc_t.append(float(t))
             self._acc.append(np.asarray(accel, dtype=float).ravel())
+            self._bound(self._acc_t)
 
     def add_positions(self, t: float, positions: npt.ArrayLike) -> None:
         """Joint positions (rad or m) at time t (s)."""
         if self._cycle is not None:
             self._pos_t.append(float(t))
             self._pos.append(np.asarray(positions, dtype=float).ravel())
+            self._bound(self._pos_t)
+
+    def _bound(self, stream: list[float]) -> None:
+        if len(stream) > self.max_samples:  # a cycle without end: abandoned, its samples dropped
+            self._cycle = None
+            self._acc_t, self._acc, self._pos_t, self._pos = [], [], [], []
+            self.abandoned += 1
 
     def event(self, kind: int, cycle: int, t: float) -> CycleResult | None:
         """A cycle event; returns the cycle's result at its END, else None."""
