@@ -10,6 +10,7 @@ passed on; how long that took; and that the node then still shapes a valid sampl
 from __future__ import annotations
 
 import argparse
+import copy
 import time
 from collections.abc import Callable
 from functools import partial
@@ -39,7 +40,7 @@ class Captured:
         self.topic_name = "captured"
 
     def publish(self, msg: Any) -> None:
-        self.sent.append(msg)
+        self.sent.append(copy.deepcopy(msg))  # as rclpy serializes it: the node may reuse or free it
 
 
 def traj(points: list[tuple[float, list[float]]], names: list[str] | None = None,

@@ -40,6 +40,7 @@ from shaper_nodes.core.shaping.trajectory import shape_trajectory
 from shaper_nodes.nodes.scheduler import SchedulerNode
 from shaper_nodes.nodes.shaper import ShaperNode
 from shaper_nodes.ros.conversions import duration_to_sec
+from shaper_nodes.ros.shaper_client import wait_for
 
 pytestmark = pytest.mark.integration
 
@@ -48,6 +49,7 @@ RATE = 100.0
 CONTROLLER = "/joint_trajectory_controller/follow_joint_trajectory"
 SERVER = "/shaper/follow_joint_trajectory"
 Goal, Result = FollowJointTrajectory.Goal, FollowJointTrajectory.Result
+FEEDBACK_PERIOD = 0.02  # s, the test controller's "control period"
 
 
 class TestController:
@@ -83,7 +85,13 @@ class TestController:
     async def _execute(self, handle) -> Result:
         goal = handle.request
         self.goals.append(goal)
+        hold = Future()
+        if self.mode == "hold":  # before any wait: a cancel may come at once
+            self._hold[bytes(handle.goal_id.uuid)] = hold
         for k in range(self.feedbacks):
+            # one feedback per control period, as joint_trajectory_controller sends them: the first one not
+            # before the goal's acceptance can have reached the client (rclpy drops earlier feedback)
+            await wait_for(self.node, Future(), FEEDBACK_PERIOD)
             fb = FollowJointTrajectory.Feedback(joint_names=list(goal.trajectory.joint_names))
             fb.desired = goal.trajectory.points[k]
             fb.actual = JointTrajectoryPoint(positions=[float(k)] * len(JOINTS))
@@ -91,7 +99,6 @@ class TestController:
             fb.multi_dof_desired = MultiDOFJointTrajectoryPoint()
             handle.publish_feedback(fb)
         if self.mode == "hold":
-            self._hold[bytes(handle.goal_id.uuid)] = hold = Future()
             await hold
         if handle.is_cancel_requested:
             handle.canceled()

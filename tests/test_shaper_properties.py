@@ -11,6 +11,7 @@ the same callbacks is covered by test_shaper_node.py.
 from __future__ import annotations
 
 import contextlib
+import copy
 import math
 
 import numpy as np
@@ -53,7 +54,7 @@ class Captured:
         self.sent: list = []
 
     def publish(self, msg) -> None:
-        self.sent.append(msg)
+        self.sent.append(copy.deepcopy(msg))  # as rclpy serializes it: the node may reuse or free it
 
 
 @pytest.fixture(scope="module")

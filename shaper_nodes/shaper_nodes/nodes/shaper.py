@@ -106,7 +106,14 @@ from shaper_nodes.core.shaping import (
 from shaper_nodes.core.shaping.limits import JointLimits, urdf_limits
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_SAMPLES
-from shaper_nodes.ros.conversions import TRAJ_FIELDS, shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
+from shaper_nodes.ros.conversions import (
+    TRAJ_FIELDS,
+    release,
+    shaper_from_msg,
+    shaper_to_msg,
+    trajectory_arrays,
+    trajectory_msg,
+)
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
@@ -131,10 +138,13 @@ _PROBE = Mode.from_hz(10.0, 0.05)  # a mode to hold one design parameter against
 #: periods at 2 kHz): a thread shaping a long trajectory gives the streaming thread the interpreter
 #: within this time
 SWITCH_INTERVAL = 2e-4
+#: s, how long the side thread sleeps after each 100 points of a whole trajectory's message it builds
+#: (about 1 ms of work): whole trajectories are background work, the stream comes first
+BACKGROUND_PAUSE = 1e-3
 #: the collector's thresholds in this node (Python's default is (700, 10, 10)); see _tune_interpreter
 GC_THRESHOLDS = (700, 10, 1000)
 #: default of limits.max_trajectory_samples (see there)
-DEFAULT_MAX_SAMPLES = 60_000
+DEFAULT_MAX_SAMPLES = 5_000
 #: the streamed inputs (array_in, stream_in)
 STREAMS = ("array", "stream")
 
@@ -179,11 +189,12 @@ PARAMETERS: tuple[Spec, ...] = (
          " acceleration in their SI units): a larger, finite value is implausible and refused before it reaches"
          " the filters, so their state keeps its precision and no sum overflows.", (1e-3, 1e12)),
     Spec("limits.max_trajectory_samples", DEFAULT_MAX_SAMPLES, "Most samples of a shaped whole trajectory (its span"
-         " plus the shaper's duration, times command_rate); a longer one is refused before any work. Building and"
-         " sending a trajectory's message holds the Python interpreter in rclpy for a time that grows with it, and"
-         " the stream waits that long (docs/shaping.md: about 0.4 ms per 1000 samples on a 2-core machine);"
-         f" the default keeps that under two periods at 1 kHz. At most {MAX_TRAJECTORY_SAMPLES}.",
-         (100, MAX_TRAJECTORY_SAMPLES)),
+         " plus the shaper's duration, times command_rate); a longer one is refused before any work. Sending a"
+         " trajectory's message holds the Python interpreter in rclpy's conversion for a time that grows with it,"
+         " and the stream waits that long: about 0.4 ms per 1000 samples on a 2-core machine (docs/shaping.md)."
+         f" The default, {DEFAULT_MAX_SAMPLES} (10 s at 500 Hz, 5 s at 1 kHz), keeps that wait under two periods"
+         " at 1 kHz; raise it for longer trajectories if the stream can wait longer while one is shaped."
+         f" At most {MAX_TRAJECTORY_SAMPLES}.", (100, MAX_TRAJECTORY_SAMPLES)),
     Spec("limits.position_lower", None, "Lowest position of each joint (rad or m), one per joint_names entry, in"
          " that order; empty (default): none (or the URDF's). No output passes below it.",
          read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
@@ -591,7 +602,7 @@ class ShaperNode(Node):
         self.limits.check_trajectory(result.times, result.positions, result.velocities, result.accelerations)
         return trajectory_msg(msg.header, self.joint_names, result.times,
                               {"positions": result.positions, "velocities": result.velocities,
-                               "accelerations": result.accelerations})
+                               "accelerations": result.accelerations}, pause=_background_pause)
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         topic = self._in_topics["trajectory_in"]
@@ -602,6 +613,7 @@ class ShaperNode(Node):
             return
         self._traj_pub.publish(out)
         self._count_forwarded("trajectory")
+        release(out, _background_pause)
 
     def destroy_node(self) -> None:
         if self._action is not None:  # action servers and clients are not destroyed with the node
@@ -622,6 +634,11 @@ class ShaperNode(Node):
             self._reject("~/shape_trajectory", err)
             resp.success, resp.message = False, str(err)
         return resp
+
+
+def _background_pause() -> None:
+    """Whole-trajectory work yields the interpreter to the stream for a while (see BACKGROUND_PAUSE)."""
+    time.sleep(BACKGROUND_PAUSE)
 
 
 def _tune_interpreter() -> None:

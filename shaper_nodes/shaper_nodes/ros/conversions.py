@@ -4,7 +4,7 @@ shapers, stamps and durations, trajectories."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -165,14 +165,28 @@ def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_
     return times, fields
 
 
+def release(msg: JointTrajectory, pause: Callable[[], None], every: int = 500) -> None:
+    """Free a long trajectory message's points ``every`` at a time, calling ``pause`` in between:
+    dropped at once, freeing tens of thousands of points holds the interpreter for milliseconds."""
+    points = msg.points
+    while points:
+        del points[-every:]
+        pause()
+
+
 def trajectory_msg(header: Header, joint_names: Sequence[str], times: Sequence[Duration] | np.ndarray,
-                   fields: Mapping[str, np.ndarray]) -> JointTrajectory:
+                   fields: Mapping[str, np.ndarray], pause: Callable[[], None] | None = None,
+                   every: int = 100) -> JointTrajectory:
     """A JointTrajectory with one point per row of ``fields`` (arrays (N, joints)); ``times`` are the
-    points' time_from_start, as Durations or in s."""
+    points' time_from_start, as Durations or in s. ``pause``, if given, is called after every ``every``
+    points (a background thread building a long trajectory gives the interpreter to the others)."""
     out = JointTrajectory(header=header, joint_names=list(joint_names))
+    rows = {f: v.tolist() for f, v in fields.items()}
     for k, t in enumerate(times):
         pt = JointTrajectoryPoint(time_from_start=t if isinstance(t, Duration) else sec_to_duration(float(t)))
-        for f, v in fields.items():
-            setattr(pt, f, v[k].tolist())
+        for f, v in rows.items():
+            setattr(pt, f, v[k])
         out.points.append(pt)
+        if pause is not None and k % every == every - 1:
+            pause()
     return out
