@@ -15,4 +15,7 @@ machines it runs on are small and noisy:
 * :mod:`benchmarks.learner_memory`: the learners' memory (RSS and their sample buffers) over a
   simulated 1-hour LIST cycle at 1 kHz, against a 10 s cycle in the same run, and over 24
   simulated hours of MRILC at 500 Hz, each in a process of its own.
+* :mod:`benchmarks.streaming_gap`: the shaper node's streaming path at 1 kHz while the largest
+  whole trajectory it accepts is shaped, against streaming alone in the same run; and the
+  interpreter stalls a trajectory causes the node's process, per trajectory size.
 """

@@ -55,6 +55,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-discretization", action="store_true", help="skip the shaper discretisation timing")
     p.add_argument("--skip-bag", action="store_true", help="skip the bag analysis throughput measurement")
     p.add_argument("--skip-arm", action="store_true", help="skip the arm's lockstep speed")
+    p.add_argument("--skip-streaming-gap", action="store_true",
+                   help="skip the shaper's streaming gap while whole trajectories are shaped")
     p.add_argument("--skip-learner-memory", action="store_true",
                    help="skip the learners' memory over a 1 h LIST cycle and 24 h of MRILC (simulated time)")
     p.add_argument("--bag-messages", type=int, default=1_000_000,
@@ -167,6 +169,7 @@ BENCHMARKS: tuple[tuple[str, str, str, Callable[[argparse.Namespace], dict[str, 
     ("bag_analysis", "skip_bag", "bag_analysis", lambda a: {"messages": a.bag_messages}),
     ("arm_lockstep", "skip_arm", "arm_lockstep", lambda a: {}),
     ("learner_memory", "skip_learner_memory", "learner_memory", lambda a: {}),
+    ("streaming_gap", "skip_streaming_gap", "streaming_gap", lambda a: {}),
 )
 
 

@@ -27,7 +27,7 @@ import pathlib
 import tempfile
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -110,11 +110,12 @@ def measure(seconds: float = 8.0, rate: float = 1000.0, points: int | None = Non
     from rclpy.executors import SingleThreadedExecutor
 
     from benchmarks.latency import Driver
-    from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS, MAX_TRAJECTORY_SAMPLES
+    from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
+    from shaper_nodes.nodes.shaper import DEFAULT_MAX_SAMPLES
     from shaper_nodes.ros.launching import NodeProcess
 
     fir_len = 300  # a zvd shaper at 5 Hz is ~0.2 s: room for it within the samples limit
-    span = span or (MAX_TRAJECTORY_SAMPLES - fir_len - 4) / rate  # default: the longest span accepted
+    span = span or (DEFAULT_MAX_SAMPLES - fir_len - 4) / rate  # default: the longest span the node accepts
     points = points or min(MAX_TRAJECTORY_POINTS, 1000)
     params = {"joint_names": [f"joint_{i + 1}" for i in range(JOINTS)], "command_rate": rate,
               "shaper.family": "zvd", "shaper.frequency_hz": 5.0, "shaper.damping_ratio": 0.05}
@@ -205,8 +206,9 @@ def _window(label: str, replies: list[tuple[int, int, object]], stamps: np.ndarr
 @dataclass
 class Stall:
     """How long a thread of the node's process waited for the interpreter while a whole trajectory of
-    ``samples`` samples was shaped and published on the topic path."""
+    ``samples`` samples was shaped on ``path``."""
 
+    path: str
     samples: int
     work_ms: float
     baseline_gap_ms: float
@@ -219,14 +221,18 @@ def interpreter_stalls(sizes: tuple[int, ...] = (5_000, 10_000, 30_000, 60_000),
     A real ``ShaperNode`` runs in this process, its interpreter tuned as its ``main`` does. A ticker
     thread wakes every 0.5 ms, as the streaming thread does for each setpoint at 2 kHz, and records the
     largest interval between its wake-ups; meanwhile this thread does what the side node's thread does
-    for a trajectory on the topic path (``_on_trajectory``: shape, check, build, publish, release). The
-    interval beyond the ticker's own in a quiet second before (``baseline``) is time the streaming
-    thread would have waited for the interpreter: rclpy's conversions of the message hold it in C.
+    for one trajectory: on the topic path, hand the serialized message to the worker process and publish
+    the bytes it returns (``_on_trajectory``); on the service path, shape in this process
+    (``_on_shape_trajectory``) and serialize the answer, as rclpy does before sending it. The interval
+    beyond the ticker's own in a quiet second before (``baseline``) is time the streaming thread would
+    have waited for the interpreter.
     """
     import rclpy
     import rclpy.context
     from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
 
+    from shaper_msgs.srv import ShapeTrajectory
     from shaper_nodes.nodes import shaper as shaper_module
 
     shaper_module._tune_interpreter()
@@ -247,20 +253,27 @@ def interpreter_stalls(sizes: tuple[int, ...] = (5_000, 10_000, 30_000, 60_000),
             gaps.append(now - last)
             last = now
 
+    def service(msg: Any) -> None:
+        resp = node._on_shape_trajectory(ShapeTrajectory.Request(trajectory=msg), ShapeTrajectory.Response())
+        serialize_message(resp)
+
     ticker = threading.Thread(target=tick, daemon=True)
     ticker.start()
     out: list[Stall] = []
     try:
+        node._on_trajectory(serialize_message(_trajectory(10, 1.0, JOINTS)))  # the worker started
         for n in sizes:
             msg = _trajectory(500, (n - 300) / rate, JOINTS)
-            gaps.clear()
-            time.sleep(1.0)
-            base = max(gaps)
-            gaps.clear()
-            t0 = time.perf_counter()
-            node._on_trajectory(msg)
-            work = time.perf_counter() - t0
-            out.append(Stall(n, 1e3 * work, 1e3 * base, 1e3 * max(gaps, default=0.0)))
+            for path, work in (("topic (worker process)", lambda m=msg: node._on_trajectory(serialize_message(m))),
+                               ("service (side thread)", lambda m=msg: service(m))):
+                gaps.clear()
+                time.sleep(1.0)
+                base = max(gaps)
+                gaps.clear()
+                t0 = time.perf_counter()
+                work()
+                elapsed = time.perf_counter() - t0
+                out.append(Stall(path, n, 1e3 * elapsed, 1e3 * base, 1e3 * max(gaps, default=0.0)))
     finally:
         stop.set()
         ticker.join()
@@ -270,15 +283,15 @@ def interpreter_stalls(sizes: tuple[int, ...] = (5_000, 10_000, 30_000, 60_000),
 
 
 def print_stalls(stalls: list[Stall]) -> None:
-    print("\nInterpreter stalls of the node's process while one whole trajectory is shaped and published"
+    print("\nInterpreter stalls of the node's process while one whole trajectory is shaped"
           " (in-process ticker every 0.5 ms; benchmarks/streaming_gap.py)")
-    print(f"{'samples':>8}{'work ms':>10}{'quiet gap ms':>14}{'gap while shaping ms':>22}{'ratio':>8}")
+    print(f"{'path':<24}{'samples':>8}{'work ms':>10}{'quiet gap ms':>14}{'gap while shaping ms':>22}{'ratio':>8}")
     for st in stalls:
-        print(f"{st.samples:>8}{st.work_ms:>10.1f}{st.baseline_gap_ms:>14.2f}{st.stall_gap_ms:>22.2f}"
+        print(f"{st.path:<24}{st.samples:>8}{st.work_ms:>10.1f}{st.baseline_gap_ms:>14.2f}{st.stall_gap_ms:>22.2f}"
               f"{st.stall_gap_ms / max(st.baseline_gap_ms, 1e-9):>8.2f}")
 
 
-def print_table(windows: list[Window], rate: float) -> None:
+def print_windows(windows: list[Window], rate: float) -> None:
     print(f"\nShaper node streaming path at {rate:g} Hz (array path, {JOINTS} joints) while whole trajectories"
           " are shaped (benchmarks/streaming_gap.py)")
     print(f"{'window':<10}{'sent':>7}{'replies':>9}{'traj':>6}{'gap ms':>9}{'p99.9 ms':>10}{'>2 periods':>12}"
@@ -289,6 +302,29 @@ def print_table(windows: list[Window], rate: float) -> None:
     if len(windows) == 2 and windows[0].gap_ms > 0:
         print(f"loaded / baseline: largest gap x{windows[1].gap_ms / windows[0].gap_ms:.2f},"
               f" max latency x{windows[1].latency_max_ms / max(windows[0].latency_max_ms, 1e-9):.2f}")
+
+
+def _stalls_in_child(queue: Any) -> None:
+    queue.put([asdict(s) for s in interpreter_stalls()])
+
+
+def run(progress: Any = lambda s: None) -> dict:
+    """``python -m benchmarks``: the DDS windows at 1 kHz with the largest trajectory the node accepts by
+    default, and the interpreter stalls (in a child process: they tune its interpreter as the node does)."""
+    windows = measure(progress=progress)
+    progress("streaming gap: interpreter stalls per trajectory size")
+    mpx = mp.get_context("spawn")
+    queue = mpx.Queue()
+    child = mpx.Process(target=_stalls_in_child, args=(queue,))
+    child.start()
+    stalls = queue.get(timeout=600)
+    child.join(30)
+    return {"rate": 1000.0, "windows": [asdict(w) for w in windows], "stalls": stalls}
+
+
+def print_table(result: dict) -> None:
+    print_windows([Window(**w) for w in result["windows"]], result["rate"])
+    print_stalls([Stall(**s) for s in result["stalls"]])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -303,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if not a.stalls_only:
         windows = measure(a.seconds, a.rate, a.points, a.span, progress=print)
-        print_table(windows, a.rate)
+        print_windows(windows, a.rate)
     print_stalls(interpreter_stalls(rate=a.rate))
     return 0
 

@@ -101,14 +101,12 @@ from shaper_nodes.core.shaping import (
     discretize,
     modes_from_hz,
     none_shaper,
-    shape_trajectory,
 )
 from shaper_nodes.core.shaping.limits import JointLimits, urdf_limits
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_SAMPLES
 from shaper_nodes.ros.conversions import (
     TRAJ_FIELDS,
-    release,
     shaper_from_msg,
     shaper_to_msg,
     trajectory_arrays,
@@ -120,6 +118,7 @@ from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED
 from shaper_nodes.ros.side_node import SideNode
+from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
 
 from .trajectory_action import TrajectoryActionProxy
 
@@ -143,6 +142,8 @@ SWITCH_INTERVAL = 2e-4
 BACKGROUND_PAUSE = 1e-3
 #: the collector's thresholds in this node (Python's default is (700, 10, 10)); see _tune_interpreter
 GC_THRESHOLDS = (700, 10, 1000)
+#: s, the longest a whole trajectory may take in the worker process (300,000 samples take about 10 s)
+WORKER_TIMEOUT = 120.0
 #: default of limits.max_trajectory_samples (see there)
 DEFAULT_MAX_SAMPLES = 5_000
 #: the streamed inputs (array_in, stream_in)
@@ -280,6 +281,7 @@ class ShaperNode(Node):
         self._publisher_counts = dict.fromkeys(STREAMS, 1)
         # whole trajectories: served by a side node on a thread of its own, never in the streaming thread
         self._side = SideNode(self, "trajectories")
+        self._worker = TrajectoryWorker()  # the trajectory topic's shaping, in a process of its own
         side = self._side.node
 
         tp = {k: p(f"topics.{k}").value for k in TOPICS}
@@ -301,8 +303,9 @@ class ShaperNode(Node):
                                                  self._on_array, depth),  # type: ignore[arg-type]
             "stream_in": self.create_subscription(JointTrajectory, tp["stream_in"],
                                                   self._on_stream, depth),  # type: ignore[arg-type]
+            # raw: the bytes go to the trajectory worker process undecoded (ros/whole_trajectory.py)
             "trajectory_in": side.create_subscription(JointTrajectory, self.resolve_topic_name(tp["trajectory_in"]),
-                                                      self._on_trajectory, 10),
+                                                      self._on_trajectory, 10, raw=True),
         }
         self._subs = subs
         self._in_topics = {k: sub.topic_name for k, sub in subs.items()}  # fully qualified, for messages
@@ -590,30 +593,28 @@ class ShaperNode(Node):
                                                 {f: shaped[f"stream.{f}"] for f in names}))
         self._count_forwarded("stream")
 
+    def whole_shaping(self, shaper: Shaper | None = None) -> WholeShaping:
+        """What a whole trajectory is shaped with now: the active FIR, or ``shaper`` discretised as the
+        active one is (ShaperError or ValueError if it cannot be), the limits in force."""
+        fir = self._fir if shaper is None else discretize(shaper, self.rate, self._method)
+        return WholeShaping(tuple(self.joint_names), self.rate, fir, self.limits, self._limit(), self._max_samples)
+
     def shape_whole(self, msg: JointTrajectory, shaper: Shaper | None = None) -> JointTrajectory:
         """Shape a whole trajectory with the active shaper, or with ``shaper`` (discretised as the
         active one is; the active shaper is not changed), and check it against the output invariants.
         Raises InputError on bad input or output, and ShaperError or ValueError if ``shaper`` cannot
         be discretised."""
-        fir = self._fir if shaper is None else discretize(shaper, self.rate, self._method)
-        times, fields = trajectory_arrays(msg, self.joint_names, require_times=True, limit=self._limit())
-        result = shape_trajectory(times, fields["positions"], fir, self.rate, fields.get("velocities"),
-                                  max_samples=self._max_samples)
-        self.limits.check_trajectory(result.times, result.positions, result.velocities, result.accelerations)
-        return trajectory_msg(msg.header, self.joint_names, result.times,
-                              {"positions": result.positions, "velocities": result.velocities,
-                               "accelerations": result.accelerations}, pause=_background_pause)
+        return self.whole_shaping(shaper).shape(msg, pause=_background_pause)
 
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
+    def _on_trajectory(self, data: bytes) -> None:
+        """The trajectory topic: the serialized message shaped in the worker process, published as bytes."""
         topic = self._in_topics["trajectory_in"]
-        try:
-            out = self.shape_whole(msg)
-        except InputError as err:
-            self._reject(topic, err)
+        answer = self._worker.shape(self.whole_shaping(), data, WORKER_TIMEOUT)
+        if answer[0] != "shaped":
+            self._reject(topic, InputError(str(answer[1]), str(answer[2])))
             return
-        self._traj_pub.publish(out)
+        self._traj_pub.publish(answer[1])
         self._count_forwarded("trajectory")
-        release(out, _background_pause)
 
     def destroy_node(self) -> None:
         if self._action is not None:  # action servers and clients are not destroyed with the node
@@ -623,6 +624,7 @@ class ShaperNode(Node):
             self.pose_shaper.destroy()
             self.pose_shaper = None
         self._side.close()
+        self._worker.close()
         super().destroy_node()
 
     def _on_shape_trajectory(self, req: ShapeTrajectory.Request,

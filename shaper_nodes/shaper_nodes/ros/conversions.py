@@ -165,15 +165,6 @@ def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_
     return times, fields
 
 
-def release(msg: JointTrajectory, pause: Callable[[], None], every: int = 500) -> None:
-    """Free a long trajectory message's points ``every`` at a time, calling ``pause`` in between:
-    dropped at once, freeing tens of thousands of points holds the interpreter for milliseconds."""
-    points = msg.points
-    while points:
-        del points[-every:]
-        pause()
-
-
 def trajectory_msg(header: Header, joint_names: Sequence[str], times: Sequence[Duration] | np.ndarray,
                    fields: Mapping[str, np.ndarray], pause: Callable[[], None] | None = None,
                    every: int = 100) -> JointTrajectory:
