@@ -454,3 +454,24 @@ def test_drops_and_gaps_of_the_stream_are_reported(ros_context):
         assert rig.node.rate_watch["array"].total_drops >= 40  # the queue kept about its last 5
     finally:
         rig.close()
+
+
+def test_whole_trajectory_topic_is_shaped_in_the_worker_process(rig):
+    """The trajectory topic: taken as bytes, shaped in the worker process, published as bytes; the same
+    trajectory as the service gives, and a bad one refused with its reason."""
+    traj_in = rig.probe.create_publisher(JointTrajectory, "/shaper/joint_trajectory", 10)
+    rig.spin_until(lambda: traj_in.get_subscription_count() >= 1, "the trajectory topic's subscription")
+    traj = stream_msg(["j2", "j1", "j3"], [(0.5, [0, 0, 0]), (1.0, [0.5, 1.0, 0.0]), (1.5, [1.0, 2.0, 0.0])])
+    traj_in.publish(traj)
+    rig.spin_until(lambda: any(len(m.points) > 10 for m in rig.stream_out), "the shaped trajectory", timeout=30.0)
+    out = next(m for m in rig.stream_out if len(m.points) > 10)
+    via_service = rig.call(ShapeTrajectory, "/shaper/shape_trajectory", ShapeTrajectory.Request(trajectory=traj))
+    assert via_service.success and list(out.joint_names) == JOINTS
+    assert [p.time_from_start for p in out.points] == [p.time_from_start for p in via_service.shaped.points]
+    np.testing.assert_array_equal([p.positions for p in out.points], [p.positions for p in via_service.shaped.points])
+    assert rig.node.forwarded["trajectory"] == 1
+    traj_in.publish(stream_msg(JOINTS, [(1.0, [0, 0, 0]), (1.0, [1, 1, 1])]))
+    rig.spin_until(lambda: any(s.values[0].value == "non_increasing_time" for s in rig.diag), "the refusal",
+                   timeout=30.0)
+    status = next(s for s in rig.diag if s.values[0].value == "non_increasing_time")
+    assert "/shaper/joint_trajectory" in status.message and "not strictly increasing" in status.message
