@@ -264,11 +264,6 @@ def test_design_returns_bounded_valid_shapers_or_refuses_with_a_shaper_error(fam
     assert s.gain == pytest.approx(1.0, abs=1e-9)  # designed families never amplify
 
 
-@pytest.mark.xfail(strict=True, reason="bug: si (si.py _si_normalised/_si_lp) sizes its linear programme by the"
-                   " ratio of the highest to the lowest mode with no bound: 1 Hz with 100 Hz takes 70 s and 1.8 GB,"
-                   " 1 Hz with 300 Hz 130 s and 3.8 GB, 0.016 Hz with 1.6 kHz asks for 2.8 GiB x 8; further apart it"
-                   " raises numpy's ValueError 'Maximum allowed size exceeded', and a ratio that overflows raises"
-                   " ZeroDivisionError, which the node's ~/set_shaper handler (catches ShaperError) does not catch")
 @FAST
 @given(low=st.floats(1e-300, 1e2), high=st.floats(1e20, 1.7976931348623157e308), zeta=dampings)
 @example(low=1e-300, high=1e300, zeta=0.05)  # ZeroDivisionError
@@ -386,11 +381,6 @@ def test_split_and_round_firs_are_finite_causal_and_no_louder_than_the_shaper(ra
         assert fir_gain(fir) <= shaper.gain * (1.0 + 1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: a FIR's taps may sum to 1 only within 1e-9, so a held input never comes"
-                   " out unchanged (off by up to 1e-9 x the step: 1e-3 on a 1e6 move): Shaper accepts custom"
-                   " amplitudes summing to 1 +- SUM_TOL (types.py) and split/round pass that sum on; 'exact' accepts a"
-                   " least-squares solution whose 'taps sum to 1' row holds to the 1e-9 residual"
-                   " (fir.py _exact_taps.solve)")
 @MEDIUM
 @given(rate=rates, data=st.data())
 @example(rate=500.0, data=("exact", design("custom", [Mode.from_hz(5.0, 0.05)], amplitudes=[0.5, 0.5],
@@ -412,10 +402,6 @@ def test_every_fir_passes_a_constant_unchanged(rate, data):
     assert abs(y[-1, 0] - LIMIT) <= 4.0 * bound * LIMIT
 
 
-@pytest.mark.xfail(strict=True, reason="bug: discretize(..., 'exact') bounds its correction only for positive"
-                   " shapers (taps >= 0); for a custom shaper with negative impulses the unconstrained least change"
-                   " (fir.py _exact_taps, np.linalg.lstsq) can give taps whose gain sum |b| is thousands of times"
-                   " max_gain, so a unit step comes out ~2700 high; nothing checks the FIR's gain")
 @MEDIUM
 @given(rate=rates, data=st.data())
 @example(rate=500.0, data=None)
@@ -597,10 +583,6 @@ def test_retiming_shaper_output_is_finite_bounded_and_settles_at_the_held_input(
     run_and_settle(case, RetimingShaper)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: RetimingShaper.retime keeps the fraction already emitted as a floor"
-                   " (e = max(floor, s_new)); when the old filter's step response overshoots (a custom shaper with"
-                   " negative impulses, max_gain > 1) the floor exceeds 1, the increment is folded into the base"
-                   " with that fraction (fir.py RetimingShaper._sample) and the output stays off the input forever")
 @MEDIUM
 @given(case=runs(retiming=True))
 @example(case={"rate": 100.0, "joints": 1,
@@ -612,11 +594,6 @@ def test_retiming_from_an_overshooting_filter_settles_at_the_held_input(case):
     run_and_settle(case, RetimingShaper)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: RetimingShaper.switch appends the new filter's step response to"
-                   " _filters and only prunes unused ones when a pending increment completes; with no motion (or on a"
-                   " filter that never gets data, like the node's velocity/acceleration stream filters) every switch"
-                   " is kept forever while .stages stays 1, so the policy's MAX_STAGES guard never refuses: unbounded"
-                   " memory under repeated set_shaper calls")
 @FAST
 @given(switches=st.integers(4 * MAX_STAGES, 8 * MAX_STAGES), started=st.booleans())
 @example(switches=200, started=False)
@@ -736,10 +713,6 @@ def test_whole_trajectory_near_the_int32_end_is_refused_or_fits_on_the_wire(case
     check_wire(out, case)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: resample (trajectory.py) counts a grid point within 1e-9 samples"
-                   " before the last waypoint as reaching it (n = ceil(span * rate - 1e-9) + 1) but samples the"
-                   " waypoints there, not at the last time: when the last waypoint is that close after the previous"
-                   " one, the shaped trajectory ends at the previous waypoint's position")
 @MEDIUM
 @given(rate=rates, data=st.data())
 @example(rate=1000.0, data=None)

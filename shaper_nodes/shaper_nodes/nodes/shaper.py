@@ -418,6 +418,8 @@ class ShaperNode(Node):
             discretize(shaper, self.rate, method)  # may refuse; nothing has changed yet
         except (ShaperError, PolicyError, ValueError) as err:
             return SetParametersResult(successful=False, reason=str(err))
+        except Exception as err:  # whatever the values, the node refuses them and keeps running
+            return SetParametersResult(successful=False, reason=f"the design failed ({type(err).__name__}: {err})")
         self._pending_params = (shaper, method)
         return SetParametersResult(successful=True)
 
@@ -466,6 +468,8 @@ class ShaperNode(Node):
             resp.success, resp.message = self.request(shaper, source)
         except ShaperError as err:
             resp.success, resp.message = False, f"invalid shaper: {err}"
+        except Exception as err:  # whatever a request holds, the node answers and keeps running
+            resp.success, resp.message = False, f"invalid shaper: the design failed ({type(err).__name__}: {err})"
         if not resp.success:
             self.get_logger().warning(f"set_shaper from {source} refused: {resp.message}")
         resp.active = self.active_msg()

@@ -114,8 +114,11 @@ class PoseShaperClient:
         try:
             shaper = shaper_from_msg(msg, self._max_gain())
             check_representable(shaper, self._rate)
-        except (ShaperError, PolicyError) as err:
+        except (ShaperError, PolicyError, ValueError) as err:
             return PoseAnswer(None, f"the shaper of {self.srv_name} ({resp.shaper.family}) is refused here: {err}")
+        except Exception as err:  # a design that fails otherwise: the goal falls back, the node runs on
+            return PoseAnswer(None, f"the shaper of {self.srv_name} ({resp.shaper.family}) failed to design here:"
+                                    f" {type(err).__name__}: {err}")
         return PoseAnswer(shaper, resp.message)
 
     async def __call__(self, trajectory: JointTrajectory) -> JointTrajectory | None:

@@ -119,6 +119,13 @@ def discretize(shaper: Shaper, rate: float, method: str = "split") -> SparseFir:
     np.add.at(acc, delays, gains)
     if method == "exact":
         acc = _exact_taps(shaper, rate, acc, base)
+        gain = float(np.sum(np.abs(acc)))
+        if gain > shaper.gain * (1.0 + 1e-6) + 1e-12:  # the correction must not amplify beyond the shaper
+            raise ValueError(f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz would amplify: gain"
+                             f" sum |b| = {gain:.6g} beyond the shaper's {shaper.gain:.6g}; use 'split'")
+    total = float(acc.sum())
+    if total != 0.0 and abs(total - 1.0) < 1e-6:  # taps summing to 1 to rounding: a held input comes out unchanged
+        acc = acc / total
     nz = np.flatnonzero(acc != 0.0)
     return SparseFir(delays=nz, gains=acc[nz])
 
@@ -388,6 +395,16 @@ class RetimingShaper(_ChannelShaper):
         self._fir = fir
         self._filters.append(np.cumsum(fir.dense()))
         self._active = len(self._filters) - 1
+        self._prune()
+
+    def _prune(self) -> None:
+        """Forget the filters no pending increment uses (the active one stays)."""
+        used = sorted(set(self._fid.tolist()) | {self._active})
+        if len(used) != len(self._filters):
+            remap = {old: new for new, old in enumerate(used)}
+            self._filters = [self._filters[i] for i in used]
+            self._fid = np.array([remap[i] for i in self._fid.tolist()], dtype=int)
+            self._active = remap[self._active]
 
     def switch(self, fir: SparseFir) -> None:
         """Bumpless: ``fir`` shapes the increments from the next sample on."""
@@ -399,7 +416,9 @@ class RetimingShaper(_ChannelShaper):
         self._filters = [np.cumsum(fir.dense())]  # no increment keeps another filter
         self._active = 0
         self._fid[:] = 0
-        self._floor = self._emitted.copy()
+        # never taking back what was emitted, but at most all of it: an overshooting filter (negative
+        # taps) may have emitted more than the increment, and a floor above 1 would never settle
+        self._floor = np.minimum(self._emitted, 1.0)
 
     def _sample(self, x: np.ndarray) -> np.ndarray:
         if self._last is None:
@@ -430,12 +449,7 @@ class RetimingShaper(_ChannelShaper):
             keep = ~done
             self._inc, self._age, self._fid = self._inc[keep], self._age[keep], self._fid[keep]
             self._floor, self._emitted = self._floor[keep], self._emitted[keep]
-            used = sorted(set(self._fid.tolist()) | {self._active})
-            if len(used) != len(self._filters):  # forget filters no increment uses
-                remap = {old: new for new, old in enumerate(used)}
-                self._filters = [self._filters[i] for i in used]
-                self._fid = np.array([remap[i] for i in self._fid.tolist()], dtype=int)
-                self._active = remap[self._active]
+            self._prune()
         return self._base + self._emitted @ self._inc
 
     def process(self, block: np.ndarray) -> np.ndarray:

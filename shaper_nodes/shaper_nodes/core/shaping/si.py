@@ -38,6 +38,11 @@ _SI_POINTS_PER_PERIOD = 24
 _SI_MAX_POINTS = 1500
 #: longest SI design searched, in periods of the lowest design frequency
 _SI_MAX_PERIODS = 40.0
+#: widest spread of the design modes (highest / lowest frequency) SI designs jointly: the grid follows
+#: the highest, the duration the lowest, so the work grows with the square of the spread
+MAX_SI_SPREAD = 16.0
+#: most entries of one linear programme's constraint matrix (about 16 MB): beyond, refused
+_SI_MAX_ENTRIES = 2_000_000
 #: weight of sum(A^2) added to t_n in the SQP objective: breaks ties between equally short sequences
 _SI_TIE_BREAK = 1e-6
 
@@ -112,9 +117,13 @@ def _si_lp(duration: float, bands: Sequence[Band], v: float, dt: float) -> Impul
     nt = int(min(_SI_MAX_POINTS, max(24, math.ceil(duration / dt)))) + 1
     t = np.linspace(0.0, duration, nt)
     dirs = np.exp(-2j * math.pi * np.arange(_SI_DIRECTIONS) / _SI_DIRECTIONS)
+    samples = [max(8, int(math.ceil((hi - lo) * duration / 0.25)) + 2) for lo, hi, _ in bands]
+    if sum(samples) * _SI_DIRECTIONS * nt > _SI_MAX_ENTRIES:  # bounded work: refused before the matrix is made
+        raise ShaperError(f"the SI design would need a linear programme of {sum(samples) * _SI_DIRECTIONS * nt:.3g}"
+                          f" entries (limit {_SI_MAX_ENTRIES:.3g}): loosen vibration_tolerance or insensitivity,"
+                          " or design the modes one by one")
     rows = []
-    for lo, hi, z in bands:
-        m = max(8, int(math.ceil((hi - lo) * duration / 0.25)) + 2)
+    for (lo, hi, z), m in zip(bands, samples, strict=True):
         w = np.linspace(lo, hi, m)[:, None]
         e = np.exp(z * w * (t - duration) + 1j * w * math.sqrt(1.0 - z * z) * t)
         rows.append((dirs[:, None, None] * e[None]).real.reshape(-1, nt))
@@ -270,7 +279,8 @@ def si(
     Raises
     ------
     ShaperError
-        Invalid parameters, or no sequence of at most 40 periods meets the specification.
+        Invalid parameters, modes more than :data:`MAX_SI_SPREAD` times apart, a linear programme
+        too large (bounded work), or no sequence of at most 40 periods meets the specification.
     """
     v = _check_tolerance(vibration_tolerance)
     ins = _check_insensitivity(insensitivity)
@@ -278,6 +288,10 @@ def si(
     if not modes:
         raise ShaperError("shaper family 'si' needs at least one mode")
     w_ref = min(m.omega for m in modes)
+    spread = max(m.omega for m in modes) / w_ref
+    if not spread <= MAX_SI_SPREAD:  # before any work (an overflowing ratio is inf: refused too)
+        raise ShaperError(f"si designs modes at most {MAX_SI_SPREAD:g} times apart jointly; these are {spread:.3g}"
+                          " times apart: design them one by one (another family convolves per mode)")
     key = tuple(sorted({(m.omega / w_ref, m.zeta) for m in modes}))
     amps, times = _si_normalised(key, v, ins)
     return np.array(amps), np.array(times) / w_ref

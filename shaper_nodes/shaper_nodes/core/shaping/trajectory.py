@@ -86,6 +86,7 @@ def resample(
         out = spline(grid_in)
     else:
         out = np.column_stack([np.interp(grid_in, t, p[:, j]) for j in range(p.shape[1])])
+    out[-1] = p[-1]  # the grid's last point is the last waypoint (within 1e-9 samples): it ends there exactly
     return grid, out
 
 
