@@ -27,6 +27,8 @@ cycles
     cycle event codes (those of shaper_msgs/CycleEvent).
 checks
     The one home of the number and array checks, with errors that name the problem.
+rate
+    How a streamed input arrives against its nominal rate: rate, gaps, bursts, drops and lag.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "scheduling", "shaping"]
+__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "scheduling", "shaping"]

@@ -20,6 +20,11 @@ pose_shaper
     gives (the shaper node's ``action.scheduler``), falling back to the active shaper with a warning.
 node_main
     The Jazzy ``main`` of every node.
+side_node
+    A node's second node on a thread of its own (the shaper's whole trajectories).
+whole_trajectory
+    Whole-trajectory shaping as the shaper node does it, and the same in a worker process on
+    serialized messages.
 bag_writer
     rosbag2 folders with MCAP storage, written with rosbags (the suite's own types included).
 launching

@@ -24,6 +24,8 @@ fir
 trajectory
     Whole-trajectory shaping (resampling, convolution, derivatives) for
     joint_trajectory_controller.
+limits
+    Joint limits of the shaper's output (parameters, a URDF's) and the checks of an output.
 policy
     The shaper node's update policy: who may change the active shaper, and whether a change
     switches bumplessly or re-times the motion already commanded (the stage limit).
