@@ -42,7 +42,7 @@ if TYPE_CHECKING:
 RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz)
 DWELL = 30.0      # s per step
 WINDOW = 10.0     # s after a step where its residual window starts
-PREROLL = 4.0     # s at rest before the first step (the scheduler's first shaper goes out here)
+PREROLL = 4.0     # s at rest before the first step (the scheduler's first shaper is active before the task starts)
 JOINT = "joint_1"
 FUZZY_POINTS = tuple(np.linspace(0.0, 0.7, 8))  # every 0.1 m
 
@@ -226,7 +226,7 @@ def _start_nodes(case: Case, start: StartNode) -> None:
     start("sim_plant_node", "sim_plant", {
         "joint_names": [JOINT], "rate": RATE, "mode": "lockstep", "plant.model": "two_mass",
         "imu.axes": [0, -1, -1], "task.start": [0.0], "task.levels": [float(v) for v in STEP_LEVELS],
-        "task.dwell": DWELL, "task.preroll": PREROLL, "lockstep_timeout": 10.0})
+        "task.dwell": DWELL, "task.preroll": PREROLL, "lockstep_timeout": 10.0, "joint_states.idle_period": 0.1})
     shaper = {"joint_names": [JOINT], "command_rate": RATE, "use_sim_time": True, **case.shaper}
     if case.scheduler is not None:
         shaper["retime_sources"] = ["scheduler"]
@@ -249,6 +249,10 @@ def _wait_for_nodes(case: Case, node: Any, until: Callable[[Callable[[], bool], 
     for topic, n in need.items():
         until(functools.partial(_has_subscribers, node, topic, n), 60.0, f"{n} subscribers on {topic}")
     until(lambda: bool(rec.active), 60.0, "the shaper's active shaper")
+    if case.scheduler is not None:
+        # the plant at rest publishes its pose (joint_states.idle_period), so the scheduler sends the
+        # shaper of the start pose before the first step, however long its discovery takes
+        until(lambda: any(src == "scheduler" for _, src, _ in rec.active), 120.0, "the scheduler's first shaper")
     settle = time.monotonic() + 1.0
     until(lambda: time.monotonic() > settle, 5.0, "discovery to settle")
 

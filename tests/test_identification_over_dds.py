@@ -19,7 +19,7 @@ pytestmark = pytest.mark.integration
 TRUE_HZ, TRUE_ZETA = 3.3, 0.02
 
 
-def identify(conductor: Conductor, request: Identify.Request, timeout: float = 20.0) -> Identify.Response:
+def identify(conductor: Conductor, request: Identify.Request, timeout: float = 60.0) -> Identify.Response:
     """Call ~/identify, retrying while the identifier has not yet buffered the finished cycle."""
     client = conductor.create_client(Identify, "/identifier/identify")
     deadline = time.monotonic() + timeout

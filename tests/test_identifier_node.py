@@ -70,6 +70,7 @@ class Rig:
         self.event(CycleEvent.MOTION_END, cycle)
         self.spin_until(lambda: self.node.monitor.in_cycle, "START")
         t0 = self.t
+        sent = 0
         for k in range(int(seconds * RATE)):
             t = t0 + k / RATE
             value = None if accel is None else accel(t - t0)
@@ -78,17 +79,15 @@ class Rig:
                 msg.header.stamp = stamp(t)
                 msg.linear_acceleration.x = float(value)
                 self.imu.publish(msg)
+                sent += 1
             if k % 20 == 0:
                 self.ex.spin_once(timeout_sec=0.0)
         self.t = t0 + seconds
-        self.settle()
+        # every sample in before END (the IMU and the events are separate topics)
+        self.spin_until(lambda: self.node.monitor.accel_samples >= sent, f"the {sent} samples of cycle {cycle}",
+                        timeout=60.0)
         self.event(CycleEvent.END, cycle)
         self.spin_until(lambda: not self.node.monitor.in_cycle, "END")
-
-    def settle(self, seconds=0.3):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.ex.spin_once(timeout_sec=0.02)
 
     def identify(self, **fields) -> Identify.Response:
         cli = self.probe.create_client(Identify, "/identifier/identify")

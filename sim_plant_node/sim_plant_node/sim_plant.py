@@ -120,7 +120,7 @@ SENSOR_PARAMS = ("imu.bias", "imu.noise_stddev", "imu.gyro_noise_stddev", "imu.g
 #: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
 WAITING = "waiting for subscribers"
 LOCKSTEP_IMU_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-#: s of wall time between joint states of the lockstep arm at rest
+#: s of wall time between joint states of the lockstep arm at rest (joint_states.idle_period's default)
 IDLE_STATE_PERIOD = 0.1
 
 
@@ -167,6 +167,10 @@ PARAMETERS: tuple[Spec, ...] = (
          (0.0, 1.0)),
     Spec("joint_states.resolution", 0.0, "Encoder quantum of the reported joint positions, rad or m (0: none).",
          (0.0, 1.0)),
+    Spec("joint_states.idle_period", -1.0, "Lockstep, at rest (no task, no trajectory): the last joint state is"
+         " published again every this many s of wall time, as a joint_state_broadcaster keeps publishing (simulated"
+         " time stands still, so the stamp repeats); 0: never; negative: 0.1 for the arm, never for other plants.",
+         (-1.0, 60.0), read_only=True),
     *(Spec(name, default, text, check=functools.partial(check_loop_value, name))
       for name, (default, text) in LOOP_PARAMS.items()),
     Spec("controller.numerator", list(PAPER_CONTROLLER[0]),
@@ -310,13 +314,15 @@ class SimPlantNode(Node):
                                         tp["jtc_topic"])
             if self.mode == "lockstep":
                 self.create_timer(0.002, self._free_run)
-                # a robot's joint_state_broadcaster publishes at rest too: the last state again (time stands still)
-                self._last_js = JointState(name=self.joint_names, position=self._reported(
-                    self.plant.base_position).tolist(), velocity=self.plant.base_velocity.tolist(),
-                    effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
-                self._last_js.header.stamp = sec_to_time(self._now())
-                self.create_timer(IDLE_STATE_PERIOD, self._idle_joint_states,
-                                  clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
+        idle = float(self.get_parameter("joint_states.idle_period").value)
+        idle = (IDLE_STATE_PERIOD if self.arm else 0.0) if idle < 0 else idle
+        if self.mode == "lockstep" and idle > 0:
+            # a robot's joint_state_broadcaster publishes at rest too: the last state again (time stands still)
+            self._last_js = JointState(name=self.joint_names, position=self._reported(
+                self.plant.base_position).tolist(), velocity=self.plant.base_velocity.tolist(),
+                effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
+            self._last_js.header.stamp = sec_to_time(self._now())
+            self.create_timer(idle, self._idle_joint_states, clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         if self.mode == "lockstep":
             self.create_timer(0.05, self._watchdog)
             self._publish_clock()
@@ -604,8 +610,8 @@ class SimPlantNode(Node):
         self._integrate(c.command, c.command_velocity)
 
     def _idle_joint_states(self) -> None:
-        """Lockstep arm at rest (no trajectory, no task): publish the last joint state again."""
-        if self.jtc is not None and not self.jtc.running and self.task is None and self._waiting_since is None:
+        """Lockstep at rest (no trajectory, no task): publish the last joint state again."""
+        if (self.jtc is None or not self.jtc.running) and self.task is None and self._waiting_since is None:
             self._js_pub.publish(self._last_js)
 
     def _free_run(self) -> None:

@@ -69,6 +69,11 @@ class CycleMonitor:
     def in_cycle(self) -> bool:
         return self._cycle is not None
 
+    @property
+    def accel_samples(self) -> int:
+        """Accelerometer samples collected in the cycle in progress (0 between cycles)."""
+        return len(self._acc_t)
+
     def add_accel(self, t: float, accel: npt.ArrayLike) -> None:
         """An accelerometer sample (m/s^2, 1 to 3 axes) at time t (s)."""
         if self._cycle is not None:

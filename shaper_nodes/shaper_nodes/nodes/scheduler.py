@@ -200,6 +200,10 @@ class SchedulerNode(Node):
             self.diagnostics.report("input", ERROR, f"refused joint_states: {err}")
             return
         self._z, self._z_stamp, self._stamp = z, self._now(), msg.header.stamp
+        if self.last_sent is None:
+            # the first shaper goes out as soon as a pose and the shaper node are there, also while
+            # simulated time stands still (a lockstep plant at rest) and the period timer does not fire
+            self._tick()
 
     def _on_active(self, msg: ShaperMsg) -> None:
         self._active = msg
