@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus
 from conftest import Diagnosed, SilentShaper
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -165,5 +166,62 @@ def test_a_shaper_node_that_never_answers_is_reported_and_the_identifier_keeps_g
         again = rig.identify(apply=True)
         assert again.success and not again.applied and len(rig.node.cycles) == 2
         assert len(peer.requests) == 2
+    finally:
+        rig.close()
+
+
+def decay_at(hz: float, zeta: float = ZETA):
+    """A free decay of a mode at ``hz`` (the robot's mode after a change)."""
+    w = 2 * math.pi * hz
+    return lambda t: 5.0 * math.exp(-zeta * w * t) * math.cos(w * math.sqrt(1 - zeta**2) * t)
+
+
+def test_the_drift_watch_warns_once_the_mode_leaves_the_shapers_working_band(ros_context):
+    """A ZV shaper designed at 4 Hz keeps V under 5 % from about 3.87 to 4.13 Hz. Cycles at 4 Hz and at
+    4.05 Hz (a mode drifting inside the band) raise no warning; at 4.6 Hz (a heavier payload, say) the
+    WARN comes at the second cycle outside (watch.confirm 2) and names the numbers; it clears once
+    the mode is back inside."""
+    from shaper_msgs.msg import Mode as ModeMsg
+    from shaper_msgs.msg import Shaper as ShaperMsg
+    from shaper_nodes.core.shaping.families import Mode, design
+    from shaper_nodes.ros.conversions import shaper_to_msg
+    from shaper_nodes.ros.qos import LATCHED
+
+    rig = Rig(ros_context)
+    try:
+        zv = design("zv", (Mode(2 * math.pi * HZ, ZETA),))
+        active = shaper_to_msg(zv, "parameters", 1)
+        assert [m.natural_frequency for m in active.design_modes] == [pytest.approx(2 * math.pi * HZ)]
+        pub = rig.probe.create_publisher(ShaperMsg, "/shaper/active_shaper", LATCHED)
+        pub.publish(active)
+        rig.spin_until(lambda: rig.node._active is not None, "the active shaper")
+        assert isinstance(rig.node._active.design_modes[0], ModeMsg)
+
+        def drift_statuses():
+            return [s for s in rig.diag.statuses if s.name == "identifier: drift"]
+
+        for cycle, hz in enumerate((4.0, 4.05, 4.0)):
+            rig.cycle(cycle, accel=decay_at(hz))
+            rig.spin_until(lambda n=cycle + 1: len(drift_statuses()) >= n, f"the drift check of cycle {cycle}")
+        assert all(s.level == DiagnosticStatus.OK for s in drift_statuses()), [s.message for s in drift_statuses()]
+        inside = drift_statuses()[-1]
+        assert "inside the band" in inside.message
+        values = {kv.key: kv.value for kv in inside.values}
+        assert 3.8 < float(values["band_low_hz"]) < 3.95 and 4.05 < float(values["band_high_hz"]) < 4.2, values
+
+        levels = []
+        for cycle in (3, 4, 5):  # the mode has moved to 4.6 Hz
+            rig.cycle(cycle, accel=decay_at(4.6))
+            rig.spin_until(lambda n=cycle + 1: len(drift_statuses()) >= n, f"the drift check of cycle {cycle}")
+            levels.append(drift_statuses()[-1].level)
+        assert levels == [DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.WARN]  # WARN from the second cycle outside on
+        warn = drift_statuses()[-1]
+        assert "drifted out of the active shaper's working band" in warn.message
+        assert "mode 4.6" in warn.message and "outside the band" in warn.message
+        assert float({kv.key: kv.value for kv in warn.values}["vibration"]) > 0.05
+
+        rig.cycle(6, accel=decay_at(4.0))  # back inside (the payload is off again)
+        rig.spin_until(lambda: len(drift_statuses()) >= 7, "the drift check of cycle 6")
+        assert drift_statuses()[-1].level == DiagnosticStatus.OK
     finally:
         rig.close()

@@ -21,7 +21,18 @@ topics.imu (sensor_msgs/Imu, sensor QoS), topics.joint_states, topics.cycle_even
 ~/mode_estimate (shaper_msgs/ModeEstimate, latched)
     The last identified modes with their one-sigma uncertainties.
 /diagnostics
-    A set_shaper call the shaper node did not answer; a saturated cycle.
+    A set_shaper call the shaper node did not answer; a saturated cycle; the drift watch.
+
+Drift watch (``watch.*``)
+-------------------------
+With ``watch.enabled``, every buffered cycle is identified on its own and its mode rated
+against the shaper node's active shaper (``<shaper>/active_shaper``, latched): V of the shaper
+at the mode, and the working band around the design mode where V stays under
+``watch.tolerance`` (:mod:`shaper_nodes.core.identification.drift`). When ``watch.confirm``
+cycles in a row find the mode outside the band, a WARN ``identifier: drift`` on /diagnostics
+names the numbers (logged once, until the mode comes back); every check publishes the status
+(OK inside the band). A change of the active shaper starts the count again. The identity
+shaper is not watched.
 
 Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
@@ -42,10 +53,11 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
 from shaper_nodes.core.identification import METHODS, IdentificationError, ModeFit, identify_records, recommend_shaper
+from shaper_nodes.core.identification.drift import DriftWatch, ModeCheck, check_mode
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
-from shaper_nodes.ros.diagnostics import WARN, Diagnostics
+from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
@@ -133,6 +145,14 @@ PARAMETERS: tuple[Spec, ...] = (
          (0.0, 1e3)),
     Spec("service_timeout", 5.0, "Time to wait for the shaper node's set_shaper service, and then for its"
          " answer, s.", (0.1, 600.0)),
+    Spec("watch.enabled", True, "Drift watch: rate every buffered cycle's mode against the active shaper's working"
+         " band and warn on /diagnostics when it leaves it.", read_only=True),
+    Spec("watch.tolerance", 0.05, "Drift watch: the working band is where the active shaper keeps V under this,"
+         " fraction.", (0.001, 0.5)),
+    Spec("watch.confirm", 2, "Drift watch: cycles in a row outside the band before the warning.", (1, 1000)),
+    Spec("watch.max_uncertainty", 0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
+         " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
+         " nothing to identify).", (1e-4, 1.0)),
     *topics({"imu": "/tip_imu", "joint_states": "/joint_states", "cycle_events": "/cycle_events"}),
 )
 
@@ -159,6 +179,12 @@ class IdentifierNode(Node):
         self.shaper = ShaperClient(self, str(p("shaper").value), SOURCE, lambda: float(p("service_timeout").value),
                                    self.diagnostics)
         self.create_service(Identify, "~/identify", self._on_identify)
+        self.watch = DriftWatch(int(p("watch.confirm").value))
+        self._active: ShaperMsg | None = None
+        self._warned = False
+        if bool(p("watch.enabled").value):
+            self.create_subscription(ShaperMsg, f"{str(p('shaper').value).rstrip('/')}/active_shaper",
+                                     self._on_active, LATCHED)
         self.get_logger().info(
             f"identifying from {p('topics.imu').value}, keeping {self.cycles.maxlen} cycles;"
             f" applies to {self.shaper.srv_name}")
@@ -200,6 +226,77 @@ class IdentifierNode(Node):
         self.get_logger().info(
             f"cycle {result.cycle}: residual RMS {result.residual.rms:.4g} m/s^2 over"
             f" {result.residual.window_end - result.residual.window_start:.3g} s buffered ({len(self.cycles)})")
+        self._watch_cycle(result.cycle, record)
+
+    # ----------------------------------------------------------------- drift watch
+    def _on_active(self, msg: ShaperMsg) -> None:
+        if self._active is None or msg.revision != self._active.revision:
+            self.watch.reset()
+        self._active = msg
+
+    def _watch_cycle(self, cycle: int, record: tuple[np.ndarray, np.ndarray]) -> None:
+        """Rate this cycle's mode against the active shaper (see the module docstring)."""
+        active = self._active
+        if active is None or len(active.amplitudes) < 2 or active.family == "none":
+            return
+        p = self.get_parameter
+        lo, hi = (float(x) for x in p("band_hz").value)
+        try:
+            modes = identify_records([record], method=str(p("method").value), max_modes=int(p("max_modes").value),
+                                     band_hz=(lo, hi) if hi > 0.0 else None)
+        except IdentificationError as err:
+            self._quiet(cycle, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is at the"
+                        " noise floor")
+            return
+        sharp = [m for m in modes if m.omega > 0 and m.omega_std <= float(p("watch.max_uncertainty").value) * m.omega]
+        check = self._worst(active, sharp)
+        if check is None:
+            found = ", ".join(f"{m.hz:.4g} Hz (+-{100 * m.omega_std / m.omega:.2g} %)" for m in modes if m.omega > 0)
+            self._quiet(cycle, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
+                        f" watch.max_uncertainty {100 * float(p('watch.max_uncertainty').value):.3g} %): the residual"
+                        " is at the noise floor")
+            return
+        warning = self.watch.update(check)
+        text = f"cycle {cycle}: {check.describe()}"
+        values = [("cycle", str(cycle)), ("mode_hz", f"{check.mode_hz:.6g}"), ("zeta", f"{check.zeta:.4g}"),
+                  ("vibration", f"{check.vibration:.4g}"), ("tolerance", f"{check.tolerance:.4g}"),
+                  ("band_low_hz", f"{check.band_hz[0]:.6g}" if check.band_hz else "none"),
+                  ("band_high_hz", f"{check.band_hz[1]:.6g}" if check.band_hz else "none"),
+                  ("outside_in_a_row", str(self.watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
+        if warning:
+            text = (f"the mode has drifted out of the active shaper's working band ({self.watch.outside_in_a_row}"
+                    f" cycles in a row): {text}; retune the shaper (~/identify with apply)")
+            if not self._warned:
+                self.get_logger().warning(text)
+            self._warned = True
+            self.diagnostics.publish("drift", WARN, text, values)
+        else:
+            if self._warned:
+                self.get_logger().info(f"the mode is back inside the working band: {text}")
+            self._warned = False
+            self.diagnostics.publish("drift", OK, text, values)
+
+    def _quiet(self, cycle: int, text: str) -> None:
+        """A cycle with nothing to rate: the shaper works (see DriftWatch.quiet)."""
+        self.watch.quiet()
+        if self._warned:
+            self.get_logger().info(f"the mode is back inside the working band: {text}")
+        self._warned = False
+        self.diagnostics.publish("drift", OK, text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
+
+    def _worst(self, active: ShaperMsg, modes: list[ModeFit]) -> ModeCheck | None:
+        """The check of the identified mode nearest each design mode (the strongest mode if the shaper
+        names none); of several, the one with the largest V."""
+        if not modes:
+            return None
+        tol = float(self.get_parameter("watch.tolerance").value)
+        design = [m.natural_frequency / (2 * math.pi) for m in active.design_modes if m.natural_frequency > 0]
+        if design:
+            chosen = {min(modes, key=lambda m, f=f: abs(m.hz - f)) for f in design}
+        else:
+            chosen = {max(modes, key=lambda m: m.amplitude)}
+        checks = [check_mode(active.amplitudes, active.times, design, m, tol) for m in chosen]
+        return max(checks, key=lambda c: c.vibration)
 
     def _skip(self, why: str, kind: str = "") -> None:
         self.skipped.append(why)
