@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticStatus
 from conftest import Diagnosed, SilentShaper
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -214,7 +214,8 @@ def test_the_drift_watch_warns_once_the_mode_leaves_the_shapers_working_band(ros
             rig.cycle(cycle, accel=decay_at(4.6))
             rig.spin_until(lambda n=cycle + 1: len(drift_statuses()) >= n, f"the drift check of cycle {cycle}")
             levels.append(drift_statuses()[-1].level)
-        assert levels == [DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.WARN]  # WARN from the second cycle outside on
+        # WARN from the second cycle outside on
+        assert levels == [DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.WARN]
         warn = drift_statuses()[-1]
         assert "drifted out of the active shaper's working band" in warn.message
         assert "mode 4.6" in warn.message and "outside the band" in warn.message
