@@ -306,6 +306,23 @@ def test_namespace_and_node_names_follow_the_options(tmp_path: pathlib.Path) -> 
     assert subject.strip() == "subject=CN=/cell7/shaper"
 
 
+def test_extra_grants_for_interfaces_outside_the_suite(tmp_path: pathlib.Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "ks"
+    assert cli.main(["create", str(path), "--grant", "motion_source:publish:rt/move_group/*",
+                     "--grant", "motion_source:subscribe:rt/monitored_planning_scene"]) == 0
+    (grant,) = parse_permissions((enclave_dir(path, "motion_source") / "permissions.xml").read_text())
+    assert grant.decide("publish", "rt/move_group/display_planned_path").allowed
+    assert grant.decide("subscribe", "rt/monitored_planning_scene").allowed
+    assert not grant.decide("publish", "rq/shaper/set_shaperRequest").allowed
+    (other,) = parse_permissions((enclave_dir(path, "learner") / "permissions.xml").read_text())
+    assert not other.decide("publish", "rt/move_group/display_planned_path").allowed
+    assert cli.main(["create", str(path), "--grant", "robot:publish:rt/x"]) == 2
+    assert "unknown role 'robot'" in capsys.readouterr().err
+    assert cli.main(["create", str(path), "--grant", "learner:write:rt/x"]) == 2
+    assert "publish or subscribe" in capsys.readouterr().err
+
+
 def test_a_second_run_keeps_the_ca_and_identities_and_re_signs(tmp_path: pathlib.Path) -> None:
     path = tmp_path / "ks"
     assert cli.main(["create", str(path)]) == 0

@@ -29,18 +29,22 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime, timedelta
+from typing import cast
 
 from shaper_nodes.core.security import (
     DEFAULT_DOMAINS,
     DEFAULT_NAMES,
     DEFAULT_ROOT,
+    Access,
     Validity,
+    Verb,
     enclave_path,
     governance_xml,
     suite_permissions,
     suite_policy,
+    with_grants,
 )
 
 from .common import Parser, UsageError, run, text_table
@@ -157,7 +161,7 @@ def make_identity(keystore: pathlib.Path, folder: pathlib.Path, enclave: str, va
     return True
 
 
-def create(keystore: pathlib.Path, root: str = DEFAULT_ROOT, overrides: dict[str, str] | None = None,
+def create(keystore: pathlib.Path, root: str = DEFAULT_ROOT, policy: Mapping[str, Access] | None = None,
            domains: tuple[int, int] = DEFAULT_DOMAINS, days: int = 3650, now: datetime | None = None) -> list[str]:
     """Write (or update) the keystore; returns what was done, one line each.
 
@@ -167,8 +171,8 @@ def create(keystore: pathlib.Path, root: str = DEFAULT_ROOT, overrides: dict[str
         The keystore folder (created if absent).
     root : str
         Enclave folder of the suite (``/shaper_suite``).
-    overrides : dict, optional
-        Names of :data:`~shaper_nodes.core.security.DEFAULT_NAMES` to change.
+    policy : mapping of role to Access, optional
+        The access policy (default: :func:`~shaper_nodes.core.security.suite_policy` with the default names).
     domains : (int, int)
         ROS domain ids covered (inclusive).
     days : int
@@ -180,7 +184,7 @@ def create(keystore: pathlib.Path, root: str = DEFAULT_ROOT, overrides: dict[str
         raise KeystoreError(f"--days must be at least 1, got {days}")
     start = (now or datetime.now(UTC)).replace(microsecond=0, tzinfo=None)
     validity = Validity(start, start + timedelta(days=days))
-    permissions = suite_permissions(root, validity, overrides, domains)  # checks the names before any file
+    permissions = suite_permissions(root, validity, policy, domains)  # checks the names before any file
     openssl_path()
     done = []
     keystore.mkdir(parents=True, exist_ok=True)
@@ -226,19 +230,29 @@ def _overrides(args: argparse.Namespace) -> dict[str, str]:
     return names
 
 
+def _policy(args: argparse.Namespace) -> dict[str, Access]:
+    grants = []
+    for item in args.grant or ():
+        role, verb, topic = [*item.split(":", 2), "", ""][:3]
+        if not topic:
+            raise UsageError(f"--grant takes ROLE:VERB:DDS_TOPIC, got {item!r}")
+        grants.append((role, cast(Verb, verb), topic))  # with_grants checks the verb
+    return with_grants(suite_policy(_overrides(args)), grants)
+
+
 def _cmd_create(args: argparse.Namespace) -> str:
     lo, _, hi = args.domains.partition("-")
     try:
         domains = (int(lo), int(hi or lo))
     except ValueError:
         raise UsageError(f"--domains takes MIN-MAX or ID, got {args.domains!r}") from None
-    lines = create(pathlib.Path(args.keystore), args.root, _overrides(args), domains, args.days)
+    lines = create(pathlib.Path(args.keystore), args.root, _policy(args), domains, args.days)
     return "\n".join([*lines, f"export ROS_SECURITY_KEYSTORE={pathlib.Path(args.keystore).resolve()}"])
 
 
 def _cmd_policy(args: argparse.Namespace) -> str:
     rows = []
-    for role, access in suite_policy(_overrides(args)).items():
+    for role, access in _policy(args).items():
         enclave = enclave_path(args.root, role)
         for what, items in (("publish", access.publish), ("subscribe", access.subscribe),
                             ("serve", access.serve), ("call", access.call),
@@ -265,6 +279,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--name", action="append", metavar="KEY=VALUE",
                        help="any name of the table, e.g. topics.array_in=/arm/commands; keys: "
                             + ", ".join(k for k in DEFAULT_NAMES if not k.startswith("node.")) + "; repeatable")
+        p.add_argument("--grant", action="append", metavar="ROLE:VERB:DDS_TOPIC",
+                       help="grant a role an interface outside the suite, as a DDS topic or fnmatch pattern, e.g. "
+                            "motion_source:publish:rt/move_group/* (VERB: publish or subscribe); repeatable")
 
     create_p = sub.add_parser("create", help="write or update the keystore")
     create_p.add_argument("keystore", help="keystore folder (ROS_SECURITY_KEYSTORE), created if absent")

@@ -30,7 +30,7 @@ from __future__ import annotations
 import fnmatch
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Literal
 from xml.sax.saxutils import escape
@@ -429,17 +429,35 @@ def permissions_xml(enclave: str, access: Access, validity: Validity, denied: tu
 """
 
 
-def suite_permissions(root: str, validity: Validity, overrides: Mapping[str, str] | None = None,
+def with_grants(policy: Mapping[str, Access], grants: Iterable[tuple[str, Verb, str]]) -> dict[str, Access]:
+    """``policy`` with extra DDS topics or patterns granted: ``(role, verb, dds_topic)`` each, for
+    interfaces outside the suite (MoveIt's, a driver's). A pattern (``rt/move_group/*``) also
+    lifts the role's explicit denials that it matches."""
+    out = dict(policy)
+    for role, verb, topic in grants:
+        if role not in out:
+            raise ValueError(f"unknown role {role!r}; roles: {', '.join(out)}")
+        if verb not in ("publish", "subscribe"):
+            raise ValueError(f"verb must be publish or subscribe, got {verb!r}")
+        topic = topic.strip()
+        if not topic or any(c.isspace() or c in "<>&" for c in topic):
+            raise ValueError(f"{topic!r} is not a DDS topic name or pattern")
+        a = out[role]
+        if verb == "publish":
+            out[role] = replace(a, dds_publish=a.dds_publish | {topic})
+        else:
+            out[role] = replace(a, dds_subscribe=a.dds_subscribe | {topic})
+    return out
+
+
+def suite_permissions(root: str, validity: Validity, policy: Mapping[str, Access] | None = None,
                       domains: tuple[int, int] = DEFAULT_DOMAINS) -> dict[str, str]:
-    """Enclave path -> permissions document, for every role of :func:`suite_policy` under ``root``.
-    Each enclave's deny rule names every DDS topic another enclave is granted and it is not."""
-    policy = suite_policy(overrides)
+    """Enclave path -> permissions document, for every role of ``policy`` (default
+    :func:`suite_policy`) under ``root``. Each enclave's deny rule names every DDS topic the policy
+    grants anyone (in either direction) that the enclave is not granted."""
+    policy = suite_policy() if policy is None else policy
     grants = {role: access.dds() for role, access in policy.items()}
-    all_pub = frozenset().union(*(g[0] for g in grants.values()))
-    all_sub = frozenset().union(*(g[1] for g in grants.values()))
-    # a topic anyone publishes is one nobody else may publish, and the same for subscribing; the
-    # denials cover both directions of every named topic
-    every = frozenset(all_pub | all_sub)
+    every = frozenset().union(*(pub | sub for pub, sub in grants.values()))
     return {enclave_path(root, role): permissions_xml(enclave_path(root, role), access, validity, (every, every),
                                                       domains)
             for role, access in policy.items()}
