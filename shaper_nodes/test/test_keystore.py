@@ -15,7 +15,7 @@ import pathlib
 import shutil
 import subprocess
 import xml.etree.ElementTree as ET
-from datetime import datetime
+from datetime import UTC, datetime, timedelta
 
 import pytest
 
@@ -148,8 +148,10 @@ def test_subject_names_match_the_certificates(keystore: pathlib.Path, role: str)
     assert grant.default == "DENY"
     issuer = ssl("x509", "-in", folder / "cert.pem", "-noout", "-issuer", "-nameopt", "RFC2253").stdout.strip()
     assert issuer == "issuer=CN=sros2CA"
-    begin = datetime.fromisoformat(grant.not_before)
-    assert datetime.fromisoformat(grant.not_after) > begin
+    # the grant holds from a day back (zone-less times read as local time) for the ten years of the certificate
+    begin, end = datetime.fromisoformat(grant.not_before), datetime.fromisoformat(grant.not_after)
+    assert timedelta(hours=14) < datetime.now(UTC).replace(tzinfo=None) - begin < timedelta(days=2)
+    assert timedelta(days=3650) < end - begin < timedelta(days=3652)
     assert [r[0] for r in grant.rules] == ["allow_rule", "deny_rule"]
     assert all(r[3] == (0, 232) for r in grant.rules)
 
@@ -161,8 +163,16 @@ def test_documents_are_well_formed_dds_security_xml(keystore: pathlib.Path) -> N
     assert rule is not None
     assert rule.findtext("allow_unauthenticated_participants") == "false"
     assert rule.findtext("enable_join_access_control") == "true"
+    # the element order of the DDS-Security schema, which Fast DDS's parsers require
+    assert [c.tag for c in rule] == ["domains", "allow_unauthenticated_participants", "enable_join_access_control",
+                                     "discovery_protection_kind", "liveliness_protection_kind",
+                                     "rtps_protection_kind", "topic_access_rules"]
     topic_rule = rule.find("topic_access_rules/topic_rule")
     assert topic_rule is not None and topic_rule.findtext("topic_expression") == "*"
+    assert [c.tag for c in topic_rule] == ["topic_expression", "enable_discovery_protection",
+                                           "enable_liveliness_protection", "enable_read_access_control",
+                                           "enable_write_access_control", "metadata_protection_kind",
+                                           "data_protection_kind"]
     assert topic_rule.findtext("enable_read_access_control") == "true"
     assert topic_rule.findtext("enable_write_access_control") == "true"
     for role in ROLES:

@@ -176,14 +176,18 @@ def create(keystore: pathlib.Path, root: str = DEFAULT_ROOT, policy: Mapping[str
     domains : (int, int)
         ROS domain ids covered (inclusive).
     days : int
-        Validity of new certificates and of the permissions, days from ``now``.
+        Validity of new certificates and of the permissions, days from ``now`` (the permissions hold
+        from a day before ``now``, whatever the robot's time zone).
     now : datetime, optional
         Start of the validity (UTC; default: now).
     """
     if days < 1:
         raise KeystoreError(f"--days must be at least 1, got {days}")
     start = (now or datetime.now(UTC)).replace(microsecond=0, tzinfo=None)
-    validity = Validity(start, start + timedelta(days=days))
+    # The permissions' times have no zone, and DDS implementations read them as local time (Fast DDS:
+    # mktime): a robot west of UTC would see a grant starting "now" in UTC as starting hours ahead.
+    # So the grant starts a day early; the certificates' times are UTC and start now.
+    validity = Validity(start - timedelta(days=1), start + timedelta(days=days))
     permissions = suite_permissions(root, validity, policy, domains)  # checks the names before any file
     openssl_path()
     done = []
