@@ -358,6 +358,9 @@ def test_help_and_bad_input_write_nothing(tmp_path: pathlib.Path, capsys: pytest
     assert "0..232" in capsys.readouterr().err
     assert cli.main(["create", "ks", "--shaper-name", "a/b"]) == 2
     assert "must not contain '/'" in capsys.readouterr().err
+    # a wildcard in a name would widen the grant: refused
+    assert cli.main(["create", "ks", "--name", "topics.array_in=/arm/*"]) == 2
+    assert "not a valid ROS name" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
     assert cli.main(["policy"]) == 0
     out = capsys.readouterr().out

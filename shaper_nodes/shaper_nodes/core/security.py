@@ -91,8 +91,11 @@ def _clean(name: str) -> str:
     name = name.strip()
     if not name:
         raise ValueError("a ROS name must not be empty")
-    if any(c.isspace() for c in name) or "//" in name:
-        raise ValueError(f"{name!r} is not a valid ROS name (spaces or '//')")
+    bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c in "_/~"))})
+    if bad or "//" in name:
+        # also keeps fnmatch wildcards (* ? [) out of the permissions, where they would widen a grant
+        raise ValueError(f"{name!r} is not a valid ROS name: only letters, digits, '_', '/' and '~' "
+                         f"({'has ' + ' '.join(map(repr, bad)) if bad else 'has //'})")
     return name
 
 
