@@ -32,6 +32,7 @@ setup(
             "loop_design = shaper_nodes.cli.loop_design:main",
             "analyze_bag = shaper_nodes.cli.analyze_bag:main",
             "bag_play = shaper_nodes.nodes.bag_play:main",
+            "shaper_keystore = shaper_nodes.cli.keystore:main",
         ],
     },
 )

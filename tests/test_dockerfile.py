@@ -99,3 +99,37 @@ def test_pip_pins_match_requirements_lock() -> None:
     for name, version in pins.items():
         assert lock.get(name.lower()) == version, (
             f"docker/Dockerfile pins {name}=={version}, requirements.lock has {lock.get(name.lower())}")
+
+
+def _entrypoint_without_ros(tmp_path: pathlib.Path) -> pathlib.Path:
+    """docker/entrypoint.sh without the lines that source /opt/ros and /ws (absent here)."""
+    text = (ROOT / "docker" / "entrypoint.sh").read_text()
+    script = tmp_path / "entrypoint.sh"
+    script.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("source ")) + "\n")
+    return script
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl executable not found")
+def test_entrypoint_checks_the_sros2_enclave_before_starting(tmp_path: pathlib.Path) -> None:
+    from shaper_nodes.cli import keystore
+
+    assert keystore.main(["create", str(tmp_path / "ks")]) == 0
+    script = _entrypoint_without_ros(tmp_path)
+
+    def run(env: dict[str, str], *cmd: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(["bash", str(script), *cmd], env={"PATH": "/usr/bin:/bin", **env},
+                              capture_output=True, text=True, timeout=30, check=False)
+
+    secure = {"ROS_SECURITY_ENABLE": "true", "ROS_SECURITY_KEYSTORE": str(tmp_path / "ks")}
+    assert run({}, "echo", "started").stdout.strip() == "started"  # security off: no check
+    proc = run({"ROS_SECURITY_ENABLE": "true"}, "echo", "started")
+    assert proc.returncode == 1 and "ROS_SECURITY_KEYSTORE" in proc.stderr and "started" not in proc.stdout
+    proc = run(secure, "echo", "--ros-args", "--enclave", "/shaper_suite/shaper")
+    assert proc.returncode == 0 and "--enclave" in proc.stdout
+    proc = run(secure, "echo", "--ros-args", "-e", "/shaper_suite/robot")
+    assert proc.returncode == 1 and "/shaper_suite/robot" in proc.stderr and "cert.pem" in proc.stderr
+    proc = run({**secure, "ROS_SECURITY_ENCLAVE_OVERRIDE": "/shaper_suite/learner"}, "echo", "-e", "/x")
+    assert proc.returncode == 0
+    # the image's default command names the shaper's enclave
+    cmd = next(ins for ins in _instructions() if ins.startswith("CMD "))
+    assert '"--enclave", "/shaper_suite/shaper"' in cmd

@@ -6,6 +6,7 @@ every node from there.
 
 import os
 import pathlib
+import shutil
 import subprocess
 import time
 
@@ -76,6 +77,19 @@ def test_loop_design_cli_runs_from_its_installed_executable():
                           "--delay", "0.349"], capture_output=True, text=True, timeout=120, env=os.environ)
     assert out.returncode == 0, out.stderr
     assert "stable for 3 <= w_R <= 5.04568 rad/s" in out.stdout
+
+
+def test_keystore_cli_runs_from_its_installed_executable(tmp_path):
+    exe = str(executable("shaper_nodes", "shaper_keystore"))
+    out = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=120, env=os.environ, cwd=tmp_path)
+    assert out.returncode == 0 and "usage: shaper_keystore" in out.stdout
+    assert list(tmp_path.iterdir()) == []  # --help does nothing else
+    if shutil.which("openssl") is None:
+        return
+    out = subprocess.run([exe, "create", str(tmp_path / "ks")], capture_output=True, text=True, timeout=120,
+                         env=os.environ)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "ks" / "enclaves" / "shaper_suite" / "shaper" / "permissions.p7s").is_file()
 
 
 def test_list_replay_names_a_missing_bag(tmp_path):

@@ -12,6 +12,9 @@ list_replay
 analyze_bag
     ``analyze_bag``: per-cycle tables, modes and the learners' replays of a recording
     (:mod:`shaper_nodes.analysis`).
+keystore
+    ``shaper_keystore``: the suite's SROS2 keystore (CA, one enclave per node, signed permissions
+    from :mod:`shaper_nodes.core.security`), made with ``openssl``.
 common
     What they share: argument types, the parser that does not exit, text tables and the ``main``
     that turns bad input into exit status 2.

@@ -29,6 +29,9 @@ checks
     The one home of the number and array checks, with errors that name the problem.
 rate
     How a streamed input arrives against its nominal rate: rate, gaps, bursts, drops and lag.
+security
+    Who may talk to whom on the DDS domain: the SROS2 access policy table, ROS-to-DDS name
+    mangling, and the DDS-Security governance and permissions documents (no cryptography).
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "scheduling", "shaping"]
+__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "scheduling", "security", "shaping"]
