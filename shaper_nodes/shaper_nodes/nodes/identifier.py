@@ -39,6 +39,7 @@ Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from typing import Any
@@ -67,6 +68,11 @@ SOURCE = "identification"
 #: a gap between two accelerometer samples longer than this many median periods marks the
 #: cycle's data as incomplete
 MAX_GAP_PERIODS = 5.0
+
+
+def _distance(hz: float, mode: ModeFit) -> float:
+    """How far ``mode`` is from ``hz``, Hz."""
+    return abs(mode.hz - hz)
 
 
 def _validate_method(method: str) -> str:
@@ -292,7 +298,7 @@ class IdentifierNode(Node):
         tol = float(self.get_parameter("watch.tolerance").value)
         design = [m.natural_frequency / (2 * math.pi) for m in active.design_modes if m.natural_frequency > 0]
         if design:
-            chosen = {min(modes, key=lambda m, f=f: abs(m.hz - f)) for f in design}
+            chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
         else:
             chosen = {max(modes, key=lambda m: m.amplitude)}
         checks = [check_mode(active.amplitudes, active.times, design, m, tol) for m in chosen]
