@@ -24,7 +24,8 @@ action.server_name (~/follow_joint_trajectory) -> action.controller
 /diagnostics
     diagnostic_msgs/DiagnosticArray: every refused input (its class, throttled per class) and a
     periodic summary, with each streamed input's rate, gaps, bursts, drops and queueing lag
-    (core/rate.py; WARN when a window saw gaps or drops).
+    (core/rate.py; WARN when a window saw gaps or drops); and the graph around the command path
+    (another node of this name, other publishers, wrong types, incompatible QoS: ros/graph_watch.py).
 
 What leaves the node
 --------------------
@@ -113,6 +114,7 @@ from shaper_nodes.ros.conversions import (
     trajectory_msg,
 )
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from shaper_nodes.ros.graph_watch import GraphWatch
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
@@ -224,6 +226,11 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("error_throttle", 1.0, "Least time between two error logs or diagnostics of the same class of bad input,"
          " s.", (0.0, 3600.0)),
     Spec("diagnostics_period", 1.0, "Period of the diagnostics summary, s.", (0.05, 3600.0), read_only=True),
+    Spec("graph_watch.period", 1.0, "Period of the look at the ROS graph around the command path, s of wall"
+         " time: another node of this node's name, several publishers on an input, another publisher on an"
+         " output, a wrong message type or incompatible QoS on either, reported on /diagnostics (status"
+         " '<node>: graph') and logged once each (ros/graph_watch.py). 0 disables it.", (0.0, 3600.0),
+         read_only=True),
     *topics(TOPICS),
     Spec("action.server_name", "~/follow_joint_trajectory", "FollowJointTrajectory action served by this node;"
          " empty: no action server.", read_only=True),
@@ -283,13 +290,15 @@ class ShaperNode(Node):
         self._side = SideNode(self, "trajectories")
         self._worker = TrajectoryWorker()  # the trajectory topic's shaping, in a process of its own
         side = self._side.node
+        # the command path's endpoints are made through the graph watch, which looks from the side thread
+        self.graph = GraphWatch(self, self.diagnostics, float(p("graph_watch.period").value), looker=side)
 
         tp = {k: p(f"topics.{k}").value for k in TOPICS}
         pubs: dict[str, Any] = {}
 
         def pub(name: str, typ: Any) -> Any:
             if name not in pubs:
-                pubs[name] = self.create_publisher(typ, name, 10)
+                pubs[name] = self.graph.publisher(typ, name, 10)
             return pubs[name]
 
         self._array_pub = pub(tp["array_out"], Float64MultiArray)
@@ -299,13 +308,11 @@ class ShaperNode(Node):
         depth = int(p("queue_depth").value)
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
-            "array_in": self.create_subscription(Float64MultiArray, tp["array_in"],
-                                                 self._on_array, depth),  # type: ignore[arg-type]
-            "stream_in": self.create_subscription(JointTrajectory, tp["stream_in"],
-                                                  self._on_stream, depth),  # type: ignore[arg-type]
+            "array_in": self.graph.subscription(Float64MultiArray, tp["array_in"], self._on_array, depth),
+            "stream_in": self.graph.subscription(JointTrajectory, tp["stream_in"], self._on_stream, depth),
             # raw: the bytes go to the trajectory worker process undecoded (ros/whole_trajectory.py)
-            "trajectory_in": side.create_subscription(JointTrajectory, self.resolve_topic_name(tp["trajectory_in"]),
-                                                      self._on_trajectory, 10, raw=True),
+            "trajectory_in": self.graph.subscription(JointTrajectory, self.resolve_topic_name(tp["trajectory_in"]),
+                                                     self._on_trajectory, 10, on=side, raw=True),
         }
         self._subs = subs
         self._in_topics = {k: sub.topic_name for k, sub in subs.items()}  # fully qualified, for messages
@@ -333,6 +340,7 @@ class ShaperNode(Node):
         self.create_timer(float(p("diagnostics_period").value), self._publish_summary,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_active()
+        self.graph.start()
         self._side.start()
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"

@@ -9,6 +9,9 @@ conversions
     trajectories.
 diagnostics
     Throttled refusals and summaries on the log and ``/diagnostics``.
+graph_watch
+    The graph around a node's command path, watched: another node of its name, other publishers,
+    wrong types, incompatible QoS, on the log once and on ``/diagnostics``.
 parameters
     Parameter tables (``Spec``), ``declare_all`` and ``values``: each node declares its
     parameters from one table.
