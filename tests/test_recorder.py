@@ -23,8 +23,8 @@ import time
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticStatus
 from conftest import Diagnosed
+from diagnostic_msgs.msg import DiagnosticStatus
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap_ros2.decoder import DecoderFactory
