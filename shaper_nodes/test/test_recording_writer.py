@@ -151,6 +151,12 @@ def test_the_loss_bound_covers_what_the_recorder_held():
     cut = loss_bound(beat, first_ns=0, cut_chunk_end_ns=10_800_000_000)
     assert cut.alive_ns == 10_800_000_000 and cut.seconds == pytest.approx(1.8)
     assert cut.messages["/imu"] == 3 + 901
+    # a late writer (1.3 s since the previous flush, which took 0.2 s) and 0.5 s of receive lag widen it
+    late = Heartbeat(beat.stamp_ns, 1.0, beat.received, beat.written, beat.dropped, beat.rates, 1.3, 0.2, 0.5)
+    assert Heartbeat.from_values(late.stamp_ns, late.to_values()) == late
+    slow = loss_bound(late, first_ns=0)
+    assert slow.seconds == pytest.approx(1.3 + 0.2 + 0.5) and slow.stopped_by_ns == 11_500_000_000
+    assert slow.messages["/imu"] == 3 + 1001
     with pytest.raises(ValueError, match="flush_period"):
         Heartbeat.from_values(0, [("received:/imu", "3")])
 

@@ -554,7 +554,7 @@ def describe_unclosed(d: Damage) -> str:
     if loss.alive_ns > beat.stamp_ns:
         text += f" and was still alive at {_sec(loss.alive_ns - origin):.3f} s (the chunk it was writing was cut)"
     text += (f"; lost after its last flush: at most ~{loss.seconds:.1f} s, {loss.total} messages ({per_topic};"
-             f" at the rates it measured, if its writer kept its {beat.flush_period:g} s flush period)")
+             f" at the rates it measured, if its writer kept the pace of its {beat.flush_period:g} s flushes)")
     if loss.dropped:
         text += (f"; it had also dropped {sum(loss.dropped.values())} message(s) (queue full: "
                  + ", ".join(f"{t} {n}" for t, n in sorted(loss.dropped.items())) + ")")

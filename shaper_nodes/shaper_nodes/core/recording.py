@@ -13,9 +13,11 @@ up to the last flush, and maybe part of the next one. Its last heartbeat says th
 was alive at its stamp and that everything received until then is in the file (apart from the
 few messages ``queued`` at that instant); the next flush was due ``flush_period`` s later and did
 not complete, so the recorder stopped before then. :func:`loss_bound` turns that into an upper
-bound: at most ``flush_period`` s (plus the time the cut chunk covers) of data, and at most the
-messages received at the measured rates in that time. The bound assumes the writer kept its
-period; a writer starved of CPU for longer flushes later and can lose more.
+bound: at most one flush interval (as measured at the last heartbeat, plus the time the last flush
+took, plus the time the cut chunk covers, plus the receive lag the recorder measured) of data, and
+at most the messages received at the measured rates in that time. The bound assumes the writer
+kept the pace it had at its last heartbeat; a writer starved of CPU after it flushes later and can
+lose more.
 
 Nothing here imports rclpy or message types.
 """
@@ -55,6 +57,13 @@ class Heartbeat:
         because the queue was full, since the recording started.
     rates : dict of str to float
         Per topic: messages received per second over the last period, Hz.
+    interval : float
+        Time since the previous flush, s (the period as kept; longer when the writer is late).
+    flush_time : float
+        How long the previous flush took (chunk closed, written, flushed, fsync), s.
+    lag : float
+        Largest receive lag over the last period, s: from the middleware's receiving a message to
+        the recorder's queuing it (messages waiting in the recorder's process, unseen).
     """
 
     stamp_ns: int
@@ -63,6 +72,9 @@ class Heartbeat:
     written: dict[str, int] = field(default_factory=dict)
     dropped: dict[str, int] = field(default_factory=dict)
     rates: dict[str, float] = field(default_factory=dict)
+    interval: float = 0.0
+    flush_time: float = 0.0
+    lag: float = 0.0
 
     @property
     def queued(self) -> dict[str, int]:
@@ -71,7 +83,8 @@ class Heartbeat:
 
     def to_values(self) -> list[tuple[str, str]]:
         """The key values of the heartbeat's DiagnosticStatus."""
-        out = [("flush_period_s", f"{self.flush_period:.6g}")]
+        out = [("flush_period_s", f"{self.flush_period:.6g}"), ("interval_s", f"{self.interval:.6g}"),
+               ("flush_time_s", f"{self.flush_time:.6g}"), ("lag_s", f"{self.lag:.6g}")]
         for topic in sorted(self.received):
             out += [(f"received:{topic}", str(self.received[topic])),
                     (f"written:{topic}", str(self.written.get(topic, 0))),
@@ -89,16 +102,20 @@ class Heartbeat:
             A value does not parse, or the flush period is missing.
         """
         period = None
+        extra = {"interval_s": 0.0, "flush_time_s": 0.0, "lag_s": 0.0}
         per: dict[str, dict[str, Any]] = {k: {} for k in _PER_TOPIC}
         for key, value in values:
             if key == "flush_period_s":
                 period = float(value)
+            elif key in extra:
+                extra[key] = max(0.0, float(value))
             kind, sep, topic = key.partition(":")
             if sep and kind in per:
                 per[kind][topic] = float(value) if kind == "rate_hz" else int(value)
         if period is None or not math.isfinite(period) or period <= 0.0:
             raise ValueError("a recorder heartbeat without a valid flush_period_s")
-        return cls(int(stamp_ns), period, per["received"], per["written"], per["dropped"], per["rate_hz"])
+        return cls(int(stamp_ns), period, per["received"], per["written"], per["dropped"], per["rate_hz"],
+                   extra["interval_s"], extra["flush_time_s"], extra["lag_s"])
 
 
 @dataclass(frozen=True)
@@ -111,10 +128,12 @@ class LossBound:
         The recorder was alive at least until then, ns (the last heartbeat, or the end of the
         messages of a chunk it had started to write when it stopped).
     stopped_by_ns : int
-        It stopped before then, ns, if the writer kept its period.
+        It stopped before then, ns, if the writer kept the pace it had at its last heartbeat (the
+        next flush due one interval later, taking as long as the last one).
     seconds : float
-        Length of the time whose messages may be lost, s (from the last heartbeat to
-        ``stopped_by_ns``).
+        Length of the time whose messages may be lost, s: from the last heartbeat to
+        ``stopped_by_ns``, plus the receive lag (messages received by the middleware but not yet
+        seen by the recorder at the heartbeat).
     messages : dict of str to int
         Per topic: at most this many messages lost (queued at the heartbeat, plus those received
         at the larger of the recent and the mean rate during ``seconds``).
@@ -148,8 +167,8 @@ def loss_bound(last: Heartbeat, first_ns: int | None = None, cut_chunk_end_ns: i
         recorder was alive then, and stopped before the flush after it.
     """
     alive = max(last.stamp_ns, cut_chunk_end_ns or 0)
-    stopped_by = alive + int(round(last.flush_period * 1e9))
-    seconds = (stopped_by - last.stamp_ns) * 1e-9
+    stopped_by = alive + int(round((max(last.flush_period, last.interval) + last.flush_time) * 1e9))
+    seconds = (stopped_by - last.stamp_ns) * 1e-9 + last.lag
     span = (last.stamp_ns - first_ns) * 1e-9 if first_ns is not None and last.stamp_ns > first_ns else 0.0
     messages = {}
     for topic, n in last.received.items():

@@ -22,6 +22,7 @@ line. A full queue drops the newest messages, counted per topic and reported (WA
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any, BinaryIO
 
@@ -121,16 +122,19 @@ class RecorderNode(Node):
             except (ImportError, AttributeError, KeyError) as err:
                 self.get_logger().error(f"cannot record {topic} ({type_name}): {err}", throttle_duration_sec=10.0)
                 continue
-            self._subs[topic] = self.create_subscription(cls, topic, self._queuer(topic), self._qos_for(topic),
-                                                         raw=True)
+            callback: Any = self._queuer(topic)  # (bytes, message info): rclpy passes both to two-argument callbacks
+            self._subs[topic] = self.create_subscription(cls, topic, callback, self._qos_for(topic), raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
-    def _queuer(self, topic: str) -> Callable[[bytes], None]:
-        """The subscription callback of ``topic``: queue the raw message with the receive time."""
+    def _queuer(self, topic: str) -> Callable[[bytes, dict], None]:
+        """The subscription callback of ``topic``: queue the raw message with the receive time (the
+        node's clock) and how long it waited in the middleware."""
         put, clock = self.recording.put, self.get_clock()
 
-        def queue(data: bytes) -> None:
-            put(topic, clock.now().nanoseconds, data)
+        def queue(data: bytes, info: dict) -> None:
+            received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
+            lag = (time.time_ns() - received) * 1e-9 if received > 0 else 0.0  # both the system clock
+            put(topic, clock.now().nanoseconds, data, lag)
         return queue
 
     def _unsubscribe(self) -> None:
@@ -151,7 +155,8 @@ class RecorderNode(Node):
     def _values(self) -> list[tuple[str, str]]:
         rec = self.recording
         out = [("output", str(self.bag.path)), ("queued_messages", str(rec.queued_messages)),
-               ("queued_bytes", str(rec.queued_bytes)), ("flushes", str(rec.flushes))]
+               ("queued_bytes", str(rec.queued_bytes)), ("flushes", str(rec.flushes)),
+               ("receive_lag_s", f"{rec.lag:.3f}")]
         for topic in sorted(rec.received):
             out += [(f"received:{topic}", str(rec.received[topic])), (f"written:{topic}", str(rec.written[topic])),
                     (f"dropped:{topic}", str(rec.dropped[topic]))]

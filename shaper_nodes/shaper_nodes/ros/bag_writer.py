@@ -227,6 +227,9 @@ class QueuedRecording:
         self._closed = False
         self._last_counts: dict[str, int] = {}
         self._last_flush = time.monotonic()
+        self._flush_time = 0.0
+        self._lag = 0.0
+        self.lag = 0.0  # the largest receive lag of the last full period, s
         self._thread = threading.Thread(target=self._loop, name="bag-writer", daemon=True)
 
     # ------------------------------------------------------------------ callbacks' side
@@ -238,13 +241,18 @@ class QueuedRecording:
         with self._wlock:
             self.bag.add_topic(topic, type_name)
 
-    def put(self, topic: str, stamp_ns: int, data: bytes) -> bool:
-        """Queue one message; False if it was dropped (queue full) or the recording has stopped."""
+    def put(self, topic: str, stamp_ns: int, data: bytes, lag: float = 0.0) -> bool:
+        """Queue one message; False if it was dropped (queue full) or the recording has stopped.
+
+        ``lag`` is how long the message waited between the middleware and this call, s.
+        """
         if self.failure is not None or self._closed:
             return False
         size = len(data)
         with self._qlock:
             self.received[topic] += 1
+            if lag > self._lag:
+                self._lag = lag
             if (self.queued_bytes + size > self.max_queue_bytes
                     or len(self._queue) >= self.max_queue_messages):
                 self.dropped[topic] += 1
@@ -284,17 +292,23 @@ class QueuedRecording:
         """What the recorder knows now (counts since the start, rates over the last period)."""
         now = time.monotonic()
         with self._qlock:
-            received, dropped = dict(self.received), dict(self.dropped)
-        rates = rates_between(self._last_counts, received, now - self._last_flush)
-        return Heartbeat(int(self.now_ns()), self.flush_period, received, dict(self.written), dropped, rates)
+            received, dropped, lag = dict(self.received), dict(self.dropped), self._lag
+        interval = now - self._last_flush
+        rates = rates_between(self._last_counts, received, interval)
+        return Heartbeat(int(self.now_ns()), self.flush_period, received, dict(self.written), dropped, rates,
+                         interval, self._flush_time, lag)
 
     def _flush(self) -> None:
         beat = self.heartbeat()
+        with self._qlock:
+            self.lag, self._lag = self._lag, 0.0
+        start = time.monotonic()
         with self._wlock:
             if self.heartbeat_topic:
                 self.bag.write_heartbeat(self.heartbeat_topic, beat)
             self.bag.flush(self.fsync)
-        self._last_counts, self._last_flush = beat.received, time.monotonic()
+        self._flush_time = time.monotonic() - start
+        self._last_counts, self._last_flush = beat.received, start
         self.flushes += 1
 
     def _fail(self, err: BaseException) -> None:
