@@ -29,6 +29,10 @@ checks
     The one home of the number and array checks, with errors that name the problem.
 rate
     How a streamed input arrives against its nominal rate: rate, gaps, bursts, drops and lag.
+recording
+    The recorder's heartbeat in its recordings, and the upper bound of what a recording that was
+    not closed (recorder killed) lost.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "scheduling", "shaping"]
+__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "recording", "scheduling",
+           "shaping"]
