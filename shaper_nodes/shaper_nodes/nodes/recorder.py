@@ -194,8 +194,10 @@ class RecorderNode(Node):
             counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.bag.counts.items()))
             self.get_logger().info(f"closed {self.bag.path} ({counts})")
             return
-        self._failed_handled = False
-        self._on_failure()
+        # failed now or before: the log and the exit status say why (the graph may be gone at shutdown)
+        self.exit_code, self.exit_reason = 1, f"recording stopped: {rec.failure}"
+        if not self._failed_handled:
+            self.get_logger().error(self.exit_reason)
 
     def _on_stop(self, req, resp):
         self.close()

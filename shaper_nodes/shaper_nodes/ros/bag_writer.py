@@ -238,8 +238,16 @@ class QueuedRecording:
         return self
 
     def add_topic(self, topic: str, type_name: str) -> None:
+        """Add a topic (nothing once the recording has stopped).
+
+        Raises
+        ------
+        KeyError
+            No message definition for ``type_name``.
+        """
         with self._wlock:
-            self.bag.add_topic(topic, type_name)
+            if self.failure is None and not self._closed:
+                self.bag.add_topic(topic, type_name)
 
     def put(self, topic: str, stamp_ns: int, data: bytes, lag: float = 0.0) -> bool:
         """Queue one message; False if it was dropped (queue full) or the recording has stopped.
