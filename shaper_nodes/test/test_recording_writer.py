@@ -259,3 +259,24 @@ def test_a_full_disk_stops_the_recording_cleanly(tmp_path):
             assert bag.damage[0].messages_read == len(got)
     finally:
         subprocess.run(["umount", str(mnt)], check=False)
+
+
+def test_analyze_bag_reports_a_killed_recording_it_cannot_analyse(tmp_path, capsys):
+    """A killed low-rate recording (no accelerometer): the error, and what the recording holds and lost."""
+    from shaper_nodes.cli import analyze_bag
+
+    rec, _ = _unclosed_recording(tmp_path / "bag", chunks=2, per_chunk=3)
+    assert analyze_bag.main([str(tmp_path / "bag"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "no accelerometer topic" in err
+    assert "WARNING: damaged recording: recording not closed (recorder killed?): 6 messages read" in err
+    assert "lost after its last flush: at most ~" in err
+    rec.close()
+
+
+def test_a_recording_that_cannot_be_created_is_named(tmp_path):
+    (tmp_path / "a_file").write_text("")
+    with pytest.raises(OSError, match=r"cannot create the recording .*a_file/bag: .*\(.*a_file\)"):
+        BagWriter(tmp_path / "a_file" / "bag")
+    with pytest.raises(FileExistsError, match="exists already"):
+        BagWriter(tmp_path / "a_file")

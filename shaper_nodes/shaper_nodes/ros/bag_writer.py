@@ -85,10 +85,14 @@ class BagWriter:
         self.path = pathlib.Path(path)
         if self.path.exists():
             raise FileExistsError(f"recording folder {self.path} exists already")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self._store = typestore_with_own_types()
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        self._writer.open()
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._writer.open()
+        except OSError as err:
+            where = f" ({err.filename})" if err.filename and str(err.filename) != str(self.path) else ""
+            raise OSError(f"cannot create the recording {self.path}: {err.strerror or err}{where}") from None
         self._storage: Any = self._writer.storage
         if not (callable(getattr(self._storage, "close_chunk", None)) and hasattr(self._storage, "bio")
                 and hasattr(self._storage, "chunk")):
