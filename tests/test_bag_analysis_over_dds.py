@@ -13,6 +13,7 @@ import csv
 import math
 import os
 import re
+import struct
 import subprocess
 import sys
 import time
@@ -58,10 +59,15 @@ def test_demo_recording_analysis_matches_the_demo_and_the_plant(tmp_path, domain
     assert best is not None and best.nominal_vibration <= 0.05
     assert an.predicted["rms_nominal"] < 0.1 * an.cycles[0].rms
 
-    # the recording cut in the middle of its last chunk, as a recorder killed while writing leaves it
+    # the recording cut in the middle of the first chunk that starts after the second cycle's START (the
+    # recorder closes a chunk every second), as a recorder killed while writing leaves it: that cycle's END
+    # is lost
     mcap = next((out / "recording").glob("*.mcap"))
     data = mcap.read_bytes()
-    last, length = mcap_chunks(data)[-1]
+    spans = [(pos, length, *(t * 1e-9 for t in struct.unpack_from("<QQ", data, pos + 9)))
+             for pos, length in mcap_chunks(data)]
+    last, length, _, chunk_end = next(c for c in spans if c[2] > an.cycles[1].start)
+    assert chunk_end < an.cycles[1].end
     (tmp_path / "cut.mcap").write_bytes(data[: last + length // 2])
     cut = read_recording(tmp_path / "cut.mcap")
     (dmg,) = cut.damage

@@ -11,6 +11,12 @@ messages in the chunk that was cut, read from its header).
 
 Messages are deserialised with rosbags' typestore built from the schemas in the file; a type
 whose definition is missing or does not parse is reported, and its messages are skipped.
+
+A recording that was not closed (no footer, or no metadata.yaml) is described plainly: how many
+messages were read, where the data ends, and, from the last heartbeat the suite's recorder wrote
+into it (:mod:`shaper_nodes.core.recording`), until when the recorder was alive and how much it
+lost at most after its last flush (seconds and messages per topic). A closed recording whose
+recorder dropped messages (queue full) says so from metadata.yaml's ``custom_data``.
 """
 
 from __future__ import annotations
@@ -20,7 +26,9 @@ import pathlib
 import struct
 from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
+
+from shaper_nodes.core.recording import Heartbeat, LossBound, is_heartbeat_topic, loss_bound
 
 if TYPE_CHECKING:
     from mcap.data_stream import ReadDataStream
@@ -70,6 +78,14 @@ class Damage:
         Chunks skipped because their data was corrupt (and why).
     expected_messages : int or None
         Message count that metadata.yaml promises, if it exists.
+    messages_read : int
+        Messages read from the file (the recorder's heartbeats not counted).
+    data_start, data_end : int or None
+        Log times of the first and last message read, ns (heartbeats not counted).
+    heartbeat : Heartbeat or None
+        The last recorder heartbeat read (None: the file has none).
+    loss : LossBound or None
+        What was lost after the last flush, at most (from the heartbeat).
     """
 
     path: str
@@ -79,6 +95,16 @@ class Damage:
     lost_time: tuple[int, int] | None = None
     skipped_chunks: list[str] = field(default_factory=list)
     expected_messages: int | None = None
+    messages_read: int = 0
+    data_start: int | None = None
+    data_end: int | None = None
+    heartbeat: Heartbeat | None = None
+    loss: LossBound | None = None
+
+    @property
+    def not_closed(self) -> bool:
+        """The file ends without its footer (the writer stopped before closing it)."""
+        return self.reason == "the file ends without a footer" or self.reason.startswith("cut inside")
 
     @property
     def lost_bytes(self) -> int:
@@ -146,6 +172,7 @@ class Bag:
             if recover:
                 raise BagRecovery("asked to scan the file record by record")
             self._open_rosbags()
+            self._note_drops()
         except BagError:
             raise
         except Exception as err:
@@ -174,6 +201,23 @@ class Bag:
         reader.open()
         self._reader = reader
         self.reader_name = "rosbags AnyReader"
+
+    def _note_drops(self) -> None:
+        """A note if metadata.yaml says that the recorder dropped messages (its queue was full)."""
+        meta = self.path / "metadata.yaml"
+        if not meta.is_file():
+            return
+        try:
+            import yaml
+
+            info = (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information", {})
+            text = str((info.get("custom_data") or {}).get("shaper_nodes.recorder.dropped", ""))
+            dropped = {t: int(n) for t, _, n in (x.rpartition("=") for x in text.split(",") if x)}
+        except Exception:
+            return
+        if any(dropped.values()):
+            self.notes.append(f"the recorder dropped {sum(dropped.values())} message(s) because its write queue was"
+                              " full (" + ", ".join(f"{t}: {n}" for t, n in sorted(dropped.items()) if n) + ")")
 
     def close(self) -> None:
         if self._reader is not None:
@@ -269,9 +313,25 @@ class _Recovered:
         self._schemas: dict[int, tuple[str, str, str]] = {}  # id -> (name, encoding, text)
         self.store = get_typestore(Stores.EMPTY)
         self.bad_types: dict[str, str] = {}
-        # a first pass over the readable part: channels and definitions (messages stream later)
+        self._last_beat: tuple[int, bytes, str] | None = None  # log time, raw, msgtype
+        # a first pass over the readable part: channels, definitions, counts (messages stream later)
         for _ in self._records(set(), collect=True):
             pass
+        self._conclude()
+
+    def _conclude(self) -> None:
+        """The last heartbeat, and the loss bound it gives if the file was not closed."""
+        d = self.damage
+        if self._last_beat is None:
+            return
+        stamp, raw, msgtype = self._last_beat
+        try:
+            status: Any = self.store.deserialize_cdr(raw, msgtype)
+            d.heartbeat = Heartbeat.from_values(stamp, ((kv.key, kv.value) for kv in status.values))
+        except Exception:
+            return
+        if d.not_closed:
+            d.loss = loss_bound(d.heartbeat, d.data_start, d.lost_time[1] if d.lost_time else None)
 
     def messages(self, wanted: set[str]) -> Iterator[tuple[str, str, int, bytes]]:
         yield from self._records(wanted, collect=False)
@@ -313,18 +373,16 @@ class _Recovered:
             self._stop(collect, good, "cut inside a record header")
             return None
         op, length = head[0], struct.unpack("<Q", head[1:])[0]
-        if length > self.size:
+        if length > self.size and (op not in _OPNAMES or length >= 2**40):
             self._stop(collect, good, f"corrupt record header at byte {good} (length {length})")
             return None
-        body = f.read(length)
-        if len(body) < length:
-            lost = None
-            if op == OP_CHUNK and len(body) >= 16:
-                lost = struct.unpack("<QQ", body[:16])
+        if good + 9 + length > self.size:  # a record cut by the end of the file (its header written, not all of it)
+            body = f.read(16)
+            lost = struct.unpack("<QQ", body[:16]) if op == OP_CHUNK and len(body) >= 16 else None
             self._stop(collect, good, f"cut inside a {_OPNAMES.get(op, hex(op))} record"
-                       f" ({len(body)} of {length} bytes)", lost)
+                       f" ({self.size - good - 9} of {length} bytes)", lost)
             return None
-        return op, length, body
+        return op, length, f.read(length)
 
     def _record_items(self, op: int, length: int, stream: ReadDataStream, wanted: set[str], collect: bool,
                       good: int) -> Generator[tuple[str, str, int, bytes], None, bool]:
@@ -341,7 +399,7 @@ class _Recovered:
                 self._add_channel(c.id, c.topic, c.schema_id)
         elif op == OP_MESSAGE:
             m = Message.read(stream, length)
-            item = self._message(m, wanted)
+            item = self._message(m, wanted, collect)
             if item is not None:
                 yield item
         elif op == OP_CHUNK:
@@ -368,7 +426,7 @@ class _Recovered:
                 if collect:
                     self._add_channel(rec.id, rec.topic, rec.schema_id)
             elif isinstance(rec, Message):
-                item = self._message(rec, wanted)
+                item = self._message(rec, wanted, collect)
                 if item is not None:
                     yield item
 
@@ -376,8 +434,18 @@ class _Recovered:
         if collect:
             self.damage.readable, self.damage.reason, self.damage.lost_time = good, reason, lost
 
-    def _message(self, m, wanted: set[str]) -> tuple[str, str, int, bytes] | None:
+    def _message(self, m, wanted: set[str], collect: bool = False) -> tuple[str, str, int, bytes] | None:
         ch = self.channels.get(m.channel_id)
+        if collect and ch is not None:
+            stamp = int(m.log_time)
+            if is_heartbeat_topic(*ch):
+                if self._last_beat is None or stamp >= self._last_beat[0]:
+                    self._last_beat = (stamp, m.data, ch[1])
+            else:
+                d = self.damage
+                d.messages_read += 1
+                d.data_start = stamp if d.data_start is None else min(d.data_start, stamp)
+                d.data_end = stamp if d.data_end is None else max(d.data_end, stamp)
         if ch is None or ch[0] not in wanted:
             return None
         return ch[0], ch[1], int(m.log_time), m.data
@@ -407,8 +475,10 @@ class _Recovered:
             self.bad_types[name] = f"its definition does not parse ({err})"
 
 
-_OPNAMES = {OP_SCHEMA: "schema", OP_CHANNEL: "channel", OP_MESSAGE: "message", OP_CHUNK: "chunk",
-            OP_FOOTER: "footer", OP_DATA_END: "data-end"}
+_OPNAMES = {0x01: "header", OP_FOOTER: "footer", OP_SCHEMA: "schema", OP_CHANNEL: "channel", OP_MESSAGE: "message",
+            OP_CHUNK: "chunk", 0x07: "message index", 0x08: "chunk index", 0x09: "attachment",
+            0x0A: "attachment index", 0x0B: "statistics", 0x0C: "metadata", 0x0D: "metadata index",
+            0x0E: "summary offset", OP_DATA_END: "data-end"}
 
 
 def _chunk_records(chunk) -> tuple[list, str]:
@@ -456,16 +526,49 @@ def mcap_chunks(data: bytes) -> list[tuple[int, int]]:
     return out
 
 
+def _when(ns: int, origin: int | None) -> str:
+    """A log time as seconds from ``origin``, with the UTC clock time when it looks like wall time."""
+    text = f"{_sec(ns - (origin or 0)):.3f} s"
+    if ns > 10**18:  # after 2001: a wall clock, not simulated time
+        import datetime
+
+        clock = datetime.datetime.fromtimestamp(ns * 1e-9, tz=datetime.UTC).strftime("%Y-%m-%d %H:%M:%S.%f")
+        text += f" ({clock[:-3]} UTC)"
+    return text
+
+
+def describe_unclosed(d: Damage) -> str:
+    """What a recording that was not closed holds and lost, in one sentence (see the module docstring)."""
+    if d.data_end is None:
+        head = f"recording not closed (recorder killed?): no message in {d.path}"
+    else:
+        head = (f"recording not closed (recorder killed?): {d.messages_read} messages read, data ends at"
+                f" {_when(d.data_end, d.data_start)} from its first message")
+    if d.loss is None or d.heartbeat is None:
+        return head + ("; the file has no recorder heartbeat, so how much the recorder still held when it stopped"
+                       " is not known")
+    loss, beat = d.loss, d.heartbeat
+    origin = d.data_start if d.data_start is not None else beat.stamp_ns
+    per_topic = ", ".join(f"{t} {n}" for t, n in sorted(loss.messages.items()))
+    text = f"{head}; the recorder had written everything it received until {_when(beat.stamp_ns, origin)}"
+    if loss.alive_ns > beat.stamp_ns:
+        text += f" and was still alive at {_sec(loss.alive_ns - origin):.3f} s (the chunk it was writing was cut)"
+    text += (f"; lost after its last flush: at most ~{loss.seconds:.1f} s, {loss.total} messages ({per_topic};"
+             f" at the rates it measured, if its writer kept the pace of its {beat.flush_period:g} s flushes)")
+    if loss.dropped:
+        text += (f"; it had also dropped {sum(loss.dropped.values())} message(s) (queue full: "
+                 + ", ".join(f"{t} {n}" for t, n in sorted(loss.dropped.items())) + ")")
+    return text
+
+
 def describe_damage(d: Damage) -> str:
     """One sentence on what a damaged file lost."""
     if not d.reason and not d.skipped_chunks:
         return f"{d.path}: read to the end"
     parts = []
-    if d.reason == "the file ends without a footer":
-        parts.append(f"{d.path}: the recording was not finished (no summary, no footer): read all {d.readable}"
-                     " bytes; what the recorder had not yet written when it stopped is lost, and its amount is"
-                     " not in the file")
-    elif d.reason:
+    if d.not_closed:
+        parts.append(describe_unclosed(d))
+    if d.reason and d.reason != "the file ends without a footer":
         parts.append(f"{d.path}: {d.reason}; read {d.readable} of {d.size} bytes, {d.lost_bytes} bytes"
                      f" ({100.0 * d.lost_bytes / max(d.size, 1):.1f} %) lost")
         if d.lost_time is not None:

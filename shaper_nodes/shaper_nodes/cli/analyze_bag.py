@@ -20,7 +20,7 @@ import pathlib
 import sys
 
 from shaper_nodes.analysis.analyze import Options, analyze
-from shaper_nodes.analysis.reading import BagError
+from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
 from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
@@ -75,6 +75,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def _damage_of(path: pathlib.Path) -> list[str]:
+    """What a recording lost, described (nothing if it cannot be opened or is whole)."""
+    try:
+        with Bag(path) as bag:
+            return [describe_damage(d) for d in bag.damage]
+    except Exception:
+        return []
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
@@ -90,10 +99,10 @@ def main(argv: list[str] | None = None) -> int:
         an = analyze(rec, options)
     except (BagError, OSError, ValueError) as err:
         print(f"analyze_bag: {err}", file=sys.stderr)
+        for text in _damage_of(args.bag):  # what the recording holds, even if it cannot be analysed
+            print(f"analyze_bag: WARNING: damaged recording: {text}", file=sys.stderr)
         return 2
     for d in rec.damage:
-        from shaper_nodes.analysis.reading import describe_damage
-
         print(f"analyze_bag: WARNING: damaged recording: {describe_damage(d)}", file=sys.stderr)
     if args.out:
         files = write_report(an, args.out)

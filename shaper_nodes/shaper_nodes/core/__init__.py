@@ -32,6 +32,10 @@ rate
 security
     Who may talk to whom on the DDS domain: the SROS2 access policy table, ROS-to-DDS name
     mangling, and the DDS-Security governance and permissions documents (no cryptography).
+recording
+    The recorder's heartbeat in its recordings, and the upper bound of what a recording that was
+    not closed (recorder killed) lost.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "scheduling", "security", "shaping"]
+__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "recording", "scheduling",
+           "security", "shaping"]

@@ -1,19 +1,30 @@
 """Recorder node: chosen topics, serialized CDR as received, into a rosbag2 MCAP folder.
 
 For machines without rosbag2 (it is not on PyPI). Subscriptions take the raw bytes and only
-queue them; a writer thread writes them, so no disk I/O happens in a callback. Topics are
-found by name as they appear on the graph (types from the graph), with a QoS that matches
-their publishers (TRANSIENT_LOCAL for latched topics such as the active shaper). The bag is
-finished (metadata.yaml written) on shutdown (SIGINT) or by the ~/stop service.
+queue them (a bounded queue); a writer thread writes them, so no disk I/O happens in a callback.
+Topics are found by name as they appear on the graph (types from the graph), with a QoS that
+matches their publishers (TRANSIENT_LOCAL for latched topics such as the active shaper).
+
+Every ``flush_period`` s the writer closes the MCAP chunk being filled, writes a heartbeat of
+its own into it (``<node>/heartbeat``, a DiagnosticStatus with the counts received, written and
+dropped per topic; see :mod:`shaper_nodes.core.recording`) and flushes the file to the
+operating system (and ``os.fsync`` with ``fsync``), so that a recorder killed with ``kill -9``
+loses at most about ``flush_period`` s, and the analysis can say how much at most. The bag is
+finished (summary, footer, metadata.yaml) on shutdown (SIGINT) or by the ``~/stop`` service.
+
+A write failure (a full disk, an I/O error, a permission) stops the recording cleanly: the
+reason goes to the log and ``/diagnostics`` (ERROR, repeated every second), the subscriptions
+are destroyed and the queue emptied (memory stays bounded), the file is left readable up to its
+last complete chunk (no metadata.yaml), ``~/stop`` answers ``success: false`` with the reason,
+and the node keeps running until it is shut down, then exits with status 1 and the reason on one
+line. A full queue drops the newest messages, counted per topic and reported (WARN).
 """
 
 from __future__ import annotations
 
-import collections
-import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, BinaryIO
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -21,7 +32,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from std_srvs.srv import Trigger
 
-from shaper_nodes.ros.bag_writer import BagWriter, message_class
+from shaper_nodes.core.recording import HEARTBEAT_SUFFIX
+from shaper_nodes.ros.bag_writer import BagWriter, QueuedRecording, message_class
+from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all
 
@@ -30,7 +43,18 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("output", "recording", "rosbag2 folder to create (must not exist).", read_only=True),
     Spec("topics", ["/joint_states", "/tip_imu", "/cycle_events"], "Topics to record (fully qualified names).",
          read_only=True),
-    Spec("discovery_period", 0.2, "How often to look for requested topics not yet subscribed, s.", read_only=True),
+    Spec("discovery_period", 0.2, "How often to look for requested topics not yet subscribed, s.", (0.01, 60.0),
+         read_only=True),
+    Spec("flush_period", 1.0, "Time between two flushes of the recording to the operating system (MCAP chunk"
+         " closed, heartbeat written), s: a killed recorder loses at most about this much.", (0.05, 60.0),
+         read_only=True),
+    Spec("fsync", True, "os.fsync the file at every flush (the data then also survives a power cut, where the"
+         " disk honours it); false: flush to the operating system only (enough for a killed process).",
+         read_only=True),
+    Spec("max_queue_mb", 100.0, "Most bytes waiting to be written, MB (10^6 bytes); beyond, new messages are"
+         " dropped and counted.", (0.001, 100000.0), read_only=True),
+    Spec("max_queue_messages", 100000, "Most messages waiting to be written; beyond, new messages are dropped"
+         " and counted.", (1, 10**8), read_only=True),
 )
 
 
@@ -40,21 +64,33 @@ class RecorderNode(Node):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("recorder", *args, **kwargs)
         declare_all(self, PARAMETERS)
-        self.wanted = [t if t.startswith("/") else "/" + t for t in self.get_parameter("topics").value]
-        self.bag = BagWriter(self.get_parameter("output").value)
-        self._queue: collections.deque[tuple[str, int, bytes]] = collections.deque()
+        p = self.get_parameter
+        self.wanted = [t if t.startswith("/") else "/" + t for t in p("topics").value]
+        self.bag = BagWriter(p("output").value, wrap_file=self._wrap_file())
+        self.recording = QueuedRecording(
+            self.bag, lambda: self.get_clock().now().nanoseconds,
+            heartbeat_topic=self.get_fully_qualified_name().rstrip("/") + HEARTBEAT_SUFFIX,
+            flush_period=float(p("flush_period").value), fsync=bool(p("fsync").value),
+            max_queue_bytes=int(float(p("max_queue_mb").value) * 1e6),
+            max_queue_messages=int(p("max_queue_messages").value)).start()
+        self.diagnostics = Diagnostics(self, throttle=5.0)
         self._subs: dict[str, Subscription] = {}
-        self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._drain_loop, name="bag-writer", daemon=True)
-        self._thread.start()
-        # wall-clock timer: with use_sim_time the ROS clock stands still while the plant is idle
-        self.create_timer(float(self.get_parameter("discovery_period").value), self._discover,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.create_service(Trigger, "~/stop", self._on_stop)
         self._closed = False
+        self._failed_handled = False
+        self._dropped_seen = 0
+        self.exit_code = 0
+        self.exit_reason = ""
+        # wall-clock timers: with use_sim_time the ROS clock stands still while the plant is idle
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(float(p("discovery_period").value), self._discover, clock=wall)
+        self.create_timer(1.0, self._publish_status, clock=wall)
+        self.create_service(Trigger, "~/stop", self._on_stop)
         self._discover()
         self.get_logger().info(f"recording {self.wanted} to {self.bag.path}")
+
+    def _wrap_file(self) -> Callable[[BinaryIO], BinaryIO] | None:
+        """What wraps the MCAP file object: nothing here (tests inject failing files)."""
+        return None
 
     @property
     def subscribed(self) -> list[str]:
@@ -70,6 +106,9 @@ class RecorderNode(Node):
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
     def _discover(self) -> None:
+        if self.recording.failure is not None:
+            self._on_failure()
+            return
         if self._closed:
             return
         graph = dict(self.get_topic_names_and_types())
@@ -79,50 +118,92 @@ class RecorderNode(Node):
             type_name = graph[topic][0]
             try:
                 cls = message_class(type_name)
-                with self._lock:
-                    self.bag.add_topic(topic, type_name)
+                self.recording.add_topic(topic, type_name)
             except (ImportError, AttributeError, KeyError) as err:
                 self.get_logger().error(f"cannot record {topic} ({type_name}): {err}", throttle_duration_sec=10.0)
                 continue
-            self._subs[topic] = self.create_subscription(cls, topic, self._queuer(topic), self._qos_for(topic),
-                                                         raw=True)
+            callback: Any = self._queuer(topic)  # (bytes, message info): rclpy passes both to two-argument callbacks
+            self._subs[topic] = self.create_subscription(cls, topic, callback, self._qos_for(topic), raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
-    def _queuer(self, topic: str) -> Callable[[bytes], None]:
-        """The subscription callback of ``topic``: queue the raw message with the receive time."""
-        def queue(data: bytes) -> None:
-            self._queue.append((topic, self.get_clock().now().nanoseconds, data))
+    def _queuer(self, topic: str) -> Callable[[bytes, dict], None]:
+        """The subscription callback of ``topic``: queue the raw message with the receive time (the
+        node's clock) and how long it waited in the middleware."""
+        put, clock = self.recording.put, self.get_clock()
+
+        def queue(data: bytes, info: dict) -> None:
+            received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
+            lag = (time.time_ns() - received) * 1e-9 if received > 0 else 0.0  # both the system clock
+            put(topic, clock.now().nanoseconds, data, lag)
         return queue
 
-    def _drain(self) -> None:
-        with self._lock:
-            while self._queue:
-                topic, stamp, data = self._queue.popleft()
-                self.bag.write(topic, stamp, data)
+    def _unsubscribe(self) -> None:
+        for sub in self._subs.values():
+            self.destroy_subscription(sub)
+        self._subs.clear()
 
-    def _drain_loop(self) -> None:
-        while not self._stop.is_set():
-            self._drain()
-            time.sleep(0.02)
+    def _on_failure(self) -> None:
+        """The writer stopped on a write failure: unsubscribe, report (once; the status repeats it)."""
+        if self._failed_handled:
+            return
+        self._failed_handled = True
+        self._unsubscribe()
+        reason = f"recording stopped: {self.recording.failure}"
+        self.exit_code, self.exit_reason = 1, reason
+        self.diagnostics.report("write_failed", ERROR, reason, values=self._values())
+
+    def _values(self) -> list[tuple[str, str]]:
+        rec = self.recording
+        out = [("output", str(self.bag.path)), ("queued_messages", str(rec.queued_messages)),
+               ("queued_bytes", str(rec.queued_bytes)), ("flushes", str(rec.flushes)),
+               ("receive_lag_s", f"{rec.lag:.3f}")]
+        for topic in sorted(rec.received):
+            out += [(f"received:{topic}", str(rec.received[topic])), (f"written:{topic}", str(rec.written[topic])),
+                    (f"dropped:{topic}", str(rec.dropped[topic]))]
+        return out
+
+    def _publish_status(self) -> None:
+        """Every second on /diagnostics: recording (OK), dropping (WARN) or stopped (ERROR)."""
+        rec = self.recording
+        if rec.failure is not None:
+            self._on_failure()
+            self.diagnostics.publish("recording", ERROR, self.exit_reason, self._values())
+            return
+        if self._closed:
+            return
+        dropped = sum(rec.dropped.values())
+        if dropped > self._dropped_seen:
+            self.diagnostics.report(
+                "queue_full", WARN, f"dropped {dropped - self._dropped_seen} message(s): the write queue is full"
+                f" ({rec.queued_messages} messages, {rec.queued_bytes / 1e6:.1f} MB); the disk is too slow",
+                values=self._values())
+            self._dropped_seen = dropped
+        level, message = (WARN, f"recording; {dropped} message(s) dropped (queue full)") if dropped else \
+            (OK, "recording")
+        self.diagnostics.publish("recording", level, message, self._values())
 
     def close(self) -> None:
-        """Write what is queued and finish the bag (idempotent)."""
+        """Write what is queued and finish the bag (idempotent); after a write failure, only unsubscribe."""
         if self._closed:
             return
         self._closed = True
-        for sub in self._subs.values():
-            self.destroy_subscription(sub)
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-        self._drain()
-        with self._lock:
-            self.bag.close()
-        counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.bag.counts.items()))
-        self.get_logger().info(f"closed {self.bag.path} ({counts})")
+        self._unsubscribe()
+        rec = self.recording
+        custom = {"shaper_nodes.recorder.dropped": ",".join(f"{t}={n}" for t, n in sorted(rec.dropped.items()))}
+        if rec.close(custom_data=custom):
+            counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.bag.counts.items()))
+            self.get_logger().info(f"closed {self.bag.path} ({counts})")
+            return
+        # failed now or before: the log and the exit status say why (the graph may be gone at shutdown)
+        self.exit_code, self.exit_reason = 1, f"recording stopped: {rec.failure}"
+        if not self._failed_handled:
+            self.get_logger().error(self.exit_reason)
 
     def _on_stop(self, req, resp):
         self.close()
-        resp.success, resp.message = True, str(self.bag.path)
+        failure = self.recording.failure
+        resp.success = failure is None
+        resp.message = str(self.bag.path) if failure is None else f"recording stopped: {failure}"
         return resp
 
 

@@ -29,7 +29,9 @@ whole_trajectory
     Whole-trajectory shaping as the shaper node does it, and the same in a worker process on
     serialized messages.
 bag_writer
-    rosbag2 folders with MCAP storage, written with rosbags (the suite's own types included).
+    rosbag2 folders with MCAP storage, written with rosbags (the suite's own types included), chunks
+    closed and flushed by time; the recorder's bounded queue, writer thread, heartbeat and clean stop
+    on a write failure (``QueuedRecording``).
 launching
     Installed node executables started as ``ros2 run`` starts them, for tests and tools.
 """

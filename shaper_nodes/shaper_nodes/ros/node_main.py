@@ -12,9 +12,10 @@ from rclpy.node import Node
 def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
     """init, spin until Ctrl-C or shutdown, then close, destroy and shut down.
 
-    A configuration error (``ValueError`` or ``FileExistsError`` from the constructor) is printed
-    as ``name: message`` and gives exit code 1. A node with a ``close()`` method gets it called
-    before it is destroyed.
+    A configuration error (``ValueError`` or ``OSError`` such as ``FileExistsError`` from the
+    constructor) is printed as ``name: message`` and gives exit code 1. A node with a ``close()``
+    method gets it called before it is destroyed. A node that sets ``exit_code`` (and
+    ``exit_reason``) ends with that code, the reason printed as ``name: reason``.
     """
     rclpy.init(args=args)
     node = None
@@ -23,7 +24,7 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ValueError, FileExistsError) as err:
+    except (ValueError, OSError) as err:
         print(f"{name}: {err}", flush=True)
         return 1
     finally:
@@ -33,4 +34,7 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    code = int(getattr(node, "exit_code", 0) or 0)
+    if code:
+        print(f"{name}: {getattr(node, 'exit_reason', '') or 'failed'}", flush=True)
+    return code
