@@ -159,7 +159,7 @@ class RecorderNode(Node):
                ("receive_lag_s", f"{rec.lag:.3f}")]
         for topic in sorted(rec.received):
             out += [(f"received:{topic}", str(rec.received[topic])), (f"written:{topic}", str(rec.written[topic])),
-                    (f"dropped:{topic}", str(rec.dropped[topic]))]
+                    (f"flushed:{topic}", str(rec.flushed.get(topic, 0))), (f"dropped:{topic}", str(rec.dropped[topic]))]
         return out
 
     def _publish_status(self) -> None:

@@ -221,6 +221,8 @@ class QueuedRecording:
         self.received: collections.Counter[str] = collections.Counter()
         self.written: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
+        #: messages per topic written before the last completed flush (in the file, whatever happens next)
+        self.flushed: dict[str, int] = {}
         self.queued_bytes = 0
         self.flushes = 0
         self.failure: str | None = None
@@ -312,6 +314,7 @@ class QueuedRecording:
 
     def _flush(self) -> None:
         beat = self.heartbeat()
+        written = dict(self.written)  # the writer thread is the only one that writes: all of these are in
         with self._qlock:
             self.lag, self._lag = self._lag, 0.0
         start = time.monotonic()
@@ -321,6 +324,7 @@ class QueuedRecording:
             self.bag.flush(self.fsync)
         self._flush_time = time.monotonic() - start
         self._last_counts, self._last_flush = beat.received, start
+        self.flushed = written
         self.flushes += 1
 
     def _fail(self, err: BaseException) -> None:
