@@ -476,7 +476,8 @@ def test_several_plants_in_one_recording_are_reported_per_group(tmp_path):
     text = bag_analysis_cli_table(an)
     assert "group 3.5 Hz (cycles #0-3)" in text and "group 6.5 Hz (cycles #8-11)" in text
     doc = json.loads(json.dumps(bag_summary(an)))
-    assert [g["cycles"] for g in doc["groups"]] == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]]
+    assert [g["rows"] for g in doc["groups"]] == [g["cycles"] for g in doc["groups"]] == [[0, 1, 2, 3], [4, 5, 6, 7],
+                                                                                  [8, 9, 10, 11]]
 
 
 def test_one_plant_is_one_group():

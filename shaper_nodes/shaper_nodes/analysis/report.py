@@ -84,8 +84,9 @@ def summary(an: Analysis) -> dict:
 def _group(g) -> dict:
     """One group of cycles that see the same modes, as plain data."""
     best = g.recommendation.best if g.recommendation is not None else None
-    return {"cycles": g.cycles, "modes": [{"frequency_hz": m.hz, "frequency_std_hz": m.omega_std / (2 * math.pi),
-                                           "zeta": m.zeta, "zeta_std": m.zeta_std} for m in g.modes],
+    modes = [{"frequency_hz": m.hz, "frequency_std_hz": m.omega_std / (2 * math.pi), "zeta": m.zeta,
+              "zeta_std": m.zeta_std} for m in g.modes]
+    return {"rows": g.rows, "cycles": g.cycles, "modes": modes,
             "recommendation": None if best is None else {**shaper_of(best.shaper), "v_nominal": best.nominal_vibration,
                                                          "v_worst": best.worst_vibration},
             "rule": g.recommendation.rule if g.recommendation is not None else ""}
@@ -270,7 +271,7 @@ def _groups_markdown(groups: list[dict]) -> list[str]:
     for g in groups:
         r = g["recommendation"]
         shaper = f"{r['family']} ({1e3 * r['duration']:.1f} ms)" if r else "none"
-        md.append(f"| {', '.join(map(str, g['cycles']))} | "
+        md.append(f"| {', '.join(f'#{r}' for r in g['rows'])} | "
                   + ", ".join(f"{m['frequency_hz']:.4g} ± {m['frequency_std_hz']:.2g}" for m in g["modes"])
                   + f" | {shaper} |")
     return [*md, ""]
