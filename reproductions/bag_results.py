@@ -50,7 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     # 1. the demo
-    demo = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "--out", str(work / "demo"), "--offsets", "0.3",
+    demo = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "joint", "--out", str(work / "demo"),
+                           "--offsets", "0.3",
                            "--shapers", "none,zv,zvd", "--cycles", str(args.cycles)], capture_output=True, text=True)
     if demo.returncode != 0:
         print(demo.stdout + demo.stderr, file=sys.stderr)

@@ -4,7 +4,9 @@
   with the ``mcap`` library's record parsers; deserialise with rosbags' typestores.
 - :mod:`.streams`: find the accelerometer, joint-state, command, cycle-event and shaper topics
   by type and extract them into arrays.
-- :mod:`.segment`: cycles from the cycle events, or from the commands' motion when there are none.
+- :mod:`.segment`: cycles from the cycle events, or from the motion of the commands or joint states
+  when there are none, with thresholds from the positions' measured noise.
+- :mod:`.groups`: cycles that see different modes (several plants, payloads or poses), grouped.
 - :mod:`.analyze`: per-cycle residual vibration and settling, spectrum, modes, recommended shaper,
   and the learner replays the options ask for.
 - :mod:`.replay`: what the learners (LIST, MRILC) would have done over a recording, fed as the live

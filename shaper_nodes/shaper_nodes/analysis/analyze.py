@@ -40,9 +40,10 @@ from shaper_nodes.core.identification import (
 )
 from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_time
 
+from .groups import GROUP_GAP, GROUP_SIGMAS, ModeGroup, group_cycles
 from .reading import BagError
 from .replay import LEARNER_REPLAYS, LearnerReplay
-from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion
+from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion, position_noise
 from .streams import Recording, Signal
 
 if TYPE_CHECKING:
@@ -54,6 +55,11 @@ MIN_V_FOR_LEVEL = 0.2
 OFFSET_LIMIT = 1.0
 #: fewest samples of a residual window used for the spectrum
 MIN_SPECTRUM_SAMPLES = 64
+#: positions within this many noise standard deviations (or two quantisation steps) of their final
+#: value are at rest (the residual window's start), whatever smaller --settle-tolerance says
+SETTLE_SIGMAS = 10.0
+#: the settling band is at least this many accelerometer noise standard deviations (per axis)
+BAND_SIGMAS = 6.0
 
 
 @dataclass(frozen=True)
@@ -63,9 +69,11 @@ class Options:
     settle_tolerance : rad or m, positions at rest; band : settling band, m/s^2 (a float) or
     a fraction of the cycle's peak (a string ending in %); remove_mean : "auto", "yes", "no";
     segmentation : "auto", "events", "motion"; method, max_modes, band_hz : identification;
-    target, sigmas : recommendation; identify_cycles : most cycles identified (evenly spread over
-    the usable ones; 0 = all); learners : names of :data:`LEARNER_REPLAYS` to run;
-    learner_params : parameters as the live learner node takes them.
+    target, sigmas, min_saving : recommendation (:func:`recommend_shaper`); identify_cycles : most
+    cycles identified (evenly spread over the usable ones; 0 = all); learners : names of
+    :data:`LEARNER_REPLAYS` to run; learner_params : parameters as the live learner node takes
+    them; motion_threshold : speed (rad/s or m/s) above which a sample moves when the cycles come
+    from the motion (default: from the top speed and the measured noise).
     """
 
     settle_tolerance: float = 1e-6
@@ -81,6 +89,8 @@ class Options:
     identify_cycles: int = 20
     learners: tuple[str, ...] = ("list", "mrilc")
     learner_params: Mapping[str, object] = field(default_factory=dict)
+    motion_threshold: float | None = None
+    min_saving: float = 0.2
 
 
 @dataclass
@@ -118,6 +128,9 @@ class Analysis:
     replays: dict[str, LearnerReplay]
     notes: list[str]
     removed_mean: bool
+    groups: list[ModeGroup] = field(default_factory=list)  # several when cycles see different modes
+    settle_tolerance: float = float("nan")  # positions at rest within this (rad or m), as used
+    accel_noise: float = float("nan")  # accelerometer noise per axis, m/s^2 (third differences' MAD)
 
     @property
     def origin(self) -> float:
@@ -144,17 +157,27 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
     if remove_mean and opt.remove_mean == "auto":
         notes.append(f"the accelerometer has an offset of {np.linalg.norm(np.nanmedian(acc.values, axis=0)):.3g} m/s^2"
                      " (gravity, bias): each window's mean is removed")
-    rows, traces, windows = _cycles(rec, spans, opt, remove_mean)
+    tolerance, accel_noise, noise_notes = _noise(rec, opt)
+    notes += noise_notes
+    rows, traces, windows = _cycles(rec, spans, opt, remove_mean, tolerance, accel_noise)
     for i, r in enumerate(rows):
         if r.issue:
             notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
     spectrum = _spectrum(windows)
-    modes, id_notes = _identify(windows, rows, opt)
+    groups, id_notes = _identify(windows, rows, opt)
     notes += id_notes
-    recommendation, level, predicted = _recommend(rows, modes, opt, notes)
+    main = max(groups, key=lambda g: len(g.rows)) if groups else None
+    modes = main.modes if main is not None else []
+    if len(groups) > 1:
+        for g in groups:
+            g.recommendation = _group_recommendation(g.modes, opt)
+    recommendation, level, predicted = _recommend(rows if main is None or len(groups) == 1
+                                                  else [rows[i] for i in main.rows], modes, opt, notes)
+    if main is not None:
+        main.recommendation = recommendation
     replays = _replays(rec, spans, segmentation, opt, notes)
     return Analysis(rec, opt, segmentation, rows, traces, spectrum, modes, recommendation, level, predicted,
-                    replays, notes, remove_mean)
+                    replays, notes, remove_mean, groups, tolerance, accel_noise)
 
 
 # ------------------------------------------------------------------------------ pieces
@@ -169,7 +192,7 @@ def _segment(rec: Recording, opt: Options) -> tuple[list[CycleSpan], str, list[s
     source = rec.commands if rec.commands is not None and len(rec.commands) > 2 else rec.joints
     if source is None:
         return [], "", ["no cycle events, and no commands or joint states to find the moves in"]
-    spans, notes = from_motion(source, end_time=float(rec.accel.t[-1]))
+    spans, notes = from_motion(source, end_time=float(rec.accel.t[-1]), threshold=opt.motion_threshold)
     kind = "commands" if source is rec.commands else "joint states"
     return spans, f"motion end of the {kind} ({source.topic})", notes
 
@@ -181,10 +204,40 @@ def _positions(rec: Recording, opt: Options) -> Signal | None:
     return rec.joints
 
 
-def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: bool
+def _noise(rec: Recording, opt: Options) -> tuple[float, float, list[str]]:
+    """The rest tolerance of the positions (rad or m), the accelerometer noise per axis (m/s^2) and notes.
+
+    The tolerance is ``--settle-tolerance``, raised to :data:`SETTLE_SIGMAS` times the positions'
+    measured noise (or two quantisation steps) when they are noisier
+    (:func:`~.segment.position_noise`); the accelerometer noise is the same estimate on its axes.
+    """
+    notes: list[str] = []
+    tolerance = float(opt.settle_tolerance)
+    pos = _positions(rec, opt)
+    if pos is not None and len(pos) >= 8:
+        noise = position_noise(pos.values)
+        floor = float(max(np.max(SETTLE_SIGMAS * noise.sigma), np.max(2.0 * noise.step)))
+        if floor > tolerance:
+            notes.append(f"{pos.topic}: position noise {float(np.max(noise.sigma)):.2g}"
+                         + f", smallest step {float(np.max(noise.step)):.2g} (rad or m): positions count as at rest"
+                         f" within {floor:.2g} of their final value ({SETTLE_SIGMAS:g} sigma or 2 steps;"
+                         f" --settle-tolerance {tolerance:g} is below the noise)")
+            tolerance = floor
+    acc_noise = float(np.max(position_noise(rec.accel.values).sigma)) if len(rec.accel) >= 8 else 0.0
+    if acc_noise > 0:
+        notes.append(f"settling band: the larger of --band {opt.band} and {BAND_SIGMAS * acc_noise:.2g} m/s^2"
+                     f" ({BAND_SIGMAS:g} x the accelerometer noise {acc_noise:.2g} m/s^2 per axis, from its third"
+                     " differences), so that a cycle that reaches the noise floor settles")
+    return tolerance, acc_noise, notes
+
+
+def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: bool, tolerance: float,
+            accel_noise: float
             ) -> tuple[list[CycleRow], list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
     """Per cycle: its figures, its trace (time from START in s, acceleration in m/s^2) and its residual
-    window (time in s, acceleration in m/s^2; empty for a cycle with an issue)."""
+    window (time in s, acceleration in m/s^2; empty for a cycle with an issue). Positions are at rest
+    within ``tolerance`` (rad or m); the settling band is at least :data:`BAND_SIGMAS` times
+    ``accel_noise`` (m/s^2)."""
     acc = rec.accel
     pos = _positions(rec, opt)
     step = float(np.median(np.diff(acc.t))) if len(acc) > 1 else 0.0
@@ -200,8 +253,8 @@ def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: b
         else:
             pt, pv = np.zeros(0), np.zeros((0, 1))
         res = evaluate_cycle(span.cycle, span.start, span.motion_end, span.end, at, av, pt, pv,
-                             opt.settle_tolerance, remove_mean).residual
-        band = _band(opt.band, res.peak)
+                             tolerance, remove_mean).residual
+        band = max(_band(opt.band, res.peak), BAND_SIGMAS * accel_noise)
         settle = (settling_time(at, av, res.window_start, res.window_end, band, remove_mean)
                   if res.samples and band > 0 else float("nan"))
         label, impulses = _active_shaper(rec, span)
@@ -241,7 +294,7 @@ def _recommend(rows: list[CycleRow], modes: list[ModeFit], opt: Options, notes: 
                                                     np.asarray(r.shaper_impulses[1], dtype=float), top.omega,
                                                     top.zeta))
     try:
-        recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas)
+        recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas, min_saving=opt.min_saving)
         notes += list(recommendation.notes)
     except IdentificationError as err:
         notes.append(f"no recommendation: {err}")
@@ -320,8 +373,11 @@ def _spectrum(windows: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
     return f, np.mean(psds, axis=0)
 
 
-def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeFit], list[str]]:
-    per_record, failed = [], []
+def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeGroup], list[str]]:
+    """The groups of cycles that see the same modes (:func:`~.groups.group_cycles`), each with its modes
+    combined over its cycles, and notes; no group when no cycle gives a mode."""
+    per_record: list[tuple[int, list[ModeFit]]] = []
+    failed = []
     usable = [i for i, (t, _) in enumerate(windows) if t.size]
     notes = []
     if opt.identify_cycles and len(usable) > opt.identify_cycles:
@@ -331,7 +387,7 @@ def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeFit
     for i in usable:
         (t, a), r = windows[i], rows[i]
         try:
-            per_record.append(identify(t, a, method=opt.method, max_modes=opt.max_modes, band_hz=opt.band_hz))
+            per_record.append((i, identify(t, a, method=opt.method, max_modes=opt.max_modes, band_hz=opt.band_hz)))
         except IdentificationError as err:
             failed.append(f"cycle {r.cycle}: {err}")
     if failed:
@@ -340,10 +396,29 @@ def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeFit
     if not per_record:
         notes.append("no mode identified in any cycle")
         return [], notes
-    modes = combine_modes(per_record, method=opt.method, max_modes=opt.max_modes)
-    if not modes:
-        notes.append(f"no mode found in at least half of the {len(per_record)} cycles that gave modes")
-    return modes, notes
+    found = dict(per_record)
+    groups = []
+    for keys in group_cycles(per_record):
+        keys = sorted(keys)
+        modes = combine_modes([found[k] for k in keys], method=opt.method, max_modes=opt.max_modes)
+        groups.append(ModeGroup(keys, [rows[k].cycle for k in keys], modes))
+    if len(groups) > 1:
+        notes.append(f"the cycles see different modes (several plants, payloads or poses): {len(groups)} groups,"
+                     f" split where the cycles' dominant frequencies, sorted, differ by more than"
+                     f" {100 * GROUP_GAP:g} % and {GROUP_SIGMAS:g} combined sigma: "
+                     + "; ".join(g.label for g in groups)
+                     + ". Modes, recommendation and prediction are the largest group's; each group's are listed")
+    for g in groups:
+        if not g.modes:
+            notes.append(f"group of cycles {g.cycles}: no mode found in at least half of its cycles")
+    return [g for g in groups if g.modes], notes
+
+
+def _group_recommendation(modes: list[ModeFit], opt: Options) -> Recommendation | None:
+    try:
+        return recommend_shaper(modes, opt.target, sigmas=opt.sigmas, min_saving=opt.min_saving)
+    except IdentificationError:
+        return None
 
 
 def _prediction(rows: list[CycleRow], modes: list[ModeFit], rec: Recommendation | None, opt: Options

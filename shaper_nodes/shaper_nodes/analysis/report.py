@@ -74,7 +74,22 @@ def summary(an: Analysis) -> dict:
         if rcm.best is not None:
             doc["recommendation"] = {**shaper_of(rcm.best.shaper), "v_nominal": rcm.best.nominal_vibration,
                                      "v_worst": rcm.best.worst_vibration, "target": rcm.target}
+        doc["rule"] = rcm.rule
+    doc["groups"] = [_group(g) for g in an.groups]
+    doc["settle_tolerance"] = an.settle_tolerance
+    doc["accel_noise_m_s2"] = an.accel_noise
     return _clean(doc)
+
+
+def _group(g) -> dict:
+    """One group of cycles that see the same modes, as plain data."""
+    best = g.recommendation.best if g.recommendation is not None else None
+    modes = [{"frequency_hz": m.hz, "frequency_std_hz": m.omega_std / (2 * math.pi), "zeta": m.zeta,
+              "zeta_std": m.zeta_std} for m in g.modes]
+    return {"rows": g.rows, "cycles": g.cycles, "modes": modes,
+            "recommendation": None if best is None else {**shaper_of(best.shaper), "v_nominal": best.nominal_vibration,
+                                                         "v_worst": best.worst_vibration},
+            "rule": g.recommendation.rule if g.recommendation is not None else ""}
 
 
 def _settle(r) -> str:
@@ -107,6 +122,14 @@ def table(an: Analysis) -> str:
                      f" predicted residual {_f(p.get('rms_nominal', float('nan')))} m/s2"
                      f" (worst {_f(p.get('rms_worst', float('nan')))}) + noise, from an unshaped level of"
                      f" {_f(an.unshaped_level)} m/s2")
+    if rcm is not None and rcm.rule:
+        lines.append(rcm.rule)
+    if len(an.groups) > 1:
+        for g in an.groups:
+            best = g.recommendation.best if g.recommendation is not None else None
+            lines.append(f"group {g.label}: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
+                                                          f" damping {m.zeta:.3g}" for m in g.modes)
+                         + (f"; recommended {best.family} ({1e3 * best.duration:.1f} ms)" if best else ""))
     for name, rep in an.replays.items():
         learned = [r for r in rep.rows if "skipped" not in r]
         if learned and "rms_e" in learned[0]:
@@ -189,6 +212,7 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
         md.append("")
     else:
         md += ["No mode identified.", ""]
+    md += _groups_markdown(doc["groups"])
     if doc["recommendation"]:
         r, p = doc["recommendation"], an.predicted
         md += [f"Recommended: **{r['family']}**, {1e3 * r['duration']:.1f} ms, impulses "
@@ -198,7 +222,8 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
                f" {_f(p.get('rms_nominal', float('nan')))} m/s²"
                f" (worst {_f(p.get('rms_worst', float('nan')))}) plus the sensor noise, from an unshaped level of"
                f" {_f(an.unshaped_level)} m/s² (median over {p.get('cycles_used', 0)} cycles of RMS / V of the"
-               " active shaper).", "", "| family | duration (ms) | V at mode (%) | worst V (%) | meets target |",
+               " active shaper).", "", f"The {doc['rule']}.", "",
+               "| family | duration (ms) | V at mode (%) | worst V (%) | meets target |",
                "|---|---|---|---|---|"]
         for c in doc["candidates"]:
             md.append(f"| {c['family']} | {1e3 * c['duration_s']:.1f} | {100 * c['v_nominal']:.3g} |"
@@ -235,6 +260,21 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     if an.notes:
         md += ["## Notes", ""] + [f"- {n}" for n in an.notes] + [""]
     return "\n".join(md)
+
+
+def _groups_markdown(groups: list[dict]) -> list[str]:
+    """The per-group table when the cycles see different modes (nothing for one group)."""
+    if len(groups) < 2:
+        return []
+    md = ["The cycles see different modes (several plants, payloads or poses); per group:", "",
+          "| cycles | modes (Hz) | recommended |", "|---|---|---|"]
+    for g in groups:
+        r = g["recommendation"]
+        shaper = f"{r['family']} ({1e3 * r['duration']:.1f} ms)" if r else "none"
+        md.append(f"| {', '.join(f'#{r}' for r in g['rows'])} | "
+                  + ", ".join(f"{m['frequency_hz']:.4g} ± {m['frequency_std_hz']:.2g}" for m in g["modes"])
+                  + f" | {shaper} |")
+    return [*md, ""]
 
 
 def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:

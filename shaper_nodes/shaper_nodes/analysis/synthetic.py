@@ -97,13 +97,17 @@ class _Template:
 def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndarray, *, t0: float = 1.7e9,
               imu_topic: str = "/imu/data", joints_topic: str = "/joint_states", commands_topic: str | None = None,
               joint_names: tuple[str, ...] = ("joint_1",), imu_every: int = 1, joints_every: int = 1,
-              finish: bool = True) -> int:
+              finish: bool = True, joint_noise: float = 0.0, joint_resolution: float = 0.0,
+              joint_seed: int = 2) -> int:
     """Write the samples into a rosbag2 folder (MCAP); returns the number of messages written.
 
     ``t0`` (s) is added to every time (a robot's wall clock). Every joint of ``joint_names`` gets
     the position ``u``. ``imu_every``/``joints_every`` write every n-th sample only. With
     ``finish`` False the writer is abandoned without closing, as a killed recorder leaves it: the
     chunk it was filling, the summary, the footer and metadata.yaml are never written.
+    The joint states are measured positions: ``u`` plus white noise of standard deviation
+    ``joint_noise`` (rad or m; independent per joint, seeded by ``joint_seed``), rounded to
+    multiples of ``joint_resolution`` (an encoder's step; 0: not rounded). The commands stay ``u``.
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -131,6 +135,11 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
                    "sensor_msgs/msg/JointState", {"p": sentinel[0]})
     cmd = _Template(store, F64(layout=Layout(dim=[], data_offset=0), data=np.array(sentinel)),
                     "std_msgs/msg/Float64MultiArray", {"p": sentinel[0]})
+    measured = np.repeat(np.asarray(u, dtype=float)[:, None], n, axis=1)
+    if joint_noise > 0.0:
+        measured += np.random.default_rng(joint_seed).normal(0.0, joint_noise, measured.shape)
+    if joint_resolution > 0.0:
+        measured = np.round(measured / joint_resolution) * joint_resolution
     stamp = struct.Struct("<iI")
     path = pathlib.Path(path)
     count = 0
@@ -155,7 +164,7 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
                 count += 1
             if i % joints_every == 0:
                 stamp.pack_into(buf_j, 4, sec, nsec)
-                pos.pack_into(buf_j, oj, *([float(u[i])] * n))
+                pos.pack_into(buf_j, oj, *measured[i])
                 writer.write(c_js, stamp_ns, bytes(buf_j))
                 count += 1
             if i % imu_every == 0:
@@ -169,3 +178,76 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
         else:  # what the process had handed to the OS is in the file; the rest is lost
             cast("McapWriter", writer.storage).bio.close()  # the storage plugin asked for: MCAP
     return count
+
+
+def simulate_plants(modes_hz: tuple[float, ...] = (3.5, 5.0, 6.5), cycles: int = 4, zeta: float = 0.02,
+                    **kwargs) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Truth]]:
+    """Several plants (or poses) in one recording: :func:`simulate` for each mode in turn, end to end.
+
+    Each plant runs ``cycles`` (even, so the position comes back to where the next one starts)
+    back-and-forth moves; the first has :func:`simulate`'s lead, the others none (the last rest of
+    one plant is the lead of the next). Returns times (s), commanded positions, tip acceleration
+    (N, 3) and one :class:`Truth` per plant, its times on the joint recording's clock.
+    """
+    if cycles % 2:
+        raise ValueError(f"cycles must be even (the moves go back and forth), got {cycles}")
+    ts, us, accs, truths = [], [], [], []
+    shift = 0.0
+    lead = float(kwargs.pop("lead", 0.5))
+    for k, hz in enumerate(modes_hz):
+        t, u, a, tr = simulate(cycles=cycles, mode_hz=hz, zeta=zeta, lead=lead if k == 0 else 0.0, seed=k + 1,
+                               **kwargs)
+        ts.append(t + shift)
+        us.append(u)
+        accs.append(a)
+        truths.append(Truth(hz, zeta, tuple(s + shift for s in tr.move_starts), tuple(e + shift for e in tr.move_ends),
+                            tr.duration))
+        shift += tr.duration
+    return np.concatenate(ts), np.concatenate(us), np.concatenate(accs), truths
+
+
+@dataclass(frozen=True)
+class SegmentationCheck:
+    """How a recording with noisy joint states is analysed: noise (rad), quantisation step (rad), moves
+    found and true, the largest error of the move starts and ends (s), the identified mode (Hz) and the
+    true one, and the recommended family."""
+
+    noise: float
+    resolution: float
+    moves_found: int
+    moves_true: int
+    start_error: float
+    end_error: float
+    mode_hz: float
+    true_hz: float
+    recommended: str
+
+    @property
+    def mode_error(self) -> float:
+        """Relative error of the identified mode (fraction)."""
+        return abs(self.mode_hz / self.true_hz - 1.0)
+
+
+def check_segmentation(folder: str | pathlib.Path, noise: float, resolution: float = 0.0, cycles: int = 6,
+                       mode_hz: float = 4.0, zeta: float = 0.02) -> SegmentationCheck:
+    """Write a robot-style recording (joint states with ``noise`` rad and ``resolution`` rad steps, IMU
+    with gravity, no commands, no cycle events) into ``folder`` and analyse it (for the tests and the
+    table of docs/bag_analysis.md)."""
+    from .analyze import Options, analyze
+    from .streams import read_recording
+
+    t, u, a, truth = simulate(cycles=cycles, mode_hz=mode_hz, zeta=zeta, offset=(0.0, 0.0, 9.81))
+    t0 = 1.7e9
+    path = pathlib.Path(folder) / f"noise_{noise:g}_res_{resolution:g}"
+    write_bag(path, t, u, a, t0=t0, joint_names=("shoulder", "elbow"), joint_noise=noise, joint_resolution=resolution)
+    an = analyze(read_recording(path), Options(learners=()))
+    found = len(an.cycles)
+    if found == len(truth.move_starts):
+        se = max(abs(r.start - t0 - s) for r, s in zip(an.cycles, truth.move_starts, strict=True))
+        ee = max(abs(r.motion_end - t0 - e) for r, e in zip(an.cycles, truth.move_ends, strict=True))
+    else:
+        se = ee = float("inf")
+    best = an.recommendation.best if an.recommendation is not None else None
+    return SegmentationCheck(noise, resolution, found, len(truth.move_starts), se, ee,
+                             an.modes[0].hz if an.modes else float("nan"), mode_hz,
+                             best.family if best is not None else "none")

@@ -49,10 +49,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--positions", choices=("auto", "joints", "commands"), default="auto",
                    help="positions whose rest starts the residual window (auto: joint states, else commands)")
     p.add_argument("--settle-tolerance", type=float, default=1e-6,
-                   help="positions within this of their final value are at rest, rad or m (default 1e-6;"
-                        " raise it for measured, noisy joint states)")
+                   help="positions within this of their final value are at rest, rad or m (default 1e-6; raised"
+                        " to 10 x the noise measured in the positions, or 2 encoder steps, when they are noisier)")
     p.add_argument("--band", default="5%", help="settling band: m/s^2, or a percentage of the cycle's peak"
-                                                " (default 5%%)")
+                                                " (default 5%%); at least 6 x the accelerometer noise measured")
     p.add_argument("--remove-mean", choices=("auto", "yes", "no"), default="auto",
                    help="remove each window's mean acceleration (gravity, bias); auto: when the recording"
                         " has a clear offset")
@@ -64,6 +64,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--target", type=float, default=0.05,
                    help="largest acceptable worst-case percentage vibration, fraction (default 0.05)")
     p.add_argument("--sigmas", type=float, default=2.0, help="uncertainty box half-width, standard deviations")
+    p.add_argument("--min-saving", type=float, default=0.2,
+                   help="another shaper replaces the zero-residual default only if it is at least this fraction"
+                        " shorter, 0..1 (default 0.2)")
+    p.add_argument("--motion-threshold", type=float, metavar="SPEED",
+                   help="cycles from the motion: a sample moves above this speed, rad/s or m/s (default: the"
+                        " larger of 1 %% of the top speed and 6 x the speed noise measured in the positions)")
     p.add_argument("--learners", default=",".join(LEARNER_REPLAYS),
                    help=f"learner replays to run, comma-separated, '' for none (known: {','.join(LEARNER_REPLAYS)})")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
@@ -92,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         options = Options(settle_tolerance=args.settle_tolerance, band=args.band, remove_mean=args.remove_mean,
                           segmentation=args.segmentation, positions=args.positions, method=args.method,
                           max_modes=args.max_modes, band_hz=args.band_hz, identify_cycles=args.identify_cycles,
-                          target=args.target, sigmas=args.sigmas,
+                          target=args.target, sigmas=args.sigmas, min_saving=args.min_saving,
+                          motion_threshold=args.motion_threshold,
                           learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
                           learner_params=params)
         rec = read_recording(args.bag, overrides, progress=not args.no_progress and sys.stderr.isatty())

@@ -3,9 +3,11 @@
 It listens to the accelerometer, the joint states and the cycle events, keeps the last
 ``buffer_cycles`` finished cycles (the free decay after each move, measured as
 :class:`~shaper_nodes.core.cycles.CycleMonitor` does everywhere in the suite), and on request
-identifies the modes (:mod:`shaper_nodes.core.identification`), recommends the shortest shaper
-whose worst-case vibration over the modes' uncertainty stays under a target, and can send it
-to the shaper node. The numerics run here, never on the shaper node's real-time path.
+identifies the modes (:mod:`shaper_nodes.core.identification`), recommends a shaper by the rule
+of :mod:`~shaper_nodes.core.identification.recommend` (the shortest that leaves no vibration at the
+modes with its worst case over their uncertainty under a target, unless another within the target
+is at least 20 % shorter; the rule and its figures end the service's message), and can send it to
+the shaper node. The numerics run here, never on the shaper node's real-time path.
 
 Interfaces (names are parameters, see config/identifier.yaml)
 -------------------------------------------------------------
@@ -362,7 +364,7 @@ class IdentifierNode(Node):
         resp.recommended = shaper_to_msg(best.shaper, SOURCE, 0, now)
         resp.success = True
         resp.message = (f"modes {found} from cycles {cycles_used} ({method}); recommended {best.family}"
-                        f" ({best.duration * 1e3:.1f} ms, worst-case V {100 * best.worst_vibration:.2g} %)")
+                        f" ({best.duration * 1e3:.1f} ms, worst-case V {100 * best.worst_vibration:.2g} %); {rec.rule}")
         if req.apply:
             resp.applied, why = await self._apply(resp.recommended)
             resp.message += f"; {'applied' if resp.applied else 'not applied: ' + why}"

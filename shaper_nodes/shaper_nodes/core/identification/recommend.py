@@ -1,9 +1,20 @@
-"""The shaper recommendation: the shortest shaper robust over the identified modes' uncertainty.
+"""The shaper recommendation: a shaper that leaves no vibration at the identified mode, robust over
+its uncertainty, unless another is materially shorter.
 
 For identified modes with one-sigma uncertainties (:mod:`.modes`), every family of the registry
 (except ``none``, ``custom`` and ``zvdn``) is designed on the modes and its percentage vibration
-evaluated over the uncertainty box; the shortest candidate whose worst case stays under the
-target is recommended, and every candidate is returned, shortest first.
+V evaluated at the modes (nominal) and over their uncertainty box (worst case). The rule trades
+delay (the shaper's duration) against residual vibration:
+
+1. the default is the shortest candidate that leaves (near) zero vibration at the identified
+   modes (nominal V <= :data:`ZERO_VIBRATION`) and keeps the worst case over the box within the
+   target: ZV for a well-known mode, ZVD or ZVDD as the uncertainty grows;
+2. another candidate (EI, SI, MZV, ... which leave up to their tolerance at the mode) replaces it
+   only if it is at least ``min_saving`` (:data:`MIN_SAVING`, 20 %) shorter while its worst case
+   also stays within the target;
+3. if no zero-residual candidate meets the target, the shortest candidate that does.
+
+The rule and the figures of the decision are stated in :attr:`Recommendation.rule`.
 """
 
 from __future__ import annotations
@@ -24,7 +35,10 @@ from .record import IdentificationError
 DESIGN_MARGIN = 0.8
 #: families not considered by the recommendation
 EXCLUDED_FAMILIES = ("none", "custom", "zvdn")
-
+#: nominal V (fraction) at or below which a shaper leaves no residual vibration at the mode
+ZERO_VIBRATION = 0.005
+#: fraction of the default's duration another shaper must save to be recommended instead
+MIN_SAVING = 0.2
 
 
 @dataclass(frozen=True)
@@ -57,13 +71,20 @@ class Candidate:
 
 @dataclass(frozen=True)
 class Recommendation:
-    """Candidates shortest first, and the shortest that meets the target (``best``)."""
+    """Candidates shortest first, the one recommended (``best``) and the rule that chose it.
+
+    ``rule`` states the rule with its numbers and the decision (which default, which alternative
+    and how much delay it would save); ``default`` is the zero-residual candidate of the rule
+    (None if none meets the target).
+    """
 
     target: float
     modes: tuple[ModeFit, ...]
     candidates: tuple[Candidate, ...]
     best: Candidate | None
     notes: tuple[str, ...] = ()
+    rule: str = ""
+    default: Candidate | None = None
 
 
 def worst_case_vibration(shaper: Shaper, modes: Sequence[ModeFit], sigmas: float = 2.0,
@@ -94,8 +115,9 @@ def recommend_shaper(
     sigmas: float = 2.0,
     families: Sequence[str] | None = None,
     min_relative_amplitude: float = 0.1,
+    min_saving: float = MIN_SAVING,
 ) -> Recommendation:
-    """Design candidate shapers on the identified modes and pick the shortest robust one.
+    """Design candidate shapers on the identified modes and pick one by the rule of the module.
 
     Parameters
     ----------
@@ -114,12 +136,16 @@ def recommend_shaper(
         covers omega +- sigmas omega_std.
     min_relative_amplitude : float
         See ``modes``.
+    min_saving : float
+        Fraction of the zero-residual default's duration (0..1) another candidate must save to be
+        recommended instead (default :data:`MIN_SAVING`).
 
     Returns
     -------
     Recommendation
-        ``best`` is the shortest candidate whose worst-case V <= target, or None. Families
-        that cannot be designed are left out and named in ``notes``.
+        ``best`` is chosen by the rule of the module (None if no candidate's worst-case V <=
+        target), ``rule`` says how. Families that cannot be designed are left out and named in
+        ``notes``.
     """
     modes = list(modes)
     if not modes:
@@ -130,6 +156,9 @@ def recommend_shaper(
     sigmas = float(sigmas)
     if not (math.isfinite(sigmas) and sigmas >= 0.0):
         raise IdentificationError(f"sigmas must be finite and >= 0, got {sigmas!r}")
+    min_saving = float(min_saving)
+    if not (math.isfinite(min_saving) and 0.0 <= min_saving <= 1.0):
+        raise IdentificationError(f"min_saving must be in [0, 1], got {min_saving!r}")
     top = max(mf.amplitude for mf in modes)
     shaped = tuple(sorted((mf for mf in modes if mf.amplitude >= min_relative_amplitude * top),
                           key=lambda mf: -mf.amplitude))
@@ -152,7 +181,37 @@ def recommend_shaper(
         candidates.append(Candidate(shaper.family, shaper, shaper.duration, nominal, worst, worst <= target))
     # durations equal to 1 us (far below any command period) tie; the more robust comes first
     candidates.sort(key=lambda c: (round(c.duration, 6), c.worst_vibration))
-    best = next((c for c in candidates if c.meets_target), None)
+    best, default, rule = choose(candidates, target, sigmas, min_saving)
     if best is None:
         notes.append(f"no candidate keeps the worst-case vibration under {100 * target:.3g} %")
-    return Recommendation(target, shaped, tuple(candidates), best, tuple(notes))
+    return Recommendation(target, shaped, tuple(candidates), best, tuple(notes), rule, default)
+
+
+def choose(candidates: Sequence[Candidate], target: float, sigmas: float, min_saving: float = MIN_SAVING
+           ) -> tuple[Candidate | None, Candidate | None, str]:
+    """(recommended, zero-residual default, the rule and its decision in words) for ``candidates``
+    sorted shortest first (the rule of the module; ``target`` a fraction, ``sigmas`` the box)."""
+    meeting = [c for c in candidates if c.meets_target]
+    default = next((c for c in meeting if c.nominal_vibration <= ZERO_VIBRATION), None)
+    head = (f"rule: the shortest shaper leaving V <= {100 * ZERO_VIBRATION:g} % at the identified mode and"
+            f" <= {100 * target:g} % over the mode +- {sigmas:g} sigma; another only if it is at least"
+            f" {100 * min_saving:g} % shorter with the same worst case")
+
+    def desc(c: Candidate) -> str:
+        return (f"{c.family} ({1e3 * c.duration:.1f} ms, V {100 * c.nominal_vibration:.2g} % at the mode,"
+                f" {100 * c.worst_vibration:.2g} % worst case)")
+
+    if not meeting:
+        return None, None, f"{head}: no candidate keeps the worst case within {100 * target:g} %"
+    shortest = meeting[0]
+    if default is None:
+        return shortest, None, (f"{head}: no zero-residual shaper keeps the worst case within"
+                                f" {100 * target:g} %, so the shortest that does: {desc(shortest)}")
+    saving = 1.0 - shortest.duration / default.duration if default.duration > 0 else 0.0
+    if shortest is not default and saving >= min_saving:
+        return shortest, default, (f"{head}: {desc(shortest)} saves {100 * saving:.3g} % of the delay of"
+                                   f" {desc(default)}: taken")
+    if shortest is default:
+        return default, default, f"{head}: {desc(default)}, also the shortest within the target"
+    return default, default, (f"{head}: {desc(default)}; the shortest alternative {desc(shortest)} would save"
+                              f" only {100 * saving:.3g} % of the delay")
