@@ -91,7 +91,8 @@ class Services:
         if atomically:
             return [self.call(SetParametersAtomically, f"{node}/set_parameters_atomically",
                               SetParametersAtomically.Request(parameters=list(params))).result]
-        return self.call(SetParameters, f"{node}/set_parameters", SetParameters.Request(parameters=list(params))).results
+        request = SetParameters.Request(parameters=list(params))
+        return self.call(SetParameters, f"{node}/set_parameters", request).results
 
     def close(self) -> None:
         self.ex.shutdown()
