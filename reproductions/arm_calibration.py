@@ -50,7 +50,7 @@ def offline_calibration(config: pathlib.Path) -> Any:
     from shaper_nodes.nodes.calibrate import config_from_values, settings_from_values
     from sim_plant_node.arm.offline import OfflineArm
 
-    v = dict(_flatten(yaml.safe_load(config.read_text())["calibrate"]["ros__parameters"]))
+    v = dict(_flatten(yaml.safe_load(config.read_text())["/**"]["ros__parameters"]))
     for key, default in (("poses", None), ("timeouts.data", 30.0)):
         v.setdefault(key, default)
     cfg = config_from_values(v, None)

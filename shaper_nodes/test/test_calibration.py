@@ -63,7 +63,7 @@ ROUNDED = 0.5 * 10.0 ** (1 - DIGITS) * (1 + 1e-9)
 # --------------------------------------------------------------------------- helpers
 def default_config(**changes) -> PlanConfig:
     """config/calibrate.yaml's plan (its parameters mapped as the node maps them), with ``changes``."""
-    p = yaml.safe_load(CONFIG.read_text())["calibrate"]["ros__parameters"]
+    p = yaml.safe_load(CONFIG.read_text())["/**"]["ros__parameters"]
     k = len(p["grid"]["joints"])
     gains = p["follow"]["gains"]
     follow = {j: gains[i * k:(i + 1) * k] for i, j in enumerate(p["follow"]["joints"])}
@@ -589,8 +589,8 @@ def test_the_report_is_plain_json_and_the_parameter_files_load_as_the_nodes_read
         assert [m["frequency_hz"] for m in pose["modes"]] == pytest.approx([m.hz for m in r.modes], rel=ROUNDED)
 
     doc = yaml.safe_load(scheduler_yaml(cal))
-    assert list(doc) == ["scheduler"] and list(doc["scheduler"]) == ["ros__parameters"]
-    params = doc["scheduler"]["ros__parameters"]
+    assert list(doc) == ["/**"] and list(doc["/**"]) == ["ros__parameters"]  # any node name
+    params = doc["/**"]["ros__parameters"]
     assert params["family"] == "zv" and params["interpolation"] == "modes"
     assert params["rule_names"] == list(params["rules"]) == list(cal.rule_base["rules"])
     numbers = list(params["range"])
@@ -610,7 +610,7 @@ def test_the_report_is_plain_json_and_the_parameter_files_load_as_the_nodes_read
                                    rtol=ROUNDED)
 
     doc = yaml.safe_load(shaper_yaml(cal))
-    shaper = doc["shaper"]["ros__parameters"]["shaper"]
+    shaper = doc["/**"]["ros__parameters"]["shaper"]
     home = cal.results[0]
     assert shaper["family"] == "zv"
     assert shaper["frequencies_hz"] == pytest.approx([m.hz for m in home.modes], rel=ROUNDED)

@@ -26,6 +26,8 @@ import time
 
 import numpy as np
 
+from shaper_nodes.cli.common import survives_closed_pipe
+
 RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/cycle_reports", "/shaper/commands",
             "/forward_position_controller/commands", "/shaper/active_shaper", "/sim_plant/tip_state",
             "/diagnostics"]
@@ -71,6 +73,7 @@ def plot(path: pathlib.Path, traces: dict, offsets: list[float], shapers: list[s
     plt.close(fig)
 
 
+@survives_closed_pipe
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] != ["joint"]:  # the arm story (arm_demo.py); "demo arm ..." is the same

@@ -55,7 +55,6 @@ realtime
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import math
 import time
@@ -66,7 +65,6 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock as RclpyClock
 from rclpy.clock import ClockType
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -82,7 +80,7 @@ from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
 from shaper_nodes.ros.conversions import sec_to_time
-from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.qos import LATCHED
 
@@ -408,7 +406,7 @@ class SimPlantNode(Node):
         task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
                          float(g("task.max_acceleration")), float(g("task.dwell")), self.rate, int(g("task.cycles")),
                          str(g("task.profile")), bool(g("task.round_trip")))
-        with contextlib.suppress(ParameterUninitializedException):
+        if len(g("task.levels")):  # empty (the default): not set
             return StaircaseTask(self._pose("task.start", {}), g("task.levels"), float(g("task.dwell")), self.rate)
         return task
 
@@ -707,7 +705,9 @@ class SimPlantNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(SimPlantNode, "sim_plant", args)
+    return run_node(SimPlantNode, "sim_plant", args, examples=(
+        with_config("sim_plant_node", "sim_plant", "sim_plant.yaml"),
+        "ros2 run sim_plant_node sim_plant --ros-args -p plant.model:=arm -p mode:=realtime",))
 
 
 if __name__ == "__main__":

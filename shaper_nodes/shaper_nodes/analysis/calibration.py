@@ -298,8 +298,9 @@ def _floats(values: Sequence[float]) -> str:
     return "[" + ", ".join(one(x) for x in values) + "]"
 
 
-def scheduler_yaml(cal: Calibration, node: str = "scheduler") -> str:
-    """The scheduler node's parameter file for the calibrated rule base."""
+def scheduler_yaml(cal: Calibration, node: str = "/**") -> str:
+    """The scheduler node's parameter file for the calibrated rule base (keyed ``/**`` by default: it
+    applies whatever the scheduler node is named)."""
     assert cal.rule_base is not None
     spec = cal.rule_base
     lines = [f"# Scheduler rule base from a calibration ({len(cal.results)} poses): ros2 run shaper_nodes scheduler",
@@ -321,8 +322,9 @@ def scheduler_yaml(cal: Calibration, node: str = "scheduler") -> str:
     return "\n".join(lines) + "\n"
 
 
-def shaper_yaml(cal: Calibration, node: str = "shaper") -> str:
-    """The shaper node's parameters for the fallback: the family's shaper on the home pose's modes."""
+def shaper_yaml(cal: Calibration, node: str = "/**") -> str:
+    """The shaper node's parameters for the fallback: the family's shaper on the home pose's modes (keyed
+    ``/**`` by default: it applies whatever the shaper node is named)."""
     assert cal.fallback is not None
     modes = cal.fallback.modes
     return "\n".join([

@@ -25,6 +25,7 @@ from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
 
+from .common import survives_closed_pipe
 from .list_replay import parse_params
 
 
@@ -90,6 +91,7 @@ def _damage_of(path: pathlib.Path) -> list[str]:
         return []
 
 
+@survives_closed_pipe
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:

@@ -22,6 +22,8 @@ from collections.abc import Iterable
 from shaper_nodes.analysis.replay import TOPICS, list_row, replay
 from shaper_nodes.core.learning.list import ListError
 
+from .common import survives_closed_pipe
+
 
 def _value(text: str):
     try:
@@ -47,6 +49,7 @@ def parse_params(items: Iterable[str]) -> dict[str, object]:
     return params
 
 
+@survives_closed_pipe
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="list_replay", description=__doc__.split("\n\n")[0])
     p.add_argument("bag", type=pathlib.Path, help="rosbag2 folder or .mcap file")

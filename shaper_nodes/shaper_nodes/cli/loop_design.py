@@ -29,7 +29,7 @@ import numpy as np
 from shaper_nodes.core.closed_loop import qft
 from shaper_nodes.core.closed_loop import time_delay as td
 
-from .common import Parser, UsageError, number, run, text_table
+from .common import Parser, UsageError, number, run, survives_closed_pipe, text_table
 
 PROG = "loop_design"
 
@@ -431,6 +431,7 @@ COMMANDS = {"tdf-interval": _cmd_tdf_interval, "tdf-step": _cmd_tdf_step, "tdf-s
             "tdf-plot": _cmd_tdf_plot, "qft-table": _cmd_qft_table, "qft-plot": _cmd_qft_plot}
 
 
+@survives_closed_pipe
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input)."""
     return run(PROG, build_parser(), COMMANDS, argv)

@@ -40,7 +40,7 @@ from shaper_nodes.core.shaping import (
     percentage_vibration,
 )
 
-from .common import Parser, UsageError, number, run, text_table
+from .common import Parser, UsageError, number, run, survives_closed_pipe, text_table
 
 #: families compared and plotted when --families is not given
 DEFAULT_FAMILIES = ("zv", "zvd", "zvdd", "mzv", "ei", "2hump_ei", "3hump_ei", "si")
@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     common(p_cmp, repeat_frequency=False)
     p_cmp.add_argument("--families", nargs="+", default=list(DEFAULT_FAMILIES), help="families to compare")
 
-    p_plot = sub.add_parser("plot", help="sensitivity curves (V % against frequency) to a PNG")
+    p_plot = sub.add_parser("plot", help="sensitivity curves (V %% against frequency) to a PNG")
     common(p_plot, repeat_frequency=False)
     p_plot.add_argument("--families", nargs="+", default=list(DEFAULT_FAMILIES), help="families to plot")
     p_plot.add_argument("--out", required=True, help="output image file (.png)")
@@ -289,6 +289,7 @@ def _cmd_plot(args: argparse.Namespace) -> str:
 COMMANDS = {"list": _cmd_list, "show": _cmd_show, "compare": _cmd_compare, "plot": _cmd_plot}
 
 
+@survives_closed_pipe
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input)."""
     return run(PROG, build_parser(), COMMANDS, argv)

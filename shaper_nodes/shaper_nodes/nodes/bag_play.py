@@ -214,7 +214,8 @@ class BagPlayNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(BagPlayNode, "bag_play", args)
+    return run_node(BagPlayNode, "bag_play", args, examples=(
+        "ros2 run shaper_nodes bag_play --ros-args -p bag:=recording -p rate:=2.0",))
 
 
 if __name__ == "__main__":

@@ -55,6 +55,7 @@ from shaper_nodes.analysis.calibration import (
     write_atomic,
     write_outputs,
 )
+from shaper_nodes.cli.common import survives_closed_pipe
 from shaper_nodes.core.calibration import IdentifySettings, Plan, PlanConfig, PlanError, PoseStep, Waypoint
 from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_plan, quintic_time
 from shaper_nodes.core.calibration.plan import approach as plan_approach
@@ -339,8 +340,13 @@ class Calibrator:
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="calibrate", description=__doc__.split("\n\n")[0],
-                                epilog="Parameters: --ros-args --params-file FILE (see config/calibrate.yaml).")
+    from shaper_nodes.ros.node_main import parameter_help
+
+    epilog = ("ROS arguments follow --ros-args: --params-file FILE (see config/calibrate.yaml), -p NAME:=VALUE.\n\n"
+              + parameter_help({"": PARAMETERS}) + "\nExample:\n  ros2 run shaper_nodes calibrate --ros-args"
+              " --params-file $(ros2 pkg prefix shaper_nodes)/share/shaper_nodes/config/calibrate.yaml\n")
+    p = argparse.ArgumentParser(prog="calibrate", description=__doc__.split("\n\n")[0], epilog=epilog,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--execute", action="store_true", help="move the robot through the plan (default: print it)")
     p.add_argument("--resume", action="store_true", help="continue the calibration in --out from its last"
                    " completed pose (with --execute)")
@@ -373,6 +379,7 @@ def summary(cal: Any) -> None:
         print(f"  note: {n}")
 
 
+@survives_closed_pipe
 def main(args: list[str] | None = None) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -398,6 +405,8 @@ def main(args: list[str] | None = None) -> int:
     try:
         declare_all(node, PARAMETERS)
         v = values(node, PARAMETERS)
+        if not v["joint_names"]:
+            raise PlanError("parameter joint_names is required: the controller's joints (see config/calibrate.yaml)")
         cal = Calibrator(node, executor, v)
         return _run(cal, v, opts)
     except KeyboardInterrupt:

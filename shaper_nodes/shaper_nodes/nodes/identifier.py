@@ -61,7 +61,7 @@ from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
-from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, topics
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
 from shaper_nodes.ros.shaper_client import ShaperClient
@@ -378,7 +378,8 @@ class IdentifierNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(IdentifierNode, "identifier", args)
+    return run_node(IdentifierNode, "identifier", args, examples=(
+        with_config("shaper_nodes", "identifier", "identifier.yaml"),))
 
 
 if __name__ == "__main__":

@@ -56,7 +56,7 @@ from shaper_nodes.core.learning.samples import MAX_CYCLE_DURATION
 from shaper_nodes.core.learning.state_file import load_state, write_atomic
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
-from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all
 from shaper_nodes.ros.shaper_client import ShaperClient, wait_for
 
@@ -229,7 +229,13 @@ class LearnerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(LearnerNode, "learner", args)
+    from . import learner_list, learner_mrilc
+
+    return run_node(LearnerNode, "learner", args, tables={
+        "every mode": PARAMETERS, "mode list": learner_list.PARAMETERS, "mode mrilc": learner_mrilc.PARAMETERS},
+        examples=(
+        with_config("shaper_nodes", "learner", "learner.yaml"),
+        with_config("shaper_nodes", "learner", "mrilc.yaml")))
 
 
 if __name__ == "__main__":

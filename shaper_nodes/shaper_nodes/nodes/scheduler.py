@@ -67,8 +67,8 @@ from shaper_nodes.core.scheduling import FuzzyError, Interpolation, RateLimit, S
 from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
-from shaper_nodes.ros.node_main import run_node
-from shaper_nodes.ros.parameters import Spec, declare_all, describe, values
+from shaper_nodes.ros.node_main import run_node, with_config
+from shaper_nodes.ros.parameters import Spec, declare_all, values
 from shaper_nodes.ros.qos import LATCHED
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 
@@ -168,9 +168,11 @@ class SchedulerNode(Node):
         rules: dict[str, dict[str, Any]] = {}
         for name in v["rule_names"] or []:
             rules[name] = {}
-            for fld, typ in RULE_FIELDS.items():
-                self.declare_parameter(f"rules.{name}.{fld}", typ, describe(f"Rule {name}: {fld}.", read_only=True))
-                rules[name][fld] = values(self, [f"rules.{name}.{fld}"])[f"rules.{name}.{fld}"] or []
+            fields = [Spec(f"rules.{name}.{fld}", None, f"Rule {name}: {fld}.", read_only=True, type=typ)
+                      for fld, typ in RULE_FIELDS.items()]
+            declare_all(self, fields)
+            for fld, value in values(self, fields, f"rules.{name}.").items():
+                rules[name][fld] = list(value or [])
         spec = {"premises": list(v["premises"] or []), "rules": rules, "range": list(v["range"] or []),
                 "max_damping": float(v["max_damping"])}
         try:
@@ -368,7 +370,8 @@ def _estimate(interp: Interpolation, stamp: Any) -> ModeEstimate:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(SchedulerNode, "scheduler", args)
+    return run_node(SchedulerNode, "scheduler", args, examples=(
+        with_config("shaper_nodes", "scheduler", "scheduler.yaml"),))
 
 
 if __name__ == "__main__":

@@ -115,7 +115,7 @@ from shaper_nodes.ros.conversions import (
 )
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
-from shaper_nodes.ros.node_main import run_node
+from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED
@@ -668,7 +668,10 @@ def _tune_interpreter() -> None:
 
 def main(args: list[str] | None = None) -> int:
     _tune_interpreter()
-    return run_node(ShaperNode, "shaper_node", args)
+    return run_node(ShaperNode, "shaper_node", args, examples=(
+        with_config("shaper_nodes", "shaper_node", "shaper.yaml"),
+        with_config("shaper_nodes", "shaper_node", "shaper.yaml",
+                    "-r __node:=left_arm_shaper -p shaper.family:=zvd -p shaper.frequency_hz:=8")))
 
 
 if __name__ == "__main__":

@@ -1,32 +1,144 @@
-"""The Jazzy ``main`` of every node of the suite, written once."""
+"""The Jazzy ``main`` of every node of the suite, written once, and the nodes' ``--help``.
+
+``run_node`` answers ``-h``/``--help`` (among the arguments before ``--ros-args``) with the
+node's usage, generated from its module docstring and its parameter tables, without starting
+anything: no ``rclpy.init``, no file written. A configuration error (a missing or invalid
+parameter) ends the node with one line on stderr and exit status 1, no traceback.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import json
+import re
+import sys
+import textwrap
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
+from shaper_nodes.cli.common import quiet_closed_pipe
+
+#: what ``run_node`` returns when the node's configuration is refused
+EXIT_CONFIG = 1
+#: width of the --help text
+WIDTH = 100
 
 
-def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
+def with_config(package: str, executable: str, config: str, extra: str = "") -> str:
+    """A ``ros2 run`` line that starts ``executable`` with the package's shipped config file ``config``."""
+    return (f"ros2 run {package} {executable} --ros-args --params-file"
+            f" $(ros2 pkg prefix {package})/share/{package}/config/{config}{' ' + extra if extra else ''}")
+
+
+def wants_help(argv: Sequence[str]) -> bool:
+    """Whether ``-h`` or ``--help`` is among the arguments before ``--ros-args`` (``argv[0]`` is the
+    program); what follows ``--ros-args`` is ROS's."""
+    args = list(argv[1:])
+    if "--ros-args" in args:
+        args = args[:args.index("--ros-args")]
+    return "-h" in args or "--help" in args
+
+
+def yaml_value(value: Any) -> str:
+    """A parameter value as a params file or ``-p name:=value`` writes it."""
+    if isinstance(value, str):
+        return value if value and re.fullmatch(r"[A-Za-z_/~][\w/~.\-]*", value) else json.dumps(value)
+    if isinstance(value, float):
+        return repr(value) if value == value and abs(value) != float("inf") else (
+            ".nan" if value != value else ("-.inf" if value < 0 else ".inf"))
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(yaml_value(v) for v in value) + "]"
+    return json.dumps(value)
+
+
+def parameter_help(tables: Mapping[str, Iterable[Any]]) -> str:
+    """The parameters of ``tables`` (heading -> tuple of :class:`~shaper_nodes.ros.parameters.Spec`):
+    name, type, default, range or choices, read-only, and description, one entry each."""
+    from shaper_nodes.ros.parameters import TYPE_NAMES
+
+    out: list[str] = []
+    for heading, table in tables.items():
+        out.append(f"Parameters{' (' + heading + ')' if heading else ''}:")
+        for spec in table:
+            facts = [TYPE_NAMES[spec.param_type],
+                     "default " + ("[] (empty: not set)" if spec.default is None else yaml_value(spec.default))]
+            if spec.range is not None:
+                lo, hi = spec.range
+                facts.append(f"range [{lo:g}, {hi:g}]")
+            if spec.read_only:
+                facts.append("read-only")
+            out.append(f"  {spec.name} ({', '.join(facts)})")
+            text = spec.description + (" One of: " + ", ".join(spec.choices) + "." if spec.choices else "")
+            out.extend(textwrap.wrap(text, WIDTH, initial_indent=" " * 6, subsequent_indent=" " * 6))
+        out.append("")
+    return "\n".join(out)
+
+
+def node_help(module: Any, executable: str, tables: Mapping[str, Iterable[Any]],
+              examples: Sequence[str] = ()) -> str:
+    """The ``--help`` text of node ``executable`` defined in ``module``."""
+    package = module.__name__.split(".")[0]
+    first = next(iter(next(iter(tables.values()), ())), None)
+    doc = (module.__doc__ or "").strip().replace("``", "")
+    specs = [s for table in tables.values() for s in table]
+    topics = [s for s in specs if s.name.startswith("topics.") or s.name == "topics"]
+    lines = [f"usage: ros2 run {package} {executable} [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE]...",
+             "                                [-r FROM:=TO]... [-r __node:=NAME] [-r __ns:=NAMESPACE]]", "",
+             doc, ""]
+    if topics:
+        lines.append("Topics (the parameters naming them; or remap with -r FROM:=TO):")
+        lines += [f"  {s.name} = {yaml_value(s.default)}" for s in topics]
+        lines.append("")
+    lines.append(parameter_help(tables))
+    lines.append("A params file keyed '/**:' (as the shipped config files are) applies whatever the node is")
+    lines.append("named; numbers may be written as integers where a double is declared (5 is 5.0).")
+    lines.append("")
+    lines.append("Examples:")
+    examples = list(examples) or [f"ros2 run {package} {executable} --ros-args --params-file my_{executable}.yaml"]
+    if first is not None and first.default is not None:
+        examples.append(f"ros2 run {package} {executable} --ros-args -p {first.name}:={yaml_value(first.default)!s}"
+                        f" -r __node:=my_{executable}")
+    lines += [f"  {e}" for e in examples]
+    return "\n".join(lines) + "\n"
+
+
+def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = None, *,
+             tables: Mapping[str, Iterable[Any]] | None = None, examples: Sequence[str] = ()) -> int:
     """init, spin until Ctrl-C or shutdown, then close, destroy and shut down.
 
+    With ``-h``/``--help`` before ``--ros-args``, print the node's usage (its module docstring,
+    ``tables`` or the module's ``PARAMETERS``, ``examples``) and return 0 without starting it.
+
     A configuration error (``ValueError`` or ``OSError`` such as ``FileExistsError`` from the
-    constructor) is printed as ``name: message`` and gives exit code 1. A node with a ``close()``
-    method gets it called before it is destroyed. A node that sets ``exit_code`` (and
-    ``exit_reason``) ends with that code, the reason printed as ``name: reason``.
+    constructor, or a parameter rclpy refuses) is printed on stderr as ``name: message`` and gives
+    exit code 1. A node with a ``close()`` method gets it called before it is destroyed. A node that
+    sets ``exit_code`` (and ``exit_reason``) ends with that code, the reason printed as
+    ``name: reason``.
     """
-    rclpy.init(args=args)
+    argv = list(sys.argv if args is None else args)
+    if wants_help(argv):
+        module = sys.modules[factory.__module__]
+        text = node_help(module, name, tables or {"": getattr(module, "PARAMETERS", ())}, examples)
+        return quiet_closed_pipe(lambda: print(text, end="", flush=True) or 0)
+
+    import rclpy
+    from rclpy.exceptions import ParameterException
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=argv)
     node = None
     try:
         node = factory()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ValueError, OSError) as err:
-        print(f"{name}: {err}", flush=True)
-        return 1
+    except (ValueError, OSError, ParameterException) as err:
+        message = " ".join(str(err).split())
+        print(f"{name}: {message}", file=sys.stderr, flush=True)
+        return EXIT_CONFIG
+    except Exception:
+        if not rclpy.ok():  # a signal shut the context down while the node was being made: as Ctrl-C
+            return 0
+        raise
     finally:
         if node is not None:
             close = getattr(node, "close", None)
@@ -36,5 +148,5 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
         rclpy.try_shutdown()
     code = int(getattr(node, "exit_code", 0) or 0)
     if code:
-        print(f"{name}: {getattr(node, 'exit_reason', '') or 'failed'}", flush=True)
+        print(f"{name}: {getattr(node, 'exit_reason', '') or 'failed'}", file=sys.stderr, flush=True)
     return code
