@@ -175,7 +175,7 @@ def test_unknown_types_are_noted_and_empty_or_wrong_bags_are_refused(tmp_path):
     with pytest.raises(BagError, match="no recording"):
         read_recording(tmp_path / "missing")
     (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
-    with pytest.raises(BagError, match=r"bad magic|not an MCAP"):
+    with pytest.raises(BagError, match=r"not an MCAP file"):
         read_recording(tmp_path / "junk.mcap")
     with pytest.raises(BagError, match="--accel-topic /nope"):
         read_recording(tmp_path / "ok", {"accel": "/nope"})
@@ -190,8 +190,14 @@ def test_cli_writes_the_report_folder_and_json(robot_bag, tmp_path, capsys):
     assert len(doc["cycles"]) == 6 and doc["modes"][0]["frequency_hz"] == pytest.approx(MODE_HZ, rel=0.02)
     assert doc["recommendation"]["family"] and doc["replays"]["list"]["rows"][0]["action"] == "reference"
     for name in ("report.md", "cycles.csv", "modes.csv", "candidates.csv", "replay_list.csv", "summary.json",
-                 "traces.png", "spectrum.png", "sensitivity.png", "learning.png"):
+                 "traces.png", "spectrum.png", "sensitivity.png"):
         assert (out / name).stat().st_size > 0, name
+    # the recording ran unshaped: LIST takes its first cycle as the reference and learns from no other, so
+    # there is no learning curve, and the report says why
+    learned = [r for r in doc["replays"]["list"]["rows"] if "skipped" not in r]
+    assert len(learned) < 2 and not (out / "learning.png").exists()
+    assert f"the LIST replay made {len(learned)} update(s): a learning curve needs two or more" in (
+        out / "report.md").read_text()
     assert json.loads((out / "summary.json").read_text()) == doc
     assert "| # | cycle | RMS" in (out / "report.md").read_text()
 
@@ -518,3 +524,215 @@ def test_the_recommendation_keeps_zv_for_a_well_known_mode_and_prints_its_rule(r
     doc = json.loads(capsys.readouterr().out)
     shortest = min((c for c in doc["candidates"] if c["meets_target"]), key=lambda c: c["duration_s"])
     assert doc["recommendation"]["family"] == shortest["family"] and "0 %" in doc["rule"]
+
+
+# ------------------------------------------------------------------------------ bounded reading
+def _mcap_with_one_chunk(path, payload: bytes, compression: str) -> None:
+    """A closed MCAP file whose single chunk holds one message of ``payload`` (written by mcap's writer)."""
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+
+    kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}[compression]
+    with open(path, "wb") as f:
+        w = McapWriter(f, compression=kind, chunk_size=len(payload) + 1024)
+        w.start()
+        sid = w.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        cid = w.register_channel("/blob", "cdr", sid)
+        w.add_message(cid, 1, payload, 1)
+        w.finish()
+
+
+@pytest.fixture()
+def no_inflation(monkeypatch):
+    """Count every chunk inflated (through reading.inflate, which the record scan and rosbags both use)."""
+    from shaper_nodes.analysis import reading
+
+    calls: list[int] = []
+    real = reading.inflate
+
+    def counted(data, compression, declared):
+        calls.append(declared)
+        return real(data, compression, declared)
+
+    monkeypatch.setattr(reading, "inflate", counted)
+    return calls
+
+
+def test_a_huge_metadata_yaml_is_refused_before_it_is_parsed(robot_bag, tmp_path):
+    folder = tmp_path / "huge_meta"
+    folder.mkdir()
+    mcap = next(robot_bag[0].glob("*.mcap"))
+    (folder / mcap.name).write_bytes(mcap.read_bytes())
+    with open(folder / "metadata.yaml", "wb") as f:  # 109 MiB, sparse: made at once
+        f.write(b"rosbag2_bagfile_information:\n  version: 9\n")
+        f.truncate(109 * 2**20)
+    with pytest.raises(BagError, match=r"metadata.yaml is 109 MiB, beyond the limit of 16 MiB"):
+        read_recording(folder)
+    text = bag_analysis_cli_output_err([str(folder), "--no-progress"])
+    assert "metadata.yaml is 109 MiB, beyond the limit of 16 MiB" in text
+    # a larger limit, asked for, lets it through to the parser (which finds it broken: NUL bytes)
+    assert "beyond the limit" not in bag_analysis_cli_output_err([str(folder), "--max-metadata-mib", "200"])
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_a_chunk_declaring_a_huge_size_is_refused_before_it_is_inflated(tmp_path, compression, no_inflation):
+    path = tmp_path / "bomb.mcap"
+    _mcap_with_one_chunk(path, b"\x00\x01\x00\x00" + b"\x00" * 32 * 1024, compression)
+    data = bytearray(path.read_bytes())
+    ((start, _),) = mcap_chunks(bytes(data))
+    struct.pack_into("<Q", data, start + 9 + 16, 3_435_973_837)  # the declared uncompressed size: 3.2 GiB
+    path.write_bytes(bytes(data))
+    with pytest.raises(BagError, match=rf"chunk at offset {start} declares 3.2 GiB uncompressed, beyond the limit"
+                                       r" of 256 MiB \(not inflated"):
+        read_recording(path)
+    with pytest.raises(BagError, match=rf"chunk at offset {start} declares 3.2 GiB"):
+        Bag(path, recover=True)  # the record scan refuses it too
+    assert no_inflation == []
+
+
+def test_a_zip_bomb_chunk_is_refused_by_its_compression_ratio(tmp_path, no_inflation):
+    from shaper_nodes.analysis.reading import ReadLimits
+
+    path = tmp_path / "zeros.mcap"
+    _mcap_with_one_chunk(path, bytes(64 * 2**20), "zstd")  # 64 MiB of zeros: a few kB compressed
+    assert path.stat().st_size < 2**20
+    with pytest.raises(BagError, match=r"declares 64 MiB uncompressed from .* of zstd data, a ratio of \d+ beyond"
+                                       r" the limit of 1000 \(not inflated\)"):
+        read_recording(path)
+    with pytest.raises(BagError, match=r"declares 64 MiB uncompressed, beyond the limit of 16 MiB"):
+        read_recording(path, limits=ReadLimits(chunk_bytes=16 * 2**20, compression_ratio=1e6))
+    assert no_inflation == []
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_inflation_stops_at_the_size_a_chunk_declares(compression):
+    import lz4.frame
+    import zstandard
+
+    from shaper_nodes.analysis.reading import ChunkTooLarge, _bound_rosbags_decompressors, inflate
+
+    data = bytes(8 * 2**20)
+    packed = zstandard.compress(data) if compression == "zstd" else lz4.frame.compress(data)
+    assert inflate(packed, compression, len(data)) == data
+    with pytest.raises(ChunkTooLarge, match="inflates beyond the 4096 bytes the chunk declares"):
+        inflate(packed, compression, 4096)
+    _bound_rosbags_decompressors()  # what rosbags' reader inflates with, once a Bag has opened one
+    from rosbags.rosbag2 import storage_mcap
+
+    with pytest.raises(ChunkTooLarge):
+        storage_mcap.DECOMPRESSORS[compression](packed, 4096)
+
+
+def test_a_file_cut_anywhere_says_it_was_not_closed(robot_bag, tmp_path):
+    data = next(robot_bag[0].glob("*.mcap")).read_bytes()
+    chunks = mcap_chunks(data)
+    texts = {}
+    for cut in (0, 5, 8, 20, chunks[0][0] + 100, chunks[1][0] + 4000, len(data) - 10):
+        path = tmp_path / f"cut_{cut}.mcap"
+        path.write_bytes(data[:cut])
+        try:
+            rec = read_recording(path)
+            texts[cut] = " ".join(rec.notes) + " " + " ".join(d.reason for d in rec.damage)
+        except BagError as err:
+            texts[cut] = str(err)
+        assert "not an MCAP" not in texts[cut] and "empty bag" not in texts[cut], texts[cut]
+        assert "not closed" in texts[cut] or "cut inside" in texts[cut], texts[cut]
+    assert "is empty (0 bytes): recording not closed" in texts[0]
+    assert "ends after 5 of the 8 bytes of the MCAP magic" in texts[5]
+    assert "nothing readable before the damage" in texts[20]
+    assert "recording not closed (no summary/footer): 0 complete chunk(s)" in texts[chunks[0][0] + 100]
+    assert "recording not closed (no summary/footer): 1 complete chunk(s)" in texts[chunks[1][0] + 4000]
+
+
+def test_random_bytes_are_not_an_mcap_file(tmp_path):
+    path = tmp_path / "noise.mcap"
+    path.write_bytes(np.random.default_rng(1).bytes(4096))
+    with pytest.raises(BagError, match=r"not an MCAP file \(its first bytes are [0-9a-f ]+, the MCAP magic is"
+                                       r" 89 4d 43 41 50 30 0d 0a\)"):
+        read_recording(path)
+
+
+def bag_analysis_cli_output_err(argv: list[str]) -> str:
+    """What the CLI prints on stderr (it exits 2 here: the recording is refused)."""
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert bag_analysis_cli.main(argv) == 2
+    return err.getvalue()
+
+
+# ------------------------------------------------------------------------------ figures
+def _traces_drawn(ax) -> list:
+    """The cycle traces of a traces panel (its vertical window markers have two points)."""
+    return [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 2]
+
+
+def _vertical_lines_at(ax) -> list[float]:
+    return [float(ln.get_xdata()[0]) for ln in ax.get_lines()
+            if len(ln.get_xdata()) == 2 and ln.get_xdata()[0] == ln.get_xdata()[1]]
+
+
+def test_figures_of_three_plants_are_per_group_on_a_log_band_around_the_modes(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from shaper_nodes.analysis.report import MAX_TRACES_PER_PANEL, figures, write_report
+
+    t, u, a, _truths = simulate_plants((3.5, 5.0, 6.5), cycles=4)
+    write_bag(tmp_path / "plants", t, u, a, joint_noise=1e-5)
+    an = analyze(read_recording(tmp_path / "plants"), Options())
+    assert len(an.groups) == 3
+    figs = figures(an)
+    try:
+        panels = [ax for ax in figs["traces.png"].axes if _traces_drawn(ax)]
+        assert len(panels) == 3  # one traces panel per group, its cycles only
+        for ax, g in zip(panels, an.groups, strict=True):
+            assert len(_traces_drawn(ax)) == len(g.rows) <= MAX_TRACES_PER_PANEL
+            assert ax.get_title(loc="left").startswith(g.label)
+        spec, sens = figs["spectrum.png"].axes
+        assert spec.get_xscale() == "log" and sens.get_xscale() == "log"
+        hz = sorted(m.hz for g in an.groups for m in g.modes)
+        lo, hi = spec.get_xlim()
+        assert lo == pytest.approx(0.2 * hz[0], rel=1e-6)
+        assert hi == pytest.approx(min(5 * hz[-1], an.spectrum[0][-1]), rel=1e-6)
+        for f in hz:  # every group's mode marked on both panels
+            assert any(abs(x - f) < 1e-9 for x in _vertical_lines_at(spec))
+            assert any(abs(x - f) < 1e-9 for x in _vertical_lines_at(sens))
+        curves = [ln for ln in sens.get_lines() if len(ln.get_xdata()) > 2]
+        assert len(curves) == 3  # each group's recommended shaper's V(f)
+        for ln, g in zip(curves, an.groups, strict=True):  # each V(f) is near zero at its group's mode
+            f, v = np.asarray(ln.get_xdata()), np.asarray(ln.get_ydata())
+            assert v[np.argmin(abs(f - g.modes[0].hz))] < 100 * an.options.target
+        tolerance = [ln for ln in sens.get_lines() if list(ln.get_ydata()) == [100 * an.options.target] * 2]
+        assert tolerance
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+    write_report(an, tmp_path / "report")
+    for name in ("traces.png", "spectrum.png", "sensitivity.png"):
+        assert (tmp_path / "report" / name).stat().st_size > 0
+
+
+def test_one_plant_traces_are_capped_and_there_is_no_learning_figure_without_learning(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from shaper_nodes.analysis.report import MAX_TRACES_PER_PANEL, figures, write_report
+
+    t, u, a, _ = simulate(cycles=MAX_TRACES_PER_PANEL + 4, mode_hz=MODE_HZ, zeta=ZETA)
+    write_bag(tmp_path / "one", t, u, a)
+    an = analyze(read_recording(tmp_path / "one"), Options(learners=(), band_hz=(1.0, 30.0)))
+    figs = figures(an)
+    try:
+        (panel,) = [ax for ax in figs["traces.png"].axes if _traces_drawn(ax)]
+        assert len(_traces_drawn(panel)) == MAX_TRACES_PER_PANEL
+        assert f"{MAX_TRACES_PER_PANEL} of {MAX_TRACES_PER_PANEL + 4} cycles" in panel.get_title(loc="left")
+        spec = figs["spectrum.png"].axes[0]
+        assert spec.get_xscale() == "log" and spec.get_xlim() == pytest.approx((1.0, 30.0))  # the band asked for
+        assert not any(name.startswith("learning") for name in figs)
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+    write_report(an, tmp_path / "report")
+    assert not list((tmp_path / "report").glob("learning*.png"))
+    assert "No learning plot: no learner replay was asked for" in (tmp_path / "report" / "report.md").read_text()

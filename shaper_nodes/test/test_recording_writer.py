@@ -167,7 +167,8 @@ def test_the_reader_reports_the_bound_of_a_killed_recording(tmp_path):
     with Bag(tmp_path / "bag") as bag:
         (d,) = bag.damage
         assert d.heartbeat is not None and d.heartbeat.written == {"/imu": 120}
-        assert d.loss is not None and d.loss.seconds == pytest.approx(3600.0)
+        # the flush period, plus the last flush's duration as measured on the wall clock (ms; more under load)
+        assert d.loss is not None and 3600.0 <= d.loss.seconds < 3601.0
         assert d.data_end == d.heartbeat.stamp_ns
         text = describe_damage(d)
         assert "120 messages read" in text and "had written everything it received until" in text

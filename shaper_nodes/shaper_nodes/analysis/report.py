@@ -3,11 +3,14 @@
 The folder holds ``report.md`` (everything, with the plots), ``cycles.csv`` (one row per cycle),
 ``modes.csv``, ``candidates.csv`` (every shaper family designed on the modes), one CSV per
 learner replay, ``summary.json`` (what ``--json`` prints) and the plots: ``traces.png``
-(per-cycle acceleration overlaid, from each cycle's start, the residual windows marked),
-``spectrum.png`` (with the identified modes), ``sensitivity.png`` (V against frequency of the
-recommended and the recorded shapers, the identified band shaded), ``learning.png``
-(LIST's M and parameters per cycle) and ``learning_mrilc.png`` (MRILC's RMS(e), RMS(u1) and
-RMS(u2) per iteration).
+(one panel per group of cycles, i.e. per plant, payload or pose, at most
+:data:`MAX_TRACES_PER_PANEL` cycles overlaid in each, from each cycle's start, the residual
+windows marked), ``spectrum.png`` (log frequency axis over the band around the identified modes,
+which are marked, and below it V(f) of the recommended and the active shapers with the
+tolerance), ``sensitivity.png`` (V against frequency of the recommended and the recorded shapers
+near the first mode, its band shaded), and, only when a learner replay made two or more updates,
+``learning.png`` (LIST's M and parameters per cycle) and ``learning_mrilc.png`` (MRILC's RMS(e),
+RMS(u1) and RMS(u2) per iteration); report.md says why there is no learning plot otherwise.
 """
 
 from __future__ import annotations
@@ -256,10 +259,18 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
                           f" {row['t2_next']:.5f} |")
         md.append("")
     if plots:
-        md += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+        md += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""] + _no_learning_plot(an)
     if an.notes:
         md += ["## Notes", ""] + [f"- {n}" for n in an.notes] + [""]
     return "\n".join(md)
+
+
+def _no_learning_plot(an: Analysis) -> list[str]:
+    """Why the report has no learning plot (nothing when it has one)."""
+    curves, mrilc, why = learning_curves(an)
+    if curves or mrilc:
+        return []
+    return ["No learning plot: " + "; ".join(why or ["no learner update"]) + ".", ""]
 
 
 def _groups_markdown(groups: list[dict]) -> list[str]:
@@ -277,66 +288,213 @@ def _groups_markdown(groups: list[dict]) -> list[str]:
     return [*md, ""]
 
 
-def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
+#: most cycles overlaid in one traces panel (evenly spread over the group when it has more)
+MAX_TRACES_PER_PANEL = 8
+#: the spectrum's band around the identified modes: from this fraction of the lowest ...
+SPECTRUM_LOW = 0.2
+#: ... to this multiple of the highest
+SPECTRUM_HIGH = 5.0
+
+
+def learning_curves(an: Analysis) -> tuple[dict[str, list[dict]], dict[str, list[dict]], list[str]]:
+    """The LIST and MRILC learning curves worth a plot (two or more updates), and why others are not plotted."""
+    curves: dict[str, list[dict]] = {}
+    mrilc: dict[str, list[dict]] = {}
+    why: list[str] = []
+    if not an.replays:
+        why.append("no learner replay was asked for (--learners '')")
+    for name, rep in an.replays.items():
+        rows = [r for r in rep.rows if "skipped" not in r]
+        if len(rows) < 2:
+            skipped = [r["skipped"] for r in rep.rows if "skipped" in r]
+            because = (f"{len(skipped)} cycle(s) not learned from: {skipped[0]}" if skipped else
+                       "; ".join(rep.notes))
+            why.append(f"the {name.upper()} replay made {len(rows)} update(s): a learning curve needs two or more"
+                       + (f" ({because})" if because else ""))
+        elif "rms_e" in rows[0]:
+            mrilc[name] = rows
+        elif "M" in rows[0]:
+            curves[name] = rows
+    return curves, mrilc, why
+
+
+def figures(an: Analysis) -> dict[str, object]:
+    """The report's figures, file name -> matplotlib Figure (not saved; the caller closes them)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    files = [_plot_traces(plt, an, out)]
+    figs: dict[str, object] = {"traces.png": _plot_traces(plt, an)}
     if an.spectrum is not None:
-        files.append(_plot_spectrum(plt, an, an.spectrum, out))
+        figs["spectrum.png"] = _plot_spectrum(plt, an, an.spectrum)
     rcm = an.recommendation
     if an.modes and rcm is not None and rcm.best is not None:
-        files.append(_plot_sensitivity(plt, an, rcm.best.shaper, rcm.target, out))
-    curves = {name: [r for r in rep.rows if "skipped" not in r and "M" in r] for name, rep in an.replays.items()}
-    mrilc = {name: [r for r in rep.rows if "skipped" not in r and "rms_e" in r] for name, rep in an.replays.items()}
-    if any(mrilc.values()):
-        files.append(_plot_mrilc_learning(plt, mrilc, out))
-    if any(curves.values()):
-        files.append(_plot_list_learning(plt, curves, out))
-    return files
+        figs["sensitivity.png"] = _plot_sensitivity(plt, an, rcm.best.shaper, rcm.target)
+    curves, mrilc, _why = learning_curves(an)
+    if mrilc:
+        figs["learning_mrilc.png"] = _plot_mrilc_learning(plt, mrilc)
+    if curves:
+        figs["learning.png"] = _plot_list_learning(plt, curves)
+    return figs
 
 
-def _plot_traces(plt, an: Analysis, out: pathlib.Path) -> pathlib.Path:
-    """traces.png: the per-cycle acceleration (m/s^2) on its most varying axis, overlaid, coloured by shaper."""
+def _plots(an: Analysis, out: pathlib.Path) -> list[pathlib.Path]:
+    return [_save(fig, out / name) for name, fig in figures(an).items()]
+
+
+def _trace_panels(an: Analysis) -> list[tuple[str, list[int]]]:
+    """(title, rows of the cycles drawn) per traces panel: one per group of cycles, at most
+    :data:`MAX_TRACES_PER_PANEL` cycles each, evenly spread."""
+    groups = [(f"{g.label}", list(g.rows)) for g in an.groups] or [("all cycles", list(range(len(an.cycles))))]
+    grouped = {i for _, rows in groups for i in rows}
+    rest = [i for i in range(len(an.cycles)) if i not in grouped]
+    if rest:
+        groups.append(("cycles with no mode identified", rest))
+    panels = []
+    for title, rows in groups:
+        drawn = rows if len(rows) <= MAX_TRACES_PER_PANEL else [
+            rows[int(round(k))] for k in np.linspace(0, len(rows) - 1, MAX_TRACES_PER_PANEL)]
+        shown = (f"{len(rows)} cycles" if len(drawn) == len(rows) else
+                 f"{len(drawn)} of {len(rows)} cycles (evenly spread)")
+        panels.append((f"{title}: {shown}", drawn))
+    return panels
+
+
+def _plot_traces(plt, an: Analysis):
+    """traces.png: one panel per group of cycles (plant, payload or pose), the acceleration (m/s^2) on its
+    most varying axis from each cycle's start, at most :data:`MAX_TRACES_PER_PANEL` cycles overlaid; coloured
+    by shaper when the panel's cycles ran several (unshaped against shaped at a glance), else by cycle
+    (light to dark from early to late); each residual window's start dotted."""
     axis = int(np.argmax(np.nanvar(an.recording.accel.values, axis=0)))
-    fig, ax = plt.subplots(figsize=(10, 4))
-    labels = sorted({r.shaper for r in an.cycles})
-    colors = {lab: plt.cm.tab10(i % 10) for i, lab in enumerate(labels)}
-    shown = set()
-    for (t, a), r in zip(an.traces, an.cycles, strict=True):
-        if t.size:
-            ax.plot(t, a[:, axis], lw=0.6, color=colors[r.shaper], alpha=0.8,
-                    label=None if r.shaper in shown else r.shaper)
-            shown.add(r.shaper)
-            ax.axvline(r.window_start - r.start, color=colors[r.shaper], lw=0.5, ls=":")
-    ax.set_xlabel("time from cycle start (s); dotted: start of the residual window")
-    ax.set_ylabel(f"acceleration, axis {'xyz'[axis] if axis < 3 else axis} (m/s²)")
-    ax.set_title(f"{len(an.cycles)} cycles overlaid", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper right")
-    return _save(fig, out / "traces.png")
+    panels = _trace_panels(an)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.2 + 2.2 * len(panels)), squeeze=False, sharex=True)
+    for ax, (title, rows) in zip(axes[:, 0], panels, strict=True):
+        shapers = list(dict.fromkeys(an.cycles[i].shaper for i in rows))
+        by_shaper = len(shapers) > 1
+        shown: set[str] = set()
+        for k, i in enumerate(rows):
+            t, a = an.traces[i]
+            r = an.cycles[i]
+            if not t.size:
+                continue
+            if by_shaper:
+                color = plt.get_cmap("tab10")(shapers.index(r.shaper) % 10)
+                n = sum(an.cycles[j].shaper == r.shaper for j in rows)
+                label = None if r.shaper in shown else f"{r.shaper} ({n} cycle{'s' if n > 1 else ''})"
+                shown.add(r.shaper)
+            else:
+                color = plt.get_cmap("viridis")(0.85 * k / max(len(rows) - 1, 1))
+                label = f"#{i}" + ("" if r.shaper in ("", "unknown") else f" {r.shaper}")
+            ax.plot(t, a[:, axis], lw=0.7, color=color, label=label)
+            ax.axvline(r.window_start - r.start, color=color, lw=0.6, ls=":")
+        ax.set_title(title, fontsize=9, loc="left")
+        ax.set_ylabel(f"a{'xyz'[axis] if axis < 3 else axis} (m/s²)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6, loc="upper right", ncol=2 if len(rows) > 4 and not by_shaper else 1, framealpha=0.7)
+    axes[-1, 0].set_xlabel("time from cycle start (s); dotted: start of the residual window")
+    return fig
 
 
-def _plot_spectrum(plt, an: Analysis, spectrum: tuple[np.ndarray, np.ndarray], out: pathlib.Path) -> pathlib.Path:
-    """spectrum.png: the residual windows' PSD ((m/s^2)^2/Hz against Hz) with the identified modes."""
+def spectrum_band(an: Analysis, spectrum: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+    """The spectrum plot's frequency range, Hz: ``--band-hz`` if given, else from :data:`SPECTRUM_LOW` x the
+    lowest to :data:`SPECTRUM_HIGH` x the highest identified mode (of every group), within the computed
+    spectrum; the whole spectrum (above 0 Hz) when no mode was identified."""
+    f = spectrum[0]
+    fmin, fmax = float(f[1]) if f.size > 1 else 0.1, float(f[-1])
+    modes = [m.hz for g in an.groups for m in g.modes] or [m.hz for m in an.modes]
+    if an.options.band_hz is not None:
+        lo, hi = an.options.band_hz
+    elif modes:
+        lo, hi = SPECTRUM_LOW * min(modes), SPECTRUM_HIGH * max(modes)
+    else:
+        lo, hi = fmin, fmax
+    lo, hi = max(lo, fmin), min(hi, fmax)
+    return (lo, hi) if hi > lo else (fmin, fmax)
+
+
+def _shapers_to_draw(an: Analysis) -> list[tuple[str, Shaper | tuple[np.ndarray, np.ndarray], str]]:
+    """(label, shaper or (amplitudes, times), line style) of the recommended shaper(s) and the recorded ones."""
+    out: list[tuple[str, Shaper | tuple[np.ndarray, np.ndarray], str]] = []
+    if len(an.groups) > 1:
+        for g in an.groups:
+            if g.recommendation is not None and g.recommendation.best is not None:
+                b = g.recommendation.best
+                out.append((f"recommended for {', '.join(f'{m.hz:.3g}' for m in g.modes)} Hz: {b.family}", b.shaper,
+                            "-"))
+    elif an.recommendation is not None and an.recommendation.best is not None:
+        out.append((f"recommended: {an.recommendation.best.family}", an.recommendation.best.shaper, "-"))
+    seen = set()
+    for r in an.cycles:
+        if r.shaper_impulses is not None and r.shaper not in seen and len(r.shaper_impulses[0]) > 1:
+            seen.add(r.shaper)
+            out.append((f"active (recorded): {r.shaper}", (np.asarray(r.shaper_impulses[0], dtype=float),
+                                                          np.asarray(r.shaper_impulses[1], dtype=float)), "--"))
+    return out
+
+
+def _group_color(k: int) -> str:
+    return ("C1", "C2", "C4", "C5", "C6")[k % 5]
+
+
+def _plot_spectrum(plt, an: Analysis, spectrum: tuple[np.ndarray, np.ndarray]):
+    """spectrum.png: the residual windows' PSD ((m/s^2)^2/Hz) on a log frequency axis (Hz) over
+    :func:`spectrum_band`, the identified modes marked and labelled; below it, on the same axis, the
+    percentage vibration V (%) of the recommended and the active shapers with the tolerance marked."""
     f, p = spectrum
-    fig, ax = plt.subplots(figsize=(8, 3.6))
-    ax.semilogy(f[1:], p[1:], lw=0.8)
-    for i, m in enumerate(an.modes):
-        ax.axvline(m.hz, color="C3", ls="--", lw=0.8, label=f"mode {i + 1}: {m.hz:.4g} Hz, ζ {m.zeta:.3g}")
-    ax.set_xlabel("frequency (Hz)")
+    lo, hi = spectrum_band(an, spectrum)
+    shapers = _shapers_to_draw(an) if an.modes else []
+    rows = 2 if shapers else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(8, 3.2 + 2.4 * (rows - 1)), sharex=True, squeeze=False,
+                             gridspec_kw={"height_ratios": [3, 2][:rows]})
+    ax = axes[0, 0]
+    inside = (f >= lo) & (f <= hi) & (f > 0)
+    ax.loglog(f[inside], p[inside], lw=0.9, color="C0")
+    ax.set_xscale("log")
+    ax.set_xlim(lo, hi)
+    # mode lines: one colour per group, the same as its recommended shaper's V(f) below
+    modes = ([(m, "", "C3") for m in an.modes] if len(an.groups) < 2 else
+             [(m, f"group {k + 1}: ", _group_color(k)) for k, g in enumerate(an.groups) for m in g.modes])
+    for i, (m, where, color) in enumerate(modes):
+        if lo <= m.hz <= hi:
+            for a in axes[:, 0]:
+                a.axvline(m.hz, color=color, ls="--", lw=0.9)
+            ax.annotate(f"{where}{m.hz:.3g} Hz, ζ {m.zeta:.2g}", (m.hz, 1.0), xycoords=("data", "axes fraction"),
+                        xytext=(3, -3 - 11 * (i % 4)), textcoords="offset points", fontsize=7, color=color,
+                        va="top", ha="left")
     ax.set_ylabel("PSD ((m/s²)²/Hz)")
-    ax.set_title("residual windows, Welch, averaged over cycles", fontsize=9)
+    ax.set_title(f"residual vibration spectrum (Welch, averaged over cycles), {lo:.3g}-{hi:.3g} Hz", fontsize=9,
+                 loc="left")
     ax.grid(alpha=0.3)
-    if an.modes:
-        ax.legend(fontsize=8)
-        ax.set_xlim(0, min(f[-1], 4 * max(m.hz for m in an.modes)))
-    return _save(fig, out / "spectrum.png")
+    ax.grid(alpha=0.12, which="minor", axis="x")
+    if shapers:
+        zeta = an.modes[0].zeta
+        hz = np.geomspace(lo, hi, 600)
+        va = axes[1, 0]
+        for k, (label, sh, ls) in enumerate(shapers):
+            amps, times = (sh.amplitudes, sh.times) if isinstance(sh, Shaper) else sh
+            color = (_group_color(k) if len(an.groups) > 1 else "C0") if ls == "-" else f"C{7 + k % 3}"
+            va.plot(hz, 100 * percentage_vibration(amps, times, 2 * np.pi * hz, zeta), ls=ls,
+                    lw=1.4 if ls == "-" else 1.1, color=color, label=label)
+        target = an.recommendation.target if an.recommendation is not None else an.options.target
+        va.axhline(100 * target, color="0.3", lw=0.8, ls=":")
+        va.annotate(f"tolerance {100 * target:g} %", (1.0, 100 * target), xycoords=("axes fraction", "data"),
+                    xytext=(-3, 2), textcoords="offset points", fontsize=7, ha="right", va="bottom", color="0.3")
+        va.set_ylabel(f"V (%) at ζ {zeta:.2g}")
+        va.set_ylim(0, 110)
+        va.grid(alpha=0.3, which="both")
+        va.legend(fontsize=7, loc="upper left")
+    axes[-1, 0].set_xlabel("frequency (Hz, log)")
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    xaxis = axes[-1, 0].xaxis
+    xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    xaxis.set_minor_formatter(NullFormatter())
+    return fig
 
 
-def _plot_sensitivity(plt, an: Analysis, best: Shaper, target: float, out: pathlib.Path) -> pathlib.Path:
+def _plot_sensitivity(plt, an: Analysis, best: Shaper, target: float):
     """sensitivity.png: V (%) against frequency (Hz) of the recommended shaper ``best`` and of the recorded
     ones, at the first mode's damping, its band shaded and the ``target`` V (fraction) marked."""
     top = an.modes[0]
@@ -361,10 +519,10 @@ def _plot_sensitivity(plt, an: Analysis, best: Shaper, target: float, out: pathl
     ax.set_title(f"sensitivity at damping {top.zeta:.3g}", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    return _save(fig, out / "sensitivity.png")
+    return fig
 
 
-def _plot_mrilc_learning(plt, mrilc: dict[str, list[dict]], out: pathlib.Path) -> pathlib.Path:
+def _plot_mrilc_learning(plt, mrilc: dict[str, list[dict]]):
     """learning_mrilc.png: RMS(e) (joint units), RMS(u1) and RMS(u2) (effort units) per iteration."""
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
     for name, rows in mrilc.items():
@@ -379,10 +537,10 @@ def _plot_mrilc_learning(plt, mrilc: dict[str, list[dict]], out: pathlib.Path) -
         ax.set_xlabel("iteration")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    return _save(fig, out / "learning_mrilc.png")
+    return fig
 
 
-def _plot_list_learning(plt, curves: dict[str, list[dict]], out: pathlib.Path) -> pathlib.Path:
+def _plot_list_learning(plt, curves: dict[str, list[dict]]):
     """learning.png: LIST's M (m/s^2), next A1 and next T2 (s) per cycle."""
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
     for name, rows in curves.items():
@@ -397,7 +555,7 @@ def _plot_list_learning(plt, curves: dict[str, list[dict]], out: pathlib.Path) -
         ax.set_xlabel("cycle")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    return _save(fig, out / "learning.png")
+    return fig
 
 
 def _save(fig, path: pathlib.Path) -> pathlib.Path:

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .reading import Bag, BagError, Damage, ReadResult, TopicInfo
+from .reading import Bag, BagError, Damage, ReadLimits, ReadResult, TopicInfo, describe_damage
 
 IMU, JOINT_STATE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"
 ARRAY, TRAJECTORY = "std_msgs/msg/Float64MultiArray", "trajectory_msgs/msg/JointTrajectory"
@@ -294,7 +294,7 @@ def _stamp(msg, log_ns: int) -> float:
 
 
 def read_recording(path, overrides: Mapping[str, str] | None = None, progress: bool = False,
-                   on_progress: Callable[[int], None] | None = None) -> Recording:
+                   on_progress: Callable[[int], None] | None = None, limits: ReadLimits | None = None) -> Recording:
     """Open the bag at ``path``, choose the topics and extract them.
 
     A recording that rosbags opens but fails to read to the end (a corrupt record in an indexed
@@ -303,12 +303,13 @@ def read_recording(path, overrides: Mapping[str, str] | None = None, progress: b
     Raises
     ------
     BagError
-        Not a recording, unreadable, no message, or no accelerometer topic.
+        Not a recording, unreadable, beyond the reading limits (``limits``, see
+        :class:`~shaper_nodes.analysis.reading.ReadLimits`), no message, or no accelerometer topic.
     """
     try:
-        return _read(path, overrides, progress, on_progress, recover=False)
+        return _read(path, overrides, progress, on_progress, recover=False, limits=limits)
     except _ReadFailed as err:
-        rec = _read(path, overrides, progress, on_progress, recover=True)
+        rec = _read(path, overrides, progress, on_progress, recover=True, limits=limits)
         rec.notes.insert(0, f"rosbags stopped reading after {err.count} messages ({err.reason});"
                             " read again record by record")
         return rec
@@ -320,8 +321,8 @@ class _ReadFailed(Exception):
         self.count, self.reason = count, reason
 
 
-def _read(path, overrides, progress, on_progress, recover: bool) -> Recording:
-    with Bag(path, recover=recover) as bag:
+def _read(path, overrides, progress, on_progress, recover: bool, limits: ReadLimits | None = None) -> Recording:
+    with Bag(path, recover=recover, limits=limits) as bag:
         infos = bag.topics
         chosen, roles, notes = _roles(path, bag, infos, overrides)
         decoders = _decoders(bag, roles, infos, notes)
@@ -348,6 +349,9 @@ def _roles(path, bag: Bag, infos: dict[str, TopicInfo], overrides: Mapping[str, 
     BagError
         The bag has no topics or no accelerometer topic, or one topic is taken for two roles.
     """
+    if not infos and bag.damage:
+        said = [n for n in bag.notes if "not closed" in n] or [describe_damage(d) for d in bag.damage]
+        raise BagError("nothing readable before the damage (no channel, no message): " + "; ".join(said))
     if not infos:
         raise BagError(f"{path}: the recording has no topics (empty bag)")
     chosen, notes = choose_topics(infos, overrides)

@@ -20,7 +20,7 @@ import pathlib
 import sys
 
 from shaper_nodes.analysis.analyze import Options, analyze
-from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
+from shaper_nodes.analysis.reading import MIB, Bag, BagError, ReadLimits, describe_damage
 from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
@@ -78,14 +78,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         " mrilc.gamma=10 (repeatable); replay.learned_run=true replays every MRILC cycle"
                         " (a recording of a live MRILC run)")
     p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
+    p.add_argument("--max-chunk-mib", type=float, default=ReadLimits.chunk_bytes / MIB,
+                   help="refuse an MCAP chunk that declares more than this uncompressed, MiB, before inflating it"
+                        " (default %(default)g)")
+    p.add_argument("--max-metadata-mib", type=float, default=ReadLimits.metadata_bytes / MIB,
+                   help="refuse a metadata.yaml larger than this, MiB, before parsing it (default %(default)g)")
     p.add_argument("--strict", action="store_true", help="exit 3 when the recording was damaged")
     return p.parse_args(argv)
 
 
-def _damage_of(path: pathlib.Path) -> list[str]:
+def _damage_of(path: pathlib.Path, limits: ReadLimits) -> list[str]:
     """What a recording lost, described (nothing if it cannot be opened or is whole)."""
     try:
-        with Bag(path) as bag:
+        with Bag(path, limits=limits) as bag:
             return [describe_damage(d) for d in bag.damage]
     except Exception:
         return []
@@ -94,6 +99,7 @@ def _damage_of(path: pathlib.Path) -> list[str]:
 @survives_closed_pipe
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    limits = ReadLimits(metadata_bytes=int(args.max_metadata_mib * MIB), chunk_bytes=int(args.max_chunk_mib * MIB))
     try:
         params = parse_params(args.param)
         overrides = {role: getattr(args, f"{role}_topic") for role in ROLE_TYPES if getattr(args, f"{role}_topic")}
@@ -104,11 +110,12 @@ def main(argv: list[str] | None = None) -> int:
                           motion_threshold=args.motion_threshold,
                           learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
                           learner_params=params)
-        rec = read_recording(args.bag, overrides, progress=not args.no_progress and sys.stderr.isatty())
+        rec = read_recording(args.bag, overrides, progress=not args.no_progress and sys.stderr.isatty(),
+                             limits=limits)
         an = analyze(rec, options)
     except (BagError, OSError, ValueError) as err:
         print(f"analyze_bag: {err}", file=sys.stderr)
-        for text in _damage_of(args.bag):  # what the recording holds, even if it cannot be analysed
+        for text in _damage_of(args.bag, limits):  # what the recording holds, even if it cannot be analysed
             print(f"analyze_bag: WARNING: damaged recording: {text}", file=sys.stderr)
         return 2
     for d in rec.damage:
