@@ -1,5 +1,6 @@
 """Streaming FIR: equals offline convolution; bumpless, exact switching; re-timing."""
 
+import itertools
 import math
 
 import numpy as np
@@ -159,7 +160,7 @@ def test_single_sample_path_equals_block_path_and_offline(shaper, other, rate, d
     bounds = [0, *cuts, x.shape[0]]
     by_sample, by_block, mixed = StreamingShaper(fa, 7), StreamingShaper(fa, 7), StreamingShaper(fa, 7)
     y1, y2, y3 = [], [], []
-    for i, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+    for i, (lo, hi) in enumerate(itertools.pairwise(bounds)):
         if i:
             f = fb if i % 2 else fa
             for s in (by_sample, by_block, mixed):

@@ -224,7 +224,7 @@ class _Stage:
     path unrolls the ring into the history it prepends to the block.
     """
 
-    __slots__ = ("fir", "held", "held_samples", "origin", "_buf", "_pos", "_size", "_delays", "_gains", "_idx")
+    __slots__ = ("_buf", "_delays", "_gains", "_idx", "_pos", "_size", "fir", "held", "held_samples", "origin")
 
     def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
         self.fir = fir
@@ -258,7 +258,7 @@ class _Stage:
             ext = block
         delays, gains = self._delays, self._gains
         start = hist_len - delays[0]
-        out = np.multiply(gains[0], ext[start : start + n])
+        out: np.ndarray = np.multiply(gains[0], ext[start : start + n])
         tmp = np.empty_like(out)
         for d, g in zip(delays[1:], gains[1:], strict=True):
             start = hist_len - d
@@ -390,16 +390,17 @@ class StreamingShaper(_ChannelShaper):
         return out.reshape(x.shape) if single else out
 
     def _sample(self, x: np.ndarray) -> np.ndarray:
-        """:meth:`process` for one sample ``x`` (shape (channels,), owned): the same sums in the same
-        order, without the block path's copies of the history."""
+        """:meth:`process` for one sample ``x`` (shape (channels,), owned), without the block path's
+        copies of the history: the same sums as the block path, formed as one dot product of the
+        gains with the tapped inputs (so equal to it to rounding, a few ulp; tests hold them to 1e-12)."""
         if self._last is None:
             self._start(x)
         stages = self._stages
         if len(stages) == 1 and stages[0].held is None:  # the usual case: one filter, no change settling
             stage = stages[0]
-            out = self._offset + stage.step(x - stage.origin)
+            y: np.ndarray = self._offset + stage.step(x - stage.origin)
             self._last = x
-            return out
+            return y
         out = self._offset.copy()
         keep: list[_Stage] = []
         for stage in stages:
