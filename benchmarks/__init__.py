@@ -2,7 +2,9 @@
 
 Run with ``./run bench`` (``python -m benchmarks`` in the suite's environment; ``--help`` lists
 the options). Every figure is printed next to a baseline measured in the same run, because the
-machines it runs on are small and noisy:
+machines it runs on are small and noisy. The run ends with one summary table (figure, value,
+baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures and goals are in
+``docs/benchmarks.md``:
 
 * :mod:`benchmarks.latency`: round-trip latency (driver -> node -> driver) and CPU share of the
   shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`).
@@ -10,6 +12,11 @@ machines it runs on are small and noisy:
   (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter``.
 * :mod:`benchmarks.list_update`: one LIST update for a 10 s cycle of 1 kHz 3-axis accelerometer
   data, against ``filtfilt`` + ``hilbert`` on the same data.
+* :mod:`benchmarks.scheduler`: one rule-base evaluation plus design against the design alone, and
+  the scheduler node's CPU share at 500 Hz joint states against an idle subscriber.
+* :mod:`benchmarks.discretization`: the exact discretisation against the split.
+* :mod:`benchmarks.arm_lockstep`: simulated seconds per wall second of the six-axis arm (core and
+  the sim plant node over DDS) against one Pinocchio ``aba`` call per step.
 * :mod:`benchmarks.bag_analysis`: messages per second of the bag analysis on a recording of a
   million messages, against the rosbags reader alone iterating the same bag.
 * :mod:`benchmarks.learner_memory`: the learners' memory (RSS and their sample buffers) over a

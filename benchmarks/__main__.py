@@ -40,7 +40,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command-line options."""
     p = argparse.ArgumentParser(prog="python -m benchmarks",
                                 description="Shaper suite benchmarks (figures, not pass/fail).")
-    p.add_argument("--seconds", type=float, default=5.0, help="duration of each latency measurement, s (default 5)")
+    p.add_argument("--seconds", type=float, default=5.0,
+                   help="duration of the latency measurement per target (and of each scheduler CPU window), s"
+                        " (default 5)")
     p.add_argument("--rate", type=float, default=1000.0, help="send rate of the latency driver, Hz (default 1000)")
     p.add_argument("--joints", type=int, default=7, help="joints (values per message and FIR channels; default 7)")
     p.add_argument("--warmup", type=float, default=0.5, help="warm-up after the first reply, s (default 0.5)")
@@ -177,6 +179,160 @@ def _module(name: str) -> Any:
     return importlib.import_module(f".{name}", __package__)
 
 
+# ----------------------------------------------------------------- the one summary table
+#: goals of issue 19 (Performance), shown beside the figures they concern (never checked: figures, not pass/fail)
+GOALS = {
+    "fir_blocks": ">= 5x lfilter",
+    "fir_sample": "<= 5 us",
+    "scheduler_cpu": "<= 1.3x idle",
+    "arm_node": ">= 20x real time",
+    "arm_core": ">= 20x real time",
+}
+
+
+def _row(figure: str, value: float, unit: str, baseline: str, base_value: float, ratio: float | None = None,
+         goal: str = "") -> dict[str, Any]:
+    """One row of the summary: a figure, its baseline measured in the same run, their ratio."""
+    return {"figure": figure, "value": value, "unit": unit, "baseline": baseline, "baseline_value": base_value,
+            "ratio": _ratio(value, base_value) if ratio is None else ratio, "goal": goal}
+
+
+def _fir_rows(fir: dict) -> list[dict[str, Any]]:
+    m = {r["method"]: r for r in fir["methods"]}
+    ref = m[fir["reference"]]
+    rows = []
+    for r in fir["methods"]:
+        us = 1e6 * r["best_s"] / r["calls"]
+        if r["method"].startswith("shaper, blocks"):
+            rows.append(_row(f"FIR {r['method']}", r["joint_samples_per_s"] / 1e6, "M joint-samples/s",
+                             ref["method"], ref["joint_samples_per_s"] / 1e6, goal=GOALS["fir_blocks"]))
+        elif r["method"] == "shaper, sample by sample":
+            lf = next((x for x in fir["methods"] if x["method"].startswith("lfilter") and x["calls"] == x["samples"]),
+                      None)
+            rows.append(_row(f"FIR one {fir['joints']}-joint sample per call", us, "us/call",
+                             lf["method"] if lf else "", 1e6 * lf["best_s"] / lf["calls"] if lf else math.nan,
+                             goal=GOALS["fir_sample"]))
+    return rows
+
+
+def _method_rows(name: str, res: dict, unit_scale: float = 1e3) -> list[dict[str, Any]]:
+    floor = next(r for r in res["methods"] if r["method"].startswith("floor"))
+    return [_row(f"{name}: {r['method']}", unit_scale * r["best_s"], "ms", floor["method"],
+                 unit_scale * floor["best_s"]) for r in res["methods"] if r is not floor]
+
+
+def _scheduler_rows(res: dict) -> list[dict[str, Any]]:
+    t, c = res["timing"], res["cpu"]
+    return [_row("scheduler: evaluate + ZV design", t["evaluate_design_us"], "us/update", "ZV design alone",
+                 t["design_us"]),
+            _row(f"scheduler CPU at {c['rate_hz']:g} Hz joint states", c["scheduler"]["cpu_pct"], "% of a core",
+                 "idle subscriber", c["idle node"]["cpu_pct"], goal=GOALS["scheduler_cpu"])]
+
+
+def _arm_rows(res: dict) -> list[dict[str, Any]]:
+    base = res["baseline: pinocchio aba"]
+    rows = []
+    for key, value in res.items():
+        if isinstance(value, float) and not key.startswith("baseline"):
+            goal = GOALS["arm_node"] if key.startswith("sim plant node") else (
+                GOALS["arm_core"] if key.startswith("ArmPlant") else "")
+            rows.append(_row(f"arm lockstep: {key}", value, "sim s/wall s", "one Pinocchio aba per 1 ms step", base,
+                             goal=goal))
+    return rows
+
+
+def _latency_rows(lat: dict) -> list[dict[str, Any]]:
+    base = lat["runs"][0]
+    rows = []
+    for r in lat["runs"][1:]:
+        for key, label, unit in (("p50_us", "p50", "us"), ("p99_us", "p99", "us"),
+                                 ("node_cpu_pct", "CPU", "% of a core")):
+            rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{base['label']} {label}", base[key]))
+    return rows
+
+
+def _memory_rows(res: dict) -> list[dict[str, Any]]:
+    rows = []
+    if "list" in res:
+        r = res["list"]
+        rows.append(_row(f"LIST learner peak RSS, {r['hours']:g} h cycle", r["peak"]["rss_mib"], "MiB",
+                         f"a {r['baseline']['seconds']:g} s cycle", r["baseline"]["rss_mib"]))
+    if "mrilc" in res:
+        m = res["mrilc"]
+        rows.append(_row(f"MRILC learner peak RSS, {m['hours']:g} h", m["peak"]["rss_mib"], "MiB",
+                         "the process at start", m["start_rss_mib"]))
+    return rows
+
+
+def _gap_rows(res: dict) -> list[dict[str, Any]]:
+    w = res["windows"]
+    if len(w) < 2:
+        return []
+    return [_row("streaming gap while shaping trajectories", w[1]["gap_ms"], "ms (largest)", f"{w[0]['label']} alone",
+                 w[0]["gap_ms"])]
+
+
+def _bag_rows(res: dict) -> list[dict[str, Any]]:
+    base = next(m for m in res["methods"] if m["method"].startswith("baseline"))
+    return [_row(f"bag analysis: {m['method']}", m["messages_per_s"] / 1e3, "k messages/s", base["method"],
+                 base["messages_per_s"] / 1e3) for m in res["methods"] if m is not base]
+
+
+def _discretization_rows(rows: list[dict]) -> list[dict[str, Any]]:
+    return [_row(f"exact discretisation: {r['case']}", r["exact_us"], "us", "split", r["split_us"]) for r in rows]
+
+
+#: per report key, its rows of the summary table
+SUMMARIES: dict[str, Callable[[Any], list[dict[str, Any]]]] = {
+    "latency": _latency_rows,
+    "fir": _fir_rows,
+    "list_update": lambda r: _method_rows("LIST update", r),
+    "mrilc_update": lambda r: _method_rows("MRILC update", r),
+    "scheduler": _scheduler_rows,
+    "discretization": _discretization_rows,
+    "bag_analysis": _bag_rows,
+    "arm_lockstep": _arm_rows,
+    "learner_memory": _memory_rows,
+    "streaming_gap": _gap_rows,
+}
+
+
+def summary(report: dict) -> list[dict[str, Any]]:
+    """Every figure of ``report`` as rows (figure, value, unit, baseline measured in the same run, ratio, goal)."""
+    rows: list[dict[str, Any]] = []
+    for key, fn in SUMMARIES.items():
+        if key in report:
+            try:
+                rows += fn(report[key])
+            except (KeyError, IndexError, StopIteration, TypeError) as err:  # a benchmark's figures changed shape
+                rows.append(_row(f"{key}: no summary ({type(err).__name__}: {err})", math.nan, "", "", math.nan))
+    return rows
+
+
+def print_summary(rows: list[dict[str, Any]], load: str) -> None:
+    """The one table of every figure, its baseline (same run) and their ratio."""
+    w = max([len(r["figure"]) for r in rows] + [6])
+    wb = max([len(r["baseline"]) for r in rows] + [8])
+    head = (f"{'figure':<{w}} | {'value':>10} {'unit':<17} | {'baseline (same run)':<{wb}} {'value':>10}"
+            f" | {'ratio':>7} | goal")
+    print("Summary: every figure against its baseline measured in the same run")
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        print(f"{r['figure']:<{w}} | {_fmt(r['value'], '10.4g')} {r['unit']:<17} | {r['baseline']:<{wb}}"
+              f" {_fmt(r['baseline_value'], '10.4g')} | {_fmt(r['ratio'], '7.3g')} | {r['goal']}")
+    print(f"load (uptime) at the end: {load}; the machine's other work moves these figures: take final figures on a"
+          " quiet machine")
+
+
+def _load() -> str:
+    try:
+        one, five, fifteen = os.getloadavg()
+    except OSError:
+        return "n/a"
+    return f"load average {one:.2f}, {five:.2f}, {fifteen:.2f} on {os.cpu_count()} CPUs"
+
+
 def run_all(args: argparse.Namespace, report: dict) -> None:
     """Run every benchmark the options do not skip; their figures go into ``report``."""
     if not args.skip_latency:
@@ -197,6 +353,8 @@ def print_report(report: dict, args: argparse.Namespace) -> None:
             _module(module).print_table(report[key])
             print()
     print(f"({report['meta']['cpus']} CPUs, {report['meta']['rmw']}, {report['meta']['elapsed_s']:.0f} s)")
+    print()
+    print_summary(report["summary"], report["meta"]["load_end"])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -209,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
         "meta": {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started)),
                  "host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
                  "rmw": os.environ.get("RMW_IMPLEMENTATION", ""), "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", ""),
-                 "argv": sys.argv[1:] if argv is None else argv},
+                 "argv": sys.argv[1:] if argv is None else argv, "load_start": _load()},
     }
     try:
         run_all(args, report)
@@ -220,6 +378,8 @@ def main(argv: list[str] | None = None) -> int:
         _progress(f"error: {err}")
         return 1
     report["meta"]["elapsed_s"] = time.time() - started
+    report["meta"]["load_end"] = _load()
+    report["summary"] = summary(report)
     print_report(report, args)
     if args.json:
         args.json.write_text(json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")

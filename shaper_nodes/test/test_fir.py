@@ -1,5 +1,6 @@
 """Streaming FIR: equals offline convolution; bumpless, exact switching; re-timing."""
 
+import itertools
 import math
 
 import numpy as np
@@ -140,3 +141,38 @@ def test_retime_moves_a_pending_impulse_and_never_takes_back_what_was_emitted():
     y = np.vstack([y, sh2.process(x[60:])])
     assert np.all(np.diff(y[:, 0]) >= -1e-12)
     assert (np.argmax(y[:, 0] >= 1.0 - 1e-12)) / rate == pytest.approx(2.1, abs=0.011)
+
+
+@SETTINGS
+@given(shaper_st, shaper_st, st.sampled_from([250.0, 1000.0]), st.data(),
+       arrays(float, (300, 7), elements=st.floats(-2, 2)))
+def test_single_sample_path_equals_block_path_and_offline(shaper, other, rate, data, x):
+    """The fast one-sample path (ring buffer) gives what the block path gives, through filter
+    changes and any mix of one-sample calls and blocks, and both equal offline convolution."""
+    fa, fb = discretize(shaper, rate), discretize(other, rate)
+    # offline: one filter throughout
+    one = StreamingShaper(fa, 7)
+    ys = np.vstack([one.process(x[k]) for k in range(x.shape[0])])
+    np.testing.assert_allclose(ys, offline(x, fa.dense()), rtol=0, atol=1e-12)
+    # switches at drawn samples, sample by sample against one block between switches, against a
+    # random mix of one-sample calls and blocks
+    cuts = sorted(set(data.draw(st.lists(st.integers(1, x.shape[0] - 1), max_size=4))))
+    bounds = [0, *cuts, x.shape[0]]
+    by_sample, by_block, mixed = StreamingShaper(fa, 7), StreamingShaper(fa, 7), StreamingShaper(fa, 7)
+    y1, y2, y3 = [], [], []
+    for i, (lo, hi) in enumerate(itertools.pairwise(bounds)):
+        if i:
+            f = fb if i % 2 else fa
+            for s in (by_sample, by_block, mixed):
+                s.switch(f)
+        y1 += [by_sample.process(x[k]) for k in range(lo, hi)]
+        y2.append(by_block.process(x[lo:hi]))
+        k = lo
+        while k < hi:
+            n = data.draw(st.integers(1, 40))
+            y3.append(mixed.process(x[k]) if n == 1 else mixed.process(x[k : min(hi, k + n)]))
+            k = min(hi, k + n) if n > 1 else k + 1
+    y1a, y2a, y3a = np.vstack(y1), np.vstack(y2), np.vstack(y3)
+    np.testing.assert_allclose(y1a, y2a, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(y3a, y2a, rtol=0, atol=1e-12)
+    assert by_sample.stages == by_block.stages == mixed.stages

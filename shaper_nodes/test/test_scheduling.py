@@ -83,6 +83,30 @@ def test_premise_values_are_picked_by_name_in_linear_time_and_bad_poses_are_name
         [MAX_POSE_JOINTS - 1.0, MAX_POSE_JOINTS - 2.0]
 
 
+def test_the_scheduler_remembers_where_the_premises_are_and_still_checks_every_pose():
+    """The premise joints' places are looked up once per name layout; every pose is still checked,
+    and a pose after a refused one or in another layout gives what the plain function gives."""
+    sched = Scheduler(base())
+    poses = [
+        (["x", "q"], [5.0, 0.5]), (["x", "q"], [5.0, 0.7]),        # the same layout twice
+        (["x", "q"], [5.0]),                                       # same names, wrong size
+        (["x", "q"], [5.0, math.inf]),                             # same names, non-finite
+        (["q", "x"], [0.9, 5.0]),                                  # another layout
+        (["x", "y"], [1.0, 2.0]), (["q", "q"], [1.0, 2.0]),        # missing, duplicate
+        (["q", "x"], [1.1, 5.0]), (["x", "q"], [5.0, 1.2]),        # back to known layouts
+        (("x", "q"), np.array([5.0, 1.3])),                        # tuple and array as given
+    ]
+    for names, positions in poses:
+        try:
+            want: object = premise_values(("q",), names, positions)
+        except InputError as err:
+            want = (err.kind, str(err))
+        try:
+            got: object = sched.premise_values(names, positions)
+        except InputError as err:
+            got = (err.kind, str(err))
+        assert got == want, (names, positions)
+
 def test_the_shaper_at_a_pose_is_the_schedules_with_the_regions_correction_and_clamping_is_said():
     s = Scheduler(base())
     at = s.evaluate([0.3])

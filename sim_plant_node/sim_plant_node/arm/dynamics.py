@@ -135,6 +135,8 @@ class ElasticArm:
         self._rest_of_a = 0.5 * h * self._cb + 0.25 * h * h * self._kb
         self._a = self._rest_of_a.copy()
         self._a[n:, n:] += np.diag(model.motor_inertia)
+        self._hh4, self._h2 = 0.25 * h * h, 0.5 * h  # the trapezoidal rule's factors, as step used to form them
+        self._kd_zero = model.kd * np.zeros(n)  # kd times a zero velocity feedforward
         self.reset(np.zeros(n) if position is None else position)
 
     def reset(self, position: np.ndarray) -> None:
@@ -145,6 +147,7 @@ class ElasticArm:
         self.xd = np.zeros(2 * self.n)
         self.xdd = np.zeros(2 * self.n)
         self.setpoint = r
+        self._setpoint_bytes = r.tobytes()
         self._g_r = self.model.gravity(r)
         self.torque = self._g_r.copy()
         self.time = 0.0
@@ -177,24 +180,33 @@ class ElasticArm:
         """Advance one step holding the loop's setpoint (rad) and velocity feedforward (rad/s)."""
         n, h, mdl = self.n, self.h, self.model
         r = np.asarray(setpoint, dtype=float)
-        if not np.array_equal(r, self.setpoint):
+        key = r.tobytes()  # the setpoint changes at most once per command period: gravity at it is kept
+        if key != self._setpoint_bytes:
             self.setpoint = r.copy()
+            self._setpoint_bytes = key
             self._g_r = mdl.gravity(r)
-        rd = np.zeros(n) if velocity is None else np.asarray(velocity, dtype=float)
         q, v = self.x[:n], self.xd[:n]
         a_mat = self._a
         a_mat[:n, :n] = mdl.mass(q) + self._rest_of_a[:n, :n]
         f = np.empty(2 * n)
         f[:n] = -mdl.nonlinear(q, v)
-        f[n:] = mdl.kp * r + mdl.kd * rd + self._g_r
-        x_pred = self.x + h * self.xd + 0.25 * h * h * self.xdd
-        xd_pred = self.xd + 0.5 * h * self.xdd
+        if velocity is None:
+            f[n:] = mdl.kp * r + self._kd_zero + self._g_r
+        else:
+            rd = np.asarray(velocity, dtype=float)
+            f[n:] = mdl.kp * r + mdl.kd * rd + self._g_r
+        hh4, h2 = self._hh4, self._h2
+        x_pred = self.x + h * self.xd + hh4 * self.xdd
+        xd_pred = self.xd + h2 * self.xdd
         xdd = np.linalg.solve(a_mat, f - self._cb @ xd_pred - self._kb @ x_pred)
-        self.x = x_pred + 0.25 * h * h * xdd
-        self.xd = xd_pred + 0.5 * h * xdd
+        self.x = x_pred + hh4 * xdd
+        self.xd = xd_pred + h2 * xdd
         self.xdd = xdd
         theta, thetad = self.x[n:], self.xd[n:]
-        self.torque = mdl.kp * (r - theta) + mdl.kd * (rd - thetad) + self._g_r
+        if velocity is None:
+            self.torque = mdl.kp * (r - theta) + mdl.kd * (0.0 - thetad) + self._g_r
+        else:
+            self.torque = mdl.kp * (r - theta) + mdl.kd * (rd - thetad) + self._g_r
         self.time += h
 
     def imu(self) -> tuple[np.ndarray, np.ndarray]:

@@ -68,6 +68,12 @@ def premise_values(premises: Sequence[str], names: Sequence[str], positions: Seq
         names differ in number), ``missing_joint``, ``duplicate_joint`` (a premise joint named
         twice) or ``non_finite``; the message names the joints. The work is linear in the pose.
     """
+    return _values(premises, premise_index(premises, names, positions), positions)
+
+
+def premise_index(premises: Sequence[str], names: Sequence[str], positions: Sequence[float]) -> list[int]:
+    """Where the premise joints are in a pose's ``names`` (see :func:`premise_values`, which raises the
+    same errors but ``non_finite``)."""
     if len(names) > MAX_POSE_JOINTS:
         raise InputError("too_large", f"{len(names)} joint names exceed the limit of {MAX_POSE_JOINTS}")
     if len(positions) != len(names):
@@ -86,7 +92,12 @@ def premise_values(premises: Sequence[str], names: Sequence[str], positions: Seq
         raise InputError("missing_joint", f"missing premise joints {missing} (the pose names {len(names)} joints)")
     if twice:
         raise InputError("duplicate_joint", f"premise joints named more than once: {sorted(set(twice))}")
-    z = [float(positions[index[j]]) for j in premises]
+    return [index[j] for j in premises]
+
+
+def _values(premises: Sequence[str], index: list[int], positions: Sequence[float]) -> list[float]:
+    """The positions at ``index`` (one per premise), refused (``non_finite``) if not all finite."""
+    z = [float(positions[i]) for i in index]
     bad = [f"{j} = {v!r}" for j, v in zip(premises, z, strict=True) if not math.isfinite(v)]
     if bad:
         raise InputError("non_finite", "non-finite premise values: " + ", ".join(bad))
@@ -115,6 +126,8 @@ class Scheduler:
     corrections: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     #: per rule, the learner's extra factor for schedules on several modes (None: none yet)
     factors: list[Shaper | None] = field(default_factory=list)
+    #: the last pose layout seen: its names and where the premise joints are in it
+    _layout: tuple[tuple[str, ...], list[int]] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.method not in ("model", "modes"):
@@ -133,8 +146,19 @@ class Scheduler:
         return out
 
     def premise_values(self, names: Sequence[str], positions: Sequence[float]) -> list[float]:
-        """The premise values of a pose (see :func:`premise_values`)."""
-        return premise_values(self.rule_base.premises, names, positions)
+        """The premise values of a pose (see :func:`premise_values`).
+
+        The premise joints' places are looked up once per name layout: a stream of joint states
+        with the same names costs a comparison of the names and the finiteness checks per message.
+        """
+        premises = self.rule_base.premises
+        if self._layout is not None and len(names) == len(self._layout[0]) and tuple(names) == self._layout[0]:
+            if len(positions) != len(names):
+                raise InputError("wrong_size", f"{len(positions)} positions for {len(names)} names")
+            return _values(premises, self._layout[1], positions)
+        index = premise_index(premises, names, positions)
+        self._layout = (tuple(names), index)
+        return _values(premises, index, positions)
 
     def clamping(self, interp: Interpolation) -> str:
         """What was clamped to the rule base's range at the pose of ``interp`` ("" if nothing)."""
