@@ -135,7 +135,7 @@ def find_recordings(root: str | pathlib.Path, limit: int = MAX_RECORDINGS) -> li
     for here, dirs, files in os.walk(root):
         folder = pathlib.Path(here)
         dirs[:] = sorted(d for d in dirs if not d.startswith("."))
-        if folder != root and _is_rosbag2(folder) or folder == root and (folder / "metadata.yaml").is_file():
+        if (folder != root and _is_rosbag2(folder)) or (folder == root and (folder / "metadata.yaml").is_file()):
             found.append(folder)
             dirs[:] = []
         else:

@@ -190,7 +190,7 @@ def robot_drift(robot: str, results: Sequence[Result], rule: DriftRule) -> Robot
             why.append(f"damping ratio {p.zeta:.3g} changed by {dz:+.3g} from the baseline's {out.baseline_zeta:.3g}"
                        f" ({p.damping_sigmas:.1f} sigma)")
         p.out, p.why = bool(why), "; ".join(why)
-        run = run + [p] if p.out else []
+        run = [*run, p] if p.out else []
         if len(run) == rule.confirm:
             out.alerts.append(_alert(robot, run, out, base_shaper, rule))
         elif len(run) > rule.confirm:  # the alert of this run, updated with every further recording out
@@ -207,8 +207,8 @@ def _alert(robot: str, run: list[Point], drift: RobotDrift, base_shaper: Any, ru
     retune, _ = _recommend(new, rule)
     fares = None
     if base_shaper is not None:
-        check = check_mode(base_shaper.amplitudes, base_shaper.times, [m.omega / (2 * math.pi) for m in base_shaper.modes],
-                           new, rule.target)
+        design_hz = [m.omega / (2 * math.pi) for m in base_shaper.modes]
+        check = check_mode(base_shaper.amplitudes, base_shaper.times, design_hz, new, rule.target)
         fares = {"family": base_shaper.family, "v_at_new_mode": check.vibration, "inside_band": check.inside,
                  "band_hz": list(check.band_hz) if check.band_hz else None}
     return Alert(robot, run[0].result.path, run[rule.confirm - 1].result.path, run[0].result.start_s, len(run),

@@ -29,7 +29,7 @@ def _f(x: float | None, spec: str = ".4g") -> str:
 def _when(t: float) -> str:
     if not math.isfinite(t):
         return "n/a"
-    return datetime.datetime.fromtimestamp(t, tz=datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    return datetime.datetime.fromtimestamp(t, tz=datetime.UTC).strftime("%Y-%m-%d %H:%M:%S")
 
 
 def fleet_doc(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule) -> dict[str, Any]:
@@ -40,7 +40,8 @@ def fleet_doc(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule) -> di
         "failed": [{"path": r.path, "robot": r.robot, "error": r.error} for r in run.results if r.error],
         "seconds": run.seconds, "where": run.where,
         "robots": [{
-            "robot": d.robot, "note": d.note, "baseline_hz": d.baseline_hz, "baseline_scatter_hz": d.baseline_scatter_hz,
+            "robot": d.robot, "note": d.note, "baseline_hz": d.baseline_hz,
+            "baseline_scatter_hz": d.baseline_scatter_hz,
             "baseline_zeta": d.baseline_zeta, "baseline_scatter_zeta": d.baseline_scatter_zeta,
             "baseline_recommendation": d.baseline_recommendation,
             "alerts": [dataclasses.asdict(a) for a in d.alerts],
@@ -126,10 +127,11 @@ def write_csv(path: pathlib.Path, drift: Sequence[RobotDrift]) -> None:
                 cmp = [int(p.in_baseline), _f(p.shift, ".4f"), _f(p.shift_sigmas, ".2f"), _f(p.damping_change, ".4f"),
                        int(p.out), r.error]
                 if not r.modes:
-                    w.writerow(common + [r.cycles, "", "", "", "", "", rec] + cmp)
+                    w.writerow([*common, r.cycles, "", "", "", "", "", rec, *cmp])
                 for k, m in enumerate(r.modes):
-                    w.writerow(common + [r.cycles, k + 1, _f(m["frequency_hz"], ".6g"), _f(m["frequency_std_hz"], ".3g"),
-                                         _f(m["zeta"], ".4g"), _f(m["zeta_std"], ".3g"), rec] + cmp)
+                    w.writerow([*common, r.cycles, k + 1, _f(m["frequency_hz"], ".6g"),
+                                _f(m["frequency_std_hz"], ".3g"), _f(m["zeta"], ".4g"), _f(m["zeta_std"], ".3g"), rec,
+                                *cmp])
 
 
 def write_alerts_csv(path: pathlib.Path, drift: Sequence[RobotDrift]) -> None:
@@ -172,9 +174,10 @@ def plot_modes(path: pathlib.Path, drift: Sequence[RobotDrift], rule: DriftRule)
             lo, hi = d.baseline_hz * (1 - rule.max_frequency_shift), d.baseline_hz * (1 + rule.max_frequency_shift)
             ax.axhspan(lo, hi, color="tab:green", alpha=0.15, label=f"baseline +-{100 * rule.max_frequency_shift:g} %")
             ax.axhline(d.baseline_hz, color="tab:green", lw=0.8)
-        for kind, sel, style in (("baseline", lambda p: p.in_baseline, dict(color="tab:green", marker="s")),
-                                 ("within", lambda p: not p.in_baseline and not p.out, dict(color="tab:blue", marker="o")),
-                                 ("out", lambda p: p.out, dict(color="tab:red", marker="x"))):
+        kinds = (("baseline", lambda p: p.in_baseline, dict(color="tab:green", marker="s")),
+                 ("within", lambda p: not p.in_baseline and not p.out, dict(color="tab:blue", marker="o")),
+                 ("out", lambda p: p.out, dict(color="tab:red", marker="x")))
+        for kind, sel, style in kinds:
             chosen = [(xi, p) for xi, p in zip(x, pts, strict=True) if sel(p)]
             if chosen:
                 ax.errorbar([c[0] for c in chosen], [c[1].frequency_hz for c in chosen],

@@ -284,7 +284,10 @@ def write_fleet(folder: str | pathlib.Path, robots: int = 10, recordings: int = 
     """
     rng = np.random.default_rng(seed)
     root = pathlib.Path(folder)
-    modes, zetas, drift_from, paths = {}, {}, {}, {}
+    modes: dict[str, float] = {}
+    zetas: dict[str, float] = {}
+    drift_from: dict[str, int] = {}
+    paths: dict[str, list[pathlib.Path]] = {}
     first_drifted = int(round(drift_at * recordings))
     for k in range(robots):
         name = f"robot_{k:02d}"
