@@ -18,7 +18,8 @@ run ``repeats`` times, interleaved, and the best time of each is reported with e
     the interpreter's start and imports (about 2 s).
 ``Dask, N workers``
     A new ``LocalCluster`` of N worker processes (one thread, one BLAS thread each), no cache;
-    includes starting and closing the cluster.
+    includes starting and closing the cluster; ``of which cluster start`` is the time until the
+    workers are up and have imported the analysis (numpy, scipy, rosbags), before the first task.
 ``rerun, cache hits``
     With a cache filled by a first run: every recording hashed (SHA-256 of its bytes) and found.
 
@@ -79,6 +80,7 @@ def run(*, robots: int = 10, recordings: int = 20, worker_counts: tuple[int, ...
                 load = os.getloadavg()[0]
                 r = run_fleet(paths, options, None, workers=n)
                 timed(f"Dask, {n} worker process{'es' if n > 1 else ''}", r.seconds, load)
+                timed(f"  of which cluster start, {n}", r.startup_s, load)
         cache = Cache(pathlib.Path(tmp) / "cache")
         progress("fleet: filling the cache (2 workers)")
         run_fleet(paths, options, cache, workers=max(worker_counts))

@@ -108,3 +108,13 @@ def test_robot_from_metadata_else_folder_and_refusals(tmp_path):
         find_recordings(tmp_path, limit=1)
     with pytest.raises(FleetError, match="not a folder"):
         find_recordings(tmp_path / "missing")
+
+
+def test_analyze_bag_names_analyze_fleet_for_a_folder_of_recordings(tmp_path, capsys):
+    from shaper_nodes.cli import analyze_bag
+
+    t, u, a, _ = simulate(cycles=2, rate=250.0, dwell=1.0)
+    for name in ("rec_a", "rec_b"):
+        write_bag(tmp_path / "cell_1" / name, t, u, a)
+    assert analyze_bag.main([str(tmp_path), "--no-progress"]) == 2
+    assert "analyze_fleet" in capsys.readouterr().err

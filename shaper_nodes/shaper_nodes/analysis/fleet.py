@@ -261,6 +261,7 @@ class FleetRun:
     cached: int
     seconds: float
     where: str
+    startup_s: float = 0.0  # of that, starting (or connecting to) the cluster and importing the analysis on its workers
 
 
 def _bar(total: int, show: bool) -> Any:
@@ -284,6 +285,11 @@ def make_cluster(workers: int, processes: bool = True) -> Any:
 
 def _worker_env() -> dict[str, str | None]:
     return {k: os.environ.get(k) for k in SINGLE_THREAD}
+
+
+def _preload() -> None:
+    """On each worker: import the analysis (numpy, scipy, rosbags) once, before the tasks come."""
+    from . import analyze, streams  # noqa: F401
 
 
 def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | None, *, workers: int = 1,
@@ -322,29 +328,32 @@ def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | No
         if bar is not None:
             bar.update(1)
 
-    where = "cache only"
+    where, startup = "cache only", [0.0]
     try:
         if todo and workers == 0 and not scheduler:
             where = "serial (this process)"
             for i, key in todo:
                 done(i, analyze_one(str(paths[i]), key, options))
         elif todo:
-            where = _run_dask(paths, todo, options, done, workers, scheduler, processes, warn)
+            where = _run_dask(paths, todo, options, done, workers, scheduler, processes, warn, startup)
     finally:
         if bar is not None:
             bar.close()
     out = [r for r in results if r is not None]
-    return FleetRun(out, len(todo), cached, time.perf_counter() - started, where)
+    return FleetRun(out, len(todo), cached, time.perf_counter() - started, where, startup[0])
 
 
 def _run_dask(paths: list[pathlib.Path], todo: list[tuple[int, str]], options: Options,
               done: Callable[[int, Result], None], workers: int, scheduler: str | None, processes: bool,
-              warn: Callable[[str], None]) -> str:
+              warn: Callable[[str], None], startup: list[float]) -> str:
     from distributed import Client, as_completed
 
+    started = time.perf_counter()
     cluster = None if scheduler else make_cluster(max(workers, 1), processes)
     try:
         with Client(scheduler if scheduler else cluster) as client:
+            client.run(_preload)
+            startup[0] = time.perf_counter() - started
             where = f"Dask scheduler {scheduler}" if scheduler else (
                 f"local Dask cluster, {max(workers, 1)} worker {'processes' if processes else 'threads'}")
             if scheduler:  # a cluster started elsewhere: say so if its workers run several BLAS threads

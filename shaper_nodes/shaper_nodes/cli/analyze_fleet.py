@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(fleet_doc(run, drift, rule), indent=1, allow_nan=False))
     else:
         print(f"{len(run.results)} recordings of {len(drift)} robots: {run.analysed} analysed ({run.where}),"
-              f" {run.cached} from the cache, {sum(1 for r in run.results if r.error)} failed; {run.seconds:.1f} s")
+              f" {run.cached} from the cache, {sum(1 for r in run.results if r.error)} failed; {run.seconds:.1f} s"
+              + (f" (cluster start {run.startup_s:.1f} s)" if run.startup_s else ""))
         for d in drift:
             state = "ALERT" if d.alerts else "ok"
             print(f"  {d.robot:<20} {len(d.points):>4} rec.  baseline {d.baseline_hz:8.4g} Hz  {state}"
