@@ -19,6 +19,8 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
   the sim plant node over DDS) against one Pinocchio ``aba`` call per step.
 * :mod:`benchmarks.bag_analysis`: messages per second of the bag analysis on a recording of a
   million messages, against the rosbags reader alone iterating the same bag.
+* :mod:`benchmarks.fleet`: 200 short recordings of 10 robots (two drifting) analysed serially, on 1 and
+  2 local Dask worker processes, and again from the cache; the robots the drift rule flags.
 * :mod:`benchmarks.learner_memory`: the learners' memory (RSS and their sample buffers) over a
   simulated 1-hour LIST cycle at 1 kHz, against a 10 s cycle in the same run, and over 24
   simulated hours of MRILC at 500 Hz, each in a process of its own.

@@ -56,6 +56,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--skip-scheduler", action="store_true", help="skip the scheduler timing and CPU share")
     p.add_argument("--skip-discretization", action="store_true", help="skip the shaper discretisation timing")
     p.add_argument("--skip-bag", action="store_true", help="skip the bag analysis throughput measurement")
+    p.add_argument("--skip-fleet", action="store_true",
+                   help="skip the fleet analysis (200 recordings: serial, 1 and 2 Dask workers, cached rerun)")
     p.add_argument("--skip-arm", action="store_true", help="skip the arm's lockstep speed")
     p.add_argument("--skip-streaming-gap", action="store_true",
                    help="skip the shaper's streaming gap while whole trajectories are shaped")
@@ -169,6 +171,7 @@ BENCHMARKS: tuple[tuple[str, str, str, Callable[[argparse.Namespace], dict[str, 
     ("scheduler", "skip_scheduler", "scheduler", lambda a: {"seconds": a.seconds}),
     ("discretization", "skip_discretization", "discretization", lambda a: {}),
     ("bag_analysis", "skip_bag", "bag_analysis", lambda a: {"messages": a.bag_messages}),
+    ("fleet", "skip_fleet", "fleet", lambda a: {}),
     ("arm_lockstep", "skip_arm", "arm_lockstep", lambda a: {}),
     ("learner_memory", "skip_learner_memory", "learner_memory", lambda a: {}),
     ("streaming_gap", "skip_streaming_gap", "streaming_gap", lambda a: {}),

@@ -31,6 +31,7 @@ setup(
             "shaper_design = shaper_nodes.cli.shaper_design:main",
             "loop_design = shaper_nodes.cli.loop_design:main",
             "analyze_bag = shaper_nodes.cli.analyze_bag:main",
+            "analyze_fleet = shaper_nodes.cli.analyze_fleet:main",
             "bag_play = shaper_nodes.nodes.bag_play:main",
             "shaper_keystore = shaper_nodes.cli.keystore:main",
         ],

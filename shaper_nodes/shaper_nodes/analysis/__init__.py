@@ -12,6 +12,8 @@
 - :mod:`.replay`: what the learners (LIST, MRILC) would have done over a recording, fed as the live
   nodes are fed; the registry ``LEARNER_REPLAYS``.
 - :mod:`.report`: terminal table, Markdown, CSV, JSON and PNG plots.
+- :mod:`.fleet`, :mod:`.fleet_drift`, :mod:`.fleet_report`: a fleet's recordings analysed on Dask and cached
+  by content, each robot's modes against its baseline (drift alerts, retunes), the fleet report.
 
 The CLIs are :mod:`shaper_nodes.cli.analyze_bag` (``analyze_bag``) and :mod:`shaper_nodes.cli.list_replay`
 (``list_replay``); see docs/bag_analysis.md.

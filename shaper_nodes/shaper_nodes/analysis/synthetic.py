@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import pathlib
 import struct
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, cast
 
@@ -98,7 +99,7 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
               imu_topic: str = "/imu/data", joints_topic: str = "/joint_states", commands_topic: str | None = None,
               joint_names: tuple[str, ...] = ("joint_1",), imu_every: int = 1, joints_every: int = 1,
               finish: bool = True, joint_noise: float = 0.0, joint_resolution: float = 0.0,
-              joint_seed: int = 2) -> int:
+              joint_seed: int = 2, custom_data: Mapping[str, str] | None = None) -> int:
     """Write the samples into a rosbag2 folder (MCAP); returns the number of messages written.
 
     ``t0`` (s) is added to every time (a robot's wall clock). Every joint of ``joint_names`` gets
@@ -108,6 +109,7 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
     The joint states are measured positions: ``u`` plus white noise of standard deviation
     ``joint_noise`` (rad or m; independent per joint, seeded by ``joint_seed``), rounded to
     multiples of ``joint_resolution`` (an encoder's step; 0: not rounded). The commands stay ``u``.
+    ``custom_data`` goes into metadata.yaml's custom_data (e.g. ``{"robot": "cell_3"}``).
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -144,6 +146,8 @@ def write_bag(path: str | pathlib.Path, t: np.ndarray, u: np.ndarray, a: np.ndar
     path = pathlib.Path(path)
     count = 0
     writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    for key, value in (custom_data or {}).items():
+        writer.set_custom_data(key, value)
     writer.open()
     try:
         c_imu = writer.add_connection(imu_topic, "sensor_msgs/msg/Imu", typestore=store)
@@ -251,3 +255,55 @@ def check_segmentation(folder: str | pathlib.Path, noise: float, resolution: flo
     return SegmentationCheck(noise, resolution, found, len(truth.move_starts), se, ee,
                              an.modes[0].hz if an.modes else float("nan"), mode_hz,
                              best.family if best is not None else "none")
+
+
+@dataclass(frozen=True)
+class FleetTruth:
+    """A synthetic fleet: per robot its true mode (Hz, ratio), whether it drifts, from which recording."""
+
+    modes_hz: dict[str, float]
+    zetas: dict[str, float]
+    drift_from: dict[str, int]  # robot -> index of its first drifted recording (only drifting robots)
+    shift: float
+    paths: dict[str, list[pathlib.Path]]
+
+
+def write_fleet(folder: str | pathlib.Path, robots: int = 10, recordings: int = 20,
+                drifting: Sequence[int] = (3, 7), shift: float = 0.10, drift_at: float = 0.5, cycles: int = 3,
+                rate: float = 250.0, dwell: float = 1.5, noise: float = 0.02, spread: float = 0.005,
+                seed: int = 0) -> FleetTruth:
+    """Write a fleet's recordings: ``robots`` x ``recordings`` short robot-style recordings.
+
+    Robot k (named ``robot_KK``, the name also in each recording's metadata custom_data) has a mode
+    of 3 + 0.35 k Hz with damping ratio 0.02-0.04; every recording (``<folder>/robot_KK/rec_NNN``,
+    one a day) varies it by white noise of relative standard deviation ``spread`` (a real robot's
+    day-to-day spread) on top of the accelerometer noise ``noise`` m/s^2. The robots of ``drifting``
+    have their mode moved by ``shift`` (fraction) from recording ``drift_at`` x ``recordings`` on
+    (a payload change or wear). Each recording: ``cycles`` back-and-forth moves at ``rate`` Hz with
+    ``dwell`` s between them, joint states with encoder noise, IMU with gravity.
+    """
+    rng = np.random.default_rng(seed)
+    root = pathlib.Path(folder)
+    modes: dict[str, float] = {}
+    zetas: dict[str, float] = {}
+    drift_from: dict[str, int] = {}
+    paths: dict[str, list[pathlib.Path]] = {}
+    first_drifted = int(round(drift_at * recordings))
+    for k in range(robots):
+        name = f"robot_{k:02d}"
+        modes[name] = 3.0 + 0.35 * k
+        zetas[name] = 0.02 + 0.02 * (k % 3) / 2
+        if k in drifting:
+            drift_from[name] = first_drifted
+        paths[name] = []
+        for n in range(recordings):
+            hz = modes[name] * (1.0 + spread * rng.standard_normal())
+            if k in drifting and n >= first_drifted:
+                hz *= 1.0 + shift
+            t, u, a, _ = simulate(cycles=cycles, rate=rate, mode_hz=hz, zeta=zetas[name], dwell=dwell, noise=noise,
+                                  offset=(0.0, 0.0, 9.81), seed=int(rng.integers(1 << 31)))
+            path = root / name / f"rec_{n:03d}"
+            write_bag(path, t, u, a, t0=1.7e9 + 86400.0 * n + 600.0 * k, joint_names=("joint_1",),
+                      joint_noise=1e-5, joint_seed=int(rng.integers(1 << 31)), custom_data={"robot": name})
+            paths[name].append(path)
+    return FleetTruth(modes, zetas, drift_from, shift, paths)

@@ -96,6 +96,16 @@ def _damage_of(path: pathlib.Path, limits: ReadLimits) -> list[str]:
         return []
 
 
+def _holds_recordings(path: pathlib.Path) -> bool:
+    """``path`` is a folder of several recordings (not one): a hint to use analyze_fleet."""
+    from shaper_nodes.analysis.fleet import FleetError, find_recordings
+
+    try:
+        return path.is_dir() and len(find_recordings(path, limit=2)) > 1
+    except (FleetError, OSError):
+        return True  # more than the limit: several
+
+
 @survives_closed_pipe
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
@@ -117,6 +127,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"analyze_bag: {err}", file=sys.stderr)
         for text in _damage_of(args.bag, limits):  # what the recording holds, even if it cannot be analysed
             print(f"analyze_bag: WARNING: damaged recording: {text}", file=sys.stderr)
+        if _holds_recordings(args.bag):
+            print(f"analyze_bag: {args.bag} holds several recordings: analyze_fleet analyses them all"
+                  " (docs/fleet.md)", file=sys.stderr)
         return 2
     for d in rec.damage:
         print(f"analyze_bag: WARNING: damaged recording: {describe_damage(d)}", file=sys.stderr)

@@ -1,0 +1,120 @@
+"""A small synthetic fleet through analyze_fleet on a real Dask LocalCluster (one worker).
+
+The worker runs as a thread of the test process (``processes=False``): the same scheduler, client,
+task submission and result transfer as with worker processes, without a process start-up per test.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import pathlib
+
+import pytest
+
+from shaper_nodes.analysis.analyze import Options
+from shaper_nodes.analysis.fleet import Cache, FleetError, content_key, find_recordings, robot_of, run_fleet
+from shaper_nodes.analysis.fleet_drift import DriftRule, fleet_drift
+from shaper_nodes.analysis.fleet_report import write_fleet_report
+from shaper_nodes.analysis.synthetic import simulate, write_bag, write_fleet
+
+OPTIONS = Options(learners=())
+RULE = DriftRule(baseline=3, confirm=2)
+
+
+@pytest.fixture
+def fleet(tmp_path):
+    root = tmp_path / "fleet"
+    truth = write_fleet(root, robots=3, recordings=6, drifting=(1,), shift=0.10, drift_at=0.5, seed=3)
+    return root, truth
+
+
+def test_fleet_on_dask_flags_the_drifting_robot_caches_and_reports(fleet, tmp_path):
+    root, truth = fleet
+    paths = find_recordings(root)
+    assert len(paths) == 18
+    cache = Cache(tmp_path / "cache")
+
+    first = run_fleet(paths, OPTIONS, cache, workers=1, processes=False)
+    assert first.where.startswith("local Dask cluster")
+    assert (first.analysed, first.cached) == (18, 0)
+    assert not [r.error for r in first.results if r.error]
+    for r in first.results:  # robot from the recording's metadata; the true mode found
+        assert r.robot == pathlib.Path(r.path).parent.name
+        hz = truth.modes_hz[r.robot] * (1 + truth.shift if r.robot in truth.drift_from
+                                        and int(r.path[-3:]) >= truth.drift_from[r.robot] else 1)
+        assert r.modes and r.modes[0]["frequency_hz"] == pytest.approx(hz, rel=0.03)
+
+    drift = {d.robot: d for d in fleet_drift(first.results, RULE)}
+    assert [name for name, d in drift.items() if d.alerts] == ["robot_01"]
+    alert = drift["robot_01"].alerts[0]
+    assert alert.shift == pytest.approx(truth.shift, abs=0.03)
+    assert alert.retune is not None and alert.retune["designed_hz"] == pytest.approx(alert.frequency_hz)
+
+    # a rerun analyses nothing: every result comes from the cache, the same
+    again = run_fleet(paths, OPTIONS, cache, workers=1, processes=False)
+    assert (again.analysed, again.cached) == (0, 18)
+    assert [r.modes for r in again.results] == [r.modes for r in first.results]
+
+    # a changed recording is analysed again, and only it
+    changed = truth.paths["robot_02"][1]
+    t, u, a, _ = simulate(cycles=3, rate=250.0, mode_hz=4.2, zeta=0.03, dwell=1.5, noise=0.02, offset=(0, 0, 9.81))
+    for f in changed.iterdir():
+        f.unlink()
+    changed.rmdir()
+    write_bag(changed, t, u, a, t0=1.7e9 + 86400.0 + 1200.0, custom_data={"robot": "robot_02"})
+    third = run_fleet(paths, OPTIONS, cache, workers=1, processes=False)
+    assert (third.analysed, third.cached) == (1, 17)
+    redone = next(r for r in third.results if r.path == str(changed))
+    assert redone.modes[0]["frequency_hz"] == pytest.approx(4.2, rel=0.03)
+
+    # the report: files exist, the CSV and JSON hold the modes
+    out = tmp_path / "report"
+    files = write_fleet_report(first, list(drift.values()), RULE, out)
+    assert all(f.is_file() and f.stat().st_size > 0 for f in files)
+    with (out / "recordings.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len({r["path"] for r in rows}) == 18
+    first_modes = {r.path: r.modes[0]["frequency_hz"] for r in first.results}
+    for row in rows:
+        if row["mode"] == "1":
+            assert float(row["frequency_hz"]) == pytest.approx(first_modes[row["path"]], rel=1e-5)
+    doc = json.loads((out / "fleet.json").read_text())
+    robots = {r["robot"]: r for r in doc["robots"]}
+    assert [a["robot"] for r in doc["robots"] for a in r["alerts"]] == ["robot_01"]
+    assert sum(len(r["recordings"]) for r in robots.values()) == 18
+    assert all(rec["modes"] for r in robots.values() for rec in r["recordings"])
+    assert "robot_01" in (out / "alerts.csv").read_text()
+
+
+def test_unreadable_recording_is_reported_not_fatal(tmp_path):
+    bad = tmp_path / "cell_9" / "broken"
+    bad.mkdir(parents=True)
+    (bad / "broken_0.mcap").write_bytes(b"not an mcap file")
+    run = run_fleet(find_recordings(tmp_path), OPTIONS, None, workers=0)
+    assert len(run.results) == 1 and run.results[0].error and run.results[0].robot == "cell_9"
+
+
+def test_robot_from_metadata_else_folder_and_refusals(tmp_path):
+    t, u, a, _ = simulate(cycles=2, rate=250.0, dwell=1.0)
+    write_bag(tmp_path / "day_1" / "rec_a", t, u, a, custom_data={"robot": "arm_7"})
+    write_bag(tmp_path / "day_1" / "rec_b", t, u, a)
+    assert robot_of(tmp_path / "day_1" / "rec_a") == "arm_7"
+    assert robot_of(tmp_path / "day_1" / "rec_b") == "day_1"
+    assert content_key(tmp_path / "day_1" / "rec_a", OPTIONS) != content_key(tmp_path / "day_1" / "rec_b", OPTIONS)
+    assert content_key(tmp_path / "day_1" / "rec_b", OPTIONS) != content_key(tmp_path / "day_1" / "rec_b",
+                                                                            Options(learners=(), max_modes=1))
+    with pytest.raises(FleetError, match="more than 1 recordings"):
+        find_recordings(tmp_path, limit=1)
+    with pytest.raises(FleetError, match="not a folder"):
+        find_recordings(tmp_path / "missing")
+
+
+def test_analyze_bag_names_analyze_fleet_for_a_folder_of_recordings(tmp_path, capsys):
+    from shaper_nodes.cli import analyze_bag
+
+    t, u, a, _ = simulate(cycles=2, rate=250.0, dwell=1.0)
+    for name in ("rec_a", "rec_b"):
+        write_bag(tmp_path / "cell_1" / name, t, u, a)
+    assert analyze_bag.main([str(tmp_path), "--no-progress"]) == 2
+    assert "analyze_fleet" in capsys.readouterr().err
