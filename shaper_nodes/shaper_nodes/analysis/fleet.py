@@ -32,6 +32,7 @@ from typing import Any
 import yaml
 
 from .analyze import Options
+from .report import json_ready
 
 #: part of every cache key: change it when the analysis or the result's fields change
 ANALYSIS_VERSION = "fleet 1 (analyze 2026-11)"
@@ -93,7 +94,7 @@ class Result:
 
     def to_json(self) -> dict[str, Any]:
         """Strict-JSON form (NaN as None)."""
-        return _clean(dataclasses.asdict(self))
+        return json_ready(dataclasses.asdict(self))
 
     @classmethod
     def from_json(cls, doc: dict[str, Any]) -> Result:
@@ -103,16 +104,6 @@ class Result:
         if out.start_s is None:
             out.start_s = float("nan")
         return out
-
-
-def _clean(v: Any) -> Any:
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    return v
 
 
 # ------------------------------------------------------------------------------ finding and hashing
@@ -175,7 +166,7 @@ def options_doc(options: Options) -> dict[str, Any]:
     """The options as plain data (part of the cache key)."""
     doc = dataclasses.asdict(options)
     doc["learner_params"] = dict(options.learner_params)
-    return _clean(doc)
+    return json_ready(doc)
 
 
 def robot_of(path: pathlib.Path) -> str:

@@ -18,8 +18,9 @@ import pathlib
 from collections.abc import Sequence
 from typing import Any
 
-from .fleet import FleetRun, _clean
+from .fleet import FleetRun
 from .fleet_drift import DriftRule, RobotDrift
+from .report import json_ready
 
 
 def _f(x: float | None, spec: str = ".4g") -> str:
@@ -34,7 +35,7 @@ def _when(t: float) -> str:
 
 def fleet_doc(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule) -> dict[str, Any]:
     """Everything, as plain data (``fleet.json``)."""
-    return _clean({
+    return json_ready({
         "rule": dataclasses.asdict(rule),
         "recordings": len(run.results), "analysed": run.analysed, "cached": run.cached,
         "failed": [{"path": r.path, "robot": r.robot, "error": r.error} for r in run.results if r.error],

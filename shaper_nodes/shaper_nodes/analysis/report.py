@@ -19,6 +19,7 @@ import csv
 import json
 import math
 import pathlib
+from typing import Any
 
 import numpy as np
 
@@ -32,15 +33,16 @@ def _f(x: float, spec: str = ".4g") -> str:
     return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
-def _clean(v):
+def json_ready(v: Any) -> Any:
+    """``v`` with non-finite floats as None and numpy scalars as Python numbers, nested (for JSON)."""
     if isinstance(v, float):
         return v if math.isfinite(v) else None
     if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
+        return {k: json_ready(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
+        return [json_ready(x) for x in v]
     if isinstance(v, np.generic):
-        return _clean(v.item())
+        return json_ready(v.item())
     return v
 
 
@@ -81,7 +83,7 @@ def summary(an: Analysis) -> dict:
     doc["groups"] = [_group(g) for g in an.groups]
     doc["settle_tolerance"] = an.settle_tolerance
     doc["accel_noise_m_s2"] = an.accel_noise
-    return _clean(doc)
+    return json_ready(doc)
 
 
 def _group(g) -> dict:
