@@ -47,6 +47,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--rate", type=float, default=500.0, help="command rate, Hz (default 500)")
     p.add_argument("--noise", type=float, default=0.01, help="accelerometer noise, m/s^2 (default 0.01)")
     p.add_argument("--distance", type=float, default=0.5, help="move distance, rad (default 0.5)")
+    p.add_argument("--compression", choices=("none", "zstd"), default="none",
+                   help="MCAP chunk compression of the recording (default none)")
     return p.parse_args(argv)
 
 
@@ -105,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         NodeProcess("shaper_nodes", "shaper_node", {
             "joint_names": joint, "command_rate": args.rate, "use_sim_time": True}, log_path=out / "shaper.log"),
         NodeProcess("shaper_nodes", "recorder", {
-            "output": str(bag_path), "topics": RECORDED, "use_sim_time": True}, log_path=out / "recorder.log"),
+            "output": str(bag_path), "topics": RECORDED, "use_sim_time": True, "compression": args.compression},
+            log_path=out / "recorder.log"),
     ]
     ctx = spin_context()
     conductor = Conductor(context=ctx)

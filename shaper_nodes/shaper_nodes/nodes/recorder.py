@@ -33,7 +33,7 @@ from rclpy.subscription import Subscription
 from std_srvs.srv import Trigger
 
 from shaper_nodes.core.recording import HEARTBEAT_SUFFIX
-from shaper_nodes.ros.bag_writer import BagWriter, QueuedRecording, message_class
+from shaper_nodes.ros.bag_writer import COMPRESSIONS, BagWriter, QueuedRecording, message_class
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all
@@ -43,6 +43,8 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("output", "recording", "rosbag2 folder to create (must not exist).", read_only=True),
     Spec("topics", ["/joint_states", "/tip_imu", "/cycle_events"], "Topics to record (fully qualified names).",
          read_only=True),
+    Spec("compression", "none", "MCAP chunk compression: 'zstd' compresses each chunk (a 500 Hz IMU recording"
+         " shrinks several times), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True),
     Spec("discovery_period", 0.2, "How often to look for requested topics not yet subscribed, s.", (0.01, 60.0),
          read_only=True),
     Spec("flush_period", 1.0, "Time between two flushes of the recording to the operating system (MCAP chunk"
@@ -66,7 +68,7 @@ class RecorderNode(Node):
         declare_all(self, PARAMETERS)
         p = self.get_parameter
         self.wanted = [t if t.startswith("/") else "/" + t for t in p("topics").value]
-        self.bag = BagWriter(p("output").value, wrap_file=self._wrap_file())
+        self.bag = BagWriter(p("output").value, wrap_file=self._wrap_file(), compression=str(p("compression").value))
         self.recording = QueuedRecording(
             self.bag, lambda: self.get_clock().now().nanoseconds,
             heartbeat_topic=self.get_fully_qualified_name().rstrip("/") + HEARTBEAT_SUFFIX,

@@ -29,7 +29,7 @@ from collections.abc import Callable
 from typing import Any, BinaryIO
 
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -62,6 +62,10 @@ def message_class(type_name: str) -> Any:
     return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
 
 
+#: chunk compressions a recording may use
+COMPRESSIONS = ("none", "zstd")
+
+
 class BagWriter:
     """A rosbag2 folder with MCAP storage; add topics as they appear, write CDR bytes, flush.
 
@@ -71,6 +75,9 @@ class BagWriter:
         The folder to create (must not exist).
     wrap_file : callable, optional
         Wraps the open MCAP file object (tests inject failing files with it).
+    compression : {"none", "zstd"}
+        Chunk compression of the MCAP file ("zstd": each chunk zstd-compressed, as rosbag2's MCAP
+        storage can write it; every MCAP reader inflates it).
 
     Raises
     ------
@@ -81,12 +88,16 @@ class BagWriter:
     """
 
     def __init__(self, path: str | pathlib.Path,
-                 wrap_file: Callable[[BinaryIO], BinaryIO] | None = None) -> None:
+                 wrap_file: Callable[[BinaryIO], BinaryIO] | None = None, compression: str = "none") -> None:
         self.path = pathlib.Path(path)
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}")
         if self.path.exists():
             raise FileExistsError(f"recording folder {self.path} exists already")
         self._store = typestore_with_own_types()
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        if compression == "zstd":  # rosbags' STORAGE mode: the MCAP chunks are zstd-compressed
+            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._writer.open()
