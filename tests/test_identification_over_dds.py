@@ -30,14 +30,21 @@ def identify(conductor: Conductor, request: Identify.Request, timeout: float = 6
         time.sleep(0.2)
 
 
-def test_identify_from_one_unshaped_cycle_then_shape(start_node, ros_context):
-    omega = 2 * math.pi * TRUE_HZ
-    m, c, k = mck_from_mode(omega, TRUE_ZETA, 1.0)
+def start_plant_and_shaper(start_node) -> float:
+    """The sim plant (one joint at TRUE_HZ, TRUE_ZETA; lockstep, 500 Hz) and the shaper node; the plant's
+    mass (kg) is returned."""
+    m, c, k = mck_from_mode(2 * math.pi * TRUE_HZ, TRUE_ZETA, 1.0)
     start_node("sim_plant_node", "sim_plant", {
         "joint_names": ["joint_1"], "rate": 500.0, "mode": "lockstep", "imu.noise_stddev": 0.01,
         "imu.axes": [0, -1, -1], "plant.mass": [m], "plant.damping": [c], "plant.stiffness": [k],
         "task.dwell": 3.0, "task.preroll": 0.5})
     start_node("shaper_nodes", "shaper_node", {"joint_names": ["joint_1"], "command_rate": 500.0})
+    return m
+
+
+def test_identify_from_one_unshaped_cycle_then_shape(start_node, ros_context):
+    omega = 2 * math.pi * TRUE_HZ
+    start_plant_and_shaper(start_node)
     identifier = start_node("shaper_nodes", "identifier", {"buffer_cycles": 3})
     conductor = Conductor(context=ros_context)
     try:
@@ -90,12 +97,7 @@ def test_the_drift_watch_warns_when_a_payload_moves_the_mode_out_of_the_shapers_
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
     omega = 2 * math.pi * TRUE_HZ
-    m, c, k = mck_from_mode(omega, TRUE_ZETA, 1.0)
-    start_node("sim_plant_node", "sim_plant", {
-        "joint_names": ["joint_1"], "rate": 500.0, "mode": "lockstep", "imu.noise_stddev": 0.01,
-        "imu.axes": [0, -1, -1], "plant.mass": [m], "plant.damping": [c], "plant.stiffness": [k],
-        "task.dwell": 3.0, "task.preroll": 0.5})
-    start_node("shaper_nodes", "shaper_node", {"joint_names": ["joint_1"], "command_rate": 500.0})
+    m = start_plant_and_shaper(start_node)
     identifier = start_node("shaper_nodes", "identifier", {"buffer_cycles": 3, "watch.confirm": 2})
     conductor = Conductor(context=ros_context)
     drift: list = []
