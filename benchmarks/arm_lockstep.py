@@ -84,13 +84,13 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
     import rclpy
     from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
-    from rclpy.action import ActionClient
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+    from shaper_nodes.ros.action_client import ResilientActionClient
     from shaper_nodes.ros.launching import NodeProcess
     from sim_plant_node.arm.description import JOINT_NAMES
 
@@ -109,7 +109,7 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
         n.create_subscription(JointState, "/joint_states", count("joint_states"), 1000)
         n.create_subscription(Imu, "/tip_imu", count("imu"), qos_profile_sensor_data)
         n.create_subscription(Clock, "/clock", count("clock"), 1000)
-        client = ActionClient(n, FollowJointTrajectory, "/joint_trajectory_controller/follow_joint_trajectory")
+        client = ResilientActionClient(n, FollowJointTrajectory, "/joint_trajectory_controller/follow_joint_trajectory")
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(n)
         try:

@@ -17,12 +17,12 @@ from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
-from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.conversions import sec_to_time
 from sim_plant_node.arm.description import JOINT_NAMES
 
@@ -56,7 +56,7 @@ class Client:
 
     def __init__(self, ctx) -> None:
         self.node = rclpy.create_node("arm_client", context=ctx)
-        self.action = ActionClient(self.node, FollowJointTrajectory, ACTION)
+        self.action = ResilientActionClient(self.node, FollowJointTrajectory, ACTION)
         self.topic = self.node.create_publisher(JointTrajectory, TOPIC, 10)
         self.states: list[JointState] = []
         self.imu: list[Imu] = []

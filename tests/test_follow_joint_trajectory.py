@@ -23,7 +23,7 @@ from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -39,6 +39,7 @@ from shaper_nodes.core.shaping.fir import discretize
 from shaper_nodes.core.shaping.trajectory import shape_trajectory
 from shaper_nodes.nodes.scheduler import SchedulerNode
 from shaper_nodes.nodes.shaper import ShaperNode
+from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.conversions import duration_to_sec
 from shaper_nodes.ros.shaper_client import wait_for
 
@@ -145,7 +146,7 @@ class Rig:
         self.node = ShaperNode(context=ctx, parameter_overrides=overrides)
         self.controller = controller
         self.probe = rclpy.create_node("probe", context=ctx)
-        self.client = ActionClient(self.probe, FollowJointTrajectory, SERVER)
+        self.client = ResilientActionClient(self.probe, FollowJointTrajectory, SERVER)
         self.diag: list = []
         self.statuses: list = []  # every status, not only the input refusals
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
@@ -352,7 +353,7 @@ def test_installed_shaper_node_forwards_goals(start_node, ros_context):
                                                           "shaper.damping_ratio": 0.0})
     controller = TestController(ros_context)
     probe = rclpy.create_node("probe", context=ros_context)
-    client = ActionClient(probe, FollowJointTrajectory, SERVER)
+    client = ResilientActionClient(probe, FollowJointTrajectory, SERVER)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(controller.node)
     ex.add_node(probe)

@@ -105,12 +105,12 @@ class ArmClient:
 
     def __init__(self, conductor: Any) -> None:
         from control_msgs.action import FollowJointTrajectory
-        from rclpy.action import ActionClient
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import Imu, JointState
 
         from shaper_msgs.msg import CycleEvent, CycleReport
+        from shaper_nodes.ros.action_client import ResilientActionClient
         from shaper_nodes.ros.conversions import time_to_sec
 
         from .arm.dynamics import ArmModel
@@ -145,7 +145,7 @@ class ArmClient:
         conductor.create_subscription(Clock, "/clock", on_clock, 100)
         conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
         self.events = conductor.create_publisher(CycleEvent, "/cycle_events", 10)
-        self.action = ActionClient(conductor, FollowJointTrajectory, "/shaper/follow_joint_trajectory")
+        self.action = ResilientActionClient(conductor, FollowJointTrajectory, "/shaper/follow_joint_trajectory")
         self._Goal = FollowJointTrajectory.Goal
         self._CycleEvent = CycleEvent
 

@@ -184,9 +184,10 @@ class Calibrator:
 
     def __init__(self, node: Any, executor: Any, values: dict[str, Any]) -> None:
         from control_msgs.action import FollowJointTrajectory
-        from rclpy.action import ActionClient
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu, JointState
+
+        from shaper_nodes.ros.action_client import ResilientActionClient
 
         self.node, self.executor, self.v = node, executor, values
         self.names = list(values["joint_names"] or [])
@@ -200,7 +201,7 @@ class Calibrator:
         self.js_topic = str(values["topics.joint_states"])
         node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
         node.create_subscription(JointState, self.js_topic, self._on_joint_states, 100)
-        self.action = ActionClient(node, FollowJointTrajectory, str(values["action"]))
+        self.action = ResilientActionClient(node, FollowJointTrajectory, str(values["action"]))
         self._fjt = FollowJointTrajectory
 
     # ------------------------------------------------------------------ data

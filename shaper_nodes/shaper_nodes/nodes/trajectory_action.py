@@ -35,7 +35,7 @@ from typing import TypeAlias
 
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.client import ClientGoalHandle
 from rclpy.action.server import ServerGoalHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -44,6 +44,7 @@ from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.shaper_client import wait_for
 
 Goal: TypeAlias = FollowJointTrajectory.Goal
@@ -135,7 +136,10 @@ class TrajectoryActionProxy:
         self._live: dict[bytes, _Forward] = {}
         self._active: _Forward | None = None
         self.controller_name = controller_name
-        self._client = ActionClient(node, FollowJointTrajectory, controller_name)
+        # a goal response lost at start-up is recovered from the status topic, or the request sent
+        # again, within the timeout (ros/action_client.py)
+        self._client = ResilientActionClient(node, FollowJointTrajectory, controller_name,
+                                             resend_period=max(0.05, self._timeout / 4))
         self._server = ActionServer(
             node, FollowJointTrajectory, server_name, execute_callback=self._execute,
             goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,

@@ -1,0 +1,258 @@
+# Copyright 2026 The ros2 vibration suppression authors
+# SPDX-License-Identifier: Apache-2.0
+"""An action client whose goals survive a lost service response.
+
+ROS 2 actions ride on services, and a service response can be lost at start-up: the server's
+response writer may not yet have matched the client's response reader when it answers, although
+the client already sees the server (``server_is_ready()`` is true). Fast DDS then drops the
+response with ``failed to send response (timeout): client will not receive response``
+(rmw_fastrtps, ``rmw_response.cpp``), and ``send_goal_async`` never completes, although the server
+accepted the goal and is executing it. It happens on busy machines and, rarely, on quiet ones.
+
+:class:`ResilientActionClient` is an :class:`rclpy.action.ActionClient` that recovers from it
+without guessing:
+
+* **A goal accepted but not answered** is seen on the action's status topic (the server publishes
+  every accepted goal's status there, transient local): when no response has come ``resend_period``
+  after the request, the goal's future completes with a goal handle built from that status, as if
+  the response had arrived.
+* **A goal request answered by nobody** (neither a response nor a status naming its id within
+  ``resend_period``) is sent again *with the same goal id*. A server that never saw it handles it
+  now; one that accepted it refuses the duplicate id, and the status decides (a rejection of a
+  resent request is taken as final only when no status names the goal one more period later).
+* **A result lost** (the status says the goal has ended, and no result arrives within
+  ``resend_period``) is asked for again; the server keeps results for its ``result_timeout``.
+
+Nothing here waits a fixed time for a state: the periods are resend intervals, and every outcome
+is a message (a response or a status). The work is bounded: one timer, active only while a request
+is pending, and at most :data:`MAX_STATUSES` goal statuses remembered.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import weakref
+from dataclasses import dataclass, field
+from typing import Any
+
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
+from rclpy.clock import Clock, ClockType
+from rclpy.task import Future
+
+#: goal statuses remembered (the newest), to recognise goals accepted without a response
+MAX_STATUSES = 1024
+#: the goal states after which the server has a result
+TERMINAL = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
+
+
+@dataclass
+class _GoalSend:
+    goal: Any
+    feedback: Any
+    goal_id: Any
+    future: Future
+    sent_at: float
+    attempts: int = 1
+    rejected: Any = None  # the rejection of a resent request, waiting one period for a status
+    rejected_at: float = 0.0
+
+
+@dataclass
+class _ResultWait:
+    handle: ClientGoalHandle
+    future: Future
+    asked_at: float
+    ended_at: float | None = None
+    attempts: int = 1
+    requests: list[Future] = field(default_factory=list)
+
+
+class ResilientActionClient(ActionClient):
+    """An :class:`~rclpy.action.ActionClient` that recovers goals and results whose service response
+    was lost (see the module docstring). Use it as the rclpy class: same constructor, same futures.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node the client belongs to (its executor runs the resend timer).
+    action_type, action_name
+        As for :class:`~rclpy.action.ActionClient`.
+    resend_period : float
+        s without an answer after which a goal request or a result request is sent again (steady
+        clock, so it runs while simulated time stands still).
+    **kwargs
+        Passed to :class:`~rclpy.action.ActionClient` (QoS profiles, callback group).
+    """
+
+    def __init__(self, node: Any, action_type: Any, action_name: str, *, resend_period: float = 2.0,
+                 **kwargs: Any) -> None:
+        if not resend_period > 0:
+            raise ValueError(f"resend_period must be positive, got {resend_period!r}")
+        super().__init__(node, action_type, action_name, **kwargs)
+        self.resend_period = float(resend_period)
+        self._lock = threading.Lock()
+        self._statuses: dict[bytes, tuple[int, Any]] = {}  # goal id -> (status, goal_info)
+        self._sends: dict[bytes, _GoalSend] = {}
+        self._results: dict[bytes, _ResultWait] = {}
+        self._own_handles: dict[bytes, weakref.ref[ClientGoalHandle]] = {}
+        #: requests sent again (goal and result), for diagnostics and tests
+        self.resent = 0
+        #: goals whose handle came from the status topic because their response was lost
+        self.recovered = 0
+        self._timer = node.create_timer(self.resend_period / 4, self._check, callback_group=self.callback_group,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._timer.cancel()
+
+    # ------------------------------------------------------------------ goals
+    def send_goal_async(self, goal: Any, feedback_callback: Any = None, goal_uuid: Any = None) -> Future:
+        """Send a goal; the future completes with a :class:`ClientGoalHandle` once the server's answer
+        is known (its response, or its status topic naming the goal)."""
+        goal_id = self._generate_random_uuid() if goal_uuid is None else goal_uuid
+        outer = Future()
+        self.add_future(outer)
+        send = _GoalSend(goal, feedback_callback, goal_id, outer, time.monotonic())
+        with self._lock:
+            self._sends[bytes(goal_id.uuid)] = send
+        self._request_goal(send)
+        self._timer.reset()
+        return outer
+
+    def _request_goal(self, send: _GoalSend) -> None:
+        inner = super().send_goal_async(send.goal, send.feedback, send.goal_id)
+        inner.add_done_callback(lambda f, s=send: self._on_goal_response(s, f))
+
+    def _on_goal_response(self, send: _GoalSend, inner: Future) -> None:
+        handle = inner.result()
+        key = bytes(send.goal_id.uuid)
+        with self._lock:
+            if send.future.done() or self._sends.get(key) is not send:
+                return
+            if handle.accepted or send.attempts == 1:
+                del self._sends[key]
+                done: Any = handle
+            elif key in self._statuses:  # the resend was refused as a duplicate: accepted before
+                del self._sends[key]
+                done = self._handle_from_status(key)
+            else:  # a resend refused: final unless a status names the goal within a period
+                send.rejected, send.rejected_at = handle, time.monotonic()
+                return
+        send.future.set_result(done)
+
+    def _handle_from_status(self, key: bytes) -> ClientGoalHandle:
+        """A goal handle for an accepted goal known from the status topic (lock held)."""
+        status, info = self._statuses[key]
+        response = self._action_type.Impl.SendGoalService.Response(accepted=True, stamp=info.stamp)
+        handle = ClientGoalHandle(self, info.goal_id, response)
+        handle._status = status
+        self._own_handles[key] = weakref.ref(handle)
+        self.recovered += 1
+        self._node.get_logger().warning(
+            f"{self._action_name}: the goal response was lost on the way (the server accepted the goal:"
+            " its status says so); going on with the goal")
+        return handle
+
+    # ------------------------------------------------------------------ results
+    def _get_result_async(self, goal_handle: ClientGoalHandle) -> Future:
+        outer = Future()
+        self.add_future(outer)
+        wait = _ResultWait(goal_handle, outer, time.monotonic())
+        key = bytes(goal_handle.goal_id.uuid)
+        with self._lock:
+            self._results[key] = wait
+            if self._statuses.get(key, (GoalStatus.STATUS_UNKNOWN,))[0] in TERMINAL:
+                wait.ended_at = time.monotonic()
+        self._request_result(wait)
+        self._timer.reset()
+        return outer
+
+    def _request_result(self, wait: _ResultWait) -> None:
+        inner = super()._get_result_async(wait.handle)
+        wait.requests.append(inner)
+        inner.add_done_callback(lambda f, w=wait: self._on_result(w, f))
+
+    def _on_result(self, wait: _ResultWait, inner: Future) -> None:
+        key = bytes(wait.handle.goal_id.uuid)
+        with self._lock:
+            if wait.future.done():
+                return
+            if self._results.get(key) is wait:
+                del self._results[key]
+        wait.future.set_result(inner.result())
+
+    # ------------------------------------------------------------------ status and resends
+    async def execute(self, taken_data: Any) -> None:
+        if "status" in taken_data:
+            self._note_statuses(taken_data["status"].status_list)
+        await super().execute(taken_data)
+
+    def _note_statuses(self, status_list: Any) -> None:
+        now = time.monotonic()
+        with self._lock:
+            for s in status_list:
+                key = bytes(s.goal_info.goal_id.uuid)
+                self._statuses.pop(key, None)
+                self._statuses[key] = (s.status, s.goal_info)
+                ref = self._own_handles.get(key)
+                handle = ref() if ref is not None else None
+                if handle is not None:
+                    handle._status = s.status
+                wait = self._results.get(key)
+                if wait is not None and s.status in TERMINAL and wait.ended_at is None:
+                    wait.ended_at = now
+            while len(self._statuses) > MAX_STATUSES:
+                self._statuses.pop(next(iter(self._statuses)))
+            for key in [k for k, r in self._own_handles.items() if r() is None]:
+                del self._own_handles[key]
+
+    def _check(self) -> None:
+        """Resend what has had no answer for a period; conclude the refusals of resent goals."""
+        now = time.monotonic()
+        period = self.resend_period
+        goals, results, refused, recovered = [], [], [], []
+        with self._lock:
+            for key, send in list(self._sends.items()):
+                if send.future.done():
+                    del self._sends[key]
+                elif send.rejected is not None:
+                    if now - send.rejected_at > period:
+                        del self._sends[key]
+                        refused.append((send.future, send.rejected))
+                elif now - send.sent_at <= period:
+                    continue
+                elif key in self._statuses:  # accepted (the status says so), and no response came
+                    del self._sends[key]
+                    recovered.append((send.future, self._handle_from_status(key)))
+                else:
+                    send.sent_at, send.attempts = now, send.attempts + 1
+                    goals.append(send)
+            for key, wait in list(self._results.items()):
+                if wait.future.done():
+                    del self._results[key]
+                elif wait.ended_at is not None and now - max(wait.ended_at, wait.asked_at) > period:
+                    wait.asked_at, wait.attempts = now, wait.attempts + 1
+                    results.append(wait)
+            idle = not self._sends and not self._results
+        for future, handle in refused + recovered:
+            future.set_result(handle)
+        for send in goals:
+            self.resent += 1
+            self._node.get_logger().warning(
+                f"{self._action_name}: no answer to a goal request after {period:g} s (a response lost at"
+                f" start-up?); sending it again with the same goal id (attempt {send.attempts})")
+            self._request_goal(send)
+        for wait in results:
+            self.resent += 1
+            self._node.get_logger().warning(
+                f"{self._action_name}: the goal has ended but its result has not arrived after {period:g} s;"
+                " asking again")
+            self._request_result(wait)
+        if idle:
+            self._timer.cancel()
+
+    def destroy(self) -> None:
+        self._timer.cancel()
+        self._node.destroy_timer(self._timer)
+        super().destroy()

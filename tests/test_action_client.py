@@ -1,0 +1,167 @@
+"""ResilientActionClient against a real rclpy action server over DDS that loses responses.
+
+The server is a real :class:`rclpy.action.ActionServer`; losing a response is injected where
+rmw_fastrtps loses it at start-up: the server handles the request (accepts or rejects the goal,
+finishes it) and its response is not delivered. The client must carry on from what it can see (the
+status topic) and ask again where nothing can be seen.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+import rclpy
+from action_msgs.msg import GoalStatus
+from control_msgs.action import FollowJointTrajectory
+from rclpy.action import ActionClient, ActionServer, GoalResponse
+from rclpy.executors import SingleThreadedExecutor
+
+from shaper_nodes.ros.action_client import ResilientActionClient
+
+pytestmark = pytest.mark.integration
+ACTION = "/lossy_controller/follow_joint_trajectory"
+Goal = FollowJointTrajectory.Goal
+
+
+class LossyHandle:
+    """The server's rclpy handle, losing the first ``lose_goal`` goal responses and the first
+    ``lose_result`` result responses (they are handled, then not sent)."""
+
+    def __init__(self, handle: Any, lose_goal: int = 0, lose_result: int = 0) -> None:
+        self._handle, self.lose_goal, self.lose_result = handle, lose_goal, lose_result
+        self.goal_requests = 0
+        self.lost = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._handle, name)
+
+    def __enter__(self) -> Any:
+        return self._handle.__enter__()
+
+    def __exit__(self, *exc: Any) -> Any:
+        return self._handle.__exit__(*exc)
+
+    def send_goal_response(self, header: Any, response: Any) -> None:
+        self.goal_requests += 1
+        if self.lose_goal > 0:
+            self.lose_goal -= 1
+            self.lost += 1
+            return
+        self._handle.send_goal_response(header, response)
+
+    def send_result_response(self, header: Any, response: Any) -> None:
+        if self.lose_result > 0:
+            self.lose_result -= 1
+            self.lost += 1
+            return
+        self._handle.send_result_response(header, response)
+
+
+class Rig:
+    """A server node and a client node in one executor."""
+
+    def __init__(self, ctx: Any, *, accept: bool = True, lose_goal: int = 0, lose_result: int = 0) -> None:
+        self.server_node = rclpy.create_node("lossy_controller", context=ctx)
+        self.client_node = rclpy.create_node("resilient_client", context=ctx)
+        self.executed = 0
+
+        def execute(handle: Any) -> Any:
+            self.executed += 1
+            handle.succeed()
+            return FollowJointTrajectory.Result(error_code=0, error_string=f"done {self.executed}")
+
+        self.server = ActionServer(self.server_node, FollowJointTrajectory, ACTION, execute_callback=execute,
+                                   goal_callback=lambda _goal: GoalResponse.ACCEPT if accept else GoalResponse.REJECT)
+        self.lossy = LossyHandle(self.server._handle, lose_goal, lose_result)
+        self.server._handle = self.lossy
+        self.client = ResilientActionClient(self.client_node, FollowJointTrajectory, ACTION, resend_period=0.5)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.server_node)
+        self.ex.add_node(self.client_node)
+        self.spin_until(self.client.server_is_ready, "the server")
+
+    def spin_until(self, cond: Any, what: str, timeout: float = 60.0) -> None:
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def send(self, goal: Goal | None = None) -> Any:
+        future = self.client.send_goal_async(goal or Goal())
+        self.spin_until(future.done, "the goal's handle")
+        return future.result()
+
+    def result(self, handle: Any) -> Any:
+        future = handle.get_result_async()
+        self.spin_until(future.done, "the result")
+        return future.result()
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.client.destroy()
+        self.server.destroy()
+        self.client_node.destroy_node()
+        self.server_node.destroy_node()
+
+
+@pytest.fixture
+def rig(ros_context, request):
+    rigs: list[Rig] = []
+
+    def make(**kw: Any) -> Rig:
+        rigs.append(Rig(ros_context, **kw))
+        return rigs[-1]
+
+    yield make
+    for r in rigs:
+        r.close()
+
+
+def test_a_goal_whose_response_is_lost_goes_on_from_its_status(rig):
+    r = rig(lose_goal=1)
+    handle = r.send()
+    assert handle.accepted
+    assert r.lossy.lost == 1 and r.client.recovered == 1
+    res = r.result(handle)
+    assert res.status == GoalStatus.STATUS_SUCCEEDED
+    assert res.result.error_string == "done 1"
+    assert r.executed == 1, "the goal ran once: a resend must not start it twice"
+
+
+def test_a_rejection_whose_response_is_lost_is_asked_again_and_stays_a_rejection(rig):
+    r = rig(accept=False, lose_goal=1)
+    handle = r.send()
+    assert not handle.accepted
+    assert r.lossy.goal_requests >= 2 and r.client.resent >= 1
+    assert r.executed == 0
+
+
+def test_a_lost_result_is_asked_for_again(rig):
+    r = rig(lose_result=1)
+    handle = r.send()
+    assert handle.accepted and r.client.recovered == 0
+    res = r.result(handle)
+    assert res.status == GoalStatus.STATUS_SUCCEEDED and res.result.error_string == "done 1"
+    assert r.lossy.lost == 1 and r.client.resent >= 1
+
+
+def test_without_losses_it_is_the_plain_client(rig):
+    r = rig()
+    for k in (1, 2, 3):
+        handle = r.send()
+        assert handle.accepted
+        res = r.result(handle)
+        assert res.status == GoalStatus.STATUS_SUCCEEDED and res.result.error_string == f"done {k}"
+    assert r.client.resent == 0 and r.client.recovered == 0 and r.lossy.lost == 0
+    assert isinstance(r.client, ActionClient)
+
+
+def test_a_resend_period_that_is_not_positive_is_refused(ros_context):
+    node = rclpy.create_node("bad_period", context=ros_context)
+    try:
+        with pytest.raises(ValueError, match="resend_period must be positive"):
+            ResilientActionClient(node, FollowJointTrajectory, ACTION, resend_period=0.0)
+    finally:
+        node.destroy_node()
