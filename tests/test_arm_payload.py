@@ -95,7 +95,7 @@ class Client:
             pts = [JointTrajectoryPoint(positions=target.tolist(), velocities=[0.0] * 6, time_from_start=_duration(t))
                    for t in (MOVE, MOVE + HOLD)]
             goal = FollowJointTrajectory.Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES), points=pts))
-            sent = self.action.send_goal_async(goal, feedback_callback=lambda m: stamps.append(
+            sent = self.action.send_goal_async(goal, feedback_callback=lambda m, s=stamps: s.append(
                 time_to_sec(m.feedback.header.stamp)))
             self.spin_until(sent.done, "the goal's answer")
             handle = sent.result()
