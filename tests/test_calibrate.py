@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import rclpy
 from ament_index_python.packages import get_package_share_directory
+from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 
@@ -50,8 +51,11 @@ def calibrate(start_node, args: list[str], params: dict | None = None, timeout: 
 def test_calibration_meets_modal_analysis_and_recomputes_from_its_bag(start_node, tmp_path, ros_context):
     sim(start_node)
     out = tmp_path / "cal"
-    code, log = calibrate(start_node, ["--execute", "--out", str(out)])
+    code, log = calibrate(start_node, ["--execute", "--out", str(out)], {"compression": "zstd"})
     assert code == 0, log
+    for bag in sorted((out / "recording").glob("pose_*/*.mcap")):  # compression: zstd, as the recorder's
+        with open(bag, "rb") as f:
+            assert {c.compression for c in make_reader(f).get_summary().chunk_indexes} == {"zstd"}, bag
     report = json.loads((out / "report.json").read_text())
     assert report["complete"] and len(report["poses"]) == 9
     model = ArmModel()

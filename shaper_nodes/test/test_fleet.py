@@ -118,3 +118,71 @@ def test_analyze_bag_names_analyze_fleet_for_a_folder_of_recordings(tmp_path, ca
         write_bag(tmp_path / "cell_1" / name, t, u, a)
     assert analyze_bag.main([str(tmp_path), "--no-progress"]) == 2
     assert "analyze_fleet" in capsys.readouterr().err
+
+
+def _comparable(doc: dict) -> dict:
+    """A fleet report without what depends on where and how fast it ran."""
+    doc = {k: v for k, v in doc.items() if k not in ("seconds", "where")}
+    doc["robots"] = [{**r, "recordings": [{k: v for k, v in rec.items() if k != "seconds"}
+                                          for rec in r["recordings"]]} for r in doc["robots"]]
+    return doc
+
+
+def test_analyze_fleet_on_an_existing_dask_cluster_gives_the_local_clusters_report(tmp_path, capsys):
+    """A Dask scheduler and a worker started by dask's own command line, as processes of their own (an
+    existing cluster); ``analyze_fleet --scheduler ADDRESS`` on it gives the report a local cluster gives."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from distributed import Client
+
+    from shaper_nodes.analysis.fleet import SINGLE_THREAD
+    from shaper_nodes.analysis.fleet_report import fleet_doc
+    from shaper_nodes.cli import analyze_fleet
+
+    root = tmp_path / "fleet"
+    write_fleet(root, robots=2, recordings=3, drifting=(1,), shift=0.10, drift_at=0.5, cycles=2, seed=5)
+    rule = DriftRule(baseline=2, confirm=1)
+    local = run_fleet(find_recordings(root), OPTIONS, None, workers=1, processes=False)
+    expected = fleet_doc(local, fleet_drift(local.results, rule), rule)
+
+    address_file = tmp_path / "scheduler.json"
+    env = {**os.environ, **SINGLE_THREAD}
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", "0", "--no-dashboard", "--scheduler-file", str(address_file)],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60.0
+        while not (address_file.is_file() and address_file.stat().st_size > 0):
+            assert procs[0].poll() is None, "the dask scheduler exited"
+            assert time.monotonic() < deadline, "the dask scheduler wrote no address within 60 s"
+            time.sleep(0.1)
+        address = json.loads(address_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
+                                       "1", "--nworkers", "1", "--no-nanny", "--no-dashboard"],
+                                      env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(1, timeout=60)
+            (worker_pid,) = client.run(os.getpid).values()
+        assert worker_pid == procs[1].pid  # the analysis runs in the worker process, not here
+
+        code = analyze_fleet.main([str(root), "--scheduler", address, "--json", "--no-cache", "--quiet",
+                                   "--baseline", "2", "--confirm", "1"])
+        out, err = capsys.readouterr()
+        assert code == 0 and "WARNING" not in err
+        got = json.loads(out)
+        assert got["where"] == f"Dask scheduler {address}"
+        assert (got["recordings"], got["analysed"], got["failed"]) == (6, 6, [])
+        assert _comparable(got) == _comparable(json.loads(json.dumps(expected)))
+        assert [a["robot"] for r in got["robots"] for a in r["alerts"]] == ["robot_01"]
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()

@@ -33,7 +33,9 @@ arm
     specific force (gravity included) and angular rate at every physics step (rate x
     ``arm.substeps``). In lockstep the arm steps while the controller executes a trajectory;
     at rest it publishes its last joint state again every 0.1 s of wall time (simulated time
-    stands still), as a robot's joint_state_broadcaster keeps publishing.
+    stands still), as a robot's joint_state_broadcaster keeps publishing. The payload at the
+    flange (``arm.payload_mass``, ``arm.payload_offset``) changes live (``ros2 param set``): the
+    inertia, gravity and modes follow at the next step.
 
 Feedforward (``~/set_feedforward``, shaper_msgs/SetFeedforward)
 --------------------------------------------------------------
@@ -85,6 +87,8 @@ from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
 from shaper_nodes.ros.qos import LATCHED
 
 from .arm.description import JOINT_NAMES as ARM_JOINTS
+from .arm.description import MAX_PAYLOAD_MASS, MAX_PAYLOAD_OFFSET, PAYLOAD_MASS, PAYLOAD_OFFSET, ArmSpec, check_payload
+from .arm.dynamics import ArmModel
 from .arm.jtc import JointTrajectoryController
 from .arm.plant import ArmPlant
 from .jtc_server import ControllerServer, tolerances_from
@@ -154,6 +158,11 @@ PARAMETERS: tuple[Spec, ...] = (
          " Changes live, keeping the state when the models share it.", check=check_model),
     Spec("arm.substeps", 2, "plant.model arm: physics steps per period; the flange IMU publishes at each,"
          " rate x arm.substeps Hz (1 kHz by default).", (1, 100), read_only=True),
+    Spec("arm.payload_mass", PAYLOAD_MASS, "plant.model arm: payload at the flange (gripper and part), kg; changes"
+         " live (a part picked up, a tool changed): the inertia, gravity and modes follow at the next step, the arm"
+         " swings under the new load (docs/arm.md).", (0.0, MAX_PAYLOAD_MASS)),
+    Spec("arm.payload_offset", PAYLOAD_OFFSET, "plant.model arm: the payload's centre of mass along the flange's"
+         " z, m; changes live with arm.payload_mass.", (0.0, MAX_PAYLOAD_OFFSET)),
     Spec("jtc.trajectory_tolerance", [0.0],
          "plant.model arm, the joint_trajectory_controller emulation: path position tolerance per joint (or one"
          " for all), rad, 0 unchecked (constraints.<joint>.trajectory).", read_only=True),
@@ -353,7 +362,9 @@ class SimPlantNode(Node):
         if model == "two_mass":  # seed 004's two-mass system, m1 = 10 x0 + 1 (two_mass.py)
             return TwoMassPlant(self.n, self.rate)
         if model == "arm":
-            return ArmPlant(self.rate, int(self.get_parameter("arm.substeps").value))
+            spec = ArmSpec(payload_mass=float(self.get_parameter("arm.payload_mass").value),
+                           payload_offset=float(self.get_parameter("arm.payload_offset").value))
+            return ArmPlant(self.rate, int(self.get_parameter("arm.substeps").value), ArmModel(spec))
         m, c, k, k3, kp, f_max = (self._vector(p, overrides, p == "plant.force_limit") for p in PLANT_PARAMS)
         if model in LOOP_MODELS:
             loop = values(self, LOOP_PARAMS)
@@ -386,9 +397,17 @@ class SimPlantNode(Node):
             for pose in ("task.start", "task.goal"):
                 if pose in changes:
                     self._pose(pose, changes)
+            payload = self._payload(changes)
         except ValueError as err:
             return SetParametersResult(successful=False, reason=str(err))
         self._sensor.update({k: v for k, v in changes.items() if k in SENSOR_PARAMS})
+        if payload is not None:  # checked above: takes effect at the next step
+            assert isinstance(self.plant, ArmPlant)
+            self.plant.set_payload(*payload)
+            self.get_logger().info(
+                f"payload {payload[0]:g} kg at {payload[1]:g} m: modes at the present pose now " + ", ".join(
+                    f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(
+                        self.plant.natural_frequency[:3], self.plant.damping_ratio[:3], strict=True)))
         if new is not None:  # all checks passed: takes effect at the next step
             assert not isinstance(self.plant, ArmPlant) and not isinstance(new, ArmPlant)  # refused above
             try:
@@ -398,6 +417,16 @@ class SimPlantNode(Node):
             new.cycle_time = self.plant.cycle_time
             self.plant = new
         return SetParametersResult(successful=True)
+
+    def _payload(self, changes: dict) -> tuple[float, float] | None:
+        """The arm's new payload (mass kg, offset m) if ``changes`` sets one, checked; None otherwise (and for
+        the other plant models, which keep the values unused)."""
+        if not self.arm or not ({"arm.payload_mass", "arm.payload_offset"} & changes.keys()):
+            return None
+        g = lambda n: float(changes.get(n, self.get_parameter(n).value))  # noqa: E731
+        mass, offset = g("arm.payload_mass"), g("arm.payload_offset")
+        check_payload(mass, offset)
+        return mass, offset
 
     # ----------------------------------------------------------------- task
     def _make_task(self) -> CycleTask | StaircaseTask:

@@ -1,5 +1,6 @@
-"""The six-axis arm: its URDF from the published figures, its dynamics, and its modes."""
+"""The six-axis arm: its URDF from the published figures, its dynamics, its modes and its payload."""
 
+import itertools
 import math
 
 import numpy as np
@@ -102,3 +103,84 @@ def test_segments_meet_their_points(fields):
     if fields == "p":  # linear: constant slope between points
         assert traj.sample(1.5)[1] == pytest.approx([1.0 / 1.5])
     assert traj.sample(10.0)[0] == pytest.approx([2.0])
+
+
+def test_a_payload_set_at_run_time_is_the_arm_built_with_that_payload():
+    """set_payload changes the flange body in place: mass matrix, gravity, its derivative and the modes are
+    those of the arm whose URDF has that payload, at every pose (to the URDF's nine significant digits); back
+    to the old payload gives the old arm."""
+    arm, built = ArmModel(), ArmModel(ArmSpec(payload_mass=4.5, payload_offset=0.12))
+    q = np.array(POSES["far"]) + 0.1
+    old = arm.mass(q), arm.gravity(q)
+    arm.set_payload(4.5, 0.12)
+    assert arm.payload == (4.5, 0.12)
+    for pose in (q, HOME):
+        np.testing.assert_allclose(arm.mass(pose), built.mass(pose), rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(arm.nonlinear(pose, np.ones(6)), built.nonlinear(pose, np.ones(6)), rtol=1e-8,
+                                   atol=1e-8)
+        np.testing.assert_allclose(arm.gravity_stiffness(pose), built.gravity_stiffness(pose), rtol=1e-8, atol=1e-8)
+    assert sum(i.mass for i in arm.model.inertias) == pytest.approx(sum(LINK_MASSES) + 4.5)
+    assert lowest(arm, HOME).hz == pytest.approx(lowest(built, HOME).hz, rel=1e-8)
+    arm.set_payload(PAYLOAD_MASS, 0.08)
+    np.testing.assert_allclose(arm.mass(q), old[0], rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(arm.gravity(q), old[1], atol=1e-9)
+    arm.set_payload(0.0)  # none: the bare flange
+    assert sum(i.mass for i in arm.model.inertias) == pytest.approx(sum(LINK_MASSES))
+
+
+def test_a_heavier_payload_lowers_every_pose_s_lowest_mode_and_adds_its_weight_to_the_gravity_load():
+    """Physics: more mass at the tool, lower modes (the stiffness is the same); the static torque at the
+    shoulder grows by the added weight times its horizontal distance from the shoulder_lift axis."""
+    arm = ArmModel()
+    masses = (0.0, 1.0, 2.0, 3.5, 5.0)
+    for pose in POSES.values():
+        hz = []
+        for m in masses:
+            arm.set_payload(m)
+            hz.append(lowest(arm, np.array(pose)).hz)
+        assert all(b < a for a, b in itertools.pairwise(hz)), (pose, hz)
+    q = HOME.copy()
+    arm.set_payload(2.0)
+    g2 = arm.gravity(q)
+    arm.set_payload(5.0)
+    g5 = arm.gravity(q)
+    # the payload's centre (0.08 m along the flange's z) and the shoulder_lift axis (through the shoulder), base frame
+    pin.framesForwardKinematics(arm.model, arm.data, q)
+    centre = arm.data.oMf[arm.tool].act(np.array([0.0, 0.0, 0.08]))
+    axis = arm.data.oMi[2]
+    lever = np.cross(axis.rotation[:, 2], centre - axis.translation)  # torque per unit force along -z ...
+    expected = float(np.dot(lever, np.array([0.0, 0.0, -GRAVITY * 3.0])))
+    assert g5[1] - g2[1] == pytest.approx(-expected, rel=1e-9)
+
+
+def test_a_payload_out_of_range_is_refused_and_changes_nothing():
+    arm = ArmModel()
+    before = arm.mass(HOME)
+    for mass, offset in ((-0.1, 0.08), (math.nan, 0.08), (25.0, 0.08), (1.0, -0.01), (1.0, math.inf)):
+        with pytest.raises(ValueError, match="payload"):
+            arm.set_payload(mass, offset)
+    assert arm.payload == (PAYLOAD_MASS, 0.08)
+    np.testing.assert_allclose(arm.mass(HOME), before)
+
+
+def test_after_a_payload_change_the_arm_settles_to_its_new_rest_and_rings_at_the_new_mode():
+    """The state is kept: holding the same setpoint, the arm leaves its old rest, swings, and comes to the
+    rest of the heavier arm; the swing is the new lowest mode, not the old one."""
+    model = ArmModel()
+    arm = ElasticArm(model, 1e-3, HOME)
+    model.set_payload(4.5)
+    arm.model_changed()
+    times, accel = [], []
+    for _ in range(6000):
+        arm.step(HOME)
+        times.append(arm.time)
+        accel.append(arm.imu()[0])
+    q_rest, theta_rest = model.rest(HOME)
+    np.testing.assert_allclose(arm.q, q_rest, atol=2e-6)
+    np.testing.assert_allclose(arm.motor_position, theta_rest, atol=2e-6)
+    t = np.array(times)
+    fits = identify(t[t > 0.3], np.array(accel)[t > 0.3], max_modes=3)
+    new, old = lowest(model, HOME), lowest(ArmModel(), HOME)
+    fit = min(fits, key=lambda f: abs(f.omega - new.omega))
+    assert fit.omega == pytest.approx(new.omega, rel=0.02)
+    assert abs(fit.omega - old.omega) > 0.1 * old.omega

@@ -11,7 +11,8 @@ it sends ``control_msgs/action/FollowJointTrajectory`` goals (the controller's a
 shaper node's proxy with the shaper set to ``none``): the approach, then ``repeats`` out-and-back
 excitations each followed by ``decay`` s of free vibration, and records the accelerometer, the
 joint states and its own events to ``DIR/recording/pose_NNN`` (a rosbag2 folder with MCAP
-storage, written as ``pose_NNN.partial`` and renamed when the pose is complete). At the end it
+storage, chunks zstd-compressed with ``compression: zstd``, written as ``pose_NNN.partial`` and renamed
+when the pose is complete). At the end it
 goes back home and writes, from the recording (:mod:`shaper_nodes.analysis.calibration`),
 ``report.json``, ``report.md`` with figures, ``scheduler.yaml`` and ``shaper.yaml``.
 
@@ -59,6 +60,7 @@ from shaper_nodes.cli.common import survives_closed_pipe
 from shaper_nodes.core.calibration import IdentifySettings, Plan, PlanConfig, PlanError, PoseStep, Waypoint
 from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_plan, quintic_time
 from shaper_nodes.core.calibration.plan import approach as plan_approach
+from shaper_nodes.ros.bag_writer import COMPRESSIONS
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.parameters import Spec
 
@@ -131,6 +133,8 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("scheduler.family", "zv", "Shaper family of the rule base and the fallback.", read_only=True),
     Spec("scheduler.premise_threshold", 0.02, "A grid joint along which the modes change less than this"
          " (relative) is not a premise.", (0.0, 1.0), read_only=True),
+    Spec("compression", "none", "MCAP chunk compression of the recording: 'zstd' compresses each chunk (as the"
+         " recorder's compression), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True),
     Spec("timeouts.server", 30.0, "Wait for the action server and each goal's answer, s (wall).", (0.1, 3600.0),
          read_only=True),
     Spec("timeouts.data", 30.0, "Wait for joint states and accelerometer data, s (wall).", (0.1, 3600.0),
@@ -316,7 +320,7 @@ class Calibrator:
         partial = folder.with_name(folder.name + ".partial")
         if partial.exists():
             shutil.rmtree(partial)
-        self.writer = BagWriter(partial)
+        self.writer = BagWriter(partial, compression=str(self.v["compression"]))
         try:
             self._record(SETUP_TOPIC, "std_msgs/msg/String", String(data=json.dumps(setup, sort_keys=True)),
                          max(self.imu_stamp, 0.0))

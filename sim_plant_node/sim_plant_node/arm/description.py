@@ -21,7 +21,9 @@ What UR does not publish is chosen here and said so (docs/arm.md):
   its DH frame for the two long links (length |a|) and along z otherwise (length
   :data:`SHORT_LINK_LENGTH`), radii :data:`LINK_RADII` from the arm's tube and joint sizes.
 - A payload at the flange (gripper and part), :data:`PAYLOAD_MASS` at
-  :data:`PAYLOAD_OFFSET` along the flange's z, a cylinder of radius 0.04 m.
+  :data:`PAYLOAD_OFFSET` along the flange's z, a cylinder of radius :data:`PAYLOAD_RADIUS`
+  (:func:`payload_inertia`); the simulator changes it at run time
+  (:meth:`~sim_plant_node.arm.dynamics.ArmModel.set_payload`).
 - Joint elasticity (each joint a motor driving its link through a torsional spring and
   damper): stiffness :data:`JOINT_STIFFNESS` so that the lowest mode lies at 6 to 12 Hz over
   the workspace, as measured on arms of this size (Wu et al., "Experimental modal analysis of
@@ -61,6 +63,11 @@ SHORT_LINK_LENGTH = 0.12
 #: chosen: the payload (gripper and part) at the flange, kg and m along the flange's z
 PAYLOAD_MASS = 2.0
 PAYLOAD_OFFSET = 0.08
+#: chosen: the payload's radius, m (a uniform cylinder along the flange's z, from the flange to twice the offset)
+PAYLOAD_RADIUS = 0.04
+#: the largest payload the simulator takes, kg and m (UR5e: rated 5 kg; beyond, its model is not meant to hold)
+MAX_PAYLOAD_MASS = 20.0
+MAX_PAYLOAD_OFFSET = 0.5
 #: chosen: torsional joint stiffness, N m/rad (see the module docstring)
 JOINT_STIFFNESS = (1.0e4, 2.0e4, 1.2e4, 1.5e4, 1.5e4, 1.5e4)
 #: chosen: joint damping = DAMPING_TIME x stiffness, s
@@ -102,13 +109,33 @@ class ArmSpec:
                 raise ValueError(f"ArmSpec.{name} must be finite and > 0")
         if not (math.isfinite(self.damping_time) and self.damping_time >= 0):
             raise ValueError("ArmSpec.damping_time must be finite and >= 0")
-        if not (math.isfinite(self.payload_mass) and self.payload_mass >= 0):
-            raise ValueError("ArmSpec.payload_mass must be finite and >= 0")
+        check_payload(self.payload_mass, self.payload_offset)
 
     @property
     def damping(self) -> np.ndarray:
         """Joint damping, N m s/rad."""
         return self.damping_time * np.asarray(self.stiffness)
+
+
+def check_payload(mass: float, offset: float) -> None:
+    """Refuse a payload the model cannot take: mass in [0, MAX_PAYLOAD_MASS] kg, offset in [0, MAX_PAYLOAD_OFFSET] m.
+
+    Raises
+    ------
+    ValueError
+        Naming the value and its range.
+    """
+    if not (isinstance(mass, (int, float)) and math.isfinite(mass) and 0.0 <= mass <= MAX_PAYLOAD_MASS):
+        raise ValueError(f"payload mass must be finite and in [0, {MAX_PAYLOAD_MASS:g}] kg, got {mass!r}")
+    if not (isinstance(offset, (int, float)) and math.isfinite(offset) and 0.0 <= offset <= MAX_PAYLOAD_OFFSET):
+        raise ValueError(f"payload offset must be finite and in [0, {MAX_PAYLOAD_OFFSET:g}] m along the flange's z,"
+                         f" got {offset!r}")
+
+
+def payload_inertia(mass: float, offset: float) -> np.ndarray:
+    """The payload's inertia tensor about its centre of mass, kg m^2 (a uniform solid cylinder of radius
+    :data:`PAYLOAD_RADIUS` along the flange's z, from the flange to ``2 offset`` m; ``mass`` kg)."""
+    return _cylinder(mass, PAYLOAD_RADIUS, 2 * offset, 2)
 
 
 def _cylinder(mass: float, radius: float, length: float, axis: int) -> np.ndarray:
@@ -166,7 +193,7 @@ def urdf(spec: ArmSpec | None = None, name: str = "ur5e_elastic") -> str:
                  f'{_origin((spec.a[-1], 0.0, spec.d[-1]), (spec.alpha[-1], 0.0, 0.0))}</joint>')
     if spec.payload_mass > 0:
         payload = _inertial(spec.payload_mass, np.array([0.0, 0.0, spec.payload_offset]), (0.0, 0.0, 0.0),
-                            _cylinder(spec.payload_mass, 0.04, 2 * spec.payload_offset, 2))
+                            payload_inertia(spec.payload_mass, spec.payload_offset))
         parts.append(f'<link name="{TOOL_FRAME}">{payload}</link>')
     else:
         parts.append(f'<link name="{TOOL_FRAME}"/>')

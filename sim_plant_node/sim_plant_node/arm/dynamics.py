@@ -21,13 +21,14 @@ the step and the modes decay at their physical rate (frequency error about (w h)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
-from .description import TOOL_FRAME, ArmSpec, urdf
+from .description import TOOL_FRAME, ArmSpec, check_payload, payload_inertia, urdf
 
 GRAVITY = 9.81  # m/s^2, the model's gravity (along -z of the base)
 
@@ -70,6 +71,47 @@ class ArmModel:
         self.motor_inertia = np.asarray(spec.motor_inertia, dtype=float)
         self.motor_friction = np.asarray(spec.motor_friction, dtype=float)
         self.kp, self.kd = loop.gains(self.motor_inertia)
+        # the body of the flange's joint without the payload: a payload change replaces what is added to it
+        frame = self.model.frames[self.tool]
+        self._flange_joint, self._flange_placement = frame.parentJoint, frame.placement
+        bare = pin.buildModelFromXML(urdf(dataclasses.replace(spec, payload_mass=0.0)))
+        self._flange_body = bare.inertias[self._flange_joint].copy()
+
+    @property
+    def payload(self) -> tuple[float, float]:
+        """The payload at the flange: mass, kg, and its centre of mass along the flange's z, m."""
+        return self.spec.payload_mass, self.spec.payload_offset
+
+    def set_payload(self, mass: float, offset: float | None = None) -> None:
+        """Change the payload at the flange (a gripper picks up a part, a tool is changed).
+
+        The flange body's inertia (Pinocchio's ``model.inertias`` of the last joint) becomes the last
+        link's plus the payload, a uniform cylinder (:func:`~.description.payload_inertia`) of ``mass`` kg
+        centred ``offset`` m along the flange's z, as the URDF of a :class:`~.description.ArmSpec` with this
+        payload gives; the mass matrix, gravity and modes follow. The arm's state is not touched: an
+        :class:`ElasticArm` on this model calls :meth:`ElasticArm.model_changed` next.
+
+        Parameters
+        ----------
+        mass : float
+            Payload mass, kg, in [0, MAX_PAYLOAD_MASS].
+        offset : float, optional
+            Its centre of mass along the flange's z, m (default: unchanged).
+
+        Raises
+        ------
+        ValueError
+            The payload is out of range (nothing changes then).
+        """
+        offset = self.spec.payload_offset if offset is None else offset
+        check_payload(mass, offset)
+        spec = dataclasses.replace(self.spec, payload_mass=float(mass), payload_offset=float(offset))
+        body = self._flange_body.copy()
+        if mass > 0:
+            body += self._flange_placement.act(pin.Inertia(float(mass), np.array([0.0, 0.0, float(offset)]),
+                                                           payload_inertia(float(mass), float(offset))))
+        self.model.inertias[self._flange_joint] = body
+        self.spec = spec
 
     def mass(self, q: np.ndarray) -> np.ndarray:
         """Link-side mass matrix M(q), kg m^2 (symmetric)."""
@@ -151,6 +193,13 @@ class ElasticArm:
         self._g_r = self.model.gravity(r)
         self.torque = self._g_r.copy()
         self.time = 0.0
+
+    def model_changed(self) -> None:
+        """The model's inertial parameters changed (:meth:`ArmModel.set_payload`): recompute what is kept from
+        them. The controller's gravity feedforward at the setpoint follows the new payload (the robot is told
+        its payload, as a UR controller's ``set_payload``); the arm's state is kept, so it leaves its old
+        equilibrium under the new load from the next step on, as an arm does when it picks up a part."""
+        self._g_r = self.model.gravity(self.setpoint)
 
     @property
     def q(self) -> np.ndarray:

@@ -48,6 +48,15 @@ class ArmPlant:
         self.arm.reset(p)
         self._modes = modes(self.model, p)
 
+    def set_payload(self, mass: float, offset: float | None = None) -> None:
+        """Change the payload at the flange: ``mass`` kg, centre of mass ``offset`` m along the flange's z
+        (default unchanged). The inertia and the controller's gravity feedforward follow at once; the modes
+        are those at the present setpoint with the new payload; the state is kept (the arm swings under the
+        new load from the next step on). Raises ValueError for a payload out of range (nothing changes)."""
+        self.model.set_payload(mass, offset)
+        self.arm.model_changed()
+        self._modes = modes(self.model, self.arm.setpoint)
+
     def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """One command period holding the position setpoint ``command`` (rad), velocity ``velocity`` (rad/s)."""
         r = np.asarray(command, dtype=float)
@@ -89,7 +98,7 @@ class ArmPlant:
 
     @property
     def natural_frequency(self) -> np.ndarray:
-        """The n lowest modes at the last reset pose, rad/s."""
+        """The n lowest modes at the last reset pose (or payload change), rad/s."""
         return np.array([m.omega for m in self._modes[:self.n]])
 
     @property
