@@ -12,11 +12,16 @@ Timing (ROS-free, best of ``repeats`` passes of ``number`` calls each):
 CPU share: the scheduler node (config/scheduler.yaml's rule base, evaluating every 0.05 s, a shaper
 node answering its requests) gets ``/joint_states`` at 500 Hz for ``seconds`` s, the pose
 sweeping 0..0.7 m so that it keeps sending shapers; its CPU time (``/proc/<pid>/stat``) over
-that window divided by the window is its share of one core. The baseline is a bare node with one
-/joint_states subscription that does nothing, fed the same way.
+that window divided by the window is its share of one core. The baseline is a bare rclpy node
+(``rclpy.create_node``'s defaults: parameter services, /rosout) with one /joint_states
+subscription that does nothing, on the same topic with the same QoS as the scheduler's
+(``JOINT_STATES_DEPTH``, reliable, volatile), fed the same way. A third process, the *lean idle
+node*, is that subscription alone on a node without parameter services, type description service
+or /rosout, as the scheduler's own feed node (ros/side_node.py): the least an rclpy process pays
+for the stream.
 
 Run it with ``python -m benchmarks.scheduler`` or as part of ``python -m benchmarks``;
-``python -m benchmarks.scheduler --baseline-node`` is the bare node.
+``python -m benchmarks.scheduler --baseline-node [--lean]`` is the bare node.
 """
 
 from __future__ import annotations
@@ -65,15 +70,22 @@ def timing(number: int = 200, repeats: int = 7) -> dict:
     return {"evaluate_design_us": 1e6 * t_full, "design_us": 1e6 * t_design, "ratio": t_full / t_design}
 
 
-def _baseline_main() -> int:
+def _baseline_main(lean: bool) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
+    from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState
 
+    from shaper_nodes.nodes.scheduler import JOINT_STATES_DEPTH
+
     rclpy.init()
-    node = Node("bench_idle")
-    node.create_subscription(JointState, "/joint_states", lambda m: None, 50)
+    if lean:
+        node = Node("bench_idle", start_parameter_services=False, enable_rosout=False,
+                    parameter_overrides=[Parameter("start_type_description_service", value=False)])
+    else:
+        node = Node("bench_idle")
+    node.create_subscription(JointState, "/joint_states", lambda m: None, JOINT_STATES_DEPTH)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -82,6 +94,10 @@ def _baseline_main() -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+#: the processes whose CPU is measured (the first is the baseline of the goal)
+LABELS = ("idle node", "scheduler", "lean idle node")
 
 
 def cpu_share(seconds: float = 5.0, rate: float = 500.0, repeats: int = 2,
@@ -106,18 +122,19 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, repeats: int = 2,
         rclpy.init(context=ctx)
         node = Node("bench_driver", context=ctx)
         pub = node.create_publisher(JointState, "/joint_states", 50)
-        runs: dict[str, list[dict]] = {"idle node": [], "scheduler": []}
+        runs: dict[str, list[dict]] = {label: [] for label in LABELS}
         try:
             def make(label: str, r: int) -> ChildProcess:
-                if label == "idle node":
-                    return ChildProcess([sys.executable, "-m", "benchmarks.scheduler", "--baseline-node"],
-                                        log / f"idle{r}.log", env=env, cwd=os.getcwd())
+                if label != "scheduler":
+                    lean = ["--lean"] if label == "lean idle node" else []
+                    return ChildProcess([sys.executable, "-m", "benchmarks.scheduler", "--baseline-node", *lean],
+                                        log / f"idle{r}{len(lean)}.log", env=env, cwd=os.getcwd())
                 return NodeProcess("shaper_nodes", "scheduler", scheduler_parameters(_spec()),
                                    log_path=log / f"scheduler{r}.log", env=env)
 
-            # alternated (idle, scheduler, scheduler, idle, ...) so that a drift of the outside load hits both
-            order = [(r, label) for r in range(repeats) for label in
-                     (("idle node", "scheduler") if r % 2 == 0 else ("scheduler", "idle node"))]
+            # alternated (idle, scheduler, lean, lean, scheduler, idle, ...) so that a drift of the outside load
+            # hits all
+            order = [(r, label) for r in range(repeats) for label in (LABELS if r % 2 == 0 else LABELS[::-1])]
             for r, label in order:
                 proc = make(label, r)
                 progress(f"scheduler: CPU of the {label} at {rate:g} Hz joint states ({seconds:g} s)")
@@ -152,6 +169,7 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, repeats: int = 2,
                       "windows_pct": [g["cpu_pct"] for g in got]}
     out["repeats"] = repeats
     out["ratio"] = out["scheduler"]["cpu_pct"] / max(out["idle node"]["cpu_pct"], 1e-9)
+    out["ratio_lean"] = out["scheduler"]["cpu_pct"] / max(out["lean idle node"]["cpu_pct"], 1e-9)
     return out
 
 
@@ -166,15 +184,17 @@ def print_table(result: dict) -> None:
     print(f"  evaluate + ZV design : {t['evaluate_design_us']:8.1f} us per update")
     print(f"  baseline: ZV design  : {t['design_us']:8.1f} us            ratio {t['ratio']:.2f}")
     print(f"  CPU at {c['rate_hz']:g} Hz joint states ({c['seconds']:g} s):")
-    for label in ("idle node", "scheduler"):
-        print(f"    {label:10s}: {c[label]['cpu_pct']:5.1f} % of one core (fed at {c[label]['sent_hz']:.0f} Hz)")
-    print(f"    ratio scheduler / idle node: {c['ratio']:.2f}")
+    for label in LABELS:
+        windows = ", ".join(f"{w:.1f}" for w in c[label]["windows_pct"])
+        print(f"    {label:14s}: {c[label]['cpu_pct']:5.1f} % of one core (fed at {c[label]['sent_hz']:.0f} Hz;"
+              f" windows {windows})")
+    print(f"    ratio scheduler / idle node: {c['ratio']:.2f}; scheduler / lean idle node: {c['ratio_lean']:.2f}")
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if "--baseline-node" in argv:
-        return _baseline_main()
+        return _baseline_main("--lean" in argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     print_table(run(progress=lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True)))
     return 0

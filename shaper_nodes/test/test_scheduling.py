@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.scheduling.fuzzy import Rule, RuleBase, Triangular, triangular_partition
-from shaper_nodes.core.scheduling.scheduler import MAX_POSE_JOINTS, Scheduler, premise_values, relative_change
+from shaper_nodes.core.scheduling.fuzzy import Gaussian, Rule, RuleBase, Trapezoidal, Triangular, triangular_partition
+from shaper_nodes.core.scheduling.scheduler import (
+    GRADE_TOLERANCE,
+    MAX_POSE_JOINTS,
+    Scheduler,
+    premise_values,
+    relative_change,
+)
 from shaper_nodes.core.shaping.families import convolve, design
 from shaper_nodes.core.shaping.types import Mode, Shaper, ShaperError
 
@@ -169,3 +175,46 @@ def test_on_several_modes_the_learner_shaper_is_a_factor_of_its_region_and_on_on
     np.testing.assert_allclose(got.times, [0.0, r_t * plain.times[1]], rtol=1e-12)
     np.testing.assert_allclose(got.amplitudes, [r_a * plain.amplitudes[0], 1.0 - r_a * plain.amplitudes[0]],
                                rtol=1e-12)
+
+
+def test_membership_slopes_bound_the_grade_change_and_see_vertical_edges_inside_the_range():
+    tri, trap, gauss = Triangular(0.0, 0.5, 2.0), Trapezoidal(0.0, 0.2, 0.3, 1.3), Gaussian(1.0, 0.25)
+    for mf in (tri, trap, gauss):
+        z = np.linspace(-1.0, 3.0, 40_001)
+        grades = np.array([mf(float(v)) for v in z])
+        steepest = np.max(np.abs(np.diff(grades)) / np.diff(z))
+        assert steepest <= mf.slope(-1.0, 3.0) * (1 + 1e-9)
+        assert steepest >= 0.99 * mf.slope(-1.0, 3.0)  # and it is the steepest, not just a bound
+    shoulder = Triangular(0.0, 0.0, 1.0)  # 1 from z = 0 on, 0 below: a jump at 0
+    assert shoulder.slope(0.0, 1.0) == 1.0  # the jump is not inside [0, 1] (clamped premises never go below 0)
+    assert shoulder.slope(-1.0, 1.0) == math.inf
+    assert Triangular(0.0, 1.0, 1.0).slope(0.0, 1.0) == 1.0 and Triangular(0.0, 1.0, 1.0).slope(0.0, 2.0) == math.inf
+    assert Trapezoidal(0.0, 0.0, 1.0, 1.0).slope(0.2, 0.8) == 0.0  # crisp set, edges outside: flat
+    assert Trapezoidal(0.0, 0.0, 1.0, 1.0).slope(-0.5, 0.8) == math.inf
+
+
+def test_premises_that_move_no_grade_by_more_than_the_tolerance_reuse_the_evaluation():
+    """Scheduler.moved: within GRADE_TOLERANCE of every grade the last evaluation stands; beyond it,
+    or across the range's edge, the rule base is evaluated again; the comparison is with the last
+    evaluation's premises, so small moves do not add up unseen."""
+    core = Scheduler(base(), "model", "zv")  # triangular partition of [0, 2] with peaks 1 apart: slope 1
+    tol = core.rule_base.premise_tolerance(GRADE_TOLERANCE)
+    assert tol == pytest.approx([GRADE_TOLERANCE])
+    last = core.evaluate([0.7])
+    assert not core.moved([0.7 + 0.9 * GRADE_TOLERANCE], last)
+    assert core.moved([0.7 + 1.1 * GRADE_TOLERANCE], last)
+    # what a reuse can miss: the weights move by at most 2 R p GRADE_TOLERANCE (module docstring), the mode less
+    near = core.evaluate([0.7 + 0.9 * GRADE_TOLERANCE])
+    assert np.abs(near.weights - last.weights).sum() <= 2 * 3 * GRADE_TOLERANCE
+    assert relative_change(last.modes, near.modes) < 1e-5
+    # clamped: going into (or out of) the range evaluates again
+    far = core.evaluate([5.0])
+    assert not core.moved([5.0 + 0.5 * GRADE_TOLERANCE], far)
+    assert core.moved([7.0], far)  # (the same evaluation, but the clamping report names the value)
+    assert core.moved([2.0 - 0.1 * GRADE_TOLERANCE], far)
+    # a vertical edge inside the range: every change evaluates again
+    crisp = RuleBase(("q",), (Rule((Trapezoidal(0.0, 0.0, 1.0, 1.0),), modes=(Mode(10.0, 0.05),)),
+                              Rule((Trapezoidal(1.0, 1.0, 2.0, 2.0),), modes=(Mode(20.0, 0.05),))))
+    sharp = Scheduler(crisp, "modes", "zv")
+    assert sharp.rule_base.premise_tolerance(GRADE_TOLERANCE) == pytest.approx([0.0])
+    assert sharp.moved([0.5 + 1e-15], sharp.evaluate([0.5]))

@@ -126,6 +126,12 @@ LOCKSTEP_IMU_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, relia
 IDLE_STATE_PERIOD = 0.1
 
 
+def _set_time(stamp: Any, t: float) -> None:
+    """Write ``t`` s into a builtin_interfaces/Time in place (rounded to the ns, as ``sec_to_time``): the
+    messages published at every period are kept and refilled rather than built again."""
+    stamp.sec, stamp.nanosec = divmod(int(round(t * 1e9)), 1_000_000_000)
+
+
 def check_model(model: str) -> str:
     """The node's check of ``plant.model``: one of :data:`MODELS`."""
     if model not in MODELS:
@@ -271,7 +277,12 @@ class SimPlantNode(Node):
         self._axes = [a if 0 <= a < self.n else -1 for a in axes] + [-1] * (3 - len(axes))
         self._rng = np.random.default_rng(int(self.get_parameter("imu.seed").value))
         self._sensor = {name: self.get_parameter(name).value for name in SENSOR_PARAMS}
-        self._imu_msg = Imu()  # reused: publish() serialises it at once
+        self._sensor_changed()
+        self._imu_msg = Imu()  # reused, as the clock message: publish() serialises it at once
+        self._imu_msg.orientation_covariance[0] = -1.0
+        self._imu_gyro_sigma: float | None = None  # the gyro covariance written in it
+        self._clock_msg = Clock()
+        self._js_msg = JointState(name=self.joint_names)
         self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value), remove_mean=self.arm)
         self._active_shaper = ShaperMsg()
 
@@ -401,6 +412,7 @@ class SimPlantNode(Node):
         except ValueError as err:
             return SetParametersResult(successful=False, reason=str(err))
         self._sensor.update({k: v for k, v in changes.items() if k in SENSOR_PARAMS})
+        self._sensor_changed()
         if payload is not None:  # checked above: takes effect at the next step
             assert isinstance(self.plant, ArmPlant)
             self.plant.set_payload(*payload)
@@ -487,7 +499,8 @@ class SimPlantNode(Node):
     # ----------------------------------------------------------------- stepping
     def _publish_clock(self) -> None:
         if self._clock_pub is not None:
-            self._clock_pub.publish(Clock(clock=sec_to_time(self.sim_time)))
+            _set_time(self._clock_msg.clock, self.sim_time)
+            self._clock_pub.publish(self._clock_msg)
 
     def _now(self) -> float:
         if self.mode == "lockstep":
@@ -558,10 +571,11 @@ class SimPlantNode(Node):
         self.sim_time = self.step_index / self.rate
         t = self._now()
         stamp = sec_to_time(t)
-        js = JointState(name=self.joint_names, position=self._reported(self.plant.base_position).tolist(),
-                        velocity=self.plant.base_velocity.tolist(),
-                        effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
-        js.header.stamp = stamp
+        js = self._js_msg  # (refilled: publish serialises it at once; also the idle republisher's)
+        js.position = self._reported(self.plant.base_position).tolist()
+        js.velocity = self.plant.base_velocity.tolist()
+        js.effort = getattr(self.plant, "effort", np.zeros(0)).tolist()
+        _set_time(js.header.stamp, t)
         self._js_pub.publish(js)
         self._last_js = js
         if self._tip_pub.get_subscription_count() > 0:
@@ -593,26 +607,36 @@ class SimPlantNode(Node):
             position = np.round(position / quantum) * quantum
         return position
 
+    def _sensor_changed(self) -> None:
+        """The sensor settings as every sample uses them (after start and each parameter change)."""
+        sensor = self._sensor
+        self._imu_bias = np.asarray(sensor["imu.bias"], dtype=float)[:3]
+        self._gyro_bias = np.asarray(sensor["imu.gyro_bias"], dtype=float)[:3]
+        self._imu_sigma = float(sensor["imu.noise_stddev"])
+        self._gyro_sigma = float(sensor["imu.gyro_noise_stddev"])
+        self._imu_frame = str(sensor["imu.frame_id"])
+
     def _publish_imu(self, t: float, acc: np.ndarray, rate: np.ndarray | None) -> None:
         """One Imu message at ``t``: specific force ``acc`` (m/s^2), angular rate ``rate`` (rad/s; None: none)."""
-        sensor = self._sensor
-        acc = acc + np.asarray(sensor["imu.bias"], dtype=float)[:3]
-        sigma = float(sensor["imu.noise_stddev"])
+        acc = acc + self._imu_bias
+        sigma = self._imu_sigma
         if sigma > 0:
             acc += self._rng.normal(0.0, sigma, 3)
         imu = self._imu_msg
-        imu.header.stamp = sec_to_time(t)
-        imu.header.frame_id = str(sensor["imu.frame_id"])
-        imu.orientation_covariance[0] = -1.0
-        imu.angular_velocity_covariance[0] = -1.0
-        if rate is not None:
-            gyro_sigma = float(sensor["imu.gyro_noise_stddev"])
-            rate = rate + np.asarray(sensor["imu.gyro_bias"], dtype=float)[:3]
+        _set_time(imu.header.stamp, t)
+        imu.header.frame_id = self._imu_frame
+        if rate is None:
+            imu.angular_velocity_covariance[0] = -1.0
+        else:
+            gyro_sigma = self._gyro_sigma
+            rate = rate + self._gyro_bias
             if gyro_sigma > 0:
                 rate = rate + self._rng.normal(0.0, gyro_sigma, 3)
             imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = rate.tolist()
-            imu.angular_velocity_covariance = [gyro_sigma**2, 0.0, 0.0, 0.0, gyro_sigma**2, 0.0, 0.0, 0.0,
-                                               gyro_sigma**2]
+            if gyro_sigma != self._imu_gyro_sigma:
+                imu.angular_velocity_covariance = [gyro_sigma**2, 0.0, 0.0, 0.0, gyro_sigma**2, 0.0, 0.0, 0.0,
+                                                   gyro_sigma**2]
+                self._imu_gyro_sigma = gyro_sigma
         imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = acc.tolist()
         imu.linear_acceleration_covariance[0] = imu.linear_acceleration_covariance[4] = \
             imu.linear_acceleration_covariance[8] = sigma**2

@@ -17,6 +17,16 @@ Premises outside the rule base's range are clamped to it (never extrapolated) an
 non-finite positions are refused and reported; without joint states for ``stale_timeout`` s
 the scheduler stops updating and says so.
 
+Cost at a fast joint state stream: /joint_states is taken on a lean node of its own
+(``<name>_joint_states``, ros/side_node.py) spun by a thread of its own, so that each message
+wakes a wait set of one subscription rather than all of this node's entities; the message gives
+the latest premise values and their time, nothing more. The rule base is evaluated on the
+``period`` timer, and only when the premises moved enough to matter: a change that moves no
+membership grade by more than 1e-6 reuses the last evaluation (core/scheduling/scheduler.py,
+GRADE_TOLERANCE, says why that is safe); ~/mode_estimate is still published at every period.
+Until the first shaper is sent, each joint state wakes this node to try at once (also while
+simulated time stands still).
+
 Interfaces
 ----------
 /joint_states (sensor_msgs/JointState)                in
@@ -51,6 +61,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
@@ -71,6 +82,7 @@ from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, values
 from shaper_nodes.ros.qos import LATCHED
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
+from shaper_nodes.ros.side_node import SideNode
 
 SOURCE = "scheduler"
 RULE_FIELDS = {"membership": Parameter.Type.STRING_ARRAY, "membership_params": Parameter.Type.DOUBLE_ARRAY,
@@ -79,6 +91,10 @@ RULE_FIELDS = {"membership": Parameter.Type.STRING_ARRAY, "membership_params": P
 #: wall time between discovering the shaper's set_shaper service and the first request, s
 DISCOVERY_SETTLE = 0.5
 _SHAPED = tuple(k for k in FAMILIES if k not in ("none", "custom"))
+#: depth of the /joint_states subscription (reliable, volatile: rclpy's default profile)
+JOINT_STATES_DEPTH = 50
+#: refused joint states kept for the report (the count is exact; the diagnostics throttle anyway)
+_REFUSALS_KEPT = 100
 
 
 def _one_rule_base(family: str = "zv", **extra: Any) -> Scheduler:
@@ -132,17 +148,18 @@ class SchedulerNode(Node):
         self.shaper = ShaperClient(self, shaper, SOURCE, lambda: float(p("service_timeout").value),
                                    self.diagnostics, get=True)
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED)
-        self.create_subscription(JointState, str(p("joint_states").value), self._on_joint_states, 50)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
         self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
         self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at)
 
-        self._z: list[float] | None = None         # latest premise values
+        # latest (premise values, node clock time they arrived s, their header stamp), set by the feed's thread
+        self._pose: tuple[list[float], float, Any] | None = None
         self._interp: Interpolation | None = None  # the rule base at the latest evaluation
-        self._z_stamp = 0.0                        # node clock time they arrived
-        self._stamp: Any = None                    # their header stamp
+        self._estimate: ModeEstimate | None = None  # ... as published
+        self._clamped = ""                         # ... what it clamped
+        self._refusals: deque[str] = deque(maxlen=_REFUSALS_KEPT)  # from the feed's thread, reported here
         self.last_sent: Interpolation | None = None
         self._sent_at = -math.inf                  # node clock, s
         self._call: tuple[PendingCall, Interpolation] | None = None  # the scheduled shaper in flight
@@ -156,6 +173,11 @@ class SchedulerNode(Node):
         # notes when the shaper's set_shaper service appeared, see _service_settled
         self._ready_since: float | None = None
         self._watch = self.create_timer(0.05, self._watch_service, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._wake = self.create_guard_condition(self._on_wake)  # the feed's thread calls on this node
+        self._feed = SideNode(self, "joint_states", lean=True)
+        self._feed.node.create_subscription(JointState, self.resolve_topic_name(str(p("joint_states").value)),
+                                            self._on_joint_states, JOINT_STATES_DEPTH)
+        self._feed.start()
         rb = self.core.rule_base
         self.get_logger().info(
             f"{len(rb.rules)} rules over {', '.join(self.premises)} (range "
@@ -193,18 +215,31 @@ class SchedulerNode(Node):
         p = self.get_parameter
         return RateLimit(float(p("relative_change").value), float(p("min_interval").value))
 
+    def destroy_node(self) -> None:
+        self._feed.close()
+        super().destroy_node()
+
     # ----------------------------------------------------------------- inputs
     def _on_joint_states(self, msg: JointState) -> None:
+        """On the feed's thread: the premise values and their time, one assignment; anything else is
+        left to this node's executor (woken through ``_wake``)."""
         try:
             z = self.core.premise_values(msg.name, msg.position)
         except InputError as err:
-            self.refused += 1
-            self.diagnostics.report("input", ERROR, f"refused joint_states: {err}")
+            self.refused += 1  # (written by this thread only)
+            self._refusals.append(str(err))
+            self._wake.trigger()
             return
-        self._z, self._z_stamp, self._stamp = z, self._now(), msg.header.stamp
+        self._pose = (z, self._now(), msg.header.stamp)
         if self.last_sent is None:
             # the first shaper goes out as soon as a pose and the shaper node are there, also while
             # simulated time stands still (a lockstep plant at rest) and the period timer does not fire
+            self._wake.trigger()
+
+    def _on_wake(self) -> None:
+        while self._refusals:
+            self.diagnostics.report("input", ERROR, f"refused joint_states: {self._refusals.popleft()}")
+        if self.last_sent is None:
             self._tick()
 
     def _on_active(self, msg: ShaperMsg) -> None:
@@ -223,22 +258,31 @@ class SchedulerNode(Node):
             self._send(interp)
 
     def _evaluate(self) -> Interpolation | None:
-        """The rule base at the latest pose, published on ~/mode_estimate (None: no fresh pose)."""
-        if self._z is None:
+        """The rule base at the latest pose, published on ~/mode_estimate (None: no fresh pose).
+
+        The last evaluation is reused while the premises stay within GRADE_TOLERANCE of its own."""
+        pose = self._pose
+        if pose is None:
             return None
-        if self._now() - self._z_stamp > float(self.get_parameter("stale_timeout").value):
+        z, z_stamp, stamp = pose
+        if self._now() - z_stamp > float(self.get_parameter("stale_timeout").value):
             self.diagnostics.report("stale", WARN, "no joint states for stale_timeout; not updating the shaper")
             return None
-        try:
-            interp = self.core.evaluate(self._z)
-        except FuzzyError as err:
-            self.diagnostics.report("rule_base", ERROR, f"rule base: {err}")
-            return None
-        clamped = self.core.clamping(interp)
-        if clamped:
-            self.diagnostics.report("clamped", WARN, clamped)
-        self._mode_pub.publish(_estimate(interp, self._stamp))
-        self._interp = interp
+        interp, estimate = self._interp, self._estimate
+        if interp is None or estimate is None or self.core.moved(z, interp):
+            try:
+                interp = self.core.evaluate(z)
+            except FuzzyError as err:
+                self.diagnostics.report("rule_base", ERROR, f"rule base: {err}")
+                return None
+            self._clamped = self.core.clamping(interp)
+            estimate = _estimate(interp, stamp)
+        elif stamp is not None:
+            estimate.header.stamp = stamp
+        if self._clamped:
+            self.diagnostics.report("clamped", WARN, self._clamped)
+        self._mode_pub.publish(estimate)
+        self._interp, self._estimate = interp, estimate
         return interp
 
     def _watch_service(self) -> None:

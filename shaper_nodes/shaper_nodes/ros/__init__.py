@@ -24,7 +24,8 @@ pose_shaper
 node_main
     The Jazzy ``main`` of every node.
 side_node
-    A node's second node on a thread of its own (the shaper's whole trajectories).
+    A node's second node on a thread of its own (the shaper's whole trajectories; lean, the
+    scheduler's /joint_states).
 whole_trajectory
     Whole-trajectory shaping as the shaper node does it, and the same in a worker process on
     serialized messages.

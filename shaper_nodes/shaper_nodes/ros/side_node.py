@@ -8,6 +8,14 @@ not delay its fast stream (the shaper's whole trajectories against its streamed 
 the slow ones from a second node in the same process, named ``<node>_<suffix>`` in the same
 namespace, spun by a ``SingleThreadedExecutor`` in a daemon thread. The names it serves are
 resolved by the first node, so clients see the same services, topics and actions as before.
+
+A *lean* side node (``lean=True``) carries nothing but what its owner puts on it: no parameter
+services, no type description service, no ``/rosout`` publisher, and none of the process's
+command-line arguments (the owner resolves the names it uses, remappings included; a
+``-r __node:=NAME`` meant for the owner does not rename it too). rclpy's executor builds its wait
+set again over every entity of its nodes at each wake-up, so a fast stream served by a lean node
+wakes a wait set of one subscription instead of the owner's dozens of entities (the scheduler's
+500 Hz ``/joint_states``).
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ import threading
 
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 
 class SideNode:
@@ -27,14 +36,21 @@ class SideNode:
         The node it serves; its context and namespace are used.
     suffix : str
         The side node is named ``<parent name>_<suffix>``.
+    lean : bool
+        Nothing but the owner's entities on it (see the module docstring).
     """
 
-    def __init__(self, parent: Node, suffix: str) -> None:
+    def __init__(self, parent: Node, suffix: str, *, lean: bool = False) -> None:
+        extra: dict = {}
+        if lean:
+            extra = {"use_global_arguments": False, "enable_rosout": False,
+                     "parameter_overrides": [Parameter("start_type_description_service", value=False)]}
         self.node = Node(f"{parent.get_name()}_{suffix}", namespace=parent.get_namespace(), context=parent.context,
-                         start_parameter_services=False)
+                         start_parameter_services=False, **extra)
         self._executor = SingleThreadedExecutor(context=parent.context)
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=f"{self.node.get_name()} executor", daemon=True)
+        self._closed = False
 
     def start(self) -> SideNode:
         """Start spinning (after the side node's entities are created)."""
@@ -51,7 +67,10 @@ class SideNode:
                 self.node.get_logger().error(f"executor stopped: {err!r}")
 
     def close(self, timeout: float = 5.0) -> None:
-        """Stop the executor and wait for its thread (entities are the owner's to destroy first)."""
+        """Stop the executor and wait for its thread (entities are the owner's to destroy first); once."""
+        if self._closed:
+            return
+        self._closed = True
         self._executor.shutdown(timeout_sec=timeout)
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout)

@@ -17,6 +17,22 @@ Integration: the trapezoidal rule (Newmark, average acceleration) on the 12 coor
 x = (q, theta), with M(q) and the nonlinear link terms frozen over each step. The rule is
 unconditionally stable and adds no numerical damping, so the stiff motor loop does not limit
 the step and the modes decay at their physical rate (frequency error about (w h)^2 / 12).
+
+Each step solves the rule's 12 x 12 system for the new accelerations,
+
+    [[M(q) + a11, -a11], [-a11, a22]] [q'', theta''] = [-n(q, q') - s, b],
+
+with a11 = h D / 2 + h^2 K / 4 and a22 = B + h (D + F + Kd) / 2 + h^2 (K + Kp) / 4 diagonal
+(s the spring and damper torque at the predicted state, b the motor side's right-hand side).
+Eliminating theta'' (the motor block is diagonal) leaves the 6 x 6 Schur complement
+S = M(q) + diag(a11 - a11^2 / a22): a mass matrix with an added diagonal, which is what
+Pinocchio's articulated-body algorithm solves with the model's ``armature``. So one ``aba`` on a
+copy of the model with armature a11 - a11^2 / a22 gives q'' = S^-1 (tau - n(q, q')) for
+tau = a11 b / a22 - s in O(n), in place of ``crba``, ``nonLinearEffects`` and a dense 12 x 12
+solve; theta'' = (b + a11 q'') / a22. Everything else in a step is linear in the state
+(x, x', x'') and the loop's drive Kp r + Kd r' + g(r), so one precomputed 36 x 36 matrix gives
+the predicted state, s, tau and b less the drive in one product. The results equal the dense
+solve to rounding (test_arm.py compares trajectories and the modes as simulated against it).
 """
 
 from __future__ import annotations
@@ -168,18 +184,44 @@ class ElasticArm:
         if not (math.isfinite(step) and 0 < step <= 0.01):
             raise ValueError(f"integration step must be in (0, 0.01] s, got {step!r}")
         self.model = model
-        self.h = float(step)
-        n = self.n = model.n
-        k, d = np.diag(model.stiffness), np.diag(model.damping)
-        self._kb = np.block([[k, -k], [-k, k + np.diag(model.kp)]])
-        self._cb = np.block([[d, -d], [-d, d + np.diag(model.kd + model.motor_friction)]])
-        h = self.h
-        self._rest_of_a = 0.5 * h * self._cb + 0.25 * h * h * self._kb
-        self._a = self._rest_of_a.copy()
-        self._a[n:, n:] += np.diag(model.motor_inertia)
-        self._hh4, self._h2 = 0.25 * h * h, 0.5 * h  # the trapezoidal rule's factors, as step used to form them
-        self._kd_zero = model.kd * np.zeros(n)  # kd times a zero velocity feedforward
-        self.reset(np.zeros(n) if position is None else position)
+        self.h = h = float(step)
+        self.n = model.n
+        k = np.asarray(model.stiffness, dtype=float)
+        d = np.asarray(model.damping, dtype=float) * np.ones(model.n)
+        self._k, self._d = k, d
+        self._kdf = model.kd + model.motor_friction  # motor-side damping besides the joint's
+        a11 = 0.5 * h * d + 0.25 * h * h * k
+        a22 = model.motor_inertia + 0.5 * h * (d + self._kdf) + 0.25 * h * h * (k + model.kp)
+        self._ratio = a11 / a22
+        self._inv_a22 = 1.0 / a22
+        # the link side's Schur complement is M(q) + diag(a11 - a11^2 / a22): Pinocchio's armature
+        self._armature = a11 - a11 * self._ratio
+        self._copy_model()
+        self._hh4, self._h2 = 0.25 * h * h, 0.5 * h  # the trapezoidal rule's factors
+        self._map = self._linear_map()
+        self.reset(np.zeros(model.n) if position is None else position)
+
+    def _copy_model(self) -> None:
+        """The copy of the arm's Pinocchio model that the step solves with (its armature is the Schur
+        complement's diagonal), made again whenever the arm's inertial parameters change."""
+        self._pin_model = pin.Model(self.model.model)
+        self._pin_model.armature = self._armature
+        self._pin_data = self._pin_model.createData()
+
+    def _linear_map(self) -> np.ndarray:
+        """The 36 x 36 matrix W with W (x, x', x'') = (tau, b, x_pred, x'_pred) less the drive's terms.
+
+        x_pred = x + h x' + h^2 x'' / 4 and x'_pred = x' + h x'' / 2 (the rule's predictor);
+        s = K (q_p - theta_p) + D (q'_p - theta'_p) the spring and damper on it; the motor rows'
+        right-hand side b = drive + s - Kp theta_p - (Kd + F) theta'_p; tau = a11 b / a22 - s.
+        """
+        n, h = self.n, self.h
+        eye, zero = np.eye(2 * n), np.zeros((2 * n, 2 * n))
+        pred = np.block([[eye, h * eye, self._hh4 * eye], [zero, eye, self._h2 * eye]])  # -> (x_p, x'_p)
+        k, d, kp = np.diag(self._k), np.diag(self._d), np.diag(self.model.kp)
+        spring = np.hstack([k, -k, d, -d]) @ pred
+        motor = np.hstack([k, -k - kp, d, -d - np.diag(self._kdf)]) @ pred
+        return np.vstack([self._ratio[:, None] * motor - spring, motor, pred])
 
     def reset(self, position: np.ndarray) -> None:
         """At rest (static equilibrium) holding setpoint ``position``."""
@@ -191,7 +233,9 @@ class ElasticArm:
         self.setpoint = r
         self._setpoint_bytes = r.tobytes()
         self._g_r = self.model.gravity(r)
-        self.torque = self._g_r.copy()
+        self._drive = self.model.kp * r + self._g_r  # the loop's torque but its theta and velocity terms, N m
+        self._velocity: np.ndarray | None = None     # the last step's velocity feedforward, rad/s
+        self._torque: np.ndarray | None = self._g_r.copy()
         self.time = 0.0
 
     def model_changed(self) -> None:
@@ -199,7 +243,10 @@ class ElasticArm:
         them. The controller's gravity feedforward at the setpoint follows the new payload (the robot is told
         its payload, as a UR controller's ``set_payload``); the arm's state is kept, so it leaves its old
         equilibrium under the new load from the next step on, as an arm does when it picks up a part."""
+        self._copy_model()
         self._g_r = self.model.gravity(self.setpoint)
+        self._drive = self.model.kp * self.setpoint + self._g_r
+        self._torque = None
 
     @property
     def q(self) -> np.ndarray:
@@ -234,29 +281,30 @@ class ElasticArm:
             self.setpoint = r.copy()
             self._setpoint_bytes = key
             self._g_r = mdl.gravity(r)
-        q, v = self.x[:n], self.xd[:n]
-        a_mat = self._a
-        a_mat[:n, :n] = mdl.mass(q) + self._rest_of_a[:n, :n]
-        f = np.empty(2 * n)
-        f[:n] = -mdl.nonlinear(q, v)
+            self._drive = mdl.kp * r + self._g_r
         if velocity is None:
-            f[n:] = mdl.kp * r + self._kd_zero + self._g_r
+            drive = self._drive
+            self._velocity = None
         else:
-            rd = np.asarray(velocity, dtype=float)
-            f[n:] = mdl.kp * r + mdl.kd * rd + self._g_r
-        hh4, h2 = self._hh4, self._h2
-        x_pred = self.x + h * self.xd + hh4 * self.xdd
-        xd_pred = self.xd + h2 * self.xdd
-        xdd = np.linalg.solve(a_mat, f - self._cb @ xd_pred - self._kb @ x_pred)
-        self.x = x_pred + hh4 * xdd
-        self.xd = xd_pred + h2 * xdd
+            self._velocity = rd = np.asarray(velocity, dtype=float)
+            drive = self._drive + mdl.kd * rd
+        y = self._map @ np.concatenate([self.x, self.xd, self.xdd])  # (tau, b, x_pred, x'_pred) less the drive
+        link = pin.aba(self._pin_model, self._pin_data, self.x[:n], self.xd[:n], y[:n] + self._ratio * drive)
+        xdd = np.concatenate([link, self._inv_a22 * (y[n:2 * n] + drive) + self._ratio * link])
+        self.x = y[2 * n:4 * n] + self._hh4 * xdd
+        self.xd = y[4 * n:] + self._h2 * xdd
         self.xdd = xdd
-        theta, thetad = self.x[n:], self.xd[n:]
-        if velocity is None:
-            self.torque = mdl.kp * (r - theta) + mdl.kd * (0.0 - thetad) + self._g_r
-        else:
-            self.torque = mdl.kp * (r - theta) + mdl.kd * (rd - thetad) + self._g_r
+        self._torque = None
         self.time += h
+
+    @property
+    def torque(self) -> np.ndarray:
+        """The motors' torques after the last step, N m: Kp (r - theta) + Kd (r' - theta') + g(r)."""
+        if self._torque is None:
+            mdl, n = self.model, self.n
+            rd = 0.0 if self._velocity is None else self._velocity
+            self._torque = mdl.kp * (self.setpoint - self.x[n:]) + mdl.kd * (rd - self.xd[n:]) + self._g_r
+        return self._torque
 
     def imu(self) -> tuple[np.ndarray, np.ndarray]:
         """The flange IMU's ideal reading: specific force (m/s^2, gravity included) and angular rate (rad/s).

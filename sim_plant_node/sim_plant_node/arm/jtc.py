@@ -258,4 +258,4 @@ class JointTrajectoryController:
 
 
 def _violates(error: np.ndarray, tolerance: np.ndarray) -> bool:
-    return bool(np.any((tolerance > 0) & (np.abs(error) > tolerance)))
+    return bool(((tolerance > 0) & (np.abs(error) > tolerance)).any())  # (the method: no dispatch wrapper)

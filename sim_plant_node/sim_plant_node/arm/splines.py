@@ -94,5 +94,5 @@ class Trajectory:
                     np.zeros(n) if last.velocities is None else last.velocities.copy(),
                     np.zeros(n) if last.accelerations is None else last.accelerations.copy())
         t = max(t, float(self.times[0]))
-        k = max(int(np.searchsorted(self.times, t, side="right")) - 1, 0)
+        k = max(int(self.times.searchsorted(t, side="right")) - 1, 0)
         return _evaluate(self._segments[k], t - self.times[k])

@@ -15,9 +15,10 @@ rate_limit
 
 from .fuzzy import FuzzyError, Interpolation, RuleBase, modes_of, rule_base_from_dict, triangular_partition
 from .rate_limit import RateLimit
-from .scheduler import MAX_POSE_JOINTS, Scheduler, premise_values, relative_change
+from .scheduler import GRADE_TOLERANCE, MAX_POSE_JOINTS, Scheduler, premise_values, relative_change
 
 __all__ = [
+    "GRADE_TOLERANCE",
     "MAX_POSE_JOINTS",
     "FuzzyError",
     "Interpolation",

@@ -79,6 +79,13 @@ class Triangular:
         """Where the grade is 1 (an interval)."""
         return self.b, self.b
 
+    def slope(self, lo: float, hi: float) -> float:
+        """Largest |d grade / dz| for z in [lo, hi], 1/unit (inf: a vertical edge lies inside)."""
+        if (self.a == self.b and lo < self.a <= hi) or (self.b == self.c and lo <= self.c < hi):
+            return math.inf
+        return max(1.0 / (self.b - self.a) if self.b > self.a else 0.0,
+                   1.0 / (self.c - self.b) if self.c > self.b else 0.0)
+
 
 @dataclass(frozen=True)
 class Trapezoidal:
@@ -107,6 +114,13 @@ class Trapezoidal:
     def peak(self) -> tuple[float, float]:
         return self.b, self.c
 
+    def slope(self, lo: float, hi: float) -> float:
+        """Largest |d grade / dz| for z in [lo, hi], 1/unit (inf: a vertical edge lies inside)."""
+        if (self.a == self.b and lo < self.a <= hi) or (self.c == self.d and lo <= self.d < hi):
+            return math.inf
+        return max(1.0 / (self.b - self.a) if self.b > self.a else 0.0,
+                   1.0 / (self.d - self.c) if self.d > self.c else 0.0)
+
 
 @dataclass(frozen=True)
 class Gaussian:
@@ -126,6 +140,10 @@ class Gaussian:
     @property
     def peak(self) -> tuple[float, float]:
         return self.mean, self.mean
+
+    def slope(self, lo: float, hi: float) -> float:
+        """Largest |d grade / dz| anywhere, 1/unit: 1 / (sigma sqrt(e)), at mean +- sigma."""
+        return 1.0 / (self.sigma * math.sqrt(math.e))
 
 
 Membership = Triangular | Trapezoidal | Gaussian
@@ -273,6 +291,16 @@ class RuleBase:
             raise FuzzyError(f"premise values must be finite, got {zin.tolist()}")
         zc = np.clip(zin, self.ranges[:, 0], self.ranges[:, 1])
         return zin, zc, tuple(bool(x) for x in zc != zin)
+
+    def premise_tolerance(self, grade: float) -> np.ndarray:
+        """Per premise, the largest change (rad or m, within the range) that moves no membership grade
+        by more than ``grade``: ``grade`` over the steepest slope of that premise's membership
+        functions over the range (0 where a vertical edge lies inside the range)."""
+        out = np.empty(len(self.premises))
+        for j, (lo, hi) in enumerate(self.ranges):
+            steepest = max(r.memberships[j].slope(float(lo), float(hi)) for r in self.rules)
+            out[j] = grade / steepest if steepest > 0 else math.inf
+        return out
 
     def weights(self, z: Sequence[float]) -> np.ndarray:
         """Normalised weights at z (clamped to the ranges first)."""
