@@ -257,6 +257,30 @@ def _wait_for_nodes(case: Case, node: Any, until: Callable[[Callable[[], bool], 
     until(lambda: time.monotonic() > settle, 5.0, "discovery to settle")
 
 
+def _start_task(start_cli: Any, until: Callable[[Callable[[], bool], float, str], None], timeout: float = 60.0
+                ) -> None:
+    """Ask the plant to start its run; while it waits for its subscribers (its loop through the shaper not yet
+    matched on DDS), ask again every 50 ms, up to ``timeout`` s."""
+    from std_srvs.srv import Trigger
+
+    from sim_plant_node.sim_plant import WAITING
+
+    end = time.monotonic() + timeout
+    while True:
+        future = start_cli.call_async(Trigger.Request())
+        until(future.done, 30.0, "the task to start")
+        answer = future.result()
+        if answer.success:
+            return
+        if not answer.message.startswith(WAITING) or time.monotonic() > end:
+            raise RuntimeError(f"sim plant did not start: {answer.message}")
+        until(functools.partial(_past, time.monotonic() + 0.05), 5.0, "the next start request")
+
+
+def _past(t: float) -> bool:
+    return time.monotonic() > t
+
+
 def _has_subscribers(node: Any, topic: str, n: int) -> bool:
     return bool(node.count_subscribers(topic) >= n)
 
@@ -279,10 +303,7 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
     until = functools.partial(spin_until, ex)
     try:
         _wait_for_nodes(case, node, until, rec, start_cli)
-        future = start_cli.call_async(Trigger.Request())
-        until(future.done, 30.0, "the task to start")
-        if not future.result().success:
-            raise RuntimeError(f"sim plant did not start: {future.result().message}")
+        _start_task(start_cli, until)
         n_steps = len(STEP_LEVELS)
         seen = 0
 

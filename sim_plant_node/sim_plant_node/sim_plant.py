@@ -50,7 +50,10 @@ lockstep
     raw setpoint has arrived, so runs go as fast as the nodes answer and give the same result
     on a loaded machine. Idle (no task running) the plant does not step. If no answer comes
     within ``lockstep_timeout`` seconds of wall time, the plant holds the last setpoint, warns,
-    and goes on.
+    and goes on. So that the first setpoint of a run is not lost on DDS (and the run stalled
+    for ``lockstep_timeout``), ``~/start_task`` refuses with 'waiting for subscribers' (a driver
+    asks again) until the raw setpoints have a matched subscription and the shaped setpoints a
+    matched publisher.
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -302,7 +305,7 @@ class SimPlantNode(Node):
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward)
         self._ff_pending: tuple[str, np.ndarray] | None = None
         self._ff: tuple[str, np.ndarray] | None = None  # (injection, samples x joints) of this cycle
-        self.create_subscription(Float64MultiArray, tp["command_in"], self._on_command, 10)
+        self._cmd_sub = self.create_subscription(Float64MultiArray, tp["command_in"], self._on_command, 10)
         self.create_subscription(ShaperMsg, tp["active_shaper"], self._on_shaper, LATCHED)
         self.create_service(Trigger, "~/start_task", self._on_start)
         self.create_service(Trigger, "~/stop_task", self._on_stop)
@@ -451,7 +454,9 @@ class SimPlantNode(Node):
             return StaircaseTask(self._pose("task.start", {}), g("task.levels"), float(g("task.dwell")), self.rate)
         return task
 
-    def _start_task(self) -> tuple[bool, str]:
+    def _start_task(self, matched: bool = False) -> tuple[bool, str]:
+        """Start a run; with ``matched`` (the ~/start_task service), in lockstep only once the loop through the
+        shaper is matched on DDS (:meth:`_lockstep_unmatched`)."""
         if self.task is not None:
             return False, "a task is already running"
         if self.jtc is not None and self.jtc.running:
@@ -460,6 +465,9 @@ class SimPlantNode(Node):
         have = self._event_pub.get_subscription_count()  # matched, not only discovered
         if have < need:
             return False, f"{WAITING}: the cycle events have {have} matched subscriptions, task.subscribers is {need}"
+        unmatched = self._lockstep_unmatched() if matched and self.mode == "lockstep" else ""
+        if unmatched:
+            return False, f"{WAITING}: {unmatched}"
         try:
             task = self.task = self._make_task()
         except ValueError as err:
@@ -473,8 +481,20 @@ class SimPlantNode(Node):
         return True, (f"{task.cycles} cycles of {task.samples_per_cycle / self.rate:.3f} s"
                       f" (move {task.move_duration:.3f} s) after {self._preroll_left / self.rate:.3f} s preroll")
 
+    def _lockstep_unmatched(self) -> str:
+        """What the lockstep loop still lacks on DDS ('' if nothing): a step waits for the shaped answer to its
+        raw setpoint, so a run started before the raw setpoints reach a subscription, or before a publisher's
+        shaped setpoints reach the plant, loses its first setpoint and stalls for ``lockstep_timeout``. (Matched,
+        not only discovered: a driver that sees the shaper in the graph may see it before the plant matches it.)"""
+        missing = []
+        if self._cmd_pub.get_subscription_count() == 0:
+            missing.append(f"the raw setpoints on {self._cmd_pub.topic_name} have no matched subscription")
+        if self._cmd_sub.get_publisher_count() == 0:
+            missing.append(f"the shaped setpoints on {self._cmd_sub.topic_name} have no matched publisher")
+        return "; ".join(missing)
+
     def _on_start(self, req, resp):
-        resp.success, resp.message = self._start_task()
+        resp.success, resp.message = self._start_task(matched=True)
         return resp
 
     def _on_stop(self, req, resp):

@@ -35,7 +35,10 @@ security
 recording
     The recorder's heartbeat in its recordings, and the upper bound of what a recording that was
     not closed (recorder killed) lost.
+lazy
+    Heavy modules (python-control, scipy.signal) imported on first use, so that a process that
+    never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "learning", "rate", "recording", "scheduling",
-           "security", "shaping"]
+__all__ = ["checks", "closed_loop", "cycles", "identification", "lazy", "learning", "rate", "recording",
+           "scheduling", "security", "shaping"]

@@ -29,10 +29,17 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 import numpy.typing as npt
+
+from shaper_nodes.core.lazy import lazy_module
+
+if TYPE_CHECKING:
+    import control
+else:  # on first use: the sim plant node imports this module for its loop plants, which never need it
+    control = lazy_module("control")
 
 #: nominal plant, kg, N s/m, N/m
 NOMINAL = (1.0, 25.1327, 1.5791e4)
