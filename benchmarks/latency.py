@@ -44,6 +44,7 @@ machine's busy time over the same window (from ``/proc/stat``), an indicator of 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
 import signal
@@ -422,6 +423,48 @@ def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.
 
 
 # --------------------------------------------------------------------------- the targets
+# --------------------------------------------------------------------------- outside load
+#: the busy loop of :class:`CpuHog` (pure Python: one core at 100 %, no memory traffic to speak of)
+HOG_CODE = "while True:\n    pass\n"
+
+
+class CpuHog:
+    """A busy-loop child process taking one core, pinned to ``cpu`` where the OS allows it.
+
+    Used as a context manager around a measurement, so that the echo node and the shaper node are
+    measured under the same load; :attr:`cpu_seconds` is what the hog got (utime + stime, s).
+
+    Parameters
+    ----------
+    cpu : int or None
+        The CPU to pin the hog to (default the last one); None: not pinned.
+    """
+
+    def __init__(self, cpu: int | None = -1) -> None:
+        count = os.cpu_count() or 1
+        self.cpu = None if cpu is None else cpu % count
+        self.proc: ChildProcess | None = None
+        self.cpu_seconds = 0.0
+
+    def __enter__(self) -> CpuHog:
+        self.proc = ChildProcess([sys.executable, "-S", "-c", HOG_CODE]).start()
+        assert self.proc.proc is not None
+        if self.cpu is not None and hasattr(os, "sched_setaffinity"):
+            try:
+                os.sched_setaffinity(self.proc.proc.pid, {self.cpu})
+            except OSError:  # a restricted cpuset: the hog floats
+                self.cpu = None
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.proc is not None and self.proc.proc is not None:
+            with contextlib.suppress(OSError):
+                self.cpu_seconds = proc_cpu_seconds(self.proc.proc.pid)
+            self.proc.proc.kill()
+            self.proc.proc.wait()
+            self.proc = None
+
+
 def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_out") -> Target:
     """The bare echo node (:mod:`benchmarks.echo_node`) run with this interpreter."""
 

@@ -16,6 +16,8 @@ import threading
 
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 
 class SideNode:
@@ -26,12 +28,21 @@ class SideNode:
     parent : Node
         The node it serves; its context and namespace are used.
     suffix : str
-        The side node is named ``<parent name>_<suffix>``.
+        The side node is named ``<parent name>_<suffix>``, whatever ``-r __node:=NAME`` the process was
+        started with (that renames ``parent``; the side node keeps its own name after the new one).
+    lean : bool
+        Without the ``~/get_type_description`` service either (it never has parameter services), so that
+        its executor waits on nothing but what is created on it: rclpy's executor builds its wait set over
+        every entity of its nodes at each wake-up.
     """
 
-    def __init__(self, parent: Node, suffix: str) -> None:
-        self.node = Node(f"{parent.get_name()}_{suffix}", namespace=parent.get_namespace(), context=parent.context,
-                         start_parameter_services=False)
+    def __init__(self, parent: Node, suffix: str, lean: bool = False) -> None:
+        name = f"{parent.get_name()}_{suffix}"
+        # a local __node rule comes before the process's global one (which names the parent)
+        overrides = [Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)] if lean else []
+        self.node = Node(name, namespace=parent.get_namespace(), context=parent.context,
+                         cli_args=["--ros-args", "-r", f"__node:={name}"], start_parameter_services=False,
+                         parameter_overrides=overrides)
         self._executor = SingleThreadedExecutor(context=parent.context)
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=f"{self.node.get_name()} executor", daemon=True)
