@@ -84,6 +84,7 @@ def _ratios(runs: list[dict], base: dict) -> list[dict]:
         "p99": _ratio(r["p99_us"], base["p99_us"]),
         "max": _ratio(r["max_us"], base["max_us"]),
         "node_cpu": _ratio(r["node_cpu_pct"], base["node_cpu_pct"]),
+        "cpu_per_msg": _ratio(r["node_cpu_us_per_msg"], base["node_cpu_us_per_msg"]),
         "extra_p50_us": r["p50_us"] - base["p50_us"],
         "extra_p99_us": r["p99_us"] - base["p99_us"],
     } for r in runs]
@@ -142,10 +143,11 @@ def _print_runs(runs: list[dict]) -> None:
 
 
 def _print_ratios(baseline: str, ratios: list[dict]) -> None:
-    print(f"  ratio to {baseline:<22}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}{'+p50 us':>9}{'+p99 us':>9}")
+    print(f"  ratio to {baseline:<22}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}{'CPU/msg':>8}{'+p50 us':>9}"
+          f"{'+p99 us':>9}")
     for q in ratios:
         print(f"  {q['label']:<31}{_fmt(q['p50'], '.2f'):>7}{_fmt(q['p99'], '.2f'):>7}{_fmt(q['max'], '.2f'):>7}"
-              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['extra_p50_us'], '+.0f'):>9}"
+              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['cpu_per_msg'], '.2f'):>8}{_fmt(q['extra_p50_us'], '+.0f'):>9}"
               f"{_fmt(q['extra_p99_us'], '+.0f'):>9}")
 
 
@@ -158,7 +160,8 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
     print("  replies are matched to sends by the sequence number in layout.data_offset (fallback: the data")
     print("  ramp decoded through the node's FIR); out err: largest relative deviation of a reply from the")
     print("  expected FIR output; CPU: % of one core over the sending window, for the node, the driver")
-    print("  (this process) and the rest of the machine (other: outside load, i.e. noise)")
+    print("  (this process) and the rest of the machine (other: outside load, i.e. noise); CPU/msg: the node's CPU")
+    print("  time per reply received")
     every = runs + lat.get("hog_runs", [])
     _print_runs(every)
     notes = [f"{r['label']}: {r['duplicates']} duplicates, {r['undecoded']} undecoded, {r['seq_from_data']} matched"
@@ -289,7 +292,8 @@ def _latency_rows(lat: dict) -> list[dict[str, Any]]:
                     ("lost", "lost", "messages", "0, as the echo" if hog else "0"),
                     ("p50_us", "p50", "us", "" if hog else "<= 1.10x echo"),
                     ("p99_us", "p99", "us", "" if hog else "<= 1.25x echo"),
-                    ("node_cpu_pct", "CPU", "% of a core", "" if hog else "<= 1.3x echo")):
+                    ("node_cpu_pct", "CPU", "% of a core", ""),
+                    ("node_cpu_us_per_msg", "CPU per message", "us", "" if hog else "<= 1.3x echo")):
                 rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{base['label']} {label}", base[key],
                                  goal=goal if zvd else ""))
     return rows

@@ -40,6 +40,8 @@ are stamped on entry to the subscription callback (the main thread spins a
 ``/proc/<pid>/stat`` (utime + stime over the sending window) for the node and from
 :func:`os.times` for the driver, in percent of one core; ``other_cpu_pct`` is the rest of the
 machine's busy time over the same window (from ``/proc/stat``), an indicator of outside noise.
+``node_cpu_us_per_msg`` is the node's CPU time over the window per reply received: a node that loses
+messages under load does less work, so its CPU share alone would flatter it.
 """
 
 from __future__ import annotations
@@ -158,6 +160,7 @@ class LatencyResult:
     max_us: float
     mean_us: float
     node_cpu_pct: float
+    node_cpu_us_per_msg: float
     driver_cpu_pct: float
     other_cpu_pct: float
     extra: dict = field(default_factory=dict)
@@ -417,7 +420,9 @@ def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.
         send_interval_p99_us=float(np.percentile(intervals, 99)) if intervals.size else float("nan"),
         p50_us=pct(50), p99_us=pct(99), max_us=float(lat.max()) if lat.size else float("nan"),
         mean_us=float(lat.mean()) if lat.size else float("nan"),
-        node_cpu_pct=100.0 * node_cpu / wall, driver_cpu_pct=100.0 * driver_cpu / wall,
+        node_cpu_pct=100.0 * node_cpu / wall,
+        node_cpu_us_per_msg=1e6 * node_cpu / received if received else float("nan"),
+        driver_cpu_pct=100.0 * driver_cpu / wall,
         other_cpu_pct=100.0 * max(0.0, busy - node_cpu - driver_cpu) / wall,
     )
 

@@ -365,6 +365,12 @@ class StreamingShaper(_ChannelShaper):
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         x = np.asarray(block, dtype=float)
         if x.shape == self._one:
+            stages = self._stages
+            if len(stages) == 1 and stages[0].held is None:  # the usual case, inlined: _sample as below
+                y: np.ndarray = stages[0].step_value(x)
+                y += self._offset
+                self._last = x.copy()  # a copy: it is the last sample
+                return y
             return self._sample(x.copy())  # a copy: it becomes the last sample
         single = x.ndim == 1
         x2 = x.reshape(-1, self.channels)
