@@ -39,7 +39,7 @@ def _dump(out: str) -> None:
     stats: pstats.Stats | None = None
     for prof in _profiles:
         prof.snapshot_stats()  # also for daemon threads still running (their entries so far)
-        if not prof.stats:  # type: ignore[attr-defined]
+        if not prof.stats:
             continue
         if stats is None:
             stats = pstats.Stats(prof)

@@ -46,8 +46,9 @@ subscriptions, so its executor's wake-up, which rclpy rebuilds over every entity
 what a bare node's does (docs/benchmarks.md). Their topic names are resolved by this node, so
 ``~/commands`` is ``/<name>/commands`` as before. Shaper changes and parameters run in this node's
 executor; :attr:`ShaperNode.stream_lock` keeps them between two streamed samples. With
-``stream_executor`` 'node' the streamed inputs run in this node's executor as well. Whole trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) are served,
-under the same names, by a side node ``<name>_trajectories`` on a thread of its own
+``stream_executor`` 'node' the streamed inputs run in this node's executor as well. Whole
+trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) are served, under the
+same names, by a side node ``<name>_trajectories`` on a thread of its own
 (ros/side_node.py), so that the stream never waits for a long trajectory. Shaping a whole
 trajectory only reads the active filter, never the streaming filters' state. The interpreter's
 thread switch interval is shortened (:data:`SWITCH_INTERVAL`) so that a thread doing Python work

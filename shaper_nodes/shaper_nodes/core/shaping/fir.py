@@ -244,7 +244,8 @@ class _Stage:
         p = self._pos
         self._buf[p] = x
         self._pos = p + 1 if p + 1 < self._size else 0
-        return np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
+        y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
+        return y
 
     def step_value(self, x: np.ndarray) -> np.ndarray:
         """:meth:`step` for an input value ``x`` (not a deviation): its deviation from :attr:`origin` is
@@ -252,7 +253,8 @@ class _Stage:
         p = self._pos
         np.subtract(x, self.origin, out=self._buf[p])
         self._pos = p + 1 if p + 1 < self._size else 0
-        return np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
+        y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
+        return y
 
     def run(self, block: np.ndarray) -> np.ndarray:
         """A block of inputs (deviations, shape (N, channels)); returns the FIR output."""
