@@ -6,6 +6,7 @@ See :mod:`benchmarks` for what is measured, and ``--help`` for the options.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import math
@@ -50,6 +51,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--discovery-timeout", type=float, default=30.0, help="node start-up and discovery limit, s")
     p.add_argument("--fir-repeats", type=int, default=5, help="passes per FIR method, best reported (default 5)")
     p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
+    p.add_argument("--skip-hog", action="store_true",
+                   help="skip the latency measurements under load (echo and shaper ZVD again, each with a busy-loop"
+                        " process on one core)")
     p.add_argument("--skip-fir", action="store_true", help="skip the FIR throughput measurement")
     p.add_argument("--skip-list", action="store_true", help="skip the LIST update timing")
     p.add_argument("--skip-mrilc", action="store_true", help="skip the MRILC update timing")
@@ -72,44 +76,83 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def _ratios(runs: list[dict], base: dict) -> list[dict]:
+    """Each run's figures against ``base`` (measured in the same run, under the same load)."""
+    return [{
+        "label": r["label"],
+        "p50": _ratio(r["p50_us"], base["p50_us"]),
+        "p99": _ratio(r["p99_us"], base["p99_us"]),
+        "max": _ratio(r["max_us"], base["max_us"]),
+        "node_cpu": _ratio(r["node_cpu_pct"], base["node_cpu_pct"]),
+        "cpu_per_msg": _ratio(r["node_cpu_us_per_msg"], base["node_cpu_us_per_msg"]),
+        "extra_p50_us": r["p50_us"] - base["p50_us"],
+        "extra_p99_us": r["p99_us"] - base["p99_us"],
+    } for r in runs]
+
+
 def run_latency(args: argparse.Namespace) -> dict:
-    """The three latency measurements (echo baseline, shaper none, shaper ZVD) and their ratios."""
-    from .latency import echo_target, measure, shaper_target
+    """The latency measurements (echo baseline, shaper none, shaper ZVD) and their ratios; unless
+    ``--skip-hog``, echo and shaper ZVD again, each with a busy-loop process on one core (the
+    same load for both), and their ratios."""
+    from .latency import CpuHog, echo_target, measure, shaper_target
 
     zvd = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03,
            "discretization": "split"}
     targets = [
-        echo_target(),
-        shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}),
-        shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd),
+        (echo_target(), False),
+        (shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}), False),
+        (shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd), False),
     ]
-    runs = []
+    if not args.skip_hog:
+        targets += [(echo_target(), True), (shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd), True)]
+    runs: list[dict] = []
+    hog_runs: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="shaper_bench_") as tmp:
-        for target in targets:
+        for target, hog in targets:
+            if hog:
+                target.label += " + hog"
             _progress(f"latency: {target.label} ({args.seconds:g} s at {args.rate:g} Hz)")
-            result = measure(target, seconds=args.seconds, rate=args.rate, joints=args.joints, warmup=args.warmup,
-                             drain=args.drain, discovery_timeout=args.discovery_timeout,
-                             log_dir=pathlib.Path(tmp), progress=_progress)
+            with contextlib.ExitStack() as stack:
+                load = stack.enter_context(CpuHog()) if hog else None
+                result = measure(target, seconds=args.seconds, rate=args.rate, joints=args.joints,
+                                 warmup=args.warmup, drain=args.drain, discovery_timeout=args.discovery_timeout,
+                                 log_dir=pathlib.Path(tmp), progress=_progress)
             result.extra["dense_taps"] = target.fir.length
             result.extra["nonzero_taps"] = int(target.fir.delays.size)
-            runs.append(result.as_dict())
-    base = runs[0]
-    ratios = []
-    for r in runs[1:]:
-        ratios.append({
-            "label": r["label"],
-            "p50": _ratio(r["p50_us"], base["p50_us"]),
-            "p99": _ratio(r["p99_us"], base["p99_us"]),
-            "max": _ratio(r["max_us"], base["max_us"]),
-            "node_cpu": _ratio(r["node_cpu_pct"], base["node_cpu_pct"]),
-            "extra_p50_us": r["p50_us"] - base["p50_us"],
-            "extra_p99_us": r["p99_us"] - base["p99_us"],
-        })
-    return {"baseline": base["label"], "runs": runs, "ratios_to_baseline": ratios}
+            if load is not None:
+                result.extra["hog_cpu"] = load.cpu
+            (hog_runs if hog else runs).append(result.as_dict())
+    out = {"baseline": runs[0]["label"], "runs": runs, "ratios_to_baseline": _ratios(runs[1:], runs[0])}
+    if hog_runs:
+        out.update(hog_baseline=hog_runs[0]["label"], hog_runs=hog_runs,
+                   hog_ratios_to_baseline=_ratios(hog_runs[1:], hog_runs[0]))
+    return out
+
+
+def _print_runs(runs: list[dict]) -> None:
+    head = (f"  {'node':<24}{'sent':>6}{'recv':>6}{'lost':>5}{'send Hz':>9}{'p50 us':>8}{'p99 us':>8}"
+            f"{'max us':>8}{'mean us':>8}{'node CPU':>9}{'drv CPU':>8}{'other':>7}{'out err':>9}")
+    print(head)
+    print("  " + "-" * (len(head) - 2))
+    for r in runs:
+        print(f"  {r['label']:<24}{r['sent']:>6}{r['received']:>6}{r['lost']:>5}{_fmt(r['send_rate_hz'], '.1f'):>9}"
+              f"{_fmt(r['p50_us']):>8}{_fmt(r['p99_us']):>8}{_fmt(r['max_us']):>8}{_fmt(r['mean_us']):>8}"
+              f"{_fmt(r['node_cpu_pct'], '.1f'):>9}{_fmt(r['driver_cpu_pct'], '.1f'):>8}"
+              f"{_fmt(r['other_cpu_pct'], '.0f'):>7}"
+              f"{_fmt(r['max_output_error'], '.0e'):>9}")
+
+
+def _print_ratios(baseline: str, ratios: list[dict]) -> None:
+    print(f"  ratio to {baseline:<22}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}{'CPU/msg':>8}{'+p50 us':>9}"
+          f"{'+p99 us':>9}")
+    for q in ratios:
+        print(f"  {q['label']:<31}{_fmt(q['p50'], '.2f'):>7}{_fmt(q['p99'], '.2f'):>7}{_fmt(q['max'], '.2f'):>7}"
+              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['cpu_per_msg'], '.2f'):>8}{_fmt(q['extra_p50_us'], '+.0f'):>9}"
+              f"{_fmt(q['extra_p99_us'], '+.0f'):>9}")
 
 
 def print_latency(lat: dict, args: argparse.Namespace) -> None:
-    """Latency table."""
+    """Latency table (and the one under load, when measured)."""
     runs = lat["runs"]
     n = runs[0]["sent"]
     print(f"Round-trip latency driver -> node -> driver (two hops), {args.joints} joints,"
@@ -117,34 +160,27 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
     print("  replies are matched to sends by the sequence number in layout.data_offset (fallback: the data")
     print("  ramp decoded through the node's FIR); out err: largest relative deviation of a reply from the")
     print("  expected FIR output; CPU: % of one core over the sending window, for the node, the driver")
-    print("  (this process) and the rest of the machine (other: outside load, i.e. noise)")
-    head = (f"  {'node':<18}{'sent':>6}{'recv':>6}{'lost':>5}{'send Hz':>9}{'p50 us':>8}{'p99 us':>8}"
-            f"{'max us':>8}{'mean us':>8}{'node CPU':>9}{'drv CPU':>8}{'other':>7}{'out err':>9}")
-    print(head)
-    print("  " + "-" * (len(head) - 2))
-    for r in runs:
-        print(f"  {r['label']:<18}{r['sent']:>6}{r['received']:>6}{r['lost']:>5}{_fmt(r['send_rate_hz'], '.1f'):>9}"
-              f"{_fmt(r['p50_us']):>8}{_fmt(r['p99_us']):>8}{_fmt(r['max_us']):>8}{_fmt(r['mean_us']):>8}"
-              f"{_fmt(r['node_cpu_pct'], '.1f'):>9}{_fmt(r['driver_cpu_pct'], '.1f'):>8}"
-              f"{_fmt(r['other_cpu_pct'], '.0f'):>7}"
-              f"{_fmt(r['max_output_error'], '.0e'):>9}")
+    print("  (this process) and the rest of the machine (other: outside load, i.e. noise); CPU/msg: the node's CPU")
+    print("  time per reply received")
+    every = runs + lat.get("hog_runs", [])
+    _print_runs(every)
     notes = [f"{r['label']}: {r['duplicates']} duplicates, {r['undecoded']} undecoded, {r['seq_from_data']} matched"
              f" through the data (no data_offset), {r['inexact']} inexact (after lost inputs)"
-             for r in runs if r["duplicates"] or r["undecoded"] or r["seq_from_data"] or r["inexact"]]
+             for r in every if r["duplicates"] or r["undecoded"] or r["seq_from_data"] or r["inexact"]]
     busiest = max(runs, key=lambda r: r["other_cpu_pct"])
     if busiest["other_cpu_pct"] > BUSY_WARNING_PCT:
         notes.append(f"the machine was busy with other work (up to {busiest['other_cpu_pct']:.0f} % of a core during"
                      f" '{busiest['label']}'): these figures are noisy, compare runs with little 'other'")
+    if lat.get("hog_runs"):
+        notes.append("'+ hog': measured with a busy-loop process on one core (pinned where allowed; its share is"
+                     " in 'other'), the same load for the echo node and the shaper")
     for note in notes:
         print(textwrap.fill(note, width=104, initial_indent="  note: ", subsequent_indent="        "))
-    print("  send interval p99: " + ", ".join(f"{r['label']} {_fmt(r['send_interval_p99_us'])} us" for r in runs))
+    print("  send interval p99: " + ", ".join(f"{r['label']} {_fmt(r['send_interval_p99_us'])} us" for r in every))
     print()
-    print(f"  ratio to {lat['baseline']:<16}{'p50':>7}{'p99':>7}{'max':>7}{'CPU':>7}"
-          f"{'+p50 us':>9}{'+p99 us':>9}")
-    for q in lat["ratios_to_baseline"]:
-        print(f"  {q['label']:<25}{_fmt(q['p50'], '.2f'):>7}{_fmt(q['p99'], '.2f'):>7}{_fmt(q['max'], '.2f'):>7}"
-              f"{_fmt(q['node_cpu'], '.2f'):>7}{_fmt(q['extra_p50_us'], '+.0f'):>9}"
-              f"{_fmt(q['extra_p99_us'], '+.0f'):>9}")
+    _print_ratios(lat["baseline"], lat["ratios_to_baseline"])
+    if lat.get("hog_runs"):
+        _print_ratios(lat["hog_baseline"], lat["hog_ratios_to_baseline"])
 
 
 def _terminate(signum: int, frame: object) -> None:
@@ -247,12 +283,21 @@ def _arm_rows(res: dict) -> list[dict[str, Any]]:
 
 
 def _latency_rows(lat: dict) -> list[dict[str, Any]]:
-    base = lat["runs"][0]
     rows = []
-    for r in lat["runs"][1:]:
-        for key, label, unit in (("p50_us", "p50", "us"), ("p99_us", "p99", "us"),
-                                 ("node_cpu_pct", "CPU", "% of a core")):
-            rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{base['label']} {label}", base[key]))
+    for runs, hog in ((lat["runs"], False), (lat.get("hog_runs", []), True)):
+        if not runs:
+            continue
+        base = runs[0]
+        for r in runs[1:]:
+            zvd = "zvd" in r["label"]
+            for key, label, unit, goal in (
+                    ("lost", "lost", "messages", "0, as the echo" if hog else "0"),
+                    ("p50_us", "p50", "us", "" if hog else "<= 1.10x echo"),
+                    ("p99_us", "p99", "us", "" if hog else "<= 1.25x echo"),
+                    ("node_cpu_pct", "CPU", "% of a core", ""),
+                    ("node_cpu_us_per_msg", "CPU per message", "us", "" if hog else "<= 1.3x echo")):
+                rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{base['label']} {label}", base[key],
+                                 goal=goal if zvd else ""))
     return rows
 
 

@@ -40,10 +40,13 @@ are stamped on entry to the subscription callback (the main thread spins a
 ``/proc/<pid>/stat`` (utime + stime over the sending window) for the node and from
 :func:`os.times` for the driver, in percent of one core; ``other_cpu_pct`` is the rest of the
 machine's busy time over the same window (from ``/proc/stat``), an indicator of outside noise.
+``node_cpu_us_per_msg`` is the node's CPU time over the window per reply received: a node that loses
+messages under load does less work, so its CPU share alone would flatter it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
 import signal
@@ -157,6 +160,7 @@ class LatencyResult:
     max_us: float
     mean_us: float
     node_cpu_pct: float
+    node_cpu_us_per_msg: float
     driver_cpu_pct: float
     other_cpu_pct: float
     extra: dict = field(default_factory=dict)
@@ -416,12 +420,56 @@ def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.
         send_interval_p99_us=float(np.percentile(intervals, 99)) if intervals.size else float("nan"),
         p50_us=pct(50), p99_us=pct(99), max_us=float(lat.max()) if lat.size else float("nan"),
         mean_us=float(lat.mean()) if lat.size else float("nan"),
-        node_cpu_pct=100.0 * node_cpu / wall, driver_cpu_pct=100.0 * driver_cpu / wall,
+        node_cpu_pct=100.0 * node_cpu / wall,
+        node_cpu_us_per_msg=1e6 * node_cpu / received if received else float("nan"),
+        driver_cpu_pct=100.0 * driver_cpu / wall,
         other_cpu_pct=100.0 * max(0.0, busy - node_cpu - driver_cpu) / wall,
     )
 
 
 # --------------------------------------------------------------------------- the targets
+# --------------------------------------------------------------------------- outside load
+#: the busy loop of :class:`CpuHog` (pure Python: one core at 100 %, no memory traffic to speak of)
+HOG_CODE = "while True:\n    pass\n"
+
+
+class CpuHog:
+    """A busy-loop child process taking one core, pinned to ``cpu`` where the OS allows it.
+
+    Used as a context manager around a measurement, so that the echo node and the shaper node are
+    measured under the same load; :attr:`cpu_seconds` is what the hog got (utime + stime, s).
+
+    Parameters
+    ----------
+    cpu : int or None
+        The CPU to pin the hog to (default the last one); None: not pinned.
+    """
+
+    def __init__(self, cpu: int | None = -1) -> None:
+        count = os.cpu_count() or 1
+        self.cpu = None if cpu is None else cpu % count
+        self.proc: ChildProcess | None = None
+        self.cpu_seconds = 0.0
+
+    def __enter__(self) -> CpuHog:
+        self.proc = ChildProcess([sys.executable, "-S", "-c", HOG_CODE]).start()
+        assert self.proc.proc is not None
+        if self.cpu is not None and hasattr(os, "sched_setaffinity"):
+            try:
+                os.sched_setaffinity(self.proc.proc.pid, {self.cpu})
+            except OSError:  # a restricted cpuset: the hog floats
+                self.cpu = None
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.proc is not None and self.proc.proc is not None:
+            with contextlib.suppress(OSError):
+                self.cpu_seconds = proc_cpu_seconds(self.proc.proc.pid)
+            self.proc.proc.kill()
+            self.proc.proc.wait()
+            self.proc = None
+
+
 def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_out") -> Target:
     """The bare echo node (:mod:`benchmarks.echo_node`) run with this interpreter."""
 

@@ -435,8 +435,9 @@ def test_drops_and_gaps_of_the_stream_are_reported(ros_context):
     try:
         send_valid_array_and_expect_output(rig, 0.0)
         before = len(rig.array_out)
-        for _ in range(60):  # a burst the node does not take while it is not spun: its queue of 5 overflows
-            rig.array_in.publish(Float64MultiArray(data=[0.0] * 3))
+        with rig.node.stream_lock:  # the stream stalls (at most one sample taken): its queue of 5 overflows
+            for _ in range(60):
+                rig.array_in.publish(Float64MultiArray(data=[0.0] * 3))
 
         def drops():
             for s in reversed(statuses):

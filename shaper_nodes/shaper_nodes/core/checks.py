@@ -76,6 +76,10 @@ def finite_array(name: str, values: Sequence[float] | np.ndarray, size: int | No
         raise InputError("empty", f"{name} is empty")
     if size is not None and arr.size != size:
         raise InputError("wrong_size", f"{name} has {arr.size} values, expected {size}")
+    # the usual case in one reduction: the largest magnitude is NaN if any value is, and beyond a finite
+    # limit if any value is infinite or too large; only then are the checks below made, for the reason
+    if limit < math.inf and np.abs(arr).max() <= limit:
+        return arr
     bad = ~np.isfinite(arr)
     if bad.any():
         idx = np.flatnonzero(bad.ravel())

@@ -40,9 +40,15 @@ trajectories' velocities and accelerations within ``limits.velocity`` / ``limits
 
 Threads
 -------
-The streamed paths (array, stream), shaper changes and parameters run in this node's executor;
-whole trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) are served,
-under the same names, by a side node ``<name>_trajectories`` on a thread of its own
+The streamed inputs (array, stream) are taken by a lean second node, ``<name>_stream``, spun on a
+thread of its own (``stream_executor`` 'thread', the default): it has nothing but those two
+subscriptions, so its executor's wake-up, which rclpy rebuilds over every entity of its nodes, costs
+what a bare node's does (docs/benchmarks.md). Their topic names are resolved by this node, so
+``~/commands`` is ``/<name>/commands`` as before. Shaper changes and parameters run in this node's
+executor; :attr:`ShaperNode.stream_lock` keeps them between two streamed samples. With
+``stream_executor`` 'node' the streamed inputs run in this node's executor as well. Whole
+trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) are served, under the
+same names, by a side node ``<name>_trajectories`` on a thread of its own
 (ros/side_node.py), so that the stream never waits for a long trajectory. Shaping a whole
 trajectory only reads the active filter, never the streaming filters' state. The interpreter's
 thread switch interval is shortened (:data:`SWITCH_INTERVAL`) so that a thread doing Python work
@@ -63,7 +69,7 @@ Parameters: :data:`PARAMETERS` (names, defaults, ranges and descriptions; config
 
 from __future__ import annotations
 
-import copy
+import array
 import gc
 import pathlib
 import sys
@@ -150,6 +156,8 @@ WORKER_TIMEOUT = 120.0
 DEFAULT_MAX_SAMPLES = 5_000
 #: the streamed inputs (array_in, stream_in)
 STREAMS = ("array", "stream")
+#: choices of the stream_executor parameter
+STREAM_EXECUTORS = ("thread", "node")
 
 #: the shaper node's parameters (see config/shaper.yaml)
 PARAMETERS: tuple[Spec, ...] = (
@@ -214,6 +222,12 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("limits.urdf_file", "", "A URDF file whose <limit> elements (position, velocity) hold for the joints"
          " too; where a parameter above also sets a limit, the tighter one holds. Every joint of joint_names must"
          " be a revolute, prismatic or continuous joint of it. Empty (default): no URDF.", read_only=True),
+    Spec("stream_executor", "thread", "Who takes the streamed inputs (array_in, stream_in): 'thread' (default), a"
+         " lean second node of this process, '<name>_stream', with nothing but those two subscriptions, spun on a"
+         " thread of its own (the topics stay this node's: ~/commands is /<name>/commands); 'node': this node's"
+         " executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
+         " waits on all of them, which costs the stream CPU and latency: docs/benchmarks.md).",
+         choices=STREAM_EXECUTORS, read_only=True),
     Spec("queue_depth", 100, "Depth of the streamed inputs' subscription queues (array_in, stream_in), messages:"
          " how long a burst or a stall of the node may last without a sample being dropped (100 = 0.1 s at"
          " 1 kHz); a dropped sample is counted on /diagnostics.", (1, 100000), read_only=True),
@@ -278,8 +292,14 @@ class ShaperNode(Node):
         self._max_abs = float(p("limits.max_abs_value").value)
         self._max_samples = int(p("limits.max_trajectory_samples").value)
         self.limits = self._limits_from_params(v)
+        self._bounds_for = -1.0  # the limits.max_abs_value of _bounds (see _input_bounds)
+        self._bounds: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
 
-        self._lock = threading.Lock()  # the counters, shared by the streaming and the whole-trajectory threads
+        self._lock = threading.Lock()  # the counters and rate watches, shared by the threads
+        #: held while a streamed sample is shaped and while the shaper changes (they run on different threads
+        #: with stream_executor 'thread'); a holder stalls the streamed inputs
+        self.stream_lock = threading.Lock()
+        self._n = n
         self.rejections: Counter[str] = Counter()
         self.forwarded: Counter[str] = Counter()
         self._window_rejections = 0
@@ -306,10 +326,20 @@ class ShaperNode(Node):
         self._traj_pub = pub(tp["trajectory_out"], JointTrajectory)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
         depth = int(p("queue_depth").value)
+        # the streamed inputs: on a lean node of their own, spun on a thread of its own (the names resolved by
+        # this node), or on this node
+        self._stream_side: SideNode | None = None
+        stream_node: Node = self
+        if str(p("stream_executor").value) == "thread":
+            self._stream_side = SideNode(self, "stream", lean=True)
+            stream_node = self._stream_side.node
+            tp["array_in"], tp["stream_in"] = (self.resolve_topic_name(tp[k]) for k in ("array_in", "stream_in"))
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
-            "array_in": self.graph.subscription(Float64MultiArray, tp["array_in"], self._on_array, depth),
-            "stream_in": self.graph.subscription(JointTrajectory, tp["stream_in"], self._on_stream, depth),
+            "array_in": self.graph.subscription(Float64MultiArray, tp["array_in"], self._on_array, depth,
+                                                on=stream_node),
+            "stream_in": self.graph.subscription(JointTrajectory, tp["stream_in"], self._on_stream, depth,
+                                                 on=stream_node),
             # raw: the bytes go to the trajectory worker process undecoded (ros/whole_trajectory.py)
             "trajectory_in": self.graph.subscription(JointTrajectory, self.resolve_topic_name(tp["trajectory_in"]),
                                                      self._on_trajectory, 10, on=side, raw=True),
@@ -342,6 +372,8 @@ class ShaperNode(Node):
         self._publish_active()
         self.graph.start()
         self._side.start()
+        if self._stream_side is not None:
+            self._stream_side.start()
         self.get_logger().info(
             f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"
             f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}"
@@ -413,7 +445,8 @@ class ShaperNode(Node):
             raise ShaperError(f"shaper.frequencies_hz / shaper.damping_ratios: {err}") from None
 
     def _stages(self) -> list[int]:
-        return [f.stages for f in (self._array_filter, *self._stream_filters.values())]
+        with self.stream_lock:
+            return [f.stages for f in (self._array_filter, *self._stream_filters.values())]
 
     def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
         changes = {p.name: p.value for p in params if p.name in DESIGN_PARAMS}
@@ -453,11 +486,12 @@ class ShaperNode(Node):
     def _commit(self, shaper: Shaper, source: str, method: str) -> None:
         fir = discretize(shaper, self.rate, method)  # may raise; nothing changed yet
         retime = self.policy.how(source) == "retime"
-        for f in [self._array_filter, *self._stream_filters.values()]:
-            if retime:
-                f.retime(fir)  # type: ignore[union-attr]  # retime sources make every filter a RetimingShaper
-            else:
-                f.switch(fir)
+        with self.stream_lock:  # between two streamed samples
+            for f in [self._array_filter, *self._stream_filters.values()]:
+                if retime:
+                    f.retime(fir)  # type: ignore[union-attr]  # retime sources make every filter a RetimingShaper
+                else:
+                    f.switch(fir)
         self._shaper, self._fir, self._source, self._method = shaper, fir, source, method
         self._revision += 1
         self._publish_active()
@@ -505,15 +539,17 @@ class ShaperNode(Node):
     def _arrived(self, stream: str, info: dict[str, Any] | None) -> None:
         """Record a streamed message's stamps for the rate watch (the middleware's message info)."""
         info = info or {}
-        self.rate_watch[stream].arrival(info.get("source_timestamp"), info.get("received_timestamp"),
-                                        time.time_ns(), info.get("publication_sequence_number"),
-                                        self._publisher_counts[stream])
+        with self._lock:
+            self.rate_watch[stream].arrival(info.get("source_timestamp"), info.get("received_timestamp"),
+                                            time.time_ns(), info.get("publication_sequence_number"),
+                                            self._publisher_counts[stream])
 
     def _publish_summary(self) -> None:
         with self._lock:
             refused, self._window_rejections = self._window_rejections, 0
             forwarded, rejections = dict(self.forwarded), dict(self.rejections)
-        windows = {k: w.window() for k, w in self.rate_watch.items()}
+            windows = {k: w.window() for k, w in self.rate_watch.items()}
+            total_drops = {k: w.total_drops for k, w in self.rate_watch.items()}
         # sequence numbers are per publisher: drops are counted while one publisher is seen
         self._publisher_counts = {k: self._subs[f"{k}_in"].get_publisher_count() for k in STREAMS}
         troubled = [k for k, w in windows.items() if w.trouble]
@@ -528,7 +564,7 @@ class ShaperNode(Node):
         for k, w in windows.items():
             if w.messages:
                 values += w.values(f"input.{k}")
-            values.append((f"input.{k}.total_drops", str(self.rate_watch[k].total_drops)))
+            values.append((f"input.{k}.total_drops", str(total_drops[k])))
         if self.pose_shaper is not None:
             values += [("action.scheduler.shaped", str(self.pose_shaper.shaped)),
                        ("action.scheduler.fallbacks", str(self.pose_shaper.fallbacks))]
@@ -543,15 +579,56 @@ class ShaperNode(Node):
     def _on_array(self, msg: Float64MultiArray, info: dict[str, Any] | None) -> None:
         self._arrived("array", info)
         try:
-            x = finite_array("data", msg.data, size=len(self.joint_names), limit=self._limit())
-            y = self._shape_checked({"array": (self._array_filter, x, "positions")})["array"]
+            with self.stream_lock:
+                y = self._shape_array(msg.data)
         except InputError as err:
             self._reject(self._in_topics["array_in"], err)
             return
-        out = Float64MultiArray(layout=msg.layout)
-        out.data = y.tolist()
-        self._array_pub.publish(out)
+        msg.data = y  # the input message goes on, its layout unchanged, with the shaped data
+        self._array_pub.publish(msg)
         self._count_forwarded("array")
+
+    def _shape_array(self, data: Any) -> list[float]:
+        """One Float64MultiArray sample shaped by the array filter, with the checks and refusals of
+        :meth:`_shape_checked`, made cheaply for a few values: the input is finite, within
+        limits.max_abs_value and within the position limits exactly when ``lo <= v <= hi`` holds for each
+        value with the bounds of :meth:`JointLimits.input_bounds` (a NaN fails any comparison), and the
+        output is finite and within the position limits exactly when it holds with
+        :attr:`JointLimits.sample_bounds`. Only a sample that fails is checked again by the general checks,
+        which raise the InputError naming the reason. Returns the shaped values."""
+        values = data.tolist() if isinstance(data, array.array) else list(data)
+        lo, hi = self._input_bounds
+        ok = len(values) == self._n
+        if ok:
+            for v, a, b in zip(values, lo, hi, strict=True):
+                if not a <= v <= b:
+                    ok = False
+                    break
+        if ok:
+            x = np.array(values)
+        else:  # the reason, as the general checks give it
+            x = finite_array("data", data, size=self._n, limit=self._limit())
+            self.limits.check("positions", "the command", x)
+        work = {"array": (self._array_filter, x, "positions")}
+        y = self._array_filter.process(x)
+        out: list[float] = y.tolist()
+        lo, hi = self.limits.sample_bounds
+        for v, a, b in zip(out, lo, hi, strict=True):
+            if not a <= v <= b:
+                self._check_shaped(work, {"array": y})
+                break
+        self._last_sent["array"] = y
+        return out
+
+    @property
+    def _input_bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Per joint, the (lowest, highest) value a streamed position may take (limits.max_abs_value and the
+        position limits; see :meth:`_shape_array`), recomputed when limits.max_abs_value changes."""
+        max_abs = self._max_abs
+        if self._bounds_for != max_abs:
+            self._bounds = self.limits.input_bounds(max_abs)
+            self._bounds_for = max_abs
+        return self._bounds
 
     def _shape_checked(self, work: dict[str, tuple[Any, np.ndarray, str]]) -> dict[str, np.ndarray]:
         """Shape streamed samples with the output invariants held; ``work`` maps a key to (filter,
@@ -559,48 +636,53 @@ class ShaperNode(Node):
 
         Inputs beyond the joint limits are refused before any filter (a sample inside them whose first
         impulse stays inside would otherwise pull every later output out, and the stream with it).
-        Then each filter runs and its output is checked (finite, within the limits); an output can still
-        leave them although its inputs did not (a switch between shapers, a custom shaper with negative
-        impulses). Then nothing is passed on, and the filters restart at rest at the last command they
-        passed on (refusing the sample while keeping their state would refuse every later one too: the
-        state would not move on); the next sample is shaped from there. Raises the InputError."""
+        Then each filter runs and its output is checked (:meth:`_check_shaped`). Raises the InputError."""
         for _, (_, x, field) in work.items():
             self.limits.check(field, "the command", x)
-        saved = {k: copy.deepcopy(f) for k, (f, _, _) in work.items()}
+        out = {k: f.process(x) for k, (f, x, _) in work.items()}
+        self._check_shaped(work, out)
+        for k, y in out.items():
+            self._last_sent[k] = np.atleast_2d(y)[-1].copy()
+        return out
+
+    def _check_shaped(self, work: dict[str, tuple[Any, np.ndarray, str]], out: dict[str, np.ndarray]) -> None:
+        """Check the filters' outputs ``out`` (finite, within the limits); an output can leave them although
+        its inputs did not (a switch between shapers, a custom shaper with negative impulses). Then nothing
+        is passed on, and the filters of ``work`` restart at rest at the last command they passed on
+        (refusing the sample while keeping their state would refuse every later one too: the state would
+        not move on); the next sample is shaped from there. Their reset replaces all the state a sample
+        changes, so nothing of the refused sample stays. Raises the InputError."""
         try:
-            out = {k: f.process(x) for k, (f, x, _) in work.items()}
             for k, y in out.items():
                 if not np.all(np.isfinite(y)):
                     raise InputError("non_finite", f"the shaped {work[k][2]} would not be finite")
                 self.limits.check(work[k][2], "the shaped command", y)
         except InputError as err:
             for k, (f, _, _) in work.items():
-                f.__dict__.update(saved[k].__dict__)
                 f.reset(self._last_sent.get(k))
             raise InputError(err.kind, f"{err}; the filters restart from the last command passed on") from None
-        for k, y in out.items():
-            self._last_sent[k] = np.atleast_2d(y)[-1].copy()
-        return out
 
     def _on_stream(self, msg: JointTrajectory, info: dict[str, Any] | None) -> None:
         self._arrived("stream", info)
         topic = self._in_topics["stream_in"]
         try:
             _, fields = trajectory_arrays(msg, self.joint_names, require_times=False, limit=self._limit())
-            for f in fields:
-                if f not in self._stream_fields:  # a field that (re)appears starts at its first value
-                    self._stream_filters[f].reset()
-                    self._last_sent.pop(f"stream.{f}", None)
-            shaped = self._shape_checked({f"stream.{f}": (self._stream_filters[f], v, f) for f, v in fields.items()})
+            with self.stream_lock:
+                for f in fields:
+                    if f not in self._stream_fields:  # a field that (re)appears starts at its first value
+                        self._stream_filters[f].reset()
+                        self._last_sent.pop(f"stream.{f}", None)
+                shaped = self._shape_checked({f"stream.{f}": (self._stream_filters[f], v, f)
+                                              for f, v in fields.items()})
+                names = tuple(fields)
+                for f in self._stream_fields:
+                    if f not in names:  # gone: if it comes back it starts afresh
+                        self._stream_filters[f].reset()
+                        self._last_sent.pop(f"stream.{f}", None)
+                self._stream_fields = names
         except InputError as err:
             self._reject(topic, err)
             return
-        names = tuple(fields)
-        for f in self._stream_fields:
-            if f not in names:  # gone: if it comes back it starts afresh
-                self._stream_filters[f].reset()
-                self._last_sent.pop(f"stream.{f}", None)
-        self._stream_fields = names
         self._stream_pub.publish(trajectory_msg(msg.header, self.joint_names, [p.time_from_start for p in msg.points],
                                                 {f: shaped[f"stream.{f}"] for f in names}))
         self._count_forwarded("stream")
@@ -629,6 +711,9 @@ class ShaperNode(Node):
         self._count_forwarded("trajectory")
 
     def destroy_node(self) -> None:
+        if self._stream_side is not None:  # the streamed inputs stop first
+            self._stream_side.close()
+            self._stream_side = None
         if self._action is not None:  # action servers and clients are not destroyed with the node
             self._action.destroy()
             self._action = None

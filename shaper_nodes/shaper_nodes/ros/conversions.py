@@ -13,7 +13,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_nodes.core.checks import InputError, finite_array, joint_permutation, strictly_increasing
+from shaper_nodes.core.checks import MAX_JOINT_NAMES, InputError, finite_array, joint_permutation, strictly_increasing
 from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_MAX_GAIN,
@@ -125,6 +125,28 @@ def sec_to_time(t: float) -> Time:
 TRAJ_FIELDS = ("positions", "velocities", "accelerations")
 
 
+#: joint orders already seen, (configured, received) -> the permutation (read-only); see _permutation
+_PERMUTATIONS: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
+#: most entries of _PERMUTATIONS (a stream's joint order seldom changes; the cache starts afresh when full)
+_MAX_PERMUTATIONS = 16
+
+
+def _permutation(configured: Sequence[str], received: Sequence[str]) -> np.ndarray:
+    """:func:`joint_permutation`, remembered for the joint orders that passed it (a stream sends the same
+    names in every message: comparing them is cheaper than checking them again)."""
+    if len(received) > MAX_JOINT_NAMES:
+        return joint_permutation(configured, received)  # refused before any work on the names
+    key = (tuple(configured), tuple(received))
+    perm = _PERMUTATIONS.get(key)
+    if perm is None:
+        perm = joint_permutation(configured, received)
+        perm.flags.writeable = False
+        if len(_PERMUTATIONS) >= _MAX_PERMUTATIONS:
+            _PERMUTATIONS.clear()
+        _PERMUTATIONS[key] = perm
+    return perm
+
+
 def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_times: bool,
                       limit: float = math.inf) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """A JointTrajectory as arrays in the configured joint order: (times (N,) s, {field: (N, joints)}).
@@ -141,7 +163,7 @@ def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_
     """
     if len(msg.points) > MAX_TRAJECTORY_POINTS:  # before any work on them
         raise InputError("too_large", f"{len(msg.points)} points exceed the limit of {MAX_TRAJECTORY_POINTS}")
-    perm = joint_permutation(joint_names, msg.joint_names)
+    perm = _permutation(joint_names, msg.joint_names)
     if not msg.points:
         raise InputError("empty", "trajectory has no points")
     n = len(joint_names)

@@ -25,6 +25,7 @@ import threading
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 
 class SideNode:
@@ -35,18 +36,22 @@ class SideNode:
     parent : Node
         The node it serves; its context and namespace are used.
     suffix : str
-        The side node is named ``<parent name>_<suffix>``.
+        The side node is named ``<parent name>_<suffix>``, whatever ``-r __node:=NAME`` the process was
+        started with (that renames ``parent``; the side node keeps its own name after the new one).
     lean : bool
-        Nothing but the owner's entities on it (see the module docstring).
+        Nothing but the owner's entities on it (see the module docstring): rclpy's executor builds its
+        wait set over every entity of its nodes at each wake-up.
     """
 
     def __init__(self, parent: Node, suffix: str, *, lean: bool = False) -> None:
+        name = f"{parent.get_name()}_{suffix}"
         extra: dict = {}
         if lean:
             extra = {"use_global_arguments": False, "enable_rosout": False,
-                     "parameter_overrides": [Parameter("start_type_description_service", value=False)]}
-        self.node = Node(f"{parent.get_name()}_{suffix}", namespace=parent.get_namespace(), context=parent.context,
-                         start_parameter_services=False, **extra)
+                     "parameter_overrides": [Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)]}
+        # a local __node rule comes before the process's global one (which names the parent)
+        self.node = Node(name, namespace=parent.get_namespace(), context=parent.context,
+                         cli_args=["--ros-args", "-r", f"__node:={name}"], start_parameter_services=False, **extra)
         self._executor = SingleThreadedExecutor(context=parent.context)
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=f"{self.node.get_name()} executor", daemon=True)

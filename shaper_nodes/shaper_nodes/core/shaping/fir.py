@@ -240,11 +240,21 @@ class _Stage:
         self._idx = [(p - fir.delays) % size for p in range(size)]
 
     def step(self, x: np.ndarray) -> np.ndarray:
-        """One input (deviation, shape (channels,)); returns the FIR output for it."""
+        """One input (deviation, shape (channels,)); returns the FIR output for it (a new array)."""
         p = self._pos
         self._buf[p] = x
         self._pos = p + 1 if p + 1 < self._size else 0
-        return self._gains @ self._buf.take(self._idx[p], axis=0)
+        y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
+        return y
+
+    def step_value(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`step` for an input value ``x`` (not a deviation): its deviation from :attr:`origin` is
+        written straight into the ring (one numpy call instead of two). Returns a new array."""
+        p = self._pos
+        np.subtract(x, self.origin, out=self._buf[p])
+        self._pos = p + 1 if p + 1 < self._size else 0
+        y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
+        return y
 
     def run(self, block: np.ndarray) -> np.ndarray:
         """A block of inputs (deviations, shape (N, channels)); returns the FIR output."""
@@ -311,6 +321,7 @@ class StreamingShaper(_ChannelShaper):
         super().__init__(fir, channels)
         self._stages: list[_Stage] = []
         self._offset = np.zeros(self.channels)
+        self._one = (self.channels,)  # the shape of one sample
 
     @property
     def stages(self) -> int:
@@ -355,7 +366,13 @@ class StreamingShaper(_ChannelShaper):
     def process(self, block: np.ndarray) -> np.ndarray:
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         x = np.asarray(block, dtype=float)
-        if x.shape == (self.channels,):
+        if x.shape == self._one:
+            stages = self._stages
+            if len(stages) == 1 and stages[0].held is None:  # the usual case, inlined: _sample as below
+                y: np.ndarray = stages[0].step_value(x)
+                y += self._offset
+                self._last = x.copy()  # a copy: it is the last sample
+                return y
             return self._sample(x.copy())  # a copy: it becomes the last sample
         single = x.ndim == 1
         x2 = x.reshape(-1, self.channels)
@@ -397,8 +414,8 @@ class StreamingShaper(_ChannelShaper):
             self._start(x)
         stages = self._stages
         if len(stages) == 1 and stages[0].held is None:  # the usual case: one filter, no change settling
-            stage = stages[0]
-            y: np.ndarray = self._offset + stage.step(x - stage.origin)
+            y: np.ndarray = stages[0].step_value(x)
+            y += self._offset
             self._last = x
             return y
         out = self._offset.copy()

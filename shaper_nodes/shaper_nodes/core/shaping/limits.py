@@ -25,9 +25,11 @@ itself, not on the input.
 from __future__ import annotations
 
 import math
+import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -117,6 +119,28 @@ class JointLimits:
     def any_position(self) -> bool:
         return bool(np.any(np.isfinite(self.lower)) or np.any(np.isfinite(self.upper)))
 
+    @cached_property
+    def _set(self) -> dict[str, bool]:
+        """Per field, whether any joint has a limit on it (a field without one has nothing to check)."""
+        return {"positions": self.any_position, "velocities": bool(np.any(np.isfinite(self.velocity))),
+                "accelerations": bool(np.any(np.isfinite(self.acceleration)))}
+
+    @cached_property
+    def sample_bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Per joint (lowest, highest) position a shaped sample may take, as Python floats, unset limits
+        replaced by the largest finite double: ``lo <= v <= hi`` then holds exactly when ``v`` is finite
+        and within the position limits (a NaN fails every comparison), the check of
+        :meth:`check_positions` plus finiteness in one comparison per joint."""
+        big = sys.float_info.max
+        return (tuple(max(float(v), -big) for v in self.lower), tuple(min(float(v), big) for v in self.upper))
+
+    def input_bounds(self, max_abs: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """As :attr:`sample_bounds` for an input sample that must also lie within ``max_abs`` in magnitude
+        (``max_abs`` finite): ``lo <= v <= hi`` holds exactly when ``v`` passes the magnitude check of
+        :func:`~shaper_nodes.core.checks.finite_array` and :meth:`check_positions`."""
+        lo, hi = self.sample_bounds
+        return tuple(max(v, -max_abs) for v in lo), tuple(min(v, max_abs) for v in hi)
+
     def describe(self) -> str:
         """One line for the node's start-up log: which limits are set."""
         parts = []
@@ -130,6 +154,8 @@ class JointLimits:
     def check_positions(self, what: str, positions: np.ndarray, times: np.ndarray | None = None) -> None:
         """Positions (J,) or (N, J) within [lower, upper]; InputError ``beyond_limits`` naming the first
         violation (``what``: e.g. "the shaped command")."""
+        if not self._set["positions"]:  # no limit: nothing can pass one
+            return
         p = np.atleast_2d(positions)
         over = (p > self.upper) | (p < self.lower)
         if over.any():
@@ -138,6 +164,8 @@ class JointLimits:
     def check(self, field: str, what: str, values: np.ndarray, times: np.ndarray | None = None) -> None:
         """Values (J,) or (N, J) of a trajectory field ("positions", "velocities" or "accelerations")
         within their limits."""
+        if not self._set[field]:  # no limit on this field: nothing can pass one
+            return
         v = np.atleast_2d(values)
         if field == "positions":
             self.check_positions(what, v, times)
