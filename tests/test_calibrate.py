@@ -128,6 +128,9 @@ def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_
     assert "resuming" in log
     assert {p.name: p.read_bytes() for p in first.iterdir()} == kept  # what was measured is not lost
     assert not list((cut / "recording").glob("*.partial"))
+    for pose in sorted((cut / "recording").iterdir()):  # each complete pose's file named after its folder
+        assert sorted(p.name for p in pose.iterdir()) == ["metadata.yaml", f"{pose.name}.mcap"], pose
+        assert "partial" not in (pose / "metadata.yaml").read_text(), pose
     a = json.loads((whole / "report.json").read_text())
     b = json.loads((cut / "report.json").read_text())
     assert b["poses"][0] == a["poses"][0]  # measured before the kill: the same to the last digit

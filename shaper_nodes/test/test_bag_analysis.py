@@ -20,7 +20,7 @@ from shaper_nodes.analysis.report import table as bag_analysis_cli_table
 from shaper_nodes.analysis.streams import JointStateDecoder, imu_fast, joint_state_fast, read_recording
 from shaper_nodes.analysis.synthetic import check_segmentation, simulate, simulate_plants, write_bag
 from shaper_nodes.cli import analyze_bag as bag_analysis_cli
-from shaper_nodes.core.identification import ModeFit
+from shaper_nodes.core.identification import NO_SHAPER_NEEDED, ModeFit
 from shaper_nodes.core.shaping.vibration import percentage_vibration, residual_vibration
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
@@ -524,6 +524,45 @@ def test_the_recommendation_keeps_zv_for_a_well_known_mode_and_prints_its_rule(r
     doc = json.loads(capsys.readouterr().out)
     shortest = min((c for c in doc["candidates"] if c["meets_target"]), key=lambda c: c["duration_s"])
     assert doc["recommendation"]["family"] == shortest["family"] and "0 %" in doc["rule"]
+
+
+def test_a_mode_that_does_not_ring_gets_no_shaper_and_the_option_sets_the_limit(tmp_path, capsys):
+    """A plant damped at 0.5: its residual is a transient that dies within a period. The analysis reports the mode
+    but recommends no shaper ("no residual vibration above the noise"); --max-damping 0.6 makes it a ringing mode
+    again, with a shaper. The lightly damped robot recording's mode is used."""
+    t, u, a, _ = simulate(cycles=4, zeta=0.5, noise=0.01)
+    write_bag(tmp_path / "damped", t, u, a)
+    an = analyze(read_recording(tmp_path / "damped"), Options(learners=()))
+    assert an.modes and an.modes[0].zeta == pytest.approx(0.5, rel=0.05)
+    assert an.recommendation is not None and an.recommendation.best is None
+    assert NO_SHAPER_NEEDED in an.recommendation.rule
+    doc = bag_summary(an)
+    assert doc["no_shaper_needed"] and doc["recommendation"] is None
+    assert doc["modes"][0]["not_used"].startswith("does not ring")
+    assert "does not ring: damping 0.5 > 0.3; not used for the shaper" in bag_analysis_cli_table(an)
+    assert bag_analysis_cli.main([str(tmp_path / "damped"), "--learners", "", "--max-damping", "0.6", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["recommendation"] is not None and not doc["no_shaper_needed"] and doc["modes"][0]["not_used"] == ""
+
+
+def test_a_group_recommendation_leaves_out_the_heavily_damped_fit():
+    """The analysis' per-group recommendation on the fits of the arm's production recording (cycle 0): the heavily
+    damped fit (30.8 Hz, 0.54) is left out, the lightly damped one (9.91 Hz, 0.032) kept; a group of heavily damped
+    or noise-floor fits only gets none."""
+    from shaper_nodes.analysis.analyze import _group_recommendation
+
+    light = ModeFit(2 * math.pi * 9.912, 0.032, 2 * math.pi * 0.038, 0.0037, 0.2, "fit")
+    heavy = ModeFit(2 * math.pi * 30.8, 0.537, 2 * math.pi * 1.4, 0.021, 0.5, "fit")
+    rec = _group_recommendation([heavy, light], Options(), 0.01)
+    assert rec is not None and rec.best is not None and rec.modes == (light,)
+    assert [m for m, _ in rec.not_ringing] == [heavy]
+    s = rec.best.shaper
+    assert float(percentage_vibration(s.amplitudes, s.times, light.omega, light.zeta)) < 0.005
+    weak = ModeFit(2 * math.pi * 9.912, 0.032, 2 * math.pi * 0.038, 0.0037, 0.008, "fit")
+    for fits in ([heavy], [heavy, weak]):
+        rec = _group_recommendation(fits, Options(), 0.01)
+        assert rec is not None and rec.best is None and NO_SHAPER_NEEDED in rec.rule
+    assert _group_recommendation([heavy, light], Options(max_damping=0.6), 0.01).modes[0] is heavy
 
 
 # ------------------------------------------------------------------------------ bounded reading

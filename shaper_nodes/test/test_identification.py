@@ -22,7 +22,13 @@ from shaper_nodes.core.identification import (
     recommend_shaper,
 )
 from shaper_nodes.core.identification import recommend as ident
-from shaper_nodes.core.identification.recommend import MIN_SAVING, ZERO_VIBRATION
+from shaper_nodes.core.identification.recommend import (
+    MAX_RINGING_DAMPING,
+    MIN_SAVING,
+    NO_SHAPER_NEEDED,
+    ZERO_VIBRATION,
+    split_ringing,
+)
 from shaper_nodes.core.shaping.families import FAMILIES, design
 from shaper_nodes.core.shaping.vibration import percentage_vibration
 
@@ -317,6 +323,37 @@ def test_tiny_uncertainty_picks_zv_not_a_slightly_shorter_shaper_that_leaves_vib
     check_rule(rec)
     assert rec.best.family == "zv"
     assert rec.best.duration == min(c.duration for c in rec.candidates)
+
+
+def test_modes_that_do_not_ring_are_reported_but_not_designed_on():
+    """The fits of the arm's production recording (cycle 0): 9.91 Hz lightly damped (0.032) and 30.8 Hz with damping
+    0.54, which does not ring (its free decay's envelope falls to 2 % within one period). With the limit the heavy
+    fit is set aside and named, and the shaper is the one for the light mode alone; a recording whose every mode
+    is heavily damped, or at the noise floor, gets no shaper."""
+    light = mode_fit(9.91, 0.032, 0.004, amplitude=0.2)
+    heavy = mode_fit(30.8, 0.54, 0.05, amplitude=0.5)
+    assert math.exp(-2 * math.pi * 0.3 / math.sqrt(1 - 0.3**2)) == pytest.approx(0.14, abs=0.005)  # the docs' figure
+    ringing, left = split_ringing([heavy, light])
+    assert ringing == [light] and [m for m, _ in left] == [heavy] and "does not ring" in left[0][1]
+    assert split_ringing([mode_fit(10.0, 0.29, 0.01)])[0] and not split_ringing([mode_fit(10.0, 0.31, 0.01)])[0]
+    alone = recommend_shaper([light], 0.05)
+    rec = recommend_shaper([heavy, light], 0.05, max_damping=MAX_RINGING_DAMPING)
+    check_rule(rec)
+    assert rec.modes == (light,) and [m for m, _ in rec.not_ringing] == [heavy]
+    assert rec.best.family == alone.best.family and rec.best.duration == pytest.approx(alone.best.duration)
+    assert "30.8 Hz (does not ring: damping 0.54 > 0.3) not used" in rec.rule
+    assert heavy in recommend_shaper([heavy, light], 0.05).modes  # the core's default: every mode (the identifier's)
+    # no mode rings: no shaper, and the rule says why
+    rec = recommend_shaper([heavy], 0.05, max_damping=MAX_RINGING_DAMPING)
+    assert rec.best is None and rec.default is None and not rec.candidates and not rec.modes
+    assert NO_SHAPER_NEEDED in rec.rule and "does not ring" in rec.rule
+    # at the noise floor: an initial amplitude no larger than the noise's standard deviation
+    weak = mode_fit(9.91, 0.032, 0.004, amplitude=0.009)
+    rec = recommend_shaper([weak], 0.05, noise=0.01)
+    assert rec.best is None and NO_SHAPER_NEEDED in rec.rule and "at the noise floor" in rec.rule
+    assert recommend_shaper([weak], 0.05, noise=0.005).best is not None
+    with pytest.raises(IdentificationError, match="max_damping"):
+        recommend_shaper([light], 0.05, max_damping=0.0)
 
 
 def test_larger_uncertainty_picks_a_longer_more_robust_shaper():

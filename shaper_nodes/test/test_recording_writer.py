@@ -23,7 +23,7 @@ from rosbags.highlevel import AnyReader
 
 from shaper_nodes.analysis.reading import Bag, describe_damage, mcap_chunks
 from shaper_nodes.core.recording import Heartbeat, loss_bound
-from shaper_nodes.ros.bag_writer import BagWriter, QueuedRecording, typestore_with_own_types
+from shaper_nodes.ros.bag_writer import BagWriter, QueuedRecording, rename_recording, typestore_with_own_types
 
 STORE = typestore_with_own_types()
 HEARTBEAT = "/recorder/heartbeat"
@@ -281,3 +281,29 @@ def test_a_recording_that_cannot_be_created_is_named(tmp_path):
         BagWriter(tmp_path / "a_file" / "bag")
     with pytest.raises(FileExistsError, match="exists already"):
         BagWriter(tmp_path / "a_file")
+
+
+def test_a_renamed_recording_names_its_file_after_the_new_folder(tmp_path):
+    """As calibrate finishes a pose: ``pose_000.partial/pose_000.partial.mcap`` becomes ``pose_000/pose_000.mcap``,
+    metadata.yaml lists the new name, and both rosbags and the independent reader read every message."""
+    src, dst = tmp_path / "pose_000.partial", tmp_path / "pose_000"
+    bag = BagWriter(src, compression="zstd")
+    bag.add_topic("/text", "std_msgs/msg/String")
+    for i in range(5):
+        bag.write("/text", 1_000_000_000 + i, cdr(f"m{i}"))
+    bag.close()
+    assert (src / "pose_000.partial.mcap").exists()
+    assert rename_recording(src, dst) == dst
+    assert not src.exists() and sorted(p.name for p in dst.iterdir()) == ["metadata.yaml", "pose_000.mcap"]
+    info = yaml.safe_load((dst / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["relative_file_paths"] == ["pose_000.mcap"] and [f["path"] for f in info["files"]] == ["pose_000.mcap"]
+    assert "partial" not in (dst / "metadata.yaml").read_text()
+    with AnyReader([dst]) as reader:
+        assert [STORE.deserialize_cdr(raw, c.msgtype).data for c, _, raw in reader.messages()] == [
+            f"m{i}" for i in range(5)]
+    assert [m.data for _, _, m in independent(dst / "pose_000.mcap")] == [f"m{i}" for i in range(5)]
+    with pytest.raises(ValueError, match="exists"):
+        rename_recording(dst, dst)
+    (tmp_path / "open").mkdir()
+    with pytest.raises(ValueError, match=r"no metadata\.yaml"):
+        rename_recording(tmp_path / "open", tmp_path / "closed")

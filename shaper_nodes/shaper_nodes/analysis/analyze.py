@@ -9,7 +9,9 @@ Over the bag: the spectrum of the residual windows (Welch, averaged over cycles)
 identified in every cycle's residual window (:func:`~shaper_nodes.core.identification.identify`)
 and combined across cycles (cycles in which no mode stands out of the noise, e.g. well shaped
 ones, are left out with a note); the recommended shaper
-(:func:`~shaper_nodes.core.identification.recommend_shaper`) and its predicted residual
+(:func:`~shaper_nodes.core.identification.recommend_shaper`, on the modes that ring only: a mode
+damped above ``Options.max_damping`` or at the accelerometer's noise floor is reported but not
+designed on, and without a ringing mode the verdict is "no shaper needed") and its predicted residual
 vibration: for a linear plant the residual of a cycle is the unshaped residual times the
 percentage vibration V of the shaper at the mode, so the unshaped level U is estimated as the
 median of RMS / V_active over the cycles whose active shaper lets V >= 0.2 through, and the
@@ -31,12 +33,15 @@ import numpy as np
 
 from shaper_nodes.core.cycles import evaluate_cycle
 from shaper_nodes.core.identification import (
+    MAX_RINGING_DAMPING,
+    NOISE_FLOOR_SIGMAS,
     IdentificationError,
     ModeFit,
     Recommendation,
     combine_modes,
     identify,
     recommend_shaper,
+    ringing_issue,
 )
 from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_time
 
@@ -69,7 +74,12 @@ class Options:
     settle_tolerance : rad or m, positions at rest; band : settling band, m/s^2 (a float) or
     a fraction of the cycle's peak (a string ending in %); remove_mean : "auto", "yes", "no";
     segmentation : "auto", "events", "motion"; method, max_modes, band_hz : identification;
-    target, sigmas, min_saving : recommendation (:func:`recommend_shaper`); identify_cycles : most
+    target, sigmas, min_saving : recommendation (:func:`recommend_shaper`); max_damping : damping ratio
+    above which an identified mode does not ring (default :data:`MAX_RINGING_DAMPING`, 0.3), and
+    noise_sigmas : a mode whose initial amplitude is at most this many accelerometer noise standard
+    deviations (per axis, measured on the recording) is at the noise floor (default
+    :data:`NOISE_FLOOR_SIGMAS`, 1): such modes are reported but neither designed on nor used to choose
+    the shaper, and a group of cycles with no ringing mode gets "no shaper needed"; identify_cycles : most
     cycles identified (evenly spread over the usable ones; 0 = all); learners : names of
     :data:`LEARNER_REPLAYS` to run; learner_params : parameters as the live learner node takes
     them; motion_threshold : speed (rad/s or m/s) above which a sample moves when the cycles come
@@ -91,6 +101,8 @@ class Options:
     learner_params: Mapping[str, object] = field(default_factory=dict)
     motion_threshold: float | None = None
     min_saving: float = 0.2
+    max_damping: float = MAX_RINGING_DAMPING
+    noise_sigmas: float = NOISE_FLOOR_SIGMAS
 
 
 @dataclass
@@ -132,6 +144,12 @@ class Analysis:
     settle_tolerance: float = float("nan")  # positions at rest within this (rad or m), as used
     accel_noise: float = float("nan")  # accelerometer noise per axis, m/s^2 (third differences' MAD)
 
+    def ringing_issue(self, mode: ModeFit) -> str:
+        """Why ``mode`` is not used for the shaper ("" if it is): it does not ring (damping ratio above
+        ``options.max_damping``) or is at the noise floor (see :class:`Options`)."""
+        return ringing_issue(mode, self.options.max_damping, self.accel_noise if math.isfinite(self.accel_noise)
+                             else 0.0, self.options.noise_sigmas)
+
     @property
     def origin(self) -> float:
         """Whole second at or before the first accelerometer sample: reports give times from it, s."""
@@ -170,9 +188,9 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
     modes = main.modes if main is not None else []
     if len(groups) > 1:
         for g in groups:
-            g.recommendation = _group_recommendation(g.modes, opt)
+            g.recommendation = _group_recommendation(g.modes, opt, accel_noise)
     recommendation, level, predicted = _recommend(rows if main is None or len(groups) == 1
-                                                  else [rows[i] for i in main.rows], modes, opt, notes)
+                                                  else [rows[i] for i in main.rows], modes, opt, notes, accel_noise)
     if main is not None:
         main.recommendation = recommendation
     replays = _replays(rec, spans, segmentation, opt, notes)
@@ -280,21 +298,24 @@ def _cycle_issue(span: CycleSpan, at: np.ndarray, samples: int, step: float) -> 
     return ""
 
 
-def _recommend(rows: list[CycleRow], modes: list[ModeFit], opt: Options, notes: list[str]
+def _recommend(rows: list[CycleRow], modes: list[ModeFit], opt: Options, notes: list[str], accel_noise: float
                ) -> tuple[Recommendation | None, float, dict]:
     """The recommended shaper, the unshaped level (m/s^2) and the prediction for the identified ``modes``
-    (None, NaN and nothing without modes); sets each row's V of its active shaper at the first mode."""
+    (None, NaN and nothing without modes); sets each row's V of its active shaper at the first mode that
+    rings (the first mode if none does). ``accel_noise``: per axis, m/s^2."""
     if not modes:
         return None, float("nan"), {}
     recommendation = None
-    top = modes[0]
+    noise = accel_noise if math.isfinite(accel_noise) else 0.0
+    top = next((m for m in modes if not ringing_issue(m, opt.max_damping, noise, opt.noise_sigmas)), modes[0])
     for r in rows:
         if r.shaper_impulses is not None:
             r.v_active = float(percentage_vibration(np.asarray(r.shaper_impulses[0], dtype=float),
                                                     np.asarray(r.shaper_impulses[1], dtype=float), top.omega,
                                                     top.zeta))
     try:
-        recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas, min_saving=opt.min_saving)
+        recommendation = recommend_shaper(modes, opt.target, sigmas=opt.sigmas, min_saving=opt.min_saving,
+                                          max_damping=opt.max_damping, noise=noise, noise_sigmas=opt.noise_sigmas)
         notes += list(recommendation.notes)
     except IdentificationError as err:
         notes.append(f"no recommendation: {err}")
@@ -414,9 +435,11 @@ def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeGro
     return [g for g in groups if g.modes], notes
 
 
-def _group_recommendation(modes: list[ModeFit], opt: Options) -> Recommendation | None:
+def _group_recommendation(modes: list[ModeFit], opt: Options, accel_noise: float) -> Recommendation | None:
     try:
-        return recommend_shaper(modes, opt.target, sigmas=opt.sigmas, min_saving=opt.min_saving)
+        return recommend_shaper(modes, opt.target, sigmas=opt.sigmas, min_saving=opt.min_saving,
+                                max_damping=opt.max_damping, noise=accel_noise if math.isfinite(accel_noise) else 0.0,
+                                noise_sigmas=opt.noise_sigmas)
     except IdentificationError:
         return None
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from shaper_nodes.core.identification import NO_SHAPER_NEEDED
 from shaper_nodes.core.shaping import Shaper, percentage_vibration
 
 from .analyze import Analysis, shaper_of
@@ -64,7 +65,7 @@ def summary(an: Analysis) -> dict:
                     "complete": r.complete, "issue": r.issue} for r in an.cycles],
         "modes": [{"frequency_hz": m.hz, "omega": m.omega, "zeta": m.zeta,
                    "frequency_std_hz": m.omega_std / (2 * math.pi), "zeta_std": m.zeta_std, "amplitude": m.amplitude,
-                   "method": m.method} for m in an.modes],
+                   "method": m.method, "not_used": an.ringing_issue(m)} for m in an.modes],
         "spectrum_peak_hz": (float(an.spectrum[0][int(np.argmax(an.spectrum[1][1:])) + 1])
                              if an.spectrum is not None and an.spectrum[0].size > 1 else None),
         "recommendation": None,
@@ -80,21 +81,35 @@ def summary(an: Analysis) -> dict:
             doc["recommendation"] = {**shaper_of(rcm.best.shaper), "v_nominal": rcm.best.nominal_vibration,
                                      "v_worst": rcm.best.worst_vibration, "target": rcm.target}
         doc["rule"] = rcm.rule
-    doc["groups"] = [_group(g) for g in an.groups]
+    doc["no_shaper_needed"] = _no_shaper_needed(rcm)
+    doc["max_damping"] = an.options.max_damping
+    doc["noise_sigmas"] = an.options.noise_sigmas
+    doc["groups"] = [_group(an, g) for g in an.groups]
     doc["settle_tolerance"] = an.settle_tolerance
     doc["accel_noise_m_s2"] = an.accel_noise
     return json_ready(doc)
 
 
-def _group(g) -> dict:
+def _group(an: Analysis, g) -> dict:
     """One group of cycles that see the same modes, as plain data."""
     best = g.recommendation.best if g.recommendation is not None else None
     modes = [{"frequency_hz": m.hz, "frequency_std_hz": m.omega_std / (2 * math.pi), "zeta": m.zeta,
-              "zeta_std": m.zeta_std} for m in g.modes]
-    return {"rows": g.rows, "cycles": g.cycles, "modes": modes,
+              "zeta_std": m.zeta_std, "amplitude": m.amplitude, "not_used": an.ringing_issue(m)} for m in g.modes]
+    return {"rows": g.rows, "cycles": g.cycles, "modes": modes, "no_shaper_needed": _no_shaper_needed(g.recommendation),
             "recommendation": None if best is None else {**shaper_of(best.shaper), "v_nominal": best.nominal_vibration,
                                                          "v_worst": best.worst_vibration},
             "rule": g.recommendation.rule if g.recommendation is not None else ""}
+
+
+def _aside(an: Analysis, m) -> str:
+    """' (does not ring ...)' or ' (at the noise floor ...)' for a mode not used for the shaper, else ''."""
+    why = an.ringing_issue(m)
+    return f" ({why}; not used for the shaper)" if why else ""
+
+
+def _no_shaper_needed(rcm) -> bool:
+    """The recommendation found no mode that rings."""
+    return rcm is not None and rcm.best is None and not rcm.modes and bool(rcm.not_ringing)
 
 
 def _settle(r) -> str:
@@ -117,7 +132,8 @@ def table(an: Analysis) -> str:
                      + ("" if r.complete else "  (ends with the recording)") + (f"  [{r.issue}]" if r.issue else ""))
     if an.modes:
         lines.append("modes: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
-                                          f" damping {m.zeta:.3g} ± {m.zeta_std:.2g}" for m in an.modes))
+                                          f" damping {m.zeta:.3g} ± {m.zeta_std:.2g}{_aside(an, m)}"
+                                          for m in an.modes))
     rcm = an.recommendation
     if rcm is not None and rcm.best is not None:
         p = an.predicted
@@ -133,8 +149,9 @@ def table(an: Analysis) -> str:
         for g in an.groups:
             best = g.recommendation.best if g.recommendation is not None else None
             lines.append(f"group {g.label}: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
-                                                          f" damping {m.zeta:.3g}" for m in g.modes)
-                         + (f"; recommended {best.family} ({1e3 * best.duration:.1f} ms)" if best else ""))
+                                                          f" damping {m.zeta:.3g}{_aside(an, m)}" for m in g.modes)
+                         + (f"; recommended {best.family} ({1e3 * best.duration:.1f} ms)" if best else
+                            f"; {NO_SHAPER_NEEDED}" if _no_shaper_needed(g.recommendation) else ""))
     for name, rep in an.replays.items():
         learned = [r for r in rep.rows if "skipped" not in r]
         if learned and "rms_e" in learned[0]:
@@ -210,13 +227,7 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
                   f" {r.window_start - an.origin:.3f}-{r.end - an.origin:.3f} | {r.shaper}"
                   + (f" ({r.issue})" if r.issue else "") + " |")
     md += ["", "## Modes and the recommended shaper", ""]
-    if an.modes:
-        md += ["| mode | frequency (Hz) | damping ratio |", "|---|---|---|"]
-        for i, m in enumerate(an.modes):
-            md.append(f"| {i + 1} | {m.hz:.4g} ± {m.omega_std / (2 * math.pi):.2g} | {m.zeta:.4g} ± {m.zeta_std:.2g} |")
-        md.append("")
-    else:
-        md += ["No mode identified.", ""]
+    md += _modes_markdown(an, doc)
     md += _groups_markdown(doc["groups"])
     if doc["recommendation"]:
         r, p = doc["recommendation"], an.predicted
@@ -267,6 +278,24 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
     return "\n".join(md)
 
 
+def _modes_markdown(an: Analysis, doc: dict) -> list[str]:
+    """The table of the modes, each said used for the shaper or not and why; "no shaper needed" when none rings."""
+    md: list[str] = []
+    if an.modes:
+        md += ["| mode | frequency (Hz) | damping ratio | used for the shaper |", "|---|---|---|---|"]
+        for i, m in enumerate(an.modes):
+            md.append(f"| {i + 1} | {m.hz:.4g} ± {m.omega_std / (2 * math.pi):.2g} | {m.zeta:.4g} ± {m.zeta_std:.2g} |"
+                      f" {'no: ' + an.ringing_issue(m) if an.ringing_issue(m) else 'yes'} |")
+        md.append("")
+        if doc["no_shaper_needed"]:
+            md += [f"{NO_SHAPER_NEEDED[0].upper()}{NO_SHAPER_NEEDED[1:]}: no identified mode rings (damping ratio"
+                   f" at most {an.options.max_damping:g} and initial amplitude above {an.options.noise_sigmas:g} x the"
+                   " accelerometer noise).", ""]
+    else:
+        md += ["No mode identified.", ""]
+    return md
+
+
 def _no_learning_plot(an: Analysis) -> list[str]:
     """Why the report has no learning plot (nothing when it has one)."""
     curves, mrilc, why = learning_curves(an)
@@ -283,7 +312,8 @@ def _groups_markdown(groups: list[dict]) -> list[str]:
           "| cycles | modes (Hz) | recommended |", "|---|---|---|"]
     for g in groups:
         r = g["recommendation"]
-        shaper = f"{r['family']} ({1e3 * r['duration']:.1f} ms)" if r else "none"
+        shaper = (f"{r['family']} ({1e3 * r['duration']:.1f} ms)" if r else
+                  "none needed (no mode rings)" if g["no_shaper_needed"] else "none")
         md.append(f"| {', '.join(f'#{r}' for r in g['rows'])} | "
                   + ", ".join(f"{m['frequency_hz']:.4g} ± {m['frequency_std_hz']:.2g}" for m in g["modes"])
                   + f" | {shaper} |")

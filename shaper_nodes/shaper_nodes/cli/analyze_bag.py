@@ -24,6 +24,7 @@ from shaper_nodes.analysis.reading import MIB, Bag, BagError, ReadLimits, descri
 from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
+from shaper_nodes.core.identification import MAX_RINGING_DAMPING, NOISE_FLOOR_SIGMAS
 
 from .common import survives_closed_pipe
 from .list_replay import parse_params
@@ -68,6 +69,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--min-saving", type=float, default=0.2,
                    help="another shaper replaces the zero-residual default only if it is at least this fraction"
                         " shorter, 0..1 (default 0.2)")
+    p.add_argument("--max-damping", type=float, default=MAX_RINGING_DAMPING,
+                   help="modes damped above this ratio do not ring (a free decay falls to 14 %% in one period"
+                        " at 0.3): reported but not used for the shaper (default %(default)g)")
+    p.add_argument("--noise-sigmas", type=float, default=NOISE_FLOOR_SIGMAS,
+                   help="modes whose initial amplitude is at most this many accelerometer noise standard"
+                        " deviations (per axis, measured) are at the noise floor: reported but not used for the"
+                        " shaper (default %(default)g)")
     p.add_argument("--motion-threshold", type=float, metavar="SPEED",
                    help="cycles from the motion: a sample moves above this speed, rad/s or m/s (default: the"
                         " larger of 1 %% of the top speed and 6 x the speed noise measured in the positions)")
@@ -117,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
                           segmentation=args.segmentation, positions=args.positions, method=args.method,
                           max_modes=args.max_modes, band_hz=args.band_hz, identify_cycles=args.identify_cycles,
                           target=args.target, sigmas=args.sigmas, min_saving=args.min_saving,
+                          max_damping=args.max_damping, noise_sigmas=args.noise_sigmas,
                           motion_threshold=args.motion_threshold,
                           learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
                           learner_params=params)

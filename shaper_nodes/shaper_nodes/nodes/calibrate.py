@@ -11,8 +11,8 @@ it sends ``control_msgs/action/FollowJointTrajectory`` goals (the controller's a
 shaper node's proxy with the shaper set to ``none``): the approach, then ``repeats`` out-and-back
 excitations each followed by ``decay`` s of free vibration, and records the accelerometer, the
 joint states and its own events to ``DIR/recording/pose_NNN`` (a rosbag2 folder with MCAP
-storage, chunks zstd-compressed with ``compression: zstd``, written as ``pose_NNN.partial`` and renamed
-when the pose is complete). At the end it
+storage, chunks zstd-compressed with ``compression: zstd``, written as ``pose_NNN.partial`` and renamed,
+its MCAP file ``pose_NNN.mcap`` with it, when the pose is complete). At the end it
 goes back home and writes, from the recording (:mod:`shaper_nodes.analysis.calibration`),
 ``report.json``, ``report.md`` with figures, ``scheduler.yaml`` and ``shaper.yaml``.
 
@@ -315,7 +315,7 @@ class Calibrator:
                  approach: tuple[Waypoint, ...]) -> None:
         from std_msgs.msg import String
 
-        from shaper_nodes.ros.bag_writer import BagWriter
+        from shaper_nodes.ros.bag_writer import BagWriter, rename_recording
 
         partial = folder.with_name(folder.name + ".partial")
         if partial.exists():
@@ -335,7 +335,7 @@ class Calibrator:
                 self.event(2, rep, step, motion_end + step.decay)
             self.writer.close()
             self.writer = None
-            partial.rename(folder)
+            rename_recording(partial, folder)  # pose_NNN/pose_NNN.mcap; the folder's rename is the commit
         finally:
             if self.writer is not None:  # stopped in the middle: the pose is discarded
                 with contextlib.suppress(Exception):  # the partial folder is removed anyway

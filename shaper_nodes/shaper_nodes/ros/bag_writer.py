@@ -184,6 +184,70 @@ class BagWriter:
                 storage.bio.close()
 
 
+def rename_recording(src: str | pathlib.Path, dst: str | pathlib.Path) -> pathlib.Path:
+    """Rename a closed rosbag2 folder ``src`` to ``dst``, its one MCAP file to ``<dst name>.mcap`` with it.
+
+    rosbags names the file after the folder, so a folder written as ``pose_000.partial`` holds
+    ``pose_000.partial.mcap``. The file is renamed and metadata.yaml's ``relative_file_paths`` and
+    ``files`` entries rewritten (atomically: a temporary file renamed over it) while the folder still
+    has its old name; the folder's rename comes last and is the commit: a process killed before it
+    leaves ``src`` complete but under its old name.
+
+    Parameters
+    ----------
+    src : path
+        A closed recording folder (metadata.yaml and one MCAP file).
+    dst : path
+        Its new path (must not exist).
+
+    Returns
+    -------
+    pathlib.Path
+        ``dst``.
+
+    Raises
+    ------
+    ValueError
+        ``src`` has no metadata.yaml or not exactly one file, or ``dst`` exists.
+    """
+    import yaml
+
+    src, dst = pathlib.Path(src), pathlib.Path(dst)
+    if dst.exists():
+        raise ValueError(f"cannot rename the recording {src} to {dst}: {dst} exists")
+    meta = src / "metadata.yaml"
+    if not meta.is_file():
+        raise ValueError(f"cannot rename the recording {src}: no metadata.yaml (not closed?)")
+    text = meta.read_text()
+    info = yaml.safe_load(text)["rosbag2_bagfile_information"]
+    files = list(info.get("relative_file_paths") or [])
+    if len(files) != 1:
+        raise ValueError(f"cannot rename the recording {src}: {len(files)} files in metadata.yaml, expected one")
+    old, new = files[0], f"{dst.name}.mcap"
+    if old != new:
+        lines = [_renamed(line, old, new) for line in text.splitlines(keepends=True)]
+        check = yaml.safe_load("".join(lines))["rosbag2_bagfile_information"]
+        if check.get("relative_file_paths") != [new] or any(f.get("path") != new for f in check.get("files") or []):
+            raise ValueError(f"cannot rename the recording {src}: metadata.yaml does not list {old} as expected")
+        (src / old).rename(src / new)
+        tmp = src / "metadata.yaml.tmp"
+        tmp.write_text("".join(lines))
+        os.replace(tmp, meta)
+    src.rename(dst)
+    return dst
+
+
+def _renamed(line: str, old: str, new: str) -> str:
+    """``line`` of metadata.yaml with the file name ``old`` replaced by ``new`` where it is a value
+    (``- old`` or ``path: old``)."""
+    stripped = line.rstrip("\r\n")
+    for prefix in ("- ", "path: ", "- path: "):
+        body = stripped.lstrip(" ")
+        if body == prefix + old:
+            return stripped[: len(stripped) - len(body)] + prefix + new + line[len(stripped):]
+    return line
+
+
 def describe_write_error(err: BaseException, path: pathlib.Path) -> str:
     """One line naming a write failure: what, where and the system's reason."""
     if isinstance(err, OSError) and err.errno is not None:

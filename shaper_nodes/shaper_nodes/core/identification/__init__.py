@@ -15,15 +15,27 @@ estimators
     covariance of the poles.
 recommend
     The shortest shaper whose worst-case percentage vibration over the modes' uncertainty
-    band stays under a target, with every candidate ranked.
+    band stays under a target, with every candidate ranked; modes that do not ring (heavily
+    damped, or at the noise floor) set aside.
 """
 
 from .modes import METHODS, ModeFit, combine_modes, identify, identify_records
-from .recommend import Recommendation, recommend_shaper
+from .recommend import (
+    MAX_RINGING_DAMPING,
+    NO_SHAPER_NEEDED,
+    NOISE_FLOOR_SIGMAS,
+    Recommendation,
+    recommend_shaper,
+    ringing_issue,
+    split_ringing,
+)
 from .record import IdentificationError
 
 __all__ = [
+    "MAX_RINGING_DAMPING",
     "METHODS",
+    "NOISE_FLOOR_SIGMAS",
+    "NO_SHAPER_NEEDED",
     "IdentificationError",
     "ModeFit",
     "Recommendation",
@@ -31,4 +43,6 @@ __all__ = [
     "identify",
     "identify_records",
     "recommend_shaper",
+    "ringing_issue",
+    "split_ringing",
 ]

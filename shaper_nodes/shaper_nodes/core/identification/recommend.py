@@ -14,6 +14,17 @@ delay (the shaper's duration) against residual vibration:
    also stays within the target;
 3. if no zero-residual candidate meets the target, the shortest candidate that does.
 
+Before the rule, when asked (``max_damping``, ``noise``), the modes that do not ring are set aside
+(:func:`split_ringing`): reported in :attr:`Recommendation.not_ringing` with why, but neither
+designed on nor used to choose. A mode does not ring when its damping ratio exceeds
+``max_damping`` (:data:`MAX_RINGING_DAMPING`, 0.3: a free decay's envelope falls by
+exp(-2 pi zeta / sqrt(1 - zeta^2)) per damped period, to 14 % after one period and 1.9 % after two
+at 0.3, to 2.7 % after one at 0.5; such a "mode" is mostly the fit of a transient or of the noise's
+spectrum, and a shaper designed on it only adds delay), or when its initial amplitude is at the
+measured noise floor (at most ``noise_sigmas`` (:data:`NOISE_FLOOR_SIGMAS`, 1) times the sensor's
+noise standard deviation ``noise``). When no mode rings, nothing is recommended
+(``best`` None) and the rule says :data:`NO_SHAPER_NEEDED`.
+
 The rule and the figures of the decision are stated in :attr:`Recommendation.rule`.
 """
 
@@ -39,6 +50,12 @@ EXCLUDED_FAMILIES = ("none", "custom", "zvdn")
 ZERO_VIBRATION = 0.005
 #: fraction of the default's duration another shaper must save to be recommended instead
 MIN_SAVING = 0.2
+#: damping ratio above which an identified mode does not ring (see the module docstring)
+MAX_RINGING_DAMPING = 0.3
+#: a mode whose initial amplitude is at most this many noise standard deviations is at the noise floor
+NOISE_FLOOR_SIGMAS = 1.0
+#: the rule's verdict when no identified mode rings
+NO_SHAPER_NEEDED = "no residual vibration above the noise: no shaper needed (keep the shaper in use)"
 
 
 @dataclass(frozen=True)
@@ -85,6 +102,45 @@ class Recommendation:
     notes: tuple[str, ...] = ()
     rule: str = ""
     default: Candidate | None = None
+    not_ringing: tuple[tuple[ModeFit, str], ...] = ()  # modes set aside, with why (:func:`split_ringing`)
+
+
+def ringing_issue(mode: ModeFit, max_damping: float | None = MAX_RINGING_DAMPING, noise: float = 0.0,
+                  noise_sigmas: float = NOISE_FLOOR_SIGMAS) -> str:
+    """Why ``mode`` does not ring ("" if it does): damping ratio above ``max_damping`` (None: no
+    limit), or initial amplitude at most ``noise_sigmas`` times ``noise`` (the sensor's noise
+    standard deviation, in the amplitude's units, e.g. m/s^2 per axis; 0: not checked)."""
+    if max_damping is not None and mode.zeta > max_damping:
+        return f"does not ring: damping {mode.zeta:.3g} > {max_damping:g}"
+    if noise > 0.0 and mode.amplitude <= noise_sigmas * noise:
+        return f"at the noise floor: amplitude {mode.amplitude:.2g} <= {noise_sigmas:g} x the noise {noise:.2g}"
+    return ""
+
+
+def split_ringing(modes: Sequence[ModeFit], max_damping: float | None = MAX_RINGING_DAMPING, noise: float = 0.0,
+                  noise_sigmas: float = NOISE_FLOOR_SIGMAS
+                  ) -> tuple[list[ModeFit], list[tuple[ModeFit, str]]]:
+    """(the modes that ring, [(mode, why not) for the others]) by :func:`ringing_issue`, in the given order.
+
+    Raises
+    ------
+    IdentificationError
+        ``max_damping`` not in (0, 1], ``noise`` negative or ``noise_sigmas`` negative.
+    """
+    if max_damping is not None and not (math.isfinite(max_damping) and 0.0 < max_damping <= 1.0):
+        raise IdentificationError(f"max_damping (the damping ratio above which a mode does not ring) must be in"
+                                  f" (0, 1], got {max_damping!r}")
+    if not (math.isfinite(noise) and noise >= 0.0 and math.isfinite(noise_sigmas) and noise_sigmas >= 0.0):
+        raise IdentificationError(f"noise and noise_sigmas must be finite and >= 0, got {noise!r}, {noise_sigmas!r}")
+    ringing: list[ModeFit] = []
+    left: list[tuple[ModeFit, str]] = []
+    for mf in modes:
+        why = ringing_issue(mf, max_damping, noise, noise_sigmas)
+        if why:
+            left.append((mf, why))
+        else:
+            ringing.append(mf)
+    return ringing, left
 
 
 def worst_case_vibration(shaper: Shaper, modes: Sequence[ModeFit], sigmas: float = 2.0,
@@ -116,6 +172,9 @@ def recommend_shaper(
     families: Sequence[str] | None = None,
     min_relative_amplitude: float = 0.1,
     min_saving: float = MIN_SAVING,
+    max_damping: float | None = None,
+    noise: float = 0.0,
+    noise_sigmas: float = NOISE_FLOOR_SIGMAS,
 ) -> Recommendation:
     """Design candidate shapers on the identified modes and pick one by the rule of the module.
 
@@ -139,17 +198,32 @@ def recommend_shaper(
     min_saving : float
         Fraction of the zero-residual default's duration (0..1) another candidate must save to be
         recommended instead (default :data:`MIN_SAVING`).
+    max_damping : float, optional
+        Modes with a larger damping ratio do not ring and are set aside (:func:`split_ringing`;
+        :data:`MAX_RINGING_DAMPING` is the bag analysis' default). None (default): every mode is used.
+    noise : float
+        The sensor's noise standard deviation in the modes' amplitude units (e.g. m/s^2 per axis);
+        modes of initial amplitude <= ``noise_sigmas`` times it are at the noise floor and set aside.
+        0 (default): not checked.
+    noise_sigmas : float
+        See ``noise`` (default :data:`NOISE_FLOOR_SIGMAS`).
 
     Returns
     -------
     Recommendation
         ``best`` is chosen by the rule of the module (None if no candidate's worst-case V <=
-        target), ``rule`` says how. Families that cannot be designed are left out and named in
-        ``notes``.
+        target, or if no mode rings: then ``rule`` is :data:`NO_SHAPER_NEEDED` and
+        ``not_ringing`` names every mode), ``rule`` says how. Families that cannot be designed are
+        left out and named in ``notes``; modes set aside are in ``not_ringing`` and ``notes``.
     """
     modes = list(modes)
     if not modes:
         raise IdentificationError("no modes to design a shaper for")
+    modes, not_ringing = split_ringing(modes, max_damping, noise, noise_sigmas)
+    aside = [f"{mf.hz:.4g} Hz ({why}) not used for the shaper" for mf, why in not_ringing]
+    if not modes:
+        return Recommendation(float(target), (), (), None, tuple(aside),
+                              f"rule: {NO_SHAPER_NEEDED}; " + "; ".join(aside), None, tuple(not_ringing))
     target = float(target)
     if not (math.isfinite(target) and 0.0 < target < 1.0):
         raise IdentificationError(f"target vibration must be in (0, 1), got {target!r}")
@@ -184,7 +258,10 @@ def recommend_shaper(
     best, default, rule = choose(candidates, target, sigmas, min_saving)
     if best is None:
         notes.append(f"no candidate keeps the worst-case vibration under {100 * target:.3g} %")
-    return Recommendation(target, shaped, tuple(candidates), best, tuple(notes), rule, default)
+    if aside:
+        rule += " (set aside: " + "; ".join(aside) + ")"
+    return Recommendation(target, shaped, tuple(candidates), best, tuple(aside + notes), rule, default,
+                          tuple(not_ringing))
 
 
 def choose(candidates: Sequence[Candidate], target: float, sigmas: float, min_saving: float = MIN_SAVING
