@@ -18,14 +18,17 @@ parameters
 shaper_client
     Service calls with bounded waits (``ServiceClient``) and the one client of ``set_shaper``
     (``ShaperClient``): a lost reply is reported or retried, never a hang.
+action_client
+    ``ResilientActionClient``: an rclpy action client whose goals and results survive a service
+    response lost at start-up (recovered from the status topic, or asked again with the same goal id).
 pose_shaper
     A whole trajectory shaped for its final pose with the shaper a scheduler's ``~/shaper_at``
     gives (the shaper node's ``action.scheduler``), falling back to the active shaper with a warning.
 node_main
     The Jazzy ``main`` of every node.
 side_node
-    A node's second node on a thread of its own (the shaper's whole trajectories; lean, the
-    scheduler's /joint_states).
+    A node's second node on a thread of its own (the shaper's whole trajectories; lean: the
+    shaper's streamed inputs, the scheduler's /joint_states).
 whole_trajectory
     Whole-trajectory shaping as the shaper node does it, and the same in a worker process on
     serialized messages.
