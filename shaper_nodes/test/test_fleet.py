@@ -155,11 +155,14 @@ def test_analyze_fleet_on_an_existing_dask_cluster_gives_the_local_clusters_repo
                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
         deadline = time.monotonic() + 60.0
-        while not (address_file.is_file() and address_file.stat().st_size > 0):
+        address = ""
+        while not address:  # polled: the file is the scheduler's only sign; read once it is whole JSON
             assert procs[0].poll() is None, "the dask scheduler exited"
             assert time.monotonic() < deadline, "the dask scheduler wrote no address within 60 s"
-            time.sleep(0.1)
-        address = json.loads(address_file.read_text())["address"]
+            try:
+                address = json.loads(address_file.read_text())["address"]
+            except (OSError, ValueError, KeyError):
+                time.sleep(0.1)
         assert address.startswith("tcp://127.0.0.1:")
         procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
                                        "1", "--nworkers", "1", "--no-nanny", "--no-dashboard"],
