@@ -89,6 +89,24 @@ def test_samples_are_taken_by_stamp_whatever_their_arrival_order():
     assert ra.update.m == rb.update.m and ra.update.next == rb.update.next
 
 
+def test_samples_stamped_before_start_that_arrive_after_it_are_not_the_cycles():
+    # the events and the samples come on separate topics: the last samples of what ran before the cycle (a
+    # preroll's transient, say) may arrive after its START; they are not the cycle's, and must neither count
+    # as its saturation nor enter its measure
+    a, b = fresh(), fresh()
+    ra = run_cycle(a, 0, 10.0)
+    b.on_event(START, 0, 10.0, [0.0], [1.0])
+    for t in (9.985, 9.99, 9.995):  # late samples of the run before, far beyond the sensor's range
+        b.on_imu(t, (-9000.0, 0.0, 0.0))
+    b.on_event(MOTION_END, 0, 11.5)
+    for t in np.arange(0.0, 6.0 + 1e-9, 1.0 / RATE):
+        b.on_imu(10.0 + t, (float(decay(t)), 0.0, 0.0))
+    rb = b.on_event(END, 0, 16.0)
+    assert rb.learned, rb.skipped
+    assert ra.update.m == rb.update.m and ra.update.next == rb.update.next
+    assert len(b._buf) == 0  # nothing of the cycle, nor the late samples, stays
+
+
 def test_list_config_from_node_parameters():
     cfg = list_config({"rule": "paper", "window_delay": 0.0, "t2_bounds": [0.0, 0.0], "saturation": 0.0,
                        "a1_bounds": [0.3, 0.9], "patience": 2})

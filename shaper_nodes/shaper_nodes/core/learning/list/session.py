@@ -285,13 +285,16 @@ class ListSession:
 
     # ----------------------------------------------------------------- helpers
     def _cycle_samples(self, t: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], str, str]:
-        """The samples stamped up to the END at ``t`` (times from START, accel), taken out of the
-        buffer, and why they cannot be learned from with the class of the refusal ("" if they can)."""
+        """The samples stamped from the START to the END at ``t`` (times from START, accel), taken out of
+        the buffer with any stamped before the START that arrived after it (the events and the samples come
+        on separate topics: a sample of the run before the cycle may come late; it is not the cycle's), and
+        why they cannot be learned from with the class of the refusal ("" if they can)."""
         buf = self._buf
-        mine = buf.times <= t
+        upto = buf.times <= t
+        mine = upto & (buf.times >= self._start)
         times = buf.times[mine] - self._start
         accel = buf.values[mine] if mine.any() else np.zeros((0, 3))
-        buf.keep(~mine)
+        buf.keep(~upto)
         if times.size == 0:
             return times, accel, "no accelerometer data in the cycle (sensor missing or stale)", ""
         if self._malformed:
