@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from reproductions.common import docs_option, logs_folder
+from reproductions.common import docs_option, lockstep_block, logs_folder
 
 if TYPE_CHECKING:
     from sim_plant_node.conductor import StartNode
@@ -105,7 +105,8 @@ def _session(start: StartNode, ctx, joints: list[str], rate: float, plant: dict)
 
     # a generous lockstep timeout: on a loaded machine the plant waits for the shaper instead of holding
     start("sim_plant_node", "sim_plant", {"joint_names": joints, "rate": rate, "mode": "lockstep",
-                                          "lockstep_timeout": 60.0, "imu.axes": [0, -1, -1], **plant})
+                                          "lockstep_timeout": 60.0, "lockstep.block": lockstep_block(rate),
+                                          "imu.axes": [0, -1, -1], **plant})
     # 'exact': the shaper's impulses on the 1 ms grid meet the ZV / ZVD conditions at the nominal mode exactly,
     # as the paper's continuous shapers do (no discretisation floor on a plant equal to P0)
     start("shaper_nodes", "shaper_node", {"joint_names": joints, "command_rate": rate, "use_sim_time": True,

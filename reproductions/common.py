@@ -34,6 +34,23 @@ def logs_folder(name: str) -> pathlib.Path:
     return logs
 
 
+#: s of wall time the sim plant waits for the shaper's answer before it holds (``lockstep_timeout``): generous,
+#: so that a loaded machine slows a run down instead of changing it
+LOCKSTEP_TIMEOUT = 60.0
+#: the learner's settings for a lockstep run: at a cycle's END it waits up to ``end_wait`` for the samples
+#: stamped up to it (a plant stepping in blocks may run ahead of a loaded learner's intake; the wait ends as
+#: soon as they are in)
+LOCKSTEP_LEARNER = {"end_wait": 10.0}
+
+
+def lockstep_block(rate: float) -> int:
+    """The sim plant's ``lockstep.block`` for a reproduction at ``rate`` Hz: 0.1 s of samples per exchange
+    with the shaper. Every reproduction's command path is feedforward (the shaper between the task and the
+    plant, changed only at rest between cycles), so a run in blocks is the run one setpoint at a time
+    (tests/test_lockstep_blocks.py), with ten to fifty times fewer round trips through DDS."""
+    return max(1, int(round(0.1 * rate)))
+
+
 def metric(report: Any, name: str) -> float:
     """The value of metric ``name`` of a shaper_msgs/CycleReport (nan if it has none)."""
     try:

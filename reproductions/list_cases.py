@@ -21,7 +21,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from reproductions.common import LearnerDriver, action, docs_option, logs_folder, metric
+from reproductions.common import (
+    LOCKSTEP_LEARNER,
+    LOCKSTEP_TIMEOUT,
+    LearnerDriver,
+    action,
+    docs_option,
+    lockstep_block,
+    logs_folder,
+    metric,
+)
 
 if TYPE_CHECKING:
     from sim_plant_node.conductor import StartNode
@@ -33,7 +42,7 @@ RATE = 250.0
 PLANT = {"plant.mass": [1.0], "plant.damping": [1.0], "plant.stiffness": [100.0]}
 #: learner settings for all cases: the high-pass stays below the 1.6 Hz mode (the paper's 2 Hz
 #: is for its robot); A1 may go below 0.5, which the time-varying plant needs
-LEARNER = {"list.highpass_hz": 0.5, "list.a1_bounds": [0.2, 0.95]}
+LEARNER = {"list.highpass_hz": 0.5, "list.a1_bounds": [0.2, 0.95], **LOCKSTEP_LEARNER}
 TASK = {"task.start": [0.0], "task.goal": [1.0], "task.max_velocity": 1.0, "task.max_acceleration": 2.0,
         "task.dwell": 3.0, "task.preroll": 0.5}
 
@@ -87,7 +96,9 @@ def run_case(case: Case, cycles: int, start: StartNode, ctx,
 
     joint = ["joint_1"]
     start("sim_plant_node", "sim_plant", {
-        "joint_names": joint, "rate": RATE, "mode": "lockstep", "imu.axes": [0, -1, -1],
+        "joint_names": joint, "rate": RATE, "mode": "lockstep", "lockstep.block": lockstep_block(RATE),
+        "lockstep_timeout": LOCKSTEP_TIMEOUT,
+        "imu.axes": [0, -1, -1],
         "imu.noise_stddev": noise, **PLANT, **TASK, **case.plant})
     start("shaper_nodes", "shaper_node", {"joint_names": joint, "command_rate": RATE, "use_sim_time": True})
     start("shaper_nodes", "learner", {"state_file": str(state_file), **LEARNER,

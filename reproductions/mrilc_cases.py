@@ -24,7 +24,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from reproductions.common import LearnerDriver, action, docs_option, logs_folder, metric
+from reproductions.common import (
+    LOCKSTEP_LEARNER,
+    LOCKSTEP_TIMEOUT,
+    LearnerDriver,
+    action,
+    docs_option,
+    lockstep_block,
+    logs_folder,
+    metric,
+)
 from sim_plant_node.plants import mck_from_mode
 
 if TYPE_CHECKING:
@@ -57,7 +66,9 @@ def plant_params(mode: tuple[float, float]) -> dict:
 
 def _nodes(start: StartNode, plant_mode: tuple[float, float]) -> None:
     start("sim_plant_node", "sim_plant", {"joint_names": JOINT, "rate": RATE, "mode": "lockstep",
-                                          "imu.axes": [0, -1, -1], **plant_params(plant_mode), **TASK})
+                                          "lockstep.block": lockstep_block(RATE),
+                                          "lockstep_timeout": LOCKSTEP_TIMEOUT, "imu.axes": [0, -1, -1],
+                                          **plant_params(plant_mode), **TASK})
     start("shaper_nodes", "shaper_node", {"joint_names": JOINT, "command_rate": RATE, "use_sim_time": True})
 
 
@@ -66,7 +77,7 @@ def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartN
     """``iterations`` cycles with the MRILC learner on the plant (omega, zeta); one Iteration each."""
     _nodes(start, plant_mode)
     start("shaper_nodes", "learner", {"mode": "mrilc", "mrilc.rate": RATE, "use_sim_time": True,
-                                      "joint_names": JOINT, **(learner or {})})
+                                      "joint_names": JOINT, **LOCKSTEP_LEARNER, **(learner or {})})
     driver = LearnerDriver(ctx)
     out: list[Iteration] = []
     try:

@@ -775,3 +775,34 @@ def test_one_plant_traces_are_capped_and_there_is_no_learning_figure_without_lea
     write_report(an, tmp_path / "report")
     assert not list((tmp_path / "report").glob("learning*.png"))
     assert "No learning plot: no learner replay was asked for" in (tmp_path / "report" / "report.md").read_text()
+
+
+def test_commands_in_lockstep_blocks_are_skipped_with_the_reason(tmp_path):
+    # a recording of the sim plant's lockstep.block exchange: a Float64MultiArray with layout [samples, joints]
+    # carries several samples and no time for each; it is not read as one command, and the notes say why
+    Imu, F64 = STORE.types["sensor_msgs/msg/Imu"], STORE.types["std_msgs/msg/Float64MultiArray"]
+    Layout, Dim = STORE.types["std_msgs/msg/MultiArrayLayout"], STORE.types["std_msgs/msg/MultiArrayDimension"]
+    Header, Time = STORE.types["std_msgs/msg/Header"], STORE.types["builtin_interfaces/msg/Time"]
+    Quat, Vec = STORE.types["geometry_msgs/msg/Quaternion"], STORE.types["geometry_msgs/msg/Vector3"]
+    writer = Writer(tmp_path / "bag", version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    c_imu = writer.add_connection("/tip_imu", "sensor_msgs/msg/Imu", typestore=STORE)
+    c_cmd = writer.add_connection("/forward_position_controller/commands", "std_msgs/msg/Float64MultiArray",
+                                  typestore=STORE)
+    for k in range(200):
+        ns = 1_700_000_000_000_000_000 + k * 10_000_000
+        imu = Imu(header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="tool0"),
+                  orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=np.full(9, -1.0),
+                  angular_velocity=Vec(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=np.zeros(9),
+                  linear_acceleration=Vec(x=math.sin(k / 5), y=0.0, z=9.81), linear_acceleration_covariance=np.zeros(9))
+        writer.write(c_imu, ns, STORE.serialize_cdr(imu, "sensor_msgs/msg/Imu"))
+        if k % 25 == 0:
+            block = F64(layout=Layout(dim=[Dim(label="samples", size=25, stride=50), Dim(label="joints", size=2,
+                                                                                          stride=2)], data_offset=0),
+                        data=np.zeros(50))
+            writer.write(c_cmd, ns, STORE.serialize_cdr(block, "std_msgs/msg/Float64MultiArray"))
+    writer.close()
+    rec = read_recording(tmp_path / "bag")
+    assert rec.commands is None or len(rec.commands) == 0
+    assert any("/forward_position_controller/commands: 8 message(s) could not be decoded" in n
+               and "a block of 25 samples" in n for n in rec.notes), rec.notes

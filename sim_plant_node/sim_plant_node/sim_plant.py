@@ -53,7 +53,10 @@ lockstep
     and goes on. So that the first setpoint of a run is not lost on DDS (and the run stalled
     for ``lockstep_timeout``), ``~/start_task`` refuses with 'waiting for subscribers' (a driver
     asks again) until the raw setpoints have a matched subscription and the shaped setpoints a
-    matched publisher.
+    matched publisher. With ``lockstep.block`` N > 1 the raw setpoints of N steps go to the shaper in one
+    message (layout [samples, joints]) and the plant steps through the shaped block: the same run with N
+    times fewer round trips, for a command path that is feedforward (each step's events, joint states, IMU
+    and /clock go out as before, step by step).
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -75,7 +78,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent, CycleReport
@@ -124,7 +127,9 @@ SENSOR_PARAMS = ("imu.bias", "imu.noise_stddev", "imu.gyro_noise_stddev", "imu.g
                  "joint_states.noise_stddev", "joint_states.resolution")
 #: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
 WAITING = "waiting for subscribers"
-LOCKSTEP_IMU_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+#: the lockstep IMU writer: reliable, 10 s of samples at 1 kHz kept for a reader that lags (the plant stepping in
+#: blocks may run seconds ahead of a loaded reader's intake)
+LOCKSTEP_IMU_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 #: s of wall time between joint states of the lockstep arm at rest (joint_states.idle_period's default)
 IDLE_STATE_PERIOD = 0.1
 
@@ -158,6 +163,12 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("rate", 500.0, "Integration and command rate, Hz.", (1.0, 10000.0), read_only=True, check=check_rate),
     Spec("mode", "lockstep", "'lockstep' (simulated time, /clock) or 'realtime' (wall clock).", read_only=True),
     Spec("lockstep_timeout", 2.0, "Lockstep: wall time to wait for the shaped setpoint, s.", (0.01, 600.0)),
+    Spec("lockstep.block", 1, "Lockstep, a task running: steps per exchange with the shaper. 1: one raw setpoint"
+         " per message, as forward_command_controller takes; N > 1: the raw setpoints of the next N steps go out as"
+         " one Float64MultiArray with layout [samples, joints], and the plant steps through the shaped block that"
+         " comes back (the same setpoints, N times fewer round trips). Only for a feedforward command path: what"
+         " the plant does within a block cannot change the block's setpoints, and a shaper change takes effect"
+         " at a block's boundary.", (1, 1000), read_only=True),
     Spec("plant.model", "mck",
          "Plant model: 'mck' (base-driven flexible joint), or the LIST cases (seed 003) 'list_linear',"
          " 'list_time_varying', 'list_hardening', 'list_saturation', or 'mck_pid' (mck in a feedback loop,"
@@ -295,7 +306,7 @@ class SimPlantNode(Node):
         self._tip_pub = self.create_publisher(JointState, tp["tip_state"], 10)
         self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
         # in lockstep every sample counts (simulated time runs faster than a reader may take them): a reliable
-        # writer keeps 1000 for a reliable reader, and still matches best-effort readers as a sensor driver does
+        # writer keeps 10000 for a reliable reader, and still matches best-effort readers as a sensor driver does
         self._imu_pub = self.create_publisher(Imu, tp["imu"], LOCKSTEP_IMU_QOS if self.mode == "lockstep"
                                               else qos_profile_sensor_data)
         self._event_pub = self.create_publisher(CycleEvent, tp["cycle_events"], 10)
@@ -320,6 +331,9 @@ class SimPlantNode(Node):
         self._applied = np.zeros(self.n)
         self._latest_shaped: np.ndarray | None = None
         self._waiting_since: float | None = None
+        #: lockstep: the steps asked of the shaper and not yet answered: (cycle events, preroll ends) each
+        self._asked: list[tuple[list, bool]] = []
+        self._block = int(self.get_parameter("lockstep.block").value)
         self.timeouts = 0
         self.refused = 0
         self.plant.reset(self._pose("task.start", {}))
@@ -502,19 +516,26 @@ class SimPlantNode(Node):
         self.task = None
         return resp
 
-    def _next_raw(self) -> list:
-        """Raw setpoint for the current step, and its cycle events."""
+    def _next_raw(self) -> tuple[list, bool]:
+        """The raw setpoint of the next step (into ``_raw``), its cycle events, and whether the preroll ends
+        with it (:meth:`_begin_step` carries them out when the step is integrated)."""
         if self.task is None:
-            return []
+            return [], False
         if self._preroll_left > 0:
             self._raw = self.task.start.copy()
             self._preroll_left -= 1
-            if self._preroll_left == 0:
-                # rest exactly at the applied setpoint, whatever came before the run
-                self.plant.reset(self._applied)
-            return []
+            return [], self._preroll_left == 0
         self._raw, events = self.task.step()
-        return events
+        return events, False
+
+    def _begin_step(self, events: list, preroll_end: bool) -> None:
+        """What comes before a step is integrated: at the end of the preroll the plant rests exactly at the
+        applied setpoint (whatever came before the run), and the step's cycle events go out."""
+        if preroll_end:
+            self.plant.reset(self._applied)
+        t = self._now()
+        for ev in events:
+            self._emit_event(ev, t)
 
     # ----------------------------------------------------------------- stepping
     def _publish_clock(self) -> None:
@@ -528,13 +549,36 @@ class SimPlantNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _publish_next(self) -> None:
-        """Publish the raw setpoint of the current step (and its events)."""
-        events = self._next_raw()
-        t = self._now()
-        for ev in events:
-            self._emit_event(ev, t)
-        self._cmd_pub.publish(Float64MultiArray(data=self._raw.tolist()))
+        """Ask the shaper for the next step's setpoint: publish its raw setpoint, or with ``lockstep.block``
+        above 1 the raw setpoints of the next steps up to that many (up to the task's end) as one block
+        (layout [samples, joints]). Their events go out as each step is integrated (:meth:`_on_command`)."""
+        asked = self._asked
+        raws: list[np.ndarray] = []
+        while len(raws) < self._block and self.task is not None and (self._preroll_left > 0 or not self.task.done):
+            asked.append(self._next_raw())
+            raws.append(self._raw)
+        if not raws:
+            return
+        if self._block == 1:
+            msg = Float64MultiArray(data=self._raw.tolist())
+        else:
+            msg = Float64MultiArray(data=np.concatenate(raws).tolist())
+            msg.layout.dim = [MultiArrayDimension(label="samples", size=len(raws), stride=len(raws) * self.n),
+                              MultiArrayDimension(label="joints", size=self.n, stride=self.n)]
+        self._cmd_pub.publish(msg)
         self._waiting_since = time.monotonic()
+
+    def _step_asked(self, shaped: np.ndarray | None) -> None:
+        """Integrate the steps asked for, each with its shaped setpoint (a row of ``shaped``; None: each holds
+        the last applied setpoint), publishing /clock after each; then ask for the next ones."""
+        asked, self._asked = self._asked, []
+        self._waiting_since = None
+        for i, (events, preroll_end) in enumerate(asked):
+            self._begin_step(events, preroll_end)
+            self._integrate(self._applied if shaped is None else shaped[i])
+            self._publish_clock()
+        if self.task is not None:
+            self._publish_next()
 
     def _emit_event(self, ev, t: float) -> None:
         msg = CycleEvent(event=ev.kind, cycle=ev.cycle, task=str(self.get_parameter("task.name").value),
@@ -695,8 +739,9 @@ class SimPlantNode(Node):
             self._publish_clock()  # the commanded positions (what "at rest" means)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
-        try:
-            command = finite_array("shaped command", msg.data, size=self.n)
+        try:  # in lockstep, the answer to the steps asked for (lockstep.block)
+            rows = len(self._asked) if self.mode == "lockstep" and self._waiting_since is not None else 1
+            command = finite_array("shaped command", msg.data, size=self.n * rows)
         except InputError as err:
             self.refused += 1
             self.get_logger().error(f"refused setpoint: {err}; holding the last one", throttle_duration_sec=1.0)
@@ -711,11 +756,7 @@ class SimPlantNode(Node):
             return
         if self._waiting_since is None:
             return  # not waiting (idle, or a late answer after a timeout): ignore
-        self._waiting_since = None
-        self._integrate(self._applied if command is None else command)
-        self._publish_clock()
-        if self.task is not None:
-            self._publish_next()
+        self._step_asked(None if command is None else command.reshape(-1, self.n))
 
     def _watchdog(self) -> None:
         if self._waiting_since is None or time.monotonic() - self._waiting_since < float(
@@ -724,20 +765,13 @@ class SimPlantNode(Node):
         self.timeouts += 1
         self.get_logger().warning("no shaped setpoint within lockstep_timeout; holding the last setpoint",
                                   throttle_duration_sec=5.0)
-        self._waiting_since = None
-        self._integrate(self._applied)
-        self._publish_clock()
-        if self.task is not None:
-            self._publish_next()
+        self._step_asked(None)
 
     def _realtime_tick(self) -> None:
         if self.jtc is not None and self.task is None:
             self._jtc_step()
             return
-        events = self._next_raw() if self.task is not None else []
-        t = self._now()
-        for ev in events:
-            self._emit_event(ev, t)
+        self._begin_step(*self._next_raw())
         self._cmd_pub.publish(Float64MultiArray(data=self._raw.tolist()))
         command = self._latest_shaped if self._latest_shaped is not None else self._applied
         self._integrate(command)

@@ -512,6 +512,10 @@ class _Collector:
         m = self.decoders[topic](raw)
         cmd = self.cmd
         if msgtype == ARRAY:
+            dims = m.layout.dim
+            if len(dims) == 2 and int(dims[0].size) > 1:  # skipped with this reason in the notes
+                raise ValueError(f"a block of {int(dims[0].size)} samples (layout [samples, joints], the sim plant's"
+                                 " lockstep.block exchange) has no time per sample")
             cmd.seq.append(seq)
             cmd.t.append(log_ns * 1e-9)
             cmd.p.append(tuple(float(x) for x in m.data))

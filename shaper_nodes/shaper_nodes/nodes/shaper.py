@@ -4,7 +4,10 @@ Inputs and outputs (topic names are parameters, see config/shaper.yaml)
 -----------------------------------------------------------------------
 topics.array_in -> topics.array_out
     std_msgs/Float64MultiArray, one setpoint per joint in ``joint_names`` order (the input of
-    forward_command_controller), one sample per message at ``command_rate``.
+    forward_command_controller), one sample per message at ``command_rate``. A message whose layout
+    has two dimensions, [samples, joints], carries a block of consecutive samples (the sim plant's
+    lockstep exchange, ``lockstep.block``): shaped as those samples one by one would be, and sent on
+    as one message with the same layout.
 topics.stream_in -> topics.stream_out
     trajectory_msgs/JointTrajectory streamed with one or a few points per message (as MoveIt
     Servo does); every point is one sample at ``command_rate``; positions are shaped, and
@@ -579,6 +582,14 @@ class ShaperNode(Node):
     def _on_array(self, msg: Float64MultiArray, info: dict[str, Any] | None) -> None:
         self._arrived("array", info)
         try:
+            if msg.layout.dim:  # a layout: one sample, or a block of samples (:meth:`_block_rows`)
+                rows = self._block_rows(msg)
+                if rows > 1:
+                    with self.stream_lock:
+                        msg.data = self._shape_block(msg.data, rows)
+                    self._array_pub.publish(msg)
+                    self._count_forwarded("array")
+                    return
             with self.stream_lock:
                 y = self._shape_array(msg.data)
         except InputError as err:
@@ -619,6 +630,33 @@ class ShaperNode(Node):
                 break
         self._last_sent["array"] = y
         return out
+
+    def _block_rows(self, msg: Float64MultiArray) -> int:
+        """The samples a Float64MultiArray carries: one without a layout or with a layout of one dimension
+        (forward_command_controller's input), and ``dim[0].size`` for a layout of two, [samples, joints] (the
+        sim plant's lockstep exchange, ``lockstep.block``), whose rows are shaped in order as consecutive
+        samples. A layout that does not describe the data, or a block of more than
+        ``limits.max_trajectory_samples`` samples, is refused with the reason (InputError)."""
+        dims = msg.layout.dim
+        if len(dims) == 1:
+            return 1
+        shape = [int(d.size) for d in dims]
+        if len(dims) != 2 or shape[1] != self._n or shape[0] * self._n != len(msg.data) or shape[0] < 1:
+            raise InputError("wrong_size", f"layout {shape} does not describe samples x {self._n} joints in"
+                             f" {len(msg.data)} values")
+        if shape[0] > self._max_samples:
+            raise InputError("too_large", f"a block of {shape[0]} samples is more than"
+                             f" limits.max_trajectory_samples ({self._max_samples})")
+        return shape[0]
+
+    def _shape_block(self, data: Any, rows: int) -> list[float]:
+        """A block of ``rows`` consecutive samples (row-major, samples x joints) shaped by the array filter in
+        one call of its block path, with the checks and refusals of :meth:`_shape_checked`: a block with any
+        sample refused is refused whole, and nothing of it stays in the filter. Returns the shaped values."""
+        x = finite_array("data", data, size=rows * self._n, limit=self._limit()).reshape(rows, self._n)
+        out = self._shape_checked({"array": (self._array_filter, x, "positions")})
+        values: list[float] = out["array"].ravel().tolist()
+        return values
 
     @property
     def _input_bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
