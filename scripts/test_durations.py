@@ -5,6 +5,7 @@ Reads the ``--durations=0`` section that pytest prints at the end of a run::
     ./run test --durations=0 2>&1 | tee run.log
     python scripts/test_durations.py run.log            # per file and the 15 slowest
     python scripts/test_durations.py before.log after.log   # per file, before and after, and the ratio
+    python scripts/test_durations.py run.log --tests-of REV  # also: the time of the tests that existed at REV
 
 (pytest hides durations under 5 ms unless ``-vv``; they do not change the sums.) See docs/testing.md.
 """
@@ -15,6 +16,7 @@ import argparse
 import collections
 import pathlib
 import re
+import subprocess
 
 LINE = re.compile(r"^\s*([\d.]+)s (setup|call|teardown)\s+(\S+?)::(\S.*)$")
 
@@ -39,10 +41,22 @@ def per_file(rows: list[tuple[float, str, str, str]]) -> dict[str, Phases]:
     return files
 
 
+def existed(rev: str, file: str, test: str) -> bool:
+    """Whether the test function of ``test`` (a node id's name, parameters dropped) was in ``file`` at git
+    revision ``rev`` (the tests of an issue's day, say)."""
+    name = test.split("[", 1)[0].split("::")[-1]
+    try:
+        text = subprocess.run(["git", "show", f"{rev}:{file}"], capture_output=True, text=True, check=True).stdout
+    except subprocess.CalledProcessError:  # no such file then
+        return False
+    return re.search(rf"^\s*def {re.escape(name)}\(", text, re.MULTILINE) is not None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Where a test run's time went, from pytest --durations=0.")
     parser.add_argument("logs", type=pathlib.Path, nargs="+", help="one log, or two: before and after")
     parser.add_argument("--top", type=int, default=15, help="slowest tests to list (default 15)")
+    parser.add_argument("--tests-of", metavar="REV", help="also sum the tests whose function existed at git REV")
     args = parser.parse_args(argv)
     runs = [durations(p) for p in args.logs]
     for path, rows in zip(args.logs, runs, strict=True):
@@ -58,6 +72,21 @@ def main(argv: list[str] | None = None) -> int:
         print("\n| s | phase | test |\n|---:|---|---|")
         for seconds, phase, file, test in sorted(runs[0], reverse=True)[: args.top]:
             print(f"| {seconds:.2f} | {phase} | {file}::{test} |")
+        if args.tests_of:
+            known: dict[tuple[str, str], bool] = {}
+            old = new = 0.0
+            tests: dict[bool, set[str]] = {True: set(), False: set()}
+            for seconds, _, file, test in runs[0]:
+                key = (file, test)
+                if key not in known:
+                    known[key] = existed(args.tests_of, file, test)
+                tests[known[key]].add(f"{file}::{test}")
+                if known[key]:
+                    old += seconds
+                else:
+                    new += seconds
+            print(f"\ntests that existed at {args.tests_of}: {len(tests[True])} ({old:.1f} s); added since:"
+                  f" {len(tests[False])} ({new:.1f} s). (Tests under 5 ms are not listed by pytest.)")
         return 0
     before, after = files[0], files[-1]
     print("| before s | after s | after / before | file |\n|---:|---:|---:|---|")

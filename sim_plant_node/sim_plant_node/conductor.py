@@ -59,6 +59,7 @@ class Conductor(Node):
         kwargs.setdefault("start_parameter_services", False)
         super().__init__("conductor", *args, **kwargs)
         self.plant, self.shaper = plant, shaper
+        self._task_cycles: int | None = None  # task.cycles as this conductor last set it
         # by stamps: samples and events come on separate topics, in an order that depends on the load
         self.monitor = StampedCycleMonitor(settle_tolerance)
         self.results: list[CycleResult] = []
@@ -139,6 +140,8 @@ class Conductor(Node):
         bad = [r.reason for r in resp.results if not r.successful]
         if bad:
             raise RuntimeError(f"sim plant refused parameters: {bad}")
+        if "task__cycles" in values:
+            self._task_cycles = int(values["task__cycles"])
 
     def set_plant_mode(self, omega: float, zeta: float, mass: float = 1.0) -> None:
         """Make every joint of the sim plant an m-c-k system with this mode (rad/s, -)."""
@@ -147,8 +150,10 @@ class Conductor(Node):
 
     def run_cycles(self, cycles: int, timeout: float = 600.0,
                    progress: Callable[[int], None] | None = None) -> list[CycleResult]:
-        """Start a run of ``cycles`` cycles on the plant and return their results."""
-        self.set_plant(task__cycles=int(cycles))
+        """Start a run of ``cycles`` cycles on the plant and return their results (``task.cycles`` is set
+        when it differs from what this conductor set last: a learner's loop of one-cycle runs sets it once)."""
+        if self._task_cycles != int(cycles):
+            self.set_plant(task__cycles=int(cycles))
         first = len(self.results)
         self.start_task(timeout)
         seen = first
