@@ -227,6 +227,33 @@ def test_settling_time_into_a_band():
         settling_time(t, a, 0.0, 5.0, -1.0)
 
 
+def test_monitor_takes_no_sample_stamped_before_the_start():
+    """The identifier's monitor takes samples as they arrive; one stamped before START that arrives after it
+    (a preroll's ringing, handled after START by a node a few samples behind) is not the cycle's: it would
+    refuse the cycle as saturated (the LIST case3 flake, the same in the learner's session)."""
+    from shaper_nodes.core.cycles import END, MOTION_END, START, CycleMonitor
+
+    t = np.arange(0, 600) / 200.0
+    a = np.where(t > 1.0, np.exp(-(t - 1.0)) * np.sin(30 * (t - 1.0)), 0.0)
+    results = []
+    for late in (0, 3):
+        mon = CycleMonitor()
+        mon.event(START, 0, 0.0)
+        for k in range(late):  # stamped before START, arriving after it
+            mon.add_accel(-(late - k) / 200.0, [5000.0, 0.0, 0.0])
+            mon.add_positions(-(late - k) / 200.0, [-1.0])
+        for ti, ai in zip(t, a, strict=True):
+            mon.add_accel(ti, [ai, 0.0, 0.0])
+            mon.add_positions(ti, [min(ti, 1.0)])
+        mon.event(MOTION_END, 0, 1.0)
+        results.append(mon.event(END, 0, t[-1]))
+    clean, late = results
+    np.testing.assert_array_equal(late.accel_times, clean.accel_times)
+    np.testing.assert_array_equal(late.accel, clean.accel)
+    np.testing.assert_array_equal(late.positions, clean.positions)
+    assert np.max(np.abs(late.accel)) < 1.0 and late.residual.rms == clean.residual.rms
+
+
 def test_stamped_monitor_does_not_depend_on_the_order_of_arrival():
     from shaper_nodes.core.cycles import END, MOTION_END, START, CycleMonitor, StampedCycleMonitor
 

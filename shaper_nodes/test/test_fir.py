@@ -176,3 +176,41 @@ def test_single_sample_path_equals_block_path_and_offline(shaper, other, rate, d
     np.testing.assert_allclose(y1a, y2a, rtol=0, atol=1e-12)
     np.testing.assert_allclose(y3a, y2a, rtol=0, atol=1e-12)
     assert by_sample.stages == by_block.stages == mixed.stages
+
+
+def by_definition(x, firs_at):
+    """y(k) = x(0) + sum_j s_f(j)(k - j) (x(j) - x(j - 1)) (the module docstring), with s_f the step response of
+    the filter active when increment j arrived: ``firs_at[j]``."""
+    steps = [np.concatenate([np.cumsum(f.dense()), [1.0]]) for f in firs_at]
+    y = np.repeat(x[:1], x.shape[0], axis=0).astype(float)
+    for j in range(1, x.shape[0]):
+        s = steps[j]
+        age = np.arange(x.shape[0] - j)
+        y[j:] += s[np.minimum(age, s.size - 1)][:, None] * (x[j] - x[j - 1])
+    return y
+
+
+@SETTINGS
+@given(st.lists(shaper_st, min_size=1, max_size=4), st.lists(st.integers(1, 399), min_size=0, max_size=3),
+       arrays(float, (400, 2), elements=st.floats(-5, 5)))
+def test_sample_by_sample_with_switches_is_the_definition_and_shares_no_state_with_its_caller(shapers, at, x):
+    """The single-sample path (the node's: one setpoint a message), with switches between any two samples,
+    equals the sum over increments by definition; neither the input nor the returned array is the filter's
+    state (the caller reuses or keeps them: the node keeps the last output it sent)."""
+    rate = 250.0
+    firs = [discretize(s, rate) for s in shapers]
+    at = sorted(set(at))[: len(firs) - 1]
+    s = StreamingShaper(firs[0], 2)
+    active, firs_at, out = 0, [], []
+    row = np.empty(2)
+    for k in range(x.shape[0]):
+        if active + 1 < len(firs) and active < len(at) and k == at[active]:
+            active += 1
+            s.switch(firs[active])
+        firs_at.append(firs[active])
+        row[:] = x[k]  # one buffer for every input, as a caller reusing its array
+        y = s.process(row)
+        out.append(y.copy())
+        row[:] = np.nan  # ... and into its input after the call
+        y[:] = 1e9  # ... and into what it got
+    np.testing.assert_allclose(np.vstack(out), by_definition(x, firs_at), rtol=0, atol=1e-9)

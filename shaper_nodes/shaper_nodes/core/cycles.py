@@ -74,16 +74,23 @@ class CycleMonitor:
         """Accelerometer samples collected in the cycle in progress (0 between cycles)."""
         return len(self._acc_t)
 
+    def _in_cycle(self, t: float) -> bool:
+        """Whether a sample stamped ``t`` belongs to the cycle in progress: one stamped before its START
+        belongs to none (over DDS the samples come on other topics than the events, and a node behind by a
+        few samples handles START between them: rclpy's executor takes one message per ready subscription
+        at a time)."""
+        return self._cycle is not None and t >= self._start
+
     def add_accel(self, t: float, accel: npt.ArrayLike) -> None:
         """An accelerometer sample (m/s^2, 1 to 3 axes) at time t (s)."""
-        if self._cycle is not None:
+        if self._in_cycle(t):
             self._acc_t.append(float(t))
             self._acc.append(np.asarray(accel, dtype=float).ravel())
             self._bound(self._acc_t)
 
     def add_positions(self, t: float, positions: npt.ArrayLike) -> None:
         """Joint positions (rad or m) at time t (s)."""
-        if self._cycle is not None:
+        if self._in_cycle(t):
             self._pos_t.append(float(t))
             self._pos.append(np.asarray(positions, dtype=float).ravel())
             self._bound(self._pos_t)

@@ -184,6 +184,8 @@ class ListSession:
         self._latest = -math.inf
         #: accelerometer samples counted as saturated, over all cycles refused for it
         self.saturated = 0
+        #: accelerometer samples stamped before the START of the cycle in progress that arrived after it (dropped)
+        self.before_start = 0
 
     @property
     def buffered(self) -> int:
@@ -211,7 +213,8 @@ class ListSession:
 
     def on_imu(self, t: float, accel: npt.ArrayLike) -> str | None:
         """An accelerometer sample. Kept by its stamp: at END the cycle takes the samples stamped
-        between its START and END, whatever order they arrived in relative to the events.
+        between its START and END, whatever order they arrived in relative to the events (one stamped
+        before the START of the cycle in progress is dropped, and counted in :attr:`before_start`).
 
         Returns a notice, once per cycle, when the cycle in progress passes ``max_cycle_duration``
         (its samples are dropped then, and no more are kept for it); None otherwise.
@@ -219,6 +222,12 @@ class ListSession:
         t = float(t)
         self._latest = max(self._latest, t)
         buf, in_cycle = self._buf, self._cycle is not None and not self._overlong
+        if self._cycle is not None and t < self._start:
+            # stamped before the START already handled (the events come on another topic: rclpy's executor takes
+            # one message per ready subscription at a time, so a learner behind by a few samples handles START
+            # between them): it belongs to no cycle still to come
+            self.before_start += 1
+            return None
         if not buf.append(t, accel):
             if in_cycle:
                 self._malformed += 1
@@ -285,16 +294,15 @@ class ListSession:
 
     # ----------------------------------------------------------------- helpers
     def _cycle_samples(self, t: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], str, str]:
-        """The samples stamped from the START to the END at ``t`` (times from START, accel), taken out of
-        the buffer with any stamped before the START that arrived after it (the events and the samples come
-        on separate topics: a sample of the run before the cycle may come late; it is not the cycle's), and
-        why they cannot be learned from with the class of the refusal ("" if they can)."""
+        """The samples stamped from START to the END at ``t`` (times from START, accel), taken out of
+        the buffer with any stamped before START, and why they cannot be learned from with the class of
+        the refusal ("" if they can)."""
         buf = self._buf
-        upto = buf.times <= t
-        mine = upto & (buf.times >= self._start)
-        times = buf.times[mine] - self._start
-        accel = buf.values[mine] if mine.any() else np.zeros((0, 3))
-        buf.keep(~upto)
+        mine = buf.times <= t
+        inside = mine & (buf.times >= self._start)
+        times = buf.times[inside] - self._start
+        accel = buf.values[inside] if inside.any() else np.zeros((0, 3))
+        buf.keep(~mine)
         if times.size == 0:
             return times, accel, "no accelerometer data in the cycle (sensor missing or stale)", ""
         if self._malformed:
