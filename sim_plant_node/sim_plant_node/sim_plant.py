@@ -84,7 +84,7 @@ from shaper_msgs.srv import SetFeedforward
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
-from shaper_nodes.ros.cdr import ImuCdr, JointStateCdr, clock_cdr, stamp_parts
+from shaper_nodes.ros.cdr import JointStateCdr, clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
@@ -276,10 +276,14 @@ class SimPlantNode(Node):
         self._rng = np.random.default_rng(int(self.get_parameter("imu.seed").value))
         self._sensor = {name: self.get_parameter(name).value for name in SENSOR_PARAMS}
         self._sensor_changed()
-        # the per-step messages (joint states, IMU, clock) are published as serialized bytes, their numbers
-        # rewritten in place (shaper_nodes.ros.cdr): the same messages, without building message objects
-        self._imu_cdr = ImuCdr(self._imu_frame)  # (imu.frame_id is read-only)
-        self._imu_cdr.orientation_covariance[0] = -1.0  # no orientation estimate
+        # /joint_states and /clock are published as serialized bytes, their numbers rewritten in place
+        # (shaper_nodes.ros.cdr): the same messages, without building message objects. The IMU stays a message
+        # object: published as bytes (shaper_nodes.ros.cdr.ImuCdr, the same bytes on the wire) it failed
+        # tests/test_calibrate.py's killed-and-resumed run twice (no IMU sample past a point within 30 s), not
+        # yet understood (docs/benchmarks.md)
+        self._imu_msg = Imu()  # reused: publish() serialises it at once
+        self._imu_msg.orientation_covariance[0] = -1.0
+        self._imu_msg.header.frame_id = self._imu_frame  # (imu.frame_id is read-only)
         self._imu_gyro_sigma: float | None = None  # the gyro covariance written in it
         self._js_cdr: JointStateCdr | None = None  # made for the array lengths the plant reports
         self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value), remove_mean=self.arm)
@@ -647,8 +651,8 @@ class SimPlantNode(Node):
         sigma = self._imu_sigma
         if sigma > 0:
             acc += self._rng.normal(0.0, sigma, 3)
-        imu = self._imu_cdr
-        imu.set_stamp(*stamp_parts(t))
+        imu = self._imu_msg
+        imu.header.stamp.sec, imu.header.stamp.nanosec = stamp_parts(t)
         if rate is None:
             imu.angular_velocity_covariance[0] = -1.0
         else:
@@ -656,14 +660,15 @@ class SimPlantNode(Node):
             rate = rate + self._gyro_bias
             if gyro_sigma > 0:
                 rate = rate + self._rng.normal(0.0, gyro_sigma, 3)
-            imu.angular_velocity[:] = rate
+            imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = rate.tolist()
             if gyro_sigma != self._imu_gyro_sigma:
-                imu.angular_velocity_covariance[:] = 0.0
-                imu.angular_velocity_covariance[::4] = gyro_sigma**2
+                imu.angular_velocity_covariance = [gyro_sigma**2, 0.0, 0.0, 0.0, gyro_sigma**2, 0.0, 0.0, 0.0,
+                                                   gyro_sigma**2]
                 self._imu_gyro_sigma = gyro_sigma
-        imu.linear_acceleration[:] = acc
-        imu.linear_acceleration_covariance[::4] = sigma**2
-        self._imu_pub.publish(imu.data())
+        imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = acc.tolist()
+        imu.linear_acceleration_covariance[0] = imu.linear_acceleration_covariance[4] = \
+            imu.linear_acceleration_covariance[8] = sigma**2
+        self._imu_pub.publish(imu)
         self._monitor.add_accel(t, acc)
 
     # ----------------------------------------------------------------- the trajectory controller (arm)
