@@ -87,6 +87,7 @@ from shaper_msgs.srv import SetFeedforward
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
+from shaper_nodes.ros.cdr import JointStateCdr, clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
@@ -132,12 +133,6 @@ WAITING = "waiting for subscribers"
 LOCKSTEP_IMU_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 #: s of wall time between joint states of the lockstep arm at rest (joint_states.idle_period's default)
 IDLE_STATE_PERIOD = 0.1
-
-
-def _set_time(stamp: Any, t: float) -> None:
-    """Write ``t`` s into a builtin_interfaces/Time in place (rounded to the ns, as ``sec_to_time``): the
-    messages published at every period are kept and refilled rather than built again."""
-    stamp.sec, stamp.nanosec = divmod(int(round(t * 1e9)), 1_000_000_000)
 
 
 def check_model(model: str) -> str:
@@ -292,11 +287,16 @@ class SimPlantNode(Node):
         self._rng = np.random.default_rng(int(self.get_parameter("imu.seed").value))
         self._sensor = {name: self.get_parameter(name).value for name in SENSOR_PARAMS}
         self._sensor_changed()
-        self._imu_msg = Imu()  # reused, as the clock message: publish() serialises it at once
+        # /joint_states and /clock are published as serialized bytes, their numbers rewritten in place
+        # (shaper_nodes.ros.cdr): the same messages, without building message objects. The IMU stays a message
+        # object: published as bytes (shaper_nodes.ros.cdr.ImuCdr, the same bytes on the wire) it failed
+        # tests/test_calibrate.py's killed-and-resumed run twice (no IMU sample past a point within 30 s), not
+        # yet understood (docs/benchmarks.md)
+        self._imu_msg = Imu()  # reused: publish() serialises it at once
         self._imu_msg.orientation_covariance[0] = -1.0
+        self._imu_msg.header.frame_id = self._imu_frame  # (imu.frame_id is read-only)
         self._imu_gyro_sigma: float | None = None  # the gyro covariance written in it
-        self._clock_msg = Clock()
-        self._js_msg = JointState(name=self.joint_names)
+        self._js_cdr: JointStateCdr | None = None  # made for the array lengths the plant reports
         self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value), remove_mean=self.arm)
         self._active_shaper = ShaperMsg()
 
@@ -353,7 +353,7 @@ class SimPlantNode(Node):
         idle = (IDLE_STATE_PERIOD if self.arm else 0.0) if idle < 0 else idle
         if self.mode == "lockstep" and idle > 0:
             # a robot's joint_state_broadcaster publishes at rest too: the last state again (time stands still)
-            self._last_js = JointState(name=self.joint_names, position=self._reported(
+            self._last_js: JointState | bytes = JointState(name=self.joint_names, position=self._reported(
                 self.plant.base_position).tolist(), velocity=self.plant.base_velocity.tolist(),
                 effort=getattr(self.plant, "effort", np.zeros(0)).tolist())
             self._last_js.header.stamp = sec_to_time(self._now())
@@ -540,8 +540,7 @@ class SimPlantNode(Node):
     # ----------------------------------------------------------------- stepping
     def _publish_clock(self) -> None:
         if self._clock_pub is not None:
-            _set_time(self._clock_msg.clock, self.sim_time)
-            self._clock_pub.publish(self._clock_msg)
+            self._clock_pub.publish(clock_cdr(*stamp_parts(self.sim_time)))
 
     def _now(self) -> float:
         if self.mode == "lockstep":
@@ -634,24 +633,18 @@ class SimPlantNode(Node):
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
         t = self._now()
-        stamp = sec_to_time(t)
-        js = self._js_msg  # (refilled: publish serialises it at once; also the idle republisher's)
-        js.position = self._reported(self.plant.base_position).tolist()
-        js.velocity = self.plant.base_velocity.tolist()
-        js.effort = getattr(self.plant, "effort", np.zeros(0)).tolist()
-        _set_time(js.header.stamp, t)
-        self._js_pub.publish(js)
-        self._last_js = js
+        self._last_js = self._joint_state(t)  # (also the idle republisher's)
+        self._js_pub.publish(self._last_js)
         if self._tip_pub.get_subscription_count() > 0:
             tip = JointState(name=self.joint_names, position=self.plant.tip_position.tolist(),
                              velocity=self.plant.tip_velocity.tolist())
-            tip.header.stamp = stamp
+            tip.header.stamp = sec_to_time(t)
             self._tip_pub.publish(tip)
         if isinstance(self.plant, LoopPlant):  # per joint: output y (with d_o), measured y + n, control u, reference r
             p = self.plant
             loop = JointState(name=[f"{j}/{s}" for s in p.SIGNALS for j in self.joint_names],
                               position=np.concatenate([p.output, p.measured, p.control, p.reference]).tolist())
-            loop.header.stamp = stamp
+            loop.header.stamp = sec_to_time(t)
             self._loop_pub.publish(loop)
         if isinstance(self.plant, ArmPlant):  # the flange IMU at every physics step
             for t_sub, force, rate in self.plant.imu_samples:
@@ -660,6 +653,22 @@ class SimPlantNode(Node):
             acc_joint = self.plant.tip_acceleration
             self._publish_imu(t, np.array([acc_joint[a] if a >= 0 else 0.0 for a in self._axes]), None)
         self._monitor.add_positions(t, self._applied)
+
+    def _joint_state(self, t: float) -> bytes:
+        """The serialized /joint_states message at ``t`` s: reported positions, velocities, efforts (if any)."""
+        position = self._reported(self.plant.base_position)
+        velocity = self.plant.base_velocity
+        effort = getattr(self.plant, "effort", None)
+        sizes = (position.size, velocity.size, 0 if effort is None else effort.size)
+        js = self._js_cdr
+        if js is None or js.sizes != sizes:  # (a plant model changed live may report efforts or not)
+            js = self._js_cdr = JointStateCdr(self.joint_names, *sizes)
+        js.position[:] = position
+        js.velocity[:] = velocity
+        if effort is not None:
+            js.effort[:] = effort
+        js.set_stamp(*stamp_parts(t))
+        return js.data()
 
     def _reported(self, position: np.ndarray) -> np.ndarray:
         """Joint positions as the encoders report them: noise and quantisation as the parameters say."""
@@ -687,8 +696,7 @@ class SimPlantNode(Node):
         if sigma > 0:
             acc += self._rng.normal(0.0, sigma, 3)
         imu = self._imu_msg
-        _set_time(imu.header.stamp, t)
-        imu.header.frame_id = self._imu_frame
+        imu.header.stamp.sec, imu.header.stamp.nanosec = stamp_parts(t)
         if rate is None:
             imu.angular_velocity_covariance[0] = -1.0
         else:

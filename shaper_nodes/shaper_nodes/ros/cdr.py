@@ -1,0 +1,153 @@
+"""Pre-serialized messages for the per-step publishers of the simulated plant (Imu, JointState, Clock).
+
+``rclpy``'s ``Publisher.publish`` takes a message or the ``bytes`` of a serialized one (it then
+calls ``publish_raw``). A message object costs, at every publish, the generated setters' checks
+in Python and the conversion from Python to C; for messages whose layout stays the same (an
+Imu with a fixed frame_id, a JointState with fixed names and array lengths, a Clock), the
+serialized bytes can instead be kept in a buffer and only the changing numbers rewritten in
+place. The classes here build that buffer and expose its numbers as writable numpy views.
+
+The wire format is what ``rclpy.serialization.serialize_message`` gives under Fast DDS: plain
+CDR, little endian (the 4-byte encapsulation header ``00 01 00 00``), each primitive aligned to
+its size counted from the end of that header, strings as a uint32 length (with the terminating
+NUL) and the bytes with the NUL, sequences as a uint32 count then the elements. The bytes that
+only pad for alignment are zero here; Fast CDR leaves whatever its buffer held there, and every
+reader skips them. (``serialize_message`` returns Fast DDS's estimate of the size, which aligns
+an empty sequence of doubles to 8 as if it had elements: bytes at the end that nothing wrote and
+no reader reads; what a publisher sends is the written length, as here.) The unit test
+``shaper_nodes/test/test_cdr.py`` holds these buffers byte-equal to ``serialize_message``
+outside those padding bytes, and deserialized back equal.
+
+The module is pure Python (struct and numpy): it imports neither rclpy nor message types.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+#: CDR, little endian, no options (what Fast DDS writes)
+ENCAPSULATION = b"\x00\x01\x00\x00"
+_HEAD = len(ENCAPSULATION)
+_STAMP = struct.Struct("<iI")
+_U32 = struct.Struct("<I")
+#: the float64 fields of sensor_msgs/Imu after its header, in order, and their lengths
+IMU_FIELDS = (("orientation", 4), ("orientation_covariance", 9), ("angular_velocity", 3),
+              ("angular_velocity_covariance", 9), ("linear_acceleration", 3), ("linear_acceleration_covariance", 9))
+
+
+def stamp_parts(t: float) -> tuple[int, int]:
+    """``t`` s as a builtin_interfaces/Time's (sec, nanosec), rounded to the nanosecond (as ``sec_to_time``)."""
+    return divmod(int(round(t * 1e9)), 1_000_000_000)
+
+
+class _Writer:
+    """A growing CDR body (after the encapsulation header) with its alignment counted from its start."""
+
+    def __init__(self) -> None:
+        self.body = bytearray()
+        self.padding: list[tuple[int, int]] = []  # (start, end) in the body
+
+    def align(self, size: int) -> None:
+        pad = -len(self.body) % size
+        if pad:
+            self.padding.append((len(self.body), len(self.body) + pad))
+            self.body += b"\x00" * pad
+
+    def u32(self, value: int) -> None:
+        self.align(4)
+        self.body += _U32.pack(value)
+
+    def string(self, text: str) -> None:
+        data = text.encode("utf-8")
+        if b"\x00" in data:
+            raise ValueError(f"a CDR string cannot hold a NUL character: {text!r}")
+        self.u32(len(data) + 1)
+        self.body += data + b"\x00"
+
+    def header(self, frame_id: str) -> None:
+        """std_msgs/Header: the stamp (zero; rewritten in place at offset 0) and ``frame_id``."""
+        self.body += _STAMP.pack(0, 0)
+        self.string(frame_id)
+
+    def doubles(self, count: int, sequence: bool) -> int:
+        """Room for ``count`` float64 (after their count if ``sequence``): their offset in the body."""
+        if sequence:
+            self.u32(count)
+        if count:  # (an empty sequence has no elements to align)
+            self.align(8)
+        offset = len(self.body)
+        self.body += b"\x00" * (8 * count)
+        return offset
+
+
+class SerializedMessage:
+    """A serialized message of a fixed layout: the stamp and the float64 fields are rewritten in place.
+
+    Built by the subclasses; ``data()`` gives the ``bytes`` to publish. ``padding`` lists the (start, end) byte
+    ranges that only align the next field: zero here, whatever the buffer held in Fast DDS's serialization
+    (Fast CDR does not clear them); readers skip them.
+    """
+
+    def __init__(self, writer: _Writer) -> None:
+        self._buffer = bytearray(ENCAPSULATION) + writer.body
+        self.padding = [(_HEAD + a, _HEAD + b) for a, b in writer.padding]
+
+    def _view(self, offset: int, count: int) -> np.ndarray:
+        """Writable float64 view of ``count`` values at ``offset`` of the body."""
+        return np.frombuffer(self._buffer, dtype="<f8", count=count, offset=_HEAD + offset)
+
+    def set_stamp(self, sec: int, nanosec: int) -> None:
+        """The header's stamp (s, ns), as builtin_interfaces/Time holds it."""
+        _STAMP.pack_into(self._buffer, _HEAD, sec, nanosec)
+
+    def data(self) -> bytes:
+        """The serialized message as it stands (a copy: the buffer may be rewritten after)."""
+        return bytes(self._buffer)
+
+
+class ImuCdr(SerializedMessage):
+    """sensor_msgs/Imu with a fixed ``frame_id``; every float64 field a writable view (attributes named as the
+    message's fields: ``orientation`` x, y, z, w; ``angular_velocity`` rad/s and ``linear_acceleration`` m/s^2,
+    x, y, z; the three covariances, 9 values row-major). All start as a new message has them: orientation
+    (0, 0, 0, 1), everything else zero."""
+
+    def __init__(self, frame_id: str) -> None:
+        w = _Writer()
+        w.header(frame_id)
+        start = w.doubles(sum(n for _, n in IMU_FIELDS), sequence=False)
+        super().__init__(w)
+        for name, count in IMU_FIELDS:
+            setattr(self, name, self._view(start, count))
+            start += 8 * count
+        self.orientation[3] = 1.0  # geometry_msgs/Quaternion's default w
+
+    orientation: np.ndarray
+    orientation_covariance: np.ndarray
+    angular_velocity: np.ndarray
+    angular_velocity_covariance: np.ndarray
+    linear_acceleration: np.ndarray
+    linear_acceleration_covariance: np.ndarray
+
+
+class JointStateCdr(SerializedMessage):
+    """sensor_msgs/JointState with fixed ``names``, ``frame_id`` and array lengths; ``position`` (rad or m),
+    ``velocity`` and ``effort`` are writable views (start at zero)."""
+
+    def __init__(self, names: list[str], positions: int, velocities: int, efforts: int, frame_id: str = "") -> None:
+        w = _Writer()
+        w.header(frame_id)
+        w.u32(len(names))
+        for name in names:
+            w.string(name)
+        offsets = [w.doubles(count, sequence=True) for count in (positions, velocities, efforts)]
+        super().__init__(w)
+        self.sizes = (positions, velocities, efforts)
+        self.position, self.velocity, self.effort = (
+            self._view(off, count) for off, count in zip(offsets, self.sizes, strict=True))
+
+
+def clock_cdr(sec: int, nanosec: int) -> bytes:
+    """rosgraph_msgs/Clock at (``sec`` s, ``nanosec`` ns), serialized."""
+    return ENCAPSULATION + _STAMP.pack(sec, nanosec)
