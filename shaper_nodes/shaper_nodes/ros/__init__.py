@@ -36,6 +36,9 @@ bag_writer
     rosbag2 folders with MCAP storage, written with rosbags (the suite's own types included), chunks
     closed and flushed by time; the recorder's bounded queue, writer thread, heartbeat and clean stop
     on a write failure (``QueuedRecording``).
+cdr
+    Messages kept as serialized CDR bytes rewritten in place (JointState, Clock; Imu), published as
+    ``bytes``: the sim plant's per-step publishers, without a message object per step.
 launching
     Installed node executables started as ``ros2 run`` starts them, for tests and tools.
 """
