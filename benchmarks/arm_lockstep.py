@@ -124,10 +124,12 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
                                          time_from_start=Duration(sec=int(seconds)))
             goal = FollowJointTrajectory.Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES),
                                                                          points=[point]))
+            # timed from the request: the controller starts on accepting the goal, and a goal response that comes
+            # late (or is lost and recovered from the status topic) must not hide the motion before it
+            t0 = time.perf_counter()
             sent = client.send_goal_async(goal)
             while not sent.done():
-                ex.spin_once(timeout_sec=0.05)
-            t0 = time.perf_counter()
+                ex.spin_once(timeout_sec=0.01)
             result = sent.result().get_result_async()
             while not result.done():
                 ex.spin_once(timeout_sec=0.01)
