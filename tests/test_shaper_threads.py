@@ -24,6 +24,7 @@ from shaper_nodes.nodes.shaper import ShaperNode
 pytestmark = pytest.mark.integration
 JOINTS = ["j1", "j2", "j3"]
 RATE = 250.0
+MIN_SAMPLES, MIN_CHANGES, MAX_SAMPLES = 6000, 20, 200_000  # the stream's length: see stream() below
 
 
 def motion(n: int) -> np.ndarray:
@@ -57,11 +58,17 @@ def test_shaper_changes_on_the_main_thread_land_between_two_streamed_samples(ros
         filt.process, filt.switch = counting_process, recording_switch
         published: list[np.ndarray] = []
         node._array_pub.publish = lambda msg: published.append(np.array(msg.data))
-        x = motion(6000)
+        moves = motion(6000)
+        sent: list[np.ndarray] = []
         done = threading.Event()
 
         def stream() -> None:  # the stream node's callback, on a thread of its own
-            for row in x:
+            # at least the 6000 samples of the moves, and on (the moves again) until 20 changes have landed
+            # between them: how the two threads interleave is the scheduler's (a loaded machine may run the
+            # whole stream before the main thread gets far), so the stream waits for the state, not a count
+            while len(sent) < MIN_SAMPLES or (len(changes) < MIN_CHANGES and len(sent) < MAX_SAMPLES):
+                row = moves[len(sent) % moves.shape[0]]
+                sent.append(row)
                 node._on_array(Float64MultiArray(data=row.tolist()), None)
             done.set()
 
@@ -75,8 +82,9 @@ def test_shaper_changes_on_the_main_thread_land_between_two_streamed_samples(ros
         thread.join()
     finally:
         node.destroy_node()
+    x = np.array(sent)
     assert len(published) == x.shape[0] and shaped[0] == x.shape[0]
-    assert len(changes) >= 20, f"only {len(changes)} changes of {tries} landed during the stream"
+    assert len(changes) >= MIN_CHANGES, f"only {len(changes)} changes of {tries} landed in {x.shape[0]} samples"
     assert any(0 < k < x.shape[0] for k, _ in changes)
     ref = StreamingShaper(discretize(design("zv", [Mode.from_hz(5.0, 0.05)]), RATE), len(JOINTS))
     want, k0 = [], 0
