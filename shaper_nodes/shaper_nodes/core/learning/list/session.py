@@ -295,13 +295,13 @@ class ListSession:
     # ----------------------------------------------------------------- helpers
     def _cycle_samples(self, t: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], str, str]:
         """The samples stamped from START to the END at ``t`` (times from START, accel), taken out of
-        the buffer with any stamped before START, and why they cannot be learned from with the class of
-        the refusal ("" if they can)."""
+        the buffer, and why they cannot be learned from with the class of the refusal ("" if they can).
+        (None stamped before START is there: those are dropped at START and, arriving later, by
+        :meth:`on_imu`.)"""
         buf = self._buf
         mine = buf.times <= t
-        inside = mine & (buf.times >= self._start)
-        times = buf.times[inside] - self._start
-        accel = buf.values[inside] if inside.any() else np.zeros((0, 3))
+        times = buf.times[mine] - self._start
+        accel = buf.values[mine] if mine.any() else np.zeros((0, 3))
         buf.keep(~mine)
         if times.size == 0:
             return times, accel, "no accelerometer data in the cycle (sensor missing or stale)", ""
