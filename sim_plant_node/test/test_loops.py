@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 
@@ -137,6 +138,7 @@ def ros_context():
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=1 + int(os.environ.get("ROS_DOMAIN_ID", "30")) % 200)
     yield ctx
+    gc.collect()  # rclpy's objects sit in cycles: freed now, while their context is valid (tests/conftest.py)
     ctx.try_shutdown()
 
 
