@@ -450,9 +450,32 @@ def test_drops_and_gaps_of_the_stream_are_reported(ros_context):
         status, _ = drops()
         assert status.level == DiagnosticStatus.WARN and "dropped" in status.message
         # every sample of the burst is accounted for: shaped, or counted as dropped
-        rig.spin_until(lambda: len(rig.array_out) - before + rig.node.rate_watch["array"].total_drops == 60,
+        rig.spin_until(lambda: len(rig.array_out) - before + rig.node.watched("array").total_drops == 60,
                        "every sample shaped or counted as dropped")
-        assert rig.node.rate_watch["array"].total_drops >= 40  # the queue kept about its last 5
+        assert rig.node.watched("array").total_drops >= 40  # the queue kept about its last 5
+    finally:
+        rig.close()
+
+
+def test_arrivals_the_main_thread_did_not_watch_in_time_are_reported(ros_context):
+    """The streaming path only keeps each message's info; the main thread passes it through the rate
+    watch. Arrivals pushed out of the bounded queue before it did are counted and reported (WARN)."""
+    rig = Rig(ros_context, diagnostics_period=3600.0)  # no summary but the one asked for below
+    statuses = []
+    rig.probe.create_subscription(DiagnosticArray, "/diagnostics",
+                                  lambda m: statuses.extend(s for s in m.status if s.name.endswith(": shaper")), 50)
+    try:
+        node, extra = rig.node, 100
+        for i in range(node._arrivals_max + extra):  # as the stream thread would, with no spin between
+            node._arrived("array", {"source_timestamp": 10**7 * (i + 1), "received_timestamp": 10**7 * (i + 1),
+                                    "publication_sequence_number": i + 1})
+        node._publish_summary()
+        rig.spin_until(lambda: statuses, "the summary")
+        kv = {k.key: k.value for k in statuses[-1].values}
+        assert kv["input.array.unwatched"] == str(extra)
+        assert statuses[-1].level == DiagnosticStatus.WARN and "not watched" in statuses[-1].message
+        assert kv["input.array.messages"] == str(node._arrivals_max)  # the ones kept went through the watch
+        assert kv["input.array.drops"] == "0"  # the last ones kept are consecutive
     finally:
         rig.close()
 

@@ -78,7 +78,8 @@ import pathlib
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
+from operator import le
 from typing import Any
 
 import numpy as np
@@ -159,6 +160,8 @@ WORKER_TIMEOUT = 120.0
 DEFAULT_MAX_SAMPLES = 5_000
 #: the streamed inputs (array_in, stream_in)
 STREAMS = ("array", "stream")
+#: how often the streams' kept arrivals go through the rate watch (s, steady clock, main thread)
+WATCH_PERIOD = 0.25
 #: choices of the stream_executor parameter
 STREAM_EXECUTORS = ("thread", "node")
 
@@ -309,6 +312,14 @@ class ShaperNode(Node):
         self.diagnostics = Diagnostics(self, lambda: float(p("error_throttle").value))
         self.rate_watch = {k: RateWatch(self.rate) for k in STREAMS}
         self._publisher_counts = dict.fromkeys(STREAMS, 1)
+        # the streams' message infos wait here (a deque's append and popleft are atomic) and go through the
+        # rate watch off the streaming path, on the main thread every WATCH_PERIOD s (_watch_arrivals); the
+        # bound is 10 s of arrivals at the command rate: reaching it means a stalled main thread, and is reported
+        self._arrivals_max = max(4096, int(10 * self.rate))
+        self._arrivals: dict[str, deque] = {k: deque(maxlen=self._arrivals_max)
+                                                        for k in STREAMS}
+        self._arrivals_in = dict.fromkeys(STREAMS, 0)  # appended, by the one thread of each stream
+        self._arrivals_seen = dict.fromkeys(STREAMS, 0)  # through the rate watch
         # whole trajectories: served by a side node on a thread of its own, never in the streaming thread
         self._side = SideNode(self, "trajectories")
         self._worker = TrajectoryWorker()  # the trajectory topic's shaping, in a process of its own
@@ -372,6 +383,7 @@ class ShaperNode(Node):
         self.add_post_set_parameters_callback(self._apply_params)
         self.create_timer(float(p("diagnostics_period").value), self._publish_summary,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(WATCH_PERIOD, self._on_watch_timer, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_active()
         self.graph.start()
         self._side.start()
@@ -540,19 +552,42 @@ class ShaperNode(Node):
             self.forwarded[path] += 1
 
     def _arrived(self, stream: str, info: dict[str, Any] | None) -> None:
-        """Record a streamed message's stamps for the rate watch (the middleware's message info)."""
-        info = info or {}
+        """Keep a streamed message's info (the middleware's stamps) and when it was taken, for the rate
+        watch; only an append on the streaming path."""
+        self._arrivals[stream].append((info, time.time_ns()))
+        self._arrivals_in[stream] += 1
+
+    def _on_watch_timer(self) -> None:
         with self._lock:
-            self.rate_watch[stream].arrival(info.get("source_timestamp"), info.get("received_timestamp"),
-                                            time.time_ns(), info.get("publication_sequence_number"),
-                                            self._publisher_counts[stream])
+            self._watch_arrivals()
+
+    def _watch_arrivals(self) -> None:
+        """Pass the kept arrivals through the rate watches (call with ``_lock`` held)."""
+        for k, queue in self._arrivals.items():
+            watch, publishers = self.rate_watch[k], self._publisher_counts[k]
+            # bounded: what is there now (the stream thread may go on appending)
+            for _ in range(len(queue)):
+                info, handled = queue.popleft()
+                info = info or {}
+                watch.arrival(info.get("source_timestamp"), info.get("received_timestamp"), handled,
+                              info.get("publication_sequence_number"), publishers)
+                self._arrivals_seen[k] += 1
+
+    def watched(self, stream: str) -> RateWatch:
+        """The rate watch of ``stream`` ('array' or 'stream') with every arrival so far taken in."""
+        with self._lock:
+            self._watch_arrivals()
+            return self.rate_watch[stream]
 
     def _publish_summary(self) -> None:
         with self._lock:
             refused, self._window_rejections = self._window_rejections, 0
             forwarded, rejections = dict(self.forwarded), dict(self.rejections)
+            self._watch_arrivals()
             windows = {k: w.window() for k, w in self.rate_watch.items()}
             total_drops = {k: w.total_drops for k, w in self.rate_watch.items()}
+            # arrivals pushed out of a full queue before the rate watch saw them (a stalled main thread)
+            unwatched = {k: self._arrivals_in[k] - self._arrivals_seen[k] - len(self._arrivals[k]) for k in STREAMS}
         # sequence numbers are per publisher: drops are counted while one publisher is seen
         self._publisher_counts = {k: self._subs[f"{k}_in"].get_publisher_count() for k in STREAMS}
         troubled = [k for k, w in windows.items() if w.trouble]
@@ -560,6 +595,10 @@ class ShaperNode(Node):
         parts = [f"{refused} messages refused in the last period"] if refused else []
         parts += [f"{k} input: {w.gaps} gaps (largest {1e3 * w.largest_gap_s:.1f} ms), {w.drops} dropped"
                   for k, w in windows.items() if w.trouble]
+        parts += [f"{k} input: {n} arrivals not watched (the node's main thread fell behind)"
+                  for k, n in unwatched.items() if n > 0]
+        if any(n > 0 for n in unwatched.values()):
+            level = WARN
         msg = "; ".join(parts) if parts else f"shaping with {self._describe()}"
         values = [("revision", str(self._revision)), ("source", self._source), ("family", self._shaper.family),
                   ("command_rate_hz", f"{self.rate:g}")]
@@ -568,6 +607,8 @@ class ShaperNode(Node):
             if w.messages:
                 values += w.values(f"input.{k}")
             values.append((f"input.{k}.total_drops", str(total_drops[k])))
+            if unwatched[k] > 0:
+                values.append((f"input.{k}.unwatched", str(unwatched[k])))
         if self.pose_shaper is not None:
             values += [("action.scheduler.shaped", str(self.pose_shaper.shaped)),
                        ("action.scheduler.fallbacks", str(self.pose_shaper.fallbacks))]
@@ -609,25 +650,17 @@ class ShaperNode(Node):
         which raise the InputError naming the reason. Returns the shaped values."""
         values = data.tolist() if isinstance(data, array.array) else list(data)
         lo, hi = self._input_bounds
-        ok = len(values) == self._n
-        if ok:
-            for v, a, b in zip(values, lo, hi, strict=True):
-                if not a <= v <= b:
-                    ok = False
-                    break
-        if ok:
+        # all(map(le, ...)) stops at the first pair out of order, in C; a NaN compares False
+        if len(values) == self._n and all(map(le, lo, values)) and all(map(le, values, hi)):
             x = np.array(values)
         else:  # the reason, as the general checks give it
             x = finite_array("data", data, size=self._n, limit=self._limit())
             self.limits.check("positions", "the command", x)
-        work = {"array": (self._array_filter, x, "positions")}
         y = self._array_filter.process(x)
         out: list[float] = y.tolist()
         lo, hi = self.limits.sample_bounds
-        for v, a, b in zip(out, lo, hi, strict=True):
-            if not a <= v <= b:
-                self._check_shaped(work, {"array": y})
-                break
+        if not (all(map(le, lo, out)) and all(map(le, out, hi))):
+            self._check_shaped({"array": (self._array_filter, x, "positions")}, {"array": y})
         self._last_sent["array"] = y
         return out
 
