@@ -46,6 +46,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         " (default 5)")
     p.add_argument("--rate", type=float, default=1000.0, help="send rate of the latency driver, Hz (default 1000)")
     p.add_argument("--joints", type=int, default=7, help="joints (values per message and FIR channels; default 7)")
+    p.add_argument("--turn", type=float, default=5.0,
+                   help="latency: the targets take turns of this many seconds each, in rotated order, until each"
+                        " has had --seconds (default 5; 0: one stretch per target, one after the other)")
     p.add_argument("--warmup", type=float, default=0.5, help="warm-up after the first reply, s (default 0.5)")
     p.add_argument("--drain", type=float, default=0.5, help="receive time after the last send, s (default 0.5)")
     p.add_argument("--discovery-timeout", type=float, default=30.0, help="node start-up and discovery limit, s")
@@ -94,34 +97,45 @@ def run_latency(args: argparse.Namespace) -> dict:
     """The latency measurements (echo baseline, shaper none, shaper ZVD) and their ratios; unless
     ``--skip-hog``, echo and shaper ZVD again, each with a busy-loop process on one core (the
     same load for both), and their ratios."""
-    from .latency import CpuHog, echo_target, measure, shaper_target
+    from .latency import CpuHog, echo_target, measure_interleaved, shaper_target
 
     zvd = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03,
            "discretization": "split"}
-    targets = [
-        (echo_target(), False),
-        (shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}), False),
-        (shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd), False),
-    ]
+    groups = [(False, [echo_target(),
+                       shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}),
+                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)])]
     if not args.skip_hog:
-        targets += [(echo_target(), True), (shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd), True)]
+        groups.append((True, [echo_target(), shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)]))
+    rounds = max(1, round(args.seconds / args.turn)) if args.turn > 0 else 1
     runs: list[dict] = []
     hog_runs: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="shaper_bench_") as tmp:
-        for target, hog in targets:
-            if hog:
-                target.label += " + hog"
-            _progress(f"latency: {target.label} ({args.seconds:g} s at {args.rate:g} Hz)")
+        for hog, targets in groups:
+            for target in targets:
+                target.label += " + hog" if hog else ""
+            labels = ", ".join(t.label for t in targets)
+            how = f"in turns of {args.seconds / rounds:.3g} s" if rounds > 1 else "in one stretch each"
+            _progress(f"latency: {labels} ({args.seconds:g} s each at {args.rate:g} Hz, {how})")
             with contextlib.ExitStack() as stack:
                 load = stack.enter_context(CpuHog()) if hog else None
-                result = measure(target, seconds=args.seconds, rate=args.rate, joints=args.joints,
-                                 warmup=args.warmup, drain=args.drain, discovery_timeout=args.discovery_timeout,
-                                 log_dir=pathlib.Path(tmp), progress=_progress)
-            result.extra["dense_taps"] = target.fir.length
-            result.extra["nonzero_taps"] = int(target.fir.delays.size)
-            if load is not None:
-                result.extra["hog_cpu"] = load.cpu
-            (hog_runs if hog else runs).append(result.as_dict())
+                if rounds > 1:
+                    results = measure_interleaved(targets, seconds=args.seconds, rate=args.rate, joints=args.joints,
+                                                  warmup=args.warmup, drain=args.drain,
+                                                  discovery_timeout=args.discovery_timeout, log_dir=pathlib.Path(tmp),
+                                                  rounds=rounds, progress=_progress)
+                else:  # one after the other, each node started for its own stretch
+                    results = [r for t in targets
+                               for r in measure_interleaved([t], seconds=args.seconds, rate=args.rate,
+                                                            joints=args.joints, warmup=args.warmup, drain=args.drain,
+                                                            discovery_timeout=args.discovery_timeout,
+                                                            log_dir=pathlib.Path(tmp), progress=_progress)]
+            for target, result in zip(targets, results, strict=True):
+                result.extra["dense_taps"] = target.fir.length
+                result.extra["nonzero_taps"] = int(target.fir.delays.size)
+                result.extra["turns"] = rounds
+                if load is not None:
+                    result.extra["hog_cpu"] = load.cpu
+                (hog_runs if hog else runs).append(result.as_dict())
     out = {"baseline": runs[0]["label"], "runs": runs, "ratios_to_baseline": _ratios(runs[1:], runs[0])}
     if hog_runs:
         out.update(hog_baseline=hog_runs[0]["label"], hog_runs=hog_runs,

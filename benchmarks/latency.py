@@ -47,13 +47,14 @@ messages under load does less work, so its CPU share alone would flatter it.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import pathlib
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -93,6 +94,9 @@ class Target:
         The node's input and output topics.
     fir : SparseFir
         The filter the node applies to the data (for decoding and checking the replies).
+    argv : list of str
+        The node's command line after the interpreter, where the target has one to share (the shaper's:
+        executable and ROS arguments), for a driver that starts the node its own way (profile_node).
     """
 
     label: str
@@ -100,6 +104,7 @@ class Target:
     in_topic: str
     out_topic: str
     fir: SparseFir
+    argv: list[str] = field(default_factory=list)
 
 
 def identity_fir() -> SparseFir:
@@ -193,8 +198,9 @@ class Driver(Node):
         The context of this measurement.
     """
 
-    def __init__(self, in_topic: str, out_topic: str, context: rclpy.context.Context) -> None:
-        super().__init__("bench_driver", context=context)
+    def __init__(self, in_topic: str, out_topic: str, context: rclpy.context.Context,
+                 name: str = "bench_driver") -> None:
+        super().__init__(name, context=context)
         self.in_topic, self.out_topic = in_topic, out_topic
         self.pub = self.create_publisher(Float64MultiArray, in_topic, DEPTH)
         # a deep queue on the measuring side, so that the driver itself never drops a reply
@@ -267,111 +273,196 @@ def _spin_until(executor: SingleThreadedExecutor, done: Callable[[], bool], time
 def measure(target: Target, *, seconds: float = 5.0, rate: float = 1000.0, joints: int = 7,
             warmup: float = 0.5, drain: float = 0.5, discovery_timeout: float = 30.0,
             log_dir: pathlib.Path, progress: Callable[[str], None] = lambda s: None) -> LatencyResult:
-    """Start ``target``, drive it for ``seconds`` at ``rate`` and measure the round trips.
+    """Start ``target``, drive it for ``seconds`` at ``rate`` and measure the round trips (one target
+    of :func:`measure_interleaved`, in one stretch)."""
+    return measure_interleaved([target], seconds=seconds, rate=rate, joints=joints, warmup=warmup, drain=drain,
+                               discovery_timeout=discovery_timeout, log_dir=log_dir, rounds=1,
+                               progress=progress)[0]
+
+
+def _past(t: float) -> bool:
+    return time.monotonic() >= t
+
+
+def _ended(thread: threading.Thread) -> bool:
+    return not thread.is_alive()
+
+
+def _has_replies(driver: Driver, n: int) -> bool:
+    return len(driver.replies) >= n
+
+
+@dataclass
+class _Driven:
+    """One target of :func:`measure_interleaved` while it runs."""
+
+    target: Target
+    proc: Any
+    log_path: pathlib.Path
+    driver: Driver
+    expected: np.ndarray
+    stamps: np.ndarray
+    node_cpu: float = 0.0
+    driver_cpu: float = 0.0
+    busy: float = 0.0
+    wall: float = 0.0
+
+    def alive(self) -> None:
+        if not self.proc.running():
+            raise RuntimeError(f"{self.target.label}: node exited ({self.proc.proc.returncode});"
+                               f" log {self.log_path}:\n{log_tail(self.log_path)}")
+
+
+def _warm_up(executor: SingleThreadedExecutor, d: _Driven, rest: np.ndarray, rate: float, warmup: float,
+             discovery_timeout: float, alive: Callable[[], None], progress: Callable[[str], None]) -> None:
+    """Wait for ``d``'s node to be discovered, then send it the rest value until it replies, and ``warmup`` s more."""
+    t0 = time.monotonic()
+    if not _spin_until(executor, d.driver.discovered, discovery_timeout, alive):
+        raise RuntimeError(f"{d.target.label}: not discovered within {discovery_timeout:g} s;"
+                           f" log {d.log_path}:\n{log_tail(d.log_path)}")
+    progress(f"{d.target.label}: discovered after {time.monotonic() - t0:.1f} s; warming up")
+    stop = threading.Event()
+    sender = threading.Thread(target=d.driver.send_paced, args=(rest, rate), kwargs={"stop": stop}, daemon=True)
+    sender.start()
+    try:
+        if not _spin_until(executor, functools.partial(_has_replies, d.driver, 1), discovery_timeout, alive):
+            raise RuntimeError(f"{d.target.label}: no reply within {discovery_timeout:g} s;"
+                               f" log {d.log_path}:\n{log_tail(d.log_path)}")
+        _spin_until(executor, functools.partial(_past, time.monotonic() + warmup), warmup + 1.0)
+    finally:
+        stop.set()
+        sender.join()
+
+
+def _drive_turn(executor: SingleThreadedExecutor, d: _Driven, data: np.ndarray, lo: int, hi: int, rate: float,
+                alive: Callable[[], None]) -> None:
+    """Send rows ``lo`` to ``hi - 1`` of ``data`` to ``d``'s node at ``rate`` (one turn); add up its CPU and wall
+    time."""
+    pid = d.proc.proc.pid
+    node0, driver0, busy0 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
+    wall0 = time.perf_counter()
+    stamps = d.stamps[lo - 1:hi - 1]  # the stamp of data row i is at i - 1
+    sender = threading.Thread(target=d.driver.send_paced, args=(data[lo:hi], rate),
+                              kwargs={"stamps": stamps, "first_seq": lo}, daemon=True)
+    sender.start()
+    _spin_until(executor, functools.partial(_ended, sender), (hi - lo) / rate * 10 + 10, alive)
+    sender.join()
+    d.node_cpu += proc_cpu_seconds(pid) - node0
+    d.driver_cpu += self_cpu_seconds() - driver0
+    d.busy += machine_busy_seconds() - busy0
+    d.wall += time.perf_counter() - wall0
+    # its last replies come back before the next turn
+    _spin_until(executor, functools.partial(_has_replies, d.driver, hi - 1), 0.2, alive)
+
+
+def measure_interleaved(targets: list[Target], *, seconds: float = 5.0, rate: float = 1000.0, joints: int = 7,
+                        warmup: float = 0.5, drain: float = 0.5, discovery_timeout: float = 30.0,
+                        log_dir: pathlib.Path, rounds: int = 1,
+                        progress: Callable[[str], None] = lambda s: None) -> list[LatencyResult]:
+    """Start every target, and drive each for ``seconds`` at ``rate`` in ``rounds`` turns.
+
+    With several targets and rounds, the targets take turns: in each round each target is driven for
+    ``seconds / rounds`` while the others idle (their drivers out of the executor), in an order rotated
+    and reversed from round to round. A change of
+    the machine's state (another process, the host) then falls on every target alike, and their
+    ratios compare like with like; in one stretch each, a minute apart, they did not (the echo
+    node's p50 moved between 350 and 480 us from run to run on the quiet machine). Each target's
+    data is one ramp, sent in order across its turns (its filter state runs on between them).
 
     Parameters
     ----------
-    target : Target
-        The node under test.
+    targets : list of Target
+        The nodes under test (processes started together, each with its own topics).
     seconds : float
-        Duration of the measured ramp, s (``round(seconds * rate)`` messages).
+        Driven time per target, s (``round(seconds * rate)`` messages each).
     rate : float
         Send rate, Hz.
     joints : int
         Values per message.
     warmup : float
-        Zeros are sent for this long after the first reply, s.
+        Zeros are sent to each target for this long after its first reply, s.
     drain : float
         Time to keep receiving after the last send, s.
     discovery_timeout : float
-        Longest wait for the node to start and be discovered, s.
+        Longest wait for the nodes to start and be discovered, s.
     log_dir : pathlib.Path
-        Where the node's log goes.
+        Where the nodes' logs go.
+    rounds : int
+        Turns per target (>= 1).
     progress : callable
         Receives progress messages.
 
     Raises
     ------
     RuntimeError
-        If the node dies, is not discovered, or never replies.
+        If a node dies, is not discovered, or never replies.
     """
     n = max(2, round(seconds * rate))
+    rounds = max(1, min(int(rounds), n))
     data = ramp(n, joints)
-    expected = expected_output(target.fir, data)
-    log_path = log_dir / f"{target.label.replace(' ', '_')}.log"
-    proc = target.make_process(log_path)
     context = rclpy.context.Context()
     rclpy.init(args=[], context=context)
     executor = SingleThreadedExecutor(context=context)
-    driver = None
+    driven: list[_Driven] = []
     try:
-        popen = proc.start().proc
-        assert popen is not None  # (start() sets it)
+        for k, target in enumerate(targets):
+            log_path = log_dir / f"{target.label.replace(' ', '_')}.log"
+            proc = target.make_process(log_path)
+            proc.start()
+            driver = Driver(target.in_topic, target.out_topic, context, name=f"bench_driver_{k}")
+            executor.add_node(driver)
+            driven.append(_Driven(target, proc, log_path, driver, expected_output(target.fir, data),
+                                  np.zeros(n, dtype=np.int64)))
 
         def alive() -> None:
-            if not proc.running():
-                raise RuntimeError(f"{target.label}: node exited ({popen.returncode});"
-                                   f" log {log_path}:\n{log_tail(log_path)}")
+            for d in driven:
+                d.alive()
 
-        driver = Driver(target.in_topic, target.out_topic, context)
-        executor.add_node(driver)
-        t0 = time.monotonic()
-        if not _spin_until(executor, driver.discovered, discovery_timeout, alive):
-            raise RuntimeError(f"{target.label}: not discovered within {discovery_timeout:g} s;"
-                               f" log {log_path}:\n{log_tail(log_path)}")
-        progress(f"{target.label}: discovered after {time.monotonic() - t0:.1f} s; warming up")
-
-        # warm-up: zeros until the first reply, then `warmup` s more
-        stop = threading.Event()
-        sender = threading.Thread(target=driver.send_paced, args=(data[:1], rate), kwargs={"stop": stop}, daemon=True)
-        sender.start()
-        try:
-            if not _spin_until(executor, lambda: bool(driver.replies), discovery_timeout, alive):
-                raise RuntimeError(f"{target.label}: no reply within {discovery_timeout:g} s;"
-                                   f" log {log_path}:\n{log_tail(log_path)}")
-            end = time.monotonic() + warmup
-            _spin_until(executor, lambda: time.monotonic() >= end, warmup + 1.0)
-        finally:
-            stop.set()
-            sender.join()
+        for d in driven:
+            _warm_up(executor, d, data[:1], rate, warmup, discovery_timeout, alive, progress)
         _spin_until(executor, lambda: False, 0.1)  # let the last zeros come back
-        driver.replies.clear()
+        for d in driven:
+            d.driver.replies.clear()
+            executor.remove_node(d.driver)  # each driver spins only in its own turns: the executor's wait set
+            #                                 stays the one of a lone driver, as in a run with one target
 
-        # measurement: the ramp 1..n
-        stamps = np.zeros(n, dtype=np.int64)
-        pid = popen.pid
-        node_cpu0, driver_cpu0, busy0 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
-        wall0 = time.perf_counter()
-        sender = threading.Thread(target=driver.send_paced, args=(data[1:], rate),
-                                  kwargs={"stamps": stamps, "first_seq": 1},
-                                  daemon=True)
-        sender.start()
-        _spin_until(executor, lambda: not sender.is_alive(), seconds * 10 + 10)
-        sender.join()
-        node_cpu1, driver_cpu1, busy1 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
-        wall1 = time.perf_counter()
-        end = time.monotonic() + drain
-        _spin_until(executor, lambda: time.monotonic() >= end, drain + 1.0)
+        # measurement: the ramp 1..n of each target, in `rounds` turns
+        bounds = np.linspace(1, n + 1, rounds + 1).round().astype(int)  # rows [bounds[r], bounds[r+1]) of data
+        for r in range(rounds):
+            lo, hi = int(bounds[r]), int(bounds[r + 1])
+            if hi <= lo:
+                continue
+            order = driven[r % len(driven):] + driven[:r % len(driven)]  # rotated, and reversed every other
+            for d in (order[::-1] if r % 2 else order):  # round: each target follows each of the others
+                executor.add_node(d.driver)
+                _drive_turn(executor, d, data, lo, hi, rate, alive)
+                executor.remove_node(d.driver)
+        for d in driven:
+            executor.add_node(d.driver)
+        _spin_until(executor, functools.partial(_past, time.monotonic() + drain), drain + 1.0)
         alive()
-        replies = list(driver.replies)
+        replies = [list(d.driver.replies) for d in driven]
     finally:
-        if driver is not None:
-            executor.remove_node(driver)
-            driver.destroy_node()
+        for d in driven:
+            if d.driver in executor.get_nodes():
+                executor.remove_node(d.driver)
+            d.driver.destroy_node()
         executor.shutdown()
         context.try_shutdown()
-        code = proc.stop()
-        if code not in (0, None, -signal.SIGINT):
-            progress(f"{target.label}: node exited with {code} (log {log_path})")
+        for d in driven:
+            code = d.proc.stop()
+            if code not in (0, None, -signal.SIGINT):
+                progress(f"{d.target.label}: node exited with {code} (log {d.log_path})")
 
-    return _analyse(target, replies, stamps, expected, rate, joints,
-                    node_cpu=(node_cpu1 - node_cpu0), driver_cpu=(driver_cpu1 - driver_cpu0),
-                    busy=(busy1 - busy0), wall=(wall1 - wall0))
+    # the stamp index at which each turn after the first began
+    turns = [int(b) - 1 for b in bounds[1:-1]]
+    return [_analyse(d.target, rep, d.stamps, d.expected, rate, joints, node_cpu=d.node_cpu, driver_cpu=d.driver_cpu,
+                     busy=d.busy, wall=d.wall, turns=turns) for d, rep in zip(driven, replies, strict=True)]
 
 
 def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.ndarray, expected: np.ndarray,
              rate: float, joints: int, *, node_cpu: float, driver_cpu: float, busy: float,
-             wall: float) -> LatencyResult:
+             wall: float, turns: Sequence[int] = ()) -> LatencyResult:
     n = stamps.size
     key = expected[:, 0]  # strictly increasing; index = sequence number (0 = rest)
     half_gap = 0.5 * float(np.min(np.diff(key)))
@@ -406,8 +497,13 @@ def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.
         latencies.append((t_recv - int(stamps[k - 1])) * 1e-3)
     lat = np.asarray(latencies)
     received = int(seen.sum())
-    intervals = np.diff(stamps) * 1e-3
-    span = (stamps[-1] - stamps[0]) * 1e-9
+    # send intervals within each turn (the pause from one turn to the next is not a send interval)
+    keep = np.ones(max(n - 1, 0), dtype=bool)
+    for b in turns:
+        if 0 < b < n:
+            keep[b - 1] = False
+    intervals = np.diff(stamps)[keep] * 1e-3
+    span = float(intervals.sum()) * 1e-6
 
     def pct(q: float) -> float:
         return float(np.percentile(lat, q)) if lat.size else float("nan")
@@ -416,7 +512,7 @@ def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.
         label=target.label, joints=joints, target_rate_hz=rate, sent=n, received=received, lost=n - received,
         duplicates=duplicates, undecoded=undecoded, seq_from_data=from_data, inexact=int(inexact),
         max_output_error=max_err,
-        send_rate_hz=float((n - 1) / span) if span > 0 else float("nan"),
+        send_rate_hz=float(intervals.size / span) if span > 0 else float("nan"),
         send_interval_p99_us=float(np.percentile(intervals, 99)) if intervals.size else float("nan"),
         p50_us=pct(50), p99_us=pct(99), max_us=float(lat.max()) if lat.size else float("nan"),
         mean_us=float(lat.mean()) if lat.size else float("nan"),
@@ -487,7 +583,7 @@ def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any
     decoding is designed from them exactly as the node does.
     """
     from shaper_nodes.core.shaping import Mode, design, discretize
-    from shaper_nodes.ros.launching import NodeProcess
+    from shaper_nodes.ros.launching import NodeProcess, executable, ros_args
 
     params = dict(params or {})
     family = str(params.get("shaper.family", "none"))
@@ -495,9 +591,16 @@ def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any
     shaper = design(family, [mode], derivative_order=int(params.get("shaper.derivative_order", 2)),
                     vibration_tolerance=float(params.get("shaper.vibration_tolerance", 0.05)))
     fir = discretize(shaper, rate, str(params.get("discretization", "split")))
-    node_params = {"joint_names": [f"joint_{i + 1}" for i in range(joints)], "command_rate": float(rate), **params}
+    # a node name and topics of its own, so that several targets can run at once (measure_interleaved)
+    name = "bench_" + "".join(c if c.isalnum() else "_" for c in label).strip("_")
+    in_topic, out_topic = f"/{name}/commands", f"/{name}/shaped"
+    node_params = {"joint_names": [f"joint_{i + 1}" for i in range(joints)], "command_rate": float(rate),
+                   "topics.array_in": in_topic, "topics.array_out": out_topic, **params}
+
+    remaps = {"__node": name}
 
     def make(log_path: pathlib.Path) -> NodeProcess:
-        return NodeProcess("shaper_nodes", "shaper_node", node_params, log_path=log_path)
+        return NodeProcess("shaper_nodes", "shaper_node", node_params, log_path=log_path, remaps=remaps)
 
-    return Target(label, make, "/shaper/commands", "/forward_position_controller/commands", fir)
+    return Target(label, make, in_topic, out_topic, fir,
+                  [str(executable("shaper_nodes", "shaper_node")), *ros_args(node_params, remaps)])

@@ -17,7 +17,7 @@ import pstats
 import sys
 import tempfile
 
-from shaper_nodes.ros.launching import ChildProcess, executable, ros_args
+from shaper_nodes.ros.launching import ChildProcess
 
 from .latency import REPO_ROOT, Target, echo_target, identity_fir, measure, shaper_target
 
@@ -31,8 +31,7 @@ def profiled_target(kind: str, out: pathlib.Path, joints: int, rate: float) -> T
         cmd = ["-m", "benchmarks.echo_node", "--in", base.in_topic, "--out", base.out_topic]
         fir = identity_fir()
     else:
-        params = {"joint_names": [f"joint_{i + 1}" for i in range(joints)], "command_rate": float(rate), **ZVD}
-        cmd = [str(executable("shaper_nodes", "shaper_node")), *ros_args(params)]
+        cmd = base.argv
         fir = base.fir
 
     def make(log_path: pathlib.Path) -> ChildProcess:
