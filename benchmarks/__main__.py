@@ -259,10 +259,11 @@ def _fir_rows(fir: dict) -> list[dict[str, Any]]:
         if r["method"].startswith("shaper, blocks"):
             rows.append(_row(f"FIR {r['method']}", r["joint_samples_per_s"] / 1e6, "M joint-samples/s",
                              ref["method"], ref["joint_samples_per_s"] / 1e6, goal=GOALS["fir_blocks"]))
-        elif r["method"] == "shaper, sample by sample":
+        elif r["method"].startswith("shaper, sample by sample"):
             lf = next((x for x in fir["methods"] if x["method"].startswith("lfilter") and x["calls"] == x["samples"]),
                       None)
-            rows.append(_row(f"FIR one {fir['joints']}-joint sample per call", us, "us/call",
+            kind = " (lists, the node's path)" if r["method"].endswith("(lists)") else ""
+            rows.append(_row(f"FIR one {fir['joints']}-joint sample per call{kind}", us, "us/call",
                              lf["method"] if lf else "", 1e6 * lf["best_s"] / lf["calls"] if lf else math.nan,
                              goal=GOALS["fir_sample"]))
     return rows

@@ -5,6 +5,10 @@ Methods (each over the same data, each started at rest at the first sample):
 ``shaper, sample by sample``
     :meth:`shaper_nodes.core.shaping.fir.StreamingShaper.process` called with one ``(joints,)`` sample
     per call, as the shaper node does for every message.
+``shaper, sample by sample (lists)``
+    :meth:`~shaper_nodes.core.shaping.fir.StreamingShaper.process_values` with one sample as a list of
+    floats per call, the shaper node's path for ``Float64MultiArray`` messages (Python floats
+    throughout: numpy's calls cost more than the arithmetic on a few values).
 ``shaper, blocks``
     The same with ``(block, joints)`` blocks.
 ``lfilter, blocks`` (the reference)
@@ -59,6 +63,12 @@ def _shaper_samples(fir: SparseFir, x: np.ndarray) -> np.ndarray:
     return out
 
 
+def _shaper_values(fir: SparseFir, rows: list[list[float]]) -> np.ndarray:
+    sh = StreamingShaper(fir, len(rows[0]))
+    process = sh.process_values
+    return np.array([process(r) for r in rows])
+
+
 def _shaper_blocks(fir: SparseFir, x: np.ndarray, block: int) -> np.ndarray:
     sh = StreamingShaper(fir, x.shape[1])
     return np.concatenate([sh.process(x[i : i + block]) for i in range(0, x.shape[0], block)])
@@ -108,11 +118,13 @@ def run(*, hz: float = 8.0, zeta: float = 0.03, rate: float = 1000.0, joints: in
     rng = np.random.default_rng(seed)
     x = np.cumsum(rng.normal(scale=0.01, size=(block * blocks, joints)), axis=0) + rng.uniform(-1, 1, joints)
     xs = x[: min(sample_calls, x.shape[0])]
+    xs_lists = xs.tolist()
 
     ns, nb = xs.shape[0], x.shape[0]
     # name: (function, samples, calls)
     methods: dict[str, tuple[Callable[[], np.ndarray], int, int]] = {
         "shaper, sample by sample": (lambda: _shaper_samples(fir, xs), ns, ns),
+        "shaper, sample by sample (lists)": (lambda: _shaper_values(fir, xs_lists), ns, ns),
         f"shaper, blocks of {block} x {joints}": (lambda: _shaper_blocks(fir, x, block), nb, -(-nb // block)),
         f"lfilter (zi), blocks of {block} x {joints}": (lambda: _lfilter_blocks(taps, x, block), nb, -(-nb // block)),
         "lfilter (zi), sample by sample": (lambda: _lfilter_samples(taps, xs), ns, ns),

@@ -44,7 +44,7 @@ def test_shaper_changes_on_the_main_thread_land_between_two_streamed_samples(ros
         assert isinstance(filt, StreamingShaper)
         shaped: list[int] = [0]  # samples the array filter has shaped
         changes: list[tuple[int, object]] = []  # (samples shaped before it, the FIR switched to)
-        process, switch = filt.process, filt.switch
+        process, switch = filt.process_values, filt.switch  # the node's one-sample path
 
         def counting_process(x):
             y = process(x)
@@ -55,7 +55,7 @@ def test_shaper_changes_on_the_main_thread_land_between_two_streamed_samples(ros
             changes.append((shaped[0], fir))  # under stream_lock, as process: the count is the change's place
             switch(fir)
 
-        filt.process, filt.switch = counting_process, recording_switch
+        filt.process_values, filt.switch = counting_process, recording_switch
         published: list[np.ndarray] = []
         node._array_pub.publish = lambda msg: published.append(np.array(msg.data))
         moves = motion(6000)

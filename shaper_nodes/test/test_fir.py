@@ -147,35 +147,47 @@ def test_retime_moves_a_pending_impulse_and_never_takes_back_what_was_emitted():
 @given(shaper_st, shaper_st, st.sampled_from([250.0, 1000.0]), st.data(),
        arrays(float, (300, 7), elements=st.floats(-2, 2)))
 def test_single_sample_path_equals_block_path_and_offline(shaper, other, rate, data, x):
-    """The fast one-sample path (ring buffer) gives what the block path gives, through filter
-    changes and any mix of one-sample calls and blocks, and both equal offline convolution."""
+    """The fast one-sample paths (ring buffer: numpy, and Python floats with process_values) give what the
+    block path gives, through filter changes and any mix of one-sample calls of either kind and blocks,
+    and all equal offline convolution."""
     fa, fb = discretize(shaper, rate), discretize(other, rate)
     # offline: one filter throughout
     one = StreamingShaper(fa, 7)
     ys = np.vstack([one.process(x[k]) for k in range(x.shape[0])])
     np.testing.assert_allclose(ys, offline(x, fa.dense()), rtol=0, atol=1e-12)
+    lists = StreamingShaper(fa, 7)
+    yl = np.array([lists.process_values(x[k].tolist()) for k in range(x.shape[0])])
+    np.testing.assert_allclose(yl, offline(x, fa.dense()), rtol=0, atol=1e-12)
     # switches at drawn samples, sample by sample against one block between switches, against a
     # random mix of one-sample calls and blocks
     cuts = sorted(set(data.draw(st.lists(st.integers(1, x.shape[0] - 1), max_size=4))))
     bounds = [0, *cuts, x.shape[0]]
     by_sample, by_block, mixed = StreamingShaper(fa, 7), StreamingShaper(fa, 7), StreamingShaper(fa, 7)
-    y1, y2, y3 = [], [], []
+    by_values = StreamingShaper(fa, 7)
+    y1, y2, y3, y4 = [], [], [], []
     for i, (lo, hi) in enumerate(itertools.pairwise(bounds)):
         if i:
             f = fb if i % 2 else fa
-            for s in (by_sample, by_block, mixed):
+            for s in (by_sample, by_block, mixed, by_values):
                 s.switch(f)
         y1 += [by_sample.process(x[k]) for k in range(lo, hi)]
         y2.append(by_block.process(x[lo:hi]))
+        y4 += [by_values.process_values(x[k].tolist()) for k in range(lo, hi)]
         k = lo
         while k < hi:
-            n = data.draw(st.integers(1, 40))
-            y3.append(mixed.process(x[k]) if n == 1 else mixed.process(x[k : min(hi, k + n)]))
+            n = data.draw(st.integers(-1, 40))  # -1: one sample as a list, 0 or 1: as an array, more: a block
+            if n == -1:
+                y3.append(np.array(mixed.process_values(x[k].tolist())))
+            elif n <= 1:
+                y3.append(mixed.process(x[k]))
+            else:
+                y3.append(mixed.process(x[k : min(hi, k + n)]))
             k = min(hi, k + n) if n > 1 else k + 1
-    y1a, y2a, y3a = np.vstack(y1), np.vstack(y2), np.vstack(y3)
+    y1a, y2a, y3a, y4a = np.vstack(y1), np.vstack(y2), np.vstack(y3), np.array(y4)
     np.testing.assert_allclose(y1a, y2a, rtol=0, atol=1e-12)
     np.testing.assert_allclose(y3a, y2a, rtol=0, atol=1e-12)
-    assert by_sample.stages == by_block.stages == mixed.stages
+    np.testing.assert_allclose(y4a, y2a, rtol=0, atol=1e-12)
+    assert by_sample.stages == by_block.stages == mixed.stages == by_values.stages
 
 
 def by_definition(x, firs_at):
@@ -214,3 +226,37 @@ def test_sample_by_sample_with_switches_is_the_definition_and_shares_no_state_wi
         row[:] = np.nan  # ... and into its input after the call
         y[:] = 1e9  # ... and into what it got
     np.testing.assert_allclose(np.vstack(out), by_definition(x, firs_at), rtol=0, atol=1e-9)
+    # the same with one list per sample (process_values), which the caller changes after each call
+    s, active, out = StreamingShaper(firs[0], 2), 0, []
+    for k in range(x.shape[0]):
+        if active + 1 < len(firs) and active < len(at) and k == at[active]:
+            active += 1
+            s.switch(firs[active])
+        values = x[k].tolist()
+        got = s.process_values(values)
+        out.append(list(got))
+        values[:] = [math.nan] * 2
+        got[:] = [1e9] * 2
+    np.testing.assert_allclose(np.array(out), by_definition(x, firs_at), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("cls", [StreamingShaper, RetimingShaper])
+def test_process_values_takes_one_sample_of_the_filters_channels(cls):
+    fir = discretize(design("zv", [Mode.from_hz(5.0, 0.05)]), 100.0)
+    s = cls(fir, 3)
+    with pytest.raises(ValueError, match="expected 3 values, got 2"):
+        s.process_values([1.0, 2.0])
+    assert s.process_values([1.0, 2.0, 3.0]) == [1.0, 2.0, 3.0]  # at rest at its first sample
+    s.reset([0.5, 0.5, 0.5])  # a list, as the node's last sent command
+    assert s.process_values([0.5, 0.5, 0.5]) == pytest.approx([0.5, 0.5, 0.5], abs=1e-15)
+
+
+@pytest.mark.parametrize("k", [1, 2, 5, 18, 32, 33, 60])
+def test_tap_sums_written_out_are_the_loop_over_the_taps_exactly(k):
+    """The one-sample path's written-out sum (up to UNROLLED_TAPS taps) adds in the loop's order: equal bit for bit."""
+    from shaper_nodes.core.shaping.fir import UNROLLED_TAPS, _tap_sum, _tap_sum_loop
+
+    rng = np.random.default_rng(k)
+    gains, rows, offset = rng.normal(size=k).tolist(), rng.normal(size=(k, 7)).tolist(), rng.normal(size=7).tolist()
+    assert _tap_sum(k)(gains, rows, offset) == _tap_sum_loop(gains, rows, offset)
+    assert (_tap_sum(k) is _tap_sum_loop) == (k > UNROLLED_TAPS)

@@ -54,8 +54,11 @@ settles at the input.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg.blas import daxpy
@@ -231,6 +234,42 @@ def _add_row(block: np.ndarray, row: np.ndarray, tiles: dict[bytes, np.ndarray],
     return out
 
 
+#: the most taps :func:`_tap_sum` writes a comprehension for (more: a loop over the taps)
+UNROLLED_TAPS = 32
+
+
+def _tap_sum_loop(gains: list[float], rows: list[list[float]], offset: list[float]) -> list[float]:
+    """:func:`_tap_sum`'s sum as a loop over the taps (any number of them), in the same order."""
+    g = gains[0]
+    out = [g * v for v in rows[0]]
+    for g, row in zip(gains[1:], rows[1:], strict=True):
+        out = [a + g * b for a, b in zip(out, row, strict=True)]
+    return [a + o for a, o in zip(out, offset, strict=True)]
+
+
+@functools.cache
+def _tap_sum(k: int) -> Callable[[list[float], list[list[float]], list[float]], list[float]]:
+    """``f(gains, rows, offset)``: per column j, ``(gains[0] rows[0][j] + ... + gains[k-1] rows[k-1][j]) +
+    offset[j]``, summed left to right, for ``k`` taps. Written out for ``k`` up to :data:`UNROLLED_TAPS` (as
+    the standard library's ``namedtuple`` and ``dataclasses`` write their methods): one comprehension over
+    the columns, with no loop over the taps, is what makes one sample of a few channels cheaper on Python
+    floats than numpy's calls."""
+    if k < 1:
+        raise ValueError("a FIR has at least one tap")
+    if k > UNROLLED_TAPS:
+        return _tap_sum_loop
+    gs, xs, rs = ([f"{c}{i}" for i in range(k)] for c in "gxr")
+    terms = " + ".join(f"{g} * {x}" for g, x in zip(gs, xs, strict=True))
+    source = (f"def tap_sum(gains, rows, offset):\n"
+              f"    {', '.join(gs)}, = gains\n"
+              f"    {', '.join(rs)}, = rows\n"
+              f"    return [({terms}) + o for o, {', '.join(xs)} in zip(offset, {', '.join(rs)})]\n")
+    namespace: dict[str, Any] = {}
+    exec(compile(source, f"<fir tap sum, {k} taps>", "exec"), namespace)  # our own source text
+    fn: Callable[[list[float], list[list[float]], list[float]], list[float]] = namespace["tap_sum"]
+    return fn
+
+
 class _Stage:
     """One FIR running on its own input stream (deviation from ``origin``).
 
@@ -239,8 +278,8 @@ class _Stage:
     path unrolls the ring into the history it prepends to the block.
     """
 
-    __slots__ = ("_buf", "_delays", "_gains", "_idx", "_pos", "_size", "_tiles", "fir", "held", "held_samples",
-                 "origin")
+    __slots__ = ("_buf", "_buf_ok", "_delays", "_gain_list", "_gains", "_idx", "_origin_list", "_pos", "_rows",
+                 "_rows_ok", "_size", "_sum", "_taps", "_tiles", "fir", "held", "held_samples", "origin")
 
     def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
         self.fir = fir
@@ -255,6 +294,20 @@ class _Stage:
         # per ring position, the rows holding x(k - delays[i]) when x(k) is at that position
         self._idx = [(p - fir.delays) % size for p in range(size)]
         self._tiles: dict[bytes, np.ndarray] = {}
+        # the same ring as Python lists, for one sample of a few channels (step_values): numpy's calls cost
+        # more than the arithmetic there; whichever form was written last is the current one
+        self._rows: list[list[float]] = self._buf.tolist()
+        self._rows_ok = self._buf_ok = True
+        self._taps = [ix.tolist() for ix in self._idx]
+        self._gain_list: list[float] = self._gains.tolist()
+        self._origin_list: list[float] = self.origin.tolist()
+        self._sum = _tap_sum(len(self._taps[0]))
+
+    def _numpy_ring(self) -> None:
+        """Make the numpy ring current (before a numpy path reads it); the list ring stays current."""
+        if not self._buf_ok:
+            self._buf[:] = self._rows
+            self._buf_ok = True
 
     def deviation(self, block: np.ndarray) -> np.ndarray:
         """``block - origin`` for a block of inputs (N, channels), as a new array."""
@@ -262,6 +315,8 @@ class _Stage:
 
     def step(self, x: np.ndarray) -> np.ndarray:
         """One input (deviation, shape (channels,)); returns the FIR output for it (a new array)."""
+        self._numpy_ring()
+        self._rows_ok = False
         p = self._pos
         self._buf[p] = x
         self._pos = p + 1 if p + 1 < self._size else 0
@@ -271,14 +326,32 @@ class _Stage:
     def step_value(self, x: np.ndarray) -> np.ndarray:
         """:meth:`step` for an input value ``x`` (not a deviation): its deviation from :attr:`origin` is
         written straight into the ring (one numpy call instead of two). Returns a new array."""
+        self._numpy_ring()
+        self._rows_ok = False
         p = self._pos
         np.subtract(x, self.origin, out=self._buf[p])
         self._pos = p + 1 if p + 1 < self._size else 0
         y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
         return y
 
+    def step_values(self, values: list[float], offset: list[float]) -> list[float]:
+        """:meth:`step_value` on Python floats (one sample of a few channels), plus ``offset``: the deviation
+        goes into the list ring, and the output is the same sum of the tapped inputs times the gains, in the
+        order of the delays, then plus the offset (equal to the numpy paths to rounding). Returns a new list."""
+        if not self._rows_ok:
+            self._rows = self._buf.tolist()
+            self._rows_ok = True
+        self._buf_ok = False
+        p = self._pos
+        rows = self._rows
+        rows[p] = [v - o for v, o in zip(values, self._origin_list, strict=True)]
+        self._pos = p + 1 if p + 1 < self._size else 0
+        return self._sum(self._gain_list, [rows[t] for t in self._taps[p]], offset)
+
     def run(self, block: np.ndarray) -> np.ndarray:
         """A block of inputs (deviations, shape (N, channels)); returns the FIR output."""
+        self._numpy_ring()
+        self._rows_ok = False
         n = block.shape[0]
         size = self._size
         hist_len = size - 1
@@ -309,7 +382,7 @@ class _ChannelShaper:
             raise ValueError("channels must be >= 1")
         self.channels = int(channels)
         self._fir = fir
-        self._last: np.ndarray | None = None
+        self._last: np.ndarray | list[float] | None = None
 
     @property
     def fir(self) -> SparseFir:
@@ -320,6 +393,17 @@ class _ChannelShaper:
     def started(self) -> bool:
         """Whether a sample has been seen since construction or :meth:`reset`."""
         return self._last is not None
+
+    def process(self, block: np.ndarray) -> np.ndarray:
+        """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
+        raise NotImplementedError
+
+    def process_values(self, values: list[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list of ``channels`` floats; returns a list."""
+        if len(values) != self.channels:
+            raise ValueError(f"expected {self.channels} values, got {len(values)}")
+        out: list[float] = self.process(np.array(values, dtype=float)).tolist()
+        return out
 
 
 class StreamingShaper(_ChannelShaper):
@@ -345,6 +429,7 @@ class StreamingShaper(_ChannelShaper):
         self._offset = np.zeros(self.channels)
         self._offset_tiles: dict[bytes, np.ndarray] = {}
         self._one = (self.channels,)  # the shape of one sample
+        self._offset_list: tuple[np.ndarray, list[float]] = (self._offset, self._offset.tolist())
 
     @property
     def stages(self) -> int:
@@ -380,10 +465,12 @@ class StreamingShaper(_ChannelShaper):
             raise RuntimeError(
                 f"{len(self._stages)} shaper changes still settling; wait {self._fir.length} samples"
             )
+        last = np.array(self._last, dtype=float)  # (a list after process_values)
         active = self._stages[-1]
-        active.held = self._last - active.origin
+        active.held = last - active.origin
         active.held_samples = 0
-        self._stages.append(_Stage(fir, self._last))
+        self._stages.append(_Stage(fir, last))
+        self._last = last
         self._fir = fir
 
     def process(self, block: np.ndarray) -> np.ndarray:
@@ -427,6 +514,24 @@ class StreamingShaper(_ChannelShaper):
         self._stages = keep
         self._last = x2[-1].copy()
         return out.reshape(x.shape) if single else out
+
+    def process_values(self, values: list[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list of ``channels`` floats; returns the shaped sample as
+        a list. In the usual case (started, one filter, no change settling) it runs on Python floats
+        (:meth:`_Stage.step_values`), cheaper than numpy's calls on a few values; equal to :meth:`process`
+        to rounding (tests hold them to 1e-12)."""
+        if len(values) != self.channels:
+            raise ValueError(f"expected {self.channels} values, got {len(values)}")
+        stages = self._stages
+        if self._last is None or len(stages) != 1 or stages[0].held is not None:
+            out: list[float] = self._sample(np.array(values, dtype=float)).tolist()
+            return out
+        offset, offset_list = self._offset_list
+        if offset is not self._offset:  # (the offset array is replaced, never changed in place)
+            offset, offset_list = self._offset_list = (self._offset, self._offset.tolist())
+        y = stages[0].step_values(values, offset_list)
+        self._last = list(values)  # (the caller's list may change)
+        return y
 
     def _sample(self, x: np.ndarray) -> np.ndarray:
         """:meth:`process` for one sample ``x`` (shape (channels,), owned), without the block path's

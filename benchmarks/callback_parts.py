@@ -1,0 +1,168 @@
+"""Where a streamed message's time goes inside the node: wake-up, callback, and the callback's parts.
+
+``python -m benchmarks.callback_parts [--seconds S]`` runs the echo node's pattern and the shaper
+node (ZVD 8 Hz, 7 joints, 1 kHz) at once, each in a process of its own started through this module,
+and drives them in turns (:func:`benchmarks.latency.measure_interleaved`). In the node's process it
+wraps the callback and, for the shaper, its parts (``_arrived``, ``_shape_array``, the filter's
+``process_values``, the publish, ``_count_forwarded``) with wall-clock timers, and prints per node:
+
+``wake``
+    from the middleware's reception of the message (its ``received_timestamp``) to the callback's start:
+    the executor's wake-up, wait set and take;
+``callback``
+    the callback's wall time, and the parts' (p50 and p90 over the driven messages).
+
+These are the times of the code as it runs at 1 kHz, one message at a time, with the caches cold
+from the wait between messages: a tight loop (``benchmarks.fir_throughput``) runs the same code hot
+and can rank two versions the other way. The timers add well under a microsecond each. The echo
+here takes the message info (a two-argument callback, as the shaper does) so that both take the same
+path through rclpy; the bench's echo node does not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import json
+import pathlib
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+#: the shaper's methods timed in the node (name on the class)
+SHAPER_PARTS = ("_arrived", "_shape_array", "_count_forwarded")
+ZVD = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03, "discretization": "split"}
+
+
+def _timed(name: str, fn: Callable[..., Any], parts: dict[str, list[int]]) -> Callable[..., Any]:
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        t = time.perf_counter_ns()
+        out = fn(*args, **kwargs)
+        parts.setdefault(name, []).append(time.perf_counter_ns() - t)
+        return out
+    return wrapper
+
+
+def _node_main(kind: str, out: str, argv: list[str]) -> None:
+    """In the node's process: run the echo pattern or the shaper node with the timers; write them at exit."""
+    parts: dict[str, list[int]] = {}
+    wake: list[int] = []
+
+    def dump() -> None:
+        pathlib.Path(out).write_text(json.dumps({"wake": wake, **parts}))
+
+    atexit.register(dump)
+
+    def timed_callback(callback: Callable[[Any, Any], None]) -> Callable[[Any, Any], None]:
+        def wrapper(msg: Any, info: Any) -> None:
+            t0 = time.time_ns()
+            wake.append(t0 - int(info["received_timestamp"]))
+            t = time.perf_counter_ns()
+            callback(msg, info)
+            parts.setdefault("callback", []).append(time.perf_counter_ns() - t)
+        return wrapper
+
+    if kind == "shaper":
+        from shaper_nodes.nodes import shaper as shaper_module
+
+        cls = shaper_module.ShaperNode
+        for name in SHAPER_PARTS:
+            setattr(cls, name, _timed(name, getattr(cls, name), parts))
+        on_array = cls._on_array
+
+        def timed_on_array(self: Any, msg: Any, info: Any) -> None:
+            t0 = time.time_ns()
+            wake.append(t0 - int(info["received_timestamp"]))
+            if "callback" not in parts:  # the filter and the publisher exist once the node runs
+                f = self._array_filter
+                f.process_values = _timed("filter.process_values", f.process_values, parts)
+                self._array_pub.publish = _timed("publish", self._array_pub.publish, parts)
+            t = time.perf_counter_ns()
+            on_array(self, msg, info)
+            parts.setdefault("callback", []).append(time.perf_counter_ns() - t)
+
+        cls._on_array = timed_on_array  # type: ignore[method-assign]  # before the node is made: its subscription takes this
+        sys.argv = [sys.argv[0], *argv]
+        shaper_module.main()
+        return
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from std_msgs.msg import Float64MultiArray
+
+    from .echo_node import DEPTH, IN_TOPIC, OUT_TOPIC
+
+    context = rclpy.context.Context()
+    rclpy.init(args=argv, context=context, signal_handler_options=SignalHandlerOptions.ALL)
+    node = rclpy.create_node("bench_echo_parts", context=context)
+    pub = node.create_publisher(Float64MultiArray, OUT_TOPIC, DEPTH)
+    publish = _timed("publish", pub.publish, parts)
+    callback: Any = timed_callback(lambda msg, info: publish(msg))  # two arguments: rclpy passes the info
+    node.create_subscription(Float64MultiArray, IN_TOPIC, callback, DEPTH)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()
+
+
+def run(seconds: float = 30.0, progress: Callable[[str], None] = print) -> dict[str, dict[str, tuple[float, float]]]:
+    """Drive both nodes for ``seconds`` each in 5 s turns; per node and part, (p50, p90) in us."""
+    from .latency import REPO_ROOT, ChildProcess, Target, echo_target, identity_fir, measure_interleaved, shaper_target
+
+    echo, zvd = echo_target(), shaper_target("shaper zvd 8 Hz", 7, 1000.0, ZVD)
+    with tempfile.TemporaryDirectory(prefix="callback_parts_") as tmp:
+        files = {"echo": pathlib.Path(tmp) / "echo.json", "shaper": pathlib.Path(tmp) / "shaper.json"}
+
+        def make(kind: str, argv: list[str]) -> Callable[[pathlib.Path], ChildProcess]:
+            def start(log_path: pathlib.Path) -> ChildProcess:
+                cmd = [sys.executable, "-m", "benchmarks.callback_parts", "--node", kind, str(files[kind]), *argv]
+                return ChildProcess(cmd, log_path, cwd=REPO_ROOT)
+            return start
+
+        targets = [Target("echo (two-argument callback)", make("echo", []), echo.in_topic, echo.out_topic,
+                          identity_fir()),
+                   Target(zvd.label, make("shaper", zvd.argv[1:]), zvd.in_topic, zvd.out_topic, zvd.fir)]
+        results = measure_interleaved(targets, seconds=seconds, rounds=max(1, round(seconds / 5)),
+                                      log_dir=pathlib.Path(tmp), progress=progress)
+        n = round(seconds * 1000)
+        out: dict[str, dict[str, tuple[float, float]]] = {}
+        for (kind, path), res in zip(files.items(), results, strict=True):
+            timers = json.loads(path.read_text())
+            table = {"round trip (driver)": (res.p50_us, float("nan"))}
+            for name, values in timers.items():
+                v = np.asarray(values[-n:], dtype=float) / 1e3
+                table[name] = (float(np.median(v)), float(np.percentile(v, 90)))
+            out[kind] = table
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--node"]:
+        _node_main(argv[1], argv[2], argv[3:])
+        return 0
+    p = argparse.ArgumentParser(prog="python -m benchmarks.callback_parts", description=__doc__.split("\n")[0])
+    p.add_argument("--seconds", type=float, default=30.0, help="driven time per node, s (default 30)")
+    args = p.parse_args(argv)
+    out = run(args.seconds)
+    print(f"\nper message, us (p50 / p90), {args.seconds:g} s per node at 1 kHz, 7 joints")
+    for kind, table in out.items():
+        print(f"  {kind}")
+        for name, (p50, p90) in table.items():
+            print(f"    {name:<28}{p50:9.1f}" + ("" if np.isnan(p90) else f" / {p90:7.1f}"))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
