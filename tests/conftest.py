@@ -39,13 +39,12 @@ def _collect_cycles():
     whenever allocations trigger it: left to that, a finished test's nodes and executors were
     finalized in the middle of a later test's executor wait, and once that crashed the whole run
     (SIGSEGV in the collector under rclpy's ``EventHandler.is_ready``, CI of 2026-11-26). Collected
-    here, they go at a known point, between tests, with no wait set in use. What survives is frozen
-    (``gc.freeze``: left out of later collections), so each collection, this one or one that
-    allocations trigger, scans only what the tests since made, not the whole process.
+    here, they go at a known point, between tests, with no wait set in use. (Freezing what survives,
+    ``gc.freeze``, made the collections cheaper, but a quiet run with it had two failures not seen
+    without it, not yet understood: left out; docs/testing.md.)
     """
     yield
     gc.collect()
-    gc.freeze()
 
 
 @pytest.fixture
