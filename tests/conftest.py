@@ -32,7 +32,7 @@ def domain_id() -> int:
 
 @pytest.fixture(autouse=True)
 def _collect_cycles():
-    """Collect the test's garbage when it ends (last of its teardowns), and freeze what survives.
+    """Collect the test's garbage when it ends (last of its teardowns).
 
     rclpy's objects sit in reference cycles (a node with its time source, parameter service and
     callbacks; an executor with its tasks), so they are freed by the cyclic collector, which runs
