@@ -30,29 +30,12 @@ def domain_id() -> int:
     return 1 + (base + next(_counter)) % 200
 
 
-@pytest.fixture(autouse=True)
-def _collect_cycles():
-    """Collect the test's garbage when it ends (last of its teardowns).
-
-    rclpy's objects sit in reference cycles (a node with its time source, parameter service and
-    callbacks; an executor with its tasks), so they are freed by the cyclic collector, which runs
-    whenever allocations trigger it: left to that, a finished test's nodes and executors were
-    finalized in the middle of a later test's executor wait, and once that crashed the whole run
-    (SIGSEGV in the collector under rclpy's ``EventHandler.is_ready``, CI of 2026-11-26). Collected
-    here, they go at a known point, between tests, with no wait set in use. (Freezing what survives,
-    ``gc.freeze``, made the collections cheaper, but a quiet run with it had two failures not seen
-    without it, not yet understood: left out; docs/testing.md.)
-    """
-    yield
-    gc.collect()
-
-
 @pytest.fixture
 def ros_context(domain_id):
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain_id)
     yield ctx
-    gc.collect()  # the test's nodes and executors are freed while their context is valid (and _collect_cycles)
+    gc.collect()  # the test's nodes and executors are freed while their context is valid (and conftest.py)
     ctx.try_shutdown()
 
 
