@@ -107,3 +107,61 @@ def test_the_shaper_shapes_a_block_as_its_samples_and_refuses_a_bad_one_whole(st
         conductor.close()
     assert len(out[2].data) == 2 and out[2].data.tolist() == pytest.approx([0.5, 1.0], abs=1e-12)
     assert shaper.running()
+
+
+
+@pytest.mark.parametrize("block", [1, 5])
+def test_an_answer_that_comes_after_the_timeout_is_not_applied_to_a_later_step(start_node, ros_context, block):
+    """A peer in the shaper's place leaves the first ask unanswered past ``lockstep_timeout`` (the plant holds the
+    setpoint and asks again), answers it then, with values far from it, and from there answers every ask with its
+    own data and layout, as the shaper does with no filter. The late answer is reported and applied to no step:
+    the setpoints the plant applied (``~/reference``) are, ask by ask, the ask's own rows or, for an ask that timed
+    out, the held setpoint."""
+    plant = start_node("sim_plant_node", "sim_plant", {
+        "joint_names": ["a", "b"], "rate": RATE, "mode": "lockstep", "lockstep.block": block,
+        "task.start": [0.0, 0.2], "task.goal": [0.5, -0.3], "task.dwell": 0.2, "task.preroll": 0.1,
+        "task.max_velocity": 1.0, "task.max_acceleration": 8.0, "task.cycles": 1, "lockstep_timeout": 1.0})
+    asks: list[Float64MultiArray] = []
+    applied: list[tuple[float, ...]] = []
+    ends: list[int] = []
+    conductor = Conductor(context=ros_context)
+    # the reference subscription is announced before the command subscription, in order: once the plant has
+    # matched the latter (its start gate), it has matched the former
+    conductor.create_subscription(JointState, "/sim_plant/reference", lambda m: applied.append(tuple(m.position)),
+                                  RELIABLE)
+    conductor.create_subscription(CycleEvent, "/cycle_events",
+                                  lambda m: ends.append(m.cycle) if m.event == CycleEvent.END else None, RELIABLE)
+    conductor.create_subscription(Float64MultiArray, "/shaper/commands", asks.append, RELIABLE)
+    answer = conductor.create_publisher(Float64MultiArray, "/forward_position_controller/commands", RELIABLE)
+    try:
+        conductor.start_task()  # once the plant has matched this peer's command endpoints (it asks again till then)
+        conductor.spin_until(lambda: len(asks) >= 2, 60.0, "the ask after the first one's timeout")
+        late = Float64MultiArray(data=[x + 0.3 for x in asks[0].data])
+        late.layout = asks[0].layout
+        answer.publish(late)
+        conductor.spin_until(lambda: "ignored a late answer" in plant.log_path.read_text(), 60.0,
+                             "the plant's report of the late answer")
+        answered = 1
+        while not ends:  # from the second ask on, every ask answered with its own data and layout
+            conductor.spin_until(lambda n=answered: len(asks) > n or bool(ends), 60.0, "the next ask or the end")
+            while answered < len(asks):
+                answer.publish(asks[answered])
+                answered += 1
+        conductor.spin_until(lambda: len(applied) >= sum(len(a.data) // 2 for a in asks), 60.0, "every applied step")
+    finally:
+        conductor.close()
+    log = plant.log_path.read_text()
+    label = asks[0].layout.dim[0].label
+    assert label.startswith("joints, ask " if block == 1 else "samples, ask ")
+    assert len({a.layout.dim[0].label for a in asks}) == len(asks)  # each ask numbered
+    assert f"ignored a late answer to '{label}'" in log, log
+    held = (0.0, 0.2)  # task.start: what the plant applies before any answer
+    k = 0
+    for i, ask in enumerate(asks):
+        rows = [tuple(ask.data[j:j + 2]) for j in range(0, len(ask.data), 2)]
+        got = applied[k:k + len(rows)]
+        k += len(rows)
+        if i == 0 or got != rows:  # the first ask timed out; another one may under load, never a wrong answer
+            assert got == [held] * len(rows), (i, got, rows)
+        held = got[-1]
+    assert plant.running() and plant.stop() == 0

@@ -56,7 +56,12 @@ lockstep
     matched publisher. With ``lockstep.block`` N > 1 the raw setpoints of N steps go to the shaper in one
     message (layout [samples, joints]) and the plant steps through the shaped block: the same run with N
     times fewer round trips, for a command path that is feedforward (each step's events, joint states, IMU
-    and /clock go out as before, step by step).
+    and /clock go out as before, step by step). Each ask is numbered in its layout's first label
+    ("joints, ask K", or "samples, ask K" for a block), which the shaper passes on with the shaped data: an
+    answer labelled with another ask (one that comes after ``lockstep_timeout`` went by) is ignored and
+    counted (``late_answers``), with a warning, so that it is never applied to a later step. An answer with no
+    layout, or a layout of its own (a peer that does not pass the plant's on), is taken as the answer to the
+    pending ask.
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -130,6 +135,8 @@ SENSOR_PARAMS = ("imu.bias", "imu.noise_stddev", "imu.gyro_noise_stddev", "imu.g
 WAITING = "waiting for subscribers"
 #: the lockstep IMU writer: reliable, 10 s of samples at 1 kHz kept for a reader that lags (the plant stepping in
 #: blocks may run seconds ahead of a loaded reader's intake)
+#: lockstep: how the first layout label of an ask begins (then the ask's number)
+ASK_LABELS = ("joints, ask ", "samples, ask ")
 LOCKSTEP_IMU_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 #: s of wall time between joint states of the lockstep arm at rest (joint_states.idle_period's default)
 IDLE_STATE_PERIOD = 0.1
@@ -336,6 +343,9 @@ class SimPlantNode(Node):
         self._block = int(self.get_parameter("lockstep.block").value)
         self.timeouts = 0
         self.refused = 0
+        self.late_answers = 0  # lockstep: answers to an earlier ask, ignored
+        self._ask_label = ""  # lockstep: the label of the pending ask (_publish_next)
+        self._asks = 0
         self.plant.reset(self._pose("task.start", {}))
         self._applied = self._pose("task.start", {}) if self.arm else self.plant.base_position
         self._raw = self._applied.copy()
@@ -558,11 +568,15 @@ class SimPlantNode(Node):
             raws.append(self._raw)
         if not raws:
             return
+        self._asks += 1
         if self._block == 1:
+            self._ask_label = f"{ASK_LABELS[0]}{self._asks}"
             msg = Float64MultiArray(data=self._raw.tolist())
+            msg.layout.dim = [MultiArrayDimension(label=self._ask_label, size=self.n, stride=self.n)]
         else:
+            self._ask_label = f"{ASK_LABELS[1]}{self._asks}"
             msg = Float64MultiArray(data=np.concatenate(raws).tolist())
-            msg.layout.dim = [MultiArrayDimension(label="samples", size=len(raws), stride=len(raws) * self.n),
+            msg.layout.dim = [MultiArrayDimension(label=self._ask_label, size=len(raws), stride=len(raws) * self.n),
                               MultiArrayDimension(label="joints", size=self.n, stride=self.n)]
         self._cmd_pub.publish(msg)
         self._waiting_since = time.monotonic()
@@ -747,6 +761,12 @@ class SimPlantNode(Node):
             self._publish_clock()  # the commanded positions (what "at rest" means)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
+        if self.mode == "lockstep" and msg.layout.dim and msg.layout.dim[0].label != self._ask_label \
+                and msg.layout.dim[0].label.startswith(ASK_LABELS):  # the answer to an earlier ask
+            self.late_answers += 1
+            self.get_logger().warning(f"ignored a late answer to '{msg.layout.dim[0].label}' (it came after"
+                                      f" lockstep_timeout; pending: '{self._ask_label}')", throttle_duration_sec=5.0)
+            return
         try:  # in lockstep, the answer to the steps asked for (lockstep.block)
             rows = len(self._asked) if self.mode == "lockstep" and self._waiting_since is not None else 1
             command = finite_array("shaped command", msg.data, size=self.n * rows)
