@@ -157,7 +157,7 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_
         env = {"ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
         player = NodeProcess("shaper_nodes", "bag_play", {
             "bag": str(bag), "rate": 2.0, "min_interval": 0.002, "wait_for_subscribers": 1, "start_delay": 1.0,
-            "pause_after_topics": ["/cycle_events"], "pause_after": 0.8,
+            "pause_after_topics": ["/shaper/active_shaper"], "pause_after": 0.8, "await_reports": "/learner/reports",
             "topics": ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]},
             log_path=tmp_path / "bag_play.log", env=env).start()
         try:
@@ -194,3 +194,68 @@ def test_installed_executables_name_a_missing_bag(tmp_path, domain_id):
     proc.stop()
     assert proc.proc.returncode == 1
     assert "no recording at" in (tmp_path / "log").read_text()
+
+
+def test_bag_play_waits_after_each_end_for_the_learners_report(start_node, ros_context, tmp_path):
+    """With ``await_reports``, once an END is played the next cycle event waits until a report arrives on that topic,
+    while the samples logged just after the END play on; an END that is never reported holds the next event for
+    ``await_timeout`` at most, with a warning, then the playback goes on."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64
+
+    from shaper_msgs.msg import CycleEvent, CycleReport
+    from shaper_nodes.ros.bag_writer import BagWriter
+
+    bag = tmp_path / "bag"
+    w = BagWriter(bag)
+    w.add_topic("/cycle_events", "shaper_msgs/msg/CycleEvent")
+    w.add_topic("/level", "std_msgs/msg/Float64")
+    t = 1_000_000_000
+    for cycle in range(2):  # per cycle: START, a sample, END and a sample logged at the END's time
+        w.write("/cycle_events", t, serialize_message(CycleEvent(event=CycleEvent.START, cycle=cycle)))
+        w.write("/level", t + 1_000_000, serialize_message(Float64(data=1.0 + cycle)))
+        w.write("/cycle_events", t + 2_000_000, serialize_message(CycleEvent(event=CycleEvent.END, cycle=cycle)))
+        w.write("/level", t + 2_000_000, serialize_message(Float64(data=10.0 + cycle)))
+        t += 3_000_000
+    w.write("/cycle_events", t, serialize_message(CycleEvent(event=CycleEvent.START, cycle=2)))
+    w.close()
+    node = Node("learner_stand_in", context=ros_context)
+    got: list[tuple[str, float]] = []
+    node.create_subscription(CycleEvent, "/cycle_events", lambda m: got.append(("event", m.event)), 100)
+    node.create_subscription(Float64, "/level", lambda m: got.append(("level", m.data)), 100)
+    reports = node.create_publisher(CycleReport, "/learner/reports", 100)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+
+    def spin_until(done, timeout, what):
+        deadline = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < deadline, f"timed out waiting for {what}"
+            executor.spin_once(timeout_sec=0.05)
+
+    starts = lambda: got.count(("event", CycleEvent.START))  # noqa: E731
+    try:
+        player = start_node("shaper_nodes", "bag_play", {
+            "bag": str(bag), "rate": 1.0, "min_interval": 0.002, "wait_for_subscribers": 1, "start_delay": 0.5,
+            "await_reports": "/learner/reports", "await_timeout": 2.0})
+        spin_until(lambda: reports.get_subscription_count() > 0, 60.0, "bag_play's report subscription")
+        spin_until(lambda: ("level", 10.0) in got, 60.0, "the sample logged with the first END")
+        # what must not come yet: the next START. Given time to come (a wait for something that must not happen),
+        # it does not: the player waits for the report.
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        assert starts() == 1, got
+        reports.publish(CycleReport(cycle=0))
+        spin_until(lambda: starts() == 2, 60.0, "the START after the reported END")
+        spin_until(lambda: not player.running(), 60.0, "bag_play to finish after the unreported END's timeout")
+        assert player.stop() == 0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+    log = player.log_path.read_text()
+    assert log.count("no report on /learner/reports") == 1 and "for END 2 within 2 s" in log, log
+    assert got[:4] == [("event", CycleEvent.START), ("level", 1.0), ("event", CycleEvent.END), ("level", 10.0)]
+    assert starts() == 3 and "done (/cycle_events: 5, /level: 4)" in log, log

@@ -10,6 +10,14 @@ and those in ``latched_topics`` are published RELIABLE + TRANSIENT_LOCAL (depth 
 that own them do; the others RELIABLE + VOLATILE, which best-effort subscribers accept too.
 Topic names can be remapped as usual (``--ros-args -r /tip_imu:=/other``).
 
+To replay into a running learner, ``await_reports`` names the learner's report topic
+(shaper_msgs/CycleReport): once a cycle END is played, the next cycle event or active shaper
+(shaper_msgs/Shaper) waits until the learner has reported as many cycles as ENDs were played (it
+reports each one after its update was answered), so that the active shaper its update produced
+(logged at the END's time in a lockstep recording) and the next START never reach the learner while
+it is still handling the END. Other topics play on meanwhile: the samples the learner waits for at
+an END may be logged just after it.
+
 When the recording is done (or on ``~/stop``) the node logs what it published and exits,
 unless ``loop`` is set.
 
@@ -28,6 +36,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
+from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
 from shaper_nodes.ros.bag_writer import message_class
 from shaper_nodes.ros.conversions import ns_to_time
@@ -51,6 +60,11 @@ PARAMETERS: tuple[Spec, ...] = (
     Spec("pause_after", 0.0, "Pause after a message on pause_after_topics, s of wall time: gives the nodes that"
          " act on it (a learner at a cycle's END) time to finish before the recording's later messages arrive,"
          " which in a lockstep recording may follow at once.", (0.0, 60.0), read_only=True),
+    Spec("await_reports", "", "A learner's report topic (shaper_msgs/CycleReport): once a cycle END is played, the"
+         " next cycle event or shaper_msgs/Shaper message waits until as many reports have arrived as ENDs were"
+         " played (at most await_timeout); other topics play on. Empty: do not wait.", read_only=True),
+    Spec("await_timeout", 30.0, "Longest wait for a report, s; then play on with a warning.",
+         (0.1, 600.0), read_only=True),
     Spec("wait_for_subscribers", 0, "Before playing, wait until every played topic has this many subscribers (0:"
          " do not wait).", (0, 100), read_only=True),
     Spec("start_timeout", 30.0, "Longest wait for the subscribers, s; then play anyway.", (0.0, 600.0),
@@ -123,6 +137,16 @@ class BagPlayNode(Node):
             raise ValueError(f"{path}: nothing to play (topics asked for: {wanted or 'all'}; in the recording:"
                              f" {sorted(infos)})")
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p("publish_clock") else None
+        self._event_topics = {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/CycleEvent"}
+        #: what waits for the reports: the cycle events and the active shaper
+        self._gated = self._event_topics | {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/Shaper"}
+        self._reports = threading.Condition()
+        self._reported = 0  # reports received on await_reports
+        self._ends = 0  # cycle ENDs played (this pass)
+        self._await_timeout = float(p("await_timeout"))
+        self._await = str(p("await_reports"))
+        if self._await:
+            self.create_subscription(CycleReport, self._await, self._on_report, 100)
         self.published: dict[str, int] = {t: 0 for t in self._pubs}
         self.finished = threading.Event()
         self._stop = threading.Event()
@@ -163,6 +187,36 @@ class BagPlayNode(Node):
         while time.monotonic() < end and not self._stop.is_set():
             time.sleep(0.02)
 
+    def _on_report(self, _msg: CycleReport) -> None:
+        with self._reports:
+            self._reported += 1
+            self._reports.notify_all()
+
+    def _count_end(self, raw: object) -> None:
+        """After a played message of a cycle-event topic: count it if it is an END."""
+        from rclpy.serialization import deserialize_message
+
+        if deserialize_message(_cdr(raw), CycleEvent).event == CycleEvent.END:
+            self._ends += 1
+
+    def _await_reports(self) -> float:
+        """Before a cycle event or an active shaper: wait for the report of every END played so far (at most
+        ``await_timeout``). Returns the wall time waited, s."""
+        if self._reported >= self._ends:  # (read without the lock: it only grows within a pass)
+            return 0.0
+        began = time.monotonic()
+        deadline = began + self._await_timeout
+        with self._reports:
+            while self._reported < self._ends and not self._stop.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.get_logger().warning(f"no report on {self._await} for END {self._ends} within"
+                                              f" {self._await_timeout:g} s; playing on")
+                    self._reported = self._ends  # the next END waits for its own report
+                    break
+                self._reports.wait(min(left, 0.05))
+        return time.monotonic() - began
+
     def _run(self) -> None:
         try:
             self._wait_subscribers()
@@ -181,6 +235,8 @@ class BagPlayNode(Node):
 
     def _play_once(self) -> None:
         first_ns, wall0, last = None, 0.0, -1e9
+        with self._reports:  # a pass counts its own ENDs and the reports that come with them
+            self._reported = self._ends = 0
         for topic, _, log_ns, raw in self.bag.messages(list(self._pubs)):
             if first_ns is None:
                 first_ns, wall0 = log_ns, time.monotonic()
@@ -192,6 +248,10 @@ class BagPlayNode(Node):
                 time.sleep(min(left, 0.05))
             if self._stop.is_set():
                 return
+            if self._await and topic in self._gated:
+                waited = self._await_reports()
+                wall0 += waited  # the rest of the recording keeps its spacing, later
+                last += waited
             if self._clock_pub is not None:
                 self._clock_pub.publish(Clock(clock=ns_to_time(log_ns)))
             self._pubs[topic].publish(_cdr(raw))
@@ -200,6 +260,8 @@ class BagPlayNode(Node):
             if topic in self.pause_topics and self.pause > 0.0:
                 wall0 += self.pause  # the rest of the recording keeps its spacing, later
                 last += self.pause
+            if self._await and topic in self._event_topics:
+                self._count_end(raw)
 
     def _on_stop(self, req, resp):
         self._stop.set()
