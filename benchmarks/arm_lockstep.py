@@ -17,12 +17,20 @@ Methods:
     The sim plant node (``plant.model: arm``, lockstep) executing a FollowJointTrajectory goal
     sent over DDS, with /joint_states (500 Hz), the IMU (1 kHz) and /clock published and one
     subscriber on each; wall time from the goal's acceptance to its result.
+``DDS writes alone``
+    The ceiling of the node over DDS on this machine: a process that only publishes what the node
+    publishes per 2 ms period (one JointState and one Clock as CDR bytes, two Imu messages, the
+    node's QoS), as fast as it can, to the same subscriber, with no simulation at all.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import math
 import pathlib
+import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -80,14 +88,30 @@ def core(seconds: float = 2.0) -> dict:
     return out
 
 
+def _counting_subscriber(ctx) -> tuple:
+    """A node counting /joint_states, /tip_imu and /clock, raw: counted, not decoded (it shares the 2 cores)."""
+    import rclpy
+    from rclpy.qos import qos_profile_sensor_data
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Imu, JointState
+
+    n = rclpy.create_node("arm_bench", context=ctx)
+    counts = {"joint_states": 0, "imu": 0, "clock": 0}
+
+    def count(key: str) -> Callable[[object], None]:
+        return lambda _m: counts.__setitem__(key, counts[key] + 1)
+
+    n.create_subscription(JointState, "/joint_states", count("joint_states"), 1000, raw=True)
+    n.create_subscription(Imu, "/tip_imu", count("imu"), qos_profile_sensor_data, raw=True)
+    n.create_subscription(Clock, "/clock", count("clock"), 1000, raw=True)
+    return n, counts
+
+
 def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict:
     import rclpy
     from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import qos_profile_sensor_data
-    from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import Imu, JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
     from shaper_nodes.ros.action_client import ResilientActionClient
@@ -100,16 +124,7 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
                           log_path=pathlib.Path(tmp) / "sim.log", env=env).start()
         ctx = rclpy.context.Context()
         rclpy.init(context=ctx)
-        n = rclpy.create_node("arm_bench", context=ctx)
-        counts = {"joint_states": 0, "imu": 0, "clock": 0}
-
-        def count(key: str) -> Callable[[object], None]:
-            return lambda _m: counts.__setitem__(key, counts[key] + 1)
-
-        # raw: the messages are counted, not decoded (the subscriber shares the 2 cores with the node)
-        n.create_subscription(JointState, "/joint_states", count("joint_states"), 1000, raw=True)
-        n.create_subscription(Imu, "/tip_imu", count("imu"), qos_profile_sensor_data, raw=True)
-        n.create_subscription(Clock, "/clock", count("clock"), 1000, raw=True)
+        n, counts = _counting_subscriber(ctx)
         client = ResilientActionClient(n, FollowJointTrajectory, "/joint_trajectory_controller/follow_joint_trajectory")
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(n)
@@ -144,10 +159,82 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
     return {"sim plant node over DDS": seconds / wall, "received": counts}
 
 
+def _write(periods: int) -> None:
+    """The writer process of ``writes``: prints its wall time for ``periods`` periods as JSON."""
+    import rclpy
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Imu, JointState
+
+    from shaper_nodes.ros.cdr import JointStateCdr, clock_cdr, stamp_parts
+    from sim_plant_node.arm.description import JOINT_NAMES
+    from sim_plant_node.sim_plant import LOCKSTEP_IMU_QOS
+
+    rclpy.init()
+    n = rclpy.create_node("arm_bench_writer")
+    pubs = (n.create_publisher(JointState, "/joint_states", 10), n.create_publisher(Imu, "/tip_imu", LOCKSTEP_IMU_QOS),
+            n.create_publisher(Clock, "/clock", 10))
+    deadline = time.monotonic() + 60
+    while any(p.get_subscription_count() == 0 for p in pubs):
+        if time.monotonic() > deadline:
+            raise SystemExit("no subscriber matched within 60 s")
+        time.sleep(0.01)
+    time.sleep(0.5)  # the matched subscriber's side of discovery
+    js_pub, imu_pub, clock_pub = pubs
+    js, imu = JointStateCdr(list(JOINT_NAMES), 6, 6, 6), Imu()
+    t0 = time.perf_counter()
+    for k in range(periods):  # per period what the node writes: two IMU samples, the joint state, the clock
+        sec, nsec = stamp_parts(k * 2e-3)
+        for _ in range(2):
+            imu.header.stamp.sec, imu.header.stamp.nanosec = sec, nsec
+            imu.linear_acceleration.x = float(k)
+            imu_pub.publish(imu)
+        js.set_stamp(sec, nsec)
+        js.position[:] = k
+        js_pub.publish(js.data())
+        clock_pub.publish(clock_cdr(sec, nsec))
+    wall = time.perf_counter() - t0
+    print(json.dumps({"wall": wall}), flush=True)
+    n.destroy_node()
+    rclpy.try_shutdown()
+
+
+def writes(periods: int = 5000) -> dict:
+    """Simulated s per wall s of the writes alone (the ``_write`` process) to the node's subscriber."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx)
+    n, counts = _counting_subscriber(ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(n)
+    env_cmd = [sys.executable, "-m", "benchmarks.arm_lockstep", "--write", str(periods)]
+    proc = subprocess.Popen(env_cmd, stdout=subprocess.PIPE, text=True)
+    try:
+        while proc.poll() is None:
+            ex.spin_once(timeout_sec=0.01)
+        out = proc.stdout.read() if proc.stdout else ""
+        if proc.returncode != 0:
+            raise RuntimeError(f"the writer process failed (exit {proc.returncode})")
+        wall = json.loads(out.strip().splitlines()[-1])["wall"]
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:  # what is still in flight
+            ex.spin_once(timeout_sec=0.01)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        ex.shutdown()
+        n.destroy_node()
+        ctx.try_shutdown()
+    return {"DDS writes alone": periods * 2e-3 / wall, "writes received": counts}
+
+
 def run(*, progress: Callable[[str], None] = print) -> dict:
     progress("arm: core stepping rates")
     out = core()
     out.update(node(progress=progress))
+    progress("arm: the node's DDS writes alone")
+    out.update(writes())
     return out
 
 
@@ -164,3 +251,23 @@ def print_table(fig: dict) -> None:
     if rec:
         print(f"(the node run: received {rec['joint_states']} joint states, {rec['imu']} IMU messages and"
               f" {rec['clock']} clock ticks; IMU and clock are best effort or lossy under load)")
+    rec = fig.get("writes received", {})
+    if rec:
+        print(f"(the writes alone: received {rec['joint_states']} joint states, {rec['imu']} IMU messages and"
+              f" {rec['clock']} clock ticks)")
+    if "DDS writes alone" in fig and "sim plant node over DDS" in fig:
+        bound = 1.0 / (1.0 / fig["DDS writes alone"] + 1.0 / fig["ArmPlant + controller"])
+        print(f"the node over DDS at {fig['sim plant node over DDS'] / fig['DDS writes alone']:.2f} of the writes"
+              f" alone; one process that simulates and writes, one after the other, is bound to {bound:.1f} sim s"
+              f" per wall s here (the node at {fig['sim plant node over DDS'] / bound:.2f} of that)")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--write", type=int, metavar="PERIODS", help="be the writer process of the writes-alone run")
+    args = parser.parse_args()
+    if args.write:
+        _write(args.write)
+    else:
+        fig = run()
+        print_table(fig)
