@@ -307,3 +307,25 @@ def test_a_renamed_recording_names_its_file_after_the_new_folder(tmp_path):
     (tmp_path / "open").mkdir()
     with pytest.raises(ValueError, match=r"no metadata\.yaml"):
         rename_recording(tmp_path / "open", tmp_path / "closed")
+
+
+def test_a_shaper_logged_with_a_later_end_at_the_same_time_is_put_after_it():
+    """Ties of log time only: the shapers before the group's last END move to just after it, in their order; a
+    shaper at another time, or after the END, or with no END in its group, stays where it was recorded."""
+    from shaper_nodes.core.recording import shaper_after_end
+
+    def order(items, max_group=10_000):
+        return [name for _, name in shaper_after_end(items, lambda m: m[0], lambda m: m[1].startswith("shaper"),
+                                                     lambda m: m[1].startswith("END"), max_group)]
+
+    rec = [(1, "imu a"), (1, "shaper 1"), (1, "imu b"), (1, "shaper 2"), (1, "END"), (1, "imu c"), (1, "START"),
+           (2, "shaper 3"), (2, "START"), (3, "END"), (3, "shaper 4"), (4, "shaper 5"), (4, "imu d")]
+    assert order(rec) == ["imu a", "imu b", "END", "shaper 1", "shaper 2", "imu c", "START",
+                          "shaper 3", "START", "END", "shaper 4", "shaper 5", "imu d"]
+    # a shaper before an END at a later time (a change during the cycle) stays before it
+    assert order([(1, "shaper"), (2, "END")]) == ["shaper", "END"]
+    # two ENDs at one time: after the last
+    assert order([(5, "shaper"), (5, "END 1"), (5, "END 2"), (5, "imu")]) == ["END 1", "END 2", "shaper", "imu"]
+    # a run longer than the bound goes as recorded
+    assert order([(1, "shaper"), (1, "imu"), (1, "END")], max_group=2) == ["shaper", "imu", "END"]
+    assert order([]) == []

@@ -29,6 +29,7 @@ import numpy as np
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams, ListSession, SessionResult, list_config
+from shaper_nodes.core.recording import shaper_after_end
 from shaper_nodes.core.shaping import Mode
 
 from .segment import CycleSpan
@@ -93,7 +94,10 @@ def replay_items(items: Iterable[tuple[str, tuple]], params: Mapping[str, object
             if pending is not None and session.latest_imu >= pending[2]:
                 event(pending)
                 pending = None
-        elif kind == "shaper":
+        elif kind == "shaper":  # recorded after the END: the END is handled first (in the node, the change it made
+            if pending is not None:  # can only come once the END was handled)
+                event(pending)
+                pending = None
             session.on_shaper(*payload)
         else:
             if pending is not None:
@@ -140,8 +144,16 @@ def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
         if missing:
             raise ListError(f"bag {path} has no messages on {missing} (topics: {sorted(reader.topics)})")
 
+        def is_end(m: tuple) -> bool:
+            if m[0].topic != names["events"]:
+                return False
+            msg: Any = reader.deserialize(m[2], m[0].msgtype)  # typed at run time, from the recorded definition
+            return int(msg.event) == END
+
         def items() -> Iterator[tuple[str, tuple]]:
-            for conn, _, raw in reader.messages(connections=conns):
+            ordered = shaper_after_end(reader.messages(connections=conns), lambda m: m[1],
+                                       lambda m: m[0].topic == names["shaper"], is_end)
+            for conn, _, raw in ordered:
                 # typed only at run time (built from the recorded definition); the topic says which fields it has
                 msg: Any = reader.deserialize(raw, conn.msgtype)
                 if conn.topic == names["imu"]:
@@ -179,6 +191,21 @@ class LearnerReplay:
     notes: list[str] = field(default_factory=list)
 
 
+def _shaper_order(rec: Recording) -> list[int]:
+    """Where each active shaper goes in the recording order: its own place, or just after an END recorded later
+    that has the shaper's time. In lockstep the clock stands still while a learner answers an END, so its update
+    is stamped (and logged) at the END's time, and the recorder, taking several topics, may write it first (an
+    END repaired by DDS after a lost packet comes later). A change at the END's instant shaped none of that
+    cycle's samples either way: it belongs after the END."""
+    s, e = rec.shapers, rec.events
+    ends = [(q, t) for q, k, t in zip(e.seq, e.kind, e.t, strict=True) if k == END]
+    out = []
+    for q, t in zip(s.seq, s.t, strict=True):
+        later = [eq for eq, et in ends if eq > q and abs(et - t) <= 1e-9]
+        out.append(max(later) if later else q)
+    return out
+
+
 def _list_items(rec: Recording, spans: list[CycleSpan], from_events: bool, assume_unshaped: bool
                 ) -> Iterator[tuple[str, tuple]]:
     """The recording as the LIST learner's input stream, in recording order."""
@@ -186,26 +213,26 @@ def _list_items(rec: Recording, spans: list[CycleSpan], from_events: bool, assum
 
     def imu():
         for q, t, a in zip(acc.seq.tolist(), acc.t.tolist(), acc.values.tolist(), strict=True):
-            yield q, "imu", (t, a)
+            yield (q, 0), "imu", (t, a)
 
     def shapers():
         s = rec.shapers
         if assume_unshaped:
-            yield -1, "shaper", ((1.0,), (0.0,), "assumed", 0)
-        for i, q in enumerate(s.seq):
-            yield q, "shaper", (s.amplitudes[i], s.times[i], s.source[i], s.revision[i])
+            yield (-1, 1), "shaper", ((1.0,), (0.0,), "assumed", 0)
+        for i, q in enumerate(_shaper_order(rec) if from_events else s.seq):
+            yield (q, 1), "shaper", (s.amplitudes[i], s.times[i], s.source[i], s.revision[i])
 
     def events():
         if from_events:
             e = rec.events
             for i in np.argsort(np.asarray(e.seq), kind="stable"):
-                yield e.seq[i], "event", (e.kind[i], e.cycle[i], e.t[i], e.start[i], e.goal[i])
+                yield (e.seq[i], 0), "event", (e.kind[i], e.cycle[i], e.t[i], e.start[i], e.goal[i])
             return
         for s in spans:
-            yield s.start_seq, "event", (START, s.cycle, s.start, s.start_positions, s.goal_positions)
-            yield s.motion_end_seq, "event", (MOTION_END, s.cycle, s.motion_end, (), ())
+            yield (s.start_seq, 0), "event", (START, s.cycle, s.start, s.start_positions, s.goal_positions)
+            yield (s.motion_end_seq, 0), "event", (MOTION_END, s.cycle, s.motion_end, (), ())
             if s.complete:
-                yield s.end_seq, "event", (END, s.cycle, s.end, (), ())
+                yield (s.end_seq, 0), "event", (END, s.cycle, s.end, (), ())
 
     for _, kind, payload in heapq.merge(imu(), shapers(), events(), key=lambda x: x[0]):
         yield kind, payload

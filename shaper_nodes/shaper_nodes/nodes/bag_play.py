@@ -16,7 +16,8 @@ To replay into a running learner, ``await_reports`` names the learner's report t
 reports each one after its update was answered), so that the active shaper its update produced
 (logged at the END's time in a lockstep recording) and the next START never reach the learner while
 it is still handling the END. Other topics play on meanwhile: the samples the learner waits for at
-an END may be logged just after it.
+an END may be logged just after it. Whatever the setting, an active shaper logged at the same time as
+a later END is played just after that END (:func:`shaper_nodes.core.recording.shaper_after_end`).
 
 When the recording is done (or on ``~/stop``) the node logs what it published and exits,
 unless ``loop`` is set.
@@ -38,6 +39,7 @@ from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
+from shaper_nodes.core.recording import shaper_after_end
 from shaper_nodes.ros.bag_writer import message_class
 from shaper_nodes.ros.conversions import ns_to_time
 from shaper_nodes.ros.node_main import run_node
@@ -138,8 +140,8 @@ class BagPlayNode(Node):
                              f" {sorted(infos)})")
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p("publish_clock") else None
         self._event_topics = {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/CycleEvent"}
-        #: what waits for the reports: the cycle events and the active shaper
-        self._gated = self._event_topics | {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/Shaper"}
+        self._shaper_topics = {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/Shaper"}
+        self._gated = self._event_topics | self._shaper_topics  # what waits for the reports (await_reports)
         self._reports = threading.Condition()
         self._reported = 0  # reports received on await_reports
         self._ends = 0  # cycle ENDs played (this pass)
@@ -192,11 +194,15 @@ class BagPlayNode(Node):
             self._reported += 1
             self._reports.notify_all()
 
-    def _count_end(self, raw: object) -> None:
-        """After a played message of a cycle-event topic: count it if it is an END."""
+    @staticmethod
+    def _is_end(raw: object) -> bool:
         from rclpy.serialization import deserialize_message
 
-        if deserialize_message(_cdr(raw), CycleEvent).event == CycleEvent.END:
+        return bool(deserialize_message(_cdr(raw), CycleEvent).event == CycleEvent.END)
+
+    def _count_end(self, raw: object) -> None:
+        """After a played message of a cycle-event topic: count it if it is an END."""
+        if self._is_end(raw):
             self._ends += 1
 
     def _await_reports(self) -> float:
@@ -237,7 +243,10 @@ class BagPlayNode(Node):
         first_ns, wall0, last = None, 0.0, -1e9
         with self._reports:  # a pass counts its own ENDs and the reports that come with them
             self._reported = self._ends = 0
-        for topic, _, log_ns, raw in self.bag.messages(list(self._pubs)):
+        ordered = shaper_after_end(self.bag.messages(list(self._pubs)), lambda m: m[2],
+                                   lambda m: m[0] in self._shaper_topics,
+                                   lambda m: m[0] in self._event_topics and self._is_end(m[3]))
+        for topic, _, log_ns, raw in ordered:
             if first_ns is None:
                 first_ns, wall0 = log_ns, time.monotonic()
             due = max(wall0 + (log_ns - first_ns) * 1e-9 / self.rate, last + self.min_interval)
