@@ -289,7 +289,7 @@ def _arm_rows(res: dict) -> list[dict[str, Any]]:
     base = res["baseline: pinocchio aba"]
     rows = []
     for key, value in res.items():
-        if isinstance(value, float) and not key.startswith("baseline"):
+        if isinstance(value, float) and not key.startswith(("baseline", "reader", "one Python reader")):
             goal = GOALS["arm_node"] if key.startswith("sim plant node") else (
                 GOALS["arm_core"] if key.startswith("ArmPlant") else "")
             rows.append(_row(f"arm lockstep: {key}", value, "sim s/wall s", "one Pinocchio aba per 1 ms step", base,
@@ -301,6 +301,10 @@ def _arm_rows(res: dict) -> list[dict[str, Any]]:
             bound = 1.0 / (1.0 / res["DDS writes alone"] + 1.0 / res["ArmPlant + controller"])
             rows.append(_row("arm lockstep: sim plant node over DDS", res["sim plant node over DDS"], "sim s/wall s",
                              "one-process bound: 1 / (1/writes alone + 1/ArmPlant + controller)", bound))
+    if "one Python reader's limit" in res:  # a reader of the node's topics at this rate takes a whole core
+        rows.append(_row("arm lockstep: one Python reader's limit", res["one Python reader's limit"], "sim s/wall s",
+                         f"the reader's CPU per message ({res['reader CPU per message, us']:.1f} us) x 2000 msg per"
+                         " sim s = one core", 1.0, goal=""))
     return rows
 
 

@@ -21,6 +21,11 @@ Methods:
     The ceiling of the node over DDS on this machine: a process that only publishes what the node
     publishes per 2 ms period (one JointState and one Clock as CDR bytes, two Imu messages, the
     node's QoS), as fast as it can, to the same subscriber, with no simulation at all.
+``one Python reader's limit``
+    The subscriber's CPU time per message taken (its process, DDS threads included, from its first
+    message to its last) with the writer paced at 4x real time, which it follows, as the simulated
+    rate at which the node's 2000 messages per simulated second take all of one core: no Python node
+    reading all these topics follows faster.
 """
 
 from __future__ import annotations
@@ -89,7 +94,8 @@ def core(seconds: float = 2.0) -> dict:
 
 
 def _counting_subscriber(ctx) -> tuple:
-    """A node counting /joint_states, /tip_imu and /clock, raw: counted, not decoded (it shares the 2 cores)."""
+    """A node counting /joint_states, /tip_imu and /clock, raw: counted, not decoded (it shares the 2 cores);
+    also its process's CPU time at the first and the last message."""
     import rclpy
     from rclpy.qos import qos_profile_sensor_data
     from rosgraph_msgs.msg import Clock
@@ -97,14 +103,20 @@ def _counting_subscriber(ctx) -> tuple:
 
     n = rclpy.create_node("arm_bench", context=ctx)
     counts = {"joint_states": 0, "imu": 0, "clock": 0}
+    cpu = {"first": 0.0, "last": 0.0, "n": 0}  # the reader process's CPU time at its first and last message
 
     def count(key: str) -> Callable[[object], None]:
-        return lambda _m: counts.__setitem__(key, counts[key] + 1)
+        def took(_m: object) -> None:
+            counts[key] += 1
+            cpu["last"], cpu["n"] = time.process_time(), cpu["n"] + 1
+            if cpu["n"] == 1:
+                cpu["first"] = cpu["last"]
+        return took
 
     n.create_subscription(JointState, "/joint_states", count("joint_states"), 1000, raw=True)
     n.create_subscription(Imu, "/tip_imu", count("imu"), qos_profile_sensor_data, raw=True)
     n.create_subscription(Clock, "/clock", count("clock"), 1000, raw=True)
-    return n, counts
+    return n, counts, cpu
 
 
 def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict:
@@ -124,7 +136,7 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
                           log_path=pathlib.Path(tmp) / "sim.log", env=env).start()
         ctx = rclpy.context.Context()
         rclpy.init(context=ctx)
-        n, counts = _counting_subscriber(ctx)
+        n, counts, _cpu = _counting_subscriber(ctx)
         client = ResilientActionClient(n, FollowJointTrajectory, "/joint_trajectory_controller/follow_joint_trajectory")
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(n)
@@ -159,8 +171,9 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
     return {"sim plant node over DDS": seconds / wall, "received": counts}
 
 
-def _write(periods: int) -> None:
-    """The writer process of ``writes``: prints its wall time for ``periods`` periods as JSON."""
+def _write(periods: int, pace: float = 0.0) -> None:
+    """The writer process of ``writes``: prints its wall time for ``periods`` periods as JSON (``pace``: simulated
+    s per wall s to keep to; 0: as fast as it can)."""
     import rclpy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
@@ -183,6 +196,10 @@ def _write(periods: int) -> None:
     js, imu = JointStateCdr(list(JOINT_NAMES), 6, 6, 6), Imu()
     t0 = time.perf_counter()
     for k in range(periods):  # per period what the node writes: two IMU samples, the joint state, the clock
+        if pace > 0:
+            left = t0 + k * 2e-3 / pace - time.perf_counter()
+            if left > 0:
+                time.sleep(left)
         sec, nsec = stamp_parts(k * 2e-3)
         for _ in range(2):
             imu.header.stamp.sec, imu.header.stamp.nanosec = sec, nsec
@@ -198,17 +215,28 @@ def _write(periods: int) -> None:
     rclpy.try_shutdown()
 
 
-def writes(periods: int = 5000) -> dict:
-    """Simulated s per wall s of the writes alone (the ``_write`` process) to the node's subscriber."""
+def writes(periods: int = 5000, pace: float = 4.0) -> dict:
+    """Simulated s per wall s of the writes alone (the ``_write`` process) to the node's subscriber, as fast as the
+    writer can; then, paced at ``pace`` (a rate the reader follows), the reader's CPU time per message."""
+    fast = _writes(periods, 0.0)
+    paced = _writes(int(periods * 0.4), pace)
+    per_message = paced["cpu per message"]
+    # the node's topics carry 2000 messages per simulated second: the rate at which this reader's CPU is all taken
+    return {"DDS writes alone": fast["rate"], "writes received": fast["received"],
+            "reader CPU per message, us": 1e6 * per_message, "reader took, paced": paced["received"],
+            "one Python reader's limit": 1.0 / (2000 * per_message)}
+
+
+def _writes(periods: int, pace: float) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx)
-    n, counts = _counting_subscriber(ctx)
+    n, counts, cpu = _counting_subscriber(ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(n)
-    env_cmd = [sys.executable, "-m", "benchmarks.arm_lockstep", "--write", str(periods)]
+    env_cmd = [sys.executable, "-m", "benchmarks.arm_lockstep", "--write", str(periods), "--pace", str(pace)]
     proc = subprocess.Popen(env_cmd, stdout=subprocess.PIPE, text=True)
     try:
         while proc.poll() is None:
@@ -226,7 +254,8 @@ def writes(periods: int = 5000) -> dict:
         ex.shutdown()
         n.destroy_node()
         ctx.try_shutdown()
-    return {"DDS writes alone": periods * 2e-3 / wall, "writes received": counts}
+    return {"rate": periods * 2e-3 / wall, "received": counts,
+            "cpu per message": (cpu["last"] - cpu["first"]) / max(cpu["n"] - 1, 1)}
 
 
 def run(*, progress: Callable[[str], None] = print) -> dict:
@@ -245,8 +274,13 @@ def print_table(fig: dict) -> None:
     print(f"{'method':>28} | {'sim s / wall s':>14} | {'x of baseline':>13}")
     print("-" * 62)
     for key, value in fig.items():
-        if isinstance(value, float):
+        if isinstance(value, float) and not key.startswith("reader"):
             print(f"{key:>28} | {value:14.1f} | {value / base:13.3f}")
+    if "reader CPU per message, us" in fig:
+        took = fig["reader took, paced"]
+        print(f"(the reader, the writer paced at 4x: {fig['reader CPU per message, us']:.1f} us of CPU per message"
+              f" taken; it took {took['joint_states']} joint states, {took['imu']} IMU and {took['clock']} clock"
+              " ticks of 2000, 4000 and 2000)")
     rec = fig.get("received", {})
     if rec:
         print(f"(the node run: received {rec['joint_states']} joint states, {rec['imu']} IMU messages and"
@@ -265,9 +299,10 @@ def print_table(fig: dict) -> None:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", type=int, metavar="PERIODS", help="be the writer process of the writes-alone run")
+    parser.add_argument("--pace", type=float, default=0.0, help="the writer's pace, sim s per wall s (0: flat out)")
     args = parser.parse_args()
     if args.write:
-        _write(args.write)
+        _write(args.write, args.pace)
     else:
         fig = run()
         print_table(fig)
