@@ -220,3 +220,53 @@ def test_shaper_at_gives_the_schedules_shaper_at_any_pose_and_sends_nothing(grap
     spin_until(ex, lambda: not sched._pending, 10.0, "no request in flight")
     assert sched.sent == sent and peer.real[-1].revision == revision
     assert peer.modes[-1].modes[0].natural_frequency == here
+
+
+def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_context):
+    """The 500 Hz feed has no middleware event handlers (their waitables cost every wait): a publisher of the joint
+    states that never matches (here best effort, the scheduler's subscription reliable) is found on the graph and
+    reported on /diagnostics with the topic; a matching publisher's poses then reach the schedule."""
+    from conftest import Diagnosed
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    rule = {"membership": ["triangular"], "natural_frequency": [10.0], "damping_ratio": [0.05]}
+    overrides = [Parameter(k, value=v) for k, v in {"premises": ["joint_1"], "rule_names": ["low", "high"],
+                                                    "interpolation": "modes", "period": 0.02,
+                                                    "stale_timeout": 3600.0, "error_throttle": 0.0}.items()]
+    for name, peak, hz in (("low", 0.0, 10.0), ("high", 1.0, 20.0)):
+        overrides += [Parameter(f"rules.{name}.{k}", value=v) for k, v in rule.items()]
+        overrides += [Parameter(f"rules.{name}.membership_params", value=[peak - 1.0, peak, peak + 1.0]),
+                      Parameter(f"rules.{name}.natural_frequency", value=[hz])]
+    node = SchedulerNode(context=ros_context, parameter_overrides=overrides)
+    probe = Node("probe", context=ros_context)
+    diag = Diagnosed(probe)
+    modes: list[ModeEstimate] = []
+    probe.create_subscription(ModeEstimate, "/scheduler/mode_estimate", modes.append, 10)
+    probe.create_publisher(JointState, "/joint_states", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (node, probe):
+        ex.add_node(n)
+
+    def spin_until(cond, what, timeout=60.0):
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            ex.spin_once(timeout_sec=0.02)
+
+    try:
+        spin_until(lambda: diag.find("scheduler", "none matched"), "the report of the unmatched publisher")
+        status = diag.find("scheduler", "none matched")
+        assert "/joint_states" in status.message and "incompatible QoS" in status.message
+        assert not modes  # nothing came through the unmatched publisher
+        reliable = probe.create_publisher(JointState, "/joint_states", 10)
+
+        def pose() -> bool:
+            reliable.publish(JointState(name=["joint_1"], position=[0.5]))
+            return True
+
+        spin_until(lambda: pose() and modes, "a mode estimate from the matching publisher's pose")
+        assert modes[-1].modes[0].natural_frequency == pytest.approx(15.0)
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
