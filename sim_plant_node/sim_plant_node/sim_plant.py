@@ -133,10 +133,10 @@ SENSOR_PARAMS = ("imu.bias", "imu.noise_stddev", "imu.gyro_noise_stddev", "imu.g
                  "joint_states.noise_stddev", "joint_states.resolution")
 #: how ~/start_task's refusal begins while task.subscribers are not matched yet (a driver may retry)
 WAITING = "waiting for subscribers"
-#: the lockstep IMU writer: reliable, 10 s of samples at 1 kHz kept for a reader that lags (the plant stepping in
-#: blocks may run seconds ahead of a loaded reader's intake)
 #: lockstep: how the first layout label of an ask begins (then the ask's number)
 ASK_LABELS = ("joints, ask ", "samples, ask ")
+#: the lockstep IMU writer: reliable, 10 s of samples at 1 kHz kept for a reader that lags (the plant stepping in
+#: blocks may run seconds ahead of a loaded reader's intake)
 LOCKSTEP_IMU_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 #: s of wall time between joint states of the lockstep arm at rest (joint_states.idle_period's default)
 IDLE_STATE_PERIOD = 0.1

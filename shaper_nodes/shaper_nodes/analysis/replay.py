@@ -192,17 +192,20 @@ class LearnerReplay:
 
 
 def _shaper_order(rec: Recording) -> list[int]:
-    """Where each active shaper goes in the recording order: its own place, or just after an END recorded later
-    that has the shaper's time. In lockstep the clock stands still while a learner answers an END, so its update
-    is stamped (and logged) at the END's time, and the recorder, taking several topics, may write it first (an
-    END repaired by DDS after a lost packet comes later). A change at the END's instant shaped none of that
-    cycle's samples either way: it belongs after the END."""
+    """Where each active shaper goes in the recording order: its own place, or, recorded before an END of the
+    same stamp, just after that END (:func:`shaper_nodes.core.recording.shaper_after_end`, on the events and
+    shapers in recording order; the key the merge gives it is then the END's)."""
     s, e = rec.shapers, rec.events
-    ends = [(q, t) for q, k, t in zip(e.seq, e.kind, e.t, strict=True) if k == END]
-    out = []
-    for q, t in zip(s.seq, s.t, strict=True):
-        later = [eq for eq, et in ends if eq > q and abs(et - t) <= 1e-9]
-        out.append(max(later) if later else q)
+    marks = sorted([(q, t, k == END, None) for q, k, t in zip(e.seq, e.kind, e.t, strict=True)]
+                   + [(q, t, False, i) for i, (q, t) in enumerate(zip(s.seq, s.t, strict=True))],
+                   key=lambda m: m[0])
+    out = list(s.seq)
+    before = -1  # the recording position of the last event passed
+    for q, _, _, i in shaper_after_end(marks, lambda m: m[1], lambda m: m[3] is not None, lambda m: m[2]):
+        if i is None:
+            before = q
+        else:
+            out[i] = max(q, before)
     return out
 
 

@@ -200,11 +200,6 @@ class BagPlayNode(Node):
 
         return bool(deserialize_message(_cdr(raw), CycleEvent).event == CycleEvent.END)
 
-    def _count_end(self, raw: object) -> None:
-        """After a played message of a cycle-event topic: count it if it is an END."""
-        if self._is_end(raw):
-            self._ends += 1
-
     def _await_reports(self) -> float:
         """Before a cycle event or an active shaper: wait for the report of every END played so far (at most
         ``await_timeout``). Returns the wall time waited, s."""
@@ -269,8 +264,8 @@ class BagPlayNode(Node):
             if topic in self.pause_topics and self.pause > 0.0:
                 wall0 += self.pause  # the rest of the recording keeps its spacing, later
                 last += self.pause
-            if self._await and topic in self._event_topics:
-                self._count_end(raw)
+            if self._await and topic in self._event_topics and self._is_end(raw):
+                self._ends += 1
 
     def _on_stop(self, req, resp):
         self._stop.set()

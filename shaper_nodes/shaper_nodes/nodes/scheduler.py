@@ -108,10 +108,10 @@ def _one_rule_base(family: str = "zv", **extra: Any) -> Scheduler:
             "natural_frequency": [10.0], "damping_ratio": [0.05]}
     return Scheduler(rule_base_from_dict({"premises": ["joint_1"], "rules": {"r": rule}, **extra}), "modes", family)
 
-#: the scheduler node's parameters (see config/scheduler.yaml); each rule adds rules.<name>.*
 #: s that joint-state publishers may stay unmatched (discovery under way) before the scheduler warns
 UNMATCHED_WARN = 3.0
 
+#: the scheduler node's parameters (see config/scheduler.yaml); each rule adds rules.<name>.*
 PARAMETERS: tuple[Spec, ...] = (
     Spec("premises", None, "Joints whose positions (from joint_states, rad or m) are the premise variables, in the"
          " order of each rule's membership functions.", read_only=True, type=Parameter.Type.STRING_ARRAY),
