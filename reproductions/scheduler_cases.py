@@ -440,7 +440,8 @@ def main(argv: list[str] | None = None) -> int:
             " two-rule base and for interpolating mode parameters). Sim plant (`plant.model: two_mass`, lockstep at"
             f" {RATE:g} Hz), shaper node and scheduler node run as separate processes; five velocity steps of"
             f" {DWELL:g} s each put x0 at {', '.join(f'{x:g}' for x in STEP_POSES)} m. Residual: the largest"
-            f" |x1 - x0| from {WINDOW:g} s after a step to the next step. See [scheduler.md](../design/scheduler.md).", "",
+            f" |x1 - x0| from {WINDOW:g} s after a step to the next step."
+            " See [scheduler.md](../design/scheduler.md).", "",
             *[f"- ({n}) {r.case.title}" for n, r in runs.items()], "",
             markdown(runs), ratio.strip(), "",
             "Natural frequency of the interpolated mode against the plant's (eq. (1) at m1 = 10 x0 + 1) over"
