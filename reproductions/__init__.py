@@ -2,31 +2,31 @@
 
 Each module starts the real nodes as separate processes (the sim plant, the shaper and, where the
 seed needs them, the learner or the scheduler; :func:`sim_plant_node.conductor.node_session`),
-drives them over their public interfaces, and writes a results page under ``docs/`` with its
-plots under ``docs/img/``. The integration tests in ``tests/`` call the same functions with the
+drives them over their public interfaces, and writes a results page under ``docs/results/`` with its
+plots under ``docs/results/img/``. The integration tests in ``tests/`` call the same functions with the
 tolerances of the papers. Run one from the repository root (``--help`` lists its options; the
 logs of the node processes go to ``out/<module>/``):
 
 :mod:`reproductions.mrilc_cases`
     Seed 000, MRILC: the ZVD shaper alone on the nominal and the perturbed plant, then the
-    learning curves of the P-type and the robust law. Writes docs/mrilc_results.md.
+    learning curves of the P-type and the robust law. Writes docs/results/mrilc_results.md.
     ``./run exec python -m reproductions.mrilc_cases``
 :mod:`reproductions.closed_loop_cases`
     Seeds 001 and 002: the time-delay feedback controller around plants inside and outside its
     stable interval, and ZV with the QFT loops against open-loop ZV and ZVD on the eight corner
-    plants. Writes docs/closed_loop_results.md.
+    plants. Writes docs/results/closed_loop_results.md.
     ``./run exec python -m reproductions.closed_loop_cases``
 :mod:`reproductions.list_cases`
     Seed 003, LIST: the four cases (LTI, time-varying mass, hardening spring, saturated
-    actuator), one learning iteration a cycle. Writes docs/list_results.md.
+    actuator), one learning iteration a cycle. Writes docs/results/list_results.md.
     ``./run exec python -m reproductions.list_cases``
 :mod:`reproductions.scheduler_cases`
     Seed 004: the two-mass system through five velocity steps with a fixed ZV, the two-set
-    switch and the TS fuzzy scheduler. Writes docs/scheduler_results.md.
+    switch and the TS fuzzy scheduler. Writes docs/results/scheduler_results.md.
     ``./run exec python -m reproductions.scheduler_cases``
 :mod:`reproductions.bag_results`
     The bag analysis on the demo's recording and on a recording by another writer, whole and
-    cut short. Writes docs/bag_analysis_results.md.
+    cut short. Writes docs/results/bag_analysis_results.md.
     ``./run exec python -m reproductions.bag_results``
 
 :mod:`reproductions.common` holds what they share (the ``--docs`` option, the logs folder, the

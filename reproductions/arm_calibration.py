@@ -17,7 +17,7 @@ m/s^2, through the same analysis) and
    as the shaper node's ``action.scheduler`` does), and compares the residual vibration summed
    over the cycle's moves with the best fixed ZV's, move by move.
 
-Writes docs/calibration_results.md.
+Writes docs/results/calibration_results.md.
 """
 
 from __future__ import annotations

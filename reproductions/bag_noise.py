@@ -5,7 +5,7 @@ robot-style recordings (:func:`shaper_nodes.analysis.synthetic.check_segmentatio
 back-and-forth moves of 0.5 rad at 500 Hz, a 4 Hz mode with damping 0.02, IMU with gravity and
 0.01 m/s^2 noise, joint states with the given noise and steps, no commands and no cycle events),
 analyses them as ``analyze_bag`` does, and rewrites the table between the ``noise-table`` markers
-of docs/bag_analysis.md. The unit test ``test_noisy_joint_states_are_segmented`` checks the same
+of docs/results/bag_analysis_figures.md. The unit test ``test_noisy_joint_states_are_segmented`` checks the same
 figures.
 """
 
@@ -41,11 +41,11 @@ def table(folder: pathlib.Path) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="bag_noise", description=__doc__.split("\n\n")[0])
-    docs_option(p, "bag_analysis.md (its noise table)")
+    docs_option(p, "bag_analysis_figures.md (its noise table)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         text = table(pathlib.Path(tmp))
-    doc = args.docs / "bag_analysis.md"
+    doc = args.docs / "bag_analysis_figures.md"
     src = doc.read_text()
     if BEGIN not in src or END not in src:
         raise SystemExit(f"{doc}: no {BEGIN} ... {END} markers to put the table between")

@@ -6,7 +6,7 @@ at 5 Hz), analyses its recording with :mod:`shaper_nodes.analysis`, and compares
 residual vibration with what the demo measured live and what the sim plant reported; analyses a
 recording written by rosbags directly (standard types, no cycle events); analyses both cut in the
 middle of a chunk; analyses a synthetic recording of three plants; and writes
-docs/bag_analysis_results.md and docs/img/bag_*.png.
+docs/results/bag_analysis_results.md and docs/results/img/bag_*.png.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         kept = _cut(src, work / f"{name}_cut.mcap")
         rec = read_recording(work / f"{name}_cut.mcap")
         cuts[name] = (src.stat().st_size, kept, rec, analyze(rec, Options(learners=())))
-    # 4. three plants in one recording (the figures of docs/bag_analysis.md: one traces panel per plant)
+    # 4. three plants in one recording (the figures of docs/guide/analysis.md: one traces panel per plant)
     t, u, a, _truths = simulate_plants((3.5, 5.0, 6.5), cycles=6)
     write_bag(work / "plants", t, u, a, joint_noise=1e-5)
     write_report(analyze(read_recording(work / "plants"), Options()), work / "plants_report")
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
 
     md = ["# Bag analysis results (generated)", "",
           f"Regenerate with `./run exec python -m reproductions.bag_results` ({time.monotonic() - t0:.0f} s here)."
-          " See [bag_analysis.md](bag_analysis.md) for the method.", "",
+          " See [the analysis guide](../guide/analysis.md) for the method.", "",
           "## The demo's recording", "",
           f"The demo ran the sim plant with its mode at 6.5 Hz, damping 0.01 (the shapers designed at 5 Hz),"
           f" {args.cycles} cycles per shaper, sim plant, shaper and recorder as separate processes over DDS."

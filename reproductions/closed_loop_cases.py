@@ -11,8 +11,8 @@ the shaper node with ZV (or ZVD) designed on the nominal plant (w_n = 40 pi rad/
 ``qft_ffb``, ``qft_fb`` and the open loop ``qft_open``; then a unit-step plant-output disturbance
 and a unit-step measurement noise, 0.5 s after the step.
 
-``python -m reproductions.closed_loop_cases`` regenerates docs/closed_loop_results.md and
-docs/img/closed_loop_*.png; the integration tests call :func:`run_seed001` and :func:`run_seed002`.
+``python -m reproductions.closed_loop_cases`` regenerates docs/results/closed_loop_results.md and
+docs/results/img/closed_loop_*.png; the integration tests call :func:`run_seed001` and :func:`run_seed002`.
 """
 
 from __future__ import annotations
@@ -506,7 +506,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     text = ["# Closed-loop input shaping through the ROS graph (generated)", "",
             "Regenerate with `./run exec python -m reproductions.closed_loop_cases` (sim plant and shaper as"
-            " separate processes, lockstep). See [closed_loop.md](closed_loop.md) for the methods.", ""]
+            " separate processes, lockstep). See [closed_loop.md](../design/closed_loop.md) for the methods.", ""]
     for seed in args.seeds.split(","):
         with node_session(logs, seed) as (start, ctx):
             if seed == "001":

@@ -20,9 +20,9 @@ if TYPE_CHECKING:  # (rclpy is imported when a driver is made, not to print --he
 
 
 def docs_option(parser: argparse.ArgumentParser, what: str) -> None:
-    """The ``--docs`` option: the folder the results (``what``) are written to, default docs."""
-    parser.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs"),
-                        help=f"where {what} go (default docs)")
+    """The ``--docs`` option: the folder the results (``what``) are written to, default docs/results."""
+    parser.add_argument("--docs", type=pathlib.Path, default=pathlib.Path("docs/results"),
+                        help=f"where {what} go (default docs/results)")
 
 
 def logs_folder(name: str) -> pathlib.Path:

@@ -6,8 +6,8 @@ the initial guess), and then every cycle is one learning iteration. The driver r
 cycle at a time and waits for the learner's report before the next, as a robot cell whose
 next cycle starts once the update is in.
 
-``python -m reproductions.list_cases`` regenerates docs/list_results.md and
-docs/img/list_cases.png (see --help); the integration test calls :func:`run_case`.
+``python -m reproductions.list_cases`` regenerates docs/results/list_results.md and
+docs/results/img/list_cases.png (see --help); the integration test calls :func:`run_case`.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ CASES = {
                   {"initial.frequency_hz": 1.2 * OMEGA_N / (2 * math.pi), "initial.damping_ratio": 1.2 * ZETA}),
     "case2": Case("case2", "time-varying mass m(t) = 1 + t (t < 1 s), 2 after", {"plant.model": "list_time_varying"}),
     # k3 makes the cubic force a quarter of the linear one at the deflection of the acceleration
-    # phases (m a / k = 0.02 m): k3 = 0.25 k / 0.02^2 (see docs/list.md for a 4x stiffer spring)
+    # phases (m a / k = 0.02 m): k3 = 0.25 k / 0.02^2 (see docs/design/list.md for a 4x stiffer spring)
     "case3": Case("case3", "hardening spring k (x - u) + k3 (x - u)^3, k3 = 6.25e4 N/m^3",
                   {"plant.model": "list_hardening", "plant.stiffness_cubic": [6.25e4]}),
     "case4": Case("case4", "P control with a saturated actuator", {"plant.model": "list_saturation"}),
@@ -189,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
             " before the last cycle the learner is told to hold (`~/hold`), so the last row runs the best"
             " parameters found;"
             " M is the learner's measure (RMS of the high-pass filtered tip acceleration over the residual"
-            " window). See [list.md](list.md) for the method.", ""]
+            " window). See [list.md](../design/list.md) for the method.", ""]
     for name, rows in results.items():
         text.append(markdown(CASES[name], rows))
     args.docs.mkdir(parents=True, exist_ok=True)

@@ -8,8 +8,8 @@ reference and back (``task.round_trip``), each followed by a dwell, from rest (t
 put at rest at the start pose before every cycle, the paper's repeated initial condition).
 The driver runs one cycle at a time and waits for the learner's report before the next.
 
-``python -m reproductions.mrilc_cases`` regenerates docs/mrilc_results.md and
-docs/img/mrilc_learning.png (see --help); the integration test calls :func:`run_learning`
+``python -m reproductions.mrilc_cases`` regenerates docs/results/mrilc_results.md and
+docs/results/img/mrilc_learning.png (see --help); the integration test calls :func:`run_learning`
 and :func:`run_shaper_only`.
 """
 
@@ -39,7 +39,7 @@ from sim_plant_node.plants import mck_from_mode
 if TYPE_CHECKING:
     from sim_plant_node.conductor import StartNode
 
-#: sample rate of the graph runs, Hz (see docs/mrilc.md: why not 1 kHz)
+#: sample rate of the graph runs, Hz (see docs/design/mrilc.md: why not 1 kHz)
 RATE = 200.0
 JOINT = ["joint_1"]
 NOMINAL = (10.0, 0.3)
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             f"Regenerate with `./run exec python -m reproductions.mrilc_cases` (sim plant, shaper and learner as"
             f" separate processes in lockstep at {RATE:g} Hz; every cycle a unit step and back, {TASK['task.dwell']} s"
             " each; the perturbed plant w = 5 rad/s, zeta = 0.15; the ZVD shaper designed on the reference model's"
-            " mode). See [mrilc.md](mrilc.md) for the method.", "",
+            " mode). See [mrilc.md](../design/mrilc.md) for the method.", "",
             "Residual vibration (RMS of y - r from when the shaped return step has come to rest to the cycle's end;"
             " r, y in units of the unit step):", "",
             "| case | residual |", "|---|---|",

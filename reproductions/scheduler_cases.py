@@ -14,8 +14,8 @@ steps, triangular memberships) and (c-modes) case (c) interpolating the mode par
 The residual vibration of a step is the largest |x1 - x0| (m) from WINDOW s after the step to
 the next step (the longest ZV here lasts 8.9 s).
 
-``python -m reproductions.scheduler_cases`` regenerates docs/scheduler_results.md and
-docs/img/scheduler_*.png (see --help); the integration test calls :func:`run_case`.
+``python -m reproductions.scheduler_cases`` regenerates docs/results/scheduler_results.md and
+docs/results/img/scheduler_*.png (see --help); the integration test calls :func:`run_case`.
 """
 
 from __future__ import annotations
@@ -440,7 +440,8 @@ def main(argv: list[str] | None = None) -> int:
             " two-rule base and for interpolating mode parameters). Sim plant (`plant.model: two_mass`, lockstep at"
             f" {RATE:g} Hz), shaper node and scheduler node run as separate processes; five velocity steps of"
             f" {DWELL:g} s each put x0 at {', '.join(f'{x:g}' for x in STEP_POSES)} m. Residual: the largest"
-            f" |x1 - x0| from {WINDOW:g} s after a step to the next step. See [scheduler.md](scheduler.md).", "",
+            f" |x1 - x0| from {WINDOW:g} s after a step to the next step."
+            " See [scheduler.md](../design/scheduler.md).", "",
             *[f"- ({n}) {r.case.title}" for n, r in runs.items()], "",
             markdown(runs), ratio.strip(), "",
             "Natural frequency of the interpolated mode against the plant's (eq. (1) at m1 = 10 x0 + 1) over"

@@ -1,4 +1,4 @@
-"""Print the docs/shaping.md table: V (%) of the discretised FIR, rounding vs splitting vs exact.
+"""Print the docs/design/shaping.md table: V (%) of the discretised FIR, rounding vs splitting vs exact.
 
 Run with ./run exec python scripts/discretisation_table.py
 """

@@ -1,4 +1,4 @@
-"""Print the docs/identification.md comparison of the identification methods.
+"""Print the docs/design/identification.md comparison of the identification methods.
 
 Seeded synthetic free decays: natural frequency 1-100 Hz and damping ratio 0.005-0.3 (both
 log-uniform), 10 natural periods at 1 kHz, random amplitude, phase, offset and start time,

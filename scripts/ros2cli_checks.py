@@ -8,7 +8,7 @@ config/shaper.yaml``), then, over its parameter services as ros2cli does, prints
 2. ``ros2 param set /left_arm_shaper shaper.frequency_hz 9`` (an INTEGER), then ``5000`` and ``eight``,
 3. ``ros2 param get /left_arm_shaper shaper.frequency_hz``.
 
-Run: ``./run exec python scripts/ros2cli_checks.py`` (docs/ros2cli.md shows its output).
+Run: ``./run exec python scripts/ros2cli_checks.py`` (docs/reference/ros2cli.md shows its output).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ Reads the ``--durations=0`` section that pytest prints at the end of a run::
     python scripts/test_durations.py before.log after.log   # per file, before and after, and the ratio
     python scripts/test_durations.py run.log --tests-of REV  # also: the time of the tests that existed at REV
 
-(pytest hides durations under 5 ms unless ``-vv``; they do not change the sums.) See docs/testing.md.
+(pytest hides durations under 5 ms unless ``-vv``; they do not change the sums.) See docs/results/testing.md.
 """
 
 from __future__ import annotations
