@@ -295,8 +295,8 @@ class SimPlantNode(Node):
         self._sensor = {name: self.get_parameter(name).value for name in SENSOR_PARAMS}
         self._sensor_changed()
         # /joint_states and /clock are published as serialized bytes, their numbers rewritten in place
-        # (shaper_nodes.recordings.cdr): the same messages, without building message objects. The IMU stays a message
-        # object: published as bytes (shaper_nodes.recordings.cdr.ImuCdr, the same bytes on the wire) it failed
+        # (shaper_nodes.ros.cdr): the same messages, without building message objects. The IMU stays a message
+        # object: published as bytes (shaper_nodes.ros.cdr.ImuCdr, the same bytes on the wire) it failed
         # tests/test_calibrate.py's killed-and-resumed run twice (no IMU sample past a point within 30 s), not
         # yet understood (docs/benchmarks.md)
         self._imu_msg = Imu()  # reused: publish() serialises it at once
