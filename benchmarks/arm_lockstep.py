@@ -178,7 +178,7 @@ def _write(periods: int, pace: float = 0.0) -> None:
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
 
-    from shaper_nodes.ros.cdr import JointStateCdr, clock_cdr, stamp_parts
+    from shaper_nodes.recordings.cdr import JointStateCdr, clock_cdr, stamp_parts
     from sim_plant_node.arm.description import JOINT_NAMES
     from sim_plant_node.sim_plant import LOCKSTEP_IMU_QOS
 

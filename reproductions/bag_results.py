@@ -26,7 +26,7 @@ from reproductions.common import docs_option
 
 def _cut(src: pathlib.Path, dst: pathlib.Path) -> int:
     """Copy ``src`` cut in the middle of its last chunk; returns the bytes kept."""
-    from shaper_nodes.analysis.reading import mcap_chunks
+    from shaper_nodes.recordings import mcap_chunks
 
     data = src.read_bytes()
     last, length = mcap_chunks(data)[-1]
@@ -49,10 +49,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from shaper_nodes.analysis.analyze import Options, analyze
-    from shaper_nodes.analysis.reading import Bag, describe_damage
     from shaper_nodes.analysis.report import write_report
     from shaper_nodes.analysis.streams import read_recording
     from shaper_nodes.analysis.synthetic import simulate, simulate_plants, write_bag
+    from shaper_nodes.recordings import Bag, describe_damage
 
     t0 = time.monotonic()
     work = pathlib.Path("out") / "bag_results"

@@ -36,7 +36,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 
 from shaper_msgs.msg import CycleEvent, Shaper
-from shaper_nodes.analysis.reading import Bag, describe_damage
+from shaper_nodes.recordings import Bag, describe_damage
 from shaper_nodes.ros.launching import NodeProcess
 
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)

@@ -23,8 +23,8 @@ import pytest
 from reproductions.common import metric as _metric
 from reproductions.list_cases import CASES, LEARNER, run_case
 from shaper_nodes.analysis.analyze import Options, analyze
-from shaper_nodes.analysis.reading import Bag, mcap_chunks
 from shaper_nodes.analysis.streams import read_recording
+from shaper_nodes.recordings import Bag, mcap_chunks
 
 pytestmark = pytest.mark.integration
 
@@ -206,7 +206,7 @@ def test_bag_play_waits_after_each_end_for_the_learners_report(start_node, ros_c
     from std_msgs.msg import Float64
 
     from shaper_msgs.msg import CycleEvent, CycleReport
-    from shaper_nodes.ros.bag_writer import BagWriter
+    from shaper_nodes.recordings import BagWriter
 
     bag = tmp_path / "bag"
     w = BagWriter(bag)

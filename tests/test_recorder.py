@@ -37,8 +37,8 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent
-from shaper_nodes.analysis.reading import Bag, describe_damage
 from shaper_nodes.nodes.recorder import RecorderNode
+from shaper_nodes.recordings import Bag, describe_damage
 
 pytestmark = pytest.mark.integration
 RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)

@@ -28,7 +28,7 @@ from std_msgs.msg import Float64
 
 from shaper_nodes.cli import loop_design, shaper_design
 from shaper_nodes.nodes import bag_play, calibrate, identifier, learner, recorder, scheduler, shaper
-from shaper_nodes.ros.bag_writer import BagWriter
+from shaper_nodes.recordings import BagWriter
 from shaper_nodes.ros.launching import executable
 from shaper_nodes.ros.parameters import declare_all
 from sim_plant_node import sim_plant

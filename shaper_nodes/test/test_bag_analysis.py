@@ -14,14 +14,15 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.groups import group_cycles
-from shaper_nodes.analysis.reading import Bag, BagError, mcap_chunks
 from shaper_nodes.analysis.report import summary as bag_summary
 from shaper_nodes.analysis.report import table as bag_analysis_cli_table
-from shaper_nodes.analysis.streams import JointStateDecoder, imu_fast, joint_state_fast, read_recording
+from shaper_nodes.analysis.streams import read_recording
 from shaper_nodes.analysis.synthetic import check_segmentation, simulate, simulate_plants, write_bag
 from shaper_nodes.cli import analyze_bag as bag_analysis_cli
 from shaper_nodes.core.identification import NO_SHAPER_NEEDED, ModeFit
 from shaper_nodes.core.shaping.vibration import percentage_vibration, residual_vibration
+from shaper_nodes.recordings import Bag, BagError, mcap_chunks
+from shaper_nodes.recordings.cdr import JointStateDecoder, imu_fast, joint_state_fast
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 MODE_HZ, ZETA = 4.0, 0.02
@@ -448,8 +449,8 @@ def test_cli_runs_the_mrilc_replay_and_plots_its_learning_curve(tmp_path, capsys
 
 
 def test_reference_topic_choice():
-    from shaper_nodes.analysis.reading import TopicInfo
     from shaper_nodes.analysis.streams import choose_topics
+    from shaper_nodes.recordings import TopicInfo
 
     js = "sensor_msgs/msg/JointState"
     topics = {"/imu": TopicInfo("/imu", "sensor_msgs/msg/Imu", 9), "/arm/reference": TopicInfo("/arm/reference", js, 9)}
@@ -610,17 +611,18 @@ def _mcap_with_one_chunk(path, payload: bytes, compression: str) -> None:
 
 @pytest.fixture()
 def no_inflation(monkeypatch):
-    """Count every chunk inflated (through reading.inflate, which the record scan and rosbags both use)."""
-    from shaper_nodes.analysis import reading
+    """Count every chunk inflated (through recordings' inflate, which the record scan and rosbags both use)."""
+    from shaper_nodes.recordings import bounds, recovery
 
     calls: list[int] = []
-    real = reading.inflate
+    real = bounds.inflate
 
     def counted(data, compression, declared):
         calls.append(declared)
         return real(data, compression, declared)
 
-    monkeypatch.setattr(reading, "inflate", counted)
+    monkeypatch.setattr(bounds, "inflate", counted)  # rosbags' decompressors, bounded
+    monkeypatch.setattr(recovery, "inflate", counted)  # the record scan
     return calls
 
 
@@ -657,7 +659,7 @@ def test_a_chunk_declaring_a_huge_size_is_refused_before_it_is_inflated(tmp_path
 
 
 def test_a_zip_bomb_chunk_is_refused_by_its_compression_ratio(tmp_path, no_inflation):
-    from shaper_nodes.analysis.reading import ReadLimits
+    from shaper_nodes.recordings import ReadLimits
 
     path = tmp_path / "zeros.mcap"
     _mcap_with_one_chunk(path, bytes(64 * 2**20), "zstd")  # 64 MiB of zeros: a few kB compressed
@@ -675,14 +677,15 @@ def test_inflation_stops_at_the_size_a_chunk_declares(compression):
     import lz4.frame
     import zstandard
 
-    from shaper_nodes.analysis.reading import ChunkTooLarge, _bound_rosbags_decompressors, inflate
+    from shaper_nodes.recordings import ChunkTooLarge, inflate
+    from shaper_nodes.recordings.bounds import bound_rosbags_decompressors
 
     data = bytes(8 * 2**20)
     packed = zstandard.compress(data) if compression == "zstd" else lz4.frame.compress(data)
     assert inflate(packed, compression, len(data)) == data
     with pytest.raises(ChunkTooLarge, match="inflates beyond the 4096 bytes the chunk declares"):
         inflate(packed, compression, 4096)
-    _bound_rosbags_decompressors()  # what rosbags' reader inflates with, once a Bag has opened one
+    bound_rosbags_decompressors()  # what rosbags' reader inflates with, once a Bag has opened one
     from rosbags.rosbag2 import storage_mcap
 
     with pytest.raises(ChunkTooLarge):

@@ -18,7 +18,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 
-from shaper_nodes.ros.cdr import IMU_FIELDS, ImuCdr, JointStateCdr, SerializedMessage, clock_cdr, stamp_parts
+from shaper_nodes.recordings.cdr import IMU_FIELDS, ImuCdr, JointStateCdr, SerializedMessage, clock_cdr, stamp_parts
 
 STAMPS = [(0, 0), (1, 999_999_999), (-3, 5), (2_147_483_647, 123)]
 # frame ids of every length mod 8 (the doubles after the header are aligned to 8), and non-ASCII

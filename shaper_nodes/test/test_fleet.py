@@ -189,3 +189,52 @@ def test_analyze_fleet_on_an_existing_dask_cluster_gives_the_local_clusters_repo
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def _oversized_metadata(folder: pathlib.Path, size: int) -> None:
+    """A recording folder with a real MCAP file and a metadata.yaml of ``size`` bytes (sparse: made at once)."""
+    t, u, a, _ = simulate(cycles=2, rate=250.0, dwell=1.0)
+    write_bag(folder, t, u, a, custom_data={"robot": "arm_7"})
+    with open(folder / "metadata.yaml", "r+b") as f:
+        f.truncate(size)
+
+
+def test_analyze_fleet_refuses_an_oversized_metadata_yaml_as_analyze_bag_does(tmp_path, capsys):
+    """The same reader entry point and bounds: a metadata.yaml beyond the limit is not parsed by analyze_fleet
+    (not for the robot's name either) and is refused with analyze_bag's message."""
+    from shaper_nodes.cli import analyze_bag, analyze_fleet
+    from shaper_nodes.recordings import ReadLimits
+
+    folder = tmp_path / "cell_4" / "huge"
+    _oversized_metadata(folder, 3 * 2**20)  # 3 MiB, beyond a 2 MiB limit
+    assert analyze_bag.main([str(folder), "--no-progress", "--max-metadata-mib", "2"]) == 2
+    bag_err = capsys.readouterr().err.splitlines()[0]
+    assert bag_err.startswith("analyze_bag: ") and "metadata.yaml is 3.0 MiB, beyond the limit of 2.0 MiB" in bag_err
+    message = bag_err.removeprefix("analyze_bag: ")
+
+    assert analyze_fleet.main([str(tmp_path), "--workers", "0", "--no-cache", "--quiet",
+                               "--max-metadata-mib", "2"]) == 0
+    out = capsys.readouterr()
+    assert f"{folder}: not analysed: BagError: {message}" in out.err
+    run = run_fleet([folder], OPTIONS, None, workers=0, limits=ReadLimits(metadata_bytes=2 * 2**20))
+    (res,) = run.results
+    assert res.error == f"BagError: {message}"
+    assert res.robot == "cell_4"  # the oversized metadata.yaml was not parsed for the robot's name
+    assert robot_of(folder, ReadLimits(metadata_bytes=2 * 2**20)) == "cell_4"
+    # the key depends on the limits (a refused recording is read again under others), not for the defaults
+    assert content_key(folder, OPTIONS, ReadLimits(metadata_bytes=2 * 2**20)) != content_key(folder, OPTIONS)
+    assert content_key(folder, OPTIONS, ReadLimits()) == content_key(folder, OPTIONS)
+
+
+def test_analyze_fleet_refuses_a_metadata_yaml_just_over_the_default_bound(tmp_path):
+    """The default bound (16 MiB) holds in analyze_fleet as in analyze_bag, on a file one byte over it."""
+    from shaper_nodes.analysis.streams import read_recording
+    from shaper_nodes.recordings import BagError, ReadLimits
+
+    folder = tmp_path / "cell_5" / "over"
+    _oversized_metadata(folder, ReadLimits().metadata_bytes + 1)
+    with pytest.raises(BagError) as refused:
+        read_recording(folder)
+    (res,) = run_fleet(find_recordings(tmp_path), OPTIONS, None, workers=0).results
+    assert res.error == f"BagError: {refused.value}" and "beyond the limit of 16 MiB" in res.error
+    assert res.robot == "cell_5"

@@ -21,9 +21,17 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from shaper_nodes.analysis.reading import Bag, describe_damage, mcap_chunks
-from shaper_nodes.core.recording import Heartbeat, loss_bound
-from shaper_nodes.ros.bag_writer import BagWriter, QueuedRecording, rename_recording, typestore_with_own_types
+from shaper_nodes.recordings import (
+    Bag,
+    BagWriter,
+    Heartbeat,
+    QueuedRecording,
+    describe_damage,
+    loss_bound,
+    mcap_chunks,
+    rename_recording,
+    typestore_with_own_types,
+)
 
 STORE = typestore_with_own_types()
 HEARTBEAT = "/recorder/heartbeat"
@@ -312,7 +320,7 @@ def test_a_renamed_recording_names_its_file_after_the_new_folder(tmp_path):
 def test_a_shaper_logged_with_a_later_end_at_the_same_time_is_put_after_it():
     """Ties of log time only: the shapers before the group's last END move to just after it, in their order; a
     shaper at another time, or after the END, or with no END in its group, stays where it was recorded."""
-    from shaper_nodes.core.recording import shaper_after_end
+    from shaper_nodes.recordings import shaper_after_end
 
     def order(items, max_group=10_000):
         return [name for _, name in shaper_after_end(items, lambda m: m[0], lambda m: m[1].startswith("shaper"),

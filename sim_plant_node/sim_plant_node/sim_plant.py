@@ -92,7 +92,7 @@ from shaper_msgs.srv import SetFeedforward
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER
-from shaper_nodes.ros.cdr import JointStateCdr, clock_cdr, stamp_parts
+from shaper_nodes.recordings.cdr import JointStateCdr, clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare_all, topics, values

@@ -1,7 +1,8 @@
 """Offline analysis of recordings (rosbag2 folders or bare MCAP files), free of rclpy.
 
-- :mod:`.reading`: open a bag with rosbags, or recover what a truncated or corrupt MCAP holds
-  with the ``mcap`` library's record parsers; deserialise with rosbags' typestores.
+Recordings are opened and read through :mod:`shaper_nodes.recordings` (bounded, damaged files
+recovered); nothing here imports ``shaper_nodes.ros`` or ``shaper_nodes.nodes``.
+
 - :mod:`.streams`: find the accelerometer, joint-state, command, cycle-event and shaper topics
   by type and extract them into arrays.
 - :mod:`.segment`: cycles from the cycle events, or from the motion of the commands or joint states

@@ -44,9 +44,9 @@ from shaper_nodes.core.identification import (
     ringing_issue,
 )
 from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_time
+from shaper_nodes.recordings import BagError
 
 from .groups import GROUP_GAP, GROUP_SIGMAS, ModeGroup, group_cycles
-from .reading import BagError
 from .replay import LEARNER_REPLAYS, LearnerReplay
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion, position_noise
 from .streams import Recording, Signal

@@ -202,7 +202,7 @@ def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[
     PlanError
         No completed pose, no setup, or poses recorded under different setups.
     """
-    from .reading import Bag
+    from shaper_nodes.recordings import Bag
 
     path = pathlib.Path(recording)
     folders = pose_folders(path)

@@ -5,7 +5,10 @@
 (the cache among them) are skipped. :func:`content_key` hashes a recording: SHA-256 over its
 files' names and bytes (streamed, 1 MiB at a time), the analysis options and
 :data:`ANALYSIS_VERSION`, so that a changed recording, other options or a new analysis give another
-key. :func:`analyze_one` is the task a worker runs: read, analyse (no learner replays), and keep
+key. Every recording is read through :mod:`shaper_nodes.recordings` with the bounds ``analyze_bag``
+has (:class:`~shaper_nodes.recordings.ReadLimits`: metadata.yaml's size, chunk sizes and ratios), its
+metadata.yaml too (the robot's name). :func:`analyze_one` is the task a worker runs: read, analyse
+(no learner replays), and keep
 the few numbers a fleet report needs (:class:`Result`, small JSON): the robot, the start time,
 the modes with their uncertainties, the recommended shaper. A recording that cannot be analysed
 gives a result with its ``error`` (reported per recording, never fatal to the fleet).
@@ -29,7 +32,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-import yaml
+from shaper_nodes.recordings import BagError, ReadLimits, read_metadata
 
 from .analyze import Options
 from .report import json_ready
@@ -143,8 +146,10 @@ def recording_files(path: pathlib.Path) -> list[pathlib.Path]:
     return sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
 
 
-def content_key(path: pathlib.Path, options: Options) -> str:
-    """SHA-256 (hex) of the recording's file names and bytes (streamed), the options and the version.
+def content_key(path: pathlib.Path, options: Options, limits: ReadLimits | None = None) -> str:
+    """SHA-256 (hex) of the recording's file names and bytes (streamed), the options and the version
+    (and the reading limits when they are not the defaults: a recording refused under some limits is
+    read again under others).
 
     Raises
     ------
@@ -154,6 +159,8 @@ def content_key(path: pathlib.Path, options: Options) -> str:
     h = hashlib.sha256()
     h.update(ANALYSIS_VERSION.encode())
     h.update(json.dumps(options_doc(options), sort_keys=True).encode())
+    if limits is not None and limits != ReadLimits():
+        h.update(json.dumps(dataclasses.asdict(limits), sort_keys=True).encode())
     for f in recording_files(path):
         h.update(f"\0{f.name}\0{f.stat().st_size}\0".encode())
         with f.open("rb") as fh:
@@ -169,32 +176,39 @@ def options_doc(options: Options) -> dict[str, Any]:
     return json_ready(doc)
 
 
-def robot_of(path: pathlib.Path) -> str:
-    """``robot`` of the rosbag2 metadata's custom_data, else the name of the folder holding the recording."""
+def robot_of(path: pathlib.Path, limits: ReadLimits | None = None) -> str:
+    """``robot`` of the rosbag2 metadata's custom_data, else the name of the folder holding the recording.
+
+    metadata.yaml is read through :func:`shaper_nodes.recordings.read_metadata` (its size checked
+    against ``limits.metadata_bytes`` before it is parsed); one beyond the limit, or unreadable, gives
+    the folder's name (the analysis then refuses the recording with the reason).
+    """
     meta = path / "metadata.yaml" if path.is_dir() else None
     if meta is not None and meta.is_file():
         try:
-            info = (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information", {})
+            info = read_metadata(meta, limits).get("rosbag2_bagfile_information", {})
             name = (info.get("custom_data") or {}).get(ROBOT_KEY)
             if name:
                 return str(name)
-        except (yaml.YAMLError, OSError, AttributeError):
+        except (BagError, OSError, AttributeError):
             pass
     return path.parent.name or str(path.parent)
 
 
 # ------------------------------------------------------------------------------ one recording
-def analyze_one(path: str, key: str, options: Options) -> Result:
-    """Analyse one recording (the task a worker runs); never raises for a bad recording."""
+def analyze_one(path: str, key: str, options: Options, limits: ReadLimits | None = None) -> Result:
+    """Analyse one recording (the task a worker runs), read within ``limits`` (default: :class:`ReadLimits`'s,
+    as ``analyze_bag``'s); never raises for a bad recording."""
+    from shaper_nodes.recordings import describe_damage
+
     from .analyze import analyze
-    from .reading import describe_damage
     from .streams import read_recording
 
     started = time.perf_counter()
     p = pathlib.Path(path)
-    out = Result(path=str(path), key=key, robot=robot_of(p))
+    out = Result(path=str(path), key=key, robot=robot_of(p, limits))
     try:
-        rec = read_recording(p)
+        rec = read_recording(p, limits=limits)
         an = analyze(rec, options)
     except Exception as err:  # reported per recording: one bad file must not stop the fleet
         out.error = f"{type(err).__name__}: {err}"
@@ -285,8 +299,10 @@ def _preload() -> None:
 
 def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | None, *, workers: int = 1,
               scheduler: str | None = None, processes: bool = True, progress: bool = False,
-              warn: Callable[[str], None] = lambda s: None) -> FleetRun:
+              warn: Callable[[str], None] = lambda s: None, limits: ReadLimits | None = None) -> FleetRun:
     """Analyse the recordings not in the cache; returns every result (cached or new), in order.
+
+    Every recording is read within ``limits`` (default: :class:`ReadLimits`'s, as ``analyze_bag``'s).
 
     ``workers`` 0 (and no ``scheduler``): a plain loop in this process. Otherwise a Dask client on
     the cluster at ``scheduler`` or on a new local cluster of ``workers`` (``processes`` False: threads
@@ -299,9 +315,9 @@ def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | No
     cached = 0
     for i, p in enumerate(paths):
         try:
-            key = content_key(p, options)
+            key = content_key(p, options, limits)
         except OSError as err:
-            results[i] = Result(str(p), "", robot_of(p), error=f"cannot read: {err}")
+            results[i] = Result(str(p), "", robot_of(p, limits), error=f"cannot read: {err}")
             continue
         hit = cache.get(key) if cache is not None else None
         if hit is not None:
@@ -324,9 +340,9 @@ def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | No
         if todo and workers == 0 and not scheduler:
             where = "serial (this process)"
             for i, key in todo:
-                done(i, analyze_one(str(paths[i]), key, options))
+                done(i, analyze_one(str(paths[i]), key, options, limits))
         elif todo:
-            where = _run_dask(paths, todo, options, done, workers, scheduler, processes, warn, startup)
+            where = _run_dask(paths, todo, options, done, workers, scheduler, processes, warn, startup, limits)
     finally:
         if bar is not None:
             bar.close()
@@ -336,7 +352,7 @@ def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | No
 
 def _run_dask(paths: list[pathlib.Path], todo: list[tuple[int, str]], options: Options,
               done: Callable[[int, Result], None], workers: int, scheduler: str | None, processes: bool,
-              warn: Callable[[str], None], startup: list[float]) -> str:
+              warn: Callable[[str], None], startup: list[float], limits: ReadLimits | None = None) -> str:
     from distributed import Client, as_completed
 
     started = time.perf_counter()
@@ -355,14 +371,15 @@ def _run_dask(paths: list[pathlib.Path], todo: list[tuple[int, str]], options: O
                          " on few cores the analysis runs slower; start them with these variables set")
             futures = {}
             for i, key in todo:
-                f = client.submit(analyze_one, str(paths[i]), key, options, key=f"analyze-{key}-{i}", pure=False)
+                f = client.submit(analyze_one, str(paths[i]), key, options, limits, key=f"analyze-{key}-{i}",
+                                  pure=False)
                 futures[f] = (i, key)
             for f in as_completed(futures):
                 i, key = futures[f]
                 try:
                     res = f.result()
                 except Exception as err:  # the worker died or the task could not run: not cached
-                    res = Result(str(paths[i]), "", robot_of(paths[i]), error=f"{type(err).__name__}: {err}")
+                    res = Result(str(paths[i]), "", robot_of(paths[i], limits), error=f"{type(err).__name__}: {err}")
                 done(i, res)
             return where
     finally:

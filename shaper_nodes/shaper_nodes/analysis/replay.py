@@ -29,8 +29,8 @@ import numpy as np
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams, ListSession, SessionResult, list_config
-from shaper_nodes.core.recording import shaper_after_end
 from shaper_nodes.core.shaping import Mode
+from shaper_nodes.recordings import shaper_after_end
 
 from .segment import CycleSpan
 from .streams import REFERENCE_SUFFIX, Events, Recording, Signal
@@ -130,36 +130,36 @@ def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
     ------
     ListError
         Invalid parameters, or the bag lacks one of the topics.
+    BagError
+        The recording cannot be read (see :class:`shaper_nodes.recordings.Bag`).
     """
-    from rosbags.highlevel import AnyReader
-
-    from shaper_nodes.ros.bag_writer import typestore_with_own_types
+    from shaper_nodes.recordings import Bag
 
     session_for(params)  # invalid parameters fail before the bag is read
     names = {**TOPICS, **(topics or {})}
-    with AnyReader([pathlib.Path(path)], default_typestore=typestore_with_own_types()) as reader:
-        conns = [c for c in reader.connections if c.topic in names.values()]
-        found = {c.topic for c in conns}
-        missing = [t for t in names.values() if t not in found]
+    with Bag(path) as bag:  # the recordings package's reader: bounded, damaged files recovered
+        infos = bag.topics
+        missing = [t for t in names.values() if t not in infos]
         if missing:
-            raise ListError(f"bag {path} has no messages on {missing} (topics: {sorted(reader.topics)})")
+            raise ListError(f"bag {path} has no messages on {missing} (topics: {sorted(infos)})")
+        # typed at run time, from the recorded definitions; the topic says which fields a message has
+        decode = {t: bag.deserializer(infos[t].msgtype) for t in names.values()}
 
         def is_end(m: tuple) -> bool:
-            if m[0].topic != names["events"]:
+            if m[0] != names["events"]:
                 return False
-            msg: Any = reader.deserialize(m[2], m[0].msgtype)  # typed at run time, from the recorded definition
+            msg: Any = decode[m[0]](m[3])
             return int(msg.event) == END
 
         def items() -> Iterator[tuple[str, tuple]]:
-            ordered = shaper_after_end(reader.messages(connections=conns), lambda m: m[1],
-                                       lambda m: m[0].topic == names["shaper"], is_end)
-            for conn, _, raw in ordered:
-                # typed only at run time (built from the recorded definition); the topic says which fields it has
-                msg: Any = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == names["imu"]:
+            ordered = shaper_after_end(bag.messages(list(names.values())), lambda m: m[2],
+                                       lambda m: m[0] == names["shaper"], is_end)
+            for topic, _, _, raw in ordered:
+                msg: Any = decode[topic](raw)
+                if topic == names["imu"]:
                     a = msg.linear_acceleration
                     yield "imu", (_sec(msg.header.stamp), (a.x, a.y, a.z))
-                elif conn.topic == names["shaper"]:
+                elif topic == names["shaper"]:
                     yield "shaper", (msg.amplitudes, msg.times, msg.source, msg.revision)
                 else:
                     yield "event", (int(msg.event), int(msg.cycle), _sec(msg.header.stamp), msg.start_positions,
@@ -193,7 +193,7 @@ class LearnerReplay:
 
 def _shaper_order(rec: Recording) -> list[int]:
     """Where each active shaper goes in the recording order: its own place, or, recorded before an END of the
-    same stamp, just after that END (:func:`shaper_nodes.core.recording.shaper_after_end`, on the events and
+    same stamp, just after that END (:func:`shaper_nodes.recordings.shaper_after_end`, on the events and
     shapers in recording order; the key the merge gives it is then the END's)."""
     s, e = rec.shapers, rec.events
     marks = sorted([(q, t, k == END, None) for q, k, t in zip(e.seq, e.kind, e.t, strict=True)]

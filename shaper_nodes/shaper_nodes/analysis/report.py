@@ -25,9 +25,9 @@ import numpy as np
 
 from shaper_nodes.core.identification import NO_SHAPER_NEEDED
 from shaper_nodes.core.shaping import Shaper, percentage_vibration
+from shaper_nodes.recordings import describe_damage
 
 from .analyze import Analysis, shaper_of
-from .reading import describe_damage
 
 
 def _f(x: float, spec: str = ".4g") -> str:

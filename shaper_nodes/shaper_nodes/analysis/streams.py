@@ -14,12 +14,12 @@ while another one exists. When a reference topic is read, the joint states' effo
 Times are the messages' header stamps where they have one (non-zero), else the time the message
 was logged; everything is in seconds on the recording's clock (simulated time in lockstep runs).
 Imu and JointState messages in little-endian CDR are decoded by a direct parser of the fields
-used (checked against rosbags' deserialiser in the tests); other layouts go through rosbags.
+used (:mod:`shaper_nodes.recordings.cdr`, checked against rosbags' deserialiser in the tests); other
+layouts go through rosbags.
 """
 
 from __future__ import annotations
 
-import struct
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from .reading import Bag, BagError, Damage, ReadLimits, ReadResult, TopicInfo, describe_damage
+from shaper_nodes.recordings import Bag, BagError, Damage, ReadLimits, ReadResult, TopicInfo, describe_damage
+from shaper_nodes.recordings.cdr import JointStateDecoder, imu_fast, joint_state_efforts, little_endian
 
 IMU, JOINT_STATE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"
 ARRAY, TRAJECTORY = "std_msgs/msg/Float64MultiArray", "trajectory_msgs/msg/JointTrajectory"
@@ -165,97 +166,6 @@ def choose_topics(topics: Mapping[str, TopicInfo], overrides: Mapping[str, str] 
     return chosen, notes
 
 
-# ------------------------------------------------------------------------------ fast CDR decoding
-_U32, _I32U32, _D3 = struct.Struct("<I"), struct.Struct("<iI"), struct.Struct("<3d")
-
-
-def _align(pos: int, n: int) -> int:
-    """Absolute offset ``pos`` aligned to ``n`` relative to the CDR payload (after 4 header bytes)."""
-    return 4 + ((pos - 4 + n - 1) & ~(n - 1))
-
-
-def _header(raw) -> tuple[float, int]:
-    sec, nsec = _I32U32.unpack_from(raw, 4)
-    (n,) = _U32.unpack_from(raw, 12)
-    return sec + 1e-9 * nsec, 16 + n
-
-
-def imu_fast(raw) -> tuple[float, tuple[float, float, float]]:
-    """(header stamp in s, linear acceleration) of a little-endian CDR sensor_msgs/Imu."""
-    t, pos = _header(raw)
-    return t, _D3.unpack_from(raw, _align(pos, 8) + 200)  # after orientation, 3 covariances/vectors
-
-
-def joint_state_fast(raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
-    """(header stamp in s, names, positions) of a little-endian CDR sensor_msgs/JointState."""
-    t, pos = _header(raw)
-    pos = _align(pos, 4)
-    (count,) = _U32.unpack_from(raw, pos)
-    pos += 4
-    names = []
-    for _ in range(count):
-        pos = _align(pos, 4)
-        (n,) = _U32.unpack_from(raw, pos)
-        names.append(bytes(raw[pos + 4: pos + 3 + n]).decode())
-        pos += 4 + n
-    pos = _align(pos, 4)
-    (npos,) = _U32.unpack_from(raw, pos)
-    pos += 4
-    if npos:
-        pos = _align(pos, 8)
-    return t, tuple(names), struct.unpack_from(f"<{npos}d", raw, pos)
-
-
-class JointStateDecoder:
-    """:func:`joint_state_fast` that skips the names when they are those of the previous message."""
-
-    def __init__(self) -> None:
-        self._prefix = b""
-        self._names: tuple[str, ...] = ()
-        self._layout: tuple[int, struct.Struct] | None = None
-
-    def __call__(self, raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
-        n = len(self._prefix)
-        if n and self._layout is not None and raw[12:12 + n] == self._prefix:  # a prefix comes with its layout
-            offset, fmt = self._layout
-            sec, nsec = _I32U32.unpack_from(raw, 4)
-            return sec + 1e-9 * nsec, self._names, fmt.unpack_from(raw, offset)
-        t, names, pos = joint_state_fast(raw)
-        # the bytes from the frame_id to the position count fix where the positions are
-        _, end = _header(raw)
-        end = _align(end, 4) + 4  # the names' count
-        for _ in names:
-            end = _align(end, 4)
-            end += 4 + _U32.unpack_from(raw, end)[0]
-        end = _align(end, 4) + 4
-        self._prefix = bytes(raw[12:end])
-        self._names = names
-        self._layout = (_align(end, 8) if pos else end, struct.Struct(f"<{len(pos)}d"))
-        return t, names, pos
-
-    @property
-    def positions_end(self) -> int:
-        """Where the positions of the message last decoded end (for :func:`joint_state_efforts`)."""
-        if self._layout is None:
-            raise TypeError("JointStateDecoder.positions_end: no message decoded yet")
-        return self._layout[0] + self._layout[1].size
-
-
-def joint_state_efforts(raw, end: int) -> tuple[float, ...]:
-    """The efforts of a little-endian CDR sensor_msgs/JointState whose positions end at ``end``."""
-    pos = _align(end, 4)
-    (nvel,) = _U32.unpack_from(raw, pos)
-    pos = (_align(pos + 4, 8) if nvel else pos + 4) + 8 * nvel
-    pos = _align(pos, 4)
-    (neff,) = _U32.unpack_from(raw, pos)
-    pos += 4
-    return struct.unpack_from(f"<{neff}d", raw, _align(pos, 8) if neff else pos)
-
-
-def _little_endian(raw) -> bool:
-    return len(raw) > 4 and raw[1] == 1
-
-
 # ------------------------------------------------------------------------------ extraction
 class Progress:
     """A progress line on stderr (messages read, percent, rate), at most twice a second."""
@@ -304,7 +214,7 @@ def read_recording(path, overrides: Mapping[str, str] | None = None, progress: b
     ------
     BagError
         Not a recording, unreadable, beyond the reading limits (``limits``, see
-        :class:`~shaper_nodes.analysis.reading.ReadLimits`), no message, or no accelerometer topic.
+        :class:`~shaper_nodes.recordings.ReadLimits`), no message, or no accelerometer topic.
     """
     try:
         return _read(path, overrides, progress, on_progress, recover=False, limits=limits)
@@ -470,7 +380,7 @@ class _Collector:
             self._shaper(topic, seq, log_ns, raw)
 
     def _accel(self, topic: str, seq: int, log_ns: int, raw: Any) -> None:
-        if _little_endian(raw):
+        if little_endian(raw):
             t, a = imu_fast(raw)
             if t == 0.0:
                 t = log_ns * 1e-9
@@ -484,7 +394,7 @@ class _Collector:
 
     def _joint_state(self, role: str, topic: str, seq: int, log_ns: int, raw: Any) -> None:
         e: tuple[float, ...] | None = None
-        if _little_endian(raw):
+        if little_endian(raw):
             fast = self.fast[role]
             t, names, p = fast(raw)
             if role == "joints" and self.with_efforts:

@@ -20,11 +20,11 @@ import pathlib
 import sys
 
 from shaper_nodes.analysis.analyze import Options, analyze
-from shaper_nodes.analysis.reading import MIB, Bag, BagError, ReadLimits, describe_damage
 from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
 from shaper_nodes.core.identification import MAX_RINGING_DAMPING, NOISE_FLOOR_SIGMAS
+from shaper_nodes.recordings import MIB, Bag, BagError, ReadLimits, describe_damage
 
 from .common import survives_closed_pipe
 from .list_replay import parse_params
@@ -36,6 +36,20 @@ def _band_hz(text: str) -> tuple[float, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected LOW,HIGH in Hz, got {text!r}") from None
     return lo, hi
+
+
+def add_limit_options(p: argparse._ActionsContainer) -> None:
+    """The reading limits' options (``--max-chunk-mib``, ``--max-metadata-mib``), the same in analyze_fleet."""
+    p.add_argument("--max-chunk-mib", type=float, default=ReadLimits.chunk_bytes / MIB,
+                   help="refuse an MCAP chunk that declares more than this uncompressed, MiB, before inflating it"
+                        " (default %(default)g)")
+    p.add_argument("--max-metadata-mib", type=float, default=ReadLimits.metadata_bytes / MIB,
+                   help="refuse a metadata.yaml larger than this, MiB, before parsing it (default %(default)g)")
+
+
+def limits_of(args: argparse.Namespace) -> ReadLimits:
+    """The reading limits the options of :func:`add_limit_options` ask for."""
+    return ReadLimits(metadata_bytes=int(args.max_metadata_mib * MIB), chunk_bytes=int(args.max_chunk_mib * MIB))
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -86,11 +100,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         " mrilc.gamma=10 (repeatable); replay.learned_run=true replays every MRILC cycle"
                         " (a recording of a live MRILC run)")
     p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
-    p.add_argument("--max-chunk-mib", type=float, default=ReadLimits.chunk_bytes / MIB,
-                   help="refuse an MCAP chunk that declares more than this uncompressed, MiB, before inflating it"
-                        " (default %(default)g)")
-    p.add_argument("--max-metadata-mib", type=float, default=ReadLimits.metadata_bytes / MIB,
-                   help="refuse a metadata.yaml larger than this, MiB, before parsing it (default %(default)g)")
+    add_limit_options(p)
     p.add_argument("--strict", action="store_true", help="exit 3 when the recording was damaged")
     return p.parse_args(argv)
 
@@ -117,7 +127,7 @@ def _holds_recordings(path: pathlib.Path) -> bool:
 @survives_closed_pipe
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    limits = ReadLimits(metadata_bytes=int(args.max_metadata_mib * MIB), chunk_bytes=int(args.max_chunk_mib * MIB))
+    limits = limits_of(args)
     try:
         params = parse_params(args.param)
         overrides = {role: getattr(args, f"{role}_topic") for role in ROLE_TYPES if getattr(args, f"{role}_topic")}

@@ -8,7 +8,9 @@ thread each; ``--workers 0``: a plain loop in this process) or on an existing cl
 (``--scheduler tcp://host:port``; its workers must see FOLDER at the same path), groups them by
 robot (``robot`` in the rosbag2 metadata's custom_data, else the parent folder's name), compares
 each robot's later recordings with its first ones, and prints the alerts; ``--out`` writes the
-report (Markdown, CSV, JSON, PNG). See docs/fleet.md. Exit codes: 0 done (alerts or not; ``--strict``:
+report (Markdown, CSV, JSON, PNG). Every recording is read within the bounds ``analyze_bag`` has
+(``--max-metadata-mib``, ``--max-chunk-mib``); one beyond them is not analysed, with analyze_bag's
+message. See docs/fleet.md. Exit codes: 0 done (alerts or not; ``--strict``:
 1 when there are alerts), 2 the fleet cannot be analysed (the message says why).
 """
 
@@ -24,7 +26,7 @@ from shaper_nodes.analysis.fleet import MAX_RECORDINGS, Cache, FleetError, find_
 from shaper_nodes.analysis.fleet_drift import DriftRule, fleet_drift
 from shaper_nodes.analysis.fleet_report import fleet_doc, write_fleet_report
 
-from .analyze_bag import _band_hz
+from .analyze_bag import _band_hz, add_limit_options, limits_of
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -61,6 +63,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     a.add_argument("--target", type=float, default=0.05, help="worst-case V of the recommendation, fraction")
     a.add_argument("--sigmas", type=float, default=2.0, help="uncertainty box half-width, standard deviations")
     a.add_argument("--min-saving", type=float, default=0.2, help="as analyze_bag's (default 0.2)")
+    add_limit_options(a)  # the bounds of analyze_bag: a recording beyond them is refused as analyze_bag refuses it
     p.add_argument("--strict", action="store_true", help="exit 1 when a robot has an alert")
     args = p.parse_args(argv)
     if args.workers < 0 or args.max_recordings < 1:
@@ -87,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
             raise FleetError(f"{args.folder}: no recording (rosbag2 folder or .mcap file) found")
         cache = None if args.no_cache else Cache(args.cache or args.folder / ".fleet_cache")
         run = run_fleet(paths, options, cache, workers=args.workers, scheduler=args.scheduler,
-                        progress=not args.quiet and sys.stderr.isatty(), warn=warn)
+                        progress=not args.quiet and sys.stderr.isatty(), warn=warn, limits=limits_of(args))
     except (FleetError, ValueError, OSError) as err:
         print(f"analyze_fleet: {err}", file=sys.stderr)
         return 2

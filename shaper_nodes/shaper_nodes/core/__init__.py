@@ -32,13 +32,10 @@ rate
 security
     Who may talk to whom on the DDS domain: the SROS2 access policy table, ROS-to-DDS name
     mangling, and the DDS-Security governance and permissions documents (no cryptography).
-recording
-    The recorder's heartbeat in its recordings, and the upper bound of what a recording that was
-    not closed (recorder killed) lost.
 lazy
     Heavy modules (python-control, scipy.signal) imported on first use, so that a process that
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "lazy", "learning", "rate", "recording",
+__all__ = ["checks", "closed_loop", "cycles", "identification", "lazy", "learning", "rate",
            "scheduling", "security", "shaping"]

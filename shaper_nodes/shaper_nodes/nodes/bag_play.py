@@ -1,7 +1,7 @@
 """bag_play node: publish a recording's topics with their original timing, for machines without rosbag2.
 
 Reads a rosbag2 folder or a bare .mcap file (a damaged MCAP too, up to where it is readable; see
-:mod:`shaper_nodes.analysis.reading`) and publishes each message's recorded CDR bytes unchanged
+:mod:`shaper_nodes.recordings`) and publishes each message's recorded CDR bytes unchanged
 (rclpy's raw publishing, so nothing is lost in a conversion) at its recorded log time divided by
 ``rate``. Before playing, the first message of every topic is deserialised with the installed
 message class: a topic whose type is not installed, or whose recorded layout does not match the
@@ -17,7 +17,7 @@ reports each one after its update was answered), so that the active shaper its u
 (logged at the END's time in a lockstep recording) and the next START never reach the learner while
 it is still handling the END. Other topics play on meanwhile: the samples the learner waits for at
 an END may be logged just after it. Whatever the setting, an active shaper logged at the same time as
-a later END is played just after that END (:func:`shaper_nodes.core.recording.shaper_after_end`).
+a later END is played just after that END (:func:`shaper_nodes.recordings.shaper_after_end`).
 
 When the recording is done (or on ``~/stop``) the node logs what it published and exits,
 unless ``loop`` is set.
@@ -38,10 +38,9 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent, CycleReport
-from shaper_nodes.analysis.reading import Bag, BagError, describe_damage
-from shaper_nodes.core.recording import shaper_after_end
-from shaper_nodes.ros.bag_writer import message_class
+from shaper_nodes.recordings import Bag, BagError, describe_damage, shaper_after_end
 from shaper_nodes.ros.conversions import ns_to_time
+from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all, values
 

@@ -60,7 +60,7 @@ from shaper_nodes.cli.common import survives_closed_pipe
 from shaper_nodes.core.calibration import IdentifySettings, Plan, PlanConfig, PlanError, PoseStep, Waypoint
 from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_plan, quintic_time
 from shaper_nodes.core.calibration.plan import approach as plan_approach
-from shaper_nodes.ros.bag_writer import COMPRESSIONS
+from shaper_nodes.recordings import COMPRESSIONS
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.parameters import Spec
 
@@ -315,7 +315,7 @@ class Calibrator:
                  approach: tuple[Waypoint, ...]) -> None:
         from std_msgs.msg import String
 
-        from shaper_nodes.ros.bag_writer import BagWriter, rename_recording
+        from shaper_nodes.recordings import BagWriter, rename_recording
 
         partial = folder.with_name(folder.name + ".partial")
         if partial.exists():

@@ -7,7 +7,7 @@ matches their publishers (TRANSIENT_LOCAL for latched topics such as the active 
 
 Every ``flush_period`` s the writer closes the MCAP chunk being filled, writes a heartbeat of
 its own into it (``<node>/heartbeat``, a DiagnosticStatus with the counts received, written and
-dropped per topic; see :mod:`shaper_nodes.core.recording`) and flushes the file to the
+dropped per topic; see :mod:`shaper_nodes.recordings.heartbeat`) and flushes the file to the
 operating system (and ``os.fsync`` with ``fsync``), so that a recorder killed with ``kill -9``
 loses at most about ``flush_period`` s, and the analysis can say how much at most. The bag is
 finished (summary, footer, metadata.yaml) on shutdown (SIGINT) or by the ``~/stop`` service.
@@ -32,9 +32,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from std_srvs.srv import Trigger
 
-from shaper_nodes.core.recording import HEARTBEAT_SUFFIX
-from shaper_nodes.ros.bag_writer import COMPRESSIONS, BagWriter, QueuedRecording, message_class
+from shaper_nodes.recordings import COMPRESSIONS, HEARTBEAT_SUFFIX, BagWriter, QueuedRecording
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare_all
 

@@ -32,13 +32,9 @@ side_node
 whole_trajectory
     Whole-trajectory shaping as the shaper node does it, and the same in a worker process on
     serialized messages.
-bag_writer
-    rosbag2 folders with MCAP storage, written with rosbags (the suite's own types included), chunks
-    closed and flushed by time; the recorder's bounded queue, writer thread, heartbeat and clean stop
-    on a write failure (``QueuedRecording``).
-cdr
-    Messages kept as serialized CDR bytes rewritten in place (JointState, Clock; Imu), published as
-    ``bytes``: the sim plant's per-step publishers, without a message object per step.
+message_types
+    Message classes by their ROS type names (the recorder's subscriptions, bag_play's publishers);
+    recordings themselves are read and written by ``shaper_nodes.recordings``.
 launching
     Installed node executables started as ``ros2 run`` starts them, for tests and tools.
 """

@@ -1,10 +1,9 @@
 """rosbag2 folders with MCAP storage, written with the pure-Python ``rosbags`` library.
 
 rosbag2_py is not on PyPI, so recordings are written with rosbags' Writer (metadata.yaml plus
-an MCAP file with ros2msg schemas). Message definitions of standard types come from rosbags'
-Jazzy typestore; those of this suite's own types (shaper_msgs) are read from the installed
-.msg files, so that ``ros2 bag info`` and independent readers (``mcap`` with
-``mcap-ros2-support``) can decode every message.
+an MCAP file with ros2msg schemas). Message definitions come from :mod:`.typestore` (rosbags'
+Jazzy typestore plus this suite's own types), so that ``ros2 bag info`` and independent readers
+(``mcap`` with ``mcap-ros2-support``) can decode every message.
 
 rosbags' MCAP storage closes a chunk when it exceeds 1 MiB; :meth:`BagWriter.flush` also closes
 the chunk being filled (``close_chunk`` of rosbags' MCAP storage) and hands the file's bytes to
@@ -12,7 +11,7 @@ the operating system (``flush``, and ``os.fsync`` if asked), so that a process k
 ``kill -9`` leaves every message written before the last flush in complete chunks.
 :class:`QueuedRecording` is the recorder's writing off the subscription callbacks: a bounded
 queue, a writer thread that flushes every ``flush_period`` s with a heartbeat
-(:mod:`shaper_nodes.core.recording`), and a write failure that stops the recording cleanly.
+(:mod:`.heartbeat`), and a write failure that stops the recording cleanly.
 """
 
 from __future__ import annotations
@@ -20,7 +19,6 @@ from __future__ import annotations
 import collections
 import contextlib
 import errno
-import importlib
 import os
 import pathlib
 import threading
@@ -30,37 +28,9 @@ from typing import Any, BinaryIO
 
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from rosbags.typesys.store import Typestore
 
-from shaper_nodes.core.recording import HEARTBEAT_NAME, HEARTBEAT_TYPE, Heartbeat, rates_between
-
-OWN_PACKAGES = ("shaper_msgs",)
-
-
-def msg_files(package: str) -> list[pathlib.Path]:
-    """Installed .msg files of an interface package (from the ament index)."""
-    from ament_index_python.packages import get_package_share_directory
-
-    return sorted(pathlib.Path(get_package_share_directory(package), "msg").glob("*.msg"))
-
-
-def typestore_with_own_types() -> Typestore:
-    """rosbags' Jazzy typestore plus this suite's message types."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    types: dict = {}
-    for package in OWN_PACKAGES:
-        for path in msg_files(package):
-            types.update(get_types_from_msg(path.read_text(), f"{package}/msg/{path.stem}"))
-    store.register(types)
-    return store
-
-
-def message_class(type_name: str) -> Any:
-    """The Python class of a ROS type name such as ``sensor_msgs/msg/Imu``."""
-    pkg, kind, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
-
+from .heartbeat import HEARTBEAT_NAME, HEARTBEAT_TYPE, Heartbeat, rates_between
+from .typestore import typestore_with_own_types
 
 #: chunk compressions a recording may use
 COMPRESSIONS = ("none", "zstd")

@@ -1,4 +1,10 @@
-"""Pre-serialized messages for the per-step publishers of the simulated plant (Imu, JointState, Clock).
+"""CDR, pure Python: messages serialized in place for publishers, and the fields analyses read parsed directly.
+
+Writing: pre-serialized messages for the per-step publishers of the simulated plant (Imu,
+JointState, Clock). Reading: the stamps, accelerations, joint names, positions and efforts of
+little-endian CDR sensor_msgs/Imu and JointState, parsed without building message objects
+(:func:`imu_fast`, :func:`joint_state_fast`, :class:`JointStateDecoder`; checked against
+rosbags' deserialiser in ``shaper_nodes/test/test_bag_analysis.py``).
 
 ``rclpy``'s ``Publisher.publish`` takes a message or the ``bytes`` of a serialized one (it then
 calls ``publish_raw``). A message object costs, at every publish, the generated setters' checks
@@ -151,3 +157,95 @@ class JointStateCdr(SerializedMessage):
 def clock_cdr(sec: int, nanosec: int) -> bytes:
     """rosgraph_msgs/Clock at (``sec`` s, ``nanosec`` ns), serialized."""
     return ENCAPSULATION + _STAMP.pack(sec, nanosec)
+
+
+# ------------------------------------------------------------------------------ reading
+_D3 = struct.Struct("<3d")
+
+
+def _align(pos: int, n: int) -> int:
+    """Absolute offset ``pos`` aligned to ``n`` relative to the CDR payload (after 4 header bytes)."""
+    return 4 + ((pos - 4 + n - 1) & ~(n - 1))
+
+
+def _header(raw) -> tuple[float, int]:
+    sec, nsec = _STAMP.unpack_from(raw, 4)
+    (n,) = _U32.unpack_from(raw, 12)
+    return sec + 1e-9 * nsec, 16 + n
+
+
+def imu_fast(raw) -> tuple[float, tuple[float, float, float]]:
+    """(header stamp in s, linear acceleration) of a little-endian CDR sensor_msgs/Imu."""
+    t, pos = _header(raw)
+    return t, _D3.unpack_from(raw, _align(pos, 8) + 200)  # after orientation, 3 covariances/vectors
+
+
+def joint_state_fast(raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
+    """(header stamp in s, names, positions) of a little-endian CDR sensor_msgs/JointState."""
+    t, pos = _header(raw)
+    pos = _align(pos, 4)
+    (count,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    names = []
+    for _ in range(count):
+        pos = _align(pos, 4)
+        (n,) = _U32.unpack_from(raw, pos)
+        names.append(bytes(raw[pos + 4: pos + 3 + n]).decode())
+        pos += 4 + n
+    pos = _align(pos, 4)
+    (npos,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    if npos:
+        pos = _align(pos, 8)
+    return t, tuple(names), struct.unpack_from(f"<{npos}d", raw, pos)
+
+
+class JointStateDecoder:
+    """:func:`joint_state_fast` that skips the names when they are those of the previous message."""
+
+    def __init__(self) -> None:
+        self._prefix = b""
+        self._names: tuple[str, ...] = ()
+        self._layout: tuple[int, struct.Struct] | None = None
+
+    def __call__(self, raw) -> tuple[float, tuple[str, ...], tuple[float, ...]]:
+        n = len(self._prefix)
+        if n and self._layout is not None and raw[12:12 + n] == self._prefix:  # a prefix comes with its layout
+            offset, fmt = self._layout
+            sec, nsec = _STAMP.unpack_from(raw, 4)
+            return sec + 1e-9 * nsec, self._names, fmt.unpack_from(raw, offset)
+        t, names, pos = joint_state_fast(raw)
+        # the bytes from the frame_id to the position count fix where the positions are
+        _, end = _header(raw)
+        end = _align(end, 4) + 4  # the names' count
+        for _ in names:
+            end = _align(end, 4)
+            end += 4 + _U32.unpack_from(raw, end)[0]
+        end = _align(end, 4) + 4
+        self._prefix = bytes(raw[12:end])
+        self._names = names
+        self._layout = (_align(end, 8) if pos else end, struct.Struct(f"<{len(pos)}d"))
+        return t, names, pos
+
+    @property
+    def positions_end(self) -> int:
+        """Where the positions of the message last decoded end (for :func:`joint_state_efforts`)."""
+        if self._layout is None:
+            raise TypeError("JointStateDecoder.positions_end: no message decoded yet")
+        return self._layout[0] + self._layout[1].size
+
+
+def joint_state_efforts(raw, end: int) -> tuple[float, ...]:
+    """The efforts of a little-endian CDR sensor_msgs/JointState whose positions end at ``end``."""
+    pos = _align(end, 4)
+    (nvel,) = _U32.unpack_from(raw, pos)
+    pos = (_align(pos + 4, 8) if nvel else pos + 4) + 8 * nvel
+    pos = _align(pos, 4)
+    (neff,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    return struct.unpack_from(f"<{neff}d", raw, _align(pos, 8) if neff else pos)
+
+
+def little_endian(raw) -> bool:
+    """Whether serialized bytes are little-endian CDR (their encapsulation header says so)."""
+    return len(raw) > 4 and raw[1] == 1

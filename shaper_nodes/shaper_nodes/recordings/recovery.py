@@ -1,0 +1,370 @@
+"""What a damaged or unclosed MCAP file still holds, read record by record, and what it lost.
+
+rosbags' reader needs the MCAP footer and summary, so a file cut short (recorder killed, disk
+full) or with a broken record fails to open; :class:`RecoveredFile` scans it from its start,
+record by record, with the ``mcap`` library's record parsers: schemas, channels, messages and
+chunks are taken until the first record that is cut off or unreadable, a chunk whose data does
+not decompress or fails its CRC is skipped, and :class:`Damage` says how much was lost (bytes,
+and the time range of the messages in the chunk that was cut, read from its header). Messages
+are deserialised with a typestore built from the schemas in the file; a type whose definition is
+missing or does not parse is reported.
+
+A recording that was not closed is described plainly (:func:`describe_unclosed`): how many
+messages were read, where the data ends, and, from the last heartbeat the suite's recorder wrote
+into it (:mod:`.heartbeat`), until when the recorder was alive and how much it lost at most after
+its last flush (seconds and messages per topic).
+"""
+
+from __future__ import annotations
+
+import io
+import pathlib
+import struct
+from collections.abc import Generator, Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, BinaryIO
+
+from .bounds import (
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_MESSAGE,
+    OP_SCHEMA,
+    OPNAMES,
+    ReadLimits,
+    check_chunk,
+    check_magic,
+    inflate,
+)
+from .errors import BagError
+from .heartbeat import Heartbeat, LossBound, is_heartbeat_topic, loss_bound
+
+if TYPE_CHECKING:
+    from mcap.data_stream import ReadDataStream
+
+@dataclass
+class Damage:
+    """What a damaged MCAP file lost.
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    size : int
+        File size, bytes.
+    readable : int
+        Bytes up to the end of the last complete record, from the start of the file.
+    reason : str
+        Why reading stopped (or "" if it reached the end).
+    lost_time : tuple of (int, int) or None
+        Log-time range (ns) of the messages in the chunk that was cut, from its header.
+    skipped_chunks : list of str
+        Chunks skipped because their data was corrupt (and why).
+    expected_messages : int or None
+        Message count that metadata.yaml promises, if it exists.
+    messages_read : int
+        Messages read from the file (the recorder's heartbeats not counted).
+    data_start, data_end : int or None
+        Log times of the first and last message read, ns (heartbeats not counted).
+    heartbeat : Heartbeat or None
+        The last recorder heartbeat read (None: the file has none).
+    loss : LossBound or None
+        What was lost after the last flush, at most (from the heartbeat).
+    """
+
+    path: str
+    size: int
+    readable: int
+    reason: str = ""
+    lost_time: tuple[int, int] | None = None
+    skipped_chunks: list[str] = field(default_factory=list)
+    expected_messages: int | None = None
+    messages_read: int = 0
+    data_start: int | None = None
+    data_end: int | None = None
+    heartbeat: Heartbeat | None = None
+    loss: LossBound | None = None
+
+    @property
+    def not_closed(self) -> bool:
+        """The file ends without its footer (the writer stopped before closing it)."""
+        return self.reason == "the file ends without a footer" or self.reason.startswith("cut inside")
+
+    @property
+    def lost_bytes(self) -> int:
+        return self.size - self.readable
+
+def _sec(ns: int) -> float:
+    return ns * 1e-9
+
+class RecoveredFile:
+    """A damaged MCAP file scanned record by record (see the module docstring)."""
+
+    def __init__(self, path: pathlib.Path, limits: ReadLimits | None = None) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
+        self.path = path
+        self.limits = limits or ReadLimits()
+        self.size = path.stat().st_size
+        self.damage = Damage(str(path), self.size, 0)
+        self.channels: dict[int, tuple[str, str]] = {}  # id -> (topic, msgtype)
+        self._schemas: dict[int, tuple[str, str, str]] = {}  # id -> (name, encoding, text)
+        self.store = get_typestore(Stores.EMPTY)
+        self.bad_types: dict[str, str] = {}
+        self._last_beat: tuple[int, bytes, str] | None = None  # log time, raw, msgtype
+        # a first pass over the readable part: channels, definitions, counts (messages stream later)
+        for _ in self._records(set(), collect=True):
+            pass
+        self._conclude()
+
+    def _conclude(self) -> None:
+        """The last heartbeat, and the loss bound it gives if the file was not closed."""
+        d = self.damage
+        if self._last_beat is None:
+            return
+        stamp, raw, msgtype = self._last_beat
+        try:
+            status: Any = self.store.deserialize_cdr(raw, msgtype)
+            d.heartbeat = Heartbeat.from_values(stamp, ((kv.key, kv.value) for kv in status.values))
+        except Exception:
+            return
+        if d.not_closed:
+            d.loss = loss_bound(d.heartbeat, d.data_start, d.lost_time[1] if d.lost_time else None)
+
+    def messages(self, wanted: set[str]) -> Iterator[tuple[str, str, int, bytes]]:
+        yield from self._records(wanted, collect=False)
+
+    # ----------------------------------------------------------------- scanning
+    def _records(self, wanted: set[str], collect: bool) -> Iterator[tuple[str, str, int, bytes]]:
+        """The messages of ``wanted`` topics, up to the first record that is cut off or unreadable.
+
+        With ``collect``, also take the schemas and channels and note where and why reading stopped.
+        """
+        from mcap.data_stream import ReadDataStream
+
+        with open(self.path, "rb") as f:
+            check_magic(self.path, f.read(8))
+            good = 8
+            while True:
+                record = self._next_record(f, good, collect)
+                if record is None:
+                    return
+                op, length, body = record
+                stream = ReadDataStream(io.BytesIO(body))
+                try:
+                    end = yield from self._record_items(op, length, stream, wanted, collect, good)
+                except Exception as err:
+                    self._stop(collect, good, f"unreadable {OPNAMES.get(op, hex(op))} record at byte {good}: {err}")
+                    return
+                if end:
+                    return
+                good += 9 + length
+
+    def _next_record(self, f: BinaryIO, good: int, collect: bool) -> tuple[int, int, bytes] | None:
+        """(opcode, length, body) of the record at ``good`` (bytes), or None where reading stops (noted)."""
+        head = f.read(9)
+        if len(head) == 0:
+            self._stop(collect, good, "the file ends without a footer")
+            return None
+        if len(head) < 9:
+            self._stop(collect, good, "cut inside a record header")
+            return None
+        op, length = head[0], struct.unpack("<Q", head[1:])[0]
+        if length > self.size and (op not in OPNAMES or length >= 2**40):
+            self._stop(collect, good, f"corrupt record header at byte {good} (length {length})")
+            return None
+        if good + 9 + length > self.size:  # a record cut by the end of the file (its header written, not all of it)
+            body = f.read(16)
+            lost = struct.unpack("<QQ", body[:16]) if op == OP_CHUNK and len(body) >= 16 else None
+            self._stop(collect, good, f"cut inside a {OPNAMES.get(op, hex(op))} record"
+                       f" ({self.size - good - 9} of {length} bytes)", lost)
+            return None
+        return op, length, f.read(length)
+
+    def _record_items(self, op: int, length: int, stream: ReadDataStream, wanted: set[str], collect: bool,
+                      good: int) -> Generator[tuple[str, str, int, bytes], None, bool]:
+        """The messages of one record (a message, or those of a chunk); returns True at the end of the data."""
+        from mcap.records import Channel, Chunk, Message, Schema
+
+        if op == OP_SCHEMA:
+            if collect:
+                s = Schema.read(stream)
+                self._add_schema(s.id, s.name, s.encoding, s.data)
+        elif op == OP_CHANNEL:
+            if collect:
+                c = Channel.read(stream)
+                self._add_channel(c.id, c.topic, c.schema_id)
+        elif op == OP_MESSAGE:
+            m = Message.read(stream, length)
+            item = self._message(m, wanted, collect)
+            if item is not None:
+                yield item
+        elif op == OP_CHUNK:
+            yield from self._chunk_items(Chunk.read(stream), wanted, collect, good)
+        elif op in (OP_FOOTER, OP_DATA_END):
+            self._stop(collect, self.size, "")
+            return True
+        return False
+
+    def _chunk_items(self, chunk, wanted: set[str], collect: bool, good: int) -> Iterator[tuple[str, str, int, bytes]]:
+        """The messages of the chunk at ``good`` (bytes) up to its first corrupt record (noted)."""
+        from mcap.records import Channel, Message, Schema
+
+        records, err = _chunk_records(chunk, self.limits, good, self.path)
+        if err and collect:
+            self.damage.skipped_chunks.append(
+                f"chunk at byte {good} ({_sec(chunk.message_start_time):.3f}-"
+                f"{_sec(chunk.message_end_time):.3f} s): {err}; {len(records)} records before it kept")
+        for rec in records:
+            if isinstance(rec, Schema):
+                if collect:
+                    self._add_schema(rec.id, rec.name, rec.encoding, rec.data)
+            elif isinstance(rec, Channel):
+                if collect:
+                    self._add_channel(rec.id, rec.topic, rec.schema_id)
+            elif isinstance(rec, Message):
+                item = self._message(rec, wanted, collect)
+                if item is not None:
+                    yield item
+
+    def _stop(self, collect: bool, good: int, reason: str, lost: tuple[int, int] | None = None) -> None:
+        if collect:
+            self.damage.readable, self.damage.reason, self.damage.lost_time = good, reason, lost
+
+    def _message(self, m, wanted: set[str], collect: bool = False) -> tuple[str, str, int, bytes] | None:
+        ch = self.channels.get(m.channel_id)
+        if collect and ch is not None:
+            stamp = int(m.log_time)
+            if is_heartbeat_topic(*ch):
+                if self._last_beat is None or stamp >= self._last_beat[0]:
+                    self._last_beat = (stamp, m.data, ch[1])
+            else:
+                d = self.damage
+                d.messages_read += 1
+                d.data_start = stamp if d.data_start is None else min(d.data_start, stamp)
+                d.data_end = stamp if d.data_end is None else max(d.data_end, stamp)
+        if ch is None or ch[0] not in wanted:
+            return None
+        return ch[0], ch[1], int(m.log_time), m.data
+
+    def _add_schema(self, sid: int, name: str, encoding: str, data: bytes) -> None:
+        self._schemas[sid] = (name, encoding, data.decode("utf-8", errors="replace"))
+
+    def _add_channel(self, cid: int, topic: str, schema_id: int) -> None:
+        from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+        name, encoding, text = self._schemas.get(schema_id, ("", "", ""))
+        self.channels[cid] = (topic, name)
+        if not name or name in self.store.fielddefs or name in self.bad_types:
+            return
+        try:
+            if encoding == "ros2msg":
+                types = get_types_from_msg(text, name)
+            elif encoding == "ros2idl":
+                sep = "=" * 80 + "\n"
+                types = {}
+                for part in (text.split(sep)[1:] if text.startswith(sep + "IDL: ") else [text]):
+                    types.update(get_types_from_idl(part.split("\n", 1)[1] if part.startswith("IDL: ") else part))
+            else:
+                raise BagError(f"schema encoding {encoding!r} is not supported")
+            self.store.register(types)
+        except Exception as err:
+            self.bad_types[name] = f"its definition does not parse ({err})"
+
+def _chunk_records(chunk, limits: ReadLimits, offset: int, path: pathlib.Path) -> tuple[list, str]:
+    """The records of a chunk up to the first corrupt one, and what was wrong ("" if nothing)."""
+    import zlib
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Channel, Message, Schema
+
+    check_chunk(offset, chunk.compression, chunk.uncompressed_size, len(chunk.data), limits, path)
+    try:
+        data = inflate(chunk.data, chunk.compression, chunk.uncompressed_size)
+        if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+            raise ValueError("CRC mismatch")
+    except Exception as err:
+        return [], f"its data is corrupt ({type(err).__name__}: {err})"
+    size = len(data)
+    records: list = []
+    pos = 0
+    parsers = {OP_SCHEMA: Schema.read, OP_CHANNEL: Channel.read}
+    while pos < size:
+        if pos + 9 > size:
+            return records, f"corrupt record header at offset {pos} of the chunk"
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if pos + 9 + length > size:
+            return records, f"record at offset {pos} of the chunk claims {length} bytes, {size - pos - 9} remain"
+        body = ReadDataStream(io.BytesIO(data[pos + 9: pos + 9 + length]))
+        try:
+            if op == OP_MESSAGE:
+                records.append(Message.read(body, length))
+            elif op in parsers:
+                records.append(parsers[op](body))
+        except Exception as err:
+            return records, f"unreadable record at offset {pos} of the chunk ({err})"
+        pos += 9 + length
+    return records, ""
+
+def mcap_chunks(data: bytes) -> list[tuple[int, int]]:
+    """(byte offset, record length) of every chunk record of an MCAP file's bytes (for tests and tools)."""
+    pos, out = 8, []
+    while pos + 9 <= len(data):
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if op == OP_CHUNK:
+            out.append((pos, length))
+        if op == OP_FOOTER:
+            break
+        pos += 9 + length
+    return out
+
+def _when(ns: int, origin: int | None) -> str:
+    """A log time as seconds from ``origin``, with the UTC clock time when it looks like wall time."""
+    text = f"{_sec(ns - (origin or 0)):.3f} s"
+    if ns > 10**18:  # after 2001: a wall clock, not simulated time
+        import datetime
+
+        clock = datetime.datetime.fromtimestamp(ns * 1e-9, tz=datetime.UTC).strftime("%Y-%m-%d %H:%M:%S.%f")
+        text += f" ({clock[:-3]} UTC)"
+    return text
+
+def describe_unclosed(d: Damage) -> str:
+    """What a recording that was not closed holds and lost, in one sentence (see the module docstring)."""
+    if d.data_end is None:
+        head = f"recording not closed (recorder killed?): no message in {d.path}"
+    else:
+        head = (f"recording not closed (recorder killed?): {d.messages_read} messages read, data ends at"
+                f" {_when(d.data_end, d.data_start)} from its first message")
+    if d.loss is None or d.heartbeat is None:
+        return head + ("; the file has no recorder heartbeat, so how much the recorder still held when it stopped"
+                       " is not known")
+    loss, beat = d.loss, d.heartbeat
+    origin = d.data_start if d.data_start is not None else beat.stamp_ns
+    per_topic = ", ".join(f"{t} {n}" for t, n in sorted(loss.messages.items()))
+    text = f"{head}; the recorder had written everything it received until {_when(beat.stamp_ns, origin)}"
+    if loss.alive_ns > beat.stamp_ns:
+        text += f" and was still alive at {_sec(loss.alive_ns - origin):.3f} s (the chunk it was writing was cut)"
+    text += (f"; lost after its last flush: at most ~{loss.seconds:.1f} s, {loss.total} messages ({per_topic};"
+             f" at the rates it measured, if its writer kept the pace of its {beat.flush_period:g} s flushes)")
+    if loss.dropped:
+        text += (f"; it had also dropped {sum(loss.dropped.values())} message(s) (queue full: "
+                 + ", ".join(f"{t} {n}" for t, n in sorted(loss.dropped.items())) + ")")
+    return text
+
+def describe_damage(d: Damage) -> str:
+    """One sentence on what a damaged file lost."""
+    if not d.reason and not d.skipped_chunks:
+        return f"{d.path}: read to the end"
+    parts = []
+    if d.not_closed:
+        parts.append(describe_unclosed(d))
+    if d.reason and d.reason != "the file ends without a footer":
+        parts.append(f"{d.path}: {d.reason}; read {d.readable} of {d.size} bytes, {d.lost_bytes} bytes"
+                     f" ({100.0 * d.lost_bytes / max(d.size, 1):.1f} %) lost")
+        if d.lost_time is not None:
+            a, b = d.lost_time
+            parts.append(f"the cut chunk held messages logged {_sec(a):.3f}-{_sec(b):.3f} s")
+    if d.skipped_chunks:
+        parts.append(f"{len(d.skipped_chunks)} corrupt chunk(s) skipped: " + "; ".join(d.skipped_chunks))
+    return "; ".join(parts)
