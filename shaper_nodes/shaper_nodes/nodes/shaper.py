@@ -60,7 +60,8 @@ Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its 
 (e.g. the scheduler) re-time the motion already commanded instead of switching bumplessly
 (time-varying shaping, see core/shaping/fir.py).
 
-Parameters: :data:`PARAMETERS` (names, defaults, ranges and descriptions; config/shaper.yaml).
+Parameters: :data:`PARAMETERS` (names, defaults, ranges and descriptions; config/shaper.yaml), declared in
+nodes/shaper_parameters.py with what their values mean (the design, the joint limits).
 """
 
 from __future__ import annotations
@@ -82,7 +83,6 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFir, UpdatePolicy, discretize
-from shaper_nodes.core.shaping.limits import JointLimits
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
 from shaper_nodes.core.shaping.stream import CommandStream, block_rows
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
@@ -147,7 +147,7 @@ class ShaperNode(Node):
         self._source = PARAMETERS_SOURCE
         self._revision = 1
         self._pending_params: tuple[Shaper, str] | None = None
-        self.limits = self._limits_from_params(v)
+        self.limits = limits_from_values(self.joint_names, v)  # the parameters' and the URDF's
         #: the streamed inputs' filters and rules (core/shaping/stream.py); it owns the stream lock
         self.stream = CommandStream(self._fir, self.limits, retiming=bool(self.policy.retime_sources),
                                     max_abs=float(p("limits.max_abs_value").value),
@@ -237,10 +237,6 @@ class ShaperNode(Node):
             + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else "")
             + (f", each goal shaped for its final pose by {self.pose_shaper.srv_name}" if self.pose_shaper else "")
             + f"; {self.limits.describe()}")
-
-    def _limits_from_params(self, v: dict[str, Any]) -> JointLimits:
-        """The joint limits: the parameters', and the URDF's when limits.urdf_file is set (the tighter)."""
-        return limits_from_values(self.joint_names, v)
 
     # ----------------------------------------------------------------- shaper changes
     def _describe(self) -> str:
