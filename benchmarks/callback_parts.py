@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import importlib
 import json
 import pathlib
 import sys
@@ -33,8 +34,10 @@ from typing import Any
 
 import numpy as np
 
-#: the shaper's methods timed in the node (name on the class)
-SHAPER_PARTS = ("_arrived", "_shape_array", "_count_forwarded")
+#: the shaper's parts timed in the node: (name in the results, its module, class and method)
+SHAPER_PARTS = (("_arrived", "shaper_nodes.ros.stream_watch", "StreamWatch", "arrived"),
+                ("_shape_array", "shaper_nodes.core.shaping.stream", "CommandStream", "shape_array"),
+                ("_count_forwarded", "shaper_nodes.ros.stream_watch", "StreamWatch", "count_forwarded"))
 ZVD = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03, "discretization": "split"}
 
 
@@ -70,8 +73,9 @@ def _node_main(kind: str, out: str, argv: list[str]) -> None:
         from shaper_nodes.nodes import shaper as shaper_module
 
         cls = shaper_module.ShaperNode
-        for name in SHAPER_PARTS:
-            setattr(cls, name, _timed(name, getattr(cls, name), parts))
+        for name, module, owner, method in SHAPER_PARTS:  # before the node is made: it binds them
+            owner_cls = getattr(importlib.import_module(module), owner)
+            setattr(owner_cls, method, _timed(name, getattr(owner_cls, method), parts))
         on_array = cls._on_array
 
         def timed_on_array(self: Any, msg: Any, info: Any) -> None:

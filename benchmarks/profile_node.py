@@ -48,17 +48,17 @@ KEY_FUNCTIONS = (
     ("take (deserialise the message)", "rclpy/subscription.py", "handle.take_message"),
     ("take_message (C)", "~", "<built-in method rclpy._rclpy_pybind11.take_message>"),
     ("callback: echo's publish / shaper's _on_array", "", "_on_array"),
-    ("  _arrived (rate watch)", "nodes/shaper.py", "_arrived"),
+    ("  arrived (rate watch)", "ros/stream_watch.py", "arrived"),
     ("  finite_array", "core/checks.py", "finite_array"),
-    ("  _shape_checked", "nodes/shaper.py", "_shape_checked"),
-    ("  _shape_array", "nodes/shaper.py", "_shape_array"),
+    ("  _shape_checked", "core/shaping/stream.py", "_shape_checked"),
+    ("  shape_array", "core/shaping/stream.py", "shape_array"),
     ("    deepcopy", "copy.py", "deepcopy"),
     ("    StreamingShaper.process", "core/shaping/fir.py", "process"),
     ("    JointLimits.check", "core/shaping/limits.py", "check"),
     ("  Float64MultiArray()", "std_msgs/msg/_float64_multi_array.py", "__init__"),
     ("  Publisher.publish", "rclpy/publisher.py", "publish"),
     ("  publish (C: serialise, write)", "~", "<built-in method rclpy._rclpy_pybind11.publish>"),
-    ("  _count_forwarded", "nodes/shaper.py", "_count_forwarded"),
+    ("  count_forwarded", "ros/stream_watch.py", "count_forwarded"),
 )
 
 

@@ -13,7 +13,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
-from shaper_nodes.core.checks import MAX_JOINT_NAMES, InputError, finite_array, joint_permutation, strictly_increasing
+from shaper_nodes.core.checks import MAX_JOINT_NAMES, InputError, finite_array, joint_permutation
 from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_MAX_GAIN,
@@ -23,6 +23,7 @@ from shaper_nodes.core.shaping import (
     ShaperError,
     design,
 )
+from shaper_nodes.core.shaping.stream import FIELDS, check_times
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
 
 
@@ -122,7 +123,7 @@ def sec_to_time(t: float) -> Time:
 
 # ----------------------------------------------------------------------------- trajectories
 #: the fields of a JointTrajectoryPoint that are shaped (positions always; the others when given)
-TRAJ_FIELDS = ("positions", "velocities", "accelerations")
+TRAJ_FIELDS = FIELDS
 
 
 #: joint orders already seen, (configured, received) -> the permutation (read-only); see _permutation
@@ -168,11 +169,7 @@ def trajectory_arrays(msg: JointTrajectory, joint_names: Sequence[str], require_
         raise InputError("empty", "trajectory has no points")
     n = len(joint_names)
     times = np.array([duration_to_sec(p.time_from_start) for p in msg.points])
-    if np.any(times < 0):
-        k = int(np.argmax(times < 0))
-        raise InputError("non_increasing_time", f"time_from_start of point {k} is negative ({times[k]:g} s)")
-    if require_times or len(times) > 1:
-        strictly_increasing("time_from_start", times)
+    check_times(times, require_times)
     fields: dict[str, np.ndarray] = {}
     for f in TRAJ_FIELDS:
         present = [len(getattr(p, f)) > 0 for p in msg.points]

@@ -1,0 +1,155 @@
+"""The shaper node's bookkeeping of its inputs: arrivals through the rate watch, forwarded and refused counts.
+
+The streaming path only appends each message's info (the middleware's stamps and sequence number) and
+when it was taken (:meth:`StreamWatch.arrived`: a deque's append, atomic); the node's main thread
+passes them through one :class:`~shaper_nodes.core.rate.RateWatch` per stream every
+:data:`WATCH_PERIOD` s (:meth:`StreamWatch.watch`), off the streaming path. The kept arrivals are
+bounded (10 s at the command rate, at least 4096): reaching the bound means a stalled main thread,
+and the arrivals pushed out unseen are reported. :meth:`StreamWatch.summary` builds the periodic
+``/diagnostics`` summary: the input windows (rate, gaps, bursts, drops, lag), what was forwarded and
+what refused.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.rate import RateWatch
+
+from .diagnostics import ERROR, OK, WARN, Diagnostics
+
+#: the streamed inputs (array_in, stream_in)
+STREAMS = ("array", "stream")
+#: how often the streams' kept arrivals go through the rate watch (s, steady clock, main thread)
+WATCH_PERIOD = 0.25
+
+
+class StreamWatch:
+    """The rate, drop, forward and refusal bookkeeping of the shaper node (see the module docstring).
+
+    Parameters
+    ----------
+    rate : float
+        The command rate, Hz: the nominal rate of the streams.
+    diagnostics : Diagnostics
+        Where refusals are reported.
+    publishers : callable
+        The number of publishers on a stream's input (``publishers("array")``): sequence numbers are per
+        publisher, so drops are counted while one publisher is seen. Asked at every summary.
+
+    Attributes
+    ----------
+    rejections, forwarded : collections.Counter
+        Refused inputs per kind, forwarded messages per path ('array', 'stream', 'trajectory', 'action').
+    rate_watch : dict of str to RateWatch
+        One per stream of :data:`STREAMS`.
+    arrivals_max : int
+        How many arrivals per stream are kept until the main thread watches them.
+    lock : threading.Lock
+        The counters and rate watches, shared by the node's threads.
+    """
+
+    def __init__(self, rate: float, diagnostics: Diagnostics, publishers: Callable[[str], int]) -> None:
+        self.diagnostics = diagnostics
+        self._publishers = publishers
+        self.lock = threading.Lock()
+        self.rejections: Counter[str] = Counter()
+        self.forwarded: Counter[str] = Counter()
+        self._window_rejections = 0
+        self.rate_watch = {k: RateWatch(rate) for k in STREAMS}
+        self._publisher_counts = dict.fromkeys(STREAMS, 1)
+        # the streams' message infos wait here (a deque's append and popleft are atomic) and go through the
+        # rate watch off the streaming path, on the main thread every WATCH_PERIOD s (watch); the bound is
+        # 10 s of arrivals at the command rate: reaching it means a stalled main thread, and is reported
+        self.arrivals_max = max(4096, int(10 * rate))
+        self._arrivals: dict[str, deque[tuple[dict[str, Any] | None, int]]] = {
+            k: deque(maxlen=self.arrivals_max) for k in STREAMS}
+        self._arrivals_in = dict.fromkeys(STREAMS, 0)  # appended, by the one thread of each stream
+        self._arrivals_seen = dict.fromkeys(STREAMS, 0)  # through the rate watch
+
+    def arrived(self, stream: str, info: dict[str, Any] | None) -> None:
+        """Keep a streamed message's info (the middleware's stamps) and when it was taken, for the rate
+        watch; only an append on the streaming path."""
+        self._arrivals[stream].append((info, time.time_ns()))
+        self._arrivals_in[stream] += 1
+
+    def count_forwarded(self, path: str) -> None:
+        """One message passed on by ``path``."""
+        # no lock: each path's count has one writer (array and stream: the streaming thread; trajectory and
+        # action: the side node's thread), and a dict item's update is atomic to the readers under the GIL
+        self.forwarded[path] += 1
+
+    def refused(self, topic: str, err: InputError) -> None:
+        """Count a refused input of ``topic`` and report it (throttled per kind)."""
+        with self.lock:
+            self.rejections[err.kind] += 1
+            self._window_rejections += 1
+            count = self.rejections[err.kind]
+            self.diagnostics.report(err.kind, ERROR, f"refused {err.kind} on {topic}: {err} (not forwarded)",
+                                    name="input", values=[("topic", topic), ("count", str(count))])
+
+    def watch(self) -> None:
+        """Pass the kept arrivals through the rate watches (the main thread's timer)."""
+        with self.lock:
+            self._watch_arrivals()
+
+    def _watch_arrivals(self) -> None:
+        """:meth:`watch` with :attr:`lock` held."""
+        for k, queue in self._arrivals.items():
+            watch, publishers = self.rate_watch[k], self._publisher_counts[k]
+            # bounded: what is there now (the stream thread may go on appending)
+            for _ in range(len(queue)):
+                info, handled = queue.popleft()
+                info = info or {}
+                watch.arrival(info.get("source_timestamp"), info.get("received_timestamp"), handled,
+                              info.get("publication_sequence_number"), publishers)
+                self._arrivals_seen[k] += 1
+
+    def watched(self, stream: str) -> RateWatch:
+        """The rate watch of ``stream`` ('array' or 'stream') with every arrival so far taken in."""
+        with self.lock:
+            self._watch_arrivals()
+            return self.rate_watch[stream]
+
+    def summary(self, quiet: str, head: Iterable[tuple[str, str]] = (),
+                tail: Iterable[tuple[str, str]] = ()) -> tuple[int, str, list[tuple[str, str]]]:
+        """The periodic summary's (level, message, values), and a new window: WARN when inputs were refused
+        in the window, a stream saw gaps or drops, or arrivals went unwatched; the message says which, or is
+        ``quiet`` when none. Values: ``head``, the forwarded counts, each stream's window, ``tail``, the
+        refused counts."""
+        with self.lock:
+            refused, self._window_rejections = self._window_rejections, 0
+            forwarded, rejections = dict(self.forwarded), dict(self.rejections)
+            self._watch_arrivals()
+            windows = {k: w.window() for k, w in self.rate_watch.items()}
+            total_drops = {k: w.total_drops for k, w in self.rate_watch.items()}
+            # arrivals pushed out of a full queue before the rate watch saw them (a stalled main thread)
+            unwatched = {k: self._arrivals_in[k] - self._arrivals_seen[k] - len(self._arrivals[k]) for k in STREAMS}
+        # sequence numbers are per publisher: drops are counted while one publisher is seen
+        self._publisher_counts = {k: self._publishers(k) for k in STREAMS}
+        troubled = [k for k, w in windows.items() if w.trouble]
+        level = WARN if refused or troubled else OK
+        parts = [f"{refused} messages refused in the last period"] if refused else []
+        parts += [f"{k} input: {w.gaps} gaps (largest {1e3 * w.largest_gap_s:.1f} ms), {w.drops} dropped"
+                  for k, w in windows.items() if w.trouble]
+        parts += [f"{k} input: {n} arrivals not watched (the node's main thread fell behind)"
+                  for k, n in unwatched.items() if n > 0]
+        if any(n > 0 for n in unwatched.values()):
+            level = WARN
+        msg = "; ".join(parts) if parts else quiet
+        values = list(head)
+        values += [(f"forwarded.{k}", str(v)) for k, v in sorted(forwarded.items())]
+        for k, w in windows.items():
+            if w.messages:
+                values += w.values(f"input.{k}")
+            values.append((f"input.{k}.total_drops", str(total_drops[k])))
+            if unwatched[k] > 0:
+                values.append((f"input.{k}.unwatched", str(unwatched[k])))
+        values += list(tail)
+        values += [(f"refused.{k}", str(v)) for k, v in sorted(rejections.items())]
+        return level, msg, values
