@@ -16,7 +16,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # (rclpy is imported when a driver is made, not to print --help)
-    from sim_plant_node.conductor import Conductor, CycleResult
+    from sim_plant_node.clients.conductor import Conductor, CycleResult
 
 
 def docs_option(parser: argparse.ArgumentParser, what: str) -> None:
@@ -78,7 +78,7 @@ class LearnerDriver:
         from shaper_msgs.msg import CycleReport
         from shaper_msgs.msg import Shaper as ShaperMsg
         from shaper_nodes.ros.qos import LATCHED
-        from sim_plant_node.conductor import Conductor
+        from sim_plant_node.clients.conductor import Conductor
 
         self.conductor = Conductor(context=ctx)
         self.reports: list[Any] = []

@@ -1,0 +1,18 @@
+"""The ``sim_plant`` node (executable ``sim_plant``) and its parts.
+
+Modules
+-------
+sim_plant
+    :class:`SimPlantNode`: publishers, subscriptions, services, the task runner, the stepping in lockstep
+    or real time; ``main``.
+parameters
+    The parameter table :data:`PARAMETERS` (declared from here) and the groups the node reads together.
+models
+    ``plant.model`` to the :class:`~sim_plant_node.models.base.Plant` it names.
+sensors
+    /joint_states as the encoders report it and the accelerometer (noise, bias, quantisation).
+feedforward
+    The ``~/set_feedforward`` profile: its checks, installed at a cycle's START. Free of ROS.
+"""
+
+__all__ = ["feedforward", "models", "parameters", "sensors", "sim_plant"]
