@@ -11,8 +11,11 @@ models
     ``plant.model`` to the :class:`~sim_plant_node.models.base.Plant` it names.
 sensors
     /joint_states as the encoders report it and the accelerometer (noise, bias, quantisation).
+lockstep
+    The node's side of the lockstep exchange with the shaper (its asks on the wire, late answers, timeouts;
+    the rules are :mod:`shaper_nodes.core.lockstep`'s).
 feedforward
     The ``~/set_feedforward`` profile: its checks, installed at a cycle's START. Free of ROS.
 """
 
-__all__ = ["feedforward", "models", "parameters", "sensors", "sim_plant"]
+__all__ = ["feedforward", "lockstep", "models", "parameters", "sensors", "sim_plant"]

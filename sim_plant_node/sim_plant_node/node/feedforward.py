@@ -55,6 +55,18 @@ class Feedforward:
         samples = self.pending[1].shape[0] if self.pending else (self.active[1].shape[0] if self.active else 0)
         return samples, self.pending is not None
 
+    def request(self, msg: Any, injections: Sequence[str], joint_names: list[str], rate: float,
+                at_once: bool) -> tuple[bool, str]:
+        """The ``~/set_feedforward`` request's profile ``msg``, checked (:func:`check_profile`) and taken
+        (:meth:`set`): whether it was taken, and the answer's message."""
+        try:
+            profile = check_profile(msg, injections, joint_names, rate)
+        except ValueError as err:
+            return False, str(err)
+        samples, waits = self.set(profile, at_once)
+        return True, (f"{msg.injection} profile of {samples} samples (iteration {msg.iteration})"
+                      + (" from the next START" if waits else " installed"))
+
     def start(self) -> None:
         """A cycle starts: the pending profile (if any) becomes the installed one."""
         if self.pending is not None:

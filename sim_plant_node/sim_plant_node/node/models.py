@@ -17,11 +17,11 @@ from ..arm.plant import ArmPlant
 from ..models.base import Plant
 from ..models.loops import LOOP_MODELS, LOOP_PARAMS, make_loop_plant
 from ..models.pid_loop import PidLoopPlant
-from ..models.plants import PLANT_MODELS, make_plant
-from ..models.two_mass import TwoMassPlant
+from ..models.plants import PLANT_MODELS, CycleTask, make_plant
+from ..models.two_mass import StaircaseTask, TwoMassPlant
 from .parameters import PLANT_PARAMS, check_model
 
-__all__ = ["BUILDERS", "START_ONLY", "NodeValues", "Values", "build_plant"]
+__all__ = ["BUILDERS", "START_ONLY", "NodeValues", "Values", "build_plant", "make_task"]
 
 #: the models chosen at start-up only (a live change to them is refused)
 START_ONLY = ("arm",)
@@ -96,4 +96,23 @@ class NodeValues:
         return self._changes.get(name, self._node.get_parameter(name).value)
 
     def vector(self, name: str, allow_inf: bool = False) -> np.ndarray:
-        return np.asarray(self._node._vector(name, self._changes, allow_inf))
+        n = self._node.n
+        v = np.asarray(self.value(name), dtype=float).ravel()
+        if v.size == 1:
+            v = np.full(n, v[0])
+        finite = np.isfinite(v) | (allow_inf & np.isinf(v))
+        if v.size != n or not np.all(finite):
+            kind = "" if allow_inf else "finite "
+            raise ValueError(f"{name} needs 1 or {n} {kind}values, got {v.tolist()}")
+        return v
+
+
+def make_task(v: Values, rate: float) -> CycleTask | StaircaseTask:
+    """The task the ``task.*`` parameters describe: a staircase (seed 004) when task.levels is set, else
+    moves (ValueError if they do not make one)."""
+    task = CycleTask(v.vector("task.start"), v.vector("task.goal"), float(v.value("task.max_velocity")),
+                     float(v.value("task.max_acceleration")), float(v.value("task.dwell")), rate,
+                     int(v.value("task.cycles")), str(v.value("task.profile")), bool(v.value("task.round_trip")))
+    if len(v.value("task.levels")):  # empty (the default): not set
+        return StaircaseTask(v.vector("task.start"), v.value("task.levels"), float(v.value("task.dwell")), rate)
+    return task

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, JointState
 
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.ros.cdr import JointStateCdr, stamp_parts
@@ -83,6 +83,14 @@ class Sensors:
             js.effort[:] = effort
         js.set_stamp(*stamp_parts(t))
         return js.data()
+
+    def joint_state_message(self, plant: Plant, stamp: Any) -> JointState:
+        """The /joint_states message of ``plant``'s present state, stamped ``stamp`` (builtin_interfaces/Time)."""
+        position, velocity, effort = plant.joint_state()
+        msg = JointState(name=self.joint_names, position=self.reported(position).tolist(), velocity=velocity.tolist(),
+                         effort=(np.zeros(0) if effort is None else effort).tolist())
+        msg.header.stamp = stamp
+        return msg
 
     def reported(self, position: np.ndarray) -> np.ndarray:
         """Joint positions as the encoders report them: noise and quantisation as the parameters say."""

@@ -10,37 +10,22 @@ forward_command_controller does), integrates one period, and publishes ``/joint_
 slope), ``~/tip_state`` (tip position and velocity), the tip accelerometer (sensor_msgs/Imu,
 m/s^2, configurable noise and bias), cycle events and a per-cycle report.
 
-The model (parameter ``plant.model``: the list in :mod:`sim_plant_node.models`, the arm in
-:mod:`sim_plant_node.arm`) is built by name (:mod:`.models`) and driven through one interface,
-:class:`~sim_plant_node.models.base.Plant`: the node steps it, publishes its sensors (:mod:`.sensors`)
-and passes it the live changes it takes, whatever the model. The arm stands behind an emulation of
-joint_trajectory_controller (:mod:`sim_plant_node.controller`): FollowJointTrajectory on
-``topics.jtc_action``, JointTrajectory on ``topics.jtc_topic``, and the forward command topic while a
-task runs; in lockstep it steps while the controller executes a trajectory, and at rest publishes its
-last joint state again every 0.1 s of wall time, as a robot's joint_state_broadcaster keeps publishing.
-
-Feedforward (``~/set_feedforward``, shaper_msgs/SetFeedforward)
---------------------------------------------------------------
-A profile indexed by the sample within the cycle, installed at the next START: "command"
-profiles are added to the shaped setpoint (every model), "effort" profiles to the controller
-output (mck_pid only). See :mod:`.feedforward`.
+The model (``plant.model``: :mod:`sim_plant_node.models`, :mod:`sim_plant_node.arm`) is built by name
+(:mod:`.models`) and driven through one interface, :class:`~sim_plant_node.models.base.Plant`, whatever
+the model. The arm stands behind an emulation of joint_trajectory_controller
+(:mod:`sim_plant_node.controller`); in lockstep it steps while the controller executes a trajectory, and
+at rest publishes its last joint state again every 0.1 s of wall time. ``~/set_feedforward`` installs a
+profile at the next START (:mod:`.feedforward`).
 
 Modes (parameter ``mode``)
 --------------------------
 lockstep
-    Simulated time: publishes /clock and steps only when the shaped setpoint for the previous
-    raw setpoint has arrived, so runs go as fast as the nodes answer and give the same result
-    on a loaded machine. Idle (no task running) the plant does not step. If no answer comes
-    within ``lockstep_timeout`` seconds of wall time, the plant holds the last setpoint, warns,
-    and goes on. So that the first setpoint of a run is not lost on DDS (and the run stalled
-    for ``lockstep_timeout``), ``~/start_task`` refuses with 'waiting for subscribers' (a driver
-    asks again) until the raw setpoints have a matched subscription and the shaped setpoints a
-    matched publisher. With ``lockstep.block`` N > 1 the raw setpoints of N steps go to the shaper in one
-    message (layout [samples, joints]) and the plant steps through the shaped block: the same run with N
-    times fewer round trips, for a command path that is feedforward (each step's events, joint states, IMU
-    and /clock go out as before, step by step). Each ask is numbered in its layout's first label, and an
-    answer to an earlier ask (one that comes after ``lockstep_timeout`` went by) is ignored and counted
-    (``late_answers``), with a warning: the rules are those of :mod:`shaper_nodes.core.lockstep`.
+    Simulated time: publishes /clock and steps only when the shaped setpoint for the previous raw
+    setpoint has arrived (none within ``lockstep_timeout`` s of wall time: it holds the last setpoint,
+    warns, and goes on), so runs go as fast as the nodes answer and give the same result on a loaded
+    machine; idle (no task) it does not step. ``~/start_task`` refuses with 'waiting for subscribers'
+    until the loop through the shaper is matched on DDS. With ``lockstep.block`` N > 1 the raw setpoints
+    of N steps go out as one block. Asks, blocks and late answers follow :mod:`shaper_nodes.core.lockstep`.
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -59,7 +44,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent, CycleReport
@@ -67,7 +52,6 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetFeedforward
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
-from shaper_nodes.core.lockstep import Asks
 from shaper_nodes.ros.cdr import clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.node_main import run_node, with_config
@@ -78,8 +62,9 @@ from ..controller.jtc import JointTrajectoryController
 from ..controller.server import ControllerServer, tolerances_from
 from ..models.plants import CycleTask
 from ..models.two_mass import StaircaseTask
-from .feedforward import Feedforward, check_profile
-from .models import START_ONLY, NodeValues, build_plant
+from .feedforward import Feedforward
+from .lockstep import Exchange
+from .models import START_ONLY, NodeValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, SENSOR_PARAMS, WAITING
 from .sensors import Sensors
 
@@ -149,14 +134,9 @@ class SimPlantNode(Node):
         self.task: CycleTask | StaircaseTask | None = None
         self._preroll_left = 0
         self._latest_shaped: np.ndarray | None = None
-        self._waiting_since: float | None = None
-        #: lockstep: the steps asked of the shaper and not yet answered: (cycle events, preroll ends) each
-        self._asked: list[tuple[list, bool]] = []
-        self._block = int(self.get_parameter("lockstep.block").value)
-        self._asks = Asks(self.n, self._block > 1)  # lockstep: numbers the asks, tells the late answers
-        self.timeouts = 0
+        self.exchange = Exchange(self._cmd_pub, self.n, int(self.get_parameter("lockstep.block").value),
+                                 self.get_logger())
         self.refused = 0
-        self.late_answers = 0  # lockstep: answers to an earlier ask, ignored
         self.plant.reset(self._pose("task.start", {}))
         self._applied = self.plant.setpoint_at_rest
         self._raw = self._applied.copy()
@@ -165,8 +145,8 @@ class SimPlantNode(Node):
             g = lambda n: self.get_parameter(n).value  # noqa: E731
             defaults = tolerances_from(tuple(self.joint_names), list(g("jtc.trajectory_tolerance")),
                                        list(g("jtc.goal_tolerance")), float(g("jtc.goal_time")))
-            controller = JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate, defaults, self._applied)
-            self.jtc = ControllerServer(self, controller, self._now, lambda: self.plant.joint_state()[:2],
+            self.jtc = ControllerServer(self, JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate,
+                                        defaults, self._applied), self._now, lambda: self.plant.joint_state()[:2],
                                         self._jtc_busy, tp["jtc_action"], tp["jtc_topic"])
             if self.mode == "lockstep":
                 self.create_timer(0.002, self._free_run)
@@ -174,11 +154,7 @@ class SimPlantNode(Node):
         idle = (IDLE_STATE_PERIOD if self.plant.trajectory_controller else 0.0) if idle < 0 else idle
         if self.mode == "lockstep" and idle > 0:
             # a robot's joint_state_broadcaster publishes at rest too: the last state again (time stands still)
-            position, velocity, effort = self.plant.joint_state()
-            self._last_js: JointState | bytes = JointState(
-                name=self.joint_names, position=self.sensors.reported(position).tolist(),
-                velocity=velocity.tolist(), effort=(np.zeros(0) if effort is None else effort).tolist())
-            self._last_js.header.stamp = sec_to_time(self._now())
+            self._last_js: JointState | bytes = self.sensors.joint_state_message(self.plant, sec_to_time(self._now()))
             self.create_timer(idle, self._idle_joint_states, clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         if self.mode == "lockstep":
             self.create_timer(0.05, self._watchdog)
@@ -193,19 +169,14 @@ class SimPlantNode(Node):
                                                                           self.plant.damping_ratio, strict=True))
             + f", {self.mode} at {self.rate:g} Hz")
 
-    # ----------------------------------------------------------------- configuration
-    def _vector(self, name: str, overrides: dict, allow_inf: bool = False) -> np.ndarray:
-        v = np.asarray(overrides.get(name, self.get_parameter(name).value), dtype=float).ravel()
-        if v.size == 1:
-            v = np.full(self.n, v[0])
-        finite = np.isfinite(v) | (allow_inf & np.isinf(v))
-        if v.size != self.n or not np.all(finite):
-            kind = "" if allow_inf else "finite "
-            raise ValueError(f"{name} needs 1 or {self.n} {kind}values, got {v.tolist()}")
-        return v
+    @property
+    def _waiting_since(self) -> float | None:
+        """Lockstep: the wall time the pending ask went out (None: none pending)."""
+        return self.exchange.waiting_since
 
+    # ----------------------------------------------------------------- configuration
     def _pose(self, name: str, overrides: dict) -> np.ndarray:
-        return self._vector(name, overrides)
+        return NodeValues(self, overrides).vector(name)
 
     def _cycle_time(self) -> float | None:
         """Time since the current cycle's START at the present step, s (None before any)."""
@@ -245,19 +216,9 @@ class SimPlantNode(Node):
         return SetParametersResult(successful=True)
 
     # ----------------------------------------------------------------- task
-    def _make_task(self) -> CycleTask | StaircaseTask:
-        """The task the parameters describe: a staircase (seed 004) when task.levels is set, else moves."""
-        g = lambda n: self.get_parameter(n).value  # noqa: E731
-        task = CycleTask(self._pose("task.start", {}), self._pose("task.goal", {}), float(g("task.max_velocity")),
-                         float(g("task.max_acceleration")), float(g("task.dwell")), self.rate, int(g("task.cycles")),
-                         str(g("task.profile")), bool(g("task.round_trip")))
-        if len(g("task.levels")):  # empty (the default): not set
-            return StaircaseTask(self._pose("task.start", {}), g("task.levels"), float(g("task.dwell")), self.rate)
-        return task
-
     def _start_task(self, matched: bool = False) -> tuple[bool, str]:
         """Start a run; with ``matched`` (the ~/start_task service), in lockstep only once the loop through the
-        shaper is matched on DDS (:meth:`_lockstep_unmatched`)."""
+        shaper is matched on DDS (:meth:`.lockstep.Exchange.unmatched`)."""
         if self.task is not None:
             return False, "a task is already running"
         if self.jtc is not None and self.jtc.running:
@@ -266,33 +227,21 @@ class SimPlantNode(Node):
         have = self._event_pub.get_subscription_count()  # matched, not only discovered
         if have < need:
             return False, f"{WAITING}: the cycle events have {have} matched subscriptions, task.subscribers is {need}"
-        unmatched = self._lockstep_unmatched() if matched and self.mode == "lockstep" else ""
+        unmatched = self.exchange.unmatched(self._cmd_sub) if matched and self.mode == "lockstep" else ""
         if unmatched:
             return False, f"{WAITING}: {unmatched}"
         try:
-            task = self.task = self._make_task()
+            task = self.task = make_task(NodeValues(self, {}), self.rate)
         except ValueError as err:
             return False, str(err)
         g = lambda n: self.get_parameter(n).value  # noqa: E731
         self._preroll_left = int(round(float(g("task.preroll")) * self.rate))
         self._cycle_start_step = None  # the preroll belongs to no cycle
         self._preroll_total = self._preroll_left
-        if self.mode == "lockstep" and self._waiting_since is None:
+        if self.mode == "lockstep" and self.exchange.waiting_since is None:
             self._publish_next()
         return True, (f"{task.cycles} cycles of {task.samples_per_cycle / self.rate:.3f} s"
                       f" (move {task.move_duration:.3f} s) after {self._preroll_left / self.rate:.3f} s preroll")
-
-    def _lockstep_unmatched(self) -> str:
-        """What the lockstep loop still lacks on DDS ('' if nothing): a step waits for the shaped answer to its
-        raw setpoint, so a run started before the raw setpoints reach a subscription, or before a publisher's
-        shaped setpoints reach the plant, loses its first setpoint and stalls for ``lockstep_timeout``. (Matched,
-        not only discovered: a driver that sees the shaper in the graph may see it before the plant matches it.)"""
-        missing = []
-        if self._cmd_pub.get_subscription_count() == 0:
-            missing.append(f"the raw setpoints on {self._cmd_pub.topic_name} have no matched subscription")
-        if self._cmd_sub.get_publisher_count() == 0:
-            missing.append(f"the shaped setpoints on {self._cmd_sub.topic_name} have no matched publisher")
-        return "; ".join(missing)
 
     def _on_start(self, req, resp):
         resp.success, resp.message = self._start_task(matched=True)
@@ -335,28 +284,21 @@ class SimPlantNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _publish_next(self) -> None:
-        """Ask the shaper for the next step's setpoint: publish its raw setpoint, or with ``lockstep.block``
-        above 1 the raw setpoints of the next steps up to that many (up to the task's end) as one block
-        (layout [samples, joints]). Their events go out as each step is integrated (:meth:`_on_command`)."""
-        asked = self._asked
+        """Ask the shaper for the shaped setpoints of the next steps, up to ``lockstep.block`` of them (up to
+        the task's end). Their events go out as each step is integrated (:meth:`_step_asked`)."""
+        steps: list[tuple[list, bool]] = []
         raws: list[np.ndarray] = []
-        while len(raws) < self._block and self.task is not None and (self._preroll_left > 0 or not self.task.done):
-            asked.append(self._next_raw())
+        while len(raws) < self.exchange.block and self.task is not None and (self._preroll_left > 0
+                                                                              or not self.task.done):
+            steps.append(self._next_raw())
             raws.append(self._raw)
-        if not raws:
-            return
-        msg = Float64MultiArray(data=(self._raw if self._block == 1 else np.concatenate(raws)).tolist())
-        msg.layout.dim = [MultiArrayDimension(label=d.label, size=d.size, stride=d.stride)
-                          for d in self._asks.next(len(raws))]
-        self._cmd_pub.publish(msg)
-        self._waiting_since = time.monotonic()
+        if raws:
+            self.exchange.ask(steps, raws)
 
     def _step_asked(self, shaped: np.ndarray | None) -> None:
         """Integrate the steps asked for, each with its shaped setpoint (a row of ``shaped``; None: each holds
         the last applied setpoint), publishing /clock after each; then ask for the next ones."""
-        asked, self._asked = self._asked, []
-        self._waiting_since = None
-        for i, (events, preroll_end) in enumerate(asked):
+        for i, (events, preroll_end) in enumerate(self.exchange.take()):
             self._begin_step(events, preroll_end)
             self._integrate(self._applied if shaped is None else shaped[i])
             self._publish_clock()
@@ -437,12 +379,12 @@ class SimPlantNode(Node):
 
     def _idle_joint_states(self) -> None:
         """Lockstep at rest (no trajectory, no task): publish the last joint state again."""
-        if (self.jtc is None or not self.jtc.running) and self.task is None and self._waiting_since is None:
+        if (self.jtc is None or not self.jtc.running) and self.task is None and self.exchange.waiting_since is None:
             self._js_pub.publish(self._last_js)
 
     def _free_run(self) -> None:
         """Lockstep: step while the controller executes a trajectory (no task runs), ~20 ms of wall time a call."""
-        if self.jtc is None or self.task is not None or self._waiting_since is not None:
+        if self.jtc is None or self.task is not None or self.exchange.waiting_since is not None:
             return
         deadline = time.monotonic() + 0.02
         while self.jtc.running and time.monotonic() < deadline:
@@ -451,14 +393,10 @@ class SimPlantNode(Node):
 
     # ----------------------------------------------------------------- the shaped setpoints
     def _on_command(self, msg: Float64MultiArray) -> None:
-        label = msg.layout.dim[0].label if msg.layout.dim else None
-        if self.mode == "lockstep" and self._asks.late(label):  # the answer to an earlier ask
-            self.late_answers += 1
-            self.get_logger().warning(f"ignored a late answer to '{label}' (it came after lockstep_timeout;"
-                                      f" pending: '{self._asks.pending}')", throttle_duration_sec=5.0)
+        if self.mode == "lockstep" and self.exchange.late(msg):  # the answer to an earlier ask: ignored
             return
         try:  # in lockstep, the answer to the steps asked for (lockstep.block)
-            rows = len(self._asked) if self.mode == "lockstep" and self._waiting_since is not None else 1
+            rows = self.exchange.rows() if self.mode == "lockstep" else 1
             command = finite_array("shaped command", msg.data, size=self.n * rows)
         except InputError as err:
             self.refused += 1
@@ -472,18 +410,13 @@ class SimPlantNode(Node):
             if command is not None:
                 self._latest_shaped = command
             return
-        if self._waiting_since is None:
+        if self.exchange.waiting_since is None:
             return  # not waiting (idle, or a late answer after a timeout): ignore
         self._step_asked(None if command is None else command.reshape(-1, self.n))
 
     def _watchdog(self) -> None:
-        if self._waiting_since is None or time.monotonic() - self._waiting_since < float(
-                self.get_parameter("lockstep_timeout").value):
-            return
-        self.timeouts += 1
-        self.get_logger().warning("no shaped setpoint within lockstep_timeout; holding the last setpoint",
-                                  throttle_duration_sec=5.0)
-        self._step_asked(None)
+        if self.exchange.overdue(lambda: float(self.get_parameter("lockstep_timeout").value)):
+            self._step_asked(None)
 
     def _realtime_tick(self) -> None:
         if self.jtc is not None and self.task is None:
@@ -498,16 +431,10 @@ class SimPlantNode(Node):
         self._active_shaper = msg
 
     def _on_set_feedforward(self, req, resp):
-        resp.success, resp.message = True, ""
-        try:
-            profile = check_profile(req.profile, self.plant.injections, self.joint_names, self.rate)
-        except ValueError as err:
-            resp.success, resp.message = False, str(err)
-            self.get_logger().error(f"refused feedforward profile: {err}")
-            return resp
-        samples, waits = self._ff.set(profile, at_once=self._cycle_start_step is None or self.task is None)
-        resp.message = (f"{req.profile.injection} profile of {samples} samples (iteration {req.profile.iteration})"
-                        + (" from the next START" if waits else " installed"))
+        resp.success, resp.message = self._ff.request(req.profile, self.plant.injections, self.joint_names, self.rate,
+                                                      self._cycle_start_step is None or self.task is None)
+        if not resp.success:
+            self.get_logger().error(f"refused feedforward profile: {resp.message}")
         return resp
 
 
