@@ -60,8 +60,8 @@ def core(seconds: float = 2.0) -> dict:
     import pinocchio as pin
 
     from sim_plant_node.arm.dynamics import ArmModel, ElasticArm
-    from sim_plant_node.arm.jtc import JointTrajectoryController, RawPoint, Tolerances
     from sim_plant_node.arm.plant import ArmPlant
+    from sim_plant_node.controller.jtc import JointTrajectoryController, RawPoint, Tolerances
 
     model = ArmModel()
     steps = int(seconds * 1000)
@@ -180,7 +180,7 @@ def _write(periods: int, pace: float = 0.0) -> None:
 
     from shaper_nodes.recordings.cdr import JointStateCdr, clock_cdr, stamp_parts
     from sim_plant_node.arm.description import JOINT_NAMES
-    from sim_plant_node.sim_plant import LOCKSTEP_IMU_QOS
+    from sim_plant_node.node.sim_plant import LOCKSTEP_IMU_QOS
 
     rclpy.init()
     n = rclpy.create_node("arm_bench_writer")

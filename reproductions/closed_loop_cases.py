@@ -33,7 +33,7 @@ import numpy as np
 from reproductions.common import docs_option, lockstep_block, logs_folder
 
 if TYPE_CHECKING:
-    from sim_plant_node.conductor import StartNode
+    from sim_plant_node.clients.conductor import StartNode
 
 # ------------------------------------------------------------------ seed 001
 OMEGA_A = 3.0
@@ -101,7 +101,7 @@ class _Recorder:
 def _session(start: StartNode, ctx, joints: list[str], rate: float, plant: dict):
     from sensor_msgs.msg import JointState
 
-    from sim_plant_node.conductor import Conductor
+    from sim_plant_node.clients.conductor import Conductor
 
     # a generous lockstep timeout: on a loaded machine the plant waits for the shaper instead of holding
     start("sim_plant_node", "sim_plant", {"joint_names": joints, "rate": rate, "mode": "lockstep",
@@ -500,7 +500,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", default="001,002", help="which seeds to run (default 001,002)")
     args = p.parse_args(argv)
     logs = logs_folder("closed_loop_cases")
-    from sim_plant_node.conductor import node_session
+    from sim_plant_node.clients.conductor import node_session
 
     (args.docs / "img").mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()

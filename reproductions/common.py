@@ -15,8 +15,11 @@ import pathlib
 import time
 from typing import TYPE_CHECKING, Any
 
+# the block size rule lives with the rest of the lockstep exchange (re-exported for the reproductions)
+from shaper_nodes.core.lockstep import lockstep_block as lockstep_block
+
 if TYPE_CHECKING:  # (rclpy is imported when a driver is made, not to print --help)
-    from sim_plant_node.conductor import Conductor, CycleResult
+    from sim_plant_node.clients.conductor import Conductor, CycleResult
 
 
 def docs_option(parser: argparse.ArgumentParser, what: str) -> None:
@@ -41,14 +44,6 @@ LOCKSTEP_TIMEOUT = 60.0
 #: stamped up to it (a plant stepping in blocks may run ahead of a loaded learner's intake; the wait ends as
 #: soon as they are in)
 LOCKSTEP_LEARNER = {"end_wait": 10.0}
-
-
-def lockstep_block(rate: float) -> int:
-    """The sim plant's ``lockstep.block`` for a reproduction at ``rate`` Hz: 0.1 s of samples per exchange
-    with the shaper. Every reproduction's command path is feedforward (the shaper between the task and the
-    plant, changed only at rest between cycles), so a run in blocks is the run one setpoint at a time
-    (tests/test_lockstep_blocks.py), with ten to fifty times fewer round trips through DDS."""
-    return max(1, int(round(0.1 * rate)))
 
 
 def metric(report: Any, name: str) -> float:
@@ -78,7 +73,7 @@ class LearnerDriver:
         from shaper_msgs.msg import CycleReport
         from shaper_msgs.msg import Shaper as ShaperMsg
         from shaper_nodes.ros.qos import LATCHED
-        from sim_plant_node.conductor import Conductor
+        from sim_plant_node.clients.conductor import Conductor
 
         self.conductor = Conductor(context=ctx)
         self.reports: list[Any] = []

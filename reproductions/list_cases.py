@@ -33,7 +33,7 @@ from reproductions.common import (
 )
 
 if TYPE_CHECKING:
-    from sim_plant_node.conductor import StartNode
+    from sim_plant_node.clients.conductor import StartNode
 
 #: the paper's plant m x'' + b x' + k (x - u) = 0, m = 1, b = 1, k = 100
 OMEGA_N = 10.0
@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     docs_option(p, "list_results.md and img/list_cases.png")
     args = p.parse_args(argv)
     logs = logs_folder("list_cases")
-    from sim_plant_node.conductor import node_session
+    from sim_plant_node.clients.conductor import node_session
 
     results: dict[str, list[Iteration]] = {}
     t0 = time.monotonic()

@@ -34,10 +34,10 @@ from reproductions.common import (
     logs_folder,
     metric,
 )
-from sim_plant_node.plants import mck_from_mode
+from sim_plant_node.models.plants import mck_from_mode
 
 if TYPE_CHECKING:
-    from sim_plant_node.conductor import StartNode
+    from sim_plant_node.clients.conductor import StartNode
 
 #: sample rate of the graph runs, Hz (see docs/design/mrilc.md: why not 1 kHz)
 RATE = 200.0
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     docs_option(p, "mrilc_results.md and img/mrilc_learning.png")
     args = p.parse_args(argv)
     logs = logs_folder("mrilc_cases")
-    from sim_plant_node.conductor import node_session
+    from sim_plant_node.clients.conductor import node_session
 
     t0 = time.monotonic()
 

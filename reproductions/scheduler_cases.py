@@ -34,10 +34,10 @@ import numpy as np
 
 from reproductions.common import docs_option, logs_folder
 from shaper_nodes.core.cycles import END, START
-from sim_plant_node.two_mass import STEP_LEVELS, STEP_POSES, m1_of, two_mass_matrices
+from sim_plant_node.models.two_mass import STEP_LEVELS, STEP_POSES, m1_of, two_mass_matrices
 
 if TYPE_CHECKING:
-    from sim_plant_node.conductor import StartNode
+    from sim_plant_node.clients.conductor import StartNode
 
 RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz)
 DWELL = 30.0      # s per step
@@ -263,7 +263,7 @@ def _start_task(start_cli: Any, until: Callable[[Callable[[], bool], float, str]
     matched on DDS), ask again every 50 ms, up to ``timeout`` s."""
     from std_srvs.srv import Trigger
 
-    from sim_plant_node.sim_plant import WAITING
+    from sim_plant_node.node.parameters import WAITING
 
     end = time.monotonic() + timeout
     while True:
@@ -292,7 +292,7 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
     from rclpy.node import Node
     from std_srvs.srv import Trigger
 
-    from sim_plant_node.conductor import spin_until
+    from sim_plant_node.clients.conductor import spin_until
 
     _start_nodes(case, start)
     node = Node("scheduler_cases", context=ctx)
@@ -416,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
     docs_option(p, "scheduler_results.md and img/scheduler_*.png")
     args = p.parse_args(argv)
     logs = logs_folder("scheduler_cases")
-    from sim_plant_node.conductor import node_session
+    from sim_plant_node.clients.conductor import node_session
 
     names = [n.strip() for n in args.cases.split(",")] + (["c2", "c-modes"] if args.extra else [])
     runs: dict[str, Run] = {}

@@ -90,8 +90,8 @@ def run_production(start, ctx, out: pathlib.Path, calibration: pathlib.Path, arg
 
     from sim_plant_node.arm.description import JOINT_NAMES
     from sim_plant_node.arm.task import cycle_moves
-    from sim_plant_node.arm_demo import ArmClient, fallback_request
-    from sim_plant_node.conductor import Conductor
+    from sim_plant_node.clients.arm_demo import ArmClient, fallback_request
+    from sim_plant_node.clients.conductor import Conductor
 
     start("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": RATE,
                                           "use_sim_time": True, "action.server_timeout": 30.0})
@@ -164,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from sim_plant_node.arm.task import HOME
-    from sim_plant_node.conductor import node_session
+    from sim_plant_node.clients.conductor import node_session
 
     out: pathlib.Path = args.out
     if out.exists():

@@ -22,8 +22,8 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "sim_plant = sim_plant_node.sim_plant:main",
-            "demo = sim_plant_node.demo:main",
+            "sim_plant = sim_plant_node.node.sim_plant:main",
+            "demo = sim_plant_node.clients.demo:main",
         ],
     },
 )

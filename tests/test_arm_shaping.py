@@ -19,8 +19,8 @@ from sim_plant_node.arm.dynamics import ArmModel
 from sim_plant_node.arm.metrics import measure_move, motion_end
 from sim_plant_node.arm.modal import lowest
 from sim_plant_node.arm.task import HOME, ROTATED, trapezoid_move
-from sim_plant_node.arm_demo import ArmClient
-from sim_plant_node.conductor import Conductor
+from sim_plant_node.clients.arm_demo import ArmClient
+from sim_plant_node.clients.conductor import Conductor
 
 RATE = 500.0
 

@@ -10,8 +10,8 @@ import time
 import pytest
 
 from shaper_msgs.srv import Identify
-from sim_plant_node.conductor import Conductor, rms
-from sim_plant_node.plants import mck_from_mode
+from sim_plant_node.clients.conductor import Conductor, rms
+from sim_plant_node.models.plants import mck_from_mode
 
 pytestmark = pytest.mark.integration
 

@@ -10,7 +10,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.ros.conversions import time_to_sec
-from sim_plant_node.conductor import Conductor
+from sim_plant_node.clients.conductor import Conductor
 
 pytestmark = pytest.mark.integration
 

@@ -19,7 +19,7 @@ from reproductions.mrilc_cases import JOINT, NOMINAL, PERTURBED, RATE, plant_par
 from shaper_msgs.msg import FeedforwardProfile
 from shaper_msgs.srv import SetFeedforward, SetShaper
 from shaper_nodes.nodes.learner import LearnerNode
-from sim_plant_node.conductor import Conductor
+from sim_plant_node.clients.conductor import Conductor
 
 pytestmark = pytest.mark.integration
 

@@ -31,7 +31,7 @@ from shaper_nodes.nodes import bag_play, calibrate, identifier, learner, recorde
 from shaper_nodes.recordings import BagWriter
 from shaper_nodes.ros.launching import executable
 from shaper_nodes.ros.parameters import declare_all
-from sim_plant_node import sim_plant
+from sim_plant_node.node import sim_plant
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "shaper_nodes" / "config"

@@ -28,7 +28,7 @@ from shaper_nodes.core.scheduling.fuzzy import modes_of
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.nodes.scheduler import SchedulerNode
 from shaper_nodes.ros.qos import LATCHED
-from sim_plant_node.two_mass import m1_of, two_mass_matrices
+from sim_plant_node.models.two_mass import m1_of, two_mass_matrices
 
 pytestmark = pytest.mark.integration
 

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from sim_plant_node.conductor import Conductor, rms
+from sim_plant_node.clients.conductor import Conductor, rms
 
 pytestmark = pytest.mark.integration
 

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping import Mode, RetimingShaper, StreamingShaper, design, discretize
 from shaper_nodes.core.shaping.limits import JointLimits
-from shaper_nodes.core.shaping.stream import FIELDS, CommandStream, block_rows, check_times
+from shaper_nodes.core.shaping.stream import FIELDS, CommandStream, check_times
 
 RATE = 100.0
 NAMES = ("a", "b")

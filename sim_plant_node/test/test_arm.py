@@ -11,7 +11,7 @@ from shaper_nodes.core.identification import identify
 from sim_plant_node.arm.description import DH_A, DH_D, LINK_MASSES, PAYLOAD_MASS, ArmSpec, urdf
 from sim_plant_node.arm.dynamics import GRAVITY, ArmModel, ElasticArm
 from sim_plant_node.arm.modal import lowest, mode_map, modes
-from sim_plant_node.arm.splines import Point, Trajectory
+from sim_plant_node.controller.splines import Point, Trajectory
 
 HOME = np.array([0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
 #: three poses from folded to stretched (elbow angle), the far ones at the ends of the reach

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sim_plant_node.arm.jtc import (
+from sim_plant_node.controller.jtc import (
     GOAL_TOLERANCE_VIOLATED,
     PATH_TOLERANCE_VIOLATED,
     SUCCESSFUL,

@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.core.shaping.fir import StreamingShaper, discretize
-from sim_plant_node.plants import (
+from sim_plant_node.models.plants import (
     LIST_FORCE_LIMIT,
     LIST_STIFFNESS_CUBIC,
     PLANT_MODELS,
@@ -317,7 +317,7 @@ def ros_context():
 def make_node(ctx, params: dict | None = None, config: str | None = None):
     from rclpy.parameter import Parameter
 
-    from sim_plant_node.sim_plant import SimPlantNode
+    from sim_plant_node.node.sim_plant import SimPlantNode
 
     cli = ["--ros-args", "--params-file", str(CONFIG / config)] if config else None
     overrides = [Parameter(k, value=v) for k, v in (params or {}).items()]

@@ -11,7 +11,7 @@ import pytest
 
 from shaper_nodes.core.closed_loop import qft
 from shaper_nodes.core.closed_loop.time_delay import growth_rate, sampled_loop_matrix
-from sim_plant_node.loops import LOOP_MODELS, DelayLoopPlant, QftLoopPlant, make_loop_plant
+from sim_plant_node.models.loops import LOOP_MODELS, DelayLoopPlant, QftLoopPlant, make_loop_plant
 
 WA, T = 3.0, math.pi / 9.0
 
@@ -146,7 +146,7 @@ def ros_context():
 def test_node_builds_loop_plants_and_refuses_bad_loop_parameters(ros_context):
     from rclpy.parameter import Parameter
 
-    from sim_plant_node.sim_plant import SimPlantNode
+    from sim_plant_node.node.sim_plant import SimPlantNode
 
     node = SimPlantNode(context=ros_context, parameter_overrides=[Parameter("plant.model", value="delay_loop")])
     try:
@@ -166,7 +166,7 @@ def test_node_builds_loop_plants_and_refuses_bad_loop_parameters(ros_context):
 def test_example_configs_load(ros_context, config, cls):
     import pathlib
 
-    from sim_plant_node.sim_plant import SimPlantNode
+    from sim_plant_node.node.sim_plant import SimPlantNode
 
     path = pathlib.Path(__file__).resolve().parents[1] / "config" / config
     node = SimPlantNode(context=ros_context, cli_args=["--ros-args", "--params-file", str(path)])
@@ -184,7 +184,7 @@ def test_ramp_references_from_the_task():
     """A ramp (task.profile 'ramp') through the loops: the feedforward-feedback loop on the nominal plant
     follows it as the model P0 does (type 2: no lag at the end of the ramp), and the time-delay loop with
     the exact model lags by T (G_FF(s) = 1 - s T + ... for A1 + 2 A2 = 1) and arrives 2T after the ramp."""
-    from sim_plant_node.plants import CycleTask
+    from sim_plant_node.models.plants import CycleTask
 
     p0 = qft.nominal()
     for plant, lag in ((make_loop_plant("qft_ffb", [p0.m], [p0.c], [p0.k], 1000.0, {"loop.substeps": 10}), 0.0),

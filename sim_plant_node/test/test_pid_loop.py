@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.learning.mrilc import model as M
-from sim_plant_node.pid_loop import PidLoopPlant
-from sim_plant_node.plants import mck_from_mode
+from sim_plant_node.models.pid_loop import PidLoopPlant
+from sim_plant_node.models.plants import mck_from_mode
 
 RATE = 200.0
 

@@ -10,7 +10,7 @@ from shaper_nodes.core.cycles import END, MOTION_END, START
 from shaper_nodes.core.shaping.families import Mode, design
 from shaper_nodes.core.shaping.fir import StreamingShaper, discretize, fir_impulses
 from shaper_nodes.core.shaping.vibration import percentage_vibration
-from sim_plant_node.plants import CycleTask, MckPlant, mck_from_mode, trapezoid
+from sim_plant_node.models.plants import CycleTask, MckPlant, mck_from_mode, trapezoid
 
 
 def simulate(plant, commands):

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from sim_plant_node.loops import LOOP_PARAMS
-from sim_plant_node.sim_plant import PARAMETERS, PLANT_KEYS, PLANT_PARAMS
+from sim_plant_node.models.loops import LOOP_PARAMS
+from sim_plant_node.node.parameters import PARAMETERS, PLANT_KEYS, PLANT_PARAMS
 
 CHECKED = [spec for spec in PARAMETERS if spec.check is not None]
 

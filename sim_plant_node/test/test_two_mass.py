@@ -7,7 +7,7 @@ from scipy.integrate import solve_ivp
 from reproductions.scheduler_cases import rule_base_spec
 from shaper_nodes.core.identification.modes import identify
 from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
-from sim_plant_node.two_mass import (
+from sim_plant_node.models.two_mass import (
     C0,
     M0,
     STEP_LEVELS,

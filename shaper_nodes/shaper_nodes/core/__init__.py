@@ -27,6 +27,9 @@ cycles
     cycle event codes (those of shaper_msgs/CycleEvent).
 checks
     The one home of the number and array checks, with errors that name the problem.
+lockstep
+    The sim plant's lockstep exchange with the shaper: ask numbering and labels, block layouts,
+    late answers, the rows of a received block.
 rate
     How a streamed input arrives against its nominal rate: rate, gaps, bursts, drops and lag.
 security
@@ -37,5 +40,5 @@ lazy
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "lazy", "learning", "rate",
+__all__ = ["checks", "closed_loop", "cycles", "identification", "lazy", "learning", "lockstep", "rate",
            "scheduling", "security", "shaping"]

@@ -82,9 +82,10 @@ from trajectory_msgs.msg import JointTrajectory
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFir, UpdatePolicy, discretize
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
-from shaper_nodes.core.shaping.stream import CommandStream, block_rows
+from shaper_nodes.core.shaping.stream import CommandStream
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
@@ -338,7 +339,7 @@ class ShaperNode(Node):
     def _on_array(self, msg: Float64MultiArray, info: dict[str, Any] | None) -> None:
         self._arrived("array", info)
         try:
-            if msg.layout.dim:  # a layout: one sample, or a block of samples (core/shaping/stream.py block_rows)
+            if msg.layout.dim:  # a layout: one sample, or a block of samples (core/lockstep.py block_rows)
                 rows = block_rows([d.size for d in msg.layout.dim], len(msg.data), self.stream.joints,
                                   self.stream.max_samples)
                 if rows > 1:

@@ -12,7 +12,12 @@ dynamics
 modal
     Modal analysis of the linearised arm at any pose (frequencies, damping ratios, mode
     shapes), and the map of the lowest mode over the workspace.
-controller
-    The emulation of joint_trajectory_controller: goal validation with its error codes,
-    interpolation, tolerances, preemption, sampled at its update rate.
+plant
+    :class:`ArmPlant`, the arm as a :class:`~sim_plant_node.models.base.Plant` of the sim plant node.
+task, metrics
+    The pick-and-place cycle, and the residual vibration and path deviation of a move.
+offline
+    The arm and its controller emulation (:mod:`sim_plant_node.controller`) stepped without ROS.
 """
+
+__all__ = ["description", "dynamics", "metrics", "modal", "offline", "plant", "task"]

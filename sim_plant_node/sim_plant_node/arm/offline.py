@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..controller.jtc import JointTrajectoryController, RawPoint, Tolerances
 from .description import JOINT_NAMES
-from .jtc import JointTrajectoryController, RawPoint, Tolerances
 from .plant import ArmPlant
 
 

@@ -9,14 +9,18 @@ motor torques (``effort``) and the flange position.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
+from ..models.base import ImuSample, PlantBase
+from .description import JOINT_NAMES, check_payload
 from .dynamics import ArmModel, ElasticArm
 from .modal import modes
 
 
-class ArmPlant:
+class ArmPlant(PlantBase):
     """The elastic-joint arm stepped at ``rate`` Hz, ``substeps`` physics steps per period.
 
     Parameters
@@ -27,13 +31,23 @@ class ArmPlant:
         Physics steps per command period (the IMU's rate is rate x substeps).
     model : ArmModel, optional
         The arm (default: the UR5e-based arm of :mod:`.description`).
+
+    As a :class:`~sim_plant_node.models.base.Plant`: its six joints, chosen at start-up, behind the
+    joint_trajectory_controller emulation, the IMU's specific force with gravity, the payload live.
     """
+
+    joint_names: tuple[str, ...] | None = JOINT_NAMES
+    changes_live = False
+    trajectory_controller = True
+    gravity_in_imu = True
+    live_parameters: tuple[str, ...] = ("arm.payload_mass", "arm.payload_offset")
 
     def __init__(self, rate: float, substeps: int = 2, model: ArmModel | None = None) -> None:
         if not (isinstance(substeps, int) and 1 <= substeps <= 100):
             raise ValueError(f"arm.substeps must be an integer in [1, 100], got {substeps!r}")
         if not (math.isfinite(rate) and rate > 0):
             raise ValueError(f"rate must be finite and > 0 Hz, got {rate!r}")
+        self.rate = rate
         self.model = model or ArmModel()
         self.n = self.model.n
         self.substeps = substeps
@@ -41,10 +55,12 @@ class ArmPlant:
         self.cycle_time: float | None = None
         self.imu_samples: list[tuple[float, np.ndarray, np.ndarray]] = []  # (time since reset s, f m/s^2, w rad/s)
         self._modes = modes(self.model, np.zeros(self.n))
+        self._rest = np.zeros(self.n)  # the setpoint of the last reset
 
     def reset(self, position) -> None:
         """At rest holding ``position`` (rad); the modes are those of that pose."""
         p = np.asarray(position, dtype=float)
+        self._rest = p.copy()
         self.arm.reset(p)
         self._modes = modes(self.model, p)
 
@@ -66,6 +82,39 @@ class ArmPlant:
             self.arm.step(r, rd)
             f, w = self.arm.imu()
             self.imu_samples.append((self.arm.time, f, w))
+
+    def prepare(self, values: Mapping[str, Any]) -> Callable[[], str]:
+        """Check the payload ``values`` (``arm.payload_mass`` kg, ``arm.payload_offset`` m; ValueError if out of
+        range); what it returns applies it (:meth:`set_payload`) and tells the modes it gives."""
+        mass, offset = float(values["arm.payload_mass"]), float(values["arm.payload_offset"])
+        check_payload(mass, offset)
+
+        def apply() -> str:
+            self.set_payload(mass, offset)
+            return f"payload {mass:g} kg at {offset:g} m: modes at the present pose now " + ", ".join(
+                f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(
+                    self.natural_frequency[:3], self.damping_ratio[:3], strict=True))
+        return apply
+
+    @property
+    def state(self) -> np.ndarray:
+        """Positions and velocities of the links and motors (no other model takes them)."""
+        return np.concatenate([self.arm.x, self.arm.xd])
+
+    @state.setter
+    def state(self, value: np.ndarray) -> None:
+        raise ValueError("the arm's state is its own")
+
+    @property
+    def setpoint_at_rest(self) -> np.ndarray:
+        """The setpoint of the last :meth:`reset` (the motors sit off it under gravity)."""
+        return self._rest.copy()
+
+    def imu(self, t_start: float, t_end: float, axes: Sequence[int]) -> list[ImuSample]:
+        """The flange IMU at every physics step of the last period, stamped from ``t_start`` (``axes``: unused,
+        the flange's three axes)."""
+        last = self.imu_samples[-1][0]
+        return [(t_start + t_sub - last + 1.0 / self.rate, f, w) for t_sub, f, w in self.imu_samples]
 
     @property
     def base_position(self) -> np.ndarray:

@@ -29,7 +29,8 @@ limits
 stream
     The rules of the shaper node's streamed commands (:class:`CommandStream`): input bounds, joint
     limits, time order, the output check and the filters' restart after a refused output, blocks of
-    samples (:func:`block_rows`), trajectory fields that appear or vanish.
+    samples (their number: :func:`shaper_nodes.core.lockstep.block_rows`), trajectory fields that
+    appear or vanish.
 policy
     The shaper node's update policy: who may change the active shaper, and whether a change
     switches bumplessly or re-times the motion already commanded (the stage limit).
@@ -38,7 +39,7 @@ policy
 from .families import FAMILIES, design, family_info, family_params, none_shaper
 from .fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize, fir_impulses
 from .policy import PolicyError, UpdatePolicy
-from .stream import CommandStream, block_rows, check_times
+from .stream import CommandStream, check_times
 from .trajectory import shape_trajectory
 from .types import (
     DEFAULT_INSENSITIVITY,
@@ -84,7 +85,6 @@ __all__ = [
     "SparseFir",
     "StreamingShaper",
     "UpdatePolicy",
-    "block_rows",
     "check_times",
     "design",
     "discretize",

@@ -25,8 +25,9 @@ filter at its first value (there was no output of it to be continuous with); a f
 stops being output, and its filter starts afresh if it comes back.
 
 Blocks: a Float64MultiArray whose layout has two dimensions, [samples, joints], carries consecutive
-samples (the sim plant's lockstep exchange); :func:`block_rows` tells their number from the layout's
-sizes, and :meth:`CommandStream.shape_block` shapes them as those samples one by one would be.
+samples (the sim plant's lockstep exchange); :func:`shaper_nodes.core.lockstep.block_rows` tells
+their number from the layout's sizes, and :meth:`CommandStream.shape_block` shapes them as those
+samples one by one would be.
 
 Threads: :attr:`CommandStream.lock` is held by every call that reads or changes the filters (shaping,
 :meth:`CommandStream.switch`, :meth:`CommandStream.stages`), so a shaper change lands between two
@@ -74,30 +75,6 @@ def check_times(times: np.ndarray, require_order: bool = False) -> None:
         raise InputError("non_increasing_time", f"time_from_start of point {k} is negative ({times[k]:g} s)")
     if require_order or len(times) > 1:
         strictly_increasing("time_from_start", times)
-
-
-def block_rows(shape: Sequence[int], size: int, joints: int, max_samples: int) -> int:
-    """The samples a Float64MultiArray carries, from its layout's sizes ``shape`` (one per dimension)
-    and its number of values ``size``: one with a layout of one dimension (forward_command_controller's
-    input), and ``shape[0]`` for a layout of two, [samples, joints] (the sim plant's lockstep exchange),
-    whose rows are shaped in order as consecutive samples. A message without a layout is one sample (the
-    caller does not ask).
-
-    Raises
-    ------
-    InputError
-        ``wrong_size``: a layout that does not describe ``size`` values of ``joints`` joints;
-        ``too_large``: a block of more than ``max_samples`` samples.
-    """
-    if len(shape) == 1:
-        return 1
-    if len(shape) != 2 or shape[1] != joints or shape[0] * joints != size or shape[0] < 1:
-        raise InputError("wrong_size", f"layout {list(shape)} does not describe samples x {joints} joints in"
-                         f" {size} values")
-    if shape[0] > max_samples:
-        raise InputError("too_large", f"a block of {shape[0]} samples is more than"
-                         f" limits.max_trajectory_samples ({max_samples})")
-    return int(shape[0])
 
 
 class CommandStream:

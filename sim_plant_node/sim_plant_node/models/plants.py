@@ -54,6 +54,8 @@ from scipy.linalg import expm
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
+from .base import PlantBase
+
 
 def check_rate(rate: float) -> float:
     """The plants' check of the command (integration) rate: finite and > 0 Hz; returns it as a float."""
@@ -112,7 +114,7 @@ class MckMode:
         return self.c / (2.0 * np.sqrt(self.k * self.m))
 
 
-class MckPlant(_JointState, MckMode):
+class MckPlant(_JointState, MckMode, PlantBase):
     """Per-joint m-c-k flexible joints integrated exactly under a first-order-hold base motion.
 
     Parameters
@@ -159,7 +161,7 @@ class MckPlant(_JointState, MckMode):
         p = np.broadcast_to(np.asarray(position, dtype=float), (self.joints,))
         self.state = np.column_stack([p, np.zeros(self.joints), p, np.zeros(self.joints)])
 
-    def step(self, command, cycle_time: float | None = None) -> None:
+    def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """Advance one period while the base moves linearly to ``command``.
 
         ``cycle_time`` (s since the current cycle's START at the beginning of the period) is
@@ -232,7 +234,7 @@ def plant_values(name: str, value, joints: int | None = None) -> np.ndarray:
     return _per_joint(name, value, joints, unit, positive=positive, allow_inf=allow_inf)
 
 
-class ListPlant(_JointState):
+class ListPlant(_JointState, PlantBase):
     """The plants of the LIST simulations (seed 003), per joint, integrated with RK4.
 
     See the module docstring for the equations. State per joint, as MckPlant's: tip x, tip
@@ -327,7 +329,7 @@ class ListPlant(_JointState):
         p = np.broadcast_to(np.asarray(position, dtype=float), (self.joints,))
         self.state = np.column_stack([p, np.zeros(self.joints), p, np.zeros(self.joints)])
 
-    def step(self, command, cycle_time: float | None = None) -> None:
+    def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """Advance one period while the command moves linearly to ``command``.
 
         Parameters

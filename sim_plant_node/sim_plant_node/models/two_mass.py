@@ -39,6 +39,7 @@ import numpy as np
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
+from .base import PlantBase
 from .plants import TaskEvent, check_rate
 
 #: seed 004's parameters: c (kg/s), m0 (kg), c0 (kg/s), k (N/m), m1 = M1_SLOPE x0 + M1_OFFSET (kg)
@@ -68,7 +69,7 @@ def two_mass_matrices(m1: float, m0: float = M0, c: float = C, c0: float = C0,
     return a, b
 
 
-class TwoMassPlant:
+class TwoMassPlant(PlantBase):
     """Seed 004's two-mass system per joint (see the module docstring); the plant interface of
     sim_plant_node.plants (reset, step, base/tip positions, velocities, tip acceleration).
 
@@ -122,7 +123,7 @@ class TwoMassPlant:
         # at rest x0' = 0, so w = -v
         self.state = np.column_stack([p, -v, p, np.zeros(self.joints), v, np.zeros(self.joints)])
 
-    def step(self, command, cycle_time: float | None = None) -> None:
+    def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """Advance one period while the velocity command v moves linearly to ``command`` (m/s)."""
         v1 = np.asarray(command, dtype=float).reshape(self.joints)
         v0 = self.state[:, 4].copy()

@@ -48,6 +48,7 @@ from scipy.linalg import expm, null_space
 
 from shaper_nodes.core.closed_loop import ppusmd_gains, qft
 
+from .base import PlantBase
 from .plants import MckMode, _JointState, check_rate, plant_values
 
 LOOP_MODELS = ("delay_loop", "qft_open", "qft_fb", "qft_ffb")
@@ -111,7 +112,7 @@ def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return e[:n, :n], e[:n, n:]
 
 
-class LoopPlant(_JointState, MckMode):
+class LoopPlant(_JointState, MckMode, PlantBase):
     """Base class: the m-c-k joints, the disturbance and noise inputs, the sample loop.
 
     State per joint as the other plants: tip x2, x2', base x1 (= u at the end of the last
@@ -121,6 +122,7 @@ class LoopPlant(_JointState, MckMode):
     model = "loop"
     #: the signals of ~/loop_state, per joint, in this order
     SIGNALS = ("output", "measured", "control", "reference")
+    loop_signals: tuple[str, ...] = SIGNALS
 
     def __init__(self, mass, damping, stiffness, rate: float, params: dict) -> None:
         self.m = plant_values("mass", mass)
@@ -193,7 +195,7 @@ class LoopPlant(_JointState, MckMode):
         self.output, self.measured, self.control, self.reference = p.copy(), p.copy(), p.copy(), p.copy()
         self._rest(p)
 
-    def step(self, command, cycle_time: float | None = None) -> None:
+    def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         r = np.asarray(command, dtype=float).reshape(self.joints)
         self.reference = r.copy()
         x1_start = self._state[:, 2].copy()
@@ -217,6 +219,10 @@ class LoopPlant(_JointState, MckMode):
         self.cycle_time = None if cycle_time is None else float(cycle_time) + self.dt
         end = None if cycle_time is None else cycle_time + self.dt
         self.output = self._state[:, 0] + self._level("disturbance", end)
+
+    def loop_state(self) -> np.ndarray:
+        """Per joint: output y (with d_o), measured y + n, control u, reference r (:attr:`SIGNALS`)."""
+        return np.concatenate([self.output, self.measured, self.control, self.reference])
 
     def _level(self, what: str, tau: float | None) -> float:
         if tau is None:

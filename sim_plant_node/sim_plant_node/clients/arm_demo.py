@@ -113,7 +113,7 @@ class ArmClient:
         from shaper_nodes.ros.action_client import ResilientActionClient
         from shaper_nodes.ros.conversions import time_to_sec
 
-        from .arm.dynamics import ArmModel
+        from ..arm.dynamics import ArmModel
 
         self.c = conductor
         self.model = ArmModel()
@@ -167,7 +167,7 @@ class ArmClient:
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-        from .arm.description import JOINT_NAMES
+        from ..arm.description import JOINT_NAMES
 
         def dur(t: float) -> Duration:
             return Duration(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)) % 1_000_000_000)
@@ -224,7 +224,7 @@ class ArmClient:
         """One pick-and-place cycle. Its last move (the reach back home) is what ``/cycle_events`` marks as the
         learners' and the identifier's cycle: its timing from START is the same whatever the shaper, where the
         whole cycle's grows by the shaper's delay at every move."""
-        from .arm.task import CYCLE
+        from ..arm.task import CYCLE
 
         start, goal = CYCLE[-2][1], CYCLE[-1][1]
         runs = []
@@ -250,7 +250,7 @@ class ArmClient:
         return self.s.window(which, t0, t1)
 
     def measure(self, run: MoveRun, reference_path: np.ndarray) -> tuple[Any, np.ndarray]:
-        from .arm.metrics import measure_move, motion_end
+        from ..arm.metrics import measure_move, motion_end
 
         ct, cq = self.window("cmd", run.start, run.end)
         commanded_end = motion_end(ct, cq)
@@ -446,10 +446,10 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from shaper_msgs.srv import Identify
 
-    from .arm.description import JOINT_NAMES
-    from .arm.dynamics import ArmModel
-    from .arm.modal import lowest
-    from .arm.task import HOME, cycle_moves
+    from ..arm.description import JOINT_NAMES
+    from ..arm.dynamics import ArmModel
+    from ..arm.modal import lowest
+    from ..arm.task import HOME, cycle_moves
     from .conductor import Conductor, node_session
 
     cases = [c.strip() for c in args.cases.split(",")]
@@ -533,7 +533,7 @@ def main(argv: list[str] | None = None) -> int:
         w.writeheader()
         w.writerows(rows)
     table = [*_table(rows), "", *_sums(rows, cases, args.noise)]
-    from .arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
+    from ..arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
 
     note = (f"Residual vibration: the flange IMU's specific force minus its mean, over {RESIDUAL_WINDOW:g} s after"
             f" the commanded motion ends (accelerometer noise {args.noise:g} m/s^2); peak: the flange's largest"

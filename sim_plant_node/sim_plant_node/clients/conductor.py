@@ -32,8 +32,8 @@ from shaper_msgs.srv import SetShaper
 from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
 from shaper_nodes.ros.conversions import time_to_sec
 
-from .plants import mck_from_mode
-from .sim_plant import WAITING
+from ..models.plants import mck_from_mode
+from ..node.parameters import WAITING
 
 
 def _past(t: float) -> bool:

@@ -26,7 +26,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_nodes.ros.conversions import sec_to_time
 
-from .arm.jtc import (
+from .jtc import (
     INVALID_GOAL,
     PREEMPT_TEXT,
     JointTrajectoryController,

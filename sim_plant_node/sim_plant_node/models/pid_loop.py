@@ -31,10 +31,11 @@ if TYPE_CHECKING:
 else:  # imported when a loop is built (plant.model mck_pid), not at every sim plant start
     ct = lazy_module("control")
 
+from .base import PlantBase
 from .plants import MckMode, check_rate
 
 
-class PidLoopPlant(MckMode):
+class PidLoopPlant(MckMode, PlantBase):
     """Per-joint m-c-k plants, each in the loop of the same controller C (see the module docstring).
 
     Parameters
@@ -47,6 +48,9 @@ class PidLoopPlant(MckMode):
     numerator, denominator : sequence of float
         C(s), highest power first; it must stabilise every joint's loop.
     """
+
+    #: a command profile adds to the reference r, an effort profile to the controller output (u2)
+    injections: tuple[str, ...] = ("command", "effort")
 
     def __init__(self, mass, damping, stiffness, rate: float, numerator=PAPER_CONTROLLER[0],
                  denominator=PAPER_CONTROLLER[1]) -> None:
@@ -116,12 +120,16 @@ class PidLoopPlant(MckMode):
         self.w = np.column_stack([p, np.zeros(self.joints)])
         self.x = np.stack([-np.linalg.solve(a, b @ w) for a, b, w in zip(self._a, self._b, self.w, strict=True)])
 
-    def step(self, command, cycle_time: float | None = None) -> None:
+    def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """One period with the reference ``command`` and u2 = ``self.feedforward`` held."""
         r = np.asarray(command, dtype=float).reshape(self.joints)
         self.cycle_time = None if cycle_time is None else float(cycle_time) + self.dt
         self.w = np.column_stack([r, np.asarray(self.feedforward, dtype=float).reshape(self.joints)])
         self.x = np.einsum("jab,jb->ja", self._phi, self.x) + np.einsum("jab,jb->ja", self._gam, self.w)
+
+    def set_effort(self, effort: np.ndarray | None) -> None:
+        """u2 of the next period (None: none)."""
+        self.feedforward = np.zeros(self.joints) if effort is None else effort
 
     @property
     def base_position(self) -> np.ndarray:

@@ -1,0 +1,21 @@
+"""The ``sim_plant`` node (executable ``sim_plant``) and its parts.
+
+Modules
+-------
+sim_plant
+    :class:`SimPlantNode`: publishers, subscriptions, services, the task runner, the stepping in lockstep
+    or real time; ``main``.
+parameters
+    The parameter table :data:`PARAMETERS` (declared from here) and the groups the node reads together.
+models
+    ``plant.model`` to the :class:`~sim_plant_node.models.base.Plant` it names.
+sensors
+    /joint_states as the encoders report it and the accelerometer (noise, bias, quantisation).
+lockstep
+    The node's side of the lockstep exchange with the shaper (its asks on the wire, late answers, timeouts;
+    the rules are :mod:`shaper_nodes.core.lockstep`'s).
+feedforward
+    The ``~/set_feedforward`` profile: its checks, installed at a cycle's START. Free of ROS.
+"""
+
+__all__ = ["feedforward", "lockstep", "models", "parameters", "sensors", "sim_plant"]

@@ -1,0 +1,100 @@
+"""The sim plant node's side of the lockstep exchange with the shaper: its asks on the wire, the answers.
+
+The rules (numbering, labels, layouts, late answers) are :mod:`shaper_nodes.core.lockstep`'s; this is their
+ROS glue: :class:`Exchange` publishes the asks as std_msgs/Float64MultiArray, keeps the steps asked and not
+yet answered, tells a late answer (counted and warned about), and when ``lockstep_timeout`` went by.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from shaper_nodes.core.lockstep import Asks
+
+__all__ = ["Exchange"]
+
+
+class Exchange:
+    """The asks of a lockstep plant and their answers.
+
+    Parameters
+    ----------
+    publisher : rclpy publisher
+        Where the asks (raw setpoints, ``topics.command_out``) go.
+    joints : int
+        Values per setpoint.
+    block : int
+        Steps asked per exchange at most (``lockstep.block``).
+    logger : rclpy logger
+        Warns of late answers and timeouts.
+    """
+
+    def __init__(self, publisher: Any, joints: int, block: int, logger: Any) -> None:
+        self._pub = publisher
+        self.joints = joints
+        self.block = block
+        self._log = logger
+        self.asks = Asks(joints, block > 1)  # numbers the asks, tells the late answers
+        #: the steps asked of the shaper and not yet answered: (cycle events, preroll ends) each
+        self.asked: list[tuple[list, bool]] = []
+        #: wall time (monotonic, s) the pending ask went out; None: none pending
+        self.waiting_since: float | None = None
+        self.timeouts = 0
+        self.late_answers = 0  # answers to an earlier ask, ignored
+
+    def ask(self, steps: list[tuple[list, bool]], raws: list[np.ndarray]) -> None:
+        """Publish the raw setpoints ``raws`` of the next ``steps`` as one ask and wait for its answer."""
+        self.asked.extend(steps)
+        msg = Float64MultiArray(data=(raws[-1] if self.block == 1 else np.concatenate(raws)).tolist())
+        msg.layout.dim = [MultiArrayDimension(label=d.label, size=d.size, stride=d.stride)
+                          for d in self.asks.next(len(raws))]
+        self._pub.publish(msg)
+        self.waiting_since = time.monotonic()
+
+    def late(self, msg: Float64MultiArray) -> bool:
+        """Whether ``msg`` answers an earlier ask (then it is counted, with a warning, and to be ignored)."""
+        label = msg.layout.dim[0].label if msg.layout.dim else None
+        if not self.asks.late(label):
+            return False
+        self.late_answers += 1
+        self._log.warning(f"ignored a late answer to '{label}' (it came after lockstep_timeout; pending:"
+                          f" '{self.asks.pending}')", throttle_duration_sec=5.0)
+        return True
+
+    def rows(self) -> int:
+        """The setpoints an answer carries: the steps asked (1 when none is pending)."""
+        return len(self.asked) if self.waiting_since is not None else 1
+
+    def take(self) -> list[tuple[list, bool]]:
+        """The steps asked, now answered (or given up): none is pending any more."""
+        asked, self.asked = self.asked, []
+        self.waiting_since = None
+        return asked
+
+    def unmatched(self, answers: Any) -> str:
+        """What the loop through the shaper still lacks on DDS ('' if nothing), the shaped setpoints coming in on
+        the subscription ``answers``: a step waits for the shaped answer to its raw setpoint, so a run started
+        before the raw setpoints reach a subscription, or before a publisher's shaped setpoints reach the plant,
+        loses its first setpoint and stalls for ``lockstep_timeout``. (Matched, not only discovered: a driver
+        that sees the shaper in the graph may see it before the plant matches it.)"""
+        missing = []
+        if self._pub.get_subscription_count() == 0:
+            missing.append(f"the raw setpoints on {self._pub.topic_name} have no matched subscription")
+        if answers.get_publisher_count() == 0:
+            missing.append(f"the shaped setpoints on {answers.topic_name} have no matched publisher")
+        return "; ".join(missing)
+
+    def overdue(self, timeout: Callable[[], float]) -> bool:
+        """Whether the pending ask waited ``timeout()`` s of wall time (``lockstep_timeout``; then it is
+        counted, with a warning)."""
+        if self.waiting_since is None or time.monotonic() - self.waiting_since < timeout():
+            return False
+        self.timeouts += 1
+        self._log.warning("no shaped setpoint within lockstep_timeout; holding the last setpoint",
+                          throttle_duration_sec=5.0)
+        return True
