@@ -120,3 +120,26 @@ def test_an_empty_array_is_read_as_an_empty_tuple(context):
         assert live.value.gains.names == () and node.get_parameter("gains.names").value == []
     finally:
         node.destroy_node()
+
+
+def test_a_post_set_callback_added_after_declare_reads_the_new_values_after_refresh(context):
+    node = Node("probe", context=context)
+    try:
+        live = declare(node, _Probe)
+        seen = []
+        node.add_post_set_parameters_callback(lambda params: seen.append(live.refresh().gains.kp))
+        assert node.set_parameters([Parameter("gains.kp", value=2.5)])[0].successful
+        assert seen == [2.5] and live.value.gains.kp == 2.5
+    finally:
+        node.destroy_node()
+
+
+def test_with_changes_shows_proposed_values_without_taking_them(context):
+    node = Node("probe", context=context)
+    try:
+        live = declare(node, _Probe)
+        proposed = live.with_changes([Parameter("gains.kp", value=4.0), Parameter("mode", value="b"),
+                                      Parameter("elsewhere", value=1)])
+        assert proposed == _Probe(mode="b", gains=_Gains(kp=4.0)) and live.value == _Probe()
+    finally:
+        node.destroy_node()

@@ -382,7 +382,11 @@ def unflat(cls: type[_C], given: Mapping[str, Any], prefix: str = "") -> _C:
 
 class Live(Generic[_C]):
     """The typed parameters of a node: ``value`` is read again after every accepted change of one
-    of them (a post-set callback), so node logic reads ``live.value.<group>.<name>``."""
+    of them (a post-set callback), so node logic reads ``live.value.<group>.<name>``.
+
+    rclpy calls post-set callbacks newest first: a post-set callback the node adds after
+    :func:`declare` runs before this one, and calls :meth:`refresh` first if it reads ``value``.
+    """
 
     def __init__(self, node: Node, cls: type[_C], prefix: str = "") -> None:
         self._node, self._cls, self._prefix = node, cls, prefix
@@ -390,9 +394,21 @@ class Live(Generic[_C]):
         self.value: _C = read(node, cls, prefix)
         node.add_post_set_parameters_callback(self._changed)
 
+    def refresh(self) -> _C:
+        """Read the parameters again (and return them)."""
+        self.value = read(self._node, self._cls, self._prefix)
+        return self.value
+
+    def with_changes(self, params: Iterable[Parameter]) -> _C:
+        """The parameters as they would be with ``params`` set (for an on-set callback that validates
+        proposed values before rclpy takes them); ``value`` is not changed."""
+        n = len(self._prefix)
+        changes = {p.name[n:]: p.value for p in params if p.name in self._names}
+        return unflat(self._cls, {**flat(self.value), **changes})
+
     def _changed(self, params: list[Parameter]) -> None:
         if any(p.name in self._names for p in params):
-            self.value = read(self._node, self._cls, self._prefix)
+            self.refresh()
 
 
 def declare(node: Node, cls: type[_C], prefix: str = "") -> Live[_C]:
