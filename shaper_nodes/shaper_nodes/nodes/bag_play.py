@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from rclpy.node import Node
@@ -42,39 +43,46 @@ from shaper_nodes.recordings import Bag, BagError, describe_damage, shaper_after
 from shaper_nodes.ros.conversions import ns_to_time
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
-from shaper_nodes.ros.parameters import Spec, declare_all, values
+from shaper_nodes.ros.parameters import Spec, declare, param, table
 
 LATCHED_TYPES = ("shaper_msgs/msg/Shaper",)
 LATCHED_NAMES = ("/tf_static",)
 
-#: the bag_play node's parameters
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("bag", "", "rosbag2 folder or .mcap file to play.", read_only=True),
-    Spec("rate", 1.0, "Playback speed factor (2 = twice as fast).", (1e-3, 1e3), read_only=True),
-    Spec("topics", [""], "Topics to play (empty: all).", read_only=True),
-    Spec("latched_topics", [""], "Further topics to publish TRANSIENT_LOCAL (depth 1).", read_only=True),
-    Spec("min_interval", 0.0, "Least wall time between two published messages, s: spreads messages that were"
+@dataclass(frozen=True)
+class BagPlayParams:
+    """The bag_play node's parameters."""
+
+    bag: str = param("", "rosbag2 folder or .mcap file to play.", read_only=True)
+    rate: float = param(1.0, "Playback speed factor (2 = twice as fast).", (1e-3, 1e3), read_only=True)
+    topics: tuple[str, ...] = param([""], "Topics to play (empty: all).", read_only=True)
+    latched_topics: tuple[str, ...] = param(
+        [""], "Further topics to publish TRANSIENT_LOCAL (depth 1).", read_only=True)
+    min_interval: float = param(0.0, "Least wall time between two published messages, s: spreads messages that were"
          " logged at the same time (a lockstep simulation's clock stands still while it waits), so that they arrive"
-         " in order.", (0.0, 1.0), read_only=True),
-    Spec("pause_after_topics", [""], "After a message on one of these topics, pause for pause_after before the"
-         " next message.", read_only=True),
-    Spec("pause_after", 0.0, "Pause after a message on pause_after_topics, s of wall time: gives the nodes that"
+         " in order.", (0.0, 1.0), read_only=True)
+    pause_after_topics: tuple[str, ...] = param(
+        [""], "After a message on one of these topics, pause for pause_after before the"
+        " next message.", read_only=True)
+    pause_after: float = param(0.0, "Pause after a message on pause_after_topics, s of wall time: gives the nodes that"
          " act on it (a learner at a cycle's END) time to finish before the recording's later messages arrive,"
-         " which in a lockstep recording may follow at once.", (0.0, 60.0), read_only=True),
-    Spec("await_reports", "", "A learner's report topic (shaper_msgs/CycleReport): once a cycle END is played, the"
+         " which in a lockstep recording may follow at once.", (0.0, 60.0), read_only=True)
+    await_reports: str = param("", "A learner's report topic (shaper_msgs/CycleReport): once a cycle END is played, the"
          " next cycle event or shaper_msgs/Shaper message waits until as many reports have arrived as ENDs were"
-         " played (at most await_timeout); other topics play on. Empty: do not wait.", read_only=True),
-    Spec("await_timeout", 30.0, "Longest wait for a report, s; then play on with a warning.",
-         (0.1, 600.0), read_only=True),
-    Spec("wait_for_subscribers", 0, "Before playing, wait until every played topic has this many subscribers (0:"
-         " do not wait).", (0, 100), read_only=True),
-    Spec("start_timeout", 30.0, "Longest wait for the subscribers, s; then play anyway.", (0.0, 600.0),
-         read_only=True),
-    Spec("start_delay", 0.0, "Wait this long before the first message, s (lets discovery settle).", (0.0, 60.0),
-         read_only=True),
-    Spec("publish_clock", False, "Also publish /clock with the messages' log times.", read_only=True),
-    Spec("loop", False, "Start again at the end.", read_only=True),
-)
+         " played (at most await_timeout); other topics play on. Empty: do not wait.", read_only=True)
+    await_timeout: float = param(30.0, "Longest wait for a report, s; then play on with a warning.",
+                                 (0.1, 600.0), read_only=True)
+    wait_for_subscribers: int = param(0, "Before playing, wait until every played topic has this many subscribers (0:"
+                                      " do not wait).", (0, 100), read_only=True)
+    start_timeout: float = param(30.0, "Longest wait for the subscribers, s; then play anyway.", (0.0, 600.0),
+                                 read_only=True)
+    start_delay: float = param(0.0, "Wait this long before the first message, s (lets discovery settle).", (0.0, 60.0),
+                               read_only=True)
+    publish_clock: bool = param(False, "Also publish /clock with the messages' log times.", read_only=True)
+    loop: bool = param(False, "Start again at the end.", read_only=True)
+
+
+#: the bag_play node's parameters (derived from BagPlayParams)
+PARAMETERS: tuple[Spec, ...] = table(BagPlayParams)
 
 
 def _cdr(raw: object) -> bytes:
@@ -95,13 +103,9 @@ class BagPlayNode(Node):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("bag_play", *args, **kwargs)
-        declare_all(self, PARAMETERS)
-        v = values(self, PARAMETERS)
-
-        def p(name: str) -> Any:
-            return v[name]
-
-        path = str(p("bag"))
+        self.params = declare(self, BagPlayParams)
+        p = self.params.value
+        path = str(p.bag)
         if not path:
             raise ValueError("parameter 'bag' is required: a rosbag2 folder or .mcap file")
         try:
@@ -112,17 +116,17 @@ class BagPlayNode(Node):
             self.get_logger().warning(note)
         for dmg in self.bag.damage:
             self.get_logger().warning(f"damaged recording: {describe_damage(dmg)}; playing what is readable")
-        self.rate = float(p("rate"))
-        self.min_interval = float(p("min_interval"))
-        self.pause_topics = {t for t in p("pause_after_topics") if t}
-        self.pause = float(p("pause_after"))
+        self.rate = float(p.rate)
+        self.min_interval = float(p.min_interval)
+        self.pause_topics = {t for t in p.pause_after_topics if t}
+        self.pause = float(p.pause_after)
         infos = self.bag.topics
-        wanted = [t for t in p("topics") if t]
+        wanted = [t for t in p.topics if t]
         missing = [t for t in wanted if t not in infos]
         if missing:
             self.get_logger().error(f"not in the recording, not played: {missing} (it has {sorted(infos)})")
         selected = [t for t in (wanted or sorted(infos)) if t in infos]
-        latched = set(LATCHED_NAMES) | {t for t in p("latched_topics") if t}
+        latched = set(LATCHED_NAMES) | {t for t in p.latched_topics if t}
         self._pubs: dict[str, Publisher] = {}
         for topic in selected:
             msgtype = infos[topic].msgtype
@@ -137,15 +141,15 @@ class BagPlayNode(Node):
         if not self._pubs:
             raise ValueError(f"{path}: nothing to play (topics asked for: {wanted or 'all'}; in the recording:"
                              f" {sorted(infos)})")
-        self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p("publish_clock") else None
+        self._clock_pub = self.create_publisher(Clock, "/clock", 10) if p.publish_clock else None
         self._event_topics = {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/CycleEvent"}
         self._shaper_topics = {t for t in self._pubs if infos[t].msgtype == "shaper_msgs/msg/Shaper"}
         self._gated = self._event_topics | self._shaper_topics  # what waits for the reports (await_reports)
         self._reports = threading.Condition()
         self._reported = 0  # reports received on await_reports
         self._ends = 0  # cycle ENDs played (this pass)
-        self._await_timeout = float(p("await_timeout"))
-        self._await = str(p("await_reports"))
+        self._await_timeout = float(p.await_timeout)
+        self._await = str(p.await_reports)
         if self._await:
             self.create_subscription(CycleReport, self._await, self._on_report, 100)
         self.published: dict[str, int] = {t: 0 for t in self._pubs}
@@ -174,8 +178,8 @@ class BagPlayNode(Node):
 
     # ----------------------------------------------------------------- playing
     def _wait_subscribers(self) -> None:
-        need = int(self.get_parameter("wait_for_subscribers").value)
-        deadline = time.monotonic() + float(self.get_parameter("start_timeout").value)
+        need = int(self.params.value.wait_for_subscribers)
+        deadline = time.monotonic() + float(self.params.value.start_timeout)
         while need and not self._stop.is_set():
             short = [t for t, pub in self._pubs.items() if pub.get_subscription_count() < need]
             if not short:
@@ -184,7 +188,7 @@ class BagPlayNode(Node):
                 self.get_logger().warning(f"fewer than {need} subscribers on {short}; playing anyway")
                 break
             time.sleep(0.05)
-        end = time.monotonic() + float(self.get_parameter("start_delay").value)
+        end = time.monotonic() + float(self.params.value.start_delay)
         while time.monotonic() < end and not self._stop.is_set():
             time.sleep(0.02)
 
@@ -222,7 +226,7 @@ class BagPlayNode(Node):
             self._wait_subscribers()
             while not self._stop.is_set():
                 self._play_once()
-                if not self.get_parameter("loop").value:
+                if not self.params.value.loop:
                     break
         except Exception as err:
             self.get_logger().error(f"playback failed: {err}")

@@ -39,7 +39,8 @@ import shutil
 import struct
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -62,7 +63,7 @@ from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_
 from shaper_nodes.core.calibration.plan import approach as plan_approach
 from shaper_nodes.recordings import COMPRESSIONS
 from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.parameters import Spec
+from shaper_nodes.ros.parameters import Spec, declare_all, param, table, unflat
 
 EXIT_REFUSED, EXIT_ABORTED, EXIT_CANCELLED = 2, 1, 130
 POLL = 0.02  # s, executor spin granularity
@@ -73,139 +74,211 @@ class Aborted(RuntimeError):
     """The run stopped: the message names why."""
 
 
-#: the calibrate node's parameters (see config/calibrate.yaml)
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("joint_names", None, "The controller's joints, in the order of every per-joint list below.",
-         read_only=True, type=_SA),
-    Spec("action", "/joint_trajectory_controller/follow_joint_trajectory", "FollowJointTrajectory action to"
-         " send the moves to (the controller's, or the shaper node's proxy with its shaper set to none).",
-         read_only=True),
-    Spec("topics.joint_states", "/joint_states", "Joint states (positions, rad): where the arm is.",
-         read_only=True),
-    Spec("topics.imu", "/tip_imu", "Accelerometer (sensor_msgs/Imu, linear_acceleration m/s^2) on the tool.",
-         read_only=True),
-    Spec("topics.imu_reliable", False, "Subscribe to the accelerometer RELIABLE (lossless from a reliable"
+@dataclass(frozen=True)
+class TopicsParams:
+    """The parameters topics.*."""
+
+    joint_states: str = param("/joint_states", "Joint states (positions, rad): where the arm is.",
+                              read_only=True)
+    imu: str = param("/tip_imu", "Accelerometer (sensor_msgs/Imu, linear_acceleration m/s^2) on the tool.",
+                     read_only=True)
+    imu_reliable: bool = param(False, "Subscribe to the accelerometer RELIABLE (lossless from a reliable"
          " publisher such as the simulator in lockstep; a best-effort sensor driver does not match it)."
-         " Default best effort, deep queue.", read_only=True),
-    Spec("limits.lower", [-2 * math.pi], "Lowest joint positions, rad (one per joint, or one for all).",
-         read_only=True),
-    Spec("limits.upper", [2 * math.pi], "Highest joint positions, rad.", read_only=True),
-    Spec("limits.max_velocity", [math.pi], "Largest joint speeds, rad/s.", read_only=True),
-    Spec("limits.max_acceleration", [15.0], "Largest joint accelerations, rad/s^2.", read_only=True),
-    Spec("base_pose", None, "Pose of the joints not on the grid, rad; empty: where the arm is now.",
-         read_only=True, type=_DA),
-    Spec("home_pose", None, "Home pose, rad (calibrated first; its modes give the fallback shaper; on the grid"
-         " when inside its ranges); empty: base_pose.", read_only=True, type=_DA),
-    Spec("grid.joints", None, "Joints whose positions change the dynamics: the grid's axes (and the"
-         " scheduler's premises).", read_only=True, type=_SA),
-    Spec("grid.lower", None, "Lowest grid value per grid joint, rad.", read_only=True, type=_DA),
-    Spec("grid.upper", None, "Highest grid value per grid joint, rad.", read_only=True, type=_DA),
-    Spec("grid.counts", None, "Grid values per grid joint (evenly spaced; the home pose's value is added).",
-         read_only=True, type=Parameter.Type.INTEGER_ARRAY),
-    Spec("poses", None, "Instead of a grid: explicit poses, rad, one after the other (len(joint_names) values"
-         " each).", read_only=True, type=_DA),
-    Spec("follow.joints", None, "Joints that move with the grid to keep the tool's orientation.",
-         read_only=True, type=_SA),
-    Spec("follow.gains", None, "Per follow joint, one gain per grid joint: q_f = base_f + sum_j g_j (q_j -"
-         " base_j).", read_only=True, type=_DA),
-    Spec("excitation.joints", None, "Joints moved by the excitation.", read_only=True, type=_SA),
-    Spec("excitation.amplitude", None, f"Excursion per excitation joint, rad (signed, at most {MAX_AMPLITUDE:g}).",
-         read_only=True, type=_DA),
-    Spec("excitation.max_velocity", 0.5, "Largest speed of the excitation, rad/s.", (1e-3, 10.0), read_only=True),
-    Spec("excitation.max_acceleration", 10.0, "Largest acceleration of the excitation, rad/s^2.", (1e-3, 100.0),
-         read_only=True),
-    Spec("excitation.repeats", 3, "Excitations per pose.", (1, 10), read_only=True),
-    Spec("excitation.decay", 2.0, "Free vibration recorded after each excitation, s.", (0.2, 10.0),
-         read_only=True),
-    Spec("approach.max_velocity", 0.5, "Largest speed between poses, rad/s.", (1e-3, 10.0), read_only=True),
-    Spec("approach.max_acceleration", 2.0, "Largest acceleration between poses, rad/s^2.", (1e-3, 100.0),
-         read_only=True),
-    Spec("approach.settle", 1.0, "Rest at a pose before its first excitation, s.", (0.0, 60.0), read_only=True),
-    Spec("identification.method", "fit", "Identification method (fit, spectral, matrix_pencil).",
-         choices=("fit", "spectral", "matrix_pencil"), read_only=True),
-    Spec("identification.max_modes", 4, "Most modes mapped per pose (one more is fitted beside them).", (1, 6),
-         read_only=True),
-    Spec("identification.band_hz", [2.0, 45.0], "Band searched for modes [low, high], Hz.", read_only=True),
-    Spec("identification.max_damping", 0.15, "Modes damped more than this are not mapped (they do not ring).",
-         (0.01, 0.9), read_only=True),
-    Spec("identification.agreement", 0.02, "Largest relative spread of a mode's frequency over the repeats"
-         " before the pose is flagged.", (1e-4, 0.5), read_only=True),
-    Spec("scheduler.family", "zv", "Shaper family of the rule base and the fallback.", read_only=True),
-    Spec("scheduler.premise_threshold", 0.02, "A grid joint along which the modes change less than this"
-         " (relative) is not a premise.", (0.0, 1.0), read_only=True),
-    Spec("compression", "none", "MCAP chunk compression of the recording: 'zstd' compresses each chunk (as the"
-         " recorder's compression), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True),
-    Spec("timeouts.server", 30.0, "Wait for the action server and each goal's answer, s (wall).", (0.1, 3600.0),
-         read_only=True),
-    Spec("timeouts.data", 30.0, "Wait for joint states and accelerometer data, s (wall).", (0.1, 3600.0),
-         read_only=True),
-    Spec("timeouts.result", 600.0, "Wait for a goal's result, s (wall).", (1.0, 36000.0), read_only=True),
-)
+         " Default best effort, deep queue.", read_only=True)
 
 
-def config_from_values(v: dict[str, Any], here: np.ndarray | None) -> PlanConfig:
-    """The plan's configuration from the node's parameter values (``here``: the arm's pose now)."""
-    names = tuple(v["joint_names"] or ())
+@dataclass(frozen=True)
+class LimitsParams:
+    """The parameters limits.*."""
+
+    lower: tuple[float, ...] = param([-2 * math.pi], "Lowest joint positions, rad (one per joint, or one for all).",
+                                     read_only=True)
+    upper: tuple[float, ...] = param([2 * math.pi], "Highest joint positions, rad.", read_only=True)
+    max_velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s.", read_only=True)
+    max_acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2.", read_only=True)
+
+
+@dataclass(frozen=True)
+class GridParams:
+    """The parameters grid.*."""
+
+    joints: tuple[str, ...] = param(None, "Joints whose positions change the dynamics: the grid's axes (and the"
+                                    " scheduler's premises).", read_only=True, type=_SA)
+    lower: tuple[float, ...] = param(None, "Lowest grid value per grid joint, rad.", read_only=True, type=_DA)
+    upper: tuple[float, ...] = param(None, "Highest grid value per grid joint, rad.", read_only=True, type=_DA)
+    counts: tuple[int, ...] = param(None, "Grid values per grid joint (evenly spaced; the home pose's value is added).",
+                                    read_only=True, type=Parameter.Type.INTEGER_ARRAY)
+
+
+@dataclass(frozen=True)
+class FollowParams:
+    """The parameters follow.*."""
+
+    joints: tuple[str, ...] = param(None, "Joints that move with the grid to keep the tool's orientation.",
+                                    read_only=True, type=_SA)
+    gains: tuple[float, ...] = param(None, "Per follow joint, one gain per grid joint: q_f = base_f + sum_j g_j (q_j -"
+                                     " base_j).", read_only=True, type=_DA)
+
+
+@dataclass(frozen=True)
+class ExcitationParams:
+    """The parameters excitation.*."""
+
+    joints: tuple[str, ...] = param(None, "Joints moved by the excitation.", read_only=True, type=_SA)
+    amplitude: tuple[float, ...] = param(
+        None, f"Excursion per excitation joint, rad (signed, at most {MAX_AMPLITUDE:g}).",
+        read_only=True, type=_DA)
+    max_velocity: float = param(0.5, "Largest speed of the excitation, rad/s.", (1e-3, 10.0), read_only=True)
+    max_acceleration: float = param(10.0, "Largest acceleration of the excitation, rad/s^2.", (1e-3, 100.0),
+                                    read_only=True)
+    repeats: int = param(3, "Excitations per pose.", (1, 10), read_only=True)
+    decay: float = param(2.0, "Free vibration recorded after each excitation, s.", (0.2, 10.0),
+                         read_only=True)
+
+
+@dataclass(frozen=True)
+class ApproachParams:
+    """The parameters approach.*."""
+
+    max_velocity: float = param(0.5, "Largest speed between poses, rad/s.", (1e-3, 10.0), read_only=True)
+    max_acceleration: float = param(2.0, "Largest acceleration between poses, rad/s^2.", (1e-3, 100.0),
+                                    read_only=True)
+    settle: float = param(1.0, "Rest at a pose before its first excitation, s.", (0.0, 60.0), read_only=True)
+
+
+@dataclass(frozen=True)
+class IdentificationParams:
+    """The parameters identification.*."""
+
+    method: str = param("fit", "Identification method (fit, spectral, matrix_pencil).",
+                        choices=("fit", "spectral", "matrix_pencil"), read_only=True)
+    max_modes: int = param(4, "Most modes mapped per pose (one more is fitted beside them).", (1, 6),
+                           read_only=True)
+    band_hz: tuple[float, ...] = param([2.0, 45.0], "Band searched for modes [low, high], Hz.", read_only=True)
+    max_damping: float = param(0.15, "Modes damped more than this are not mapped (they do not ring).",
+                               (0.01, 0.9), read_only=True)
+    agreement: float = param(0.02, "Largest relative spread of a mode's frequency over the repeats"
+                             " before the pose is flagged.", (1e-4, 0.5), read_only=True)
+
+
+@dataclass(frozen=True)
+class SchedulerParams:
+    """The parameters scheduler.*."""
+
+    family: str = param("zv", "Shaper family of the rule base and the fallback.", read_only=True)
+    premise_threshold: float = param(0.02, "A grid joint along which the modes change less than this"
+                                     " (relative) is not a premise.", (0.0, 1.0), read_only=True)
+
+
+@dataclass(frozen=True)
+class TimeoutsParams:
+    """The parameters timeouts.*."""
+
+    server: float = param(30.0, "Wait for the action server and each goal's answer, s (wall).", (0.1, 3600.0),
+                          read_only=True)
+    data: float = param(30.0, "Wait for joint states and accelerometer data, s (wall).", (0.1, 3600.0),
+                        read_only=True)
+    result: float = param(600.0, "Wait for a goal's result, s (wall).", (1.0, 36000.0), read_only=True)
+
+
+@dataclass(frozen=True)
+class CalibrateParams:
+    """The calibrate node's parameters (see config/calibrate.yaml)."""
+
+    joint_names: tuple[str, ...] = param(None, "The controller's joints, in the order of every per-joint list below.",
+                                         read_only=True, type=_SA)
+    action: str = param("/joint_trajectory_controller/follow_joint_trajectory", "FollowJointTrajectory action to"
+         " send the moves to (the controller's, or the shaper node's proxy with its shaper set to none).",
+         read_only=True)
+    topics: TopicsParams = field(default_factory=TopicsParams)
+    limits: LimitsParams = field(default_factory=LimitsParams)
+    base_pose: tuple[float, ...] = param(None, "Pose of the joints not on the grid, rad; empty: where the arm is now.",
+                                         read_only=True, type=_DA)
+    home_pose: tuple[float, ...] = param(
+        None, "Home pose, rad (calibrated first; its modes give the fallback shaper; on the grid"
+        " when inside its ranges); empty: base_pose.", read_only=True, type=_DA)
+    grid: GridParams = field(default_factory=GridParams)
+    poses: tuple[float, ...] = param(
+        None, "Instead of a grid: explicit poses, rad, one after the other (len(joint_names) values"
+        " each).", read_only=True, type=_DA)
+    follow: FollowParams = field(default_factory=FollowParams)
+    excitation: ExcitationParams = field(default_factory=ExcitationParams)
+    approach: ApproachParams = field(default_factory=ApproachParams)
+    identification: IdentificationParams = field(default_factory=IdentificationParams)
+    scheduler: SchedulerParams = field(default_factory=SchedulerParams)
+    compression: str = param("none", "MCAP chunk compression of the recording: 'zstd' compresses each chunk (as the"
+         " recorder's compression), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True)
+    timeouts: TimeoutsParams = field(default_factory=TimeoutsParams)
+
+
+#: the calibrate node's parameters (derived from CalibrateParams; see config/calibrate.yaml)
+PARAMETERS: tuple[Spec, ...] = table(CalibrateParams)
+
+
+def config_from_values(v: CalibrateParams | Mapping[str, Any], here: np.ndarray | None) -> PlanConfig:
+    """The plan's configuration from the node's parameters (or a mapping of them keyed by name, as a
+    params file gives them; ``here``: the arm's pose now)."""
+    p = v if isinstance(v, CalibrateParams) else unflat(CalibrateParams, v)
+    names = p.joint_names
     if not names:
         raise PlanError("joint_names is empty: the controller's joints are needed")
     n = len(names)
-    base = np.asarray(v["base_pose"] or (here if here is not None else []), dtype=float)
+    base = np.asarray(p.base_pose or (here if here is not None else []), dtype=float)
     if base.size == 0:
         raise PlanError("base_pose is empty and no joint states came to take the present pose")
-    home = np.asarray(v["home_pose"] or base, dtype=float)
-    grid = tuple(v["grid.joints"] or ())
-    follow_joints = list(v["follow.joints"] or [])
-    gains = np.asarray(v["follow.gains"] or [], dtype=float)
+    home = np.asarray(p.home_pose or base, dtype=float)
+    grid = p.grid.joints
+    follow_joints = list(p.follow.joints)
+    gains = np.asarray(p.follow.gains, dtype=float)
     if follow_joints and gains.size != len(follow_joints) * len(grid):
         raise PlanError(f"follow.gains needs {len(grid)} gains per follow joint ({len(follow_joints) * len(grid)}"
                         f" values), got {gains.size}")
     follow = {j: tuple(gains[i * len(grid):(i + 1) * len(grid)]) for i, j in enumerate(follow_joints)}
-    flat = np.asarray(v["poses"] or [], dtype=float)
+    flat = np.asarray(p.poses, dtype=float)
     if flat.size % n:
         raise PlanError(f"poses needs {n} values per pose, got {flat.size} values")
+    lim, exc, app = p.limits, p.excitation, p.approach
     return PlanConfig(
-        names, make_limits(n, v["limits.lower"], v["limits.upper"], v["limits.max_velocity"],
-                           v["limits.max_acceleration"]),
-        base, home, grid, tuple(v["grid.lower"] or ()), tuple(v["grid.upper"] or ()),
-        tuple(int(c) for c in v["grid.counts"] or ()), tuple(tuple(p) for p in flat.reshape(-1, n)), follow,
-        tuple(v["excitation.joints"] or ()), tuple(v["excitation.amplitude"] or ()),
-        float(v["excitation.max_velocity"]), float(v["excitation.max_acceleration"]), int(v["excitation.repeats"]),
-        float(v["excitation.decay"]), float(v["approach.max_velocity"]), float(v["approach.max_acceleration"]),
-        float(v["approach.settle"]))
+        names, make_limits(n, list(lim.lower), list(lim.upper), list(lim.max_velocity), list(lim.max_acceleration)),
+        base, home, grid, p.grid.lower, p.grid.upper, tuple(int(c) for c in p.grid.counts),
+        tuple(tuple(q) for q in flat.reshape(-1, n)), follow, exc.joints, exc.amplitude,
+        float(exc.max_velocity), float(exc.max_acceleration), int(exc.repeats),
+        float(exc.decay), float(app.max_velocity), float(app.max_acceleration), float(app.settle))
 
 
-def settings_from_values(v: dict[str, Any]) -> IdentifySettings:
-    band = [float(x) for x in v["identification.band_hz"]]
+def settings_from_values(v: CalibrateParams | Mapping[str, Any]) -> IdentifySettings:
+    """The identification settings from the node's parameters (or a mapping of them keyed by name)."""
+    ident = (v if isinstance(v, CalibrateParams) else unflat(CalibrateParams, v)).identification
+    band = [float(x) for x in ident.band_hz]
     if len(band) != 2 or not 0 <= band[0] < band[1]:
         raise PlanError(f"identification.band_hz must be [low, high] with 0 <= low < high, got {band}")
-    return IdentifySettings(str(v["identification.method"]), int(v["identification.max_modes"]),
-                            (band[0], band[1]), float(v["identification.agreement"]),
-                            float(v["identification.max_damping"]))
+    return IdentifySettings(str(ident.method), int(ident.max_modes), (band[0], band[1]), float(ident.agreement),
+                            float(ident.max_damping))
 
 
 class Calibrator:
     """The ROS side of a calibration run: a node, its action client, its subscriptions and the recording."""
 
-    def __init__(self, node: Any, executor: Any, values: dict[str, Any]) -> None:
+    def __init__(self, node: Any, executor: Any, params: CalibrateParams) -> None:
         from control_msgs.action import FollowJointTrajectory
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu, JointState
 
         from shaper_nodes.ros.action_client import ResilientActionClient
 
-        self.node, self.executor, self.v = node, executor, values
-        self.names = list(values["joint_names"] or [])
+        self.node, self.executor, self.p = node, executor, params
+        self.names = list(params.joint_names)
         self.position: np.ndarray | None = None
         self.imu_stamp = -math.inf
         self.writer: Any = None
         self.goal: Any = None
-        reliability = ReliabilityPolicy.RELIABLE if values["topics.imu_reliable"] else ReliabilityPolicy.BEST_EFFORT
+        reliability = ReliabilityPolicy.RELIABLE if params.topics.imu_reliable else ReliabilityPolicy.BEST_EFFORT
         deep = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
-        self.imu_topic = str(values["topics.imu"])
-        self.js_topic = str(values["topics.joint_states"])
+        self.imu_topic = params.topics.imu
+        self.js_topic = params.topics.joint_states
         node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
         node.create_subscription(JointState, self.js_topic, self._on_joint_states, 100)
-        self.action = ResilientActionClient(node, FollowJointTrajectory, str(values["action"]))
+        self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
         self._fjt = FollowJointTrajectory
 
     # ------------------------------------------------------------------ data
@@ -241,13 +314,13 @@ class Calibrator:
             self.executor.spin_once(timeout_sec=POLL)
 
     def wait_pose(self) -> np.ndarray:
-        self.spin_until(lambda: self.position is not None, float(self.v["timeouts.data"]),
+        self.spin_until(lambda: self.position is not None, float(self.p.timeouts.data),
                         f"joint states with {', '.join(self.names)} on {self.js_topic}")
         assert self.position is not None
         return self.position.copy()
 
     def wait_imu(self, stamp: float, what: str) -> None:
-        self.spin_until(lambda: self.imu_stamp >= stamp, float(self.v["timeouts.data"]),
+        self.spin_until(lambda: self.imu_stamp >= stamp, float(self.p.timeouts.data),
                         f"accelerometer data on {self.imu_topic} up to {what} (t = {stamp:.3f} s)")
 
     # ------------------------------------------------------------------ moving
@@ -265,8 +338,8 @@ class Calibrator:
         points = [JointTrajectoryPoint(positions=w.positions.tolist(), velocities=[0.0] * n,
                                        accelerations=[0.0] * n, time_from_start=dur(w.time)) for w in waypoints]
         goal = self._fjt.Goal(trajectory=JointTrajectory(joint_names=self.names, points=points))
-        server = float(self.v["timeouts.server"])
-        self.spin_until(self.action.server_is_ready, server, f"the FollowJointTrajectory server {self.v['action']}")
+        server = float(self.p.timeouts.server)
+        self.spin_until(self.action.server_is_ready, server, f"the FollowJointTrajectory server {self.p.action}")
         stamps: list[float] = []
 
         def on_feedback(m: Any) -> None:
@@ -279,7 +352,7 @@ class Calibrator:
             raise Aborted(f"the controller rejected the goal of {what} (see its log)")
         self.goal = handle
         result = handle.get_result_async()
-        self.spin_until(result.done, float(self.v["timeouts.result"]), f"result of {what}")
+        self.spin_until(result.done, float(self.p.timeouts.result), f"result of {what}")
         self.goal = None
         res = result.result()
         from action_msgs.msg import GoalStatus
@@ -320,7 +393,7 @@ class Calibrator:
         partial = folder.with_name(folder.name + ".partial")
         if partial.exists():
             shutil.rmtree(partial)
-        self.writer = BagWriter(partial, compression=str(self.v["compression"]))
+        self.writer = BagWriter(partial, compression=str(self.p.compression))
         try:
             self._record(SETUP_TOPIC, "std_msgs/msg/String", String(data=json.dumps(setup, sort_keys=True)),
                          max(self.imu_stamp, 0.0))
@@ -392,7 +465,7 @@ def main(args: list[str] | None = None) -> int:
     from rclpy.signals import SignalHandlerOptions
     from rclpy.utilities import remove_ros_args
 
-    from shaper_nodes.ros.parameters import declare_all, values
+    from shaper_nodes.ros.parameters import read
 
     argv = list(sys.argv if args is None else args)
     opts = parse_args(remove_ros_args(argv)[1:])
@@ -409,8 +482,8 @@ def main(args: list[str] | None = None) -> int:
     cal: Calibrator | None = None
     try:
         declare_all(node, PARAMETERS)
-        v = values(node, PARAMETERS)
-        if not v["joint_names"]:
+        v = read(node, CalibrateParams)  # a one-shot command: its parameters do not change while it runs
+        if not v.joint_names:
             raise PlanError("parameter joint_names is required: the controller's joints (see config/calibrate.yaml)")
         cal = Calibrator(node, executor, v)
         return _run(cal, v, opts)
@@ -432,7 +505,7 @@ def main(args: list[str] | None = None) -> int:
         rclpy.try_shutdown()
 
 
-def _run(cal: Calibrator, v: dict[str, Any], opts: argparse.Namespace) -> int:
+def _run(cal: Calibrator, v: CalibrateParams, opts: argparse.Namespace) -> int:
     out: pathlib.Path = opts.out or pathlib.Path(datetime.datetime.now().strftime("calibration-%Y%m%d-%H%M%S"))
     if opts.resume:
         try:
@@ -443,12 +516,12 @@ def _run(cal: Calibrator, v: dict[str, Any], opts: argparse.Namespace) -> int:
         print(f"calibrate: resuming {out}: {len(pose_folders(out / 'recording'))} of {len(plan.steps)} poses done")
     else:
         here = None
-        if not v["base_pose"] or not v["home_pose"] or opts.execute:
+        if not v.base_pose or not v.home_pose or opts.execute:
             here = cal.wait_pose()
         config = config_from_values(v, here)
         plan = make_plan(config, here)
-        setup = setup_dict(plan, settings_from_values(v), str(v["scheduler.family"]),
-                           float(v["scheduler.premise_threshold"]))
+        setup = setup_dict(plan, settings_from_values(v), str(v.scheduler.family),
+                           float(v.scheduler.premise_threshold))
         plan_from_setup(setup)  # the setup recorded recomputes this plan (refused here, not after the moves)
     print(plan.describe(), flush=True)
     if not opts.execute:

@@ -44,6 +44,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -62,7 +63,7 @@ from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import Spec, declare_all, topics
+from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
 from shaper_nodes.ros.shaper_client import ShaperClient
 
@@ -134,35 +135,67 @@ def _check_band(value: Any) -> None:
 
 _PROBE = ModeFit(2 * math.pi * 10.0, 0.02, 0.5, 0.002, 1.0, "fit")  # to hold one value against the core
 
-#: the identifier node's parameters (see config/identifier.yaml)
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("shaper", "/shaper", "Fully qualified name of the shaper node to apply shapers to.", read_only=True),
-    Spec("buffer_cycles", 5, "Finished cycles kept for identification.", (1, 1000), read_only=True),
-    Spec("method", "fit", "Default identification method: " + ", ".join(f"{k} ({v})" for k, v in METHODS.items()),
-         check=lambda v: _validate_method(v)),
-    Spec("max_modes", 2, "Default largest number of modes to identify.", (1, 8)),
-    Spec("target_vibration", 0.05, "Default worst-case percentage vibration the recommended shaper must meet,"
-         " fraction.", (0.001, 0.5), check=lambda v: recommend_shaper([_PROBE], v, families=("zv",))),
-    Spec("uncertainty_sigmas", 2.0, "Half-width of the uncertainty band the worst case is taken over, in standard"
-         " deviations.", (0.0, 10.0), check=lambda v: recommend_shaper([_PROBE], 0.05, sigmas=v, families=("zv",))),
-    Spec("band_hz", [0.0, 0.0], "Frequency band searched, Hz ([0, 0]: up to Nyquist).", check=_check_band),
-    Spec("min_samples", 100, "Fewest accelerometer samples in a cycle's residual window.", (10, 10**7)),
-    Spec("sensor.max_abs_accel", MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
-         " it is refused as saturated (default 16 g).", (1e-3, 1e6)),
-    Spec("settle_tolerance", 1e-6, "Band within which the joints count as at rest after a move, rad or m.",
-         (0.0, 1e3)),
-    Spec("service_timeout", 5.0, "Time to wait for the shaper node's set_shaper service, and then for its"
-         " answer, s.", (0.1, 600.0)),
-    Spec("watch.enabled", True, "Drift watch: rate every buffered cycle's mode against the active shaper's working"
-         " band and warn on /diagnostics when it leaves it.", read_only=True),
-    Spec("watch.tolerance", 0.05, "Drift watch: the working band is where the active shaper keeps V under this,"
-         " fraction.", (0.001, 0.5)),
-    Spec("watch.confirm", 2, "Drift watch: cycles in a row outside the band before the warning.", (1, 1000)),
-    Spec("watch.max_uncertainty", 0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
-         " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
-         " nothing to identify).", (1e-4, 1.0)),
-    *topics({"imu": "/tip_imu", "joint_states": "/joint_states", "cycle_events": "/cycle_events"}),
-)
+@dataclass(frozen=True)
+class SensorParams:
+    """sensor.*: the accelerometer's range."""
+
+    max_abs_accel: float = param(MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
+                                 " it is refused as saturated (default 16 g).", (1e-3, 1e6))
+
+
+@dataclass(frozen=True)
+class WatchParams:
+    """watch.*: the drift watch."""
+
+    enabled: bool = param(True, "Drift watch: rate every buffered cycle's mode against the active shaper's working"
+                          " band and warn on /diagnostics when it leaves it.", read_only=True)
+    tolerance: float = param(0.05, "Drift watch: the working band is where the active shaper keeps V under this,"
+                             " fraction.", (0.001, 0.5))
+    confirm: int = param(2, "Drift watch: cycles in a row outside the band before the warning.", (1, 1000))
+    max_uncertainty: float = param(
+        0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
+        " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
+        " nothing to identify).", (1e-4, 1.0))
+
+
+@dataclass(frozen=True)
+class TopicParams:
+    """topics.*: the inputs."""
+
+    imu: str = topic("/tip_imu", "imu")
+    joint_states: str = topic("/joint_states", "joint_states")
+    cycle_events: str = topic("/cycle_events", "cycle_events")
+
+
+@dataclass(frozen=True)
+class IdentifierParams:
+    """The identifier node's parameters (see config/identifier.yaml)."""
+
+    shaper: str = param("/shaper", "Fully qualified name of the shaper node to apply shapers to.", read_only=True)
+    buffer_cycles: int = param(5, "Finished cycles kept for identification.", (1, 1000), read_only=True)
+    method: str = param("fit", "Default identification method: " + ", ".join(f"{k} ({v})" for k, v in METHODS.items()),
+                        check=lambda v: _validate_method(v))
+    max_modes: int = param(2, "Default largest number of modes to identify.", (1, 8))
+    target_vibration: float = param(
+        0.05, "Default worst-case percentage vibration the recommended shaper must meet,"
+        " fraction.", (0.001, 0.5), check=lambda v: recommend_shaper([_PROBE], v, families=("zv",)))
+    uncertainty_sigmas: float = param(
+        2.0, "Half-width of the uncertainty band the worst case is taken over, in standard"
+        " deviations.", (0.0, 10.0), check=lambda v: recommend_shaper([_PROBE], 0.05, sigmas=v, families=("zv",)))
+    band_hz: tuple[float, ...] = param([0.0, 0.0], "Frequency band searched, Hz ([0, 0]: up to Nyquist).",
+                                       check=_check_band)
+    min_samples: int = param(100, "Fewest accelerometer samples in a cycle's residual window.", (10, 10**7))
+    sensor: SensorParams = field(default_factory=SensorParams)
+    settle_tolerance: float = param(1e-6, "Band within which the joints count as at rest after a move, rad or m.",
+                                    (0.0, 1e3))
+    service_timeout: float = param(5.0, "Time to wait for the shaper node's set_shaper service, and then for its"
+                                   " answer, s.", (0.1, 600.0))
+    watch: WatchParams = field(default_factory=WatchParams)
+    topics: TopicParams = field(default_factory=TopicParams)
+
+
+#: the identifier node's parameters (derived from IdentifierParams)
+PARAMETERS: tuple[Spec, ...] = table(IdentifierParams)
 
 
 class IdentifierNode(Node):
@@ -170,31 +203,31 @@ class IdentifierNode(Node):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__("identifier", *args, **kwargs)
-        declare_all(self, PARAMETERS)
-        _validate_method(str(self.get_parameter("method").value))
+        self.params = declare(self, IdentifierParams)
+        p = self.params.value
+        _validate_method(p.method)
 
-        p = self.get_parameter
-        self.monitor = CycleMonitor(float(p("settle_tolerance").value))
+        self.monitor = CycleMonitor(float(p.settle_tolerance))
         self.cycles: deque[tuple[CycleResult, tuple[np.ndarray, np.ndarray]]] = deque(
-            maxlen=int(p("buffer_cycles").value))
+            maxlen=int(p.buffer_cycles))
         self.skipped: list[str] = []
         self.saturated = 0  # accelerometer samples counted as saturated (in cycles refused for it)
-        self.create_subscription(Imu, p("topics.imu").value, self._on_imu, IMU_QOS)
-        self.create_subscription(JointState, p("topics.joint_states").value, self._on_joints, 100)
-        self.create_subscription(CycleEvent, p("topics.cycle_events").value, self._on_event, 100)
+        self.create_subscription(Imu, p.topics.imu, self._on_imu, IMU_QOS)
+        self.create_subscription(JointState, p.topics.joint_states, self._on_joints, 100)
+        self.create_subscription(CycleEvent, p.topics.cycle_events, self._on_event, 100)
         self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
         self.diagnostics = Diagnostics(self)
-        self.shaper = ShaperClient(self, str(p("shaper").value), SOURCE, lambda: float(p("service_timeout").value),
+        self.shaper = ShaperClient(self, str(p.shaper), SOURCE, lambda: float(self.params.value.service_timeout),
                                    self.diagnostics)
         self.create_service(Identify, "~/identify", self._on_identify)
-        self.watch = DriftWatch(int(p("watch.confirm").value))
+        self.watch = DriftWatch(int(p.watch.confirm))
         self._active: ShaperMsg | None = None
         self._warned = False
-        if bool(p("watch.enabled").value):
-            self.create_subscription(ShaperMsg, f"{str(p('shaper').value).rstrip('/')}/active_shaper",
+        if bool(p.watch.enabled):
+            self.create_subscription(ShaperMsg, f"{str(p.shaper).rstrip('/')}/active_shaper",
                                      self._on_active, LATCHED)
         self.get_logger().info(
-            f"identifying from {p('topics.imu').value}, keeping {self.cycles.maxlen} cycles;"
+            f"identifying from {p.topics.imu}, keeping {self.cycles.maxlen} cycles;"
             f" applies to {self.shaper.srv_name}")
 
     # ----------------------------------------------------------------- data
@@ -221,8 +254,8 @@ class IdentifierNode(Node):
         if result is None:
             return
         try:
-            record = check_record(result, int(self.get_parameter("min_samples").value),
-                                  float(self.get_parameter("sensor.max_abs_accel").value))
+            record = check_record(result, int(self.params.value.min_samples),
+                                  float(self.params.value.sensor.max_abs_accel))
         except SaturatedRecord as err:
             self.saturated += err.count
             self._skip(str(err), "saturated")
@@ -247,21 +280,21 @@ class IdentifierNode(Node):
         active = self._active
         if active is None or len(active.amplitudes) < 2 or active.family == "none":
             return
-        p = self.get_parameter
-        lo, hi = (float(x) for x in p("band_hz").value)
+        p = self.params.value
+        lo, hi = (float(x) for x in p.band_hz)
         try:
-            modes = identify_records([record], method=str(p("method").value), max_modes=int(p("max_modes").value),
+            modes = identify_records([record], method=str(p.method), max_modes=int(p.max_modes),
                                      band_hz=(lo, hi) if hi > 0.0 else None)
         except IdentificationError as err:
             self._quiet(cycle, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is at the"
                         " noise floor")
             return
-        sharp = [m for m in modes if m.omega > 0 and m.omega_std <= float(p("watch.max_uncertainty").value) * m.omega]
+        sharp = [m for m in modes if m.omega > 0 and m.omega_std <= float(p.watch.max_uncertainty) * m.omega]
         check = self._worst(active, sharp)
         if check is None:
             found = ", ".join(f"{m.hz:.4g} Hz (+-{100 * m.omega_std / m.omega:.2g} %)" for m in modes if m.omega > 0)
             self._quiet(cycle, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
-                        f" watch.max_uncertainty {100 * float(p('watch.max_uncertainty').value):.3g} %): the residual"
+                        f" watch.max_uncertainty {100 * float(p.watch.max_uncertainty):.3g} %): the residual"
                         " is at the noise floor")
             return
         warning = self.watch.update(check)
@@ -297,7 +330,7 @@ class IdentifierNode(Node):
         names none); of several, the one with the largest V."""
         if not modes:
             return None
-        tol = float(self.get_parameter("watch.tolerance").value)
+        tol = float(self.params.value.watch.tolerance)
         design = [m.natural_frequency / (2 * math.pi) for m in active.design_modes if m.natural_frequency > 0]
         if design:
             chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
@@ -314,23 +347,23 @@ class IdentifierNode(Node):
 
     # ----------------------------------------------------------------- service
     async def _on_identify(self, req: Identify.Request, resp: Identify.Response) -> Identify.Response:
-        p = self.get_parameter
+        p = self.params.value
         try:
-            method = _validate_method(req.method.strip() or str(p("method").value))
-            max_modes = int(req.max_modes) or int(p("max_modes").value)
-            target = float(req.target_vibration) or float(p("target_vibration").value)
+            method = _validate_method(req.method.strip() or str(p.method))
+            max_modes = int(req.max_modes) or int(p.max_modes)
+            target = float(req.target_vibration) or float(p.target_vibration)
             if not (math.isfinite(target) and 0.0 < target < 1.0):
                 raise ValueError(f"target_vibration must be in (0, 1), got {req.target_vibration!r}")
             if not self.cycles:
                 raise IdentificationError("no finished cycle with valid accelerometer data buffered yet")
             n = int(req.cycles) or len(self.cycles)
             used = list(self.cycles)[-n:]
-            lo, hi = (float(x) for x in p("band_hz").value)
+            lo, hi = (float(x) for x in p.band_hz)
             if hi > 0.0 and not 0.0 <= lo < hi:
                 raise ValueError(f"parameter band_hz must be [low, high] with 0 <= low < high, got {[lo, hi]}")
             band = (lo, hi) if hi > 0.0 else None
             modes = identify_records([rec for _, rec in used], method=method, max_modes=max_modes, band_hz=band)
-            rec = recommend_shaper(modes, target, sigmas=float(p("uncertainty_sigmas").value))
+            rec = recommend_shaper(modes, target, sigmas=float(p.uncertainty_sigmas))
         except (IdentificationError, ShaperError, ValueError) as err:
             resp.success, resp.message = False, f"identification failed: {err}"
             self.get_logger().error(resp.message)

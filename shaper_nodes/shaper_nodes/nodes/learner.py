@@ -43,6 +43,7 @@ from __future__ import annotations
 import pathlib
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -57,7 +58,7 @@ from shaper_nodes.core.learning.state_file import load_state, write_atomic
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import Spec, declare_all
+from shaper_nodes.ros.parameters import Spec, declare, param, table
 from shaper_nodes.ros.shaper_client import ShaperClient, wait_for
 
 SOURCE = "learner"
@@ -65,21 +66,28 @@ STATE_VERSION = 1
 MODES = ("list", "mrilc")
 T = TypeVar("T")
 
-#: the parameters every mode has (the adapters add theirs)
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("mode", "list", "Learning mode: 'list' (Learning Input Shaping Technique, seed 003) or 'mrilc'"
-         " (Model-Reference Iterative Learning Control, seed 000).", choices=MODES, read_only=True),
-    Spec("shaper", "/shaper", "Fully qualified name of the shaper node.", read_only=True),
-    Spec("state_file", "", "Where the learner's state is saved and reloaded ('' = not saved).", read_only=True),
-    Spec("max_cycle_duration", MAX_CYCLE_DURATION, "Longest cycle, s: a longer one is refused and its samples"
-         " dropped at the limit (bounds the learner's memory).", (1.0, 86400.0), read_only=True),
-    Spec("stale_after", 0.1, "A cycle whose last sample is older than this at END is stale, s.", (0.0, 60.0),
-         read_only=True),
-    Spec("end_wait", 0.5, "At a cycle's END, wait up to this long for samples stamped up to END, s.",
-         (0.0, 10.0)),
-    Spec("service_timeout", 5.0, "Time to wait for the shaper node's services (and the injection point's), and"
-         " then for their answer, s.", (0.1, 600.0)),
-)
+@dataclass(frozen=True)
+class LearnerParams:
+    """The parameters every mode has (the adapters add theirs)."""
+
+    mode: str = param("list", "Learning mode: 'list' (Learning Input Shaping Technique, seed 003) or 'mrilc'"
+                      " (Model-Reference Iterative Learning Control, seed 000).", choices=MODES, read_only=True)
+    shaper: str = param("/shaper", "Fully qualified name of the shaper node.", read_only=True)
+    state_file: str = param("", "Where the learner's state is saved and reloaded ('' = not saved).", read_only=True)
+    max_cycle_duration: float = param(
+        MAX_CYCLE_DURATION, "Longest cycle, s: a longer one is refused and its samples"
+        " dropped at the limit (bounds the learner's memory).", (1.0, 86400.0), read_only=True)
+    stale_after: float = param(0.1, "A cycle whose last sample is older than this at END is stale, s.", (0.0, 60.0),
+                               read_only=True)
+    end_wait: float = param(0.5, "At a cycle's END, wait up to this long for samples stamped up to END, s.",
+                            (0.0, 10.0))
+    service_timeout: float = param(
+        5.0, "Time to wait for the shaper node's services (and the injection point's), and"
+        " then for their answer, s.", (0.1, 600.0))
+
+
+#: the parameters every mode has (derived from LearnerParams)
+PARAMETERS: tuple[Spec, ...] = table(LearnerParams)
 
 
 class Mode(Protocol):
@@ -115,18 +123,18 @@ class LearnerNode(Node):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("learner", *args, **kwargs)
-        declare_all(self, PARAMETERS)
-        p = self.get_parameter
-        path = str(p("state_file").value)
+        self.params = declare(self, LearnerParams)
+        p = self.params.value
+        path = str(p.state_file)
         self.state_path = pathlib.Path(path).expanduser() if path else None
         self.state_problem = ""  # why the state file was not loaded ("" if it was, or there was none)
-        self.max_cycle_duration = float(p("max_cycle_duration").value)
+        self.max_cycle_duration = float(p.max_cycle_duration)
         self.diagnostics = Diagnostics(self)
-        self.shaper = ShaperClient(self, str(p("shaper").value), SOURCE, self.service_timeout, self.diagnostics)
+        self.shaper = ShaperClient(self, str(p.shaper), SOURCE, self.service_timeout, self.diagnostics)
         # the END wait's sleeps (the waiting callback holds its own group; Node has its own _timers)
         self._sleep_group = MutuallyExclusiveCallbackGroup()
         self._report_pub = self.create_publisher(CycleReport, "~/reports", 10)
-        mode = str(p("mode").value)
+        mode = str(p.mode)
         if mode == "mrilc":
             from .learner_mrilc import MrilcMode
 
@@ -144,7 +152,7 @@ class LearnerNode(Node):
         self.get_logger().info(f"{self.mode.describe()}; shaper {self.shaper.srv_name}")
 
     def service_timeout(self) -> float:
-        return float(self.get_parameter("service_timeout").value)
+        return float(self.params.value.service_timeout)
 
     async def sleep(self, seconds: float) -> None:
         """Wait ``seconds`` of wall time without blocking the executor."""
@@ -214,7 +222,7 @@ class LearnerNode(Node):
     async def _on_event(self, msg: CycleEvent) -> None:
         stamp = time_to_sec(msg.header.stamp)
         if msg.event == CycleEvent.END:  # the last samples of the cycle may still be on their way
-            deadline = time.monotonic() + float(self.get_parameter("end_wait").value)
+            deadline = time.monotonic() + float(self.params.value.end_wait)
             while self.mode.latest() < stamp and time.monotonic() < deadline:
                 await self.sleep(0.01)
         report = await self.mode.on_event(msg, stamp)

@@ -37,6 +37,7 @@ held against it by the tests).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -56,7 +57,7 @@ from shaper_nodes.core.learning.list import (
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
-from shaper_nodes.ros.parameters import Spec, declare_all, topics, values
+from shaper_nodes.ros.parameters import Spec, declare, flat, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
 
 if TYPE_CHECKING:
@@ -70,45 +71,79 @@ def _check(key: str) -> Any:
     return lambda v: list_config({key: v})
 
 
-#: the LIST mode's parameters (see config/learner.yaml)
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("initial.frequency_hz", 0.0, "Initial guess: mode frequency, Hz (0 = from the first, unshaped, cycle).",
-         (0.0, 1000.0), read_only=True),
-    Spec("initial.damping_ratio", 0.0, "Initial guess: damping ratio.", (0.0, 0.95), read_only=True,
-         check=lambda v: ListParams.from_mode(Mode.from_hz(10.0, v))),
-    Spec("list.structure", _D.structure, "Impulse structure: 'zv2' (the paper's 2 impulses) or 'zvd3' (the learned"
-         " pair convolved with itself).", read_only=True, check=_check("structure")),
-    Spec("list.rule", _D.rule, "Update rule: 'components' (signed M sin/cos phi) or 'paper'.", read_only=True,
-         check=_check("rule")),
-    Spec("list.highpass_hz", _D.highpass_hz, "High-pass cut-off removing drift before M and phi, Hz (0 = none).",
-         (0.0, 1000.0), read_only=True, check=_check("highpass_hz")),
-    Spec("list.window_delay", 0.0, "Residual window starts this long after MOTION_END, s (0 = the T2 upper"
-         " bound).", (0.0, 60.0), read_only=True, check=_check("window_delay")),
-    Spec("list.a1_bounds", list(_D.a1_bounds), "Bounds of A1, [low, high].", read_only=True,
-         check=_check("a1_bounds")),
-    Spec("list.t2_bounds", [0.0, 0.0], "Bounds of T2, s ([0, 0] = 0.5 to 2 times the initial T2).",
-         read_only=True, check=_check("t2_bounds")),
-    Spec("list.max_step_a1", _D.max_step_a1, "Largest change of A1 per cycle.", (1e-6, 1.0), read_only=True,
-         check=_check("max_step_a1")),
-    Spec("list.max_step_t2", _D.max_step_t2, "Largest change of T2 per cycle, fraction of T2.", (1e-6, 10.0),
-         read_only=True, check=_check("max_step_t2")),
-    Spec("list.phase_trials", _D.phase_trials, "Most cycles varying one parameter before switching to the other.",
-         (1, 100), read_only=True, check=_check("phase_trials")),
-    Spec("list.switch_tol", _D.switch_tol, "Relative step below which a parameter counts as converged.",
-         (0.0, 0.99), read_only=True, check=_check("switch_tol")),
-    Spec("list.rollback_factor", _D.rollback_factor, "Roll back to the best parameters when M exceeds this times"
-         " the best M.", (1.0, 100.0), read_only=True, check=_check("rollback_factor")),
-    Spec("list.patience", _D.patience, "Hold at the best parameters after this many trials in a row without a"
-         " better M (0 = never).", (0, 1000), read_only=True, check=_check("patience")),
-    Spec("list.saturation", 0.0, "Accelerometer full scale, m/s^2: a cycle reaching it is rejected (0 = no"
-         " limit).", (0.0, 1e6), read_only=True, check=_check("saturation")),
-    Spec("sensor.max_abs_accel", MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
-         " it is refused as saturated (default 16 g).", (1e-3, 1e6), read_only=True,
-         check=lambda v: ListSession(ListLearner(), max_abs_accel=v)),
-    Spec("list.min_samples", _D.min_samples, "Fewest accelerometer samples in the residual window.", (2, 10**7),
-         read_only=True, check=_check("min_samples")),
-    *topics({"imu": "/tip_imu", "cycle_events": "/cycle_events"}),
-)
+@dataclass(frozen=True)
+class InitialParams:
+    """initial.*: the initial guess."""
+
+    frequency_hz: float = param(0.0, "Initial guess: mode frequency, Hz (0 = from the first, unshaped, cycle).",
+                                (0.0, 1000.0), read_only=True)
+    damping_ratio: float = param(0.0, "Initial guess: damping ratio.", (0.0, 0.95), read_only=True,
+                                 check=lambda v: ListParams.from_mode(Mode.from_hz(10.0, v)))
+
+
+@dataclass(frozen=True)
+class ListGroup:
+    """list.*: the learner's settings (the core's ListConfig, through list_config)."""
+
+    structure: str = param(_D.structure, "Impulse structure: 'zv2' (the paper's 2 impulses) or 'zvd3' (the learned"
+                           " pair convolved with itself).", read_only=True, check=_check("structure"))
+    rule: str = param(_D.rule, "Update rule: 'components' (signed M sin/cos phi) or 'paper'.", read_only=True,
+                      check=_check("rule"))
+    highpass_hz: float = param(_D.highpass_hz, "High-pass cut-off removing drift before M and phi, Hz (0 = none).",
+                               (0.0, 1000.0), read_only=True, check=_check("highpass_hz"))
+    window_delay: float = param(0.0, "Residual window starts this long after MOTION_END, s (0 = the T2 upper"
+                                " bound).", (0.0, 60.0), read_only=True, check=_check("window_delay"))
+    a1_bounds: tuple[float, ...] = param(list(_D.a1_bounds), "Bounds of A1, [low, high].", read_only=True,
+                                         check=_check("a1_bounds"))
+    t2_bounds: tuple[float, ...] = param([0.0, 0.0], "Bounds of T2, s ([0, 0] = 0.5 to 2 times the initial T2).",
+                                         read_only=True, check=_check("t2_bounds"))
+    max_step_a1: float = param(_D.max_step_a1, "Largest change of A1 per cycle.", (1e-6, 1.0), read_only=True,
+                               check=_check("max_step_a1"))
+    max_step_t2: float = param(_D.max_step_t2, "Largest change of T2 per cycle, fraction of T2.", (1e-6, 10.0),
+                               read_only=True, check=_check("max_step_t2"))
+    phase_trials: int = param(_D.phase_trials, "Most cycles varying one parameter before switching to the other.",
+                              (1, 100), read_only=True, check=_check("phase_trials"))
+    switch_tol: float = param(_D.switch_tol, "Relative step below which a parameter counts as converged.",
+                              (0.0, 0.99), read_only=True, check=_check("switch_tol"))
+    rollback_factor: float = param(_D.rollback_factor, "Roll back to the best parameters when M exceeds this times"
+                                   " the best M.", (1.0, 100.0), read_only=True, check=_check("rollback_factor"))
+    patience: int = param(_D.patience, "Hold at the best parameters after this many trials in a row without a"
+                          " better M (0 = never).", (0, 1000), read_only=True, check=_check("patience"))
+    saturation: float = param(0.0, "Accelerometer full scale, m/s^2: a cycle reaching it is rejected (0 = no"
+                              " limit).", (0.0, 1e6), read_only=True, check=_check("saturation"))
+    min_samples: int = param(_D.min_samples, "Fewest accelerometer samples in the residual window.", (2, 10**7),
+                             read_only=True, check=_check("min_samples"))
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """sensor.*: the accelerometer's range."""
+
+    max_abs_accel: float = param(MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
+                                 " it is refused as saturated (default 16 g).", (1e-3, 1e6), read_only=True,
+                                 check=lambda v: ListSession(ListLearner(), max_abs_accel=v))
+
+
+@dataclass(frozen=True)
+class TopicParams:
+    """topics.*: the inputs."""
+
+    imu: str = topic("/tip_imu", "imu")
+    cycle_events: str = topic("/cycle_events", "cycle_events")
+
+
+@dataclass(frozen=True)
+class ListModeParams:
+    """The LIST mode's parameters (see config/learner.yaml)."""
+
+    initial: InitialParams = field(default_factory=InitialParams)
+    list: ListGroup = field(default_factory=ListGroup)
+    sensor: SensorParams = field(default_factory=SensorParams)
+    topics: TopicParams = field(default_factory=TopicParams)
+
+
+#: the LIST mode's parameters (derived from ListModeParams)
+PARAMETERS: tuple[Spec, ...] = table(ListModeParams)
 
 
 def _describe(params: ListParams | None) -> str:
@@ -120,31 +155,31 @@ class ListMode:
 
     def __init__(self, node: LearnerNode) -> None:
         self.node = node
-        declare_all(node, PARAMETERS)
-        v = values(node, PARAMETERS)
+        self.params = declare(node, ListModeParams)
+        v = self.params.value
         try:
-            self.config = list_config(values(node, PARAMETERS, prefix="list."))
+            self.config = list_config(flat(v.list))
         except ListError as err:
             raise ValueError(str(err)) from None
         self.structure = self.config.structure
         learner = node.restore(learner_from_state, {"structure": self.structure})
         self.session = ListSession(learner or ListLearner(self.config, self._initial_params(v)), self.structure,
-                                   float(node.get_parameter("stale_after").value), node.max_cycle_duration,
-                                   float(v["sensor.max_abs_accel"]))
-        self.events_topic = str(v["topics.cycle_events"])
-        self.imu_topic = str(v["topics.imu"])
+                                   float(node.params.value.stale_after), node.max_cycle_duration,
+                                   float(v.sensor.max_abs_accel))
+        self.events_topic = v.topics.cycle_events
+        self.imu_topic = v.topics.imu
         inputs = MutuallyExclusiveCallbackGroup()  # taken while an END's update awaits the shaper node
         node.create_subscription(Imu, self.imu_topic, self._on_imu, IMU_QOS, callback_group=inputs)
         node.create_subscription(ShaperMsg, f"{node.shaper.srv_name.rsplit('/', 1)[0]}/active_shaper",
                                  self._on_active, LATCHED, callback_group=inputs)
 
     @staticmethod
-    def _initial_params(v: dict[str, Any]) -> ListParams | None:
-        hz = float(v["initial.frequency_hz"])
+    def _initial_params(v: ListModeParams) -> ListParams | None:
+        hz = float(v.initial.frequency_hz)
         if hz <= 0.0:
             return None
         try:
-            return ListParams.from_mode(Mode.from_hz(hz, float(v["initial.damping_ratio"])))
+            return ListParams.from_mode(Mode.from_hz(hz, float(v.initial.damping_ratio)))
         except ShaperError as err:
             raise ValueError(f"invalid initial mode: {err}") from None
 

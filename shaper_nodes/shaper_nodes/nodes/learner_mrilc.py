@@ -81,15 +81,14 @@ class MrilcMode:
     def __init__(self, node: LearnerNode) -> None:
         self.node = node
         declare_all(node, PARAMETERS)
-        v = values(node, PARAMETERS)
-        try:
-            self.model, settings = model_from_params(v)
+        try:  # the core validates the whole mapping (as offline replays pass it from YAML) into typed settings
+            self.model, settings = model_from_params(values(node, PARAMETERS))
         except MrilcError as err:
             raise ValueError(str(err)) from None
         self.joint_names: list[str] = list(settings.joint_names)
         self.patience, self.noise_floor, self.learn = settings.patience, settings.noise_floor, settings.learn
         self.settings = settings
-        self.injection = str(v["mrilc.injection"])
+        self.injection = self.model.injection
         self.family = settings.shaper_family
         self.events_topic = settings.topics["cycle_events"]
         self.session: MrilcSession | None = node.restore(self._session_from, {"mode": "mrilc"})
@@ -113,7 +112,7 @@ class MrilcMode:
         if learner is None:
             learner = MrilcLearner(self.model, joints, self.patience, self.noise_floor)
             learner.holding = not self.learn
-        return MrilcSession(learner, float(self.node.get_parameter("stale_after").value), self.node.max_cycle_duration,
+        return MrilcSession(learner, float(self.node.params.value.stale_after), self.node.max_cycle_duration,
                             self.settings.max_abs_position, self.settings.max_abs_effort)
 
     def _session_from(self, doc: dict[str, Any]) -> MrilcSession:

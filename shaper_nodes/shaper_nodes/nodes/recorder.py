@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, BinaryIO
 
 from rclpy.clock import Clock, ClockType
@@ -36,28 +37,35 @@ from shaper_nodes.recordings import COMPRESSIONS, HEARTBEAT_SUFFIX, BagWriter, Q
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
-from shaper_nodes.ros.parameters import Spec, declare_all
+from shaper_nodes.ros.parameters import Spec, declare, param, table
 
-#: the recorder node's parameters
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("output", "recording", "rosbag2 folder to create (must not exist).", read_only=True),
-    Spec("topics", ["/joint_states", "/tip_imu", "/cycle_events"], "Topics to record (fully qualified names).",
-         read_only=True),
-    Spec("compression", "none", "MCAP chunk compression: 'zstd' compresses each chunk (a 500 Hz IMU recording"
-         " shrinks several times), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True),
-    Spec("discovery_period", 0.2, "How often to look for requested topics not yet subscribed, s.", (0.01, 60.0),
-         read_only=True),
-    Spec("flush_period", 1.0, "Time between two flushes of the recording to the operating system (MCAP chunk"
+
+@dataclass(frozen=True)
+class RecorderParams:
+    """The recorder node's parameters."""
+
+    output: str = param("recording", "rosbag2 folder to create (must not exist).", read_only=True)
+    topics: tuple[str, ...] = param(
+        ["/joint_states", "/tip_imu", "/cycle_events"], "Topics to record (fully qualified names).",
+        read_only=True)
+    compression: str = param("none", "MCAP chunk compression: 'zstd' compresses each chunk (a 500 Hz IMU recording"
+         " shrinks several times), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True)
+    discovery_period: float = param(0.2, "How often to look for requested topics not yet subscribed, s.", (0.01, 60.0),
+                                    read_only=True)
+    flush_period: float = param(1.0, "Time between two flushes of the recording to the operating system (MCAP chunk"
          " closed, heartbeat written), s: a killed recorder loses at most about this much.", (0.05, 60.0),
-         read_only=True),
-    Spec("fsync", True, "os.fsync the file at every flush (the data then also survives a power cut, where the"
-         " disk honours it); false: flush to the operating system only (enough for a killed process).",
-         read_only=True),
-    Spec("max_queue_mb", 100.0, "Most bytes waiting to be written, MB (10^6 bytes); beyond, new messages are"
-         " dropped and counted.", (0.001, 100000.0), read_only=True),
-    Spec("max_queue_messages", 100000, "Most messages waiting to be written; beyond, new messages are dropped"
-         " and counted.", (1, 10**8), read_only=True),
-)
+         read_only=True)
+    fsync: bool = param(True, "os.fsync the file at every flush (the data then also survives a power cut, where the"
+                        " disk honours it); false: flush to the operating system only (enough for a killed process).",
+                        read_only=True)
+    max_queue_mb: float = param(100.0, "Most bytes waiting to be written, MB (10^6 bytes); beyond, new messages are"
+                                " dropped and counted.", (0.001, 100000.0), read_only=True)
+    max_queue_messages: int = param(100000, "Most messages waiting to be written; beyond, new messages are dropped"
+                                    " and counted.", (1, 10**8), read_only=True)
+
+
+#: the recorder node's parameters (derived from RecorderParams)
+PARAMETERS: tuple[Spec, ...] = table(RecorderParams)
 
 
 class RecorderNode(Node):
@@ -65,16 +73,16 @@ class RecorderNode(Node):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("recorder", *args, **kwargs)
-        declare_all(self, PARAMETERS)
-        p = self.get_parameter
-        self.wanted = [t if t.startswith("/") else "/" + t for t in p("topics").value]
-        self.bag = BagWriter(p("output").value, wrap_file=self._wrap_file(), compression=str(p("compression").value))
+        self.params = declare(self, RecorderParams)
+        p = self.params.value
+        self.wanted = [t if t.startswith("/") else "/" + t for t in p.topics]
+        self.bag = BagWriter(p.output, wrap_file=self._wrap_file(), compression=str(p.compression))
         self.recording = QueuedRecording(
             self.bag, lambda: self.get_clock().now().nanoseconds,
             heartbeat_topic=self.get_fully_qualified_name().rstrip("/") + HEARTBEAT_SUFFIX,
-            flush_period=float(p("flush_period").value), fsync=bool(p("fsync").value),
-            max_queue_bytes=int(float(p("max_queue_mb").value) * 1e6),
-            max_queue_messages=int(p("max_queue_messages").value)).start()
+            flush_period=float(p.flush_period), fsync=bool(p.fsync),
+            max_queue_bytes=int(float(p.max_queue_mb) * 1e6),
+            max_queue_messages=int(p.max_queue_messages)).start()
         self.diagnostics = Diagnostics(self, throttle=5.0)
         self._subs: dict[str, Subscription] = {}
         self._closed = False
@@ -84,7 +92,7 @@ class RecorderNode(Node):
         self.exit_reason = ""
         # wall-clock timers: with use_sim_time the ROS clock stands still while the plant is idle
         wall = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(float(p("discovery_period").value), self._discover, clock=wall)
+        self.create_timer(float(p.discovery_period), self._discover, clock=wall)
         self.create_timer(1.0, self._publish_status, clock=wall)
         self.create_service(Trigger, "~/stop", self._on_stop)
         self._discover()

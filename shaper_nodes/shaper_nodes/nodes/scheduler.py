@@ -66,6 +66,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from dataclasses import dataclass, replace
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
@@ -84,15 +85,12 @@ from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import Spec, declare_all, values
+from shaper_nodes.ros.parameters import Spec, declare, declare_all, flat, param, read, table
 from shaper_nodes.ros.qos import LATCHED
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
 SOURCE = "scheduler"
-RULE_FIELDS = {"membership": Parameter.Type.STRING_ARRAY, "membership_params": Parameter.Type.DOUBLE_ARRAY,
-               "a_matrix": Parameter.Type.DOUBLE_ARRAY, "b_matrix": Parameter.Type.DOUBLE_ARRAY,
-               "natural_frequency": Parameter.Type.DOUBLE_ARRAY, "damping_ratio": Parameter.Type.DOUBLE_ARRAY}
 #: wall time between discovering the shaper's set_shaper service and the first request, s
 DISCOVERY_SETTLE = 0.5
 _SHAPED = tuple(k for k in FAMILIES if k not in ("none", "custom"))
@@ -111,35 +109,70 @@ def _one_rule_base(family: str = "zv", **extra: Any) -> Scheduler:
 #: s that joint-state publishers may stay unmatched (discovery under way) before the scheduler warns
 UNMATCHED_WARN = 3.0
 
-#: the scheduler node's parameters (see config/scheduler.yaml); each rule adds rules.<name>.*
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("premises", None, "Joints whose positions (from joint_states, rad or m) are the premise variables, in the"
-         " order of each rule's membership functions.", read_only=True, type=Parameter.Type.STRING_ARRAY),
-    Spec("range", None, "Valid range per premise [lo1, hi1, lo2, hi2, ...] (rad or m); outside it premises are"
-         " clamped. Default: from the lowest to the highest membership peak.", read_only=True,
-         type=Parameter.Type.DOUBLE_ARRAY),
-    Spec("rule_names", None, "Names of the rules (operating points); each has rules.<name>.membership (one kind per"
-         " premise: triangular, trapezoidal, gaussian), .membership_params (their parameters, concatenated), and"
-         " .a_matrix (n*n, row-major) with .b_matrix (n*m), and/or .natural_frequency (rad/s) with"
-         " .damping_ratio, one per mode.", read_only=True, type=Parameter.Type.STRING_ARRAY),
-    Spec("interpolation", "model", "'model': interpolate the linear models and take the modes of the result (seed"
-         " 004); 'modes': interpolate the mode parameters directly.", choices=("model", "modes"), read_only=True),
-    Spec("max_damping", 0.3, "Modes with a damping ratio at or above this are not shaped for.", (0.01, 0.95),
-         read_only=True, check=lambda v: _one_rule_base(max_damping=v)),
-    Spec("family", "zv", "Shaper family designed on the interpolated modes: " + ", ".join(_SHAPED) + ".",
-         read_only=True, check=lambda v: _one_rule_base(family=v)),
-    Spec("shaper", "/shaper", "Fully qualified name of the shaper node.", read_only=True),
-    Spec("joint_states", "/joint_states", "Joint state topic.", read_only=True),
-    Spec("period", 0.05, "How often the rule base is evaluated, s (node clock).", (0.001, 60.0), read_only=True),
-    Spec("min_interval", 0.1, "Least time between two shapers sent, s.", (0.0, 3600.0),
-         check=lambda v: RateLimit(min_interval=v)),
-    Spec("service_timeout", 2.0, "A set_shaper call unanswered this long (wall time) is given up and sent again,"
-         " s.", (0.01, 600.0)),
-    Spec("relative_change", 0.01, "Least change that sends a new shaper: |d omega| / omega or |d zeta| / max(zeta,"
-         " 0.01), fraction.", (0.0, 10.0), check=lambda v: RateLimit(relative_change=v)),
-    Spec("stale_timeout", 1.0, "Joint states older than this stop the updates, s.", (0.001, 3600.0)),
-    Spec("error_throttle", 1.0, "Least time between two reports of the same problem, s.", (0.0, 3600.0)),
-)
+@dataclass(frozen=True)
+class SchedulerParams:
+    """The scheduler node's parameters (see config/scheduler.yaml); each rule adds rules.<name>.* (RuleParams)."""
+
+    premises: tuple[str, ...] = param(
+        None, "Joints whose positions (from joint_states, rad or m) are the premise variables, in the"
+        " order of each rule's membership functions.", read_only=True, type=Parameter.Type.STRING_ARRAY)
+    range: tuple[float, ...] = param(
+        None, "Valid range per premise [lo1, hi1, lo2, hi2, ...] (rad or m); outside it premises are"
+        " clamped. Default: from the lowest to the highest membership peak.", read_only=True,
+        type=Parameter.Type.DOUBLE_ARRAY)
+    rule_names: tuple[str, ...] = param(
+        None, "Names of the rules (operating points); each has rules.<name>.membership (one kind per"
+        " premise: triangular, trapezoidal, gaussian), .membership_params (their parameters, concatenated), and"
+        " .a_matrix (n*n, row-major) with .b_matrix (n*m), and/or .natural_frequency (rad/s) with"
+        " .damping_ratio, one per mode.", read_only=True, type=Parameter.Type.STRING_ARRAY)
+    interpolation: str = param(
+        "model", "'model': interpolate the linear models and take the modes of the result (seed"
+        " 004); 'modes': interpolate the mode parameters directly.", choices=("model", "modes"), read_only=True)
+    max_damping: float = param(0.3, "Modes with a damping ratio at or above this are not shaped for.", (0.01, 0.95),
+                               read_only=True, check=lambda v: _one_rule_base(max_damping=v))
+    family: str = param("zv", "Shaper family designed on the interpolated modes: " + ", ".join(_SHAPED) + ".",
+                        read_only=True, check=lambda v: _one_rule_base(family=v))
+    shaper: str = param("/shaper", "Fully qualified name of the shaper node.", read_only=True)
+    joint_states: str = param("/joint_states", "Joint state topic.", read_only=True)
+    period: float = param(0.05, "How often the rule base is evaluated, s (node clock).", (0.001, 60.0),
+                          read_only=True)
+    min_interval: float = param(0.1, "Least time between two shapers sent, s.", (0.0, 3600.0),
+                                check=lambda v: RateLimit(min_interval=v))
+    service_timeout: float = param(
+        2.0, "A set_shaper call unanswered this long (wall time) is given up and sent again, s.", (0.01, 600.0))
+    relative_change: float = param(
+        0.01, "Least change that sends a new shaper: |d omega| / omega or |d zeta| / max(zeta,"
+        " 0.01), fraction.", (0.0, 10.0), check=lambda v: RateLimit(relative_change=v))
+    stale_timeout: float = param(1.0, "Joint states older than this stop the updates, s.", (0.001, 3600.0))
+    error_throttle: float = param(1.0, "Least time between two reports of the same problem, s.", (0.0, 3600.0))
+
+
+@dataclass(frozen=True)
+class RuleParams:
+    """The parameters rules.<name>.* of one rule (declared for each name of rule_names)."""
+
+    membership: tuple[str, ...] = param(None, "Rule <name>: membership.", read_only=True,
+                                        type=Parameter.Type.STRING_ARRAY)
+    membership_params: tuple[float, ...] = param(None, "Rule <name>: membership_params.", read_only=True,
+                                                 type=Parameter.Type.DOUBLE_ARRAY)
+    a_matrix: tuple[float, ...] = param(None, "Rule <name>: a_matrix.", read_only=True,
+                                        type=Parameter.Type.DOUBLE_ARRAY)
+    b_matrix: tuple[float, ...] = param(None, "Rule <name>: b_matrix.", read_only=True,
+                                        type=Parameter.Type.DOUBLE_ARRAY)
+    natural_frequency: tuple[float, ...] = param(None, "Rule <name>: natural_frequency.", read_only=True,
+                                                 type=Parameter.Type.DOUBLE_ARRAY)
+    damping_ratio: tuple[float, ...] = param(None, "Rule <name>: damping_ratio.", read_only=True,
+                                             type=Parameter.Type.DOUBLE_ARRAY)
+
+
+#: the scheduler node's parameters (derived from SchedulerParams)
+PARAMETERS: tuple[Spec, ...] = table(SchedulerParams)
+
+
+def rule_table(name: str) -> tuple[Spec, ...]:
+    """The parameters rules.<name>.* of rule ``name``."""
+    return tuple(replace(s, description=s.description.replace("<name>", name))
+                 for s in table(RuleParams, f"rules.{name}."))
 
 
 class SchedulerNode(Node):
@@ -147,13 +180,13 @@ class SchedulerNode(Node):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("scheduler", *args, **kwargs)
-        declare_all(self, PARAMETERS)
+        self.params = declare(self, SchedulerParams)
         self.core = self._rule_base()
         self.premises = self.core.rule_base.premises
-        p = self.get_parameter
-        self.diagnostics = Diagnostics(self, lambda: float(p("error_throttle").value))
-        shaper = str(p("shaper").value).rstrip("/")
-        self.shaper = ShaperClient(self, shaper, SOURCE, lambda: float(p("service_timeout").value),
+        p = self.params.value
+        self.diagnostics = Diagnostics(self, lambda: float(self.params.value.error_throttle))
+        shaper = p.shaper.rstrip("/")
+        self.shaper = ShaperClient(self, shaper, SOURCE, lambda: float(self.params.value.service_timeout),
                                    self.diagnostics, get=True)
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
@@ -176,7 +209,7 @@ class SchedulerNode(Node):
         self._active: ShaperMsg | None = None
         self.sent = 0
         self.refused = 0
-        self.create_timer(float(p("period").value), self._tick)
+        self.create_timer(float(p.period), self._tick)
         # wall clock (with use_sim_time the node clock stands still while a lockstep plant is idle):
         # notes when the shaper's set_shaper service appeared, see _service_settled
         self._ready_since: float | None = None
@@ -186,7 +219,7 @@ class SchedulerNode(Node):
         # no middleware event handlers on the 500 Hz feed (rclpy's defaults add two waitables to every wait of
         # its executor, 13 % of its CPU under a profiler): an unmatched publisher is found by _watch_match instead
         self._feed_sub = self._feed.node.create_subscription(
-            JointState, self.resolve_topic_name(str(p("joint_states").value)), self._on_joint_states,
+            JointState, self.resolve_topic_name(p.joint_states), self._on_joint_states,
             JOINT_STATES_DEPTH, event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
         self._unmatched_since: float | None = None
         self.create_timer(1.0, self._watch_match, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -199,19 +232,15 @@ class SchedulerNode(Node):
 
     def _rule_base(self) -> Scheduler:
         """The rule base of the parameters (the table's and each rule's rules.<name>.*)."""
-        v = values(self, PARAMETERS)
+        p = self.params.value
         rules: dict[str, dict[str, Any]] = {}
-        for name in v["rule_names"] or []:
-            rules[name] = {}
-            fields = [Spec(f"rules.{name}.{fld}", None, f"Rule {name}: {fld}.", read_only=True, type=typ)
-                      for fld, typ in RULE_FIELDS.items()]
-            declare_all(self, fields)
-            for fld, value in values(self, fields, f"rules.{name}.").items():
-                rules[name][fld] = list(value or [])
-        spec = {"premises": list(v["premises"] or []), "rules": rules, "range": list(v["range"] or []),
-                "max_damping": float(v["max_damping"])}
+        for name in p.rule_names:
+            declare_all(self, rule_table(name))
+            rules[name] = flat(read(self, RuleParams, f"rules.{name}."))
+        spec = {"premises": list(p.premises), "rules": rules, "range": list(p.range),
+                "max_damping": float(p.max_damping)}
         try:
-            return Scheduler(rule_base_from_dict(spec), str(v["interpolation"]), str(v["family"]))
+            return Scheduler(rule_base_from_dict(spec), p.interpolation, p.family)
         except (FuzzyError, ShaperError) as err:
             raise ValueError(f"invalid rule base: {err}") from None
 
@@ -225,8 +254,8 @@ class SchedulerNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _rate_limit(self) -> RateLimit:
-        p = self.get_parameter
-        return RateLimit(float(p("relative_change").value), float(p("min_interval").value))
+        p = self.params.value
+        return RateLimit(float(p.relative_change), float(p.min_interval))
 
     def destroy_node(self) -> None:
         self._feed.close()
@@ -278,7 +307,7 @@ class SchedulerNode(Node):
         if pose is None:
             return None
         z, z_stamp, stamp = pose
-        if self._now() - z_stamp > float(self.get_parameter("stale_timeout").value):
+        if self._now() - z_stamp > float(self.params.value.stale_timeout):
             self.diagnostics.report("stale", WARN, "no joint states for stale_timeout; not updating the shaper")
             return None
         interp, estimate = self._interp, self._estimate

@@ -14,7 +14,10 @@ graph_watch
     wrong types, incompatible QoS, on the log once and on ``/diagnostics``.
 parameters
     Parameter tables (``Spec``), ``declare_all`` and ``values``: each node declares its
-    parameters from one table.
+    parameters from one table, derived from its typed parameter class (``param``, ``table``,
+    ``declare`` -> ``Live``, ``read``).
+parameters_doc
+    The parameter reference (docs/reference/parameters.md) rendered from the tables.
 shaper_client
     Service calls with bounded waits (``ServiceClient``) and the one client of ``set_shaper``
     (``ShaperClient``): a lost reply is reported or retried, never a hang.
