@@ -23,10 +23,10 @@ from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
+from shaper_nodes.core.closed_pipe import survives_closed_pipe
 from shaper_nodes.core.identification import MAX_RINGING_DAMPING, NOISE_FLOOR_SIGMAS
 from shaper_nodes.recordings import MIB, Bag, BagError, ReadLimits, describe_damage
 
-from .common import survives_closed_pipe
 from .list_replay import parse_params
 
 

@@ -4,49 +4,16 @@ and the ``main`` that turns errors into exit status 2.
 Every CLI prints its result on stdout and exits 0; bad input prints one line naming the problem
 on stderr (``PROG: error: ...``) and exits 2; ``--help`` exits 0. A reader that closes the pipe
 early (``shaper_design list | head -1``) ends the CLI quietly with status 141, as a shell reports
-a process ended by SIGPIPE (:func:`survives_closed_pipe`).
+a process ended by SIGPIPE (:func:`shaper_nodes.core.closed_pipe.survives_closed_pipe`).
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import math
-import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, NoReturn, TypeVar
-
-#: exit status after the reader of stdout went away (128 + SIGPIPE, as a shell reports it)
-EXIT_CLOSED_PIPE = 141
-_F = TypeVar("_F", bound=Callable[..., int])
-
-
-def quiet_closed_pipe(main: Callable[[], int]) -> int:
-    """Run ``main`` and flush stdout; if the reader of stdout has gone (``... | head -1``), return
-    :data:`EXIT_CLOSED_PIPE` without a traceback.
-
-    As Python's documentation of ``signal`` recommends, stdout is then pointed at ``os.devnull``, so
-    that the interpreter's own flush at exit does not fail again.
-    """
-    try:
-        status = main()
-        sys.stdout.flush()
-        return status
-    except BrokenPipeError:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return EXIT_CLOSED_PIPE
-
-
-def survives_closed_pipe(main: _F) -> _F:
-    """Decorate a CLI's ``main``: see :func:`quiet_closed_pipe`."""
-
-    @functools.wraps(main)
-    def wrapped(*args: Any, **kwargs: Any) -> int:
-        return quiet_closed_pipe(lambda: main(*args, **kwargs))
-
-    return wrapped  # type: ignore[return-value]
+from typing import Any, NoReturn
 
 
 class UsageError(Exception):

@@ -20,9 +20,8 @@ import sys
 from collections.abc import Iterable
 
 from shaper_nodes.analysis.replay import TOPICS, list_row, replay
+from shaper_nodes.core.closed_pipe import survives_closed_pipe
 from shaper_nodes.core.learning.list import ListError
-
-from .common import survives_closed_pipe
 
 
 def _value(text: str):

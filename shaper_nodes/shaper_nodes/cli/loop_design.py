@@ -28,8 +28,9 @@ import numpy as np
 
 from shaper_nodes.core.closed_loop import qft
 from shaper_nodes.core.closed_loop import time_delay as td
+from shaper_nodes.core.closed_pipe import survives_closed_pipe
 
-from .common import Parser, UsageError, number, run, survives_closed_pipe, text_table
+from .common import Parser, UsageError, number, run, text_table
 
 PROG = "loop_design"
 

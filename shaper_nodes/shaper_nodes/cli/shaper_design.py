@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from shaper_nodes.core.closed_pipe import survives_closed_pipe
 from shaper_nodes.core.shaping import (
     DEFAULT_INSENSITIVITY,
     DEFAULT_VIBRATION_TOLERANCE,
@@ -40,7 +41,7 @@ from shaper_nodes.core.shaping import (
     percentage_vibration,
 )
 
-from .common import Parser, UsageError, number, run, survives_closed_pipe, text_table
+from .common import Parser, UsageError, number, run, text_table
 
 #: families compared and plotted when --families is not given
 DEFAULT_FAMILIES = ("zv", "zvd", "zvdd", "mzv", "ei", "2hump_ei", "3hump_ei", "si")

@@ -27,6 +27,8 @@ cycles
     cycle event codes (those of shaper_msgs/CycleEvent).
 checks
     The one home of the number and array checks, with errors that name the problem.
+closed_pipe
+    A command whose reader went away (``... | head -1``) ends quietly with status 141.
 lockstep
     The sim plant's lockstep exchange with the shaper: ask numbering and labels, block layouts,
     late answers, the rows of a received block.
@@ -40,5 +42,5 @@ lazy
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "cycles", "identification", "lazy", "learning", "lockstep", "rate",
-           "scheduling", "security", "shaping"]
+__all__ = ["checks", "closed_loop", "closed_pipe", "cycles", "identification", "lazy", "learning", "lockstep",
+           "rate", "scheduling", "security", "shaping"]

@@ -15,7 +15,7 @@ import textwrap
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
-from shaper_nodes.cli.common import quiet_closed_pipe
+from shaper_nodes.core.closed_pipe import quiet_closed_pipe
 
 #: what ``run_node`` returns when the node's configuration is refused
 EXIT_CONFIG = 1

@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from shaper_nodes.cli.common import survives_closed_pipe
+from shaper_nodes.core.closed_pipe import survives_closed_pipe
 
 RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/cycle_reports", "/shaper/commands",
             "/forward_position_controller/commands", "/shaper/active_shaper", "/sim_plant/tip_state",
