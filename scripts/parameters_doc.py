@@ -27,7 +27,7 @@ from shaper_nodes.nodes import (
 )
 from shaper_nodes.ros.parameters import Spec
 from shaper_nodes.ros.parameters_doc import render
-from sim_plant_node import sim_plant
+from sim_plant_node.node import sim_plant
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 TARGET = ROOT / "docs" / "reference" / "parameters.md"
@@ -47,7 +47,7 @@ def sections() -> list[tuple[str, str, Sequence[tuple[str, Iterable[Spec]]]]]:
         ("recorder", "The recorder (`shaper_nodes.nodes.recorder`).", [("", recorder.PARAMETERS)]),
         ("bag_play", "Playback of a recording (`shaper_nodes.nodes.bag_play`).", [("", bag_play.PARAMETERS)]),
         ("calibrate", "Calibration of an arm (`shaper_nodes.nodes.calibrate`).", [("", calibrate.PARAMETERS)]),
-        ("sim_plant", "The simulated plant (`sim_plant_node.sim_plant`).", [("", sim_plant.PARAMETERS)]),
+        ("sim_plant", "The simulated plant (`sim_plant_node.node.sim_plant`).", [("", sim_plant.PARAMETERS)]),
     ]
 
 

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from sensor_msgs.msg import Imu
@@ -60,8 +60,7 @@ from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.parameters import Spec, declare, flat, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
 
-if TYPE_CHECKING:
-    from .learner import LearnerNode
+from .learner_base import LearnerBase
 
 _D = ListConfig()
 
@@ -153,7 +152,7 @@ def _describe(params: ListParams | None) -> str:
 class ListMode:
     """The LIST adapter of the learner node (see the module docstring)."""
 
-    def __init__(self, node: LearnerNode) -> None:
+    def __init__(self, node: LearnerBase) -> None:
         self.node = node
         self.params = declare(node, ListModeParams)
         v = self.params.value

@@ -35,7 +35,7 @@ Bounded memory and implausible samples: see :class:`~shaper_nodes.core.learning.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -59,8 +59,7 @@ from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.parameters import Spec, declare_all, values
 from shaper_nodes.ros.shaper_client import ServiceClient
 
-if TYPE_CHECKING:
-    from .learner import LearnerNode
+from .learner_base import LearnerBase
 
 
 def _check(name: str) -> Any:
@@ -78,7 +77,7 @@ PARAMETERS: tuple[Spec, ...] = tuple(
 class MrilcMode:
     """The MRILC adapter of the learner node (see the module docstring)."""
 
-    def __init__(self, node: LearnerNode) -> None:
+    def __init__(self, node: LearnerBase) -> None:
         self.node = node
         declare_all(node, PARAMETERS)
         try:  # the core validates the whole mapping (as offline replays pass it from YAML) into typed settings
