@@ -31,8 +31,8 @@ from shaper_nodes.analysis.calibration import (
     scheduler_yaml,
     setup_dict,
     shaper_yaml,
-    write_outputs,
 )
+from shaper_nodes.analysis.calibration_report import write_outputs
 from shaper_nodes.core.calibration import Decay, IdentifySettings, PoseResult, identify_pose, rule_base_spec
 from shaper_nodes.core.calibration.plan import (
     MAX_AMPLITUDE,

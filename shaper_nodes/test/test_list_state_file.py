@@ -22,7 +22,7 @@ from shaper_nodes.core.learning.state_file import (
     nesting_depth,
     read_state,
     set_aside,
-    write_atomic,
+    write_state,
 )
 
 VERSION = 1
@@ -103,7 +103,7 @@ def test_a_good_document_round_trips():
 
 def test_a_saved_state_loads(tmp_path):
     path = tmp_path / "state.json"
-    write_atomic(path, good_document())
+    write_state(path, good_document())
     loaded = load(path)
     assert loaded.problem == "" and loaded.state is not None and loaded.state.params == ListParams(0.6, 0.1)
     assert load(tmp_path / "none.json").state is None and load(tmp_path / "none.json").problem == ""
@@ -138,7 +138,7 @@ def test_a_corrupt_file_that_cannot_be_moved_aside_is_reported_and_ignored_at_ev
 
 def test_an_unreadable_file_is_reported(tmp_path, monkeypatch):
     path = tmp_path / "state.json"
-    write_atomic(path, good_document())
+    write_state(path, good_document())
 
     def denied(self, *args, **kwargs):
         raise PermissionError(13, "Permission denied", str(self))
@@ -150,7 +150,7 @@ def test_an_unreadable_file_is_reported(tmp_path, monkeypatch):
 
 def test_a_builder_that_fails_in_any_way_is_reported(tmp_path):
     path = tmp_path / "state.json"
-    write_atomic(path, good_document())
+    write_state(path, good_document())
 
     def broken(doc):
         return doc["learner"]["history"][5]  # IndexError: not one of the learner's own errors
@@ -163,7 +163,7 @@ def test_a_file_too_long_is_refused_before_it_is_read(tmp_path, monkeypatch):
     from shaper_nodes.core.learning import state_file
 
     path = tmp_path / "state.json"
-    write_atomic(path, good_document())
+    write_state(path, good_document())
     monkeypatch.setattr(state_file, "MAX_BYTES", 10)
     with pytest.raises(state_file.StateFileError, match="more than the 10"):
         read_state(path, VERSION)

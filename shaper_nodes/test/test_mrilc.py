@@ -409,18 +409,18 @@ def _load(paper_model, path):
 
 
 def test_a_saved_mrilc_state_with_unmeasured_effort_loads(paper_model, tmp_path):
-    from shaper_nodes.core.learning.state_file import write_atomic
+    from shaper_nodes.core.learning.state_file import write_state
 
     path = tmp_path / "state.json"
     doc = _state(paper_model)
     assert math.isnan(doc["learner"]["history"][0][2])  # rms_u1 NaN: the effort was not measured
-    write_atomic(path, doc)
+    write_state(path, doc)
     loaded = _load(paper_model, path)
     assert loaded.problem == "", loaded.problem
     learner, names = loaded.state
     assert names == ["joint_1"] and learner.iteration == 4
     assert json.dumps(learner.to_dict()) == json.dumps(doc["learner"])  # NaN compares equal as text
-    write_atomic(path, _state(paper_model, learned=False))  # a fresh learner's state loads too
+    write_state(path, _state(paper_model, learned=False))  # a fresh learner's state loads too
     assert _load(paper_model, path).problem == ""
 
 

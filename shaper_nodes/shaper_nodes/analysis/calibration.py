@@ -12,7 +12,7 @@ pose (``pose_000``, ``pose_001``, ...), each with
 
 :func:`compute` turns setup and per-pose samples into a :class:`Calibration`; the node calls it
 on what it recorded, and ``calibrate --from-bag`` on what it reads back, so both give the same
-report. :func:`write_outputs` writes report.json, report.md with its figures, scheduler.yaml
+report. :func:`.calibration_report.write_outputs` writes report.json, report.md with its figures, scheduler.yaml
 (the scheduler node's parameters) and shaper.yaml (the shaper node's fallback parameters),
 each written to a temporary name and renamed, so a folder never holds half a file.
 """
@@ -335,33 +335,3 @@ def shaper_yaml(cal: Calibration, node: str = "/**") -> str:
         f"      frequencies_hz: {_floats([m.omega / (2 * math.pi) for m in modes])}",
         f"      damping_ratios: {_floats([m.zeta for m in modes])}",
     ]) + "\n"
-
-
-def write_atomic(path: pathlib.Path, data: str | bytes) -> None:
-    """Write to ``path.tmp`` then rename: readers see the old file or the whole new one."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(data.encode() if isinstance(data, str) else data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
-def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recording") -> list[pathlib.Path]:
-    """report.json, report.md with figures, scheduler.yaml and shaper.yaml in ``out``; the paths written."""
-    from .calibration_report import figures, markdown
-
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    figs = figures(out, cal)
-    written += figs
-    report = report_dict(cal)
-    if cal.rule_base is not None:
-        write_atomic(out / "scheduler.yaml", scheduler_yaml(cal))
-        written.append(out / "scheduler.yaml")
-    if cal.fallback is not None:
-        write_atomic(out / "shaper.yaml", shaper_yaml(cal))
-        written.append(out / "shaper.yaml")
-    write_atomic(out / "report.md", markdown(cal, report, [f.name for f in figs], recording))
-    write_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
-    return [*written, out / "report.md", out / "report.json"]

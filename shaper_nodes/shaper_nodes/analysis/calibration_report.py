@@ -1,4 +1,5 @@
-"""report.md and its figures for a calibration (see :mod:`.calibration`).
+"""report.md and its figures for a calibration (see :mod:`.calibration`), and :func:`write_outputs`, which
+writes them with report.json, scheduler.yaml and shaper.yaml.
 
 Figures (PNG, matplotlib's Agg backend):
 
@@ -11,14 +12,16 @@ Figures (PNG, matplotlib's Agg backend):
 
 from __future__ import annotations
 
+import json
 import math
 import pathlib
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .calibration import Calibration
+from shaper_nodes.core.files import write_atomic
+
+from .calibration import Calibration, report_dict, scheduler_yaml, shaper_yaml
 
 
 def figures(out: pathlib.Path, cal: Calibration) -> list[pathlib.Path]:
@@ -26,8 +29,6 @@ def figures(out: pathlib.Path, cal: Calibration) -> list[pathlib.Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .calibration import write_atomic
 
     paths = []
 
@@ -151,3 +152,21 @@ def markdown(cal: Calibration, report: dict[str, Any], figs: list[str], recordin
               " weighted by their amplitudes."]
     lines += [""] + [f"![{f}]({f})" for f in figs]
     return "\n".join(lines) + "\n"
+
+
+def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recording") -> list[pathlib.Path]:
+    """report.json, report.md with figures, scheduler.yaml and shaper.yaml in ``out``; the paths written."""
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    figs = figures(out, cal)
+    written += figs
+    report = report_dict(cal)
+    if cal.rule_base is not None:
+        write_atomic(out / "scheduler.yaml", scheduler_yaml(cal))
+        written.append(out / "scheduler.yaml")
+    if cal.fallback is not None:
+        write_atomic(out / "shaper.yaml", shaper_yaml(cal))
+        written.append(out / "shaper.yaml")
+    write_atomic(out / "report.md", markdown(cal, report, [f.name for f in figs], recording))
+    write_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
+    return [*written, out / "report.md", out / "report.json"]

@@ -54,13 +54,13 @@ from shaper_nodes.analysis.calibration import (
     pose_folders,
     read_recording,
     setup_dict,
-    write_atomic,
-    write_outputs,
 )
+from shaper_nodes.analysis.calibration_report import write_outputs
 from shaper_nodes.core.calibration import IdentifySettings, Plan, PlanConfig, PlanError, PoseStep, Waypoint
 from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_plan, quintic_time
 from shaper_nodes.core.calibration.plan import approach as plan_approach
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
+from shaper_nodes.core.files import write_atomic
 from shaper_nodes.recordings import COMPRESSIONS
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.parameters import Spec, declare_all, param, table, unflat

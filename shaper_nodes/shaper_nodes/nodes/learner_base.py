@@ -21,7 +21,7 @@ from rclpy.task import Future
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_nodes.core.learning.samples import MAX_CYCLE_DURATION
-from shaper_nodes.core.learning.state_file import load_state, write_atomic
+from shaper_nodes.core.learning.state_file import load_state, write_state
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.parameters import Spec, declare, param, table
 from shaper_nodes.ros.shaper_client import ShaperClient, wait_for
@@ -129,7 +129,7 @@ class LearnerBase(Node):
         if self.state_path is None or doc is None:
             return
         try:
-            write_atomic(self.state_path, {"version": STATE_VERSION, **doc, "saved_at": time.time()})
+            write_state(self.state_path, {"version": STATE_VERSION, **doc, "saved_at": time.time()})
         except OSError as err:
             self.get_logger().error(f"could not save the learner state to {self.state_path}: {err}")
 

@@ -1,7 +1,7 @@
 """Learner state files: one JSON document, versioned, written atomically, checked fully on reading.
 
 Both learners (LIST and MRILC) save their whole state after every update and reload it at
-start. :func:`write_atomic` writes, fsyncs, renames and fsyncs the folder, so that a crash
+start. :func:`write_state` writes, fsyncs, renames and fsyncs the folder, so that a crash
 leaves either the old file or the new one, never a torn one. :func:`read_state` reads a document
 back and checks what can be checked without knowing the learner: its size, that it parses
 (a nesting so deep that the parser recurses out is caught), its nesting depth, its version and
@@ -21,6 +21,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
+from shaper_nodes.core.files import write_atomic
+
 #: largest state file read, bytes (a longer one is refused before it is read into memory)
 MAX_BYTES = 512 * 1024 * 1024
 #: deepest nesting of lists and dictionaries a state document may have (the learners' need 6)
@@ -33,20 +35,9 @@ class StateFileError(ValueError):
     """A state file that cannot be loaded: unreadable, not JSON, another version or another set-up."""
 
 
-def write_atomic(path: pathlib.Path, doc: Mapping[str, Any]) -> None:
-    """``doc`` as JSON to ``path`` atomically (write, fsync, rename, fsync the folder)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        json.dump(doc, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+def write_state(path: pathlib.Path, doc: Mapping[str, Any]) -> None:
+    """``doc`` as JSON to ``path``, atomically (:func:`shaper_nodes.core.files.write_atomic`)."""
+    write_atomic(path, json.dumps(doc))
 
 
 def nesting_depth(doc: Any) -> int:
