@@ -44,6 +44,7 @@ from shaper_nodes.core.calibration import (
 from shaper_nodes.core.calibration.plan import PlanError, config_from_dict, config_to_dict, plan_to_dict
 from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import Shaper
+from shaper_nodes.core.stamps import stamp_to_sec
 
 SETUP_TOPIC = "/calibrate/setup"
 EVENTS_TOPIC = "/calibrate/events"
@@ -227,19 +228,15 @@ def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[
                         raise PlanError(f"{folder.name} was recorded with another setup than the poses before it")
                     setup = this
                 elif topic == EVENTS_TOPIC:
-                    data.events.append((int(msg.event), int(msg.cycle), _sec(msg.header.stamp)))
+                    data.events.append((int(msg.event), int(msg.cycle), stamp_to_sec(msg.header.stamp)))
                 else:
                     a = msg.linear_acceleration
-                    data.imu_t.append(_sec(msg.header.stamp))
+                    data.imu_t.append(stamp_to_sec(msg.header.stamp))
                     data.imu.append((a.x, a.y, a.z))
         poses.append(data)
     if setup is None:
         raise PlanError(f"{path}: no {SETUP_TOPIC} message: not a calibration recording")
     return setup, poses
-
-
-def _sec(stamp: Any) -> float:
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
 # --------------------------------------------------------------------------- outputs

@@ -30,6 +30,7 @@ import numpy as np
 from shaper_nodes.core.cycles import END, MOTION_END, START
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams, ListSession, SessionResult, list_config
 from shaper_nodes.core.shaping import Mode
+from shaper_nodes.core.stamps import stamp_to_sec
 from shaper_nodes.recordings import shaper_after_end
 
 from .segment import CycleSpan
@@ -39,10 +40,6 @@ if TYPE_CHECKING:
     from shaper_nodes.core.learning.mrilc import MrilcModel, MrilcSession
 
 TOPICS = {"imu": "/tip_imu", "events": "/cycle_events", "shaper": "/shaper/active_shaper"}
-
-
-def _sec(stamp) -> float:
-    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
 
 
 def session_for(params: Mapping[str, object] | None = None) -> ListSession:
@@ -158,11 +155,11 @@ def replay(path: str | pathlib.Path, params: Mapping[str, object] | None = None,
                 msg: Any = decode[topic](raw)
                 if topic == names["imu"]:
                     a = msg.linear_acceleration
-                    yield "imu", (_sec(msg.header.stamp), (a.x, a.y, a.z))
+                    yield "imu", (stamp_to_sec(msg.header.stamp), (a.x, a.y, a.z))
                 elif topic == names["shaper"]:
                     yield "shaper", (msg.amplitudes, msg.times, msg.source, msg.revision)
                 else:
-                    yield "event", (int(msg.event), int(msg.cycle), _sec(msg.header.stamp), msg.start_positions,
+                    yield "event", (int(msg.event), int(msg.cycle), stamp_to_sec(msg.header.stamp), msg.start_positions,
                                     msg.goal_positions)
 
         return replay_items(items(), params)

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from shaper_nodes.core.stamps import stamp_to_sec
 from shaper_nodes.recordings import Bag, BagError, Damage, ReadLimits, ReadResult, TopicInfo, describe_damage
 from shaper_nodes.recordings.cdr import JointStateDecoder, imu_fast, joint_state_efforts, little_endian
 
@@ -200,7 +201,7 @@ class Progress:
 
 def _stamp(msg, log_ns: int) -> float:
     st = msg.header.stamp
-    return (st.sec + 1e-9 * st.nanosec) if (st.sec or st.nanosec) else log_ns * 1e-9
+    return stamp_to_sec(st) if (st.sec or st.nanosec) else log_ns * 1e-9
 
 
 def read_recording(path, overrides: Mapping[str, str] | None = None, progress: bool = False,

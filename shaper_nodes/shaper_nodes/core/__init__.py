@@ -27,6 +27,10 @@ cycles
     cycle event codes (those of shaper_msgs/CycleEvent).
 checks
     The one home of the number and array checks, with errors that name the problem.
+files
+    Files written whole (:func:`~shaper_nodes.core.files.write_atomic`): the old one or the new one.
+stamps
+    The one conversion of a ``sec``/``nanosec`` pair (a stamp, a duration) to seconds.
 closed_pipe
     A command whose reader went away (``... | head -1``) ends quietly with status 141.
 lockstep
@@ -42,5 +46,5 @@ lazy
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "closed_pipe", "cycles", "identification", "lazy", "learning", "lockstep",
-           "rate", "scheduling", "security", "shaping"]
+__all__ = ["checks", "closed_loop", "closed_pipe", "cycles", "files", "identification", "lazy", "learning",
+           "lockstep", "rate", "scheduling", "security", "shaping", "stamps"]

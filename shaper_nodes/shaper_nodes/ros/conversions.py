@@ -25,6 +25,7 @@ from shaper_nodes.core.shaping import (
 )
 from shaper_nodes.core.shaping.stream import FIELDS, check_times
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
+from shaper_nodes.core.stamps import stamp_to_sec
 
 
 def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None = None) -> ShaperMsg:
@@ -87,7 +88,7 @@ def _or_default(value: float, default: float) -> float:
 
 def duration_to_sec(d: Duration) -> float:
     """A builtin_interfaces/Duration in s."""
-    return float(d.sec) + 1e-9 * float(d.nanosec)
+    return stamp_to_sec(d)
 
 
 #: the nanoseconds a builtin_interfaces/Duration or Time holds (int32 seconds)
@@ -105,7 +106,7 @@ def sec_to_duration(t: float) -> Duration:
 
 def time_to_sec(t: Time) -> float:
     """A builtin_interfaces/Time (a header stamp) in s."""
-    return float(t.sec) + 1e-9 * float(t.nanosec)
+    return stamp_to_sec(t)
 
 
 def ns_to_time(ns: int) -> Time:

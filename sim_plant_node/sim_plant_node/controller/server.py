@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from shaper_nodes.core.stamps import stamp_to_sec
 from shaper_nodes.ros.conversions import sec_to_time
 
 from .jtc import (
@@ -42,13 +43,9 @@ ACTION_MONITOR_RATE = 20.0  # Hz, the controller's default
 Result = FollowJointTrajectory.Result
 
 
-def _seconds(stamp: Any) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
 def raw_points(msg: JointTrajectory) -> list[RawPoint]:
     """The message's points as plain values."""
-    return [RawPoint(_seconds(p.time_from_start), list(p.positions), list(p.velocities), list(p.accelerations),
+    return [RawPoint(stamp_to_sec(p.time_from_start), list(p.positions), list(p.velocities), list(p.accelerations),
                      list(p.effort)) for p in msg.points]
 
 
@@ -95,7 +92,7 @@ class ControllerServer:
         if busy is not None:
             return busy
         try:
-            validate(self.controller.joints, list(msg.joint_names), raw_points(msg), _seconds(msg.header.stamp),
+            validate(self.controller.joints, list(msg.joint_names), raw_points(msg), stamp_to_sec(msg.header.stamp),
                      self._now())
         except TrajectoryRefused as err:
             return str(err)
@@ -120,7 +117,7 @@ class ControllerServer:
         if reason is not None:
             self._refuse(reason)
             return
-        self.controller.accept(list(msg.joint_names), raw_points(msg), _seconds(msg.header.stamp))
+        self.controller.accept(list(msg.joint_names), raw_points(msg), stamp_to_sec(msg.header.stamp))
 
     def _on_accepted(self, handle: Any) -> None:
         if self._active is not None:  # preemption
@@ -130,11 +127,11 @@ class ControllerServer:
         tolerances, problem = goal_tolerances(
             self.controller.defaults, self.controller.joints,
             [(t.name, t.position) for t in goal.path_tolerance], [(t.name, t.position) for t in goal.goal_tolerance],
-            _seconds(goal.goal_time_tolerance))
+            stamp_to_sec(goal.goal_time_tolerance))
         if problem is not None:
             self._log.error(problem)
         self.controller.accept(list(goal.trajectory.joint_names), raw_points(goal.trajectory),
-                               _seconds(goal.trajectory.header.stamp))
+                               stamp_to_sec(goal.trajectory.header.stamp))
         self.controller.start_goal(tolerances)
         self._active = (handle, Future())
         self._futures[bytes(handle.goal_id.uuid)] = self._active[1]
