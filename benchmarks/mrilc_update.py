@@ -57,8 +57,8 @@ def run(*, rate: float = 1000.0, seconds: float = 10.0, joints: int = 7, repeats
     r_s = sum(a * np.roll(r, int(round(t * rate))) for a, t in
               zip(np.array([1, 2 * k, k * k]) / (1 + k) ** 2, (0.0, math.pi / wd, 2 * math.pi / wd), strict=True))
     plant = M.mck_plant(5.0, 0.15)
-    y = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "command"), period))(r_s)
-    u = M.SampledFilter(M.discretise(ct.feedback(model.c, plant), period))(r_s)
+    y = M.SampledFilter(M.zoh_sampled(M.learning_path(model.c, plant, "command"), period))(r_s)
+    u = M.SampledFilter(M.zoh_sampled(ct.feedback(model.c, plant), period))(r_s)
     r_s, y, u = (np.repeat(x[:, None], joints, axis=1) for x in (r_s, y, u))
     h = model.reference_filter.impulse(n)
 

@@ -339,8 +339,8 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
 
     model, _ = model_from_params({})
     plant, period = M.mck_plant(5.0, 0.15), 1.0 / rate
-    t_path = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "command"), period))
-    u_r = M.SampledFilter(M.discretise(M.ct.feedback(model.c, plant), period))  # C / (1 + C P)
+    t_path = M.SampledFilter(M.zoh_sampled(M.learning_path(model.c, plant, "command"), period))
+    u_r = M.SampledFilter(M.zoh_sampled(M.ct.feedback(model.c, plant), period))  # C / (1 + C P)
     n = 160
     k = np.arange(n) * period
     up, _ = trapezoid(k, 1.0, 5.0, 50.0)

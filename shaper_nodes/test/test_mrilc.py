@@ -36,10 +36,10 @@ def _zvd_step_and_back(mode, samples: int) -> np.ndarray:
 
 def _simulate(model, plant, learner, iterations: int, r_s) -> list:
     """The sampled loop (exact ZOH discretisation, as the sim plant integrates it) with u2 learned."""
-    t_path = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "command"), PERIOD))
-    h_path = M.SampledFilter(M.discretise(M.learning_path(model.c, plant, "effort"), PERIOD))
-    u_r = M.SampledFilter(M.discretise(M.ct.feedback(model.c, plant), PERIOD))      # C / (1 + C P)
-    u_u = M.SampledFilter(M.discretise(M.ct.feedback(1, model.c * plant), PERIOD))  # 1 / (1 + C P)
+    t_path = M.SampledFilter(M.zoh_sampled(M.learning_path(model.c, plant, "command"), PERIOD))
+    h_path = M.SampledFilter(M.zoh_sampled(M.learning_path(model.c, plant, "effort"), PERIOD))
+    u_r = M.SampledFilter(M.zoh_sampled(M.ct.feedback(model.c, plant), PERIOD))      # C / (1 + C P)
+    u_u = M.SampledFilter(M.zoh_sampled(M.ct.feedback(1, model.c * plant), PERIOD))  # 1 / (1 + C P)
     out = []
     for _ in range(iterations):
         u2 = learner.profile_for(r_s.shape[0])

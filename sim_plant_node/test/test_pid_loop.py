@@ -33,8 +33,8 @@ def test_loop_matches_the_sampled_model(mode):
     u2 = rng.normal(0, 0.1, r.size)
     y, _ = _run(plant, r, u2)
     c, p = M.controller(), M.mck_plant(*mode)
-    t = M.SampledFilter(M.discretise(M.learning_path(c, p, "command"), 1 / RATE))
-    h = M.SampledFilter(M.discretise(M.learning_path(c, p, "effort"), 1 / RATE))
+    t = M.SampledFilter(M.zoh_sampled(M.learning_path(c, p, "command"), 1 / RATE))
+    h = M.SampledFilter(M.zoh_sampled(M.learning_path(c, p, "effort"), 1 / RATE))
     expected = 0.5 + t(r - 0.5) + h(u2)
     assert np.max(np.abs(y - expected)) < 1e-9
 

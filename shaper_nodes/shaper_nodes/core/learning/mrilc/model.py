@@ -127,7 +127,7 @@ def modes(system: ct.LTI, max_damping: float = 0.95) -> list[Mode]:
     return sorted(out, key=lambda m: m.zeta)
 
 
-def discretise(system: ct.LTI, period: float) -> ct.StateSpace:
+def zoh_sampled(system: ct.LTI, period: float) -> ct.StateSpace:
     """Zero-order-hold discretisation (inputs held over each period, the loop exact)."""
     if not (math.isfinite(period) and period > 0):
         raise MrilcError(f"sample period must be > 0 s, got {period!r}")
@@ -393,10 +393,10 @@ class MrilcModel:
     def __post_init__(self) -> None:
         self.g_m = reference_model(self.c, self.nominal)
         self.mode = modes(self.g_m)[0] if modes(self.g_m) else None
-        self.g_m_d = discretise(self.g_m, self.period)
+        self.g_m_d = zoh_sampled(self.g_m, self.period)
         self.reference_filter = SampledFilter(self.g_m_d)
         plants = {"nominal": self.nominal, **self.plant_set}
-        self.paths_d = {name: discretise(learning_path(self.c, p, self.injection), self.period)
+        self.paths_d = {name: zoh_sampled(learning_path(self.c, p, self.injection), self.period)
                         for name, p in plants.items()}
         self.learning = design_learning_filter(self.law, self.period, list(self.paths_d.values()), self.omega_min)
         self.convergence = check_convergence(self.learning, self.paths_d, self.omega_min)
