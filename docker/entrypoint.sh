@@ -17,14 +17,14 @@ if [ "$#" -eq 0 ]; then
   set -- bash
 fi
 
-# SROS2 (docs/security.md): with ROS_SECURITY_ENABLE=true, check before starting that the keystore
+# SROS2 (docs/guide/security.md): with ROS_SECURITY_ENABLE=true, check before starting that the keystore
 # is mounted and that the enclave named by --enclave (or ROS_SECURITY_ENCLAVE_OVERRIDE) has its
 # files, and say which is missing; DDS would otherwise fail later with a less direct message.
 if [ "${ROS_SECURITY_ENABLE:-}" = "true" ]; then
   keystore="${ROS_SECURITY_KEYSTORE:-}"
   if [ -z "${keystore}" ] || [ ! -d "${keystore}/enclaves" ]; then
     echo "shaper-entrypoint: ROS_SECURITY_ENABLE=true but ROS_SECURITY_KEYSTORE (${keystore:-unset}) has no" \
-         "enclaves/ folder: mount the keystore (docs/security.md)" >&2
+         "enclaves/ folder: mount the keystore (docs/guide/security.md)" >&2
     exit 1
   fi
   enclave="${ROS_SECURITY_ENCLAVE_OVERRIDE:-}"

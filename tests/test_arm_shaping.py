@@ -2,7 +2,7 @@
 controller emulation, unshaped and with ZVD at the home pose's lowest mode.
 
 The move is the demo's base rotation that ends at the home configuration. What ZVD can leave is
-set by physics (docs/arm.md): the rotation excites the lowest mode (9.96 Hz, the design mode) and
+set by physics (docs/design/arm.md): the rotation excites the lowest mode (9.96 Hz, the design mode) and
 the base's mode at 12.16 Hz, of which a ZVD at 9.96 Hz passes about 11 %; so the residual must
 drop to well under a fifth of the unshaped one, and the shaped motion must end later by the ZVD's
 duration.

@@ -84,7 +84,7 @@ def test_seed002_zv_with_feedforward_feedback(start_node, ros_context):
     light = damping_only & np.array([c.zeta < p0.zeta for c in cs])
     assert same.sum() == 2 and damping_only.sum() == 2 and light.sum() == 1
     # metric 1 (RMS of x2 - 1 after the shaped step) and metric 2 (residual vibration: the oscillatory part
-    # of x2 - 1 after the shaped step, the loop's non-oscillatory settling removed; docs/closed_loop.md)
+    # of x2 - 1 after the shaped step, the loop's non-oscillatory settling removed; docs/design/closed_loop.md)
     r_ffb, r_zv, r_zvd = residual(tr["ffb"], "zv")[0], residual(tr["zv"], "zv")[0], residual(tr["zvd"], "zvd")[0]
     ffb, zv, zvd = vibration(tr["ffb"])[0], vibration(tr["zv"])[0], vibration(tr["zvd"])[0]
     # the shaper node discretises 'exact' (closed_loop_cases): P0's own residual after the reference it sent,

@@ -4,7 +4,7 @@ ros2cli is not on PyPI, so these tests do what its verbs do, over the same inter
 ``ros2 param dump`` is ``list_parameters`` + ``get_parameters`` on the node's parameter services;
 ``ros2 param set NAME x 8`` is ``set_parameters`` with an INTEGER value; ``ros2 run ... -r
 __node:=NAME --params-file FILE`` is the installed executable with those ROS arguments; and the
-executables' ``--help`` and exit status are run as a shell runs them. See docs/ros2cli.md.
+executables' ``--help`` and exit status are run as a shell runs them. See docs/reference/ros2cli.md.
 """
 
 from __future__ import annotations
@@ -258,7 +258,7 @@ def _run(cmd: list[str], cwd: pathlib.Path, domain_id: int, **kwargs) -> subproc
     (["shaper_node", "--ros-args", "-p", "joint_names:=[a]", "-p", "discretization:=nearest"], "discretization", 1),
     (["scheduler"], "premises", 1),
     (["bag_play"], "bag", 1),
-    (["calibrate"], "joint_names", 2),  # calibrate's refusals exit 2 (docs/calibration.md)
+    (["calibrate"], "joint_names", 2),  # calibrate's refusals exit 2 (docs/guide/calibration.md)
 ])
 def test_a_node_without_a_required_parameter_says_why_in_one_line(command, words, status, domain_id, tmp_path):
     package = "sim_plant_node" if command[0] in console_scripts("sim_plant_node") else "shaper_nodes"

@@ -127,7 +127,7 @@ def test_scheduled_mode_follows_the_pose_and_out_of_range_is_clamped(graph):
         active = settle_at(sched, peer, ex, x)
         assert active.source == "scheduler" and active.family == "zv"
         omega = active.design_modes[0].natural_frequency
-        assert omega == pytest.approx(true_mode(x).omega, rel=0.07)  # interpolation error, docs/scheduler.md
+        assert omega == pytest.approx(true_mode(x).omega, rel=0.07)  # interpolation error, docs/design/scheduler.md
         est = peer.modes[-1].modes[0]
         assert est.natural_frequency == pytest.approx(omega, rel=0.011)  # sent when it moved by 1 %
     active = settle_at(sched, peer, ex, 1.5)  # beyond the rule base: clamped at 0.7, not extrapolated

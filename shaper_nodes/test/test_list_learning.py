@@ -609,7 +609,7 @@ def test_inverted_phase_falls_back_on_m_alone():
 
 
 def convergence_table(cycles=15, seeds=3):
-    """The convergence table of docs/list.md (``python shaper_nodes/test/test_list_learning.py``)."""
+    """The convergence table of docs/design/list.md (``python shaper_nodes/test/test_list_learning.py``)."""
     rows = ["| structure | rule | start | noise (m/s^2) | cycles to 1 % | final error | M(10) / M(1) |",
             "|---|---|---|---|---|---|---|"]
     for structure in ("zv2", "zvd3"):

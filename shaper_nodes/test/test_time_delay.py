@@ -148,7 +148,7 @@ def zoh_step_overshoot(wa, t_delay, wr, per_delay, horizon):
 
 
 def independent_overshoot(wa, t_delay, wr, per_delay=1000, horizon=None):
-    """The hold adds overshoot at first order in the step (docs/closed_loop.md); Richardson extrapolation of
+    """The hold adds overshoot at first order in the step (docs/design/closed_loop.md); Richardson extrapolation of
     two step sizes removes it."""
     horizon = horizon or max(40 * t_delay, 15.0)
     coarse = zoh_step_overshoot(wa, t_delay, wr, per_delay, horizon)

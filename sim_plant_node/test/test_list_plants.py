@@ -251,7 +251,7 @@ def test_default_force_limit_acts_in_the_acceleration_phase_shaped_or_not():
     for name, cmd in (("raw", raw), ("zv", zv_shaped(raw))):
         out = run(ListPlant("saturation", M, B, K, RATE), cmd)
         clipped[name] = float(np.mean(np.abs(out["f"][accel, 0]) >= LIST_FORCE_LIMIT - 1e-12))
-    # the shares quoted in docs/list_plants.md and config/list_case4.yaml
+    # the shares quoted in docs/design/list_plants.md and config/list_case4.yaml
     assert clipped["raw"] == pytest.approx(0.64, abs=0.01)
     assert clipped["zv"] == pytest.approx(0.19, abs=0.01)
 

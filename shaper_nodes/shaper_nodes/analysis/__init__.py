@@ -17,5 +17,5 @@ recovered); nothing here imports ``shaper_nodes.ros`` or ``shaper_nodes.nodes``.
   by content, each robot's modes against its baseline (drift alerts, retunes), the fleet report.
 
 The CLIs are :mod:`shaper_nodes.cli.analyze_bag` (``analyze_bag``) and :mod:`shaper_nodes.cli.list_replay`
-(``list_replay``); see docs/bag_analysis.md.
+(``list_replay``); see docs/guide/analysis.md.
 """

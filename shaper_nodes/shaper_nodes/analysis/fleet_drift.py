@@ -1,6 +1,6 @@
 """Drift of each robot's vibration mode across its recordings, against the robot's own baseline.
 
-The rule (docs/fleet.md). A robot's recordings are taken in the order of their start time; those
+The rule (docs/guide/fleet.md). A robot's recordings are taken in the order of their start time; those
 that gave no mode (or could not be analysed) are listed but take no part. The **baseline** is the
 robot's first ``baseline`` recordings with a mode: its frequency f_b and damping ratio z_b are
 the means of those recordings' strongest mode, its scatter s_f, s_z their sample standard

@@ -73,7 +73,7 @@ def markdown(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule, plot: 
         f" recording is out when its mode moved by more than {100 * rule.max_frequency_shift:g} % and"
         f" {rule.sigmas:g} sigma, or its damping ratio by more than the larger of"
         f" {100 * rule.max_damping_change:g} % and {rule.damping_floor:g} and {rule.sigmas:g} sigma;"
-        f" an alert after {rule.confirm} recordings out in a row (docs/fleet.md).", "",
+        f" an alert after {rule.confirm} recordings out in a row (docs/guide/fleet.md).", "",
         f"**{len(alerts)} alert(s)**" + (": " + ", ".join(sorted({a.robot for a in alerts})) if alerts else ""), "",
         "| robot | recordings | baseline mode Hz | scatter Hz | baseline zeta | out | alert | new mode Hz | retune |",
         "|---|---:|---:|---:|---:|---:|---|---:|---|",

@@ -236,7 +236,7 @@ def check_segmentation(folder: str | pathlib.Path, noise: float, resolution: flo
                        mode_hz: float = 4.0, zeta: float = 0.02) -> SegmentationCheck:
     """Write a robot-style recording (joint states with ``noise`` rad and ``resolution`` rad steps, IMU
     with gravity, no commands, no cycle events) into ``folder`` and analyse it (for the tests and the
-    table of docs/bag_analysis.md)."""
+    table of docs/guide/analysis.md)."""
     from .analyze import Options, analyze
     from .streams import read_recording
 

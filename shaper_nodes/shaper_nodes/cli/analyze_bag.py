@@ -8,7 +8,7 @@ motion of the commands), replays the learners (LIST; MRILC where the recording h
 events, joint states and the applied reference), and prints a table; ``--out`` writes a report
 folder (Markdown, CSV, JSON, PNG plots); ``--json`` prints the summary as JSON instead of the
 table. See
-docs/bag_analysis.md. Exit codes: 0 done, 2 the recording cannot be analysed (the message says
+docs/guide/analysis.md. Exit codes: 0 done, 2 the recording cannot be analysed (the message says
 why), 3 analysed but the recording was damaged (with ``--strict``).
 """
 
@@ -148,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"analyze_bag: WARNING: damaged recording: {text}", file=sys.stderr)
         if _holds_recordings(args.bag):
             print(f"analyze_bag: {args.bag} holds several recordings: analyze_fleet analyses them all"
-                  " (docs/fleet.md)", file=sys.stderr)
+                  " (docs/guide/fleet.md)", file=sys.stderr)
         return 2
     for d in rec.damage:
         print(f"analyze_bag: WARNING: damaged recording: {describe_damage(d)}", file=sys.stderr)

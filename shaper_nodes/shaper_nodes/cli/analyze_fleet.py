@@ -10,7 +10,7 @@ robot (``robot`` in the rosbag2 metadata's custom_data, else the parent folder's
 each robot's later recordings with its first ones, and prints the alerts; ``--out`` writes the
 report (Markdown, CSV, JSON, PNG). Every recording is read within the bounds ``analyze_bag`` has
 (``--max-metadata-mib``, ``--max-chunk-mib``); one beyond them is not analysed, with analyze_bag's
-message. See docs/fleet.md. Exit codes: 0 done (alerts or not; ``--strict``:
+message. See docs/guide/fleet.md. Exit codes: 0 done (alerts or not; ``--strict``:
 1 when there are alerts), 2 the fleet cannot be analysed (the message says why).
 """
 
@@ -43,7 +43,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--max-recordings", type=int, default=MAX_RECORDINGS,
                    help=f"refuse a folder with more recordings than this (default {MAX_RECORDINGS})")
     p.add_argument("--quiet", action="store_true", help="no progress bar (none either when stderr is not a terminal)")
-    g = p.add_argument_group("drift rule (docs/fleet.md)")
+    g = p.add_argument_group("drift rule (docs/guide/fleet.md)")
     g.add_argument("--baseline", type=int, default=5, help="each robot's first N recordings with a mode (default 5)")
     g.add_argument("--max-frequency-shift", type=float, default=0.05,
                    help="frequency change counted, fraction of the baseline (default 0.05)")

@@ -270,7 +270,7 @@ def _cmd_policy(args: argparse.Namespace) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog=PROG, description="The suite's SROS2 keystore: a CA, one enclave per node with signed "
-                    "permissions from the policy table (docs/security.md), made with openssl.")
+                    "permissions from the policy table (docs/guide/security.md), made with openssl.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def names(p: argparse.ArgumentParser) -> None:

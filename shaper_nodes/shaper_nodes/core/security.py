@@ -208,7 +208,7 @@ def names_with(overrides: Mapping[str, str] | None = None) -> dict[str, str]:
 
 
 def suite_policy(overrides: Mapping[str, str] | None = None) -> dict[str, Access]:
-    """The suite's access policy: enclave role -> :class:`Access` (the table of docs/security.md).
+    """The suite's access policy: enclave role -> :class:`Access` (the table of docs/guide/security.md).
 
     - ``shaper``: serves ``~/set_shaper``, ``~/get_shaper``, ``~/shape_trajectory`` and its
       FollowJointTrajectory action, reads the command inputs, publishes the shaped commands,

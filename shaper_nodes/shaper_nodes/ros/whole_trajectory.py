@@ -9,7 +9,7 @@ The trajectory topic path runs it in a worker process on the serialized messages
 decodes, shapes, checks and encodes, and the node publishes the bytes it gets back. So the node's
 own interpreter does no per-point work at all for that path, and its stream does not wait while a
 long trajectory is shaped; in a thread of the node it would (Python runs one thread at a time:
-docs/shaping.md, "What leaves the shaper"). The service and the action need the message objects
+docs/design/shaping.md, "What leaves the shaper"). The service and the action need the message objects
 in the node (rclpy converts their requests and answers itself), so they shape in the node's side
 thread.
 """

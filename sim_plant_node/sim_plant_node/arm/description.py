@@ -15,7 +15,7 @@ UR e-Series table): standard Denavit-Hartenberg parameters
 masses 3.761, 8.058, 2.846, 1.37, 1.3, 0.365 kg, centres of mass in the DH frame of each link
 (table below, m), and joint torque limits 150, 150, 150, 28, 28, 28 N m.
 
-What UR does not publish is chosen here and said so (docs/arm.md):
+What UR does not publish is chosen here and said so (docs/design/arm.md):
 
 - Link inertia tensors: each link a uniform solid cylinder of its published mass, along x of
   its DH frame for the two long links (length |a|) and along z otherwise (length

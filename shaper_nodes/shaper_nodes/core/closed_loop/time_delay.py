@@ -18,7 +18,7 @@ quasi-polynomial is (eq. 18, with G = G_FF(s))
 Its imaginary-axis crossings are at s = j k pi / T with w_R(k) of eq. (15) and at s = j w_A
 with w_R = w_A (eqs. 16-17); the loop is stable for w_A <= w_R <= min(w_R(k) > w_A) (eq. 27;
 at w_R = w_A exactly the plant's undamped poles are cancelled by the controller's zeros, so the
-loop is only marginally stable: see docs/closed_loop.md). For a plant w_R and a delay T, eqs.
+loop is only marginally stable: see docs/design/closed_loop.md). For a plant w_R and a delay T, eqs.
 (28)-(30) give the range of w_A to choose.
 
 The independent check (:func:`sampled_spectral_radius`) builds the sampled-data loop (exact
@@ -250,7 +250,7 @@ def sampled_spectral_radius(omega_a: float, delay: float, omega_r: float, sample
     """Spectral radius of the sampled-data loop with T split into ``samples_per_delay`` samples
     (< 1: stable, > 1: unstable), leaving out the internal model's own undamped poles
     e^{+-j w_A dt}: the filter's zeros at +-j w_A make them unobservable at u and y (they are the
-    hidden modes of eq. 12's cancellation, see docs/closed_loop.md). Independent of the analysis of
+    hidden modes of eq. 12's cancellation, see docs/design/closed_loop.md). Independent of the analysis of
     eqs. (13)-(27)."""
     n = int(samples_per_delay)
     dt = delay / n

@@ -37,7 +37,7 @@ same exponentials, so the poles are unchanged).
 Modules: the record's checks and preprocessing in :mod:`.record`, the three methods in
 :mod:`.estimators`, and here the public API (:func:`identify`, :func:`identify_records`,
 :func:`combine_modes`). The shaper recommended for the modes found is in :mod:`.recommend`.
-See docs/identification.md.
+See docs/design/identification.md.
 """
 
 from __future__ import annotations

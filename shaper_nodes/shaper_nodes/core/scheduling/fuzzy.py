@@ -16,7 +16,7 @@ threshold (real poles and rigid-body poles are not modes to shape for).
 
 The simpler alternative interpolates the mode parameters themselves,
 omega(z) = sum_i w_i(z) omega_i and zeta(z) = sum_i w_i(z) zeta_i (rules then carry modes
-instead of, or besides, their models); docs/scheduler.md compares the two.
+instead of, or besides, their models); docs/design/scheduler.md compares the two.
 
 Premises outside the rule base's range are clamped to it (never extrapolated) and reported in
 the result. A premise value in range where no rule fires is an error that names the value.

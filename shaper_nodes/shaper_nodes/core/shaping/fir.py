@@ -6,7 +6,7 @@ At command period ``Ts`` an impulse at ``t = (k + f) Ts`` (integer k, 0 <= f < 1
 rounded to the nearest sample (``"round"``) or split linearly between samples k and k + 1 with
 weights ``1 - f`` and ``f`` (``"split"``, the default). Splitting keeps the centroid of each
 impulse exactly where it belongs, so the residual vibration it leaves is second order in
-``omega Ts`` instead of first order (see ``docs/shaping.md`` for V before and after).
+``omega Ts`` instead of first order (see ``docs/design/shaping.md`` for V before and after).
 
 ``"exact"`` starts from the split and corrects its taps (least change, in the 2-norm) so that the
 FIR, read as impulses at the sample instants, meets the continuous shaper's own conditions at

@@ -3,7 +3,7 @@
 Seed 003 (Learning Input Shaping Technique) tunes the two free parameters of a two-impulse
 sequence, A1 at t = 0 and A2 = 1 - A1 at T2, from the residual vibration of the previous
 repetitions of a task, without a model of the plant. The paper's equations were lost in the
-text extraction; docs/list.md reconstructs them and gives the reasoning summarised here.
+text extraction; docs/design/list.md reconstructs them and gives the reasoning summarised here.
 
 Residual factor (:func:`lti_factor`). For an LTI mode (omega_n, zeta), sigma = zeta omega_n and
 omega_d = omega_n sqrt(1 - zeta^2), the residual vibration of the shaped move is that of the
