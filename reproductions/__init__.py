@@ -1,7 +1,7 @@
 """The paper reproductions: the seeds' experiments run through the ROS graph, and the tables they print.
 
 Each module starts the real nodes as separate processes (the sim plant, the shaper and, where the
-seed needs them, the learner or the scheduler; :func:`sim_plant_node.conductor.node_session`),
+seed needs them, the learner or the scheduler; :func:`sim_plant_node.clients.conductor.node_session`),
 drives them over their public interfaces, and writes a results page under ``docs/results/`` with its
 plots under ``docs/results/img/``. The integration tests in ``tests/`` call the same functions with the
 tolerances of the papers. Run one from the repository root (``--help`` lists its options; the

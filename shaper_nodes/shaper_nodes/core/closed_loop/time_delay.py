@@ -209,7 +209,7 @@ def sampled_loop_matrix(omega_a: float, delay_samples: int, dt: float, omega_r: 
     ratio, base-driven m-c-k with unit mass) and the internal model w_A, both discretised exactly under
     a zero-order hold of u; v_k = -y_k + yhat_k, u_k = A0 v_k + A1 v_{k-N} + A2 v_{k-2N}, N = delay_samples.
 
-    This is what :class:`sim_plant_node.loops.DelayLoopPlant` computes; it uses none of eqs. (13)-(27).
+    This is what :class:`sim_plant_node.models.loops.DelayLoopPlant` computes; it uses none of eqs. (13)-(27).
     """
     n = int(delay_samples)
     if n < 1:

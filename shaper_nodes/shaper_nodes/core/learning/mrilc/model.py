@@ -18,7 +18,7 @@ path from u2 to y), e_j = e_0 - H u2_j, so u2 converges when
 
 Everything here is sampled: r_s and u2 are held over each period T (zero-order hold) and the
 continuous loop is discretised exactly, so the learner's G_m and H are those of the sampled loop
-(the simulated plant integrates the same loop exactly, see sim_plant_node.pid_loop).
+(the simulated plant integrates the same loop exactly, see sim_plant_node.models.pid_loop).
 
 Learning laws (:class:`LawConfig`)
 ----------------------------------
