@@ -16,13 +16,13 @@ from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from shaper_nodes.nodes import bag_play, calibrate, identifier, learner, learner_list, recorder, scheduler
+from shaper_nodes.nodes import bag_play, calibrate, identifier, learner, learner_list, recorder, scheduler, shaper
 from shaper_nodes.ros.parameters import Live, declare, flat, param, read, table, unflat
 
 CLASSES = [(identifier, identifier.IdentifierParams), (learner, learner.LearnerParams),
            (learner_list, learner_list.ListModeParams), (scheduler, scheduler.SchedulerParams),
            (recorder, recorder.RecorderParams), (bag_play, bag_play.BagPlayParams),
-           (calibrate, calibrate.CalibrateParams)]
+           (calibrate, calibrate.CalibrateParams), (shaper, shaper.ShaperParams)]
 
 
 def test_the_generated_reference_matches_the_declarations():

@@ -60,8 +60,9 @@ Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its 
 (e.g. the scheduler) re-time the motion already commanded instead of switching bumplessly
 (time-varying shaping, see core/shaping/fir.py).
 
-Parameters: :data:`PARAMETERS` (names, defaults, ranges and descriptions; config/shaper.yaml), declared in
-nodes/shaper_parameters.py with what their values mean (the design, the joint limits).
+Parameters: :class:`ShaperParams` and its table :data:`PARAMETERS` (names, defaults, ranges and descriptions;
+config/shaper.yaml), written in nodes/shaper_parameters.py with what their values mean (the design, the joint
+limits); the node reads them typed, ``self.params.value`` (kept up to date on every accepted change).
 """
 
 from __future__ import annotations
@@ -73,7 +74,6 @@ from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
@@ -90,7 +90,7 @@ from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg, traject
 from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import declare_all, values
+from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED
 from shaper_nodes.ros.side_node import SideNode
@@ -104,14 +104,15 @@ from .shaper_parameters import (  # the table and its constants, importable from
     PARAMETERS,
     STREAM_EXECUTORS,
     TOPICS,
+    ShaperParams,
     describe,
-    design_from_values,
-    limits_from_values,
+    design_from_params,
+    limits_from_params,
 )
 from .trajectory_action import TrajectoryActionProxy
 
 __all__ = ["DEFAULT_MAX_SAMPLES", "DESIGN_PARAMS", "DISCRETIZATIONS", "PARAMETERS", "STREAM_EXECUTORS", "TOPICS",
-           "ShaperNode", "main"]
+           "ShaperNode", "ShaperParams", "main"]
 
 #: s, the interpreter's thread switch interval in this node (Python's default is 5 ms, ten command
 #: periods at 2 kHz): a thread shaping a long trajectory gives the streaming thread the interpreter
@@ -131,33 +132,33 @@ class ShaperNode(Node):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__("shaper", *args, **kwargs)
-        declare_all(self, PARAMETERS)
-        p = self.get_parameter
-        v = values(self, PARAMETERS)
-        self.joint_names = list(v["joint_names"] or [])
+        #: the parameters, typed (nodes/shaper_parameters.py), read again on every accepted change
+        self.params = declare(self, ShaperParams)
+        p = self.params.value
+        self.joint_names = list(p.joint_names)
         if not self.joint_names or len(set(self.joint_names)) != len(self.joint_names):
             raise ValueError("parameter joint_names must be a non-empty list of distinct names")
-        self.rate = float(p("command_rate").value)
-        self.policy = UpdatePolicy.of(v["allowed_sources"], v["retime_sources"] or ())
+        self.rate = float(p.command_rate)
+        self.policy = UpdatePolicy.of(p.allowed_sources, p.retime_sources)
         n = len(self.joint_names)
 
-        shaper, method = self._design_from_params({})
+        shaper, method = design_from_params(p, self.rate)
         self._method = method
         self._shaper = shaper
         self._fir: SparseFir = discretize(shaper, self.rate, method)
         self._source = PARAMETERS_SOURCE
         self._revision = 1
         self._pending_params: tuple[Shaper, str] | None = None
-        self.limits = limits_from_values(self.joint_names, v)  # the parameters' and the URDF's
+        self.limits = limits_from_params(self.joint_names, p.limits)  # the parameters' and the URDF's
         #: the streamed inputs' filters and rules (core/shaping/stream.py); it owns the stream lock
         self.stream = CommandStream(self._fir, self.limits, retiming=bool(self.policy.retime_sources),
-                                    max_abs=float(p("limits.max_abs_value").value),
-                                    max_samples=int(p("limits.max_trajectory_samples").value))
+                                    max_abs=float(p.limits.max_abs_value),
+                                    max_samples=int(p.limits.max_trajectory_samples))
         #: held while a streamed sample is shaped and while the shaper changes (they run on different threads
         #: with stream_executor 'thread'); a holder stalls the streamed inputs
         self.stream_lock = self.stream.lock
         self._array_filter = self.stream.array_filter
-        self.diagnostics = Diagnostics(self, lambda: float(p("error_throttle").value))
+        self.diagnostics = Diagnostics(self, lambda: float(self.params.value.error_throttle))
         # arrivals, rate watches, forwarded and refused counts (ros/stream_watch.py)
         self.watch = StreamWatch(self.rate, self.diagnostics, lambda k: self._subs[f"{k}_in"].get_publisher_count())
         self.rejections, self.forwarded, self.watched = self.watch.rejections, self.watch.forwarded, self.watch.watched
@@ -168,9 +169,9 @@ class ShaperNode(Node):
         self._worker = TrajectoryWorker()  # the trajectory topic's shaping, in a process of its own
         side = self._side.node
         # the command path's endpoints are made through the graph watch, which looks from the side thread
-        self.graph = GraphWatch(self, self.diagnostics, float(p("graph_watch.period").value), looker=side)
+        self.graph = GraphWatch(self, self.diagnostics, float(p.graph_watch.period), looker=side)
 
-        tp = {k: p(f"topics.{k}").value for k in TOPICS}
+        tp = p.topics
         pubs: dict[str, Any] = {}
 
         def pub(name: str, typ: Any) -> Any:
@@ -178,27 +179,28 @@ class ShaperNode(Node):
                 pubs[name] = self.graph.publisher(typ, name, 10)
             return pubs[name]
 
-        self._array_pub = pub(tp["array_out"], Float64MultiArray)
-        self._stream_pub = pub(tp["stream_out"], JointTrajectory)
-        self._traj_pub = pub(tp["trajectory_out"], JointTrajectory)
+        self._array_pub = pub(tp.array_out, Float64MultiArray)
+        self._stream_pub = pub(tp.stream_out, JointTrajectory)
+        self._traj_pub = pub(tp.trajectory_out, JointTrajectory)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
-        depth = int(p("queue_depth").value)
+        depth = int(p.queue_depth)
         # the streamed inputs: on a lean node of their own, spun on a thread of its own (the names resolved by
         # this node), or on this node
         self._stream_side: SideNode | None = None
         stream_node: Node = self
-        if str(p("stream_executor").value) == "thread":
+        streamed = {"array_in": tp.array_in, "stream_in": tp.stream_in}  # resolved here for a lean node of their own
+        if str(p.stream_executor) == "thread":
             self._stream_side = SideNode(self, "stream", lean=True)
             stream_node = self._stream_side.node
-            tp["array_in"], tp["stream_in"] = (self.resolve_topic_name(tp[k]) for k in ("array_in", "stream_in"))
+            streamed = {k: self.resolve_topic_name(name) for k, name in streamed.items()}
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
-            "array_in": self.graph.subscription(Float64MultiArray, tp["array_in"], self._on_array, depth,
+            "array_in": self.graph.subscription(Float64MultiArray, streamed["array_in"], self._on_array, depth,
                                                 on=stream_node),
-            "stream_in": self.graph.subscription(JointTrajectory, tp["stream_in"], self._on_stream, depth,
+            "stream_in": self.graph.subscription(JointTrajectory, streamed["stream_in"], self._on_stream, depth,
                                                  on=stream_node),
             # raw: the bytes go to the trajectory worker process undecoded (ros/whole_trajectory.py)
-            "trajectory_in": self.graph.subscription(JointTrajectory, self.resolve_topic_name(tp["trajectory_in"]),
+            "trajectory_in": self.graph.subscription(JointTrajectory, self.resolve_topic_name(tp.trajectory_in),
                                                      self._on_trajectory, 10, on=side, raw=True),
         }
         self._subs = subs
@@ -209,22 +211,22 @@ class ShaperNode(Node):
                             self._on_shape_trajectory)
         self._action: TrajectoryActionProxy | None = None
         self.pose_shaper: PoseShaperClient | None = None
-        server_name = str(p("action.server_name").value)
+        server_name = str(p.action.server_name)
         action_topic = self.resolve_topic_name(server_name) if server_name else ""
         if server_name:
-            scheduler = str(p("action.scheduler").value).strip()
+            scheduler = str(p.action.scheduler).strip()
             if scheduler:
                 self.pose_shaper = PoseShaperClient(
-                    side, scheduler, float(p("action.server_timeout").value), self.shape_whole, self.diagnostics,
-                    max_gain=lambda: float(p("shaper.max_gain").value), rate=self.rate)
+                    side, scheduler, float(p.action.server_timeout), self.shape_whole, self.diagnostics,
+                    max_gain=lambda: float(self.params.value.shaper.max_gain), rate=self.rate)
             self._action = TrajectoryActionProxy(
-                side, action_topic, str(p("action.controller").value), self.shape_whole,
+                side, action_topic, str(p.action.controller), self.shape_whole,
                 on_refused=lambda err: self._reject(action_topic, err),
                 on_forwarded=lambda: self._count_forwarded("action"),
-                timeout=float(p("action.server_timeout").value), reshape=self.pose_shaper)
+                timeout=float(p.action.server_timeout), reshape=self.pose_shaper)
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
-        self.create_timer(float(p("diagnostics_period").value), self._publish_summary,
+        self.create_timer(float(p.diagnostics_period), self._publish_summary,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(WATCH_PERIOD, self.watch.watch, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_active()
@@ -243,24 +245,12 @@ class ShaperNode(Node):
     def _describe(self) -> str:
         return describe(self._shaper)
 
-    def _design_from_params(self, overrides: dict[str, Any]) -> tuple[Shaper, str]:
-        def val(name: str) -> Any:
-            if name in overrides:
-                return overrides[name]
-            try:
-                return self.get_parameter(name).value
-            except ParameterUninitializedException:  # a list without a default, not set: empty
-                return None
-
-        return design_from_values(val, self.rate)
-
     def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
-        changes = {p.name: p.value for p in params if p.name in DESIGN_PARAMS}
-        if not changes:
+        if not any(p.name in DESIGN_PARAMS for p in params):
             return SetParametersResult(successful=True)
         try:
             self.policy.allow(PARAMETERS_SOURCE)
-            shaper, method = self._design_from_params(changes)
+            shaper, method = design_from_params(self.params.with_changes(params), self.rate)
             self.policy.settled(self.stream.stages())
             discretize(shaper, self.rate, method)  # may refuse; nothing has changed yet
         except (ShaperError, PolicyError, ValueError) as err:
@@ -271,11 +261,9 @@ class ShaperNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_params(self, params: list[Parameter]) -> None:
-        for param in params:
-            if param.name == "limits.max_abs_value":
-                self.stream.max_abs = float(param.value)
-            elif param.name == "limits.max_trajectory_samples":
-                self.stream.max_samples = int(param.value)
+        p = self.params.refresh()  # rclpy calls this before the typed parameters' own post-set callback
+        self.stream.max_abs = float(p.limits.max_abs_value)
+        self.stream.max_samples = int(p.limits.max_trajectory_samples)
         pending, self._pending_params = self._pending_params, None
         if pending is not None:
             self._commit(pending[0], PARAMETERS_SOURCE, pending[1])
@@ -306,7 +294,7 @@ class ShaperNode(Node):
     def _on_set_shaper(self, req: SetShaper.Request, resp: SetShaper.Response) -> SetShaper.Response:
         source = UpdatePolicy.source_of(req.shaper.source)
         try:
-            shaper = shaper_from_msg(req.shaper, float(self.get_parameter("shaper.max_gain").value))
+            shaper = shaper_from_msg(req.shaper, float(self.params.value.shaper.max_gain))
             resp.success, resp.message = self.request(shaper, source)
         except ShaperError as err:
             resp.success, resp.message = False, f"invalid shaper: {err}"

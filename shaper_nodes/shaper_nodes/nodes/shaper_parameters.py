@@ -1,15 +1,15 @@
-"""The shaper node's parameters: their table (:data:`PARAMETERS`, declared by nodes/shaper.py) and what
-their values mean: the active shaper's design (:func:`design_from_values`), the joint limits
-(:func:`limits_from_values`). See config/shaper.yaml.
+"""The shaper node's parameters: their class (:class:`ShaperParams`, whose table :data:`PARAMETERS` is declared
+by nodes/shaper.py) and what their values mean: the active shaper's design (:func:`design_from_params`), the
+joint limits (:func:`limits_from_params`). See config/shaper.yaml.
 
-The values are read by the node (by name, through ``val``); the functions here only interpret them.
+The node reads its parameters typed (``ShaperParams``, :func:`shaper_nodes.ros.parameters.declare`); the
+functions here only interpret them.
 """
 
 from __future__ import annotations
 
 import pathlib
-from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass, field
 
 from rclpy.parameter import Parameter
 
@@ -28,7 +28,7 @@ from shaper_nodes.core.shaping import (
 )
 from shaper_nodes.core.shaping.limits import JointLimits, urdf_limits
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_SAMPLES
-from shaper_nodes.ros.parameters import Spec, topics
+from shaper_nodes.ros.parameters import Spec, param, table, topic
 
 DESIGN_PARAMS = ("shaper.family", "shaper.frequency_hz", "shaper.damping_ratio",
                  "shaper.frequencies_hz", "shaper.damping_ratios",
@@ -46,108 +46,174 @@ DEFAULT_MAX_SAMPLES = 5_000
 #: choices of the stream_executor parameter
 STREAM_EXECUTORS = ("thread", "node")
 
-#: the shaper node's parameters (see config/shaper.yaml)
-PARAMETERS: tuple[Spec, ...] = (
-    Spec("joint_names", None, "Joints to shape, in the order of Float64MultiArray data and of the outputs.",
-         read_only=True, type=Parameter.Type.STRING_ARRAY),
-    Spec("command_rate", 500.0, "Rate of the streamed setpoints and of whole-trajectory resampling, Hz.",
-         (1.0, 10000.0), read_only=True, check=lambda v: discretize(none_shaper(), v)),
-    Spec("shaper.family", "none", "Shaper family: " + ", ".join(f"{k} ({v})" for k, v in FAMILIES.items()
-                                                               if k != "custom"),
-         check=lambda v: design(v, [_PROBE])),
-    Spec("shaper.frequency_hz", 10.0, "Natural frequency of the mode to shape for, Hz (undamped).", (0.01, 1000.0),
-         check=lambda v: design("zv", [Mode.from_hz(v, 0.05)])),
-    Spec("shaper.damping_ratio", 0.05, "Damping ratio of the mode to shape for, dimensionless.", (0.0, 0.95),
-         check=lambda v: design("zv", [Mode.from_hz(10.0, v)])),
-    Spec("shaper.frequencies_hz", None, "Several modes: their natural frequencies, Hz (undamped), one per entry"
-         " of shaper.damping_ratios. When set (non-empty), the family is designed on all these modes (the"
-         " single-mode designs convolved; si designs them jointly) and shaper.frequency_hz and"
-         f" shaper.damping_ratio are not used. At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
-         " A change of the number of modes sets both lists at once (ros2 param load, or one atomic set).",
-         type=Parameter.Type.DOUBLE_ARRAY, check=lambda v: modes_from_hz(v, [0.05] * len(v))),
-    Spec("shaper.damping_ratios", None, "Several modes: their damping ratios, dimensionless, in [0, 0.95], one per"
-         " entry of shaper.frequencies_hz (see there).", type=Parameter.Type.DOUBLE_ARRAY,
-         check=lambda v: modes_from_hz([10.0] * len(v), v)),
-    Spec("shaper.derivative_order", 2, "n of the ZV-D^n family (family zvdn): 0 = ZV, 1 = ZVD, 2 = ZVDD.", (0, 10),
-         check=lambda v: design("zvdn", [_PROBE], derivative_order=v)),
-    Spec("shaper.vibration_tolerance", 0.05, "EI, multi-hump EI and SI families: tolerated percentage vibration,"
-         " fraction (0.05 = 5 %).", (0.001, 0.3), check=lambda v: design("ei", [_PROBE], vibration_tolerance=v)),
-    Spec("shaper.insensitivity", 0.4, "SI family: width of the band where V <= vibration_tolerance, fraction of"
-         " the design frequency (0.4 = +-20 %).", (0.01, 1.5),
-         check=lambda v: design("si", [_PROBE], insensitivity=v)),
-    Spec("discretization", "split", "Impulse times between samples: 'split' linearly between the two samples"
-         " (default), 'round', or 'exact' (the split corrected so the FIR meets the shaper's conditions at its"
-         " modes exactly).", choices=DISCRETIZATIONS,
-         check=lambda v: discretize(design("zv", [_PROBE]), 500.0, v)),
-    Spec("shaper.max_gain", DEFAULT_MAX_GAIN, "Largest gain sum |A| of a custom shaper sent to ~/set_shaper:"
-         " 1 (default) admits non-negative impulses only; larger allows negative impulses, whose output may"
-         f" overshoot the input by up to this factor. In [1, {MAX_GAIN:g}].", (1.0, MAX_GAIN),
-         check=lambda v: design("custom", amplitudes=[1.0], times=[0.0], max_gain=v)),
-    Spec("limits.max_abs_value", 1e6, "Largest magnitude of any input value (position rad or m, velocity,"
-         " acceleration in their SI units): a larger, finite value is implausible and refused before it reaches"
-         " the filters, so their state keeps its precision and no sum overflows.", (1e-3, 1e12)),
-    Spec("limits.max_trajectory_samples", DEFAULT_MAX_SAMPLES, "Most samples of a shaped whole trajectory (its span"
-         " plus the shaper's duration, times command_rate); a longer one is refused before any work. Sending a"
-         " trajectory's message holds the Python interpreter in rclpy's conversion for a time that grows with it,"
-         " and the stream waits that long: about 0.4 ms per 1000 samples on a 2-core machine (docs/shaping.md)."
-         f" The default, {DEFAULT_MAX_SAMPLES} (10 s at 500 Hz, 5 s at 1 kHz), keeps that wait under two periods"
-         " at 1 kHz; raise it for longer trajectories if the stream can wait longer while one is shaped."
-         f" At most {MAX_TRAJECTORY_SAMPLES}.", (100, MAX_TRAJECTORY_SAMPLES)),
-    Spec("limits.position_lower", None, "Lowest position of each joint (rad or m), one per joint_names entry, in"
-         " that order; empty (default): none (or the URDF's). No output passes below it.",
-         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
-    Spec("limits.position_upper", None, "Highest position of each joint (rad or m), one per joint_names entry;"
-         " empty (default): none (or the URDF's). No output passes above it.",
-         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
-    Spec("limits.velocity", None, "Largest |velocity| of each joint (rad/s or m/s), one per joint_names entry;"
-         " .inf for none on a joint; empty (default): none (or the URDF's). Whole trajectories whose shaped"
-         " velocities pass it, and streamed points whose shaped velocities pass it, are refused.",
-         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
-    Spec("limits.acceleration", None, "Largest |acceleration| of each joint (rad/s^2 or m/s^2), one per"
-         " joint_names entry; .inf for none on a joint; empty (default): none (URDF has none). As limits.velocity.",
-         read_only=True, type=Parameter.Type.DOUBLE_ARRAY),
-    Spec("limits.urdf_file", "", "A URDF file whose <limit> elements (position, velocity) hold for the joints"
-         " too; where a parameter above also sets a limit, the tighter one holds. Every joint of joint_names must"
-         " be a revolute, prismatic or continuous joint of it. Empty (default): no URDF.", read_only=True),
-    Spec("stream_executor", "thread", "Who takes the streamed inputs (array_in, stream_in): 'thread' (default), a"
-         " lean second node of this process, '<name>_stream', with nothing but those two subscriptions, spun on a"
-         " thread of its own (the topics stay this node's: ~/commands is /<name>/commands); 'node': this node's"
-         " executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
-         " waits on all of them, which costs the stream CPU and latency: docs/benchmarks.md).",
-         choices=STREAM_EXECUTORS, read_only=True),
-    Spec("queue_depth", 100, "Depth of the streamed inputs' subscription queues (array_in, stream_in), messages:"
-         " how long a burst or a stall of the node may last without a sample being dropped (100 = 0.1 s at"
-         " 1 kHz); a dropped sample is counted on /diagnostics.", (1, 100000), read_only=True),
-    Spec("allowed_sources", ["parameters", "service", "learner", "scheduler", "identification", "user"],
-         "Sources allowed to change the active shaper (update policy).", read_only=True),
-    Spec("retime_sources", None, "Sources whose changes re-time the motion already commanded (time-varying"
-         " shaping: pending impulses follow the new shaper, e.g. 'scheduler' for pose-dependent modes) instead of"
-         " the bumpless switch that leaves it to the old shaper. Default none.", read_only=True,
-         type=Parameter.Type.STRING_ARRAY),
-    Spec("error_throttle", 1.0, "Least time between two error logs or diagnostics of the same class of bad input,"
-         " s.", (0.0, 3600.0)),
-    Spec("diagnostics_period", 1.0, "Period of the diagnostics summary, s.", (0.05, 3600.0), read_only=True),
-    Spec("graph_watch.period", 1.0, "Period of the look at the ROS graph around the command path, s of wall"
-         " time: another node of this node's name, several publishers on an input, another publisher on an"
-         " output, a wrong message type or incompatible QoS on either, reported on /diagnostics (status"
-         " '<node>: graph') and logged once each (ros/graph_watch.py). 0 disables it.", (0.0, 3600.0),
-         read_only=True),
-    *topics(TOPICS),
-    Spec("action.server_name", "~/follow_joint_trajectory", "FollowJointTrajectory action served by this node;"
-         " empty: no action server.", read_only=True),
-    Spec("action.controller", "/joint_trajectory_controller/follow_joint_trajectory", "The controller's"
-         " FollowJointTrajectory action that shaped goals are forwarded to.", read_only=True),
-    Spec("action.server_timeout", 2.0, "How long a goal waits for the controller's action server and for its"
-         " answer to the goal request, and (with action.scheduler) for the scheduler's answer, s.", (0.01, 3600.0),
-         read_only=True),
-    Spec("action.scheduler", "", "Fully qualified name of a scheduler node (e.g. '/scheduler'): each goal is then"
-         " shaped with the shaper <scheduler>/shaper_at gives for the goal trajectory's final point (the modes"
-         " where the move ends), not with the active shaper, which stays as it is. If the scheduler is absent,"
-         " does not answer within action.server_timeout, refuses the pose, or its shaper fails this node's checks,"
-         " the goal is shaped with the active shaper and a warning says why. Empty (default): the active shaper.",
-         read_only=True),
-)
 
+@dataclass(frozen=True)
+class DesignParams:
+    """shaper.*: the active shaper's design (:func:`design_from_params`), and the largest gain of a custom one."""
+
+    family: str = param("none", "Shaper family: " + ", ".join(f"{k} ({v})" for k, v in FAMILIES.items()
+                                                             if k != "custom"),
+                        check=lambda v: design(v, [_PROBE]))
+    frequency_hz: float = param(10.0, "Natural frequency of the mode to shape for, Hz (undamped).", (0.01, 1000.0),
+                                check=lambda v: design("zv", [Mode.from_hz(v, 0.05)]))
+    damping_ratio: float = param(0.05, "Damping ratio of the mode to shape for, dimensionless.", (0.0, 0.95),
+                                 check=lambda v: design("zv", [Mode.from_hz(10.0, v)]))
+    frequencies_hz: tuple[float, ...] = param(
+        None, "Several modes: their natural frequencies, Hz (undamped), one per entry"
+        " of shaper.damping_ratios. When set (non-empty), the family is designed on all these modes (the"
+        " single-mode designs convolved; si designs them jointly) and shaper.frequency_hz and"
+        f" shaper.damping_ratio are not used. At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
+        " A change of the number of modes sets both lists at once (ros2 param load, or one atomic set).",
+        type=Parameter.Type.DOUBLE_ARRAY, check=lambda v: modes_from_hz(v, [0.05] * len(v)))
+    damping_ratios: tuple[float, ...] = param(
+        None, "Several modes: their damping ratios, dimensionless, in [0, 0.95], one per"
+        " entry of shaper.frequencies_hz (see there).", type=Parameter.Type.DOUBLE_ARRAY,
+        check=lambda v: modes_from_hz([10.0] * len(v), v))
+    derivative_order: int = param(2, "n of the ZV-D^n family (family zvdn): 0 = ZV, 1 = ZVD, 2 = ZVDD.", (0, 10),
+                                  check=lambda v: design("zvdn", [_PROBE], derivative_order=v))
+    vibration_tolerance: float = param(
+        0.05, "EI, multi-hump EI and SI families: tolerated percentage vibration,"
+        " fraction (0.05 = 5 %).", (0.001, 0.3), check=lambda v: design("ei", [_PROBE], vibration_tolerance=v))
+    insensitivity: float = param(
+        0.4, "SI family: width of the band where V <= vibration_tolerance, fraction of"
+        " the design frequency (0.4 = +-20 %).", (0.01, 1.5),
+        check=lambda v: design("si", [_PROBE], insensitivity=v))
+    max_gain: float = param(
+        DEFAULT_MAX_GAIN, "Largest gain sum |A| of a custom shaper sent to ~/set_shaper:"
+        " 1 (default) admits non-negative impulses only; larger allows negative impulses, whose output may"
+        f" overshoot the input by up to this factor. In [1, {MAX_GAIN:g}].", (1.0, MAX_GAIN),
+        check=lambda v: design("custom", amplitudes=[1.0], times=[0.0], max_gain=v))
+
+
+@dataclass(frozen=True)
+class LimitParams:
+    """limits.*: input bounds and joint limits (:func:`limits_from_params`)."""
+
+    max_abs_value: float = param(
+        1e6, "Largest magnitude of any input value (position rad or m, velocity,"
+        " acceleration in their SI units): a larger, finite value is implausible and refused before it reaches"
+        " the filters, so their state keeps its precision and no sum overflows.", (1e-3, 1e12))
+    max_trajectory_samples: int = param(
+        DEFAULT_MAX_SAMPLES, "Most samples of a shaped whole trajectory (its span"
+        " plus the shaper's duration, times command_rate); a longer one is refused before any work. Sending a"
+        " trajectory's message holds the Python interpreter in rclpy's conversion for a time that grows with it,"
+        " and the stream waits that long: about 0.4 ms per 1000 samples on a 2-core machine (docs/shaping.md)."
+        f" The default, {DEFAULT_MAX_SAMPLES} (10 s at 500 Hz, 5 s at 1 kHz), keeps that wait under two periods"
+        " at 1 kHz; raise it for longer trajectories if the stream can wait longer while one is shaped."
+        f" At most {MAX_TRAJECTORY_SAMPLES}.", (100, MAX_TRAJECTORY_SAMPLES))
+    position_lower: tuple[float, ...] = param(
+        None, "Lowest position of each joint (rad or m), one per joint_names entry, in"
+        " that order; empty (default): none (or the URDF's). No output passes below it.",
+        read_only=True, type=Parameter.Type.DOUBLE_ARRAY)
+    position_upper: tuple[float, ...] = param(
+        None, "Highest position of each joint (rad or m), one per joint_names entry;"
+        " empty (default): none (or the URDF's). No output passes above it.",
+        read_only=True, type=Parameter.Type.DOUBLE_ARRAY)
+    velocity: tuple[float, ...] = param(
+        None, "Largest |velocity| of each joint (rad/s or m/s), one per joint_names entry;"
+        " .inf for none on a joint; empty (default): none (or the URDF's). Whole trajectories whose shaped"
+        " velocities pass it, and streamed points whose shaped velocities pass it, are refused.",
+        read_only=True, type=Parameter.Type.DOUBLE_ARRAY)
+    acceleration: tuple[float, ...] = param(
+        None, "Largest |acceleration| of each joint (rad/s^2 or m/s^2), one per"
+        " joint_names entry; .inf for none on a joint; empty (default): none (URDF has none). As limits.velocity.",
+        read_only=True, type=Parameter.Type.DOUBLE_ARRAY)
+    urdf_file: str = param(
+        "", "A URDF file whose <limit> elements (position, velocity) hold for the joints"
+        " too; where a parameter above also sets a limit, the tighter one holds. Every joint of joint_names must"
+        " be a revolute, prismatic or continuous joint of it. Empty (default): no URDF.", read_only=True)
+
+
+@dataclass(frozen=True)
+class GraphWatchParams:
+    """graph_watch.*: the look at the ROS graph around the command path (ros/graph_watch.py)."""
+
+    period: float = param(
+        1.0, "Period of the look at the ROS graph around the command path, s of wall"
+        " time: another node of this node's name, several publishers on an input, another publisher on an"
+        " output, a wrong message type or incompatible QoS on either, reported on /diagnostics (status"
+        " '<node>: graph') and logged once each (ros/graph_watch.py). 0 disables it.", (0.0, 3600.0),
+        read_only=True)
+
+
+@dataclass(frozen=True)
+class TopicParams:
+    """topics.*: the inputs and outputs (defaults: :data:`TOPICS`)."""
+
+    array_in: str = topic(TOPICS["array_in"], "array_in")
+    array_out: str = topic(TOPICS["array_out"], "array_out")
+    stream_in: str = topic(TOPICS["stream_in"], "stream_in")
+    stream_out: str = topic(TOPICS["stream_out"], "stream_out")
+    trajectory_in: str = topic(TOPICS["trajectory_in"], "trajectory_in")
+    trajectory_out: str = topic(TOPICS["trajectory_out"], "trajectory_out")
+
+
+@dataclass(frozen=True)
+class ActionParams:
+    """action.*: the FollowJointTrajectory proxy (nodes/trajectory_action.py, ros/pose_shaper.py)."""
+
+    server_name: str = param("~/follow_joint_trajectory", "FollowJointTrajectory action served by this node;"
+                             " empty: no action server.", read_only=True)
+    controller: str = param("/joint_trajectory_controller/follow_joint_trajectory", "The controller's"
+                            " FollowJointTrajectory action that shaped goals are forwarded to.", read_only=True)
+    server_timeout: float = param(
+        2.0, "How long a goal waits for the controller's action server and for its"
+        " answer to the goal request, and (with action.scheduler) for the scheduler's answer, s.", (0.01, 3600.0),
+        read_only=True)
+    scheduler: str = param(
+        "", "Fully qualified name of a scheduler node (e.g. '/scheduler'): each goal is then"
+        " shaped with the shaper <scheduler>/shaper_at gives for the goal trajectory's final point (the modes"
+        " where the move ends), not with the active shaper, which stays as it is. If the scheduler is absent,"
+        " does not answer within action.server_timeout, refuses the pose, or its shaper fails this node's checks,"
+        " the goal is shaped with the active shaper and a warning says why. Empty (default): the active shaper.",
+        read_only=True)
+
+
+@dataclass(frozen=True)
+class ShaperParams:
+    """The shaper node's parameters (see config/shaper.yaml)."""
+
+    joint_names: tuple[str, ...] = param(
+        None, "Joints to shape, in the order of Float64MultiArray data and of the outputs.",
+        read_only=True, type=Parameter.Type.STRING_ARRAY)
+    command_rate: float = param(500.0, "Rate of the streamed setpoints and of whole-trajectory resampling, Hz.",
+                                (1.0, 10000.0), read_only=True, check=lambda v: discretize(none_shaper(), v))
+    shaper: DesignParams = field(default_factory=DesignParams)
+    discretization: str = param(
+        "split", "Impulse times between samples: 'split' linearly between the two samples"
+        " (default), 'round', or 'exact' (the split corrected so the FIR meets the shaper's conditions at its"
+        " modes exactly).", choices=DISCRETIZATIONS,
+        check=lambda v: discretize(design("zv", [_PROBE]), 500.0, v))
+    limits: LimitParams = field(default_factory=LimitParams)
+    stream_executor: str = param(
+        "thread", "Who takes the streamed inputs (array_in, stream_in): 'thread' (default), a"
+        " lean second node of this process, '<name>_stream', with nothing but those two subscriptions, spun on a"
+        " thread of its own (the topics stay this node's: ~/commands is /<name>/commands); 'node': this node's"
+        " executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
+        " waits on all of them, which costs the stream CPU and latency: docs/benchmarks.md).",
+        choices=STREAM_EXECUTORS, read_only=True)
+    queue_depth: int = param(
+        100, "Depth of the streamed inputs' subscription queues (array_in, stream_in), messages:"
+        " how long a burst or a stall of the node may last without a sample being dropped (100 = 0.1 s at"
+        " 1 kHz); a dropped sample is counted on /diagnostics.", (1, 100000), read_only=True)
+    allowed_sources: tuple[str, ...] = param(
+        ["parameters", "service", "learner", "scheduler", "identification", "user"],
+        "Sources allowed to change the active shaper (update policy).", read_only=True)
+    retime_sources: tuple[str, ...] = param(
+        None, "Sources whose changes re-time the motion already commanded (time-varying"
+        " shaping: pending impulses follow the new shaper, e.g. 'scheduler' for pose-dependent modes) instead of"
+        " the bumpless switch that leaves it to the old shaper. Default none.", read_only=True,
+        type=Parameter.Type.STRING_ARRAY)
+    error_throttle: float = param(
+        1.0, "Least time between two error logs or diagnostics of the same class of bad input, s.", (0.0, 3600.0))
+    diagnostics_period: float = param(1.0, "Period of the diagnostics summary, s.", (0.05, 3600.0), read_only=True)
+    graph_watch: GraphWatchParams = field(default_factory=GraphWatchParams)
+    topics: TopicParams = field(default_factory=TopicParams)
+    action: ActionParams = field(default_factory=ActionParams)
+
+
+#: the shaper node's parameters (derived from ShaperParams; see config/shaper.yaml)
+PARAMETERS: tuple[Spec, ...] = table(ShaperParams)
 
 def describe(s: Shaper) -> str:
     """One line on a shaper: its family, impulses, duration (ms) and modes (Hz, damping ratio)."""
@@ -155,48 +221,66 @@ def describe(s: Shaper) -> str:
     return f"{s.family} ({len(s)} impulses, {s.duration * 1e3:.1f} ms{', ' + modes if modes else ''})"
 
 
-def design_from_values(val: Callable[[str], Any], rate: float) -> tuple[Shaper, str]:
-    """The shaper the design parameters give, and the discretization method: ``val(name)`` is the value of
-    parameter ``name`` (None for an unset list), ``rate`` the command rate, Hz. Raises ShaperError."""
-    method = str(val("discretization"))
+def design_from_params(p: ShaperParams, rate: float) -> tuple[Shaper, str]:
+    """The shaper the design parameters ``p`` give (``p.shaper`` and ``p.discretization``), and the
+    discretization method; ``rate`` is the command rate, Hz.
+
+    Raises
+    ------
+    ShaperError
+        The values do not make a shaper (the message names the parameter).
+    """
+    method = str(p.discretization)
     if method not in DISCRETIZATIONS:
         raise ShaperError(f"discretization must be 'split', 'round' or 'exact', got {method!r}")
-    family = str(val("shaper.family")).strip().lower()
+    s = p.shaper
+    family = str(s.family).strip().lower()
     if family == "custom":
         raise ShaperError("family 'custom' is set through the ~/set_shaper service, not parameters")
-    modes, name = modes_from_values(val)
+    modes, name = modes_from_params(s)
     high = [m.hz for m in modes if m.hz >= rate / 4.0]
     if family != "none" and high:
         raise ShaperError(
             f"{name} {high[0]:.6g} Hz is too high for command_rate {rate:g} Hz"
             f" (must be below rate / 4 = {rate / 4:g} Hz)")
     shaper = design(family, modes,
-                    derivative_order=int(val("shaper.derivative_order")),
-                    vibration_tolerance=float(val("shaper.vibration_tolerance")),
-                    insensitivity=float(val("shaper.insensitivity")))
+                    derivative_order=int(s.derivative_order),
+                    vibration_tolerance=float(s.vibration_tolerance),
+                    insensitivity=float(s.insensitivity))
     return shaper, method
 
 
-def modes_from_values(val: Callable[[str], Any]) -> tuple[tuple[Mode, ...], str]:
+def modes_from_params(s: DesignParams) -> tuple[tuple[Mode, ...], str]:
     """The design modes: shaper.frequencies_hz with shaper.damping_ratios when set, else
-    shaper.frequency_hz with shaper.damping_ratio; and the name of the parameter they came from."""
-    freqs, zetas = list(val("shaper.frequencies_hz") or []), list(val("shaper.damping_ratios") or [])
+    shaper.frequency_hz with shaper.damping_ratio; and the name of the parameter they came from
+    (frequencies in Hz, damping ratios dimensionless).
+
+    Raises
+    ------
+    ShaperError
+        The lists do not make modes.
+    """
+    freqs, zetas = list(s.frequencies_hz), list(s.damping_ratios)
     if not freqs and not zetas:
-        return (Mode.from_hz(float(val("shaper.frequency_hz")), float(val("shaper.damping_ratio"))),), \
-            "shaper.frequency_hz"
+        return (Mode.from_hz(float(s.frequency_hz), float(s.damping_ratio)),), "shaper.frequency_hz"
     try:
         return modes_from_hz(freqs, zetas), "shaper.frequencies_hz"
     except ShaperError as err:
         raise ShaperError(f"shaper.frequencies_hz / shaper.damping_ratios: {err}") from None
 
 
-def limits_from_values(joint_names: list[str], v: dict[str, Any]) -> JointLimits:
-    """The joint limits: the parameters' (``v``: the values by name), and the URDF's when limits.urdf_file
-    is set (the tighter). Raises ValueError."""
-    limits = JointLimits.from_lists(joint_names, v["limits.position_lower"] or (),
-                                    v["limits.position_upper"] or (), v["limits.velocity"] or (),
-                                    v["limits.acceleration"] or ())
-    urdf_file = str(v["limits.urdf_file"]).strip()
+def limits_from_params(joint_names: list[str], lim: LimitParams) -> JointLimits:
+    """The joint limits: the parameters' (``lim``, positions in rad or m, velocities in rad/s or m/s,
+    accelerations in rad/s^2 or m/s^2), and the URDF's when limits.urdf_file is set (the tighter).
+
+    Raises
+    ------
+    ValueError
+        A list of the wrong length or with bad entries, or a URDF that cannot be read or lacks a joint.
+    """
+    limits = JointLimits.from_lists(joint_names, lim.position_lower, lim.position_upper, lim.velocity,
+                                    lim.acceleration)
+    urdf_file = str(lim.urdf_file).strip()
     if urdf_file:
         try:
             text = pathlib.Path(urdf_file).read_text(encoding="utf-8")
