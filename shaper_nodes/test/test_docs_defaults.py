@@ -199,7 +199,9 @@ def decl():
 
 def test_every_default_stated_in_the_docs_matches_the_code(decl):
     stated = [st for path in doc_files() for st in default_statements(path, decl)]
-    assert len(stated) >= 20, stated  # the scan reads the docs (not an empty pass)
+    # the scan reads the docs (not an empty pass): 19 statements since the guide and design pages link the
+    # generated reference instead of restating their nodes' defaults in tables
+    assert len(stated) >= 15, stated
     found = [f for path in doc_files() for f in default_findings(path, decl)]
     assert not found, "docs state defaults the code does not have:\n" + "\n".join(found)
 
