@@ -18,11 +18,13 @@ from rclpy.parameter import Parameter
 
 from shaper_nodes.nodes import bag_play, calibrate, identifier, learner, learner_list, recorder, scheduler, shaper
 from shaper_nodes.ros.parameters import Live, declare, flat, param, read, table, unflat
+from sim_plant_node.node import parameters as sim_plant
 
 CLASSES = [(identifier, identifier.IdentifierParams), (learner, learner.LearnerParams),
            (learner_list, learner_list.ListModeParams), (scheduler, scheduler.SchedulerParams),
            (recorder, recorder.RecorderParams), (bag_play, bag_play.BagPlayParams),
-           (calibrate, calibrate.CalibrateParams), (shaper, shaper.ShaperParams)]
+           (calibrate, calibrate.CalibrateParams), (shaper, shaper.ShaperParams),
+           (sim_plant, sim_plant.SimPlantParams)]
 
 
 def test_the_generated_reference_matches_the_declarations():

@@ -27,7 +27,7 @@ from shaper_nodes.nodes import (
     shaper,
 )
 from shaper_nodes.ros.parameters import Spec
-from sim_plant_node import sim_plant
+from sim_plant_node.node import sim_plant
 
 TABLES = {
     "shaper": shaper.PARAMETERS,

@@ -1,6 +1,6 @@
 """The sim plant node's sensor outputs: /joint_states as the encoders report it, and the accelerometer.
 
-:class:`Sensors` applies the sensor parameters (:data:`~.parameters.SENSOR_PARAMS`: encoder noise and
+:class:`Sensors` applies the sensor parameters (``imu.*`` and ``joint_states.*``: encoder noise and
 quantum, accelerometer and gyro noise and bias, the IMU's frame) to what the model gives
 (:meth:`~sim_plant_node.models.base.Plant.joint_state`, :meth:`~sim_plant_node.models.base.Plant.imu`)
 and publishes it.
@@ -8,7 +8,6 @@ and publishes it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -18,7 +17,7 @@ from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.recordings.cdr import JointStateCdr, stamp_parts
 
 from ..models.base import Plant
-from .parameters import SENSOR_PARAMS
+from .parameters import ImuParams, JointStatesParams
 
 __all__ = ["Sensors"]
 
@@ -30,24 +29,23 @@ class Sensors:
     ----------
     joint_names : list of str
         The joints, in /joint_states' order.
-    settings : mapping
-        The present values of :data:`SENSOR_PARAMS` (read at every sample: cached here).
-    seed : int
-        Seed of the noise generator (``imu.seed``).
+    imu : ImuParams
+        The accelerometer's settings (``imu.*``; ``imu.seed`` seeds the noise generator).
+    joint_states : JointStatesParams
+        The encoders' settings (``joint_states.*``).
     imu_pub : rclpy publisher
         Where the Imu messages go.
     monitor : CycleMonitor
         Takes every accelerometer sample (the per-cycle residual vibration).
     """
 
-    def __init__(self, joint_names: list[str], settings: Mapping[str, Any], seed: int, imu_pub: Any,
+    def __init__(self, joint_names: list[str], imu: ImuParams, joint_states: JointStatesParams, imu_pub: Any,
                  monitor: CycleMonitor) -> None:
         self.joint_names = joint_names
-        self.rng = np.random.default_rng(seed)
-        self._settings = dict(settings)
+        self.rng = np.random.default_rng(int(imu.seed))
         self._imu_pub = imu_pub
         self._monitor = monitor
-        self.changed({})
+        self.changed(imu, joint_states)
         # /joint_states is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr):
         # the same messages, without building message objects. The IMU stays a message object: published as
         # bytes (shaper_nodes.recordings.cdr.ImuCdr, the same bytes on the wire) it failed tests/test_calibrate.py's
@@ -59,15 +57,15 @@ class Sensors:
         self._imu_gyro_sigma: float | None = None  # the gyro covariance written in it
         self._js_cdr: JointStateCdr | None = None  # made for the array lengths the plant reports
 
-    def changed(self, changes: Mapping[str, Any]) -> None:
-        """Take the sensor settings among ``changes`` (parameter name -> value; others are ignored)."""
-        self._settings.update({k: v for k, v in changes.items() if k in SENSOR_PARAMS})
-        sensor = self._settings
-        self._imu_bias = np.asarray(sensor["imu.bias"], dtype=float)[:3]
-        self._gyro_bias = np.asarray(sensor["imu.gyro_bias"], dtype=float)[:3]
-        self._imu_sigma = float(sensor["imu.noise_stddev"])
-        self._gyro_sigma = float(sensor["imu.gyro_noise_stddev"])
-        self._imu_frame = str(sensor["imu.frame_id"])
+    def changed(self, imu: ImuParams, joint_states: JointStatesParams) -> None:
+        """Take the sensor settings ``imu`` and ``joint_states`` (read at every sample: kept here)."""
+        self._imu_bias = np.asarray(imu.bias, dtype=float)[:3]
+        self._gyro_bias = np.asarray(imu.gyro_bias, dtype=float)[:3]
+        self._imu_sigma = float(imu.noise_stddev)
+        self._gyro_sigma = float(imu.gyro_noise_stddev)
+        self._imu_frame = str(imu.frame_id)
+        self._js_sigma = float(joint_states.noise_stddev)
+        self._js_quantum = float(joint_states.resolution)
 
     def joint_state(self, plant: Plant, t: float) -> bytes:
         """The serialized /joint_states message at ``t`` s: reported positions, velocities, efforts (if any)."""
@@ -94,8 +92,7 @@ class Sensors:
 
     def reported(self, position: np.ndarray) -> np.ndarray:
         """Joint positions as the encoders report them: noise and quantisation as the parameters say."""
-        sigma = float(self._settings["joint_states.noise_stddev"])
-        quantum = float(self._settings["joint_states.resolution"])
+        sigma, quantum = self._js_sigma, self._js_quantum
         if sigma > 0:
             position = position + self.rng.normal(0.0, sigma, position.size)
         if quantum > 0:

@@ -1,7 +1,8 @@
 """Simulated plant node: flexible joints with a tip accelerometer, running a repeated task.
 
 Stands in for a robot and its ros2_control forward position controller in tests and the demo.
-Its parameters (names, defaults, ranges, units) are the table :data:`~.parameters.PARAMETERS`.
+Its parameters (names, defaults, ranges, units) are the class :class:`~.parameters.SimPlantParams`, read
+typed as ``self.params.value`` (its table: :data:`~.parameters.PARAMETERS`).
 
 Each step the task runner publishes the raw setpoint (``topics.command_out``, to the shaper),
 the plant takes the shaped setpoint (``topics.command_in``, std_msgs/Float64MultiArray as
@@ -55,7 +56,7 @@ from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.recordings.cdr import clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import declare_all, values
+from shaper_nodes.ros.parameters import declare, flat
 from shaper_nodes.ros.qos import LATCHED
 
 from ..controller.jtc import JointTrajectoryController
@@ -64,8 +65,8 @@ from ..models.plants import CycleTask
 from ..models.two_mass import StaircaseTask
 from .feedforward import Feedforward
 from .lockstep import Exchange
-from .models import START_ONLY, NodeValues, build_plant, make_task
-from .parameters import MODELS, PARAMETERS, PLANT_KEYS, SENSOR_PARAMS, WAITING
+from .models import START_ONLY, PlantValues, build_plant, make_task
+from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
 from .sensors import Sensors
 
 __all__ = ["IDLE_STATE_PERIOD", "LOCKSTEP_IMU_QOS", "MODELS", "PARAMETERS", "WAITING", "SimPlantNode", "main"]
@@ -82,48 +83,47 @@ class SimPlantNode(Node):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__("sim_plant", *args, **kwargs)
-        declare_all(self, PARAMETERS)
+        self.params = declare(self, SimPlantParams)
+        p = self.params.value
 
-        self.joint_names = list(self.get_parameter("joint_names").value)
+        self.joint_names = list(p.joint_names)
         self.n = len(self.joint_names)
-        self.rate = float(self.get_parameter("rate").value)
-        self.mode = str(self.get_parameter("mode").value)
+        self.rate = float(p.rate)
+        self.mode = str(p.mode)
         if self.mode not in ("lockstep", "realtime"):
             raise ValueError(f"mode must be 'lockstep' or 'realtime', got {self.mode!r}")
-        self.plant = build_plant(NodeValues(self, {}), self.n)
+        self.plant = build_plant(PlantValues(p, self.rate, self.n), self.n)
         own = self.plant.joint_names  # a model with joints of its own (the arm): the default names become them
         if own is not None and self.joint_names == ["joint_1"]:
             self.joint_names = list(own)
         if own is not None and len(self.joint_names) != len(own):
-            raise ValueError(f"plant.model {self.get_parameter('plant.model').value} has {len(own)} joints;"
+            raise ValueError(f"plant.model {p.plant.model} has {len(own)} joints;"
                              f" joint_names has {len(self.joint_names)}")
         self.n = len(self.joint_names)
-        axes = [int(a) for a in self.get_parameter("imu.axes").value][:3]
+        axes = [int(a) for a in p.imu.axes][:3]
         self._axes = [a if 0 <= a < self.n else -1 for a in axes] + [-1] * (3 - len(axes))
-        self._monitor = CycleMonitor(float(self.get_parameter("settle_tolerance").value),
-                                     remove_mean=self.plant.gravity_in_imu)
+        self._monitor = CycleMonitor(float(p.settle_tolerance), remove_mean=self.plant.gravity_in_imu)
         self._active_shaper = ShaperMsg()
 
-        tp = values(self, PARAMETERS, "topics.")
-        self._cmd_pub = self.create_publisher(Float64MultiArray, tp["command_out"], 10)
-        self._js_pub = self.create_publisher(JointState, tp["joint_states"], 10)
-        self._tip_pub = self.create_publisher(JointState, tp["tip_state"], 10)
+        t = p.topics
+        self._cmd_pub = self.create_publisher(Float64MultiArray, t.command_out, 10)
+        self._js_pub = self.create_publisher(JointState, t.joint_states, 10)
+        self._tip_pub = self.create_publisher(JointState, t.tip_state, 10)
         self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
         # in lockstep every sample counts (simulated time runs faster than a reader may take them): a reliable
         # writer keeps 10000 for a reliable reader, and still matches best-effort readers as a sensor driver does
-        imu_pub = self.create_publisher(Imu, tp["imu"], LOCKSTEP_IMU_QOS if self.mode == "lockstep"
+        imu_pub = self.create_publisher(Imu, t.imu, LOCKSTEP_IMU_QOS if self.mode == "lockstep"
                                         else qos_profile_sensor_data)
-        self.sensors = Sensors(self.joint_names, {name: self.get_parameter(name).value for name in SENSOR_PARAMS},
-                               int(self.get_parameter("imu.seed").value), imu_pub, self._monitor)
-        self._event_pub = self.create_publisher(CycleEvent, tp["cycle_events"], 10)
-        self._report_pub = self.create_publisher(CycleReport, tp["cycle_reports"], 10)
+        self.sensors = Sensors(self.joint_names, p.imu, p.joint_states, imu_pub, self._monitor)
+        self._event_pub = self.create_publisher(CycleEvent, t.cycle_events, 10)
+        self._report_pub = self.create_publisher(CycleReport, t.cycle_reports, 10)
         # /clock is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
-        self._ref_pub = self.create_publisher(JointState, tp["reference"], 10)
+        self._ref_pub = self.create_publisher(JointState, t.reference, 10)
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward)
         self._ff = Feedforward()
-        self._cmd_sub = self.create_subscription(Float64MultiArray, tp["command_in"], self._on_command, 10)
-        self.create_subscription(ShaperMsg, tp["active_shaper"], self._on_shaper, LATCHED)
+        self._cmd_sub = self.create_subscription(Float64MultiArray, t.command_in, self._on_command, 10)
+        self.create_subscription(ShaperMsg, t.active_shaper, self._on_shaper, LATCHED)
         self.create_service(Trigger, "~/start_task", self._on_start)
         self.create_service(Trigger, "~/stop_task", self._on_stop)
         self.add_on_set_parameters_callback(self._validate_params)
@@ -134,23 +134,21 @@ class SimPlantNode(Node):
         self.task: CycleTask | StaircaseTask | None = None
         self._preroll_left = 0
         self._latest_shaped: np.ndarray | None = None
-        self.exchange = Exchange(self._cmd_pub, self.n, int(self.get_parameter("lockstep.block").value),
-                                 self.get_logger())
+        self.exchange = Exchange(self._cmd_pub, self.n, int(p.lockstep.block), self.get_logger())
         self.refused = 0
-        self.plant.reset(self._pose("task.start", {}))
+        self.plant.reset(self._values(p).vector("task.start", p.task.start))
         self._applied = self.plant.setpoint_at_rest
         self._raw = self._applied.copy()
         self.jtc: ControllerServer | None = None
         if self.plant.trajectory_controller:
-            g = lambda n: self.get_parameter(n).value  # noqa: E731
-            defaults = tolerances_from(tuple(self.joint_names), list(g("jtc.trajectory_tolerance")),
-                                       list(g("jtc.goal_tolerance")), float(g("jtc.goal_time")))
+            defaults = tolerances_from(tuple(self.joint_names), list(p.jtc.trajectory_tolerance),
+                                       list(p.jtc.goal_tolerance), float(p.jtc.goal_time))
             self.jtc = ControllerServer(self, JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate,
                                         defaults, self._applied), self._now, lambda: self.plant.joint_state()[:2],
-                                        self._jtc_busy, tp["jtc_action"], tp["jtc_topic"])
+                                        self._jtc_busy, t.jtc_action, t.jtc_topic)
             if self.mode == "lockstep":
                 self.create_timer(0.002, self._free_run)
-        idle = float(self.get_parameter("joint_states.idle_period").value)
+        idle = float(p.joint_states.idle_period)
         idle = (IDLE_STATE_PERIOD if self.plant.trajectory_controller else 0.0) if idle < 0 else idle
         if self.mode == "lockstep" and idle > 0:
             # a robot's joint_state_broadcaster publishes at rest too: the last state again (time stands still)
@@ -161,10 +159,10 @@ class SimPlantNode(Node):
             self._publish_clock()
         else:
             self.create_timer(1.0 / self.rate, self._realtime_tick)
-        if self.get_parameter("task.autostart").value:
+        if p.task.autostart:
             self._start_task()
         self.get_logger().info(
-            f"{self.n} joints, plant {self.get_parameter('plant.model').value}, modes " + ", ".join(
+            f"{self.n} joints, plant {p.plant.model}, modes " + ", ".join(
                 f"{w / (2 * math.pi):.4g} Hz zeta {z:.3g}" for w, z in zip(self.plant.natural_frequency,
                                                                           self.plant.damping_ratio, strict=True))
             + f", {self.mode} at {self.rate:g} Hz")
@@ -175,8 +173,9 @@ class SimPlantNode(Node):
         return self.exchange.waiting_since
 
     # ----------------------------------------------------------------- configuration
-    def _pose(self, name: str, overrides: dict) -> np.ndarray:
-        return NodeValues(self, overrides).vector(name)
+    def _values(self, params: SimPlantParams) -> PlantValues:
+        """``params`` (present or proposed) as the plant's builders read them."""
+        return PlantValues(params, self.rate, self.n)
 
     def _cycle_time(self) -> float | None:
         """Time since the current cycle's START at the present step, s (None before any)."""
@@ -185,25 +184,26 @@ class SimPlantNode(Node):
         return (self.step_index - self._cycle_start_step) / self.rate
 
     def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
-        changes = {p.name: p.value for p in params}
-        if not self.plant.changes_live and any(p in changes for p in PLANT_KEYS):
-            model = self.get_parameter("plant.model").value
+        changed = {p.name for p in params}
+        q = self.params.with_changes(params)  # the parameters as they would be
+        if not self.plant.changes_live and changed.intersection(PLANT_KEYS):
+            model = self.params.value.plant.model
             return SetParametersResult(successful=False, reason=f"the {model} (plant.model {model}) is chosen at"
                                        " start-up; its model and plant.* do not change live")
-        if changes.get("plant.model") in START_ONLY:
+        if "plant.model" in changed and q.plant.model in START_ONLY:
             return SetParametersResult(successful=False,
-                                       reason=f"plant.model {changes['plant.model']} is chosen at start-up only")
+                                       reason=f"plant.model {q.plant.model} is chosen at start-up only")
         live = self.plant.live_parameters
+        v = self._values(q)
         try:
-            new = build_plant(NodeValues(self, changes), self.n) if any(p in changes for p in PLANT_KEYS) else None
-            for pose in ("task.start", "task.goal"):
-                if pose in changes:
-                    self._pose(pose, changes)
-            apply = None if not set(live) & changes.keys() else self.plant.prepare(
-                {n: changes.get(n, self.get_parameter(n).value) for n in live})
+            new = build_plant(v, self.n) if changed.intersection(PLANT_KEYS) else None
+            for name, pose in (("task.start", q.task.start), ("task.goal", q.task.goal)):
+                if name in changed:
+                    v.vector(name, pose)
+            apply = self.plant.prepare({n: flat(q)[n] for n in live}) if changed.intersection(live) else None
         except ValueError as err:
             return SetParametersResult(successful=False, reason=str(err))
-        self.sensors.changed(changes)
+        self.sensors.changed(q.imu, q.joint_states)
         if apply is not None:  # checked above: takes effect at the next step
             self.get_logger().info(apply())
         if new is not None:  # all checks passed: takes effect at the next step
@@ -223,7 +223,8 @@ class SimPlantNode(Node):
             return False, "a task is already running"
         if self.jtc is not None and self.jtc.running:
             return False, "joint_trajectory_controller is executing a trajectory"
-        need = int(self.get_parameter("task.subscribers").value)
+        p = self.params.value
+        need = int(p.task.subscribers)
         have = self._event_pub.get_subscription_count()  # matched, not only discovered
         if have < need:
             return False, f"{WAITING}: the cycle events have {have} matched subscriptions, task.subscribers is {need}"
@@ -231,11 +232,10 @@ class SimPlantNode(Node):
         if unmatched:
             return False, f"{WAITING}: {unmatched}"
         try:
-            task = self.task = make_task(NodeValues(self, {}), self.rate)
+            task = self.task = make_task(self._values(p), self.rate)
         except ValueError as err:
             return False, str(err)
-        g = lambda n: self.get_parameter(n).value  # noqa: E731
-        self._preroll_left = int(round(float(g("task.preroll")) * self.rate))
+        self._preroll_left = int(round(float(p.task.preroll) * self.rate))
         self._cycle_start_step = None  # the preroll belongs to no cycle
         self._preroll_total = self._preroll_left
         if self.mode == "lockstep" and self.exchange.waiting_since is None:
@@ -306,7 +306,7 @@ class SimPlantNode(Node):
             self._publish_next()
 
     def _emit_event(self, ev, t: float) -> None:
-        msg = CycleEvent(event=ev.kind, cycle=ev.cycle, task=str(self.get_parameter("task.name").value),
+        msg = CycleEvent(event=ev.kind, cycle=ev.cycle, task=str(self.params.value.task.name),
                          joint_names=self.joint_names, start_positions=ev.start.tolist(),
                          goal_positions=ev.goal.tolist())
         msg.header.stamp = sec_to_time(t)
@@ -415,7 +415,7 @@ class SimPlantNode(Node):
         self._step_asked(None if command is None else command.reshape(-1, self.n))
 
     def _watchdog(self) -> None:
-        if self.exchange.overdue(lambda: float(self.get_parameter("lockstep_timeout").value)):
+        if self.exchange.overdue(lambda: float(self.params.value.lockstep_timeout)):
             self._step_asked(None)
 
     def _realtime_tick(self) -> None:
