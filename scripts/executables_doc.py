@@ -1,8 +1,8 @@
 """Write docs/reference/executables.md: every executable's ``--help`` as it prints it.
 
 ``./run exec python scripts/executables_doc.py [--check]`` runs each executable of ``shaper_nodes`` and
-``sim_plant_node`` (and each subcommand) with ``--help`` where ``ros2 run`` finds it (``./run exec`` puts
-those folders on PATH) and writes the page; the nodes' parameter lists are left out (they are in the
+``sim_plant_node`` (and each subcommand) with ``--help`` where ``ros2 run`` finds it (lib/PACKAGE/ of the
+package's prefix) and writes the page; the nodes' parameter lists are left out (they are in the
 generated parameter reference, scripts/parameters_doc.py). With ``--check`` it writes nothing and exits 1
 when the page differs from what the executables print now.
 """
@@ -45,8 +45,10 @@ HEAD = [
 ]
 
 
-def _help(args: list[str]) -> str:
-    r = subprocess.run([*args, "--help"], capture_output=True, text=True, timeout=300,
+def _help(package: str, args: list[str]) -> str:
+    from shaper_nodes.ros.launching import executable
+
+    r = subprocess.run([str(executable(package, args[0])), *args[1:], "--help"], capture_output=True, text=True, timeout=300,
                        env={**os.environ, "COLUMNS": "100"})
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(args)} --help: exit {r.returncode}\n{r.stderr[-2000:]}")
@@ -74,11 +76,11 @@ def page() -> str:
     md = list(HEAD)
     md += [f"| [`{n}`](#{n}) | `{p}` | {'node' if k == 'node' else 'command-line tool'} |" for n, p, k in EXES]
     md.append("")
-    for name, _, kind in EXES:
-        text = _help([name])
+    for name, package, kind in EXES:
+        text = _help(package, [name])
         md += [f"## {name}", "", "```", _without_parameters(text) if kind == "node" else text, "```", ""]
         for sub in SUBCOMMANDS.get(name, []):
-            md += [f"### {name} {sub}", "", "```", _help([name, sub]), "```", ""]
+            md += [f"### {name} {sub}", "", "```", _help(package, [name, sub]), "```", ""]
     return "\n".join(md)
 
 

@@ -121,3 +121,14 @@ def test_the_checker_sees_a_broken_link_and_anchor(tmp_path: pathlib.Path) -> No
     page.write_text("[ok](a.md#a-title-with-code) [ok](a.md#twice-1) [bad](a.md#nope) [gone](c.md)\n"
                     "`[in code](d.md)`\n```\n[fenced](e.md)\n```\n[web](https://example.org/x.md)\n")
     assert broken_links(page) == ["a.md#nope: no heading #nope in a.md", "c.md: no such file"]
+
+
+@pytest.mark.integration
+def test_the_executables_reference_is_what_the_executables_print():
+    """docs/reference/executables.md is every installed executable's --help (scripts/executables_doc.py)."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, str(ROOT / "scripts" / "executables_doc.py"), "--check"],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
