@@ -48,8 +48,8 @@ HEAD = [
 def _help(package: str, args: list[str]) -> str:
     from shaper_nodes.ros.launching import executable
 
-    r = subprocess.run([str(executable(package, args[0])), *args[1:], "--help"], capture_output=True, text=True, timeout=300,
-                       env={**os.environ, "COLUMNS": "100"})
+    r = subprocess.run([str(executable(package, args[0])), *args[1:], "--help"], capture_output=True, text=True,
+                       timeout=300, env={**os.environ, "COLUMNS": "100"})
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(args)} --help: exit {r.returncode}\n{r.stderr[-2000:]}")
     return r.stdout.rstrip()
