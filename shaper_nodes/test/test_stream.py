@@ -223,8 +223,9 @@ def test_stream_points_are_shaped_per_field_and_fields_that_appear_start_at_thei
     assert out["velocities"] == pytest.approx(back)
 
 
-@pytest.mark.parametrize(("stamp", "normal"), [((5, 4_000_000_000), (9, 0)), ((0, 1_500_000_000), (1, 500_000_000)),
-                                               ((-3, 4_294_967_295), (1, 294_967_295)), ((7, 999_999_999), (7, 999_999_999))])
+@pytest.mark.parametrize(("stamp", "normal"), [
+    ((5, 4_000_000_000), (9, 0)), ((0, 1_500_000_000), (1, 500_000_000)),
+    ((-3, 4_294_967_295), (1, 294_967_295)), ((7, 999_999_999), (7, 999_999_999))])
 def test_stamps_are_normalised(stamp, normal):
     assert normal_stamp(*stamp) == normal
 
