@@ -145,6 +145,25 @@ def test_a_saturated_sample_refuses_the_cycle_with_the_reason(rig):
     assert [r.cycle for r, _ in rig.node.cycles] == [1]
 
 
+@pytest.mark.parametrize("value", [3.0, 0.0])
+def test_a_stuck_or_dead_accelerometer_is_a_sensor_fault_never_rated_ok(rig, value):
+    """Cycles whose accelerometer reads one value throughout (stuck at 3.0, or exactly 0) are not buffered
+    for identification: an ERROR ``identifier: sensor`` names the fault, and the drift watch reports
+    that it cannot rate the cycle (ERROR), never OK."""
+    for cycle in (0, 1):
+        rig.cycle(cycle, accel=lambda t: value)
+    assert len(rig.node.cycles) == 0 and len(rig.node.skipped) == 2
+    assert "sensor fault: every accelerometer axis read one value through the whole cycle" in rig.node.skipped[0]
+    rig.spin_until(lambda: rig.diag.find("identifier", "stuck or dead"), "the sensor fault on /diagnostics")
+    fault = rig.diag.find("identifier", "stuck or dead")
+    assert fault.name == "identifier: sensor" and fault.level == DiagnosticStatus.ERROR
+    rig.spin_until(lambda: rig.diag.find("identifier", "cannot rate the mode"), "the drift watch's verdict")
+    drift = [s for s in rig.diag.statuses if s.name == "identifier: drift"]
+    assert drift and all(s.level == DiagnosticStatus.ERROR for s in drift)
+    rig.cycle(2, accel=decay)  # a working sensor again: buffered
+    assert [r.cycle for r, _ in rig.node.cycles] == [2]
+
+
 def test_bad_requests_are_refused_with_the_reason(rig):
     rig.cycle(0, accel=decay)
     assert not rig.identify(method="nope").success

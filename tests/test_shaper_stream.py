@@ -99,3 +99,53 @@ def test_a_renamed_shaper_renames_its_streamed_inputs_and_its_side_nodes_keep_th
     finally:
         node.destroy_node()
         ctx.try_shutdown()
+
+
+def test_stream_stamps_go_out_normalised_and_never_back(ros_context):
+    """A header stamp or a time_from_start with nanosec >= 1e9 goes out normalised; a non-zero stamp
+    earlier than the last accepted one is refused with the reason (diagnostics) and not forwarded;
+    zero (start now) always passes."""
+    from builtin_interfaces.msg import Duration, Time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    node = ShaperNode(context=ros_context, parameter_overrides=params())
+    probe = rclpy.create_node("stamp_probe", context=ros_context)
+    out: list[JointTrajectory] = []
+    refusals: list[str] = []
+    probe.create_subscription(JointTrajectory, "/joint_trajectory_controller/joint_trajectory", out.append, 10)
+    probe.create_subscription(DiagnosticArray, "/diagnostics", lambda m: refusals.extend(
+        s.message for s in m.status if s.values and s.values[0].value == "non_increasing_time"), 10)
+    pub = probe.create_publisher(JointTrajectory, "/shaper/joint_trajectory_stream", 10)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    ex.add_node(probe)
+
+    def send(sec: int, nanosec: int, t_sec: int = 0, t_nanosec: int = 10_000_000) -> None:
+        msg = JointTrajectory(joint_names=JOINTS)
+        msg.header.stamp = Time(sec=sec, nanosec=nanosec)
+        msg.points.append(JointTrajectoryPoint(positions=[0.1] * 3, time_from_start=Duration(sec=t_sec,
+                                                                                             nanosec=t_nanosec)))
+        pub.publish(msg)
+
+    try:
+        spin_until(ex, lambda: pub.get_subscription_count() >= 1 and probe.count_publishers(
+            "/joint_trajectory_controller/joint_trajectory") >= 1, "discovery")
+        send(5, 4_000_000_000, 0, 1_500_000_000)
+        spin_until(ex, lambda: len(out) == 1, "the first output")
+        assert (out[0].header.stamp.sec, out[0].header.stamp.nanosec) == (9, 0)
+        tfs = out[0].points[0].time_from_start
+        assert (tfs.sec, tfs.nanosec) == (1, 500_000_000)
+        send(8, 0)  # before 9 s: refused
+        spin_until(ex, lambda: refusals, "the refusal of a stamp that goes back")
+        assert "header stamp 8.000000000 s is before the last accepted one, 9.000000000 s" in refusals[0]
+        send(0, 0)  # now: passes
+        spin_until(ex, lambda: len(out) == 2, "the output of a zero stamp")
+        send(9, 1)
+        spin_until(ex, lambda: len(out) == 3, "the output of a later stamp")
+        assert [(m.header.stamp.sec, m.header.stamp.nanosec) for m in out] == [(9, 0), (0, 0), (9, 1)]
+        assert node.rejections["non_increasing_time"] == 1
+    finally:
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()

@@ -156,6 +156,10 @@ def test_rule_base_from_dict_checks_everything():
     bad("b_matrix needs", b_matrix=[1.0, 2.0, 3.0])
     bad("membership_params has 3", membership_params=[0, 1, 2])
     bad("finite", a_matrix=[0, 1, float("inf"), 0])
+    bad(r"a_matrix\[2\] = -1e\+308 is beyond \+-1e\+12", a_matrix=[0, 1, -1e308, -1e308])
+    bad(r"b_matrix\[1\] = 1e\+200 is beyond", b_matrix=[0, 1e200])
+    big = (a * 1e9).ravel().tolist()  # a mode at 5 kHz still loads
+    rule_base_from_dict({**good, "rules": {"r": {**good["rules"]["r"], "a_matrix": big}}})
     bad("unknown membership", membership=["sigmoid"])
     bad("1 natural frequencies but 0", natural_frequency=[1.0])
     with pytest.raises(FuzzyError, match="premise values"):

@@ -270,3 +270,29 @@ def test_the_session_refuses_bounds_that_are_not_positive():
                {"max_abs_accel": float("nan")}):
         with pytest.raises(ListError):
             ListSession(ListLearner(), **kw)
+
+
+@pytest.mark.parametrize("sample, words", [((3.0, 3.0, 3.0), "stuck or dead"), ((0.0, 0.0, 0.0), "stuck or dead"),
+                                           ((np.nan, 0.0, 0.0), "non-finite")])
+def test_a_stuck_dead_or_non_finite_sensor_is_a_sensor_fault_not_a_quiet_cycle(sample, words):
+    s = fresh()
+    s.on_event(START, 0, 0.0, [0.0], [1.0])
+    s.on_event(MOTION_END, 0, 1.5)
+    for t in np.arange(0.0, 6.0 + 1e-9, 1.0 / RATE):
+        s.on_imu(t, sample)
+    r = s.on_event(END, 0, 6.0)
+    assert r.update is None and r.refusal == "sensor" and words in r.skipped
+    assert s.learner.reference is None  # nothing learned, not even as the unshaped reference
+    r = run_cycle(s, 1, 10.0)  # a working sensor again
+    assert r.learned and r.update.action == "reference"
+
+
+def test_sensor_fault_words():
+    from shaper_nodes.core.learning.samples import sensor_fault
+
+    assert sensor_fault(np.zeros((0, 3))).startswith("0 accelerometer samples in the cycle: the sensor is silent")
+    assert sensor_fault(np.array([[1.0, 0.0, 9.81], [1.0, 0.0, 9.81]])).startswith(
+        "every accelerometer axis read one value through the whole cycle ([1, 0, 9.81], 2 samples)")
+    assert sensor_fault(np.array([[1.0, 0.0, 9.81], [1.0, 0.0, 9.8100001]])) is None  # one axis moves
+    assert "1 of 2 accelerometer samples are non-finite (first at sample 1)" in sensor_fault(
+        np.array([[1.0, 0.0, 9.81], [np.inf, 0.0, 9.81]]))

@@ -16,7 +16,7 @@ from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping import Mode, RetimingShaper, StreamingShaper, design, discretize
 from shaper_nodes.core.shaping.limits import JointLimits
-from shaper_nodes.core.shaping.stream import FIELDS, CommandStream, check_times
+from shaper_nodes.core.shaping.stream import FIELDS, CommandStream, check_times, normal_stamp
 
 RATE = 100.0
 NAMES = ("a", "b")
@@ -221,6 +221,33 @@ def test_stream_points_are_shaped_per_field_and_fields_that_appear_start_at_thei
     back = np.array([[-3.0, 1.0], [-3.0, 1.0]])
     out = s.shape_points(t, {"positions": pos, "velocities": back})
     assert out["velocities"] == pytest.approx(back)
+
+
+@pytest.mark.parametrize(("stamp", "normal"), [
+    ((5, 4_000_000_000), (9, 0)), ((0, 1_500_000_000), (1, 500_000_000)),
+    ((-3, 4_294_967_295), (1, 294_967_295)), ((7, 999_999_999), (7, 999_999_999))])
+def test_stamps_are_normalised(stamp, normal):
+    assert normal_stamp(*stamp) == normal
+
+
+def test_a_stamp_that_overflows_int32_seconds_is_refused():
+    with refused("too_large", "does not fit"):
+        normal_stamp(2**31 - 2, 4_000_000_000)
+
+
+def test_header_stamps_may_not_go_back_zero_means_now():
+    s = stream()
+    t = np.array([0.0])
+    pos = np.array([[0.1, 0.1]])
+    s.shape_points(t, {"positions": pos}, (10, 0))
+    s.shape_points(t, {"positions": pos}, (10, 0))  # the same stamp again: not going back
+    s.shape_points(t, {"positions": pos}, (0, 0))  # "now": always taken, not ordered
+    with refused("non_increasing_time", r"header stamp 9\.500000000 s is before the last accepted one, 10\.0"):
+        s.shape_points(t, {"positions": np.array([[5.0, 5.0]])}, (9, 500_000_000))
+    # the refused point left nothing in the filter: the next sample continues from 0.1
+    out = s.shape_points(t, {"positions": pos}, (11, 0))
+    assert out["positions"] == pytest.approx(pos)
+    assert s.last_stamp_ns == 11 * 10**9
 
 
 def test_stream_points_beyond_a_velocity_limit_restart_every_field_filter():

@@ -17,6 +17,15 @@ Documents are signed as S/MIME in text mode (``openssl smime -sign -text``, SHA-
 as sros2 signs them. An existing CA and existing enclave identities are kept (so enclaves can be
 re-issued with a new policy without re-keying); the governance and the permissions are always
 written anew. ``shaper_keystore policy`` prints the policy table and writes nothing.
+
+The keystore holds private keys, so it is written as such whatever the umask: every folder 0700,
+every key 0600, certificates and documents 0644. Nothing inside it is followed through a symbolic
+link (a planted link would make ``create`` overwrite its target): a link where a file or folder is
+expected is refused, naming it; only the CA's alias links ``{identity,permissions}_ca.*.pem`` are
+links, and they must point at ``ca.cert.pem`` / ``ca.key.pem`` beside them. Files are written to a new
+name in their folder and renamed into place (a rename replaces a path, it never writes through it).
+An existing keystore whose folders or keys have wider modes is repaired, and each repair is listed
+in what ``create`` prints.
 """
 
 from __future__ import annotations
@@ -73,6 +82,91 @@ class KeystoreError(ValueError):
     """openssl failed or the keystore is not usable; the message says which step and why."""
 
 
+DIR_MODE = 0o700   # every folder of the keystore
+KEY_MODE = 0o600   # private keys
+FILE_MODE = 0o644  # certificates, governance, permissions and their signatures
+
+
+class _Tree:
+    """Writes inside the keystore without following links, with set modes; collects the repairs made."""
+
+    def __init__(self) -> None:
+        self.repaired: list[str] = []
+
+    @staticmethod
+    def no_link(path: pathlib.Path) -> None:
+        if path.is_symlink():
+            raise KeystoreError(f"{path} is a symbolic link (to {os.readlink(path)}): the keystore follows no link;"
+                                " remove it (or pass the real folder) and run again")
+
+    def mode(self, path: pathlib.Path, mode: int) -> None:
+        """Check ``path`` is no link and set its mode, noting a repair when it was other."""
+        self.no_link(path)
+        old = path.lstat().st_mode & 0o777
+        if old != mode:
+            try:
+                path.chmod(mode)
+            except OSError as exc:
+                raise KeystoreError(f"{path} has mode {old:04o} and cannot be set to {mode:04o}:"
+                                    f" {exc.strerror}") from None
+            self.repaired.append(f"repaired mode of {path}: {old:04o} -> {mode:04o}")
+
+    def folder(self, path: pathlib.Path) -> None:
+        """Make ``path`` (and missing parents inside the keystore) a folder of mode 0700."""
+        self.no_link(path)
+        if not path.exists():
+            if path.parent != path and not path.parent.exists():
+                self.folder(path.parent)
+            path.mkdir(mode=DIR_MODE)
+            path.chmod(DIR_MODE)  # the umask may have taken bits away; never adds any here
+        elif not path.is_dir():
+            raise KeystoreError(f"{path} is not a folder")
+        self.mode(path, DIR_MODE)
+
+    @staticmethod
+    def scratch(dst: pathlib.Path) -> pathlib.Path:
+        """A new, unused path beside ``dst`` for a file to be renamed onto it."""
+        return dst.parent / f".{dst.name}.{secrets.token_hex(6)}.tmp"
+
+    def install(self, tmp: pathlib.Path, dst: pathlib.Path, mode: int) -> None:
+        """Give ``tmp`` (beside ``dst``) its mode and rename it onto ``dst``."""
+        self.no_link(dst)
+        tmp.chmod(mode)
+        os.replace(tmp, dst)
+
+    def write(self, dst: pathlib.Path, data: bytes, mode: int = FILE_MODE) -> None:
+        tmp = self.scratch(dst)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            self.install(tmp, dst, mode)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+
+    def openssl_out(self, dst: pathlib.Path, mode: int, *args: str | pathlib.Path) -> None:
+        """Run ``openssl ARGS -out <new path>`` and install what it wrote as ``dst``."""
+        self.no_link(dst)
+        tmp = self.scratch(dst)
+        try:
+            openssl(*args, "-out", tmp)
+            self.install(tmp, dst, mode)
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def alias(self, link: pathlib.Path, target: str) -> None:
+        """The CA alias ``link`` -> ``target`` (a name in the same folder): made, or checked."""
+        if link.is_symlink():
+            if os.readlink(link) != target:
+                raise KeystoreError(f"{link} points at {os.readlink(link)}, not {target}: refusing a CA alias that"
+                                    " leads elsewhere; remove it and run again")
+        elif link.exists():
+            raise KeystoreError(f"{link} should be a link to {target} and is a file; remove it and run again")
+        else:
+            link.symlink_to(target)
+
+
 def openssl_path() -> str:
     """The openssl executable (``OPENSSL`` environment variable, else on PATH)."""
     given = os.environ.get("OPENSSL")
@@ -101,9 +195,8 @@ def _config(tmp: pathlib.Path, cn: str) -> pathlib.Path:
     return path
 
 
-def _new_key(path: pathlib.Path) -> None:
-    openssl("genpkey", "-algorithm", "EC", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-out", path)
-    path.chmod(0o600)
+def _new_key(tree: _Tree, path: pathlib.Path) -> None:
+    tree.openssl_out(path, KEY_MODE, "genpkey", "-algorithm", "EC", "-pkeyopt", "ec_paramgen_curve:prime256v1")
 
 
 def _serial() -> str:
@@ -114,50 +207,56 @@ def _days(validity: Validity) -> str:
     return str(max(1, (validity.not_after - validity.not_before).days))
 
 
-def make_ca(keystore: pathlib.Path, validity: Validity, tmp: pathlib.Path) -> bool:
+def make_ca(tree: _Tree, keystore: pathlib.Path, validity: Validity, tmp: pathlib.Path) -> bool:
     """Create the CA in ``keystore/public`` and ``keystore/private`` unless it exists; True if made."""
     public, private = keystore / "public", keystore / "private"
+    tree.folder(public)
+    tree.folder(private)
     cert, key = public / "ca.cert.pem", private / "ca.key.pem"
+    tree.no_link(cert)
+    tree.no_link(key)
     if cert.exists() != key.exists():
         raise KeystoreError(f"{cert} and {key} must both exist or both be absent (a half keystore)")
     made = False
     if not cert.exists():
-        public.mkdir(parents=True, exist_ok=True)
-        private.mkdir(parents=True, exist_ok=True)
-        private.chmod(0o700)
-        _new_key(key)
-        openssl("req", "-x509", "-new", "-key", key, "-config", _config(tmp, CA_SUBJECT), "-extensions", "ca_ext",
-                "-days", _days(validity), "-sha256", "-set_serial", _serial(), "-out", cert)
+        _new_key(tree, key)
+        tree.openssl_out(cert, FILE_MODE, "req", "-x509", "-new", "-key", key, "-config", _config(tmp, CA_SUBJECT),
+                         "-extensions", "ca_ext", "-days", _days(validity), "-sha256", "-set_serial", _serial())
         made = True
+    tree.mode(cert, FILE_MODE)
+    tree.mode(key, KEY_MODE)
     for folder, target in ((public, "ca.cert.pem"), (private, "ca.key.pem")):
         for kind in ("identity_ca", "permissions_ca"):
-            link = folder / target.replace("ca", kind, 1)
-            if not link.exists() and not link.is_symlink():
-                link.symlink_to(target)
+            tree.alias(folder / target.replace("ca", kind, 1), target)
     return made
 
 
-def sign(keystore: pathlib.Path, document: pathlib.Path, out: pathlib.Path) -> None:
+def sign(tree: _Tree, keystore: pathlib.Path, document: pathlib.Path, out: pathlib.Path) -> None:
     """Sign ``document`` with the permissions CA: S/MIME, text mode, SHA-256 (as sros2 does)."""
-    openssl("smime", "-sign", "-text", "-md", "sha256", "-in", document, "-out", out,
-            "-signer", keystore / "public" / "permissions_ca.cert.pem",
-            "-inkey", keystore / "private" / "permissions_ca.key.pem")
+    tree.no_link(document)
+    tree.openssl_out(out, FILE_MODE, "smime", "-sign", "-text", "-md", "sha256", "-in", document,
+                     "-signer", keystore / "public" / "permissions_ca.cert.pem",
+                     "-inkey", keystore / "private" / "permissions_ca.key.pem")
 
 
-def make_identity(keystore: pathlib.Path, folder: pathlib.Path, enclave: str, validity: Validity,
+def make_identity(tree: _Tree, keystore: pathlib.Path, folder: pathlib.Path, enclave: str, validity: Validity,
                   tmp: pathlib.Path) -> bool:
     """The enclave's key and certificate (subject ``CN=<enclave>``, signed by the identity CA),
     unless both exist; True if made."""
     cert, key = folder / "cert.pem", folder / "key.pem"
+    tree.no_link(cert)
+    tree.no_link(key)
     if cert.exists() and key.exists():
+        tree.mode(cert, FILE_MODE)
+        tree.mode(key, KEY_MODE)
         return False
-    _new_key(key)
+    _new_key(tree, key)
     conf = _config(tmp, enclave)
     csr = tmp / "request.csr"
     openssl("req", "-new", "-key", key, "-config", conf, "-out", csr)
-    openssl("x509", "-req", "-in", csr, "-CA", keystore / "public" / "identity_ca.cert.pem",
-            "-CAkey", keystore / "private" / "identity_ca.key.pem", "-set_serial", _serial(),
-            "-days", _days(validity), "-sha256", "-extfile", conf, "-extensions", "enclave_ext", "-out", cert)
+    tree.openssl_out(cert, FILE_MODE, "x509", "-req", "-in", csr, "-CA", keystore / "public" / "identity_ca.cert.pem",
+                     "-CAkey", keystore / "private" / "identity_ca.key.pem", "-set_serial", _serial(),
+                     "-days", _days(validity), "-sha256", "-extfile", conf, "-extensions", "enclave_ext")
     return True
 
 
@@ -191,27 +290,31 @@ def create(keystore: pathlib.Path, root: str = DEFAULT_ROOT, policy: Mapping[str
     permissions = suite_permissions(root, validity, policy, domains)  # checks the names before any file
     openssl_path()
     done = []
-    keystore.mkdir(parents=True, exist_ok=True)
+    tree = _Tree()
+    tree.folder(keystore)
     enclaves = keystore / "enclaves"
-    enclaves.mkdir(exist_ok=True)
+    tree.folder(enclaves)
     with tempfile.TemporaryDirectory(prefix="shaper_keystore_") as tmp_name:
         tmp = pathlib.Path(tmp_name)
-        done.append(("created" if make_ca(keystore, validity, tmp) else "kept") + f" CA {keystore / 'public'}")
+        done.append(("created" if make_ca(tree, keystore, validity, tmp) else "kept") + f" CA {keystore / 'public'}")
         gov = enclaves / "governance.xml"
-        gov.write_text(governance_xml(domains))
-        sign(keystore, gov, enclaves / "governance.p7s")
+        tree.write(gov, governance_xml(domains).encode())
+        sign(tree, keystore, gov, enclaves / "governance.p7s")
         done.append(f"signed {gov}")
+        ca_cert = (keystore / "public" / "ca.cert.pem").read_bytes()
         for enclave, text in permissions.items():
             folder = enclaves / enclave.strip("/")
-            folder.mkdir(parents=True, exist_ok=True)
-            made = make_identity(keystore, folder, enclave, validity, tmp)
+            for part in reversed(folder.relative_to(enclaves).parents):  # every level checked and set
+                tree.folder(enclaves / part)
+            tree.folder(folder)
+            made = make_identity(tree, keystore, folder, enclave, validity, tmp)
             for name in ("identity_ca.cert.pem", "permissions_ca.cert.pem"):
-                shutil.copyfile(keystore / "public" / name, folder / name)
-            shutil.copyfile(enclaves / "governance.p7s", folder / "governance.p7s")
-            (folder / "permissions.xml").write_text(text)
-            sign(keystore, folder / "permissions.xml", folder / "permissions.p7s")
+                tree.write(folder / name, ca_cert)
+            tree.write(folder / "governance.p7s", (enclaves / "governance.p7s").read_bytes())
+            tree.write(folder / "permissions.xml", text.encode())
+            sign(tree, keystore, folder / "permissions.xml", folder / "permissions.p7s")
             done.append(f"{'created' if made else 'kept'} identity and signed permissions of {enclave}")
-    return done
+    return [*tree.repaired, *done]
 
 
 def _pairs(values: Sequence[str] | None, what: str) -> dict[str, str]:

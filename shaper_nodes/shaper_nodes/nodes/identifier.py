@@ -58,10 +58,10 @@ from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
 from shaper_nodes.core.identification import METHODS, IdentificationError, ModeFit, identify_records, recommend_shaper
 from shaper_nodes.core.identification.drift import DriftWatch, ModeCheck, check_mode
-from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range
+from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sensor_fault
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
-from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
+from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
@@ -84,7 +84,11 @@ def _validate_method(method: str) -> str:
     return method
 
 
-class SaturatedRecord(IdentificationError):
+class SensorFault(IdentificationError):
+    """A cycle whose accelerometer data cannot come from a working sensor (silent, stuck, non-finite)."""
+
+
+class SaturatedRecord(SensorFault):
     """A cycle with accelerometer samples at or beyond the sensor's range; ``count`` of them."""
 
     def __init__(self, message: str, count: int) -> None:
@@ -99,11 +103,16 @@ def check_record(result: CycleResult, min_samples: int, max_abs_accel: float = M
     Raises
     ------
     IdentificationError
-        Too few samples in the window, non-finite samples, or a gap in the samples;
-        :class:`SaturatedRecord` if any sample of the cycle is at or beyond ``max_abs_accel``
-        (m/s^2, the sensor's range).
+        Too few samples in the window, or a gap in the samples; :class:`SensorFault` when the cycle's
+        samples cannot come from a working sensor (none, non-finite, or every axis one value through
+        the cycle: :func:`~shaper_nodes.core.learning.samples.sensor_fault`), and its subclass
+        :class:`SaturatedRecord` if any sample of the cycle is at or beyond ``max_abs_accel`` (m/s^2,
+        the sensor's range).
     """
     t, a = result.accel_times, result.accel
+    fault = sensor_fault(a)  # over the whole cycle, motion included
+    if fault is not None:
+        raise SensorFault(f"cycle {result.cycle}: sensor fault: {fault}")
     sel = (t >= result.residual.window_start) & (t < result.residual.window_end)
     t, a = t[sel], a[sel]
     if t.size < min_samples:
@@ -258,7 +267,10 @@ class IdentifierNode(Node):
                                   float(self.params.value.sensor.max_abs_accel))
         except SaturatedRecord as err:
             self.saturated += err.count
-            self._skip(str(err), "saturated")
+            self._sensor_fault(result.cycle, str(err), "saturated")
+            return
+        except SensorFault as err:
+            self._sensor_fault(result.cycle, str(err), "sensor")
             return
         except IdentificationError as err:
             self._skip(str(err))
@@ -338,6 +350,17 @@ class IdentifierNode(Node):
             chosen = {max(modes, key=lambda m: m.amplitude)}
         checks = [check_mode(active.amplitudes, active.times, design, m, tol) for m in chosen]
         return max(checks, key=lambda c: c.vibration)
+
+    def _sensor_fault(self, cycle: int, why: str, kind: str) -> None:
+        """A cycle the sensor failed: skipped, an ERROR ``identifier: sensor``, and the drift watch says it
+        cannot rate (never OK on a dead sensor; the run of cycles outside the band is left as it was)."""
+        self.skipped.append(why)
+        text = f"{why}; cycle not used for identification"
+        if not self.diagnostics.report(kind, ERROR, text, name="sensor"):
+            self.get_logger().error(text)
+        if self.params.value.watch.enabled:
+            self.diagnostics.publish("drift", ERROR, f"cycle {cycle}: cannot rate the mode: {why}",
+                                     [("cycle", str(cycle)), ("sensor_fault", kind)])
 
     def _skip(self, why: str, kind: str = "") -> None:
         self.skipped.append(why)

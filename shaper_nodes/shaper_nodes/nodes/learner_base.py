@@ -26,6 +26,9 @@ from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.parameters import Spec, declare, param, table
 from shaper_nodes.ros.shaper_client import ShaperClient, wait_for
 
+#: refusal classes that are a fault of the sensor (reported as such: ERROR, status "sensor")
+SENSOR_FAULTS = ("sensor", "saturated")
+
 SOURCE = "learner"
 STATE_VERSION = 1
 MODES = ("list", "mrilc")
@@ -145,9 +148,12 @@ class LearnerBase(Node):
 
     def skipped(self, msg: CycleEvent, window: tuple[float, float], why: str, refusal: str = "") -> CycleReport:
         """The report of a cycle not learned from (logged with the reason; a ``refusal`` of a class
-        the core names, such as "too_long" or "saturated", also on /diagnostics)."""
+        the core names, such as "too_long" or "saturated", also on /diagnostics; a sensor's fault,
+        "sensor" or "saturated", as an ERROR in the status ``<node>: sensor``)."""
         text = f"cycle {msg.cycle} not learned from: {why}"
-        if not (refusal and self.diagnostics.report(refusal, WARN, text)):  # logged there unless throttled
+        fault = refusal in SENSOR_FAULTS
+        if not (refusal and self.diagnostics.report(refusal, ERROR if fault else WARN, text,
+                                                    name="sensor" if fault else None)):  # logged unless throttled
             self.get_logger().warning(text)
         return self.report(msg, window, ["skipped"], [1.0])
 

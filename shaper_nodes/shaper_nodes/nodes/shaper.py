@@ -85,7 +85,7 @@ from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFir, UpdatePolicy, discretize
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
-from shaper_nodes.core.shaping.stream import CommandStream
+from shaper_nodes.core.shaping.stream import NS, CommandStream, normal_stamp
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
@@ -347,12 +347,17 @@ class ShaperNode(Node):
         self._arrived("stream", info)
         try:
             times, fields = trajectory_arrays(msg, self.joint_names, require_times=False, limit=self.stream.max_abs)
-            shaped = self.stream.shape_points(times, fields)
+            stamp = msg.header.stamp
+            stamp.sec, stamp.nanosec = normal_stamp(stamp.sec, stamp.nanosec)
+            durations = [p.time_from_start for p in msg.points]
+            for d in durations:
+                if d.nanosec >= NS:  # normalised as the stamp (the times were checked as seconds already)
+                    d.sec, d.nanosec = normal_stamp(d.sec, d.nanosec)
+            shaped = self.stream.shape_points(times, fields, (stamp.sec, stamp.nanosec))
         except InputError as err:
             self._reject(self._in_topics["stream_in"], err)
             return
-        self._stream_pub.publish(trajectory_msg(msg.header, self.joint_names, [p.time_from_start for p in msg.points],
-                                                shaped))
+        self._stream_pub.publish(trajectory_msg(msg.header, self.joint_names, durations, shaped))
         self._count_forwarded("stream")
 
     def whole_shaping(self, shaper: Shaper | None = None) -> WholeShaping:

@@ -16,7 +16,7 @@ import io
 import pathlib
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import BinaryIO
 
 from .errors import BagError, ChunkTooLarge
@@ -199,8 +199,11 @@ class McapScan:
     chunks: int = 0
     end: int = 8
     reason: str = ""
+    corrupt: list[str] = field(default_factory=list)
 
     def describe(self) -> str:
+        if self.closed:
+            return f"{self.path}: " + "; ".join(self.corrupt)
         return (f"{self.path}: recording not closed (no summary/footer): {self.chunks} complete chunk(s)"
                 f" ({self.end} of {self.size} bytes), then {self.reason}")
 
@@ -209,6 +212,10 @@ def scan_mcap(path: pathlib.Path, limits: ReadLimits | None = None) -> McapScan:
 
     Reads 9 bytes per record and 40 bytes plus the compression name per chunk: never more than the
     file holds, nothing inflated.
+
+    A chunk whose header cannot be one (a compression name or a compressed size larger than its
+    record) is damage, not a threat: it is listed in ``corrupt`` (the file is then read record by
+    record, which skips it) and the walk goes on.
 
     Raises
     ------
@@ -233,8 +240,11 @@ def scan_mcap(path: pathlib.Path, limits: ReadLimits | None = None) -> McapScan:
                                f" ({size - pos - 9} of its {length} bytes written)")
                 return scan
             if op == OP_CHUNK:
-                _check_chunk_header(f, pos, length, limits, path)
-                scan.chunks += 1
+                damage = _check_chunk_header(f, pos, length, limits, path)
+                if damage:
+                    scan.corrupt.append(damage)
+                else:
+                    scan.chunks += 1
             elif op == OP_FOOTER:
                 scan.closed, scan.end = True, pos + 9 + length
                 return scan
@@ -242,19 +252,21 @@ def scan_mcap(path: pathlib.Path, limits: ReadLimits | None = None) -> McapScan:
             scan.end = pos
             f.seek(pos)
 
-def _check_chunk_header(f: BinaryIO, pos: int, length: int, limits: ReadLimits, path: pathlib.Path) -> None:
-    """Read the fixed fields of the chunk record at ``pos`` and check its sizes (BagError)."""
+def _check_chunk_header(f: BinaryIO, pos: int, length: int, limits: ReadLimits, path: pathlib.Path) -> str:
+    """Read the fixed fields of the chunk record at ``pos``: "" if sound, else what is corrupt.
+
+    Sizes beyond the limits raise :class:`BagError` (see :func:`scan_mcap`).
+    """
     fixed = f.read(28)
     if len(fixed) < 28 or length < 40:
-        raise BagError(f"{path}: chunk at offset {pos}: its record of {length} bytes is too short for a chunk"
-                       " header")
+        return f"chunk at offset {pos}: its record of {length} bytes is too short for a chunk header"
     uncompressed = struct.unpack_from("<Q", fixed, 16)[0]
     (name_len,) = struct.unpack("<I", f.read(4))
     if name_len > min(length - 40, 64):
-        raise BagError(f"{path}: chunk at offset {pos}: corrupt header (compression name of {name_len} bytes)")
+        return f"chunk at offset {pos}: corrupt header (compression name of {name_len} bytes)"
     compression = f.read(name_len).decode("ascii", errors="replace")
     (compressed,) = struct.unpack("<Q", f.read(8))
     if compressed > length - 40 - name_len:
-        raise BagError(f"{path}: chunk at offset {pos}: corrupt header (declares {compressed} compressed bytes in"
-                       f" a record of {length})")
+        return f"chunk at offset {pos}: corrupt header (declares {compressed} compressed bytes in a record of {length})"
     check_chunk(pos, compression, uncompressed, compressed, limits, path)
+    return ""

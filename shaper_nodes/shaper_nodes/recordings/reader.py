@@ -95,7 +95,7 @@ class Bag:
         files, expected, has_meta = mcap_files(self.path, self.limits)  # metadata.yaml's size checked
         # every MCAP file walked header by header before anything is inflated (BagError if refused)
         scans = [scan_mcap(f, self.limits) for f in files if not is_sqlite(f)]
-        unclosed = [sc for sc in scans if not sc.closed]
+        unclosed = [sc for sc in scans if not sc.closed or sc.corrupt]
         try:
             if recover:
                 raise BagRecovery("asked to scan the file record by record")

@@ -9,6 +9,14 @@ and the time range of the messages in the chunk that was cut, read from its head
 are deserialised with a typestore built from the schemas in the file; a type whose definition is
 missing or does not parse is reported.
 
+A file that was closed still has its summary section, whose chunk index gives the offset and the
+length of every chunk. So a record whose header is corrupt (a chunk length that overruns the file,
+or does not match the index) or whose content does not parse does not end the reading there: the
+chunk is read with the index's length, and where it still does not read, the scan goes on at the
+next indexed chunk; the skipped bytes and the log-time range of the skipped chunk(s) are stated
+(:attr:`Damage.skipped_chunks`). The summary is read only when the footer points at one inside the
+file, and its size is bounded by ``ReadLimits.metadata_bytes``.
+
 A recording that was not closed is described plainly (:func:`describe_unclosed`): how many
 messages were read, where the data ends, and, from the last heartbeat the suite's recorder wrote
 into it (:mod:`.heartbeat`), until when the recorder was alive and how much it lost at most after
@@ -113,6 +121,15 @@ class RecoveredFile:
         self.store = get_typestore(Stores.EMPTY)
         self.bad_types: dict[str, str] = {}
         self._last_beat: tuple[int, bytes, str] | None = None  # log time, raw, msgtype
+        self._stopped = ""  # why the scan stopped last
+        self.index: dict[int, tuple[int, int, int]] = {}  # chunk offset -> (length, start ns, end ns)
+        for rec in _summary_records(path, self.size, self.limits):  # the schemas and channels of a lost chunk too
+            if isinstance(rec, tuple):
+                self.index[rec[0]] = rec[1:]
+            elif hasattr(rec, "encoding"):
+                self._add_schema(rec.id, rec.name, rec.encoding, rec.data)
+            else:
+                self._add_channel(rec.id, rec.topic, rec.schema_id)
         # a first pass over the readable part: channels, definitions, counts (messages stream later)
         for _ in self._records(set(), collect=True):
             pass
@@ -148,18 +165,24 @@ class RecoveredFile:
             good = 8
             while True:
                 record = self._next_record(f, good, collect)
-                if record is None:
+                if record is not None:
+                    op, length, body = record
+                    stream = ReadDataStream(io.BytesIO(body))
+                    try:
+                        end = yield from self._record_items(op, length, stream, wanted, collect, good)
+                    except Exception as err:
+                        self._stop(collect, good, f"unreadable {OPNAMES.get(op, hex(op))} record at byte {good}:"
+                                   f" {err}")
+                    else:
+                        if end:
+                            return
+                        good += 9 + length
+                        continue
+                resume = self._resume(collect, good)
+                if resume is None:
                     return
-                op, length, body = record
-                stream = ReadDataStream(io.BytesIO(body))
-                try:
-                    end = yield from self._record_items(op, length, stream, wanted, collect, good)
-                except Exception as err:
-                    self._stop(collect, good, f"unreadable {OPNAMES.get(op, hex(op))} record at byte {good}: {err}")
-                    return
-                if end:
-                    return
-                good += 9 + length
+                good = resume
+                f.seek(good)
 
     def _next_record(self, f: BinaryIO, good: int, collect: bool) -> tuple[int, int, bytes] | None:
         """(opcode, length, body) of the record at ``good`` (bytes), or None where reading stops (noted)."""
@@ -171,6 +194,16 @@ class RecoveredFile:
             self._stop(collect, good, "cut inside a record header")
             return None
         op, length = head[0], struct.unpack("<Q", head[1:])[0]
+        indexed = self.index.get(good) if self.index else None
+        if op == OP_CHUNK and indexed is not None and 9 + length != indexed[0]:
+            if collect:
+                self.damage.skipped_chunks.append(
+                    f"chunk at byte {good}: its length field says {length} bytes, the summary's index"
+                    f" {indexed[0] - 9}; read with the index's")
+            length = indexed[0] - 9
+        if op != OP_CHUNK and indexed is not None:
+            self._stop(collect, good, f"record at byte {good} has opcode {op:#04x} where the summary indexes a chunk")
+            return None
         if length > self.size and (op not in OPNAMES or length >= 2**40):
             self._stop(collect, good, f"corrupt record header at byte {good} (length {length})")
             return None
@@ -228,7 +261,29 @@ class RecoveredFile:
                 if item is not None:
                     yield item
 
+    def _resume(self, collect: bool, good: int) -> int | None:
+        """Where reading goes on after the record at ``good`` failed: the next chunk the summary indexes.
+
+        The failure noted by :meth:`_stop` becomes a skipped chunk, with the bytes and log times lost.
+        """
+        if not self.index or self._stopped in ("", "the file ends without a footer"):
+            return None
+        later = sorted(o for o in self.index if o > good)
+        if not later:
+            return None
+        nxt = later[0]
+        if collect:
+            d = self.damage
+            lost = [v for o, v in self.index.items() if good <= o < nxt]
+            times = (f"; it held the messages logged {_sec(min(v[1] for v in lost)):.3f}-"
+                     f"{_sec(max(v[2] for v in lost)):.3f} s") if lost else ""
+            d.skipped_chunks.append(f"{d.reason}; skipped {nxt - good} bytes to the next chunk the summary"
+                                    f" indexes (byte {nxt}){times}")
+            d.reason, d.lost_time, d.readable = "", None, 0
+        return nxt
+
     def _stop(self, collect: bool, good: int, reason: str, lost: tuple[int, int] | None = None) -> None:
+        self._stopped = reason  # in both passes: where to go on depends on it (:meth:`_resume`)
         if collect:
             self.damage.readable, self.damage.reason, self.damage.lost_time = good, reason, lost
 
@@ -271,6 +326,51 @@ class RecoveredFile:
             self.store.register(types)
         except Exception as err:
             self.bad_types[name] = f"its definition does not parse ({err})"
+
+def _summary_records(path: pathlib.Path, size: int, limits: ReadLimits) -> list:
+    """The summary section's schemas, channels and chunk index entries (as (offset, record length with its
+    9-byte header, first and last log time ns)).
+
+    Empty when the file has no footer, no summary, or a summary that does not read (or is larger than
+    ``limits.metadata_bytes``): the summary only helps, it is never needed.
+    """
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Channel, ChunkIndex, Schema
+
+    footer_at = size - 8 - 29  # footer record (opcode, length, 20 bytes), then the magic
+    if footer_at < 8:
+        return []
+    with open(path, "rb") as f:
+        f.seek(footer_at)
+        tail = f.read(37)
+        if len(tail) != 37 or tail[0] != OP_FOOTER:
+            return []
+        summary_start = struct.unpack_from("<Q", tail, 9)[0]
+        if not 8 <= summary_start < footer_at or footer_at - summary_start > limits.metadata_bytes:
+            return []
+        f.seek(summary_start)
+        data = f.read(footer_at - summary_start)
+    out: list = []
+    pos = 0
+    while pos + 9 <= len(data):
+        op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+        if pos + 9 + length > len(data):
+            break
+        body = ReadDataStream(io.BytesIO(data[pos + 9: pos + 9 + length]))
+        try:
+            if op == 0x08:  # chunk index
+                ci = ChunkIndex.read(body)
+                if 8 <= ci.chunk_start_offset < size and 9 < ci.chunk_length <= size - ci.chunk_start_offset:
+                    out.append((ci.chunk_start_offset, ci.chunk_length, ci.message_start_time, ci.message_end_time))
+            elif op == OP_SCHEMA:
+                out.append(Schema.read(body))
+            elif op == OP_CHANNEL:
+                out.append(Channel.read(body))
+        except Exception:
+            return []
+        pos += 9 + length
+    return out
+
 
 def _chunk_records(chunk, limits: ReadLimits, offset: int, path: pathlib.Path) -> tuple[list, str]:
     """The records of a chunk up to the first corrupt one, and what was wrong ("" if nothing)."""

@@ -203,3 +203,28 @@ def out_of_range(values: npt.ArrayLike, limit: float) -> OutOfRange | None:
         return None
     return OutOfRange(int(rows.sum()), int(a.shape[0]), float(mag[over].max()), int(np.flatnonzero(rows)[0]),
                       float(limit))
+
+
+def sensor_fault(values: npt.ArrayLike, what: str = "accelerometer") -> str | None:
+    """Why the samples of one cycle ((n,) or (n, k)) cannot come from a working sensor, or None.
+
+    A cycle contains a motion, and a motion moves a working accelerometer's reading (its noise alone
+    moves it by 1e-4 m/s^2 and more): a cycle whose every axis reads one value from its START to its
+    END (exactly 0, or stuck at 3.0) is a dead or stuck sensor, never "a quiet residual". A cycle
+    with no sample at all is a silent sensor; non-finite samples are a faulty one. (Saturation is
+    :func:`out_of_range`.) The words name the fault; the callers report them as a sensor fault.
+    """
+    a = np.asarray(values, dtype=float)
+    if a.ndim == 1:
+        a = a[:, None]
+    if a.shape[0] == 0:
+        return f"0 {what} samples in the cycle: the sensor is silent (disconnected, or its driver stopped)"
+    bad = ~np.isfinite(a)
+    if bad.any():
+        rows = np.flatnonzero(bad.any(axis=1))
+        return f"{rows.size} of {a.shape[0]} {what} samples are non-finite (first at sample {int(rows[0])})"
+    if a.shape[0] >= 2 and np.all(np.ptp(a, axis=0) == 0.0):
+        values_text = ", ".join(f"{v:g}" for v in a[0])
+        return (f"every {what} axis read one value through the whole cycle ([{values_text}], {a.shape[0]} samples):"
+                " a working sensor's reading moves with the motion and with its noise; the sensor is stuck or dead")
+    return None

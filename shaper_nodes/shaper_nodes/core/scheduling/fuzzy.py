@@ -351,14 +351,30 @@ class RuleBase:
                           float(sum(wi * m[k].zeta for wi, m in zip(w, per_rule, strict=True)))) for k in range(n))
 
 
+#: largest magnitude of a local model's A or B entry: a mechanical mode's A holds omega^2 and 2 zeta omega,
+#: so 1e12 admits modes up to 1.6e5 Hz; beyond it a value is a typo or an attack, and the weighted
+#: sums of the interpolation would overflow to inf long before 1e308
+MAX_MATRIX_ENTRY = 1e12
+
+
+def _matrix(name: str, what: str, values: Any) -> np.ndarray:
+    v = finite_values(f"rule {name} {what}", values, FuzzyError)
+    if v.size and float(np.max(np.abs(v))) > MAX_MATRIX_ENTRY:
+        k = int(np.argmax(np.abs(v)))
+        raise FuzzyError(f"rule {name}: {what}[{k}] = {v[k]:g} is beyond +-{MAX_MATRIX_ENTRY:g} (no physical"
+                         " model has such an entry; natural frequencies would be above 1.6e5 Hz)")
+    return v
+
+
 def rule_base_from_dict(spec: Mapping[str, Any]) -> RuleBase:
     """A rule base from a plain mapping (a YAML file, or the scheduler node's parameters).
 
     ``spec`` holds ``premises`` (list of names), optional ``range`` (flat [lo1, hi1, lo2, hi2...]),
     optional ``max_damping``, and ``rules``: a mapping name -> {``membership``: list of kinds,
     one per premise; ``membership_params``: the parameters of all of them, concatenated;
-    ``a_matrix``: n*n values row-major and ``b_matrix``: n*m values (optional); or/and
-    ``natural_frequency`` (rad/s) and ``damping_ratio`` lists, one per mode}.
+    ``a_matrix``: n*n values row-major and ``b_matrix``: n*m values (optional; every entry finite and
+    within :data:`MAX_MATRIX_ENTRY`); or/and ``natural_frequency`` (rad/s) and ``damping_ratio`` lists,
+    one per mode}.
     """
     premises = list(spec.get("premises") or [])
     rules = []
@@ -377,11 +393,11 @@ def rule_base_from_dict(spec: Mapping[str, Any]) -> RuleBase:
             raise FuzzyError(f"rule {name}: membership_params has {params.size} values, its functions take {pos}")
         a = b = None
         if len(r.get("a_matrix") or []):
-            av = finite_values(f"rule {name} a_matrix", r["a_matrix"], FuzzyError)
+            av = _matrix(name, "a_matrix", r["a_matrix"])
             n = int(round(math.sqrt(av.size)))
             if n * n != av.size:
                 raise FuzzyError(f"rule {name}: a_matrix needs n*n values, got {av.size}")
-            bv = finite_values(f"rule {name} b_matrix", r.get("b_matrix") or [], FuzzyError)
+            bv = _matrix(name, "b_matrix", r.get("b_matrix") or [])
             if bv.size == 0 or bv.size % n:
                 raise FuzzyError(f"rule {name}: b_matrix needs n*m values (n = {n}), got {bv.size}")
             a, b = av.reshape(n, n), bv.reshape(n, -1)

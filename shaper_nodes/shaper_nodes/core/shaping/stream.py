@@ -9,6 +9,10 @@ Inputs
     a filter's state), of one value per joint, and positions within the joint limits (a sample inside
     them whose first impulse stays inside would otherwise pull every later output out). A stream
     point's times (time_from_start, s) are non-negative and strictly increasing (:func:`check_times`).
+    A stream message's header stamp is normalised (:func:`normal_stamp`: a ``nanosec`` of 1e9 or more
+    carried into ``sec``) and, when not zero (zero: "start now"), never earlier than the last accepted
+    non-zero stamp (a controller given a stamp that goes back would replace the trajectory it runs
+    with one that started in its past).
 Outputs
     finite and within the joint limits (:class:`~shaper_nodes.core.shaping.limits.JointLimits`): an
     output can leave them although its inputs did not (a switch between shapers, a custom shaper with
@@ -77,6 +81,26 @@ def check_times(times: np.ndarray, require_order: bool = False) -> None:
         strictly_increasing("time_from_start", times)
 
 
+NS = 1_000_000_000
+INT32 = (-(2**31), 2**31 - 1)
+
+
+def normal_stamp(sec: int, nanosec: int) -> tuple[int, int]:
+    """A ``sec``/``nanosec`` pair (a header stamp or a duration) with ``nanosec`` in [0, 1e9).
+
+    Raises
+    ------
+    InputError
+        ``too_large`` when the carried ``sec`` leaves the int32 range of the message field.
+    """
+    if 0 <= nanosec < NS:
+        return sec, nanosec
+    carry, rest = divmod(int(nanosec), NS)
+    if not INT32[0] <= sec + carry <= INT32[1]:
+        raise InputError("too_large", f"stamp {sec} s + {nanosec} ns does not fit the message's int32 seconds")
+    return sec + carry, rest
+
+
 class CommandStream:
     """The streamed commands of the shaper node: their filters and the rules of the module docstring.
 
@@ -122,6 +146,7 @@ class CommandStream:
         self._last_sent: dict[str, np.ndarray | list[float]] = {}
         self._bounds_for = -1.0  # the max_abs of _bounds (see input_bounds)
         self._bounds: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
+        self.last_stamp_ns = 0  # the last accepted non-zero header stamp of the stream, ns (0: none yet)
 
     @property
     def input_bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -173,14 +198,20 @@ class CommandStream:
         values: list[float] = out["array"].ravel().tolist()
         return values
 
-    def shape_points(self, times: np.ndarray, fields: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    def shape_points(self, times: np.ndarray, fields: Mapping[str, np.ndarray],
+                     stamp: tuple[int, int] = (0, 0)) -> dict[str, np.ndarray]:
         """Trajectory points shaped field by field: ``times`` (N,) their time_from_start, s (checked by
         :func:`check_times`), ``fields`` maps each field the points carry (of :data:`FIELDS`; positions
         always) to its values (N, joints), in joint order, already finite and within ``max_abs`` (the
-        caller's conversion checks them). A field that appears starts its filter at its first value; a
-        field that vanishes stops, and starts afresh if it comes back. Holds :attr:`lock`. Returns the
-        shaped values per field, (N, joints) each."""
+        caller's conversion checks them), ``stamp`` the message's header stamp, normalised
+        (:func:`normal_stamp`), checked against the last one accepted (module docstring). A field that
+        appears starts its filter at its first value; a field that vanishes stops, and starts afresh if it
+        comes back. Holds :attr:`lock`. Returns the shaped values per field, (N, joints) each."""
         check_times(times)
+        stamp_ns = stamp[0] * NS + stamp[1]
+        if stamp_ns != 0 and stamp_ns < self.last_stamp_ns:
+            raise InputError("non_increasing_time", f"header stamp {stamp_ns / NS:.9f} s is before the last accepted"
+                             f" one, {self.last_stamp_ns / NS:.9f} s: a stream's stamps may not go back (0 = now)")
         unknown = [f for f in fields if f not in self.field_filters]
         if unknown:
             raise InputError("unsupported", f"fields {unknown} are not shaped (only {list(FIELDS)})")
@@ -196,6 +227,8 @@ class CommandStream:
                     self.field_filters[f].reset()
                     self._last_sent.pop(f"stream.{f}", None)
             self.fields = names
+            if stamp_ns != 0:
+                self.last_stamp_ns = stamp_ns
         return {f: shaped[f"stream.{f}"] for f in names}
 
     def _shape_checked(self, work: dict[str, tuple[_Filter, np.ndarray, str]]) -> dict[str, np.ndarray]:

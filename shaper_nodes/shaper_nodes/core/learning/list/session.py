@@ -32,7 +32,7 @@ import numpy.typing as npt
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
-from ..samples import MAX_ABS_ACCEL, MAX_CYCLE_DURATION, SampleBuffer, out_of_range
+from ..samples import MAX_ABS_ACCEL, MAX_CYCLE_DURATION, SampleBuffer, out_of_range, sensor_fault
 from .learner import ListLearner
 from .params import ListConfig, ListError, ListParams, finite_value
 from .trials import ListUpdate
@@ -304,7 +304,7 @@ class ListSession:
         accel = buf.values[mine] if mine.any() else np.zeros((0, 3))
         buf.keep(~mine)
         if times.size == 0:
-            return times, accel, "no accelerometer data in the cycle (sensor missing or stale)", ""
+            return times, accel, "no accelerometer data in the cycle (sensor missing or stale)", "sensor"
         if self._malformed:
             return times, accel, (f"{self._malformed} accelerometer samples of the cycle had another number of axes"
                                   f" than its others ({accel.shape[1]})"), "malformed"
@@ -313,6 +313,9 @@ class ListSession:
             self.saturated += saturated.count
             why = "saturated accelerometer: " + saturated.describe("accelerometer", "m/s^2", "sensor.max_abs_accel")
             return times, accel, why, "saturated"
+        fault = sensor_fault(accel)
+        if fault is not None:
+            return times, accel, "sensor fault: " + fault, "sensor"
         if (t - self._start) - times[-1] > self.stale_after:
             return times, accel, (f"stale accelerometer: its last sample is {(t - self._start) - times[-1]:.3f} s"
                                   f" before the cycle's END (limit {self.stale_after:g} s)"), ""
