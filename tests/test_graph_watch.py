@@ -211,3 +211,39 @@ def test_the_middleware_events_reach_the_watch_on_the_main_and_the_side_node(ros
     finally:
         guest.destroy_node()
         node.destroy_node()
+
+
+@pytest.mark.parametrize("order", ["second_after_first_is_up", "both_at_once", "second_before_first_is_up"])
+def test_two_shapers_of_one_name_both_report_it_whatever_the_start_order(start_node, order):
+    """Two shaper processes named /shaper, with the default look period (graph_watch.period 1 s):
+    each logs the duplicate (so whichever one an integrator looks at says it), whether the second
+    starts once the first is up, at the same moment, or while the first is still starting. The time
+    from the second start to both reports is printed (docs/guide/shaper_node.md states the bound)."""
+    params = {"joint_names": ["j1", "j2"], "command_rate": 100.0}
+    first = start_node("shaper_nodes", "shaper_node", params)
+    if order == "second_after_first_is_up":
+        end = time.monotonic() + TIMEOUT
+        while "shaping 2 joints" not in first.log_path.read_text():
+            assert first.running() and time.monotonic() < end, first.log_path.read_text()
+            time.sleep(0.05)
+    elif order == "second_before_first_is_up":
+        time.sleep(0.2)  # the first process has not started its node yet (it takes seconds to import)
+    began = time.monotonic()
+    second = start_node("shaper_nodes", "shaper_node", params)
+    seen: dict[str, float] = {}
+    end = time.monotonic() + TIMEOUT
+    while len(seen) < 2:
+        for label, proc in (("first", first), ("second", second)):
+            assert proc.running(), f"the {label} shaper stopped:\n{proc.log_path.read_text()}"
+            if label not in seen and "2 nodes named /shaper in the graph" in proc.log_path.read_text():
+                seen[label] = time.monotonic() - began
+        assert time.monotonic() < end, f"not reported by {sorted({'first', 'second'} - set(seen))} in {TIMEOUT} s"
+        time.sleep(0.05)
+    def stamp(proc, words: str) -> float:  # the ROS log time of the first line with ``words``
+        line = next(ln for ln in proc.log_path.read_text().splitlines() if words in ln)
+        return float(line.split("[")[2].split("]")[0])
+
+    up = max(stamp(first, "shaping 2 joints"), stamp(second, "shaping 2 joints"))
+    late = [stamp(p, "2 nodes named /shaper in the graph") - up for p in (first, second)]
+    print(f"{order}: reported by the first {late[0]:.2f} s and by the second {late[1]:.2f} s after both were up"
+          f" ({max(seen.values()):.1f} s after the second process started)")
