@@ -28,6 +28,7 @@ from shaper_nodes.core.shaping import Shaper, percentage_vibration
 from shaper_nodes.recordings import describe_damage
 
 from .analyze import Analysis, shaper_of
+from .text import plus_minus
 
 
 def _f(x: float, spec: str = ".4g") -> str:
@@ -73,6 +74,7 @@ def summary(an: Analysis) -> dict:
         "predicted": an.predicted,
         "replays": {name: {"rows": r.rows, "notes": r.notes} for name, r in an.replays.items()},
         "notes": an.notes,
+        "headline": an.headline,
     }
     if rcm is not None:
         doc["candidates"] = [{"family": c.family, "duration_s": c.duration, "v_nominal": c.nominal_vibration,
@@ -123,6 +125,7 @@ def table(an: Analysis) -> str:
     """The terminal table: cycles, modes, recommendation, replays, notes."""
     lines = [f"{an.recording.path}: {an.recording.messages_read} messages read ({an.recording.reader});"
              f" cycles from {an.segmentation}"]
+    lines += an.headline
     for d in an.recording.damage:
         lines.append(f"WARNING: {describe_damage(d)}")
     lines.append(f"{'#':>4} {'cycle':>5} {'RMS m/s2':>10} {'peak m/s2':>10} {'settle s':>9} {'window s':>17}  shaper")
@@ -131,8 +134,8 @@ def table(an: Analysis) -> str:
                      f" {_f(r.window_start - an.origin, '.3f'):>8}-{_f(r.end - an.origin, '.3f'):<8}  {r.shaper}"
                      + ("" if r.complete else "  (ends with the recording)") + (f"  [{r.issue}]" if r.issue else ""))
     if an.modes:
-        lines.append("modes: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
-                                          f" damping {m.zeta:.3g} ± {m.zeta_std:.2g}{_aside(an, m)}"
+        lines.append("modes: " + "; ".join(f"{plus_minus(m.hz, m.omega_std / (2 * math.pi), unit='Hz')},"
+                                          f" damping {plus_minus(m.zeta, m.zeta_std, '.3g')}{_aside(an, m)}"
                                           for m in an.modes))
     rcm = an.recommendation
     if rcm is not None and rcm.best is not None:
@@ -148,8 +151,9 @@ def table(an: Analysis) -> str:
     if len(an.groups) > 1:
         for g in an.groups:
             best = g.recommendation.best if g.recommendation is not None else None
-            lines.append(f"group {g.label}: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
-                                                          f" damping {m.zeta:.3g}{_aside(an, m)}" for m in g.modes)
+            lines.append(f"group {g.label}: "
+                         + "; ".join(f"{plus_minus(m.hz, m.omega_std / (2 * math.pi), unit='Hz')},"
+                                     f" damping {m.zeta:.3g}{_aside(an, m)}" for m in g.modes)
                          + (f"; recommended {best.family} ({1e3 * best.duration:.1f} ms)" if best else
                             f"; {NO_SHAPER_NEEDED}" if _no_shaper_needed(g.recommendation) else ""))
     for name, rep in an.replays.items():
@@ -215,6 +219,8 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
           f"{rec.messages_read} messages read with {rec.reader}; cycles from {an.segmentation};"
           f" accelerometer `{rec.topics['accel']}`" + (", window mean removed" if an.removed_mean else "")
           + f"; times in s from {an.origin:.0f} s on the recording's clock.", ""]
+    for h in an.headline:
+        md += [f"> **{h}**", ""]
     for d in doc["damage"]:
         md += [f"> **Damaged recording:** {d['text']}", ""]
     md += ["## Cycles", "", "Residual vibration: RMS and peak of the tip acceleration magnitude (m/s²) from the"
@@ -284,7 +290,8 @@ def _modes_markdown(an: Analysis, doc: dict) -> list[str]:
     if an.modes:
         md += ["| mode | frequency (Hz) | damping ratio | used for the shaper |", "|---|---|---|---|"]
         for i, m in enumerate(an.modes):
-            md.append(f"| {i + 1} | {m.hz:.4g} ± {m.omega_std / (2 * math.pi):.2g} | {m.zeta:.4g} ± {m.zeta_std:.2g} |"
+            md.append(f"| {i + 1} | {plus_minus(m.hz, m.omega_std / (2 * math.pi))} |"
+                      f" {plus_minus(m.zeta, m.zeta_std)} |"
                       f" {'no: ' + an.ringing_issue(m) if an.ringing_issue(m) else 'yes'} |")
         md.append("")
         if doc["no_shaper_needed"]:
@@ -315,7 +322,7 @@ def _groups_markdown(groups: list[dict]) -> list[str]:
         shaper = (f"{r['family']} ({1e3 * r['duration']:.1f} ms)" if r else
                   "none needed (no mode rings)" if g["no_shaper_needed"] else "none")
         md.append(f"| {', '.join(f'#{r}' for r in g['rows'])} | "
-                  + ", ".join(f"{m['frequency_hz']:.4g} ± {m['frequency_std_hz']:.2g}" for m in g["modes"])
+                  + ", ".join(plus_minus(m["frequency_hz"], m["frequency_std_hz"]) for m in g["modes"])
                   + f" | {shaper} |")
     return [*md, ""]
 
