@@ -3,9 +3,9 @@
 The rule (docs/guide/fleet.md). A robot's recordings are taken in the order of their start time; those
 that gave no mode (or could not be analysed) are listed but take no part. The **baseline** is the
 robot's first ``baseline`` recordings with a mode: its frequency f_b and damping ratio z_b are
-the means of those recordings' strongest mode, its scatter s_f, s_z their sample standard
-deviations. Every later recording is compared on its mode nearest f_b (frequency f, damping z,
-one-sigma uncertainties u_f, u_z from the identification). The comparison's sigma allows for
+the means of those recordings' strongest mode (the strongest that rings, as analyze_bag decides),
+its scatter s_f, s_z their sample standard deviations. Every later recording is compared on its
+(ringing) mode nearest f_b (frequency f, damping z, one-sigma uncertainties u_f, u_z from the identification). The comparison's sigma allows for
 both the recording's own uncertainty and the recording-to-recording scatter the baseline showed,
 and for the baseline mean's own error::
 
@@ -17,6 +17,15 @@ f_b) *and* by more than ``sigmas`` sigma_f, or its damping ratio changed by more
 identifier's on-robot drift watch (:class:`~shaper_nodes.core.identification.drift.DriftWatch`)
 does with cycles, an **alert** is raised once ``confirm`` recordings in a row are out, so one odd
 recording raises nothing.
+
+The **baseline is checked** too (:func:`_baseline_check`), since a drift inside it would otherwise move
+f_b along and never be seen: a baseline recording more than ``max_frequency_shift`` f_b and ``sigmas``
+of its own uncertainty from f_b is out (scatter), and a least-squares trend over the baseline that
+changes by more than ``max_frequency_shift`` f_b from its first to its last recording, at more than
+``sigmas`` standard errors, is a drift (trend). Either makes the robot's verdict ALERT
+(:attr:`RobotDrift.verdict`, the one string the terminal, the report and the plot's title print, so
+the plot and the verdict agree: a point drawn out is either confirmed, or counted in the verdict as
+"not confirmed").
 
 For an alert: the new mode (mean of the recordings out since the run began, with the larger of
 their rms uncertainty and their scatter), the retune (the shaper
@@ -185,7 +194,8 @@ def robot_drift(robot: str, results: Sequence[Result], rule: DriftRule) -> Robot
     out.baseline_recommendation, base_shaper = _recommend(base_mode, rule)
     run: list[Point] = []
     for p in usable[rule.baseline:]:
-        m = min(p.result.modes, key=lambda m: abs(float(m["frequency_hz"]) - out.baseline_hz))
+        m = min([m for m in p.result.modes if m.get("rings", True)] or p.result.modes,
+                key=lambda m: abs(float(m["frequency_hz"]) - out.baseline_hz))
         p.frequency_hz, p.frequency_std_hz = float(m["frequency_hz"]), float(m["frequency_std_hz"] or 0.0)
         p.zeta, p.zeta_std = float(m["zeta"]), float(m["zeta_std"] or 0.0)
         sf = math.hypot(max(p.frequency_std_hz, out.baseline_scatter_hz), base_uf / math.sqrt(n))

@@ -105,6 +105,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {d.robot:<20} {len(d.points):>4} rec.  {base}  {d.verdict}" + (f"  ({d.note})" if d.note else ""))
             if d.baseline_issue:
                 print(f"      the baseline is not steady: {d.baseline_issue}")
+            for p in d.points:
+                for h in p.result.headline:
+                    print(f"      {p.result.path}: {h}")
             for a in d.alerts:
                 retune = (f"{a.retune['family']} at {a.retune['designed_hz']:.4g} Hz" if a.retune else "none")
                 print(f"      from {a.first_out}: {a.why}; retune: {retune}")
