@@ -6,8 +6,8 @@ robot's first ``baseline`` recordings with a mode: its frequency f_b and damping
 the means of those recordings' strongest mode (the strongest that rings, as analyze_bag decides),
 its scatter s_f, s_z their sample standard deviations. Every later recording is compared on its
 (ringing) mode nearest f_b (frequency f, damping z, one-sigma uncertainties u_f, u_z from the
-identification). The comparison's sigma allows for both the recording's own uncertainty and the recording-to-recording scatter the baseline showed,
-and for the baseline mean's own error::
+identification). The comparison's sigma allows for both the recording's own uncertainty and the
+recording-to-recording scatter the baseline showed, and for the baseline mean's own error::
 
     sigma_f = sqrt(max(u_f, s_f)^2 + max(rms u_f,baseline, s_f)^2 / n_baseline)    (same for z)
 
