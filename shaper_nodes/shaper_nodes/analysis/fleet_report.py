@@ -21,10 +21,11 @@ from typing import Any
 from .fleet import FleetRun
 from .fleet_drift import DriftRule, RobotDrift
 from .report import json_ready
+from .text import plus_minus, value
 
 
 def _f(x: float | None, spec: str = ".4g") -> str:
-    return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
+    return value(x, spec)
 
 
 def _when(t: float) -> str:
@@ -98,7 +99,7 @@ def markdown(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule, plot: 
         for a in d.alerts:
             lines.append(f"- **alert** from {a.first_out} ({_when(a.start_s)} UTC), confirmed at {a.raised_at};"
                          f" {a.recordings_out} recordings out: {a.why}")
-            lines.append(f"  - new mode {a.frequency_hz:.4g} +- {a.frequency_std_hz:.2g} Hz, zeta {a.zeta:.3g}"
+            lines.append(f"  - new mode {plus_minus(a.frequency_hz, a.frequency_std_hz, unit='Hz')}, zeta {a.zeta:.3g}"
                          f" ({100 * a.shift:+.1f} %, zeta {a.damping_change:+.3g})")
             if a.baseline_shaper:
                 b = a.baseline_shaper
