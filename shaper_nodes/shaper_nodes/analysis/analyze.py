@@ -24,6 +24,7 @@ Learner replays: those of :data:`~.replay.LEARNER_REPLAYS` that the options ask 
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -43,10 +44,10 @@ from shaper_nodes.core.identification import (
     recommend_shaper,
     ringing_issue,
 )
-from shaper_nodes.core.shaping import Shaper, percentage_vibration, settling_time
+from shaper_nodes.core.shaping import Shaper, percentage_vibration, settle_time, settling_time
 from shaper_nodes.recordings import BagError
 
-from .groups import GROUP_GAP, GROUP_SIGMAS, ModeGroup, group_cycles
+from .groups import GROUP_GAP, GROUP_SIGMAS, MIN_SHARE, ModeGroup, _ranges, group_cycles
 from .replay import LEARNER_REPLAYS, LearnerReplay
 from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion, position_noise
 from .streams import Recording, Signal
@@ -63,6 +64,8 @@ MIN_SPECTRUM_SAMPLES = 64
 #: positions within this many noise standard deviations (or two quantisation steps) of their final
 #: value are at rest (the residual window's start), whatever smaller --settle-tolerance says
 SETTLE_SIGMAS = 10.0
+#: positions within this of their final value are at rest (rad or m), raised to the positions' noise floor
+DEFAULT_SETTLE_TOLERANCE = 1e-6
 #: the settling band is at least this many accelerometer noise standard deviations (per axis)
 BAND_SIGMAS = 6.0
 
@@ -86,13 +89,13 @@ class Options:
     from the motion (default: from the top speed and the measured noise).
     """
 
-    settle_tolerance: float = 1e-6
+    settle_tolerance: float | None = None
     band: str = "5%"
     remove_mean: str = "auto"
     segmentation: str = "auto"
     positions: str = "auto"
     method: str = "fit"
-    max_modes: int = 2
+    max_modes: int = 3
     band_hz: tuple[float, float] | None = None
     target: float = 0.05
     sigmas: float = 2.0
@@ -143,6 +146,7 @@ class Analysis:
     groups: list[ModeGroup] = field(default_factory=list)  # several when cycles see different modes
     settle_tolerance: float = float("nan")  # positions at rest within this (rad or m), as used
     accel_noise: float = float("nan")  # accelerometer noise per axis, m/s^2 (third differences' MAD)
+    headline: list[str] = field(default_factory=list)  # what changed between groups of cycles, first in reports
 
     def ringing_issue(self, mode: ModeFit) -> str:
         """Why ``mode`` is not used for the shaper ("" if it is): it does not ring (damping ratio above
@@ -182,9 +186,9 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
         if r.issue:
             notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
     spectrum = _spectrum(windows)
-    groups, id_notes = _identify(windows, rows, opt)
+    groups, id_notes = _identify(windows, rows, opt, accel_noise)
     notes += id_notes
-    main = max(groups, key=lambda g: len(g.rows)) if groups else None
+    main = max(reversed(groups), key=lambda g: len(g.rows)) if groups else None  # ties: the latest
     modes = main.modes if main is not None else []
     if len(groups) > 1:
         for g in groups:
@@ -194,8 +198,42 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
     if main is not None:
         main.recommendation = recommendation
     replays = _replays(rec, spans, segmentation, opt, notes)
-    return Analysis(rec, opt, segmentation, rows, traces, spectrum, modes, recommendation, level, predicted,
-                    replays, notes, remove_mean, groups, tolerance, accel_noise)
+    out = Analysis(rec, opt, segmentation, rows, traces, spectrum, modes, recommendation, level, predicted,
+                   replays, notes, remove_mean, groups, tolerance, accel_noise)
+    out.headline = plant_changes(out, main)
+    return out
+
+
+def plant_changes(an: Analysis, main: ModeGroup | None) -> list[str]:
+    """The headline when the cycles see several plants: where the modes change (groups that follow each
+    other in time: a payload, tool or pose change), from which ringing modes to which, and whose modes
+    the recommendation is for; when the groups alternate, that the cycles see several plants. Nothing
+    for one group."""
+    groups = sorted(an.groups, key=lambda g: g.rows[0])
+    if len(groups) < 2:
+        return []
+
+    def ringing(g: ModeGroup) -> list[ModeFit]:
+        return sorted((m for m in g.modes if not an.ringing_issue(m)), key=lambda m: m.omega) or list(g.modes)
+
+    def hz(modes: list[ModeFit]) -> str:
+        return " / ".join(f"{m.hz:.4g}" for m in modes) + " Hz"
+
+    whom = (f"; modes and recommendation below are for cycles #{_ranges(main.rows)} ({hz(ringing(main))})"
+            if main is not None else "")
+    contiguous = all(g.rows == list(range(g.rows[0], g.rows[-1] + 1)) for g in groups)
+    if not contiguous:
+        return [f"THE CYCLES SEE {len(groups)} DIFFERENT PLANTS (poses or payloads that alternate): "
+                + "; ".join(f"cycles #{_ranges(g.rows)}: {hz(ringing(g))}" for g in groups) + whom]
+    out = []
+    for a, b in itertools.pairwise(groups):
+        ma, mb = ringing(a), ringing(b)
+        lo = 100.0 * (mb[0].hz / ma[0].hz - 1.0)
+        out.append(f"PLANT CHANGE between cycle {an.cycles[a.rows[-1]].cycle} and cycle {an.cycles[b.rows[0]].cycle}"
+                   f" (a payload, tool or pose change): modes {hz(ma)} -> {hz(mb)} (lowest {lo:+.1f} %)")
+    if out:
+        out[-1] += whom
+    return out
 
 
 # ------------------------------------------------------------------------------ pieces
@@ -230,7 +268,7 @@ def _noise(rec: Recording, opt: Options) -> tuple[float, float, list[str]]:
     (:func:`~.segment.position_noise`); the accelerometer noise is the same estimate on its axes.
     """
     notes: list[str] = []
-    tolerance = float(opt.settle_tolerance)
+    tolerance = DEFAULT_SETTLE_TOLERANCE if opt.settle_tolerance is None else float(opt.settle_tolerance)
     pos = _positions(rec, opt)
     if pos is not None and len(pos) >= 8:
         noise = position_noise(pos.values)
@@ -270,8 +308,13 @@ def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: b
             pt, pv = pos.t[p0:p1], pos.values[p0:p1]
         else:
             pt, pv = np.zeros(0), np.zeros((0, 1))
-        res = evaluate_cycle(span.cycle, span.start, span.motion_end, span.end, at, av, pt, pv,
-                             tolerance, remove_mean).residual
+        if opt.settle_tolerance is None:  # at rest: within the noise floor, or ringing about the final value
+            rest = reached_rest(pt, pv, span.motion_end, tolerance)
+            res = evaluate_cycle(span.cycle, span.start, rest, span.end, at, av, np.zeros(0), np.zeros((0, 1)),
+                                 tolerance, remove_mean).residual
+        else:
+            res = evaluate_cycle(span.cycle, span.start, span.motion_end, span.end, at, av, pt, pv,
+                                 tolerance, remove_mean).residual
         band = max(_band(opt.band, res.peak), BAND_SIGMAS * accel_noise)
         settle = (settling_time(at, av, res.window_start, res.window_end, band, remove_mean)
                   if res.samples and band > 0 else float("nan"))
@@ -283,6 +326,30 @@ def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: b
         inside = (at >= res.window_start) & (at < res.window_end)  # as residual_vibration selects
         windows.append((at[inside], av[inside]) if not issue else (np.zeros(0), np.zeros((0, av.shape[1]))))
     return rows, traces, windows
+
+
+def reached_rest(times: np.ndarray, positions: np.ndarray, after: float, tolerance: float) -> float:
+    """When the positions are at rest after a move, s: the earlier of (a) the time from which every joint
+    stays within ``tolerance`` (rad or m) of its last value (:func:`settle_time`, the suite's rule) and
+    (b) the first time by which every joint has come within ``tolerance`` of its last value or crossed it.
+
+    (b) is the rule for positions that ring: an elastic structure pulls on the motors, so measured joint
+    positions oscillate about their final value, decaying with the vibration itself, and never stay within
+    a tolerance set by their noise until the vibration has gone. Once a joint has reached or crossed its
+    final value, what is left of its motion is that ringing, not the move. ``times`` (N,) s,
+    ``positions`` (N, J), ``after``: the motion's end, s.
+    """
+    t = np.asarray(times, dtype=float)
+    p = np.asarray(positions, dtype=float).reshape(t.size, -1)
+    sel = t >= after
+    t, p = t[sel], p[sel]
+    if t.size == 0:
+        return float(after)
+    staying = settle_time(t, p, after, tolerance)
+    d = p - p[-1]
+    reached = (np.abs(d) <= tolerance) | (np.sign(d) != np.sign(d[0]))
+    first = [int(np.argmax(col)) if col.any() else t.size - 1 for col in reached.T]
+    return float(min(staying, max(float(after), float(t[max(first)]))))
 
 
 def _cycle_issue(span: CycleSpan, at: np.ndarray, samples: int, step: float) -> str:
@@ -394,7 +461,8 @@ def _spectrum(windows: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
     return f, np.mean(psds, axis=0)
 
 
-def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeGroup], list[str]]:
+def _identify(windows, rows: list[CycleRow], opt: Options, accel_noise: float = 0.0
+              ) -> tuple[list[ModeGroup], list[str]]:
     """The groups of cycles that see the same modes (:func:`~.groups.group_cycles`), each with its modes
     combined over its cycles, and notes; no group when no cycle gives a mode."""
     per_record: list[tuple[int, list[ModeFit]]] = []
@@ -419,14 +487,16 @@ def _identify(windows, rows: list[CycleRow], opt: Options) -> tuple[list[ModeGro
         return [], notes
     found = dict(per_record)
     groups = []
-    for keys in group_cycles(per_record):
+    noise = accel_noise if math.isfinite(accel_noise) else 0.0
+    for keys in group_cycles(per_record, max_damping=opt.max_damping, noise=noise, noise_sigmas=opt.noise_sigmas):
         keys = sorted(keys)
         modes = combine_modes([found[k] for k in keys], method=opt.method, max_modes=opt.max_modes)
         groups.append(ModeGroup(keys, [rows[k].cycle for k in keys], modes))
     if len(groups) > 1:
         notes.append(f"the cycles see different modes (several plants, payloads or poses): {len(groups)} groups,"
-                     f" split where the cycles' dominant frequencies, sorted, differ by more than"
-                     f" {100 * GROUP_GAP:g} % and {GROUP_SIGMAS:g} combined sigma: "
+                     f" a cycle is another's plant when each has every ringing mode of the other (at least"
+                     f" {100 * MIN_SHARE:g} % of its strongest) within {100 * GROUP_GAP:g} % or {GROUP_SIGMAS:g}"
+                     " combined sigma: "
                      + "; ".join(g.label for g in groups)
                      + ". Modes, recommendation and prediction are the largest group's; each group's are listed")
     for g in groups:

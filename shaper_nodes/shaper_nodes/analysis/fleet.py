@@ -38,7 +38,7 @@ from .analyze import Options
 from .report import json_ready
 
 #: part of every cache key: change it when the analysis or the result's fields change
-ANALYSIS_VERSION = "fleet 1 (analyze 2026-11)"
+ANALYSIS_VERSION = "fleet 2 (analyze 2026-11, issue 32: ringing modes first, plant changes)"
 #: default refusal limit on the number of recordings under one folder
 MAX_RECORDINGS = 5000
 #: bytes read at a time when hashing
@@ -69,8 +69,12 @@ class Result:
     start_s : float
         The first accelerometer sample, s since the epoch (NaN if unknown).
     modes : list of dict
-        ``frequency_hz``, ``frequency_std_hz``, ``zeta``, ``zeta_std``, ``amplitude``, ``method``;
-        strongest first.
+        ``frequency_hz``, ``frequency_std_hz``, ``zeta``, ``zeta_std``, ``amplitude``, ``method``, ``rings``
+        (used for the shaper, as analyze_bag decides); those that ring first, strongest first.
+    headline : list of str
+        analyze_bag's headline: where the cycles' modes change (a payload, tool or pose change).
+    groups : list of list of float
+        The ringing modes (Hz, ascending) of each group of cycles, in the order of their first cycle.
     recommendation : dict or None
         ``family``, ``duration_s``, ``v_nominal``, ``v_worst`` of the recommended shaper.
     cycles : int
@@ -89,6 +93,8 @@ class Result:
     start_s: float = float("nan")
     modes: list[dict[str, Any]] = field(default_factory=list)
     recommendation: dict[str, Any] | None = None
+    headline: list[str] = field(default_factory=list)
+    groups: list[list[float]] = field(default_factory=list)
     cycles: int = 0
     error: str = ""
     damage: list[str] = field(default_factory=list)
@@ -217,8 +223,13 @@ def analyze_one(path: str, key: str, options: Options, limits: ReadLimits | None
     out.start_s = float(rec.accel.t[0])
     out.cycles = len(an.cycles)
     out.damage = [describe_damage(d) for d in rec.damage]
+    ranked = sorted(an.modes, key=lambda m: (bool(an.ringing_issue(m)), -m.amplitude))
     out.modes = [{"frequency_hz": m.hz, "frequency_std_hz": m.omega_std / (2 * math.pi), "zeta": m.zeta,
-                  "zeta_std": m.zeta_std, "amplitude": m.amplitude, "method": m.method} for m in an.modes]
+                  "zeta_std": m.zeta_std, "amplitude": m.amplitude, "method": m.method,
+                  "rings": not an.ringing_issue(m)} for m in ranked]
+    out.headline = list(an.headline)
+    out.groups = [sorted(m.hz for m in g.modes if not an.ringing_issue(m))
+                  for g in sorted(an.groups, key=lambda g: g.rows[0])]
     best = an.recommendation.best if an.recommendation is not None else None
     if best is not None:
         out.recommendation = {"family": best.family, "duration_s": best.duration,

@@ -3,11 +3,11 @@
 The rule (docs/guide/fleet.md). A robot's recordings are taken in the order of their start time; those
 that gave no mode (or could not be analysed) are listed but take no part. The **baseline** is the
 robot's first ``baseline`` recordings with a mode: its frequency f_b and damping ratio z_b are
-the means of those recordings' strongest mode, its scatter s_f, s_z their sample standard
-deviations. Every later recording is compared on its mode nearest f_b (frequency f, damping z,
-one-sigma uncertainties u_f, u_z from the identification). The comparison's sigma allows for
-both the recording's own uncertainty and the recording-to-recording scatter the baseline showed,
-and for the baseline mean's own error::
+the means of those recordings' strongest mode (the strongest that rings, as analyze_bag decides),
+its scatter s_f, s_z their sample standard deviations. Every later recording is compared on its
+(ringing) mode nearest f_b (frequency f, damping z, one-sigma uncertainties u_f, u_z from the
+identification). The comparison's sigma allows for both the recording's own uncertainty and the
+recording-to-recording scatter the baseline showed, and for the baseline mean's own error::
 
     sigma_f = sqrt(max(u_f, s_f)^2 + max(rms u_f,baseline, s_f)^2 / n_baseline)    (same for z)
 
@@ -17,6 +17,15 @@ f_b) *and* by more than ``sigmas`` sigma_f, or its damping ratio changed by more
 identifier's on-robot drift watch (:class:`~shaper_nodes.core.identification.drift.DriftWatch`)
 does with cycles, an **alert** is raised once ``confirm`` recordings in a row are out, so one odd
 recording raises nothing.
+
+The **baseline is checked** too (:func:`_baseline_check`), since a drift inside it would otherwise move
+f_b along and never be seen: a baseline recording more than ``max_frequency_shift`` f_b and ``sigmas``
+of its own uncertainty from f_b is out (scatter), and a least-squares trend over the baseline that
+changes by more than ``max_frequency_shift`` f_b from its first to its last recording, at more than
+``sigmas`` standard errors, is a drift (trend). Either makes the robot's verdict ALERT
+(:attr:`RobotDrift.verdict`, the one string the terminal, the report and the plot's title print, so
+the plot and the verdict agree: a point drawn out is either confirmed, or counted in the verdict as
+"not confirmed").
 
 For an alert: the new mode (mean of the recordings out since the run began, with the larger of
 their rms uncertainty and their scatter), the retune (the shaper
@@ -118,6 +127,18 @@ class RobotDrift:
     baseline_recommendation: dict[str, Any] | None = None
     alerts: list[Alert] = field(default_factory=list)
     note: str = ""
+    baseline_issue: str = ""  # the baseline itself drifts or scatters (its check), "" if steady
+
+    @property
+    def verdict(self) -> str:
+        """The robot's verdict, one string for the terminal, the report and the plot's title: "ALERT" with
+        a confirmed drift or an unsteady baseline; else "ok", with the recordings out not (yet) confirmed."""
+        if self.alerts or self.baseline_issue:
+            return "ALERT"
+        if not math.isfinite(self.baseline_hz):
+            return "no baseline"
+        n = sum(1 for p in self.points if p.out)
+        return f"ok ({n} recording{'s' if n > 1 else ''} out, not confirmed)" if n else "ok"
 
 
 def _rms(x: Sequence[float]) -> float:
@@ -168,11 +189,13 @@ def robot_drift(robot: str, results: Sequence[Result], rule: DriftRule) -> Robot
     out.baseline_scatter_zeta = float(z.std(ddof=1)) if n > 1 else 0.0
     base_uf = max(_rms([p.frequency_std_hz for p in base]), out.baseline_scatter_hz)
     base_uz = max(_rms([p.zeta_std for p in base]), out.baseline_scatter_zeta)
+    out.baseline_issue = _baseline_check(base, out.baseline_hz, rule)
     base_mode = _mode(out.baseline_hz, out.baseline_zeta, base_uf, base_uz)
     out.baseline_recommendation, base_shaper = _recommend(base_mode, rule)
     run: list[Point] = []
     for p in usable[rule.baseline:]:
-        m = min(p.result.modes, key=lambda m: abs(float(m["frequency_hz"]) - out.baseline_hz))
+        m = min([m for m in p.result.modes if m.get("rings", True)] or p.result.modes,
+                key=lambda m: abs(float(m["frequency_hz"]) - out.baseline_hz))
         p.frequency_hz, p.frequency_std_hz = float(m["frequency_hz"]), float(m["frequency_std_hz"] or 0.0)
         p.zeta, p.zeta_std = float(m["zeta"]), float(m["zeta_std"] or 0.0)
         sf = math.hypot(max(p.frequency_std_hz, out.baseline_scatter_hz), base_uf / math.sqrt(n))
@@ -196,6 +219,40 @@ def robot_drift(robot: str, results: Sequence[Result], rule: DriftRule) -> Robot
         elif len(run) > rule.confirm:  # the alert of this run, updated with every further recording out
             out.alerts[-1] = _alert(robot, run, out, base_shaper, rule)
     return out
+
+
+def _baseline_check(base: Sequence[Point], f_b: float, rule: DriftRule) -> str:
+    """Whether the baseline is steady ("" if so, else why; marks its points that are out).
+
+    Scatter: a baseline recording whose frequency is further from the baseline's mean than the
+    frequency limit (``max_frequency_shift`` f_b) and than ``sigmas`` times its own uncertainty is out.
+    Trend: the least-squares line of the frequency over the baseline recordings (in their order)
+    changes by more than the frequency limit from the first to the last and its slope is more than
+    ``sigmas`` standard errors from zero. Either makes the baseline unfit to compare with.
+    """
+    why = []
+    for p in base:
+        d = p.frequency_hz - f_b
+        if abs(d) > rule.max_frequency_shift * f_b and abs(d) > rule.sigmas * p.frequency_std_hz:
+            p.out = True
+            p.shift = d / f_b
+            p.why = f"inside the baseline: {p.frequency_hz:.4g} Hz is {100 * d / f_b:+.1f} % from its mean {f_b:.4g} Hz"
+    n_out = sum(1 for p in base if p.out)
+    if n_out:
+        why.append(f"{n_out} of the {len(base)} baseline recordings are more than"
+                   f" {100 * rule.max_frequency_shift:g} % from its mean {f_b:.4g} Hz")
+    if len(base) >= 3:
+        x = np.arange(len(base), dtype=float)
+        f = np.array([p.frequency_hz for p in base])
+        slope, icpt = np.polyfit(x, f, 1)
+        resid = f - (slope * x + icpt)
+        se = math.sqrt(float(resid @ resid) / (len(base) - 2) / float(((x - x.mean()) ** 2).sum()))
+        u = max(_rms([p.frequency_std_hz for p in base]) / math.sqrt(float(((x - x.mean()) ** 2).sum())), se)
+        change = float(slope) * (len(base) - 1)
+        if abs(change) > rule.max_frequency_shift * f_b and (u == 0 or abs(slope) > rule.sigmas * u):
+            why.append(f"the baseline drifts: its frequency trend changes by {100 * change / f_b:+.1f} % over its"
+                       f" {len(base)} recordings ({abs(slope) / u if u else math.inf:.1f} sigma)")
+    return "; ".join(why)
 
 
 def _alert(robot: str, run: list[Point], drift: RobotDrift, base_shaper: Any, rule: DriftRule) -> Alert:

@@ -21,10 +21,11 @@ from typing import Any
 from .fleet import FleetRun
 from .fleet_drift import DriftRule, RobotDrift
 from .report import json_ready
+from .text import plus_minus, value
 
 
 def _f(x: float | None, spec: str = ".4g") -> str:
-    return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
+    return value(x, spec)
 
 
 def _when(t: float) -> str:
@@ -41,7 +42,8 @@ def fleet_doc(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule) -> di
         "failed": [{"path": r.path, "robot": r.robot, "error": r.error} for r in run.results if r.error],
         "seconds": run.seconds, "where": run.where,
         "robots": [{
-            "robot": d.robot, "note": d.note, "baseline_hz": d.baseline_hz,
+            "robot": d.robot, "verdict": d.verdict, "note": d.note, "baseline_issue": d.baseline_issue,
+            "baseline_hz": d.baseline_hz,
             "baseline_scatter_hz": d.baseline_scatter_hz,
             "baseline_zeta": d.baseline_zeta, "baseline_scatter_zeta": d.baseline_scatter_zeta,
             "baseline_recommendation": d.baseline_recommendation,
@@ -75,27 +77,29 @@ def markdown(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule, plot: 
         f" {100 * rule.max_damping_change:g} % and {rule.damping_floor:g} and {rule.sigmas:g} sigma;"
         f" an alert after {rule.confirm} recordings out in a row (docs/guide/fleet.md).", "",
         f"**{len(alerts)} alert(s)**" + (": " + ", ".join(sorted({a.robot for a in alerts})) if alerts else ""), "",
-        "| robot | recordings | baseline mode Hz | scatter Hz | baseline zeta | out | alert | new mode Hz | retune |",
+        "| robot | recordings | baseline mode Hz | scatter Hz | baseline zeta | out | verdict | new mode Hz | retune |",
         "|---|---:|---:|---:|---:|---:|---|---:|---|",
     ]
     for d in drift:
         a = d.alerts[-1] if d.alerts else None
         lines.append(f"| {d.robot} | {len(d.points)} | {_f(d.baseline_hz)} | {_f(d.baseline_scatter_hz, '.2g')} |"
                      f" {_f(d.baseline_zeta, '.3g')} | {sum(p.out for p in d.points)} |"
-                     f" {'**yes**' if a else 'no'} | {_f(a.frequency_hz) if a else ''} |"
+                     f" {'**ALERT**' if d.verdict == 'ALERT' else d.verdict} | {_f(a.frequency_hz) if a else ''} |"
                      f" {a.retune['family'] if a and a.retune else ''} |")
     for d in drift:
-        if not d.alerts and not d.note:
+        if not d.alerts and not d.note and not d.baseline_issue:
             continue
         lines += ["", f"## {d.robot}", ""]
         if d.note:
             lines.append(f"- {d.note}")
+        if d.baseline_issue:
+            lines.append(f"- **the baseline is not steady**: {d.baseline_issue}")
         if d.baseline_recommendation:
             lines.append(f"- baseline shaper: {_shaper_text(d.baseline_recommendation)}")
         for a in d.alerts:
             lines.append(f"- **alert** from {a.first_out} ({_when(a.start_s)} UTC), confirmed at {a.raised_at};"
                          f" {a.recordings_out} recordings out: {a.why}")
-            lines.append(f"  - new mode {a.frequency_hz:.4g} +- {a.frequency_std_hz:.2g} Hz, zeta {a.zeta:.3g}"
+            lines.append(f"  - new mode {plus_minus(a.frequency_hz, a.frequency_std_hz, unit='Hz')}, zeta {a.zeta:.3g}"
                          f" ({100 * a.shift:+.1f} %, zeta {a.damping_change:+.3g})")
             if a.baseline_shaper:
                 b = a.baseline_shaper
@@ -175,7 +179,7 @@ def plot_modes(path: pathlib.Path, drift: Sequence[RobotDrift], rule: DriftRule)
             lo, hi = d.baseline_hz * (1 - rule.max_frequency_shift), d.baseline_hz * (1 + rule.max_frequency_shift)
             ax.axhspan(lo, hi, color="tab:green", alpha=0.15, label=f"baseline +-{100 * rule.max_frequency_shift:g} %")
             ax.axhline(d.baseline_hz, color="tab:green", lw=0.8)
-        kinds = (("baseline", lambda p: p.in_baseline, dict(color="tab:green", marker="s")),
+        kinds = (("baseline", lambda p: p.in_baseline and not p.out, dict(color="tab:green", marker="s")),
                  ("within", lambda p: not p.in_baseline and not p.out, dict(color="tab:blue", marker="o")),
                  ("out", lambda p: p.out, dict(color="tab:red", marker="x")))
         for kind, sel, style in kinds:
@@ -185,8 +189,7 @@ def plot_modes(path: pathlib.Path, drift: Sequence[RobotDrift], rule: DriftRule)
                             yerr=[c[1].frequency_std_hz for c in chosen], ls="none", ms=4, label=kind, **style)
         for a in d.alerts:
             ax.axvline((a.start_s - t0) / days, color="tab:red", ls="--", lw=1)
-        ax.set_title(f"{d.robot}" + (" - ALERT" if d.alerts else ""), color="tab:red" if d.alerts else "black",
-                     fontsize=9)
+        ax.set_title(f"{d.robot}: {d.verdict}", color="tab:red" if d.verdict == "ALERT" else "black", fontsize=9)
         ax.set_xlabel(f"recording start, {unit} from the first")
         ax.set_ylabel("mode, Hz")
         ax.legend(fontsize=6, loc="best")

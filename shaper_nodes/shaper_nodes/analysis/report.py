@@ -28,6 +28,7 @@ from shaper_nodes.core.shaping import Shaper, percentage_vibration
 from shaper_nodes.recordings import describe_damage
 
 from .analyze import Analysis, shaper_of
+from .text import plus_minus
 
 
 def _f(x: float, spec: str = ".4g") -> str:
@@ -73,6 +74,7 @@ def summary(an: Analysis) -> dict:
         "predicted": an.predicted,
         "replays": {name: {"rows": r.rows, "notes": r.notes} for name, r in an.replays.items()},
         "notes": an.notes,
+        "headline": an.headline,
     }
     if rcm is not None:
         doc["candidates"] = [{"family": c.family, "duration_s": c.duration, "v_nominal": c.nominal_vibration,
@@ -123,6 +125,7 @@ def table(an: Analysis) -> str:
     """The terminal table: cycles, modes, recommendation, replays, notes."""
     lines = [f"{an.recording.path}: {an.recording.messages_read} messages read ({an.recording.reader});"
              f" cycles from {an.segmentation}"]
+    lines += an.headline
     for d in an.recording.damage:
         lines.append(f"WARNING: {describe_damage(d)}")
     lines.append(f"{'#':>4} {'cycle':>5} {'RMS m/s2':>10} {'peak m/s2':>10} {'settle s':>9} {'window s':>17}  shaper")
@@ -131,8 +134,8 @@ def table(an: Analysis) -> str:
                      f" {_f(r.window_start - an.origin, '.3f'):>8}-{_f(r.end - an.origin, '.3f'):<8}  {r.shaper}"
                      + ("" if r.complete else "  (ends with the recording)") + (f"  [{r.issue}]" if r.issue else ""))
     if an.modes:
-        lines.append("modes: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
-                                          f" damping {m.zeta:.3g} ± {m.zeta_std:.2g}{_aside(an, m)}"
+        lines.append("modes: " + "; ".join(f"{plus_minus(m.hz, m.omega_std / (2 * math.pi), unit='Hz')},"
+                                          f" damping {plus_minus(m.zeta, m.zeta_std, '.3g')}{_aside(an, m)}"
                                           for m in an.modes))
     rcm = an.recommendation
     if rcm is not None and rcm.best is not None:
@@ -148,8 +151,9 @@ def table(an: Analysis) -> str:
     if len(an.groups) > 1:
         for g in an.groups:
             best = g.recommendation.best if g.recommendation is not None else None
-            lines.append(f"group {g.label}: " + "; ".join(f"{m.hz:.4g} Hz ± {m.omega_std / (2 * math.pi):.2g},"
-                                                          f" damping {m.zeta:.3g}{_aside(an, m)}" for m in g.modes)
+            lines.append(f"group {g.label}: "
+                         + "; ".join(f"{plus_minus(m.hz, m.omega_std / (2 * math.pi), unit='Hz')},"
+                                     f" damping {m.zeta:.3g}{_aside(an, m)}" for m in g.modes)
                          + (f"; recommended {best.family} ({1e3 * best.duration:.1f} ms)" if best else
                             f"; {NO_SHAPER_NEEDED}" if _no_shaper_needed(g.recommendation) else ""))
     for name, rep in an.replays.items():
@@ -215,6 +219,8 @@ def _markdown(an: Analysis, doc: dict, plots: list[str]) -> str:
           f"{rec.messages_read} messages read with {rec.reader}; cycles from {an.segmentation};"
           f" accelerometer `{rec.topics['accel']}`" + (", window mean removed" if an.removed_mean else "")
           + f"; times in s from {an.origin:.0f} s on the recording's clock.", ""]
+    for h in an.headline:
+        md += [f"> **{h}**", ""]
     for d in doc["damage"]:
         md += [f"> **Damaged recording:** {d['text']}", ""]
     md += ["## Cycles", "", "Residual vibration: RMS and peak of the tip acceleration magnitude (m/s²) from the"
@@ -284,7 +290,8 @@ def _modes_markdown(an: Analysis, doc: dict) -> list[str]:
     if an.modes:
         md += ["| mode | frequency (Hz) | damping ratio | used for the shaper |", "|---|---|---|---|"]
         for i, m in enumerate(an.modes):
-            md.append(f"| {i + 1} | {m.hz:.4g} ± {m.omega_std / (2 * math.pi):.2g} | {m.zeta:.4g} ± {m.zeta_std:.2g} |"
+            md.append(f"| {i + 1} | {plus_minus(m.hz, m.omega_std / (2 * math.pi))} |"
+                      f" {plus_minus(m.zeta, m.zeta_std)} |"
                       f" {'no: ' + an.ringing_issue(m) if an.ringing_issue(m) else 'yes'} |")
         md.append("")
         if doc["no_shaper_needed"]:
@@ -315,7 +322,7 @@ def _groups_markdown(groups: list[dict]) -> list[str]:
         shaper = (f"{r['family']} ({1e3 * r['duration']:.1f} ms)" if r else
                   "none needed (no mode rings)" if g["no_shaper_needed"] else "none")
         md.append(f"| {', '.join(f'#{r}' for r in g['rows'])} | "
-                  + ", ".join(f"{m['frequency_hz']:.4g} ± {m['frequency_std_hz']:.2g}" for m in g["modes"])
+                  + ", ".join(plus_minus(m["frequency_hz"], m["frequency_std_hz"]) for m in g["modes"])
                   + f" | {shaper} |")
     return [*md, ""]
 
@@ -393,14 +400,29 @@ def _trace_panels(an: Analysis) -> list[tuple[str, list[int]]]:
     return panels
 
 
+def trace_scale(an: Analysis) -> float:
+    """The traces' linear threshold, m/s^2: the y axis is symmetric-log, linear within +- this (3 x the
+    accelerometer noise measured per axis, so a trace at the noise floor shows as noise, not a flat line),
+    logarithmic beyond it, so cycles 1000 times apart in amplitude are readable on one scale."""
+    noise = an.accel_noise if math.isfinite(an.accel_noise) and an.accel_noise > 0 else 0.0
+    if noise == 0.0:
+        peaks = [r.peak for r in an.cycles if math.isfinite(r.peak) and r.peak > 0]
+        noise = 1e-3 * max(peaks) if peaks else 1.0
+    return 3.0 * noise
+
+
 def _plot_traces(plt, an: Analysis):
     """traces.png: one panel per group of cycles (plant, payload or pose), the acceleration (m/s^2) on its
     most varying axis from each cycle's start, at most :data:`MAX_TRACES_PER_PANEL` cycles overlaid; coloured
     by shaper when the panel's cycles ran several (unshaped against shaped at a glance), else by cycle
-    (light to dark from early to late); each residual window's start dotted."""
+    (light to dark from early to late); each residual window's start dotted. Every panel has the same
+    y axis, symmetric-log (:func:`trace_scale`), and each cycle's legend entry gives its residual RMS, so a
+    shaped cycle 1000 times quieter is seen as such, not as a flat line on another scale."""
     axis = int(np.argmax(np.nanvar(an.recording.accel.values, axis=0)))
     panels = _trace_panels(an)
-    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.2 + 2.2 * len(panels)), squeeze=False, sharex=True)
+    linear = trace_scale(an)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.2 + 2.4 * len(panels)), squeeze=False, sharex=True,
+                             sharey=True)
     for ax, (title, rows) in zip(axes[:, 0], panels, strict=True):
         shapers = list(dict.fromkeys(an.cycles[i].shaper for i in rows))
         by_shaper = len(shapers) > 1
@@ -412,19 +434,26 @@ def _plot_traces(plt, an: Analysis):
                 continue
             if by_shaper:
                 color = plt.get_cmap("tab10")(shapers.index(r.shaper) % 10)
-                n = sum(an.cycles[j].shaper == r.shaper for j in rows)
-                label = None if r.shaper in shown else f"{r.shaper} ({n} cycle{'s' if n > 1 else ''})"
+                same = [an.cycles[j].rms for j in rows if an.cycles[j].shaper == r.shaper]
+                label = None if r.shaper in shown else (
+                    f"{r.shaper} ({len(same)} cycle{'s' if len(same) > 1 else ''}, residual RMS"
+                    f" {_f(float(np.median(same)), '.3g')} m/s²)")
                 shown.add(r.shaper)
             else:
                 color = plt.get_cmap("viridis")(0.85 * k / max(len(rows) - 1, 1))
-                label = f"#{i}" + ("" if r.shaper in ("", "unknown") else f" {r.shaper}")
-            ax.plot(t, a[:, axis], lw=0.7, color=color, label=label)
+                label = (f"#{i}" + ("" if r.shaper in ("", "unknown") else f" {r.shaper}")
+                         + f" (RMS {_f(r.rms, '.3g')} m/s²)")
+            mean = np.nanmean(a[:, axis]) if an.removed_mean else 0.0
+            ax.plot(t, a[:, axis] - mean, lw=0.7, color=color, label=label)
             ax.axvline(r.window_start - r.start, color=color, lw=0.6, ls=":")
+        ax.set_yscale("symlog", linthresh=linear)
+        ax.axhspan(-linear, linear, color="0.85", alpha=0.5, lw=0)
         ax.set_title(title, fontsize=9, loc="left")
-        ax.set_ylabel(f"a{'xyz'[axis] if axis < 3 else axis} (m/s²)")
+        ax.set_ylabel(f"a{'xyz'[axis] if axis < 3 else axis}{' - mean' if an.removed_mean else ''} (m/s²)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6, loc="upper right", ncol=2 if len(rows) > 4 and not by_shaper else 1, framealpha=0.7)
-    axes[-1, 0].set_xlabel("time from cycle start (s); dotted: start of the residual window")
+    axes[-1, 0].set_xlabel(f"time from cycle start (s); dotted: start of the residual window\ny: symmetric log,"
+                           f" linear within ±{linear:.2g} m/s² (shaded: 3 x the accelerometer noise)", fontsize=8)
     return fig
 
 
@@ -487,13 +516,14 @@ def _plot_spectrum(plt, an: Analysis, spectrum: tuple[np.ndarray, np.ndarray]):
     # mode lines: one colour per group, the same as its recommended shaper's V(f) below
     modes = ([(m, "", "C3") for m in an.modes] if len(an.groups) < 2 else
              [(m, f"group {k + 1}: ", _group_color(k)) for k, g in enumerate(an.groups) for m in g.modes])
-    for i, (m, where, color) in enumerate(modes):
-        if lo <= m.hz <= hi:
-            for a in axes[:, 0]:
-                a.axvline(m.hz, color=color, ls="--", lw=0.9)
-            ax.annotate(f"{where}{m.hz:.3g} Hz, ζ {m.zeta:.2g}", (m.hz, 1.0), xycoords=("data", "axes fraction"),
-                        xytext=(3, -3 - 11 * (i % 4)), textcoords="offset points", fontsize=7, color=color,
-                        va="top", ha="left")
+    for m, where, color in sorted(modes, key=lambda e: e[0].omega):
+        if lo <= m.hz <= hi:  # labelled in the legend, in frequency order: labels on the plot overlap
+            for k, a in enumerate(axes[:, 0]):
+                a.axvline(m.hz, color=color, ls="--", lw=0.9,
+                          label=(f"{where}{m.hz:.4g} Hz, ζ {m.zeta:.2g}"
+                                 + (" (not used: " + an.ringing_issue(m).split(":")[0] + ")" if an.ringing_issue(m)
+                                    else "")) if k == 0 else None)
+    ax.legend(fontsize=6, loc="lower left", title="identified modes", title_fontsize=6, framealpha=0.8)
     ax.set_ylabel("PSD ((m/s²)²/Hz)")
     ax.set_title(f"residual vibration spectrum (Welch, averaged over cycles), {lo:.3g}-{hi:.3g} Hz", fontsize=9,
                  loc="left")
@@ -528,9 +558,12 @@ def _plot_spectrum(plt, an: Analysis, spectrum: tuple[np.ndarray, np.ndarray]):
 
 def _plot_sensitivity(plt, an: Analysis, best: Shaper, target: float):
     """sensitivity.png: V (%) against frequency (Hz) of the recommended shaper ``best`` and of the recorded
-    ones, at the first mode's damping, its band shaded and the ``target`` V (fraction) marked."""
-    top = an.modes[0]
-    hz = np.linspace(0.01, 2.0 * top.hz, 600)
+    ones, at the first ringing mode's damping, up to 1.3 x the highest mode; every identified mode of
+    the recommendation's group marked (a line, and its ±sigmas band shaded; dotted if it does not ring),
+    and the ``target`` V (fraction) marked."""
+    ringing = [m for m in an.modes if not an.ringing_issue(m)]
+    top = min(ringing or an.modes, key=lambda m: m.omega)
+    hz = np.linspace(0.01, 1.3 * max(m.hz for m in an.modes), 800)
     fig, ax = plt.subplots(figsize=(8, 3.6))
     ax.plot(hz, 100 * percentage_vibration(best.amplitudes, best.times, 2 * np.pi * hz, top.zeta),
             lw=1.5, label=f"recommended: {best.family}")
@@ -541,16 +574,21 @@ def _plot_sensitivity(plt, an: Analysis, best: Shaper, target: float):
             ax.plot(hz, 100 * percentage_vibration(np.asarray(r.shaper_impulses[0], dtype=float),
                                                    np.asarray(r.shaper_impulses[1], dtype=float), 2 * np.pi * hz,
                                                    top.zeta), lw=0.8, ls="--", label=f"recorded: {r.shaper}")
-    s = an.options.sigmas * top.omega_std / (2 * math.pi)
-    ax.axvspan(top.hz - s, top.hz + s, color="C3", alpha=0.15,
-               label=f"mode ±{an.options.sigmas:g}\N{GREEK SMALL LETTER SIGMA}")
-    ax.axvline(top.hz, color="C3", lw=0.8)
-    ax.axhline(100 * target, color="0.5", lw=0.6, ls=":")
+    for k, m in enumerate(sorted(an.modes, key=lambda m: m.omega)):
+        s = an.options.sigmas * m.omega_std / (2 * math.pi)
+        rings = not an.ringing_issue(m)
+        ax.axvspan(m.hz - s, m.hz + s, color="C3", alpha=0.15 if rings else 0.06,
+                   label=f"mode ±{an.options.sigmas:g}\N{GREEK SMALL LETTER SIGMA}" if k == 0 else None)
+        ax.axvline(m.hz, color="C3", lw=0.9, ls="-" if rings else ":",
+                   label=f"mode {m.hz:.4g} Hz, ζ {m.zeta:.2g}" + ("" if rings else " (does not ring)"))
+    ax.axhline(100 * target, color="0.5", lw=0.6, ls=":", label=f"target {100 * target:g} %")
+    ax.set_xlim(0, hz[-1])
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("V (%)")
-    ax.set_title(f"sensitivity at damping {top.zeta:.3g}", fontsize=9)
+    ax.set_title(f"percentage vibration of the shapers at damping {top.zeta:.3g} (the {top.hz:.4g} Hz mode's)",
+                 fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6, loc="upper right", framealpha=0.8)
     return fig
 
 

@@ -19,23 +19,15 @@ import json
 import pathlib
 import sys
 
-from shaper_nodes.analysis.analyze import Options, analyze
+from shaper_nodes.analysis.analyze import analyze
 from shaper_nodes.analysis.replay import LEARNER_REPLAYS
 from shaper_nodes.analysis.report import summary, table, write_report
 from shaper_nodes.analysis.streams import ROLE_TYPES, read_recording
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
-from shaper_nodes.core.identification import MAX_RINGING_DAMPING, NOISE_FLOOR_SIGMAS
 from shaper_nodes.recordings import MIB, Bag, BagError, ReadLimits, describe_damage
 
+from .common import add_analysis_options, analysis_options
 from .list_replay import parse_params
-
-
-def _band_hz(text: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LOW,HIGH in Hz, got {text!r}") from None
-    return lo, hi
 
 
 def add_limit_options(p: argparse._ActionsContainer) -> None:
@@ -60,39 +52,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     for role, types in ROLE_TYPES.items():
         p.add_argument(f"--{role}-topic", metavar="TOPIC", help=f"the {role} topic ({' or '.join(types)};"
                        " default: found by type)")
-    p.add_argument("--segmentation", choices=("auto", "events", "motion"), default="auto",
-                   help="cycles from the cycle events, or from the motion of the commands (auto: events if any)")
-    p.add_argument("--positions", choices=("auto", "joints", "commands"), default="auto",
-                   help="positions whose rest starts the residual window (auto: joint states, else commands)")
-    p.add_argument("--settle-tolerance", type=float, default=1e-6,
-                   help="positions within this of their final value are at rest, rad or m (default 1e-6; raised"
-                        " to 10 x the noise measured in the positions, or 2 encoder steps, when they are noisier)")
-    p.add_argument("--band", default="5%", help="settling band: m/s^2, or a percentage of the cycle's peak"
-                                                " (default 5%%); at least 6 x the accelerometer noise measured")
-    p.add_argument("--remove-mean", choices=("auto", "yes", "no"), default="auto",
-                   help="remove each window's mean acceleration (gravity, bias); auto: when the recording"
-                        " has a clear offset")
-    p.add_argument("--method", default="fit", help="identification method: fit, spectral, matrix_pencil")
-    p.add_argument("--max-modes", type=int, default=2, help="most modes to identify (default 2)")
-    p.add_argument("--band-hz", type=_band_hz, help="look for modes in LOW,HIGH Hz only")
-    p.add_argument("--identify-cycles", type=int, default=20,
-                   help="identify the modes in at most this many cycles, evenly spread (0 = all; default 20)")
-    p.add_argument("--target", type=float, default=0.05,
-                   help="largest acceptable worst-case percentage vibration, fraction (default 0.05)")
-    p.add_argument("--sigmas", type=float, default=2.0, help="uncertainty box half-width, standard deviations")
-    p.add_argument("--min-saving", type=float, default=0.2,
-                   help="another shaper replaces the zero-residual default only if it is at least this fraction"
-                        " shorter, 0..1 (default 0.2)")
-    p.add_argument("--max-damping", type=float, default=MAX_RINGING_DAMPING,
-                   help="modes damped above this ratio do not ring (a free decay falls to 14 %% in one period"
-                        " at 0.3): reported but not used for the shaper (default %(default)g)")
-    p.add_argument("--noise-sigmas", type=float, default=NOISE_FLOOR_SIGMAS,
-                   help="modes whose initial amplitude is at most this many accelerometer noise standard"
-                        " deviations (per axis, measured) are at the noise floor: reported but not used for the"
-                        " shaper (default %(default)g)")
-    p.add_argument("--motion-threshold", type=float, metavar="SPEED",
-                   help="cycles from the motion: a sample moves above this speed, rad/s or m/s (default: the"
-                        " larger of 1 %% of the top speed and 6 x the speed noise measured in the positions)")
+    add_analysis_options(p.add_argument_group("analysis (the same in analyze_fleet)"))
     p.add_argument("--learners", default=",".join(LEARNER_REPLAYS),
                    help=f"learner replays to run, comma-separated, '' for none (known: {','.join(LEARNER_REPLAYS)})")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
@@ -131,14 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         params = parse_params(args.param)
         overrides = {role: getattr(args, f"{role}_topic") for role in ROLE_TYPES if getattr(args, f"{role}_topic")}
-        options = Options(settle_tolerance=args.settle_tolerance, band=args.band, remove_mean=args.remove_mean,
-                          segmentation=args.segmentation, positions=args.positions, method=args.method,
-                          max_modes=args.max_modes, band_hz=args.band_hz, identify_cycles=args.identify_cycles,
-                          target=args.target, sigmas=args.sigmas, min_saving=args.min_saving,
-                          max_damping=args.max_damping, noise_sigmas=args.noise_sigmas,
-                          motion_threshold=args.motion_threshold,
-                          learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
-                          learner_params=params)
+        options = analysis_options(args, learners=tuple(x.strip() for x in args.learners.split(",") if x.strip()),
+                                   learner_params=params)
         rec = read_recording(args.bag, overrides, progress=not args.no_progress and sys.stderr.isatty(),
                              limits=limits)
         an = analyze(rec, options)

@@ -18,15 +18,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import pathlib
 import sys
 
-from shaper_nodes.analysis.analyze import Options
 from shaper_nodes.analysis.fleet import MAX_RECORDINGS, Cache, FleetError, find_recordings, run_fleet
 from shaper_nodes.analysis.fleet_drift import DriftRule, fleet_drift
 from shaper_nodes.analysis.fleet_report import fleet_doc, write_fleet_report
 
-from .analyze_bag import _band_hz, add_limit_options, limits_of
+from .analyze_bag import add_limit_options, limits_of
+from .common import add_analysis_options, analysis_options
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -54,15 +55,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     g.add_argument("--drift-sigmas", type=float, default=3.0,
                    help="the change must also exceed this many combined standard deviations (default 3)")
     g.add_argument("--confirm", type=int, default=2, help="recordings out in a row before an alert (default 2)")
-    a = p.add_argument_group("analysis of each recording (as analyze_bag's)")
-    a.add_argument("--method", default="fit", help="identification method: fit, spectral, matrix_pencil")
-    a.add_argument("--max-modes", type=int, default=2, help="most modes to identify (default 2)")
-    a.add_argument("--band-hz", type=_band_hz, help="look for modes in LOW,HIGH Hz only")
-    a.add_argument("--identify-cycles", type=int, default=20, help="most cycles identified (0 = all; default 20)")
-    a.add_argument("--segmentation", choices=("auto", "events", "motion"), default="auto")
-    a.add_argument("--target", type=float, default=0.05, help="worst-case V of the recommendation, fraction")
-    a.add_argument("--sigmas", type=float, default=2.0, help="uncertainty box half-width, standard deviations")
-    a.add_argument("--min-saving", type=float, default=0.2, help="as analyze_bag's (default 0.2)")
+    a = p.add_argument_group("analysis of each recording (the same as analyze_bag's)")
+    add_analysis_options(a)
     add_limit_options(a)  # the bounds of analyze_bag: a recording beyond them is refused as analyze_bag refuses it
     p.add_argument("--strict", action="store_true", help="exit 1 when a robot has an alert")
     args = p.parse_args(argv)
@@ -78,9 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"analyze_fleet: WARNING: {text}", file=sys.stderr)
 
     try:
-        options = Options(method=args.method, max_modes=args.max_modes, band_hz=args.band_hz,
-                          identify_cycles=args.identify_cycles, segmentation=args.segmentation, target=args.target,
-                          sigmas=args.sigmas, min_saving=args.min_saving, learners=())
+        options = analysis_options(args, learners=())
         rule = DriftRule(baseline=args.baseline, max_frequency_shift=args.max_frequency_shift,
                          max_damping_change=args.max_damping_change, damping_floor=args.damping_floor,
                          sigmas=args.drift_sigmas, confirm=args.confirm, target=args.target, sigmas_box=args.sigmas,
@@ -101,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:
         files = write_fleet_report(run, drift, rule, args.out)
         print(f"report: {args.out / 'fleet.md'} ({len(files)} files)", file=sys.stderr)
-    alerts = [a for d in drift for a in d.alerts]
+    alerts = [d for d in drift if d.verdict == "ALERT"]
     if args.json:
         print(json.dumps(fleet_doc(run, drift, rule), indent=1, allow_nan=False))
     else:
@@ -109,9 +101,13 @@ def main(argv: list[str] | None = None) -> int:
               f" {run.cached} from the cache, {sum(1 for r in run.results if r.error)} failed; {run.seconds:.1f} s"
               + (f" (cluster start {run.startup_s:.1f} s)" if run.startup_s else ""))
         for d in drift:
-            state = "ALERT" if d.alerts else "ok"
-            print(f"  {d.robot:<20} {len(d.points):>4} rec.  baseline {d.baseline_hz:8.4g} Hz  {state}"
-                  + (f"  ({d.note})" if d.note else ""))
+            base = f"baseline {d.baseline_hz:8.4g} Hz" if math.isfinite(d.baseline_hz) else "baseline: none     "
+            print(f"  {d.robot:<20} {len(d.points):>4} rec.  {base}  {d.verdict}" + (f"  ({d.note})" if d.note else ""))
+            if d.baseline_issue:
+                print(f"      the baseline is not steady: {d.baseline_issue}")
+            for p in d.points:
+                for h in p.result.headline:
+                    print(f"      {p.result.path}: {h}")
             for a in d.alerts:
                 retune = (f"{a.retune['family']} at {a.retune['designed_hz']:.4g} Hz" if a.retune else "none")
                 print(f"      from {a.first_out}: {a.why}; retune: {retune}")

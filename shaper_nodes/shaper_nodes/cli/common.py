@@ -83,3 +83,96 @@ def run(prog: str, parser: argparse.ArgumentParser, commands: Mapping[str, Calla
         return int(exc.code or 0)
     print(text)
     return 0
+
+
+# ------------------------------------------------------------------------------ analysis options
+def band_hz(text: str) -> tuple[float, float]:
+    """An argparse type: ``LOW,HIGH`` in Hz, 0 <= LOW < HIGH."""
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH in Hz, got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+        raise argparse.ArgumentTypeError(f"expected 0 <= LOW < HIGH in Hz, got {text!r}")
+    return lo, hi
+
+
+def count(what: str) -> Callable[[str], int]:
+    """An argparse type: an integer >= 0, else an error naming ``what``."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be an integer, got {text!r}") from None
+        if n < 0:
+            raise argparse.ArgumentTypeError(f"{what} must be >= 0, got {text!r}")
+        return n
+
+    return parse
+
+
+def add_analysis_options(p: argparse._ActionsContainer) -> None:
+    """The options of the analysis of one recording (:class:`~shaper_nodes.analysis.analyze.Options`),
+    one copy for ``analyze_bag`` and ``analyze_fleet``; defaults are the Options dataclass's."""
+    from shaper_nodes.analysis.analyze import (
+        BAND_SIGMAS,
+        DEFAULT_SETTLE_TOLERANCE,
+        SETTLE_SIGMAS,
+        Options,
+    )
+
+    d = Options()
+    p.add_argument("--segmentation", choices=("auto", "events", "motion"), default=d.segmentation,
+                   help="cycles from the cycle events, or from the motion of the commands (auto: events if any)")
+    p.add_argument("--positions", choices=("auto", "joints", "commands"), default=d.positions,
+                   help="positions whose rest starts the residual window (auto: joint states, else commands)")
+    p.add_argument("--settle-tolerance", type=number("--settle-tolerance", positive=True), default=None,
+                   metavar="TOL",
+                   help="positions within this of their final value are at rest, rad or m. Default: from the"
+                        f" recording: {DEFAULT_SETTLE_TOLERANCE:g} raised to {SETTLE_SIGMAS:g} x the noise measured"
+                        " in the positions (or 2 encoder steps), and a joint that has reached or crossed its"
+                        " final value after the move is at rest too (measured joint states ring about it when an"
+                        " elastic structure pulls on the motors). Given: only the tolerance rule")
+    p.add_argument("--band", default=d.band, help="settling band: m/s^2, or a percentage of the cycle's peak"
+                   f" (default {d.band.replace('%', '%%')}); at least {BAND_SIGMAS:g} x the accelerometer noise"
+                   " measured")
+    p.add_argument("--remove-mean", choices=("auto", "yes", "no"), default=d.remove_mean,
+                   help="remove each window's mean acceleration (gravity, bias); auto: when the recording"
+                        " has a clear offset")
+    p.add_argument("--method", default=d.method, help="identification method: fit, spectral, matrix_pencil")
+    p.add_argument("--max-modes", type=count("--max-modes"), default=d.max_modes,
+                   help="most modes to identify per cycle (default %(default)s)")
+    p.add_argument("--band-hz", type=band_hz, help="look for modes in LOW,HIGH Hz only")
+    p.add_argument("--identify-cycles", type=count("--identify-cycles"), default=d.identify_cycles,
+                   help="identify the modes in at most this many cycles, evenly spread (0 = all; default %(default)s)")
+    p.add_argument("--target", type=number("--target", positive=True), default=d.target,
+                   help="largest acceptable worst-case percentage vibration, fraction (default %(default)s)")
+    p.add_argument("--sigmas", type=number("--sigmas", positive=True), default=d.sigmas,
+                   help="uncertainty box half-width, standard deviations (default %(default)s)")
+    p.add_argument("--min-saving", type=number("--min-saving"), default=d.min_saving,
+                   help="another shaper replaces the zero-residual default only if it is at least this fraction"
+                        " shorter, 0..1 (default %(default)s)")
+    p.add_argument("--max-damping", type=number("--max-damping", positive=True), default=d.max_damping,
+                   help="modes damped above this ratio do not ring (a free decay falls to 14 %% in one period"
+                        " at 0.3): reported but not used for the shaper (default %(default)g)")
+    p.add_argument("--noise-sigmas", type=number("--noise-sigmas"), default=d.noise_sigmas,
+                   help="modes whose initial amplitude is at most this many accelerometer noise standard"
+                        " deviations (per axis, measured) are at the noise floor: reported but not used for the"
+                        " shaper (default %(default)g)")
+    p.add_argument("--motion-threshold", type=number("--motion-threshold", positive=True), metavar="SPEED",
+                   help="cycles from the motion: a sample moves above this speed, rad/s or m/s (default: the"
+                        " larger of 1 %% of the top speed and 6 x the speed noise measured in the positions)")
+
+
+def analysis_options(args: argparse.Namespace, **extra: Any) -> Any:
+    """The :class:`~shaper_nodes.analysis.analyze.Options` that :func:`add_analysis_options`' values ask
+    for, with ``extra`` fields (e.g. learners)."""
+    from shaper_nodes.analysis.analyze import Options
+
+    return Options(settle_tolerance=args.settle_tolerance, band=args.band, remove_mean=args.remove_mean,
+                   segmentation=args.segmentation, positions=args.positions, method=args.method,
+                   max_modes=args.max_modes, band_hz=args.band_hz, identify_cycles=args.identify_cycles,
+                   target=args.target, sigmas=args.sigmas, min_saving=args.min_saving,
+                   max_damping=args.max_damping, noise_sigmas=args.noise_sigmas,
+                   motion_threshold=args.motion_threshold, **extra)
