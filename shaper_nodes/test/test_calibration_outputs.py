@@ -31,6 +31,7 @@ from shaper_nodes.analysis.calibration import (
 from shaper_nodes.analysis.calibration_report import (
     RESIDUAL_SERIES,
     modes_figure,
+    plus_minus,
     residual_figure,
     write_outputs,
 )
@@ -187,3 +188,9 @@ def test_write_outputs_draws_the_figures_and_the_report_table_has_every_series(c
     assert {"modes_vs_pose.png", "residual.png", "shaper.yaml", "scheduler.yaml"} <= written
     table = (tmp_path / "report.md").read_text()
     assert "fixed, worst 2 sigma %" in table and "scheduled, worst 2 sigma %" in table
+
+
+def test_an_uncertainty_is_printed_to_two_significant_digits_never_as_zero():
+    assert plus_minus(9.955, 0.00041, 3) == "9.95500 +- 0.00041"
+    assert plus_minus(9.955, 0.012, 3) == "9.955 +- 0.012"
+    assert plus_minus(0.0332, 0.00012, 4) == "0.03320 +- 0.00012"
