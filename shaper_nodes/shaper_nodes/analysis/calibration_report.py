@@ -75,7 +75,7 @@ def modes_figure(cal: Calibration) -> Any:
                                 label=label, **style)
             axes[1, a].errorbar(xs, [m.zeta for m in ms], [2 * m.zeta_std for m in ms], label=label, **style)
         _label_mode_axes(axes[:, a], joint)
-    fig.suptitle("Identified modes against the pose, one point per mode and pose (error bars: two sigma)",
+    fig.suptitle("Identified modes against the pose\n(one point per mode and pose; error bars: two sigma)",
                  fontsize=10)
     fig.tight_layout()
     return fig
