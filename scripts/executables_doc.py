@@ -27,7 +27,7 @@ EXES = [
     ("demo", "sim_plant_node", "cli"), ("shaper_design", "shaper_nodes", "cli"),
     ("loop_design", "shaper_nodes", "cli"), ("list_replay", "shaper_nodes", "cli"),
     ("analyze_bag", "shaper_nodes", "cli"), ("analyze_fleet", "shaper_nodes", "cli"),
-    ("shaper_keystore", "shaper_nodes", "cli"),
+    ("shaper_keystore", "shaper_nodes", "cli"), ("send_goal", "shaper_nodes", "cli"),
 ]
 #: the subcommands whose --help is shown too
 SUBCOMMANDS = {"shaper_design": ["list", "show", "compare", "plot"],

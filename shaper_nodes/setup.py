@@ -11,7 +11,8 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", ["config/shaper.yaml", "config/identifier.yaml", "config/learner.yaml",
                                            "config/mrilc.yaml"]),
-        ("share/" + package_name + "/config", ["config/scheduler.yaml", "config/calibrate.yaml"]),
+        ("share/" + package_name + "/config", ["config/scheduler.yaml", "config/calibrate.yaml",
+                                           "config/calibrate_quick.yaml"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -34,6 +35,7 @@ setup(
             "analyze_fleet = shaper_nodes.cli.analyze_fleet:main",
             "bag_play = shaper_nodes.nodes.bag_play:main",
             "shaper_keystore = shaper_nodes.cli.keystore:main",
+            "send_goal = shaper_nodes.cli.send_goal:main",
         ],
     },
 )

@@ -15,12 +15,15 @@ import time
 import numpy as np
 import pytest
 import rclpy
+import yaml
 from ament_index_python.packages import get_package_share_directory
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 
 from shaper_msgs.srv import ShaperAt
+from shaper_nodes.core.calibration.plan import make_plan
+from shaper_nodes.nodes.calibrate import config_from_values
 from sim_plant_node.arm.dynamics import ArmModel
 from sim_plant_node.arm.modal import modes, simulated_modes
 from sim_plant_node.arm.task import HOME
@@ -143,6 +146,28 @@ def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_
             dz = 2 * max(ma["damping_ratio_std"], mb["damping_ratio_std"]) + 5e-5
             assert abs(ma["frequency_hz"] - mb["frequency_hz"]) <= df, (pa["name"], ma, mb)
             assert abs(ma["damping_ratio"] - mb["damping_ratio"]) <= dz, (pa["name"], ma, mb)
+
+
+def _flat(tree: dict, prefix: str = ""):
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            yield from _flat(value, prefix + key + ".")
+        else:
+            yield prefix + key, value
+
+
+def test_the_plan_only_starts_where_the_arm_is(start_node):
+    """A plan printed without --execute times its first approach from the arm's joint states, not from home."""
+    start = HOME.copy()
+    start[0] = 1.0  # the base turned 1 rad away from home
+    sim(start_node, **{"task.start": start.tolist()})
+    code, log = calibrate(start_node, [], timeout=300.0)
+    assert code == 0, log
+    config = config_from_values(dict(_flat(yaml.safe_load(CONFIG.read_text())["/**"]["ros__parameters"])), None)
+    here, home = make_plan(config, start), make_plan(config)
+    assert here.duration > home.duration + 1.0  # 1 rad more to travel first
+    assert f"duration: {here.duration:.1f} s of robot time" in log, log
+    assert "plan only" in log
 
 
 def test_a_plan_outside_the_limits_is_refused_and_nothing_is_written(start_node, tmp_path):

@@ -23,7 +23,7 @@ import json
 import math
 import os
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,6 +53,10 @@ START, MOTION_END, END = 0, 1, 2
 REPORT_FORMAT = "shaper_nodes calibration report 1"
 #: significant digits of the numbers in report.json (what "the same report" is compared to)
 DIGITS = 6
+#: how the calibrated nodes are wired to the robot, as the calibration found it (``setup["wiring"]``; a recording
+#: made before it was recorded takes these, the simulated arm's and a ros2_control robot's names)
+WIRING = {"action": "/joint_trajectory_controller/follow_joint_trajectory", "joint_states": "/joint_states",
+          "shaper_node": "/shaper", "scheduler_node": "/scheduler"}
 #: one BLAS thread per identifying process: the fits' matrices are small, and several BLAS threads in each
 #: of several processes on few cores spin against each other (on 2 cores: the default calibration's
 #: identification 10.8 s with them, 4.3 s without)
@@ -81,15 +85,29 @@ class Calibration:
     notes: list[str]
     fallback: Shaper | None
     residuals: list[dict[str, float]]
+    wiring: dict[str, str] = field(default_factory=lambda: dict(WIRING))
 
 
-def setup_dict(plan: Plan, settings: IdentifySettings, family: str, premise_threshold: float) -> dict[str, Any]:
-    """The setup recorded with the calibration (plan configuration, start, analysis settings)."""
+def setup_dict(plan: Plan, settings: IdentifySettings, family: str, premise_threshold: float,
+               wiring: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The setup recorded with the calibration (plan configuration, start, analysis settings, and the
+    wiring: the FollowJointTrajectory action the arm was moved with and its joint states topic, which
+    scheduler.yaml and shaper.yaml name; keys of :data:`WIRING`, the missing ones from it)."""
+    unknown = sorted(set(wiring or {}) - set(WIRING))
+    if unknown:
+        raise PlanError(f"unknown wiring keys {unknown}; known: {sorted(WIRING)}")
     return {"config": config_to_dict(plan.config), "start": plan.start.tolist(),
             "analysis": {"method": settings.method, "max_modes": settings.max_modes,
                          "band_hz": list(settings.band_hz) if settings.band_hz else None,
                          "agreement": settings.agreement, "max_damping": settings.max_damping,
-                         "family": family, "premise_threshold": premise_threshold}}
+                         "family": family, "premise_threshold": premise_threshold},
+            "wiring": {**WIRING, **(wiring or {})}}
+
+
+def wiring_of(setup: Mapping[str, Any]) -> dict[str, str]:
+    """The wiring of a recorded setup (:data:`WIRING` for what it does not name)."""
+    got = setup.get("wiring") or {}
+    return {k: str(got.get(k, v)) for k, v in WIRING.items()}
 
 
 def plan_from_setup(setup: dict[str, Any]) -> tuple[Plan, IdentifySettings, str, float]:
@@ -147,6 +165,13 @@ def compute(setup: dict[str, Any], poses: Sequence[PoseData], workers: int = 1) 
                     os.environ[k] = v
     else:
         results = [identify_pose(*job) for job in jobs]
+    return assemble(plan, settings, family, threshold, results, wiring_of(setup))
+
+
+def assemble(plan: Plan, settings: IdentifySettings, family: str, threshold: float, results: list[PoseResult],
+             wiring: Mapping[str, str] | None = None) -> Calibration:
+    """The calibration from the poses' identified modes: the rule base and the fallback (when every pose
+    of the plan was measured), the notes, and the residuals predicted at every pose."""
     notes: list[str] = []
     spec = None
     shaper = None
@@ -160,7 +185,8 @@ def compute(setup: dict[str, Any], poses: Sequence[PoseData], workers: int = 1) 
         except PlanError as err:
             notes.append(f"no fallback shaper: {err}")
     residuals = _residuals(plan, results, spec, shaper, family)
-    return Calibration(plan, settings, family, results, spec, notes, shaper, residuals)
+    return Calibration(plan, settings, family, results, spec, notes, shaper, residuals,
+                       {**WIRING, **(wiring or {})})
 
 
 def _scheduler(spec: dict[str, Any], family: str) -> Scheduler:
@@ -170,8 +196,8 @@ def _scheduler(spec: dict[str, Any], family: str) -> Scheduler:
 def _residuals(plan: Plan, results: list[PoseResult], spec: dict[str, Any] | None, shaper: Shaper | None,
                family: str) -> list[dict[str, float]]:
     """Per pose: the residual vibration predicted for the fixed (home) shaper and the scheduled one,
-    on the pose's identified modes (amplitude-weighted V), and the scheduled one's worst case over
-    the modes' +-2 sigma."""
+    on the pose's identified modes (amplitude-weighted V), and each one's worst case over the modes'
+    +-2 sigma (``fixed_worst_2sigma``, ``scheduled_worst_2sigma``: like is compared with like)."""
     out = []
     sched = _scheduler(spec, family) if spec is not None else None
     names = list(plan.config.joint_names)
@@ -179,6 +205,7 @@ def _residuals(plan: Plan, results: list[PoseResult], spec: dict[str, Any] | Non
         row: dict[str, float] = {}
         if shaper is not None and r.modes:
             row["fixed"] = predicted_residual(shaper, r.modes)
+            row["fixed_worst_2sigma"] = worst_residual(shaper, r.modes, 2.0)
         if sched is not None and r.modes:
             z = [float(r.positions[names.index(p)]) for p in sched.rule_base.premises]
             s = sched.shaper(sched.evaluate(z))
@@ -295,15 +322,26 @@ def _floats(values: Sequence[float]) -> str:
     return "[" + ", ".join(one(x) for x in values) + "]"
 
 
+def _controller_ns(action: str) -> str | None:
+    """The controller's namespace of a FollowJointTrajectory action named ``<ns>/follow_joint_trajectory``
+    (``/joint_trajectory_controller``), else None."""
+    head, _, tail = action.rpartition("/")
+    return head if tail == "follow_joint_trajectory" and head.startswith("/") else None
+
+
 def scheduler_yaml(cal: Calibration, node: str = "/**") -> str:
     """The scheduler node's parameter file for the calibrated rule base (keyed ``/**`` by default: it
-    applies whatever the scheduler node is named)."""
+    applies whatever the scheduler node is named): the rule base, the joint states topic the calibration
+    read and the shaper node the shapers go to."""
     assert cal.rule_base is not None
     spec = cal.rule_base
+    w = cal.wiring
     lines = [f"# Scheduler rule base from a calibration ({len(cal.results)} poses): ros2 run shaper_nodes scheduler",
              "# --ros-args --params-file scheduler.yaml. Premises: joint positions, rad; natural_frequency in",
              "# rad/s, one per mode (sorted by frequency); damping_ratio dimensionless.",
              f"{node}:", "  ros__parameters:",
+             f"    joint_states: {json.dumps(w['joint_states'])}   # the topic the calibration read the pose from",
+             f"    shaper: {json.dumps(w['shaper_node'])}   # the shaper node (its set_shaper)",
              f"    premises: {json.dumps(spec['premises'])}",
              f"    range: {_floats(spec['range'])}",
              "    interpolation: modes",
@@ -320,15 +358,35 @@ def scheduler_yaml(cal: Calibration, node: str = "/**") -> str:
 
 
 def shaper_yaml(cal: Calibration, node: str = "/**") -> str:
-    """The shaper node's parameters for the fallback: the family's shaper on the home pose's modes (keyed
-    ``/**`` by default: it applies whatever the shaper node is named)."""
+    """The shaper node's parameters (keyed ``/**`` by default: they apply whatever the shaper node is
+    named): the calibrated joints; the controller the calibration moved the arm with (its
+    FollowJointTrajectory action and, in its namespace, its trajectory topic); with a rule base,
+    ``action.scheduler`` (each goal shaped for the modes at its final pose); and the fixed fallback,
+    the family's shaper on the home pose's modes, active for streamed commands and for goals when the
+    scheduler does not answer."""
     assert cal.fallback is not None
     modes = cal.fallback.modes
-    return "\n".join([
-        "# Fallback shaper from a calibration: the home pose's modes. ros2 run shaper_nodes shaper_node",
-        "# --ros-args --params-file shaper.yaml (with your joint_names and topics). Hz, dimensionless.",
-        f"{node}:", "  ros__parameters:", "    shaper:",
-        f"      family: {cal.fallback.family}",
-        f"      frequencies_hz: {_floats([m.omega / (2 * math.pi) for m in modes])}",
-        f"      damping_ratios: {_floats([m.zeta for m in modes])}",
-    ]) + "\n"
+    w = cal.wiring
+    ns = _controller_ns(w["action"])
+    how = (["# shaper.yaml. Each goal to <node>/follow_joint_trajectory is shaped for the modes at its final pose",
+            "# (the scheduler's, started with scheduler.yaml; when it does not answer, with the fixed shaper below:",
+            "# the home pose's modes) and forwarded to the controller."] if cal.rule_base is not None
+           else ["# shaper.yaml. Each goal to <node>/follow_joint_trajectory is shaped with the fixed shaper below",
+                 "# (the home pose's modes) and forwarded to the controller."])
+    lines = ["# The shaper node from a calibration: ros2 run shaper_nodes shaper_node --ros-args --params-file",
+             *how, "# Frequencies Hz, damping ratios dimensionless.",
+             f"{node}:", "  ros__parameters:",
+             f"    joint_names: {json.dumps(list(cal.plan.config.joint_names))}",
+             "    action:",
+             f"      controller: {json.dumps(w['action'])}   # the action the calibration moved the arm with"]
+    if cal.rule_base is not None:
+        lines.append(f"      scheduler: {json.dumps(w['scheduler_node'])}")
+    if ns is not None:
+        lines += ["    topics:   # the controller's trajectory topic, for trajectories and streams sent to the shaper",
+                  f"      trajectory_out: {json.dumps(ns + '/joint_trajectory')}",
+                  f"      stream_out: {json.dumps(ns + '/joint_trajectory')}"]
+    lines += ["    shaper:",
+              f"      family: {cal.fallback.family}",
+              f"      frequencies_hz: {_floats([m.omega / (2 * math.pi) for m in modes])}",
+              f"      damping_ratios: {_floats([m.zeta for m in modes])}"]
+    return "\n".join(lines) + "\n"

@@ -515,13 +515,12 @@ def _run(cal: Calibrator, v: CalibrateParams, opts: argparse.Namespace) -> int:
         plan, _, _, _ = plan_from_setup(setup)
         print(f"calibrate: resuming {out}: {len(pose_folders(out / 'recording'))} of {len(plan.steps)} poses done")
     else:
-        here = None
-        if not v.base_pose or not v.home_pose or opts.execute:
-            here = cal.wait_pose()
+        here = _start_pose(cal, v, opts.execute)
         config = config_from_values(v, here)
         plan = make_plan(config, here)
         setup = setup_dict(plan, settings_from_values(v), str(v.scheduler.family),
-                           float(v.scheduler.premise_threshold))
+                           float(v.scheduler.premise_threshold),
+                           {"action": str(v.action), "joint_states": str(v.topics.joint_states)})
         plan_from_setup(setup)  # the setup recorded recomputes this plan (refused here, not after the moves)
     print(plan.describe(), flush=True)
     if not opts.execute:
@@ -533,6 +532,19 @@ def _run(cal: Calibrator, v: CalibrateParams, opts: argparse.Namespace) -> int:
         (out / "recording").mkdir(parents=True)
         write_atomic(out / "plan.json", json.dumps(setup, indent=1, sort_keys=True) + "\n")
     return _execute(cal, plan, setup, out, opts.workers)
+
+
+def _start_pose(cal: Calibrator, v: CalibrateParams, execute: bool) -> np.ndarray | None:
+    """Where the arm is (its joint states), the plan's start: the first approach, and so the plan's duration,
+    starts there. A plan only, with base_pose and home_pose given, is still printed when no joint states come
+    (no robot running): from the home pose, and it says so."""
+    try:
+        return cal.wait_pose()
+    except Aborted as err:
+        if execute or not v.base_pose or not v.home_pose:
+            raise
+        print(f"calibrate: {err}; the plan below starts at the home pose", flush=True)
+        return None
 
 
 def _execute(cal: Calibrator, plan: Plan, setup: dict[str, Any], out: pathlib.Path, workers: int) -> int:

@@ -1,0 +1,127 @@
+"""send_goal against the simulated arm's joint_trajectory_controller emulation, over DDS (the real action).
+
+The ``send_goal`` executable runs as a process, as a user runs it; the sim plant (arm, lockstep) serves
+``/joint_trajectory_controller/follow_joint_trajectory``. Each outcome is one line naming it: success with
+the controller's code and text, a rejection, an abort with the controller's code (its name) and text, a
+server or joint states that never come, bad input.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+
+from shaper_nodes.cli.send_goal import main, trajectory_points
+from sim_plant_node.arm.description import JOINT_NAMES
+from sim_plant_node.arm.task import HOME
+
+ACTION = "/joint_trajectory_controller/follow_joint_trajectory"
+GOAL = [0.3, -1.57, 1.8, -1.8, -1.57, 0.0]
+
+
+def sim(start_node, **extra):
+    return start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": 500.0,
+                                                      "task.start": HOME.tolist(), **extra})
+
+
+def send_goal(start_node, args: list[str], timeout: float = 300.0) -> tuple[int, str]:
+    proc = start_node("shaper_nodes", "send_goal", {}, args=args)
+    try:
+        code = proc.proc.wait(timeout=timeout)
+    finally:
+        proc.stop()
+    return code, proc.log_path.read_text()
+
+
+def goal_args(positions=GOAL, joints=JOINT_NAMES, *extra: str) -> list[str]:
+    return ["--action", ACTION, "--joints", *joints, "--positions", *[str(p) for p in positions],
+            "--duration", "1.5", *extra]
+
+
+def joint_states(ros_context, until, timeout: float = 120.0) -> np.ndarray:
+    """The arm's positions from the first joint state for which ``until`` holds."""
+    node = rclpy.create_node("probe", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    got: list[np.ndarray] = []
+
+    def on_state(msg):
+        q = np.array([msg.position[list(msg.name).index(j)] for j in JOINT_NAMES])
+        if until(q):
+            got.append(q)
+
+    node.create_subscription(JointState, "/joint_states", on_state, 10)
+    try:
+        deadline = time.monotonic() + timeout
+        while not got:
+            assert time.monotonic() < deadline, "no joint state as expected"
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+    return got[0]
+
+
+def test_a_goal_from_the_present_pose_succeeds_and_the_arm_gets_there(start_node, ros_context):
+    sim(start_node)
+    code, log = send_goal(start_node, goal_args(GOAL, JOINT_NAMES, "--from-current", "--hold", "0.5"))
+    assert code == 0, log
+    assert "send_goal: sending 3 point(s) over 2 s to " + ACTION in log, log
+    assert "send_goal: succeeded: error_code 0 (SUCCESSFUL) 'Goal successfully reached!'" in log, log
+    q = joint_states(ros_context, lambda q: np.allclose(q, GOAL, atol=1e-3))
+    assert q == pytest.approx(GOAL, abs=1e-3)
+    # a goal of one point: the controller interpolates from where the arm is, and the goal is reached
+    code, log = send_goal(start_node, goal_args(HOME.tolist()))
+    assert code == 0 and "sending 1 point(s) over 1.5 s" in log and "succeeded" in log, log
+    # a joint the controller does not have: rejected, and the line says so
+    code, log = send_goal(start_node, goal_args(GOAL, [*JOINT_NAMES[:-1], "gripper_joint"]))
+    assert code == 1, log
+    assert f"send_goal: rejected: {ACTION} rejected the goal" in log, log
+
+
+def test_an_aborted_goal_prints_the_controllers_code_its_name_and_its_text(start_node):
+    sim(start_node, **{"jtc.trajectory_tolerance": [1e-6]})  # every move violates the path tolerance
+    code, log = send_goal(start_node, goal_args(GOAL, JOINT_NAMES, "--from-current"))
+    assert code == 1, log
+    assert ("send_goal: aborted: error_code -4 (PATH_TOLERANCE_VIOLATED) 'Aborted due to path tolerance"
+            " violation'") in log, log
+
+
+def test_what_does_not_come_is_named_in_one_line(start_node):
+    code, log = send_goal(start_node, goal_args(GOAL, JOINT_NAMES, "--timeout", "3"))
+    assert code == 1 and log.strip().splitlines()[-1] == (
+        f"send_goal: no FollowJointTrajectory server {ACTION} within 3 s"), log
+    code, log = send_goal(start_node, goal_args(GOAL, JOINT_NAMES, "--from-current", "--timeout", "3"))
+    assert code == 1 and log.strip().splitlines()[-1] == (
+        f"send_goal: no joint states naming {', '.join(JOINT_NAMES)} on /joint_states within 3 s"), log
+
+
+VALID = {"--positions": [str(p) for p in GOAL], "--duration": ["1"]}
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ({"--positions": ["0", "1"]}, "--positions needs one value per joint (6), got 2"),
+    ({"--positions": ["0", "1", "2", "3", "4", "nan"]}, "--positions: 'nan' is not finite"),
+    ({"--positions": ["0", "1", "2", "3", "4", "x"]}, "--positions: 'x' is not a number"),
+    ({"--duration": ["0"]}, "--duration must be finite and > 0, got '0'"),
+    ({"--hold": ["-1"]}, "--hold must be >= 0, got -1"),
+])
+def test_bad_input_is_one_line_and_exit_2_before_anything_starts(capsys, change, words):
+    argv = ["send_goal", "--action", ACTION, "--joints", *JOINT_NAMES]
+    argv += [x for key, values in {**VALID, **change}.items() for x in (key, *values)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+
+
+def test_the_trajectory_starts_at_the_present_pose_ends_at_rest_and_holds():
+    pts = trajectory_points([1.0, 2.0], 2.0, start=[0.0, 0.5], hold=1.5)
+    assert pts == [(0.0, [0.0, 0.5]), (2.0, [1.0, 2.0]), (3.5, [1.0, 2.0])]
+    assert trajectory_points([1.0], 2.0) == [(2.0, [1.0])]
+    assert math.isclose(trajectory_points([1.0], 0.25, hold=0.0)[-1][0], 0.25)
