@@ -31,10 +31,10 @@ from shaper_nodes.analysis.calibration import (
 from shaper_nodes.analysis.calibration_report import (
     RESIDUAL_SERIES,
     modes_figure,
-    plus_minus,
     residual_figure,
     write_outputs,
 )
+from shaper_nodes.analysis.text import plus_minus_fixed as plus_minus
 from shaper_nodes.core.calibration import IdentifySettings, PoseResult
 from shaper_nodes.core.calibration.plan import config_from_dict, make_plan
 from shaper_nodes.core.identification import ModeFit
@@ -194,3 +194,4 @@ def test_an_uncertainty_is_printed_to_two_significant_digits_never_as_zero():
     assert plus_minus(9.955, 0.00041, 3) == "9.95500 +- 0.00041"
     assert plus_minus(9.955, 0.012, 3) == "9.955 +- 0.012"
     assert plus_minus(0.0332, 0.00012, 4) == "0.03320 +- 0.00012"
+    assert plus_minus(9.955, 0.0, 3) == "9.955 (uncertainty unknown)"

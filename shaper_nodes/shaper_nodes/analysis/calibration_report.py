@@ -27,6 +27,7 @@ import numpy as np
 from shaper_nodes.core.files import write_atomic
 
 from .calibration import Calibration, report_dict, scheduler_yaml, shaper_yaml
+from .text import plus_minus_fixed
 
 #: the residual figure's series: (report key, label); nominal and worst case side by side, like with like
 RESIDUAL_SERIES = (("fixed", "fixed (home) shaper, nominal modes"),
@@ -176,14 +177,6 @@ def _label_mode_axes(col: Any, joint: str) -> None:
         ax.grid(alpha=0.3)
 
 
-def plus_minus(value: float, std: float, decimals: int) -> str:
-    """``value +- std`` with the uncertainty to two significant digits and the value to the same decimal place
-    (at least ``decimals``), so that a small uncertainty never prints as 0.000."""
-    if std > 0 and math.isfinite(std):
-        decimals = max(decimals, 1 - math.floor(math.log10(std)))
-    return f"{value:.{decimals}f} +- {std:.{decimals}f}"
-
-
 def markdown(cal: Calibration, report: dict[str, Any], figs: list[str], recording: str) -> str:
     c = cal.plan.config
     lines = ["# Calibration report", "",
@@ -198,7 +191,7 @@ def markdown(cal: Calibration, report: dict[str, Any], figs: list[str], recordin
     names = list(c.joint_names)
     for r, res in zip(cal.results, cal.residuals, strict=True):
         joints = [f"{r.positions[names.index(j)]:+.3f}" for j in (c.grid_joints or c.joint_names)]
-        modes = "; ".join(f"{plus_minus(m.hz, m.omega_std / (2 * math.pi), 3)}, {plus_minus(m.zeta, m.zeta_std, 4)}"
+        modes = "; ".join(f"{plus_minus_fixed(m.hz, m.omega_std / (2 * math.pi), 3)}, {plus_minus_fixed(m.zeta, m.zeta_std, 4)}"
                           for m in r.modes)
         pct = " | ".join(f"{100 * res.get(k, math.nan):.1f}" for k, _ in RESIDUAL_SERIES)
         lines.append(f"| {r.name} | " + " | ".join(joints) + f" | {modes} | {pct} | {'; '.join(r.flags) or '-'} |")

@@ -23,3 +23,15 @@ def plus_minus(x: float | None, std: float | None, spec: str = ".4g", std_spec: 
     if std is None or not math.isfinite(std) or std <= 0.0:
         return f"{format(x, spec)}{u} (uncertainty unknown)"
     return f"{format(x, spec)} {sign} {format(std, std_spec)}{u}"
+
+
+def plus_minus_fixed(x: float, std: float, decimals: int) -> str:
+    """``x +- std`` in fixed notation, the uncertainty to two significant digits and the value to the same
+    decimal place (at least ``decimals``), so that a small uncertainty never prints as 0.000; "x (uncertainty
+    unknown)" when ``std`` is zero or not finite (a table's column of values, aligned by ``decimals``)."""
+    if not math.isfinite(x):
+        return "n/a"
+    if not (std > 0 and math.isfinite(std)):
+        return f"{x:.{decimals}f} (uncertainty unknown)"
+    decimals = max(decimals, 1 - math.floor(math.log10(std)))
+    return f"{x:.{decimals}f} +- {std:.{decimals}f}"
