@@ -191,8 +191,8 @@ def markdown(cal: Calibration, report: dict[str, Any], figs: list[str], recordin
     names = list(c.joint_names)
     for r, res in zip(cal.results, cal.residuals, strict=True):
         joints = [f"{r.positions[names.index(j)]:+.3f}" for j in (c.grid_joints or c.joint_names)]
-        modes = "; ".join(f"{plus_minus_fixed(m.hz, m.omega_std / (2 * math.pi), 3)}, {plus_minus_fixed(m.zeta, m.zeta_std, 4)}"
-                          for m in r.modes)
+        modes = "; ".join(f"{plus_minus_fixed(m.hz, m.omega_std / (2 * math.pi), 3)},"
+                          f" {plus_minus_fixed(m.zeta, m.zeta_std, 4)}" for m in r.modes)
         pct = " | ".join(f"{100 * res.get(k, math.nan):.1f}" for k, _ in RESIDUAL_SERIES)
         lines.append(f"| {r.name} | " + " | ".join(joints) + f" | {modes} | {pct} | {'; '.join(r.flags) or '-'} |")
     lines += [""]
