@@ -67,5 +67,6 @@ def test_the_limit_ceiling_is_the_tightest_of_velocity_and_acceleration():
     # velocity: pi / 1.5 = 2.09; acceleration: sqrt(12 / 6) = 1.41 on joint 0
     assert limit_ceiling(v, a, [np.pi] * 3, [12.0] * 3) == pytest.approx(np.sqrt(2.0))
     assert limits_held(np.array([1.0, -3.0, 0.5]), [2.0, 2.0, 2.0]) == [1]
-    with pytest.raises(SpeedError, match="finite"):
+    with pytest.raises(SpeedError, match="> 0"):
         limit_ceiling(v, a, [0.0] * 3, [1.0] * 3)
+    assert limit_ceiling(v, a, [np.pi] * 3, [np.inf] * 3) == pytest.approx(np.pi / 1.5)

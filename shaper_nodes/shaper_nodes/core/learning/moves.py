@@ -169,7 +169,8 @@ class MoveEntry:
         start, goal = _pose("start", d["start"]), _pose("goal", d["goal"])
         key = d["key"]
         if key not in (move_key(start, goal), d["name"]):
-            raise MoveError(f"key {key!r} is neither the name {d['name']!r} nor the poses' key {move_key(start, goal)!r}")
+            raise MoveError(f"key {key!r} is neither the name {d['name']!r} nor the poses' key"
+                            f" {move_key(start, goal)!r}")
         if d["origin"] not in ORIGINS:
             raise MoveError(f"origin must be one of {', '.join(ORIGINS)}, got {d['origin']!r}")
         cycles = d["cycles"]

@@ -86,7 +86,7 @@ def limit_ceiling(velocities: np.ndarray, accelerations: np.ndarray, max_velocit
     velocities, accelerations : (N, J) array
         The planned profile, rad/s and rad/s^2.
     max_velocity, max_acceleration : (J,) array_like
-        Joint limits, rad/s and rad/s^2 (> 0).
+        Joint limits, rad/s and rad/s^2 (> 0; inf: no limit).
 
     Returns
     -------
@@ -99,8 +99,8 @@ def limit_ceiling(velocities: np.ndarray, accelerations: np.ndarray, max_velocit
     amax = np.asarray(max_acceleration, dtype=float)
     if v.shape != vmax.shape or a.shape != amax.shape:
         raise SpeedError(f"limits for {vmax.size} and {amax.size} joints, profile has {v.size}")
-    if not (np.all(np.isfinite(vmax)) and np.all(vmax > 0) and np.all(np.isfinite(amax)) and np.all(amax > 0)):
-        raise SpeedError("joint velocity and acceleration limits must be finite and > 0")
+    if not (np.all(vmax > 0) and np.all(amax > 0)):  # nan fails too
+        raise SpeedError("joint velocity and acceleration limits must be > 0 (inf: no limit)")
     with np.errstate(divide="ignore"):
         s_v = np.where(v > 0, vmax / np.where(v > 0, v, 1.0), np.inf)
         s_a = np.where(a > 0, np.sqrt(amax / np.where(a > 0, a, 1.0)), np.inf)
