@@ -283,6 +283,14 @@ def _with_pair(others: Any, params: Any) -> Any:
     return Shaper(a, t, "custom", tuple(others.modes) + tuple(pair.modes))
 
 
+def _learner(entry: Any) -> Any:
+    """The move's saved LIST learner (every learning case saves one at the move's first cycle)."""
+    learner = entry.learner()
+    if learner is None:
+        raise RuntimeError(f"move {entry.name}: no LIST state saved")
+    return learner
+
+
 def _save(ctx: Context, case: str, store: Any) -> None:
     store.save(ctx.out / f"moves_{case}.json", saved_at=0.0)
 
@@ -309,7 +317,7 @@ def scheduled_list(ctx: Context, cycles: int) -> list[Row]:
                 used = None  # the reference: the schedule without its lowest-mode factor
                 shaper = others
             else:
-                learner = entry.learner()
+                learner = _learner(entry)
                 used = learner.params
                 shaper = _with_pair(others, used)
             run = cell.run(mv, shaper)
@@ -338,7 +346,7 @@ def scheduled_list_factor(ctx: Context, cycles: int) -> list[Row]:
         for mv in cycle_moves():
             entry, new = store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
             base = sched(mv.positions[-1])
-            learner = ListLearner(ListConfig(window_delay=float(base.times[-1]) + 0.1)) if new else entry.learner()
+            learner = ListLearner(ListConfig(window_delay=float(base.times[-1]) + 0.1)) if new else _learner(entry)
             used = None if new else learner.params
             shaper = base
             if used is not None:
@@ -447,7 +455,7 @@ def speedup(ctx: Context, cycles: int) -> list[Row]:
                 ceiling = limit_ceiling(mv.velocities, mv.accelerations, [UR5E_MAX_VELOCITY] * 6, [np.inf] * 6)
                 sp = SpeedLearner(SpeedSettings(step=0.1, ceiling=ceiling))
             else:
-                sp = entry.speed()
+                sp = entry.speed() or SpeedLearner()
             factor = sp.factor
             run = cell.run(mv, sched(mv.positions[-1]), factor)
             why = []
@@ -600,7 +608,7 @@ def checks(rows: list[Row], noise: float) -> list[str]:
                        f" than one 2 ms sample): {', '.join(worse) if worse else 'none'}.")
     if "speedup" in have:
         n = max(r["cycle"] for r in rows if r["case"] == "speedup")
-        sched_t = sum(base[m]["move_settle_s"] for m in moves if base[m])
+        sched_t = sum(b["move_settle_s"] for b in base.values() if b is not None)
         fast = [_get(rows, "speedup", m, n) for m in moves]
         t = sum(r["move_settle_s"] for r in fast if r)
         sp = [r for r in rows if r["case"] == "speedup"]
