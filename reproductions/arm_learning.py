@@ -17,8 +17,13 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
 - ``scheduled_list``: per move, LIST retunes the scheduled shaper's lowest-mode factor (A1, T2),
   starting from the schedule's own values, T2 never longer than the schedule's (no added delay);
   its reference is the first cycle, shaped by the schedule without that factor;
+- ``scheduled_list_factor``: per move, a LIST factor convolved with the scheduled shaper (what the
+  learner node does over the schedule today), the scheduled cycle its reference: it shows what a
+  factor costs in time;
 - ``list``: LIST per move with no calibration: the first cycle unshaped is the reference, the
-  start is the ZV of the lowest mode the identifier finds in that move's residual;
+  start is the ZV of the lowest mode the identifier finds in that move's residual; once that
+  factor holds (or after :data:`FACTOR_CYCLES` cycles) it is frozen, and the next mode that rings
+  gets its own factor, with the frozen ones' cycle as its reference;
 - ``speedup``: the schedule with a time-scaling factor per move
   (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`),
   raised while the flange settles within 0.05 mm and the joint velocity and torque limits hold;

@@ -15,25 +15,23 @@ from sim_plant_node.arm.task import cycle_moves
 SCHEMA = {"case", "move", "cycle", "residual_rms", "peak_mm", "settle_s", "move_settle_s", "speed_factor"}
 
 
-def test_two_cycles_of_the_schedule_and_the_speed_up(tmp_path):
+def test_two_cycles_of_the_speed_up_over_the_schedule(tmp_path):
     out = tmp_path / "out"
     path = tmp_path / "rows.json"
-    assert arm_learning.main(["--cycles", "2", "--cases", "scheduled,speedup", "--schedule", "modal", "--no-docs",
+    assert arm_learning.main(["--cycles", "2", "--cases", "speedup", "--schedule", "modal", "--no-docs",
                               "--json", str(path), "--out", str(out)]) == 0
     rows = json.loads(path.read_text())["rows"]
     moves = [m.name for m in cycle_moves()]
-    assert len(rows) == 2 * 2 * len(moves)
+    assert len(rows) == 2 * len(moves)
     assert all(set(r) >= SCHEMA for r in rows)
-    sched = {(r["move"], r["cycle"]): r for r in rows if r["case"] == "scheduled"}
-    fast = {(r["move"], r["cycle"]): r for r in rows if r["case"] == "speedup"}
+    fast = {(r["move"], r["cycle"]): r for r in rows}
     for m in moves:
-        # the first cycle runs at the planned speed, so it is the schedule's run exactly
+        # the first cycle runs the schedule at the planned speed; nothing was violated there, so every move
+        # was raised by one step, and it is faster
         assert fast[(m, 1)]["speed_factor"] == 1.0
-        assert fast[(m, 1)]["move_settle_s"] == sched[(m, 1)]["move_settle_s"]
-        # nothing was violated at the planned speed, so every move was raised, and it is faster
         assert fast[(m, 1)]["peak_mm"] <= 1e3 * SETTLE_TOLERANCE
         assert fast[(m, 2)]["speed_factor"] == pytest.approx(1.1)
-        assert fast[(m, 2)]["move_settle_s"] < sched[(m, 2)]["move_settle_s"]
+        assert fast[(m, 2)]["move_settle_s"] < fast[(m, 1)]["move_settle_s"]
         assert fast[(m, 2)]["velocity_ratio"] <= 1.0 and fast[(m, 2)]["torque_ratio"] <= 1.0
     store, problems = store_from_doc(json.loads((out / "moves_speedup.json").read_text()))
     assert problems == {} and len(store) == len({(m.positions[0].tobytes(), m.positions[-1].tobytes())
