@@ -16,7 +16,9 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
 - ``unshaped``, ``fixed`` (the calibration's fallback: ZV on the home pose's modes), ``scheduled``;
 - ``scheduled_list``: per move, LIST retunes the scheduled shaper's lowest-mode factor (A1, T2),
   starting from the schedule's own values, T2 never longer than the schedule's (no added delay);
-  its reference is the first cycle, shaped by the schedule without that factor;
+  its reference is the first cycle, shaped by the schedule without that factor; the second runs the
+  schedule itself, and a later trial worse than the best measured (in residual or in move + settle
+  time) stops the learning there: the pair is kept only when it pays;
 - ``scheduled_list_factor``: per move, a LIST factor convolved with the scheduled shaper (what the
   learner node does over the schedule today), the scheduled cycle its reference: it shows what a
   factor costs in time;
@@ -302,7 +304,8 @@ def _save(ctx: Context, case: str, store: Any) -> None:
 
 @register("scheduled_list")
 def scheduled_list(ctx: Context, cycles: int) -> list[Row]:
-    """Per move, LIST retunes the schedule's lowest-mode factor (module docstring)."""
+    """Per move, LIST retunes the schedule's lowest-mode factor (module docstring); a trial worse than the best
+    measured (the schedule itself at first) in residual or in move + settle time stops the learning at that best."""
     from shaper_nodes.core.learning.list import ListConfig, ListLearner, ListParams
     from shaper_nodes.core.learning.moves import MoveStore
     from sim_plant_node.arm.task import cycle_moves
@@ -324,14 +327,31 @@ def scheduled_list(ctx: Context, cycles: int) -> list[Row]:
             else:
                 learner = _learner(entry)
                 used = learner.params
+                if entry.extra.get("kept") is not None:  # learning stopped: the best pair measured
+                    used = ListParams(*entry.extra["kept"])
                 shaper = _with_pair(others, used)
             run = cell.run(mv, shaper)
-            up = learner.update(run.times, run.imu, run.planned_end, run.end, used)
+            m = {"residual_rms": run.measures.residual_rms, "move_settle_s": run.measures.move_and_settle_s}
+            if entry.extra.get("kept") is not None:
+                up_action = "kept"
+            else:
+                up_action = learner.update(run.times, run.imu, run.planned_end, run.end, used).action
+                if used is not None and entry.base is None:  # the start is the schedule itself: its measures
+                    entry.base = entry.best = m
+                    entry.extra["best_pair"] = (used.a1, used.t2)
+                elif used is not None and entry.best is not None:
+                    best = entry.best
+                    if m["residual_rms"] <= best["residual_rms"] and m["move_settle_s"] <= best["move_settle_s"]:
+                        entry.best, entry.extra["best_pair"] = m, (used.a1, used.t2)
+                    else:  # kept only when it pays: a worse trial stops learning at the best pair measured
+                        entry.extra["kept"] = entry.extra["best_pair"]
             entry.list_state, entry.cycles = learner.to_dict(), entry.cycles + 1
-            p = learner.params
-            entry.correction = None if p is None else (p.shaper().amplitudes.tolist(), p.shaper().times.tolist())
+            pair = entry.extra.get("kept") or entry.extra.get("best_pair")
+            if pair is not None:
+                sh = ListParams(*pair).shaper()
+                entry.correction = (sh.amplitudes.tolist(), sh.times.tolist())
             rows.append(row("scheduled_list", c, run, a1=None if used is None else used.a1,
-                            t2=None if used is None else used.t2, action=up.action))
+                            t2=None if used is None else used.t2, action=up_action))
     _save(ctx, "scheduled_list", store)
     return rows
 
