@@ -28,6 +28,9 @@ from shaper_nodes.core.shaping.vibration import residual_vibration, settle_time
 SETTLE_TOLERANCE = 0.05e-3
 #: length of the residual-vibration window after the commanded motion's end, s
 RESIDUAL_WINDOW = 1.0
+#: the position loop's transient after the commanded motion's end, s: the joints' servo (50 Hz, damping
+#: 0.7) settles its tracking lag in a few of its periods; :func:`late_residual` starts after it
+SERVO_TRANSIENT = 0.1
 
 
 @dataclass(frozen=True)
@@ -89,3 +92,29 @@ def measure_move(move: str, planned_start: float, planned_duration: float, comma
                  else float("nan"))
     return MoveMeasures(move, res.rms, res.peak, 1e3 * peak, settled - planned_end, planned_duration,
                         commanded_end - planned_end, 1e3 * deviation)
+
+
+def late_residual(imu_times: np.ndarray, imu: np.ndarray, commanded_end: float) -> float:
+    """RMS of the IMU's deviation from its mean over the residual window without its first
+    :data:`SERVO_TRANSIENT` s, m/s^2: the modes' ringing, without the position loop's transient
+    (which no input shaper removes: it follows the end of any commanded motion)."""
+    return residual_vibration(imu_times, imu, commanded_end + SERVO_TRANSIENT, commanded_end + RESIDUAL_WINDOW,
+                              remove_mean=True).rms
+
+
+def inverse_dynamics_peaks(model, times: np.ndarray, positions: np.ndarray, every: int = 5) -> np.ndarray:
+    """Largest |torque| per joint, N m, the rigid arm needs to follow a commanded joint trajectory:
+    M(q) q'' + C(q, q') q' + g(q), with q' and q'' by finite differences of the commanded positions
+    (``model``: an :class:`~sim_plant_node.arm.dynamics.ArmModel`; every ``every``-th sample)."""
+    t = np.asarray(times, dtype=float)
+    q = np.asarray(positions, dtype=float)
+    if t.size < 3:
+        return np.abs(np.array([model.gravity(x) for x in q])).max(axis=0) if t.size else np.zeros(model.n)
+    qd = np.gradient(q, t, axis=0)
+    qdd = np.gradient(qd, t, axis=0)
+    peaks = np.zeros(q.shape[1])
+    for i in range(0, t.size, max(1, int(every))):
+        m = np.triu(model.mass(q[i]))
+        tau = (m + np.triu(m, 1).T) @ qdd[i] + model.nonlinear(q[i], qd[i])
+        peaks = np.maximum(peaks, np.abs(tau))
+    return peaks

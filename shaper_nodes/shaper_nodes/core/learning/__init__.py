@@ -10,13 +10,20 @@ mrilc
     Model-Reference Iterative Learning Control (seed 000): the reference model, the convergence
     check and learning laws, the learner with its divergence guard, the session, and the
     parameters (names, defaults, ranges) the node and replays share.
+moves
+    Per-move learned state: a move's identity from its start and goal poses (or a name), one entry
+    per move (LIST state, correction, measures, speed factor), saved atomically as one versioned
+    document and loaded back entry by entry, each checked.
 samples
     Compact stamped sample buffers that give memory back (both learners' cycles), the defaults
     of the cycle duration limit and the accelerometer's range, and the check of samples against
     a sensor's range (saturated or implausible samples; the identifier node uses it too).
+speed
+    Learning to move faster: a per-move time-scaling factor raised while the move stays within its
+    tolerance and the joint limits, lowered at once on a violation, then bisected.
 state_file
     Atomic JSON state files with a version, checked fully when read, and the start-up load that
     never fails: a file that cannot be used is reported, moved aside if it can be, and ignored.
 """
 
-__all__ = ["list", "mrilc", "samples", "state_file"]
+__all__ = ["list", "moves", "mrilc", "samples", "speed", "state_file"]

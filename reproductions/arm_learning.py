@@ -1,0 +1,778 @@
+"""Learning on the arm, per move: LIST over the schedule and alone, speed-up, payload change (issue 31).
+
+``python -m reproductions.arm_learning [--cycles N] [--noise S] [--json PATH] [--cases A,B]``
+(``./run exec python -m reproductions.arm_learning``) runs the demo's pick-and-place cycle on the
+arm and its controller without ROS (:mod:`sim_plant_node.arm.offline`, deterministic: the IMU
+noise has a fixed seed) for every case of :data:`CASES`, ``N`` cycles each, and keeps one learned
+state per move in a :class:`~shaper_nodes.core.learning.moves.MoveStore` (saved atomically under
+``out/arm_learning/``). The schedule is the offline calibration of
+:mod:`reproductions.arm_calibration` (config/calibrate.yaml's plan, 0.01 m/s^2 noise), computed
+once and cached in ``out/arm_learning/calibration.json`` (keyed by the plan file's hash; the
+calibration is deterministic, so the cache only saves its 2-4 minutes).
+
+Cases (a registry: name -> function returning rows; another helper's MRILC case plugs in with
+:func:`register`):
+
+- ``unshaped``, ``fixed`` (the calibration's fallback: ZV on the home pose's modes), ``scheduled``;
+- ``scheduled_list``: per move, LIST retunes the scheduled shaper's lowest-mode factor (A1, T2),
+  starting from the schedule's own values, T2 never longer than the schedule's (no added delay);
+  its reference is the first cycle, shaped by the schedule without that factor; the second runs the
+  schedule itself, and a later trial worse than the best measured (in residual or in move + settle
+  time) stops the learning there: the pair is kept only when it pays;
+- ``scheduled_list_factor``: per move, a LIST factor convolved with the scheduled shaper (what the
+  learner node does over the schedule today), the scheduled cycle its reference: it shows what a
+  factor costs in time;
+- ``list``: LIST per move with no calibration: the first cycle unshaped is the reference, the
+  start is the ZV of the lowest mode the identifier finds in that move's residual; once that
+  factor holds (or after :data:`FACTOR_CYCLES` cycles) it is frozen, and the next mode that rings
+  gets its own factor, with the frozen ones' cycle as its reference;
+- ``speedup``: the schedule with a time-scaling factor per move
+  (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`),
+  raised while the flange settles within 0.05 mm and the joint velocity and torque limits hold;
+- ``payload``: the schedule, the payload changed from 2 to 4.5 kg after the third cycle; a drift
+  watch per move (:class:`~shaper_nodes.core.identification.drift.DriftWatch`) on the modes
+  identified in each move's residual; on its warning the moves are re-learned from the drift's
+  new modes (a ZV on the modes identified in the move's residual).
+
+Each row (the JSON's ``rows``): case, move, cycle, residual_rms (m/s^2, 1 s after the commanded
+motion's end), late_rms (the same without the servo's first 0.1 s), peak_mm, settle_s,
+move_settle_s (0.05 mm), speed_factor, delay_s, torque_ratio (largest joint torque / its limit),
+velocity_ratio. Writes docs/results/arm_learning.md and its figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import pathlib
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from reproductions.common import docs_option
+
+RATE = 500.0
+DWELL = 1.5  # s at rest after each move, as in the demo
+OUT = pathlib.Path("out") / "arm_learning"
+#: the UR5e's published joint speed limit, all six joints: 180 deg/s (UR5e technical specifications;
+#: ur_description's joint_limits.yaml: 3.14159 rad/s), rad/s
+UR5E_MAX_VELOCITY = math.pi
+#: tolerance of the settled flange, m (sim_plant_node.arm.metrics.SETTLE_TOLERANCE)
+PAYLOAD_AT = 3  # the payload changes after this many cycles
+HEAVY = 4.5  # kg
+#: modes identified in a residual with more damping than this are the position loop's transient, not the arm's
+SERVO_ZETA = 0.12
+
+Row = dict[str, Any]
+CaseFn = Callable[["Context", int], list[Row]]
+#: the cases, name -> function(context, cycles) returning rows
+CASES: dict[str, CaseFn] = {}
+
+
+def register(name: str) -> Callable[[CaseFn], CaseFn]:
+    """Decorator: add a case to :data:`CASES` (its function takes the context and the cycle count)."""
+    def add(fn: CaseFn) -> CaseFn:
+        CASES[name] = fn
+        return fn
+    return add
+
+
+# ------------------------------------------------------------------------------------------ calibration
+def _config() -> pathlib.Path:
+    return pathlib.Path(__file__).resolve().parents[1] / "shaper_nodes" / "config" / "calibrate.yaml"
+
+
+def calibration(cache: pathlib.Path | None = OUT / "calibration.json") -> dict[str, Any]:
+    """The schedule's rule base, family and joint names from the offline calibration, cached by the plan's hash."""
+    from reproductions.arm_calibration import offline_calibration
+
+    digest = hashlib.sha256(_config().read_bytes()).hexdigest()[:16]
+    if cache is not None and cache.exists():
+        doc = json.loads(cache.read_text())
+        if doc.get("plan_sha256") == digest:
+            return dict(doc)
+    cal = offline_calibration(_config())
+    doc = {"plan_sha256": digest, "rule_base": cal.rule_base, "family": cal.family,
+           "joints": list(cal.plan.config.joint_names),
+           "home_modes": [[m.omega, m.zeta] for m in cal.results[0].modes]}
+    if cache is not None:
+        from shaper_nodes.core.files import write_atomic
+
+        write_atomic(cache, json.dumps(doc))
+    return doc
+
+
+def modal_calibration(poses: tuple[tuple[float, ...], tuple[float, ...]] = ((-1.9, -1.57, -1.0), (0.5, 1.57, 2.4)),
+                      n_modes: int = 3) -> dict[str, Any]:
+    """A schedule of the same shape as the calibration's (shoulder_lift x elbow grid, ZV) from the modal
+    analysis of the linearised arm at its grid poses (under a second; for quick runs and the tests)."""
+    from sim_plant_node.arm.description import JOINT_NAMES
+    from sim_plant_node.arm.dynamics import ArmModel
+    from sim_plant_node.arm.modal import modes
+    from sim_plant_node.arm.task import HOME
+
+    model, rules = ArmModel(), {}
+    lift, elbow = poses
+
+    def tri(grid: tuple[float, ...], i: int) -> list[float]:
+        return [grid[max(i - 1, 0)], grid[i], grid[min(i + 1, len(grid) - 1)]]
+
+    for i, a in enumerate(lift):
+        for j, b in enumerate(elbow):
+            q = HOME.copy()
+            q[1], q[2] = a, b
+            found = sorted(modes(model, q), key=lambda m: m.omega)[:n_modes]
+            rules[f"r_{i}_{j}"] = {"membership": ["triangular", "triangular"],
+                                   "membership_params": tri(lift, i) + tri(elbow, j),
+                                   "natural_frequency": [m.omega for m in found],
+                                   "damping_ratio": [m.zeta for m in found]}
+    home = sorted(modes(model, HOME), key=lambda m: m.omega)[:n_modes]
+    return {"plan_sha256": "modal", "family": "zv", "joints": list(JOINT_NAMES),
+            "rule_base": {"premises": [JOINT_NAMES[1], JOINT_NAMES[2]], "rules": rules,
+                          "range": [lift[0], lift[-1], elbow[0], elbow[-1]]},
+            "home_modes": [[m.omega, m.zeta] for m in home]}
+
+
+# ------------------------------------------------------------------------------------------ the runs
+@dataclass
+class Context:
+    """What every case shares: the calibration, the IMU noise, its seed."""
+
+    cal: dict[str, Any]
+    noise: float = 0.0
+    seed: int = 0
+    out: pathlib.Path = OUT
+    notes: dict[str, list[str]] = field(default_factory=dict)
+
+    def schedule(self) -> Callable[[np.ndarray], Any]:
+        """The scheduled shaper at a goal pose (as the shaper node's ``action.scheduler``)."""
+        from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
+
+        sched = Scheduler(rule_base_from_dict(self.cal["rule_base"]), "modes", self.cal["family"])
+        premises = [list(self.cal["joints"]).index(p) for p in sched.rule_base.premises]
+        return lambda pose: sched.shaper(sched.evaluate(np.asarray(pose)[premises].tolist()))
+
+    def fallback(self) -> Any:
+        """The calibration's fallback: its family on the home pose's modes."""
+        from shaper_nodes.core.shaping import Mode, design
+
+        return design(self.cal["family"], [Mode(w, z) for w, z in self.cal["home_modes"]])
+
+    def note(self, case: str, text: str) -> None:
+        self.notes.setdefault(case, []).append(text)
+
+
+@dataclass
+class Run:
+    """One move's run: its measures and what a learner sees (times from the move's start)."""
+
+    measures: Any
+    times: np.ndarray
+    imu: np.ndarray
+    planned_end: float
+    end: float
+    torque_ratio: float
+    velocity_ratio: float
+    late: float
+
+
+class Cell:
+    """The arm and its controller, running the cycle's moves one after another (one arm for all cycles)."""
+
+    def __init__(self, ctx: Context) -> None:
+        from sim_plant_node.arm.description import TORQUE_LIMITS
+        from sim_plant_node.arm.offline import OfflineArm
+        from sim_plant_node.arm.task import HOME
+
+        self.arm = OfflineArm(HOME, RATE, noise=ctx.noise, seed=ctx.seed)
+        self.torque_limits = np.asarray(TORQUE_LIMITS, dtype=float)
+
+    def set_payload(self, mass: float) -> None:
+        self.arm.plant.set_payload(mass)
+
+    def run(self, move: Any, shaper: Any = None, factor: float = 1.0) -> Run:
+        """Run ``move`` (time-scaled by ``factor``, shaped by ``shaper``; None: unshaped), then dwell."""
+        from shaper_nodes.core.shaping.fir import discretize
+        from shaper_nodes.core.shaping.trajectory import shape_trajectory
+        from sim_plant_node.arm.metrics import inverse_dynamics_peaks, late_residual, measure_move, motion_end
+        from sim_plant_node.arm.task import time_scaled
+
+        mv = time_scaled(move, factor)
+        times = np.append(mv.times[1:], mv.duration + DWELL)
+        pos = np.vstack([mv.positions[1:], mv.positions[-1]])
+        vel = np.vstack([mv.velocities[1:], np.zeros(6)])
+        acc = np.vstack([mv.accelerations[1:], np.zeros(6)])
+        if shaper is not None:
+            shaped = shape_trajectory(np.append(0.0, times), np.vstack([mv.positions[0], pos]),
+                                      discretize(shaper, RATE), RATE, np.vstack([np.zeros(6), vel]))
+            times, pos, vel, acc = (shaped.times[1:], shaped.positions[1:], shaped.velocities[1:],
+                                    shaped.accelerations[1:])
+        arm = self.arm
+        start = arm.run(times, pos, vel, acc)
+        end = start + float(times[-1])
+        rec = arm.record
+        ct, cq = rec.window("cmd", start, end)
+        it, imu = rec.window("imu", start, end)
+        lt, link = rec.window("link", start, end)
+        tool = arm.plant.model.tool_positions(link)
+        c_end = motion_end(ct, cq)
+        m = measure_move(mv.name, start, mv.duration, c_end, end, it, imu, lt, tool)
+        moving = ct <= c_end + 0.05
+        torque = inverse_dynamics_peaks(arm.plant.model, ct[moving], cq[moving])
+        qd = np.abs(np.gradient(cq[moving], ct[moving], axis=0)).max(axis=0)
+        run = Run(m, it - start, imu, mv.duration, end - start, float(np.max(torque / self.torque_limits)),
+                  float(np.max(qd) / UR5E_MAX_VELOCITY), late_residual(it, imu, c_end))
+        for name in ("imu_t", "imu", "cmd_t", "cmd", "link_t", "link"):
+            getattr(rec, name).clear()
+        return run
+
+
+def row(case: str, cycle: int, run: Run, factor: float = 1.0, **extra: Any) -> Row:
+    m = run.measures
+    out = {"case": case, "move": m.move, "cycle": cycle, "residual_rms": m.residual_rms,
+           "late_rms": run.late, "peak_mm": m.peak_mm, "settle_s": m.settling_s,
+           "move_settle_s": m.move_and_settle_s, "speed_factor": factor, "delay_s": m.delay_s,
+           "torque_ratio": run.torque_ratio, "velocity_ratio": run.velocity_ratio}
+    out.update(extra)
+    return out
+
+
+def _fixed_case(name: str, shaper_for: Callable[[Any], Any]) -> CaseFn:
+    def case(ctx: Context, cycles: int) -> list[Row]:
+        from sim_plant_node.arm.task import cycle_moves
+
+        cell, rows = Cell(ctx), []
+        for c in range(1, cycles + 1):
+            rows += [row(name, c, cell.run(mv, shaper_for(mv))) for mv in cycle_moves()]
+        return rows
+    return case
+
+
+@register("unshaped")
+def unshaped(ctx: Context, cycles: int) -> list[Row]:
+    return _fixed_case("unshaped", lambda mv: None)(ctx, cycles)
+
+
+@register("fixed")
+def fixed(ctx: Context, cycles: int) -> list[Row]:
+    shaper = ctx.fallback()
+    return _fixed_case("fixed", lambda mv: shaper)(ctx, cycles)
+
+
+@register("scheduled")
+def scheduled(ctx: Context, cycles: int) -> list[Row]:
+    sched = ctx.schedule()
+    return _fixed_case("scheduled", lambda mv: sched(mv.positions[-1]))(ctx, cycles)
+
+
+# ------------------------------------------------------------------------------------------ LIST per move
+def _split_lowest(shaper: Any) -> tuple[Any, Any]:
+    """The scheduled shaper's lowest mode and the shaper of its other modes (same family)."""
+    from shaper_nodes.core.shaping import design
+
+    modes = sorted(shaper.modes, key=lambda m: m.omega)
+    return modes[0], (design("zv", modes[1:]) if len(modes) > 1 else None)
+
+
+def _with_pair(others: Any, params: Any) -> Any:
+    from shaper_nodes.core.shaping import Shaper
+    from shaper_nodes.core.shaping.families import convolve
+
+    pair = params.shaper()
+    if others is None:
+        return pair
+    a, t = convolve((others.amplitudes, others.times), (pair.amplitudes, pair.times))
+    return Shaper(a, t, "custom", tuple(others.modes) + tuple(pair.modes))
+
+
+def _learner(entry: Any) -> Any:
+    """The move's saved LIST learner (every learning case saves one at the move's first cycle)."""
+    learner = entry.learner()
+    if learner is None:
+        raise RuntimeError(f"move {entry.name}: no LIST state saved")
+    return learner
+
+
+def _save(ctx: Context, case: str, store: Any) -> None:
+    store.save(ctx.out / f"moves_{case}.json", saved_at=0.0)
+
+
+@register("scheduled_list")
+def scheduled_list(ctx: Context, cycles: int) -> list[Row]:
+    """Per move, LIST retunes the schedule's lowest-mode factor (module docstring); a trial worse than the best
+    measured (the schedule itself at first) in residual or in move + settle time stops the learning at that best."""
+    from shaper_nodes.core.learning.list import ListConfig, ListLearner, ListParams
+    from shaper_nodes.core.learning.moves import MoveStore
+    from sim_plant_node.arm.task import cycle_moves
+
+    sched, cell, store, rows = ctx.schedule(), Cell(ctx), MoveStore(), []
+    for c in range(1, cycles + 1):
+        for mv in cycle_moves():
+            entry, new = store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
+            base = sched(mv.positions[-1])
+            lowest, others = _split_lowest(base)
+            start = ListParams.from_mode(lowest)
+            if new:
+                cfg = ListConfig(t2_bounds=(0.9 * start.t2, start.t2),
+                                 a1_bounds=(max(0.5, start.a1 - 0.1), min(0.95, start.a1 + 0.1)),
+                                 window_delay=float(base.times[-1]) + 0.1)
+                learner = ListLearner(cfg, start)
+                used = None  # the reference: the schedule without its lowest-mode factor
+                shaper = others
+            else:
+                learner = _learner(entry)
+                used = learner.params
+                if entry.extra.get("kept") is not None:  # learning stopped: the best pair measured
+                    used = ListParams(*entry.extra["kept"])
+                shaper = _with_pair(others, used)
+            run = cell.run(mv, shaper)
+            m = {"residual_rms": run.measures.residual_rms, "move_settle_s": run.measures.move_and_settle_s}
+            if entry.extra.get("kept") is not None:
+                up_action = "kept"
+            else:
+                up_action = learner.update(run.times, run.imu, run.planned_end, run.end, used).action
+                if used is not None and entry.base is None:  # the start is the schedule itself: its measures
+                    entry.base = entry.best = m
+                    entry.extra["best_pair"] = (used.a1, used.t2)
+                elif used is not None and entry.best is not None:
+                    best = entry.best
+                    if m["residual_rms"] <= best["residual_rms"] and m["move_settle_s"] <= best["move_settle_s"]:
+                        entry.best, entry.extra["best_pair"] = m, (used.a1, used.t2)
+                    else:  # kept only when it pays: a worse trial stops learning at the best pair measured
+                        entry.extra["kept"] = entry.extra["best_pair"]
+            entry.list_state, entry.cycles = learner.to_dict(), entry.cycles + 1
+            pair = entry.extra.get("kept") or entry.extra.get("best_pair")
+            if pair is not None:
+                sh = ListParams(*pair).shaper()
+                entry.correction = (sh.amplitudes.tolist(), sh.times.tolist())
+            rows.append(row("scheduled_list", c, run, a1=None if used is None else used.a1,
+                            t2=None if used is None else used.t2, action=up_action))
+    _save(ctx, "scheduled_list", store)
+    return rows
+
+
+@register("scheduled_list_factor")
+def scheduled_list_factor(ctx: Context, cycles: int) -> list[Row]:
+    """Per move, a LIST factor convolved with the scheduled shaper (the learner node's factor over the
+    schedule): the scheduled cycle is the reference, the start the mode identified in its residual."""
+    from shaper_nodes.core.learning.list import ListConfig, ListLearner
+    from shaper_nodes.core.learning.moves import MoveStore
+    from shaper_nodes.core.shaping import Shaper
+    from shaper_nodes.core.shaping.families import convolve
+    from sim_plant_node.arm.task import cycle_moves
+
+    sched, cell, store, rows = ctx.schedule(), Cell(ctx), MoveStore(), []
+    for c in range(1, cycles + 1):
+        for mv in cycle_moves():
+            entry, new = store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
+            base = sched(mv.positions[-1])
+            learner = ListLearner(ListConfig(window_delay=float(base.times[-1]) + 0.1)) if new else _learner(entry)
+            used = None if new else learner.params
+            shaper = base
+            if used is not None:
+                f = used.shaper()
+                a, t = convolve((base.amplitudes, base.times), (f.amplitudes, f.times))
+                shaper = Shaper(a, t, "custom", base.modes)
+            run = cell.run(mv, shaper)
+            up = learner.update(run.times, run.imu, run.planned_end, run.end, used)
+            entry.list_state, entry.cycles = learner.to_dict(), entry.cycles + 1
+            rows.append(row("scheduled_list_factor", c, run, a1=None if used is None else used.a1,
+                            t2=None if used is None else used.t2, action=up.action))
+    _save(ctx, "scheduled_list_factor", store)
+    return rows
+
+
+#: the ``list`` case learns a factor for this many cycles (or until LIST holds), then freezes it and starts on
+#: the next mode that rings
+FACTOR_CYCLES = 2
+
+
+def _lowest_ringing(run: Run, covered: list[float]) -> Any:
+    """The lowest arm mode identified in a run's residual that no frozen factor covers (5 %), or None."""
+    from shaper_nodes.core.identification import IdentificationError, identify
+
+    sel = run.times > run.planned_end + run.measures.delay_s + 0.1
+    try:
+        fits = identify(run.times[sel], run.imu[sel], max_modes=3)
+    except IdentificationError:
+        return None
+    fits = [f for f in fits if f.hz > 2.0 and f.zeta < SERVO_ZETA and all(abs(f.hz / h - 1) > 0.05 for h in covered)]
+    return min(fits, key=lambda f: f.omega) if fits else None
+
+
+@register("list")
+def list_alone(ctx: Context, cycles: int) -> list[Row]:
+    """LIST per move with no calibration: from the lowest mode identified in the move's unshaped residual; once
+    a factor holds (or after FACTOR_CYCLES), it is frozen and the next mode that rings gets its own factor."""
+    from shaper_nodes.core.learning.list import ListConfig, ListLearner, ListParams
+    from shaper_nodes.core.learning.moves import MoveStore
+    from shaper_nodes.core.shaping import Shaper
+    from shaper_nodes.core.shaping.families import convolve
+    from sim_plant_node.arm.task import cycle_moves
+
+    cell, store, rows = Cell(ctx), MoveStore(), []
+    frozen: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    covered: dict[str, list[float]] = {}
+    learning: dict[str, int] = {}  # cycles the present factor has learned
+    for c in range(1, cycles + 1):
+        for mv in cycle_moves():
+            entry, _ = store.entry(mv.positions[0], mv.positions[-1], origin="identified")
+            fixed = frozen.get(entry.key)
+            learner = entry.learner()
+            if learner is None or learner.params is None:  # a reference cycle: the frozen factors only
+                run = cell.run(mv, None if fixed is None else Shaper(fixed[0], fixed[1], "custom"))
+                mode = _lowest_ringing(run, covered.setdefault(entry.key, []))
+                action = "reference"
+                if mode is not None:
+                    learner = ListLearner(ListConfig(window_delay=(0.0 if fixed is None else float(fixed[1][-1]))
+                                                     + 2.2 * math.pi / mode.omega),
+                                          ListParams.from_mode(mode.mode))
+                    learner.update(run.times, run.imu, run.planned_end, run.end, None)
+                    covered[entry.key].append(mode.hz)
+                    learning[entry.key] = 0
+                    ctx.note("list", f"{mv.name}, cycle {c}: a factor from {mode.hz:.2f} Hz, zeta {mode.zeta:.3f}"
+                                     " (the lowest mode that rings)")
+                used = None
+            else:
+                used = learner.params
+                pair = used.shaper()
+                a, t = ((pair.amplitudes, pair.times) if fixed is None
+                        else convolve(fixed, (pair.amplitudes, pair.times)))
+                run = cell.run(mv, Shaper(a, t, "custom"))
+                action = learner.update(run.times, run.imu, run.planned_end, run.end, used).action
+                learning[entry.key] += 1
+                if learner.holding or learning[entry.key] >= FACTOR_CYCLES:
+                    best = learner.best[0] if learner.best else learner.params
+                    bp = best.shaper()
+                    frozen[entry.key] = ((bp.amplitudes, bp.times) if fixed is None
+                                         else convolve(fixed, (bp.amplitudes, bp.times)))
+                    learner = None
+            entry.list_state = None if learner is None else learner.to_dict()
+            entry.cycles += 1
+            f = frozen.get(entry.key)
+            entry.correction = None if f is None else (np.asarray(f[0]).tolist(), np.asarray(f[1]).tolist())
+            rows.append(row("list", c, run, a1=None if used is None else used.a1,
+                            t2=None if used is None else used.t2, action=action,
+                            factors=len(covered.get(entry.key, []))))
+    _save(ctx, "list", store)
+    return rows
+
+
+# ------------------------------------------------------------------------------------------ speed-up
+@register("speedup")
+def speedup(ctx: Context, cycles: int) -> list[Row]:
+    """The schedule with a time-scaling factor learned per move (module docstring)."""
+    from shaper_nodes.core.learning.moves import MoveStore
+    from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings, limit_ceiling
+    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
+    from sim_plant_node.arm.task import cycle_moves
+
+    sched, cell, store, rows = ctx.schedule(), Cell(ctx), MoveStore(), []
+    for c in range(1, cycles + 1):
+        for mv in cycle_moves():
+            entry, new = store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
+            if new:
+                ceiling = limit_ceiling(mv.velocities, mv.accelerations, [UR5E_MAX_VELOCITY] * 6, [np.inf] * 6)
+                sp = SpeedLearner(SpeedSettings(step=0.1, ceiling=ceiling))
+            else:
+                sp = entry.speed() or SpeedLearner()
+            factor = sp.factor
+            run = cell.run(mv, sched(mv.positions[-1]), factor)
+            why = []
+            if run.measures.peak_mm > 1e3 * SETTLE_TOLERANCE:
+                why.append(f"residual {run.measures.peak_mm:.4f} mm > {1e3 * SETTLE_TOLERANCE:g} mm")
+            if run.torque_ratio > 1.0:
+                why.append(f"torque {100 * run.torque_ratio:.0f} % of the limit")
+            if run.velocity_ratio > 1.0:
+                why.append(f"velocity {100 * run.velocity_ratio:.0f} % of 180 deg/s")
+            sp.update(not why, "; ".join(why))
+            entry.speed_state, entry.cycles = sp.to_dict(), entry.cycles + 1
+            rows.append(row("speedup", c, run, factor, violation="; ".join(why)))
+    _save(ctx, "speedup", store)
+    return rows
+
+
+# ------------------------------------------------------------------------------------------ payload
+@register("payload")
+def payload(ctx: Context, cycles: int) -> list[Row]:
+    """The schedule; 2 -> 4.5 kg after PAYLOAD_AT cycles; drift watch per move; re-learned on its warning."""
+    from shaper_nodes.core.identification import IdentificationError, identify
+    from shaper_nodes.core.identification.drift import DriftWatch, check_mode
+    from shaper_nodes.core.learning.moves import MoveStore
+    from shaper_nodes.core.shaping import design
+    from sim_plant_node.arm.task import cycle_moves
+
+    sched, cell, store, rows = ctx.schedule(), Cell(ctx), MoveStore(), []
+    watches: dict[str, DriftWatch] = {}
+    own: dict[str, Any] = {}  # per move: the shaper re-learned from the drift's modes
+    for c in range(1, cycles + 1):
+        if c == PAYLOAD_AT + 1:
+            cell.set_payload(HEAVY)
+            ctx.note("payload", f"cycle {c}: payload 2 -> {HEAVY} kg")
+        for mv in cycle_moves():
+            entry, _ = store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
+            shaper = own.get(entry.key) or sched(mv.positions[-1])
+            run = cell.run(mv, shaper)
+            sel = run.times > run.planned_end + run.measures.delay_s + 0.1
+            try:
+                fits = [f for f in identify(run.times[sel], run.imu[sel], max_modes=3)
+                        if 2.0 < f.hz < 40.0 and f.zeta < SERVO_ZETA]
+            except IdentificationError:
+                fits = []
+            watch = watches.setdefault(entry.key, DriftWatch(confirm=2))
+            design_hz = [m.omega / (2 * math.pi) for m in shaper.modes]
+            if fits:
+                strongest = max(fits, key=lambda f: f.amplitude)
+                warn = watch.update(check_mode(shaper.amplitudes, shaper.times, design_hz, strongest, 0.05))
+            else:
+                warn = watch.quiet()
+            if warn:
+                # the modes found now, and those of the move's earlier re-learned shaper that none of them is near
+                # (a weak mode the noise hid this time stays covered)
+                new = [f.mode for f in fits]
+                kept = [m for m in (own[entry.key].modes if entry.key in own else ())
+                        if all(abs(m.omega / n.omega - 1.0) > 0.05 for n in new)]
+                own[entry.key] = design("zv", sorted(new + kept, key=lambda m: m.omega))
+                entry.relearn("identified")
+                said = watch.last.describe() if watch.last else ""
+                ctx.note("payload", f"cycle {c}, {mv.name}: drift warning ({said});"
+                                    " re-learned: ZV on "
+                                    + ", ".join(f"{m.omega / (2 * math.pi):.2f}" for m in own[entry.key].modes) + " Hz")
+                watch.reset()
+            entry.cycles += 1
+            rows.append(row("payload", c, run, payload_kg=HEAVY if c > PAYLOAD_AT else 2.0, warning=warn))
+    _save(ctx, "payload", store)
+    return rows
+
+
+# ------------------------------------------------------------------------------------------ report
+def sums(rows: list[Row], case: str, key: str) -> list[float]:
+    """Per cycle, the sum of ``key`` over the case's moves."""
+    cyc = sorted({r["cycle"] for r in rows if r["case"] == case})
+    return [sum(r[key] for r in rows if r["case"] == case and r["cycle"] == c) for c in cyc]
+
+
+def figures(rows: list[Row], docs: pathlib.Path, tag: str) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = []
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    for key, label, fname in (("residual_rms", "residual RMS summed over the moves, m/s^2", "residual"),
+                              ("move_settle_s", "move + settle time summed over the moves, s", "time")):
+        fig, ax = plt.subplots(figsize=(7, 4))
+        for case in cases:
+            s = sums(rows, case, key)
+            ax.plot(range(1, len(s) + 1), s, marker="o", label=case)
+        ax.set_xlabel("cycle")
+        ax.set_ylabel(label)
+        if key == "residual_rms":
+            ax.set_yscale("log")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        name = f"arm_learning_{fname}{tag}.png"
+        (docs / "img").mkdir(parents=True, exist_ok=True)
+        fig.savefig(docs / "img" / name, dpi=90)
+        plt.close(fig)
+        names.append(name)
+    return names
+
+
+def table(rows: list[Row], case: str, cycles: list[int]) -> list[str]:
+    moves = list(dict.fromkeys(r["move"] for r in rows if r["case"] == case))
+    out = ["| move | " + " | ".join(f"cycle {c}: residual / late / peak mm / move+settle s / s" for c in cycles) + " |",
+           "|---|" + "---|" * len(cycles)]
+    for mv in moves:
+        cells = []
+        for c in cycles:
+            r = next((x for x in rows if x["case"] == case and x["move"] == mv and x["cycle"] == c), None)
+            cells.append("" if r is None else f"{r['residual_rms']:.4f} / {r['late_rms']:.4f} / {r['peak_mm']:.4f} /"
+                                               f" {r['move_settle_s']:.3f} / {r['speed_factor']:.2f}")
+        out.append(f"| {mv} | " + " | ".join(cells) + " |")
+    return out
+
+
+def _get(rows: list[Row], case: str, move: str, cycle: int) -> Row | None:
+    return next((r for r in rows if r["case"] == case and r["move"] == move and r["cycle"] == cycle), None)
+
+
+def checks(rows: list[Row], noise: float) -> list[str]:
+    """The issue's "must show" items, measured on ``rows`` (lines of markdown)."""
+    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
+
+    have = {r["case"] for r in rows}
+    if "scheduled" not in have:
+        return []
+    floor = math.sqrt(3.0) * noise  # RMS of the norm of three axes of white noise
+    last = max(r["cycle"] for r in rows if r["case"] == "scheduled")
+    moves = list(dict.fromkeys(r["move"] for r in rows if r["case"] == "scheduled"))
+    base = {m: _get(rows, "scheduled", m, last) for m in moves}
+    out = [f"Against the schedule's cycle {last} (per move); noise floor {floor:.4f} m/s^2 (sqrt(3) x the noise).", ""]
+    for case in ("scheduled_list", "scheduled_list_factor", "list"):
+        if case not in have:
+            continue
+        n = max(r["cycle"] for r in rows if r["case"] == case)
+        parts, worse = [], []
+        for m in moves:
+            r, b = _get(rows, case, m, n), base[m]
+            if r is None or b is None:
+                continue
+            above = b["residual_rms"] > floor
+            parts.append(f"{m} {100 * r['residual_rms'] / b['residual_rms']:.0f} %"
+                         f" (late {100 * r['late_rms'] / b['late_rms']:.0f} %){'' if above else ' [below the floor]'}")
+            for c in range(2, n + 1):
+                x = _get(rows, case, m, c)
+                if x is not None and (x["residual_rms"] > 1.01 * b["residual_rms"]
+                                      or x["move_settle_s"] > b["move_settle_s"] + 0.0021):
+                    worse.append(f"{m} c{c}")
+        out.append(f"- **{case}**, cycle {n}, residual against the schedule's: " + "; ".join(parts) + ".")
+        if case != "list":
+            out.append(f"  Cycles after the first worse than the schedule (residual by > 1 %, or move + settle by more"
+                       f" than one 2 ms sample): {', '.join(worse) if worse else 'none'}.")
+    if "speedup" in have:
+        n = max(r["cycle"] for r in rows if r["case"] == "speedup")
+        sched_t = sum(b["move_settle_s"] for b in base.values() if b is not None)
+        fast = [_get(rows, "speedup", m, n) for m in moves]
+        t = sum(r["move_settle_s"] for r in fast if r)
+        sp = [r for r in rows if r["case"] == "speedup"]
+        out.append(f"- **speedup**, cycle {n}: summed move + settle {t:.3f} s against the schedule's {sched_t:.3f} s at"
+                   f" planned speed: **{100 * (1 - t / sched_t):.1f} % shorter**; factors "
+                   + ", ".join(f"{r['move']} {r['speed_factor']:.2f}" for r in fast if r)
+                   + f"; largest peak {max(r['peak_mm'] for r in fast if r):.4f} mm (tolerance"
+                   f" {1e3 * SETTLE_TOLERANCE:g} mm); over all cycles the largest joint speed"
+                   f" {100 * max(r['velocity_ratio'] for r in sp):.0f} % of 180 deg/s, torque"
+                   f" {100 * max(r['torque_ratio'] for r in sp):.0f} % of the limit;"
+                   " violations (then lowered at once): "
+                   + (", ".join(f"{r['move']} c{r['cycle']} x{r['speed_factor']:.2f}: {r['violation']}"
+                                for r in sp if r.get("violation")) or "none") + ".")
+    if "payload" in have:
+        pl = [r for r in rows if r["case"] == "payload"]
+        warn = sorted({(r["cycle"], r["move"]) for r in pl if r.get("warning")})
+        heavy = sorted({r["cycle"] for r in pl if r["payload_kg"] > 2.0})
+        back = next((c for c in heavy if all(r["peak_mm"] <= 1e3 * SETTLE_TOLERANCE for r in pl if r["cycle"] == c)),
+                    None)
+        out.append(f"- **payload** 2 -> {HEAVY} kg from cycle {heavy[0] if heavy else '-'}: drift warnings "
+                   + (", ".join(f"c{c} {m}" for c, m in warn) or "none")
+                   + f"; every move within {1e3 * SETTLE_TOLERANCE:g} mm again from cycle {back if back else 'never'}"
+                   + (f" ({back - heavy[0] + 1} cycles with the new payload)" if back and heavy else "") + ".")
+    return [*out, ""]
+
+
+def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
+    """Why the schedule's residual is not a mode that a shaper factor can take out (lines of markdown)."""
+    sc = [r for r in rows if r["case"] == "scheduled"]
+    if not sc:
+        return []
+    if noise > 0:
+        return ["The schedule's residual lies below the noise floor here on every move; what it is made of is"
+                " measured noise-free ([arm_learning.md](arm_learning.md)).", ""]
+    last = max(r["cycle"] for r in sc)
+    sc = [r for r in sc if r["cycle"] == last]
+    share = [f"{r['move']} {100 * (1 - (r['late_rms'] / r['residual_rms']) ** 2 * 0.9):.0f} %" for r in sc]
+    return ["## What the schedule leaves, and what learning can take out", "",
+            "The schedule's residual is mostly the joints' position loop settling its tracking lag in the first"
+            " 0.1 s after the commanded motion ends (a 50 Hz loop, damping 0.7; identified in the residual as a"
+            " heavily damped 30 Hz 'mode'), not the arm's modes ringing: share of the residual's mean square in"
+            " the first 0.1 s of the 1 s window (1 - 0.9 late^2 / residual^2): " + ", ".join(share) + ". No input"
+            " shaper removes that transient without ending the motion later: retuning the schedule's own factors"
+            " within their duration (`scheduled_list`) leaves the residual where the schedule has it, and a LIST"
+            " factor convolved with the schedule (`scheduled_list_factor`, the learner node's factor over the"
+            " schedule) lowers it only by ending the command later (its T2 goes to the upper bound, A1 near 1: a"
+            " small late impulse that moves the window past the transient), which costs move + settle time. The"
+            " goal '25 % of the schedule's residual, never slower' is out of reach on this arm with this"
+            " measure; the late RMS (without the first 0.1 s) is what a shaper can act on.", ""]
+
+
+def markdown(rows: list[Row], ctx: Context, cycles: int, seconds: float, figs: list[str]) -> str:
+    noise = f"IMU noise {ctx.noise:g} m/s^2 per axis (seed {ctx.seed})" if ctx.noise > 0 else "noise-free"
+    lines = [f"# Learning on the arm, per move ({noise})", "",
+             "Generated by `python -m reproductions.arm_learning"
+             + (f" --noise {ctx.noise:g}" if ctx.noise > 0 else "") + f" --cycles {cycles}`"
+             f" ({seconds:.0f} s). Per move and cycle: residual RMS m/s^2 (1 s after the commanded end),"
+             " late RMS (the same without the servo's first 0.1 s), peak flange deviation mm, move + settle"
+             " time s (0.05 mm), time-scaling factor.", ""]
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    lines += ["## The issue's goals, measured", "", *checks(rows, ctx.noise)]
+    lines += physics(rows, ctx.noise)
+    lines += ["## Summed over the cycle's six moves, per cycle", "",
+              "| case | " + " | ".join(f"c{c}" for c in range(1, cycles + 1)) + " |", "|---|" + "---|" * cycles]
+    for case in cases:
+        lines.append(f"| {case} residual | " + " | ".join(f"{v:.4f}" for v in sums(rows, case, "residual_rms")) + " |")
+        lines.append(f"| {case} late | " + " | ".join(f"{v:.4f}" for v in sums(rows, case, "late_rms")) + " |")
+        lines.append(f"| {case} move+settle s | " + " | ".join(f"{v:.3f}" for v in sums(rows, case, "move_settle_s"))
+                     + " |")
+    lines += [""] + [f"![{f}](img/{f})" for f in figs] + [""]
+    for case in cases:
+        cyc = sorted({r["cycle"] for r in rows if r["case"] == case})
+        show = sorted({cyc[0], cyc[min(1, len(cyc) - 1)], cyc[-1]})
+        lines += [f"## {case}", "", *table(rows, case, show), ""]
+        lines += [f"- {n}" for n in ctx.notes.get(case, [])] + ([""] if ctx.notes.get(case) else [])
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m reproductions.arm_learning", description=__doc__.split("\n\n")[0])
+    p.add_argument("--cycles", type=int, default=10, help="cycles per case (default 10)")
+    p.add_argument("--noise", type=float, default=0.0, help="IMU noise, m/s^2 per axis (default 0)")
+    p.add_argument("--json", type=pathlib.Path, default=None, help="write every row here as JSON")
+    p.add_argument("--cases", default=",".join(CASES), help=f"comma-separated cases (default all: {','.join(CASES)})")
+    p.add_argument("--no-docs", action="store_true", help="do not write the docs page and figures")
+    p.add_argument("--schedule", choices=("calibration", "modal"), default="calibration",
+                   help="the schedule: the offline calibration (default, cached in out/arm_learning) or the"
+                        " modal analysis at the calibration's grid poses (quick)")
+    p.add_argument("--render", type=pathlib.Path, default=None,
+                   help="write the docs page and figures from the rows of an earlier --json run (no runs)")
+    p.add_argument("--out", type=pathlib.Path, default=OUT,
+                   help=f"where the moves' learned states and the calibration cache go (default {OUT})")
+    docs_option(p, "arm_learning.md and its figures")
+    args = p.parse_args(argv)
+    if args.cycles < 1:
+        p.error(f"--cycles must be >= 1, got {args.cycles}")
+    if not (math.isfinite(args.noise) and args.noise >= 0):
+        p.error(f"--noise must be finite and >= 0 m/s^2, got {args.noise}")
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()]
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        p.error(f"unknown case(s) {', '.join(unknown)}; known: {', '.join(CASES)}")
+    if args.render is not None:
+        doc = json.loads(args.render.read_text())
+        ctx = Context({}, float(doc["noise"]), notes=dict(doc.get("notes", {})))
+        _write_docs(args.docs, doc["rows"], ctx, int(doc["cycles"]), float(doc.get("seconds", float("nan"))))
+        return 0
+    t0 = time.monotonic()
+    cal = calibration(args.out / "calibration.json") if args.schedule == "calibration" else modal_calibration()
+    ctx = Context(cal, args.noise, out=args.out)
+    rows: list[Row] = []
+    for case in cases:
+        rows += CASES[case](ctx, args.cycles)
+        print(f"{case}: done ({time.monotonic() - t0:.0f} s)", flush=True)
+    if args.json is not None:
+        from shaper_nodes.core.files import write_atomic
+
+        write_atomic(args.json, json.dumps({"noise": args.noise, "cycles": args.cycles, "rows": rows,
+                                            "seconds": time.monotonic() - t0,
+                                            "notes": ctx.notes}, indent=1, default=float))
+    if not args.no_docs:
+        _write_docs(args.docs, rows, ctx, args.cycles, time.monotonic() - t0)
+    return 0
+
+
+def _write_docs(docs: pathlib.Path, rows: list[Row], ctx: Context, cycles: int, seconds: float) -> None:
+    tag = "" if ctx.noise == 0 else "_noise"
+    docs.mkdir(parents=True, exist_ok=True)
+    figs = figures(rows, docs, tag)
+    text = markdown(rows, ctx, cycles, seconds, figs)
+    (docs / f"arm_learning{tag}.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
