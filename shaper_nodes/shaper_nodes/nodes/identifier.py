@@ -166,6 +166,10 @@ class TopicParams:
     imu: str = topic("/tip_imu", "imu")
     joint_states: str = topic("/joint_states", "joint_states")
     cycle_events: str = topic("/cycle_events", "cycle_events")
+    imu_reliable: bool = param(False, "Subscribe to the accelerometer RELIABLE (lossless from a reliable publisher"
+                               " such as the simulator in lockstep, which then waits for this node when it is in"
+                               " lockstep.readers; a best-effort sensor driver does not match it). Default best"
+                               " effort, deep queue.", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -217,7 +221,7 @@ class IdentifierNode(Node):
         self._imu_topic, self._js_topic = p.topics.imu, p.topics.joint_states
         self.lockstep = LockstepReader(self, {self._imu_topic: None, self._js_topic: None})
         self._cycle_start = -math.inf
-        self.create_subscription(Imu, p.topics.imu, self._on_imu, IMU_QOS)
+        self.create_subscription(Imu, p.topics.imu, self._on_imu, STREAM_QOS if p.topics.imu_reliable else IMU_QOS)
         self.create_subscription(JointState, p.topics.joint_states, self._on_joints, STREAM_QOS)
         self.create_subscription(CycleEvent, p.topics.cycle_events, self._on_event, 100)
         self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
