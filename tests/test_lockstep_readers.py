@@ -184,9 +184,48 @@ def _pause(pid: int) -> None:
     os.kill(pid, signal.SIGCONT)
 
 
+class ClockWatch:
+    """The latest /clock on a domain, followed by a node spun in a thread."""
+
+    def __init__(self, domain_id: int) -> None:
+        self.ctx = rclpy.context.Context()
+        rclpy.init(context=self.ctx, domain_id=domain_id)
+        self.node = rclpy.create_node("clock_watch", context=self.ctx)
+        self.clock = 0.0
+        self.node.create_subscription(Clock, "/clock", self._on_clock, 100)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _on_clock(self, msg: Clock) -> None:
+        self.clock = max(self.clock, time_to_sec(msg.clock))
+
+    def _spin(self) -> None:
+        while self.ctx.ok():
+            try:
+                self.ex.spin_once(timeout_sec=0.05)
+            except Exception:  # the context shut down under it
+                return
+
+    def wait_past(self, t: float, timeout: float = 300.0) -> None:
+        end = time.monotonic() + timeout
+        while self.clock <= t:
+            assert time.monotonic() < end, f"/clock did not pass {t:.3f} s"
+            time.sleep(0.01)
+
+    def close(self) -> None:
+        self.ctx.try_shutdown()
+        self.thread.join(5)
+        self.ex.shutdown()
+        self.node.destroy_node()
+
+
 def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
-    """``demo --cases none`` into ``out``; after the k-th move's progress dot, the k-th process of ``pauses``
-    ('client': the demo itself, else a node executable's name) is paused for 3 s. Returns its stdout."""
+    """``demo --cases none`` into ``out``; after the k-th move's progress dot, once the arm has moved 0.3 s of
+    simulated time further (in the middle of the next move: each lasts over 2 s with its rest), the k-th process of
+    ``pauses`` ('client': the demo itself, else a node executable's name) is paused for 3 s. Returns its stdout."""
+    watch = ClockWatch(domain_id)
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     proc = subprocess.Popen([sys.executable, "-m", "sim_plant_node.demo", "--cases", "none", "--out", str(out)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=0)
@@ -205,6 +244,7 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
     try:
         for who in pauses:
             assert dots.acquire(timeout=300), "".join(chunks)
+            watch.wait_past(watch.clock + 0.3)
             if who == "client":
                 _pause(proc.pid)
                 continue
@@ -216,6 +256,7 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
             proc.kill()
         reader.join(10)
         proc.stdout.close()
+        watch.close()
     text = "".join(chunks)
     assert code == 0, text
     return text
