@@ -34,7 +34,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.lockstep_reader import LockstepReader
+from shaper_nodes.ros.lockstep_reader import LockstepReader, header_stamp
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.task import HOME
 
@@ -263,13 +263,15 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
 
 
 def _stream(bag: pathlib.Path, topic: str) -> list[bytes]:
-    """The serialized messages of ``topic`` in the recording folder ``bag``, in the order written, a repeat of the
-    message before left out (the joint states at rest are republished every 0.1 s of wall time)."""
+    """The serialized messages of ``topic`` in the recording folder ``bag``, in the order written, from the first
+    step on (the joint states at rest before the first move, republished every 0.1 s of wall time, are recorded or
+    not by when the recorder's subscription matched) and a repeat of the message before left out (the same at rest
+    between moves)."""
     (path,) = bag.glob("*.mcap")
     out: list[bytes] = []
     with open(path, "rb") as f:
         for _, _, m in make_reader(f).iter_messages(topics=[topic], log_time_order=False):
-            if not out or m.data != out[-1]:
+            if header_stamp(m.data) > 0 and (not out or m.data != out[-1]):
                 out.append(m.data)
     return out
 
@@ -309,12 +311,17 @@ def test_calibrate_paused_gives_the_unpaused_report(start_node, tmp_path, domain
         out = tmp_path / name
         proc = start_node("shaper_nodes", "calibrate", small, params_file=config,
                           args=["--execute", "--out", str(out)])
-        if pause:  # in the middle of the first pose's moves: once it writes the pose's partial recording
-            deadline = time.monotonic() + 300.0
-            while not list((out / "recording").glob("*.partial")):
-                assert proc.running() and time.monotonic() < deadline, proc.log_path.read_text()
-                time.sleep(0.05)
-            _pause(proc.proc.pid)
+        if pause:  # in the middle of the first pose's approach: 0.3 s of simulated time after its recording began
+            watch = ClockWatch(domain_id)
+            try:
+                deadline = time.monotonic() + 300.0
+                while not list((out / "recording").glob("*.partial")):
+                    assert proc.running() and time.monotonic() < deadline, proc.log_path.read_text()
+                    time.sleep(0.05)
+                watch.wait_past(watch.clock + 0.3)
+                _pause(proc.proc.pid)
+            finally:
+                watch.close()
         code = proc.proc.wait(timeout=600)
         log = proc.log_path.read_text()
         assert code == 0, log
