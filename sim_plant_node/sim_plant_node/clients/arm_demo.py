@@ -46,7 +46,9 @@ IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/referen
 #: identifier and the recorder
 READERS = ["/calibrate", "/conductor", "/identifier", "/recorder"]
 WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stops with one line
-CALIBRATION_TIMEOUT = 900.0  # s of wall time the calibration may take
+#: s of wall time the calibration may take (a guard against a hang: on a loaded machine, load average 30 and two
+#: CPU hogs, its identification alone took over 6 min of a 15 min run)
+CALIBRATION_TIMEOUT = 3600.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
 CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
@@ -401,9 +403,15 @@ def calibrate(out: pathlib.Path, noise_log: pathlib.Path) -> pathlib.Path:
     proc = NodeProcess("shaper_nodes", "calibrate", {}, log_path=noise_log, params_file=config,
                        args=["--execute", "--out", str(out)]).start()
     assert proc.proc is not None
+    import subprocess
+
     try:
         code = proc.proc.wait(timeout=CALIBRATION_TIMEOUT)
-    except Exception:
+    except subprocess.TimeoutExpired:
+        proc.stop()
+        raise RuntimeError(f"the calibration did not finish within {CALIBRATION_TIMEOUT:g} s (its log:"
+                           f" {noise_log})") from None
+    except BaseException:
         proc.stop()
         raise
     proc.stop()
