@@ -20,6 +20,16 @@ Blocks
     the data, or a block of more samples than allowed, is refused with the reason).
 Block size
     The block a run at a given rate uses (:func:`lockstep_block`: 0.1 s of samples per exchange).
+Readers
+    The plant never runs more than a bounded lead of simulated time beyond the slowest reader a run
+    declares (the sim plant's ``lockstep.readers``). Each reader acknowledges the simulated time it has
+    processed, the oldest of the latest stamps of its streams (:class:`Acks`); the plant holds a step that
+    would go beyond the slowest acknowledgement plus ``lockstep.lead`` (:class:`ReaderGate`). A reader that
+    acknowledges nothing for ``lockstep.reader_timeout`` s of wall time while the plant waits for it, or whose
+    acknowledgements go away, is dropped with one line naming it (it is waited for again once it acknowledges).
+Losses
+    In lockstep the plant's streams have a known period (``1 / rate``, the IMU's ``1 / (rate substeps)``), so a
+    lost sample is a gap in the stamps (:class:`Gaps`); a repeated stamp (the joint states at rest) is none.
 
 A layout dimension is a :class:`Dim` (label, size, stride), the fields of
 std_msgs/MultiArrayDimension; the nodes convert at the edge.
@@ -27,13 +37,14 @@ std_msgs/MultiArrayDimension; the nodes convert at the edge.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Iterable, Sequence
 from typing import NamedTuple
 
 from .checks import InputError
 
-__all__ = ["ASK_LABELS", "JOINTS_LABEL", "Asks", "Dim", "ask_label", "ask_layout", "block_rows", "is_late",
-           "lockstep_block"]
+__all__ = ["ACK_PERIOD", "ANNOUNCE", "ASK_LABELS", "JOINTS_LABEL", "Acks", "Asks", "Dim", "Gaps", "ReaderGate",
+           "ask_label", "ask_layout", "block_rows", "is_late", "lockstep_block"]
 
 #: how the first layout label of an ask begins (then the ask's number): one setpoint, a block
 ASK_LABELS = ("joints, ask ", "samples, ask ")
@@ -167,3 +178,175 @@ class Asks:
     def late(self, label: str | None) -> bool:
         """Whether an answer with first layout label ``label`` (None: no layout) is late (:func:`is_late`)."""
         return is_late(label, self.pending)
+
+
+#: simulated s a reader's acknowledgement advances before it is sent again (:class:`Acks`)
+ACK_PERIOD = 0.02
+#: the acknowledgement of a reader that has taken no sample yet: "hold the plant where it is now"
+ANNOUNCE = -1.0
+#: slack in comparisons of simulated times, s (stamps are whole nanoseconds)
+_EPS = 1e-9
+
+
+class Acks:
+    """A reader's side of the lockstep wait: the simulated time it has processed, and when to say it.
+
+    The time processed is the oldest of the latest stamps taken on each of its streams (a stream is taken in
+    order, so every earlier sample of it is in); streams that have given nothing yet do not count.
+
+    Parameters
+    ----------
+    period : float
+        Simulated s the acknowledgement advances before it is sent again (:data:`ACK_PERIOD`).
+    """
+
+    def __init__(self, period: float = ACK_PERIOD) -> None:
+        if not (math.isfinite(period) and period >= 0):
+            raise ValueError(f"the acknowledgement period must be finite and >= 0 s, got {period!r}")
+        self.period = float(period)
+        self.latest: dict[str, float] = {}
+        #: the last acknowledgement sent, simulated s (None: none yet)
+        self.sent: float | None = None
+
+    @property
+    def processed(self) -> float | None:
+        """The simulated time processed on every stream, s (None before any sample)."""
+        return min(self.latest.values()) if self.latest else None
+
+    def took(self, stream: str, t: float) -> float | None:
+        """A sample stamped ``t`` (simulated s) of ``stream`` was taken; returns the acknowledgement to send now
+        (the time processed, once it advanced by ``period`` since the last one sent), else None."""
+        if t > self.latest.get(stream, -math.inf):
+            self.latest[stream] = t
+        done = self.processed
+        if done is None or (self.sent is not None and done < self.sent + self.period - _EPS):
+            return None
+        self.sent = done
+        return done
+
+
+class ReaderGate:
+    """The plant's side of the lockstep wait: how far it may step given what its declared readers processed.
+
+    A reader counts from its first acknowledgement (:data:`ANNOUNCE`, "nothing taken yet", holds the plant
+    at the simulated time it arrives); a reader not heard from yet does not hold the plant (it has not
+    started). The plant may step to ``t`` while ``t <= ack + lead`` for every counted reader.
+
+    Parameters
+    ----------
+    readers : iterable of str
+        The readers' names (node names).
+    lead : float
+        Simulated s the plant may run beyond the slowest reader's acknowledgement.
+    timeout : float
+        Wall s the plant waits for a reader that holds it before it drops that reader.
+    """
+
+    def __init__(self, readers: Iterable[str], lead: float, timeout: float) -> None:
+        self.readers = list(dict.fromkeys(readers))
+        if not (math.isfinite(lead) and lead > 0):
+            raise ValueError(f"lockstep.lead must be finite and > 0 s, got {lead!r}")
+        if not (math.isfinite(timeout) and timeout > 0):
+            raise ValueError(f"lockstep.reader_timeout must be finite and > 0 s, got {timeout!r}")
+        self.lead, self.timeout = float(lead), float(timeout)
+        #: the simulated time each counted reader processed, s
+        self.acked: dict[str, float] = {}
+        #: readers dropped (gone, or silent past the timeout) and not back yet
+        self.dropped: set[str] = set()
+        #: wall time (s) the plant started to wait for the reader that holds it; None: not waiting
+        self._since: float | None = None
+        #: how many times each reader held the plant (a step postponed)
+        self.waits: dict[str, int] = {}
+
+    def ack(self, reader: str, t: float, sim_time: float) -> str:
+        """Reader ``reader`` processed up to ``t`` (simulated s; :data:`ANNOUNCE`: nothing yet, taken as
+        ``sim_time``, the plant's time now). Returns a line to log ('' if none: a dropped reader is back)."""
+        if reader not in self.readers:
+            return ""
+        value = sim_time if t < 0 else t
+        back = reader in self.dropped
+        self.dropped.discard(reader)
+        if back or reader not in self.acked:
+            self.acked[reader] = value
+        else:
+            self.acked[reader] = max(self.acked[reader], value)
+        return f"lockstep: reader {reader} is back (processed up to t = {value:.3f} s)" if back else ""
+
+    def leave(self, reader: str) -> str:
+        """Reader ``reader`` went away (its acknowledgements have no publisher any more): dropped. Returns the
+        line to log ('' if it was not counted)."""
+        if reader not in self.acked or reader in self.dropped:
+            return ""
+        self.dropped.add(reader)
+        return (f"lockstep: reader {reader} went away (processed up to t = {self.acked[reader]:.3f} s);"
+                " stepping on without it")
+
+    def holding(self, t: float) -> list[str]:
+        """The counted readers that hold a step to simulated time ``t`` (``t`` beyond their ack plus the lead)."""
+        return [r for r, a in self.acked.items() if r not in self.dropped and t > a + self.lead + _EPS]
+
+    def may_step(self, t: float, wall: float) -> tuple[bool, str]:
+        """Whether the plant may step to simulated time ``t`` now (``wall``: monotonic wall time, s), and a line
+        to log ('' if none): a reader that held the plant for ``timeout`` s is dropped, named in the line."""
+        held = self.holding(t)
+        if not held:
+            self._since = None
+            return True, ""
+        if self._since is None:
+            self._since = wall
+            for r in held:
+                self.waits[r] = self.waits.get(r, 0) + 1
+            return False, ""
+        if wall - self._since < self.timeout:
+            return False, ""
+        self.dropped.update(held)
+        self._since = None
+        names = ", ".join(f"{r} (processed up to t = {self.acked[r]:.3f} s)" for r in held)
+        return not self.holding(t), (f"lockstep: no acknowledgement from reader {names} within"
+                                     f" lockstep.reader_timeout ({self.timeout:g} s); stepping on without it")
+
+
+class Gaps:
+    """Lost samples of a stream of known period, from gaps in its stamps.
+
+    Parameters
+    ----------
+    period : float or None
+        The stream's sample period, s; None: the smallest positive spacing seen so far.
+    """
+
+    def __init__(self, period: float | None = None) -> None:
+        if period is not None and not (math.isfinite(period) and period > 0):
+            raise ValueError(f"a stream's period must be finite and > 0 s, got {period!r}")
+        self.period = period
+        self._fixed = period is not None
+        self.last: float | None = None
+        self.samples = 0
+        #: the gaps: (stamp before, stamp after) of each spacing above 1.5 periods
+        self.holes: list[tuple[float, float]] = []
+
+    def add(self, t: float) -> None:
+        """A sample stamped ``t`` s (a repeated or older stamp is no gap)."""
+        self.samples += 1
+        last = self.last
+        if last is None or t <= last:
+            self.last = t if last is None else last
+            return
+        d = t - last
+        if not self._fixed and (self.period is None or d < self.period):
+            self.period = d
+        if self.period is not None and d > 1.5 * self.period:
+            self.holes.append((last, t))
+        self.last = t
+
+    def lost(self, t0: float = -math.inf, t1: float = math.inf) -> int:
+        """Samples missing with stamps in (t0, t1] s."""
+        if self.period is None:
+            return 0
+        p, n = self.period, 0
+        for a, b in self.holes:  # the missing stamps are a + k p, k = 1 .. m
+            m = round((b - a) / p) - 1
+            lo = 1 if t0 == -math.inf else max(1, math.floor((t0 - a) / p + 1e-6) + 1)
+            hi = m if t1 == math.inf else min(m, math.floor((t1 - a) / p + 1e-6))
+            n += max(0, hi - lo + 1)
+        return n

@@ -265,6 +265,7 @@ class Calibrator:
         from sensor_msgs.msg import Imu, JointState
 
         from shaper_nodes.ros.action_client import ResilientActionClient
+        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
 
         self.node, self.executor, self.p = node, executor, params
         self.names = list(params.joint_names)
@@ -276,8 +277,10 @@ class Calibrator:
         deep = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
         self.imu_topic = params.topics.imu
         self.js_topic = params.topics.joint_states
+        # a lockstep sim plant that names this node in lockstep.readers waits for it; gaps in the stamps are losses
+        self.lockstep = LockstepReader(node, {self.imu_topic: None, self.js_topic: None})
         node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
-        node.create_subscription(JointState, self.js_topic, self._on_joint_states, 100)
+        node.create_subscription(JointState, self.js_topic, self._on_joint_states, STREAM_QOS)
         self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
         self._fjt = FollowJointTrajectory
 
@@ -294,6 +297,7 @@ class Calibrator:
         sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)
         t = sec + nanosec * 1e-9
         self.imu_stamp = max(self.imu_stamp, t)
+        self.lockstep.took(self.imu_topic, t)
         if self.writer is not None:
             self.writer.add_topic(self.imu_topic, "sensor_msgs/msg/Imu")
             self.writer.write(self.imu_topic, sec * 1_000_000_000 + nanosec, raw)
@@ -303,6 +307,7 @@ class Calibrator:
             self.position = np.array([msg.position[list(msg.name).index(j)] for j in self.names], dtype=float)
         except (ValueError, IndexError):
             return
+        self.lockstep.took(self.js_topic, time_to_sec(msg.header.stamp))
         self._record(self.js_topic, "sensor_msgs/msg/JointState", msg, time_to_sec(msg.header.stamp))
 
     # ------------------------------------------------------------------ waiting
@@ -385,7 +390,8 @@ class Calibrator:
         self._record(EVENTS_TOPIC, "shaper_msgs/msg/CycleEvent", msg, time_to_sec(msg.header.stamp))
 
     def run_pose(self, step: PoseStep, setup: dict[str, Any], folder: pathlib.Path,
-                 approach: tuple[Waypoint, ...]) -> None:
+                 approach: tuple[Waypoint, ...]) -> str:
+        """Record one pose into ``folder``; returns the samples lost in its recording ('' if none)."""
         from std_msgs.msg import String
 
         from shaper_nodes.recordings import BagWriter, rename_recording
@@ -397,7 +403,7 @@ class Calibrator:
         try:
             self._record(SETUP_TOPIC, "std_msgs/msg/String", String(data=json.dumps(setup, sort_keys=True)),
                          max(self.imu_stamp, 0.0))
-            start = self.move(approach, f"the approach to pose {step.index} ({step.name})")
+            start = first = self.move(approach, f"the approach to pose {step.index} ({step.name})")
             self.wait_imu(start + approach[-1].time, "the end of the rest before the excitation")
             for rep in range(step.repeats):
                 start = self.move(step.excitations[rep], f"excitation {rep + 1} at pose {step.index}")
@@ -409,6 +415,7 @@ class Calibrator:
             self.writer.close()
             self.writer = None
             rename_recording(partial, folder)  # pose_NNN/pose_NNN.mcap; the folder's rename is the commit
+            return self.lockstep.describe_lost(first, self.imu_stamp)
         finally:
             if self.writer is not None:  # stopped in the middle: the pose is discarded
                 with contextlib.suppress(Exception):  # the partial folder is removed anyway
@@ -560,9 +567,9 @@ def _execute(cal: Calibrator, plan: Plan, setup: dict[str, Any], out: pathlib.Pa
         here = cal.wait_pose()
         approach = plan_approach(step.pose, quintic_time(step.pose - here, c.approach_velocity,
                                                          c.approach_acceleration), c.settle)
-        cal.run_pose(step, setup, recording / f"pose_{step.index:03d}", approach)
+        lost = cal.run_pose(step, setup, recording / f"pose_{step.index:03d}", approach)
         print(f"calibrate: pose {step.index + 1}/{len(plan.steps)} ({step.name}) recorded"
-              f" ({time.monotonic() - t_wall:.0f} s)", flush=True)
+              f" ({time.monotonic() - t_wall:.0f} s)" + (f"; {lost} (gaps in the stamps)" if lost else ""), flush=True)
     here = cal.wait_pose()
     cal.move((Waypoint(quintic_time(c.home_pose - here, c.approach_velocity, c.approach_acceleration),
                        c.home_pose),), "the move back home")

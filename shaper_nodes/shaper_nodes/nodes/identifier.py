@@ -62,6 +62,7 @@ from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sens
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
@@ -174,6 +175,10 @@ class TopicParams:
     imu: str = topic("/tip_imu", "imu")
     joint_states: str = topic("/joint_states", "joint_states")
     cycle_events: str = topic("/cycle_events", "cycle_events")
+    imu_reliable: bool = param(False, "Subscribe to the accelerometer RELIABLE (lossless from a reliable publisher"
+                               " such as the simulator in lockstep, which then waits for this node when it is in"
+                               " lockstep.readers; a best-effort sensor driver does not match it). Default best"
+                               " effort, deep queue.", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -221,8 +226,12 @@ class IdentifierNode(Node):
             maxlen=int(p.buffer_cycles))
         self.skipped: list[str] = []
         self.saturated = 0  # accelerometer samples counted as saturated (in cycles refused for it)
-        self.create_subscription(Imu, p.topics.imu, self._on_imu, IMU_QOS)
-        self.create_subscription(JointState, p.topics.joint_states, self._on_joints, 100)
+        # a lockstep sim plant that names this node in lockstep.readers waits for it; gaps in the stamps are losses
+        self._imu_topic, self._js_topic = p.topics.imu, p.topics.joint_states
+        self.lockstep = LockstepReader(self, {self._imu_topic: None, self._js_topic: None})
+        self._cycle_start = -math.inf
+        self.create_subscription(Imu, p.topics.imu, self._on_imu, STREAM_QOS if p.topics.imu_reliable else IMU_QOS)
+        self.create_subscription(JointState, p.topics.joint_states, self._on_joints, STREAM_QOS)
         self.create_subscription(CycleEvent, p.topics.cycle_events, self._on_event, 100)
         self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
         self.diagnostics = Diagnostics(self)
@@ -242,11 +251,15 @@ class IdentifierNode(Node):
     # ----------------------------------------------------------------- data
     def _on_imu(self, msg: Imu) -> None:
         a = msg.linear_acceleration
-        self.monitor.add_accel(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+        t = time_to_sec(msg.header.stamp)
+        self.monitor.add_accel(t, (a.x, a.y, a.z))
+        self.lockstep.took(self._imu_topic, t)
 
     def _on_joints(self, msg: JointState) -> None:
+        t = time_to_sec(msg.header.stamp)
         if msg.position:
-            self.monitor.add_positions(time_to_sec(msg.header.stamp), msg.position)
+            self.monitor.add_positions(t, msg.position)
+        self.lockstep.took(self._js_topic, t)
 
     def _on_event(self, msg: CycleEvent) -> None:
         if msg.event == CycleEvent.END and not self.monitor.in_cycle:
@@ -260,8 +273,13 @@ class IdentifierNode(Node):
         except ValueError as err:  # e.g. joint states of changing size within a cycle
             self._skip(f"cycle {msg.cycle}: {err}")
             return
+        if msg.event == CycleEvent.START:
+            self._cycle_start = time_to_sec(msg.header.stamp)
         if result is None:
             return
+        lost = self.lockstep.describe_lost(self._cycle_start, result.residual.window_end)
+        if lost:
+            self.get_logger().warning(f"cycle {result.cycle}: {lost} (gaps in the stamps)")
         try:
             record = check_record(result, int(self.params.value.min_samples),
                                   float(self.params.value.sensor.max_abs_accel))

@@ -35,6 +35,7 @@ from std_srvs.srv import Trigger
 
 from shaper_nodes.recordings import COMPRESSIONS, HEARTBEAT_SUFFIX, BagWriter, QueuedRecording
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
+from shaper_nodes.ros.lockstep_reader import HEADER_FIRST, STREAM_QOS, LockstepReader, header_stamp
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare, param, table
@@ -95,6 +96,9 @@ class RecorderNode(Node):
         self.create_timer(float(p.discovery_period), self._discover, clock=wall)
         self.create_timer(1.0, self._publish_status, clock=wall)
         self.create_service(Trigger, "~/stop", self._on_stop)
+        # a lockstep sim plant that names this node in lockstep.readers waits for it: the stamps of the per-step
+        # streams it records (IMU, joint states) say what it has taken; gaps in them are losses
+        self.lockstep = LockstepReader(self)
         self._discover()
         self.get_logger().info(f"recording {self.wanted} to {self.bag.path}")
 
@@ -111,7 +115,7 @@ class RecorderNode(Node):
         latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
         best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
         return QoSProfile(
-            depth=1000,
+            depth=STREAM_QOS.depth,  # deeper than a lockstep plant's lead over this reader
             reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
@@ -132,19 +136,23 @@ class RecorderNode(Node):
             except (ImportError, AttributeError, KeyError) as err:
                 self.get_logger().error(f"cannot record {topic} ({type_name}): {err}", throttle_duration_sec=10.0)
                 continue
-            callback: Any = self._queuer(topic)  # (bytes, message info): rclpy passes both to two-argument callbacks
+            # (bytes, message info): rclpy passes both to two-argument callbacks
+            callback: Any = self._queuer(topic, type_name in HEADER_FIRST)
             self._subs[topic] = self.create_subscription(cls, topic, callback, self._qos_for(topic), raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
-    def _queuer(self, topic: str) -> Callable[[bytes, dict], None]:
+    def _queuer(self, topic: str, stamped: bool) -> Callable[[bytes, dict], None]:
         """The subscription callback of ``topic``: queue the raw message with the receive time (the
-        node's clock) and how long it waited in the middleware."""
-        put, clock = self.recording.put, self.get_clock()
+        node's clock) and how long it waited in the middleware; ``stamped``: a per-step stream whose header
+        stamp is acknowledged to a lockstep plant."""
+        put, clock, took = self.recording.put, self.get_clock(), self.lockstep.took
 
         def queue(data: bytes, info: dict) -> None:
             received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
             lag = (time.time_ns() - received) * 1e-9 if received > 0 else 0.0  # both the system clock
             put(topic, clock.now().nanoseconds, data, lag)
+            if stamped:
+                took(topic, header_stamp(data))
         return queue
 
     def _unsubscribe(self) -> None:

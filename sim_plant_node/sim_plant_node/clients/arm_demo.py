@@ -39,7 +39,16 @@ import numpy as np
 RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/shaper/active_shaper", "/diagnostics",
             "/learner/reports"]
 RATE = 500.0
-CALIBRATION_TIMEOUT = 900.0  # s of wall time the calibration may take
+SUBSTEPS = 2  # the sim plant's arm.substeps (its default): the flange IMU at RATE x SUBSTEPS
+#: the streams the demo's measures read (and the joint states, whose repeated stamp says the arm rests)
+IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/reference", "/joint_states"
+#: the nodes the sim plant waits for in lockstep (lockstep.readers): calibrate, this demo's client, the
+#: identifier and the recorder
+READERS = ["/calibrate", "/conductor", "/identifier", "/recorder"]
+WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stops with one line
+#: s of wall time the calibration may take (a guard against a hang: on a loaded machine, load average 30 and two
+#: CPU hogs, its identification alone took over 6 min of a 15 min run)
+CALIBRATION_TIMEOUT = 3600.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
 CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
@@ -77,6 +86,10 @@ class Streams:
     cmd_t: list[float] = field(default_factory=list)
     cmd: list[list[float]] = field(default_factory=list)
     clock: float = 0.0
+    #: the simulated time the arm last rested at: a /joint_states stamp received twice (the plant republishes
+    #: its last state at rest, and does not step until a goal comes); -inf before any
+    rest: float = -math.inf
+    js_last: float = -math.inf
 
     def window(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """Samples of one move that started at ``t0`` and ended at ``t1``. Commands are stamped at the start of
@@ -105,13 +118,13 @@ class ArmClient:
 
     def __init__(self, conductor: Any) -> None:
         from control_msgs.action import FollowJointTrajectory
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import Imu, JointState
 
         from shaper_msgs.msg import CycleEvent, CycleReport
         from shaper_nodes.ros.action_client import ResilientActionClient
         from shaper_nodes.ros.conversions import time_to_sec
+        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
 
         from ..arm.dynamics import ArmModel
 
@@ -119,35 +132,53 @@ class ArmClient:
         self.model = ArmModel()
         self.s = Streams()
         self.reports: list[Any] = []
-        deep = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
         sec = time_to_sec
+        # the plant waits for this node (its lockstep.readers): acknowledged, and each stream checked for gaps
+        self.lockstep = LockstepReader(conductor, {IMU: 1.0 / (RATE * SUBSTEPS), LINK: 1.0 / RATE, CMD: 1.0 / RATE,
+                                                   JOINTS: 1.0 / RATE})
+        took = self.lockstep.took
 
         def on_imu(m: Any) -> None:
-            self.s.imu_t.append(sec(m.header.stamp))
+            t = sec(m.header.stamp)
+            self.s.imu_t.append(t)
             a = m.linear_acceleration
             self.s.imu.append((a.x, a.y, a.z))
+            took(IMU, t)
 
         def on_link(m: Any) -> None:
-            self.s.link_t.append(sec(m.header.stamp))
+            t = sec(m.header.stamp)
+            self.s.link_t.append(t)
             self.s.link.append(list(m.position))
+            took(LINK, t)
 
         def on_cmd(m: Any) -> None:
-            self.s.cmd_t.append(sec(m.header.stamp))
+            t = sec(m.header.stamp)
+            self.s.cmd_t.append(t)
             self.s.cmd.append(list(m.position))
+            took(CMD, t)
+
+        def on_joints(m: Any) -> None:
+            t = sec(m.header.stamp)
+            if t == self.s.js_last:
+                self.s.rest = t
+            self.s.js_last = t
+            took(JOINTS, t)
 
         def on_clock(m: Any) -> None:
             self.s.clock = max(self.s.clock, sec(m.clock))
 
-        reliable = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-        conductor.create_subscription(Imu, "/tip_imu", on_imu, deep)
-        conductor.create_subscription(JointState, "/sim_plant/tip_state", on_link, reliable)
-        conductor.create_subscription(JointState, "/sim_plant/reference", on_cmd, reliable)
+        # every stream a measure depends on: reliable, deeper than the plant's lead over this reader
+        conductor.create_subscription(Imu, IMU, on_imu, STREAM_QOS)
+        conductor.create_subscription(JointState, LINK, on_link, STREAM_QOS)
+        conductor.create_subscription(JointState, CMD, on_cmd, STREAM_QOS)
+        conductor.create_subscription(JointState, JOINTS, on_joints, STREAM_QOS)
         conductor.create_subscription(Clock, "/clock", on_clock, 100)
         conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
         self.events = conductor.create_publisher(CycleEvent, "/cycle_events", 10)
         self.action = ResilientActionClient(conductor, FollowJointTrajectory, "/shaper/follow_joint_trajectory")
         self._Goal = FollowJointTrajectory.Goal
         self._CycleEvent = CycleEvent
+        self._last_start: float | None = None  # the last move's start, simulated s
 
     # ------------------------------------------------------------------ driving
     def wait_listeners(self, n: int, timeout: float = 60.0) -> None:
@@ -189,20 +220,36 @@ class ArmClient:
         msg.header.stamp = sec_to_time(t)
         self.events.publish(msg)
 
+    def rest_after(self, t: float, what: str) -> float:
+        """The simulated time the arm rests at, once past ``t`` s (a /joint_states stamp received twice: at rest
+        the plant republishes its last state and does not step)."""
+        self.c.spin_until(lambda: self.s.rest > t, WAIT, f"the arm at rest (a repeated /joint_states stamp) {what}")
+        return self.s.rest
+
+    def wait_samples(self, end: float, what: str) -> None:
+        """Wait until every stream a measure reads reached simulated time ``end`` s; on a timeout, one line names
+        the streams that did not."""
+        def reached() -> dict[str, float]:
+            return {name: (times[-1] if times else -math.inf) for name, times in
+                    (("/clock", [self.s.clock]), (IMU, self.s.imu_t), (LINK, self.s.link_t), (CMD, self.s.cmd_t))}
+        try:
+            self.c.spin_until(lambda: min(reached().values()) >= end - 0.0025, WAIT, "")
+        except TimeoutError:
+            late = ", ".join(f"{name} (up to t = {t:.3f} s)" for name, t in reached().items() if t < end - 0.0025)
+            raise TimeoutError(f"no samples up to the end of {what} (t = {end:.3f} s) within {WAIT:g} s on"
+                               f" {late}") from None
+
     def run_move(self, index: int, move: Any, on_start: Callable[[float], None] | None = None) -> MoveRun:
-        """Send one move and wait for its end. Its start is the stamp of its first feedback (the controller's
-        first update: exact in simulated time, whatever the lag of /clock here); ``on_start`` gets it."""
-        from shaper_nodes.ros.conversions import time_to_sec
-
-        stamps: list[float] = []
-
-        def on_feedback(msg: Any) -> None:
-            stamps.append(time_to_sec(msg.feedback.header.stamp))
-            if len(stamps) == 1 and on_start is not None:
-                on_start(stamps[0])
-
-        future = self.action.send_goal_async(self._goal(move), feedback_callback=on_feedback)
-        self.c.spin_until(future.done, 60.0, f"the answer to the goal of {move.name}")
+        """Send one move and wait for its end. It starts where the arm rests (the controller's clock: the plant
+        does not step between goals, and the first controller update of the goal is at that time); ends
+        ``move.duration + DWELL`` later, the goal's last point. ``on_start`` gets its start."""
+        after = self._last_start if self._last_start is not None else -math.inf
+        start = self.rest_after(after, f"before {move.name}")
+        self._last_start = start
+        if on_start is not None:
+            on_start(start)
+        future = self.action.send_goal_async(self._goal(move))
+        self.c.spin_until(future.done, WAIT, f"the answer to the goal of {move.name}")
         handle = future.result()
         if not handle.accepted:
             raise RuntimeError(f"the goal of {move.name} was rejected (see the shaper's and the sim's logs)")
@@ -211,13 +258,8 @@ class ArmClient:
         res = result.result()
         if res.result.error_code != 0:
             raise RuntimeError(f"{move.name}: {res.result.error_code} {res.result.error_string}")
-        if not stamps:
-            raise RuntimeError(f"{move.name}: no feedback from the controller")
-        start = min(stamps)
         end = start + move.duration + DWELL
-        self.c.spin_until(lambda: min(self.s.clock, *(getattr(self.s, f)[-1] if getattr(self.s, f) else 0.0
-                                                      for f in ("imu_t", "link_t", "cmd_t"))) >= end - 0.0025,
-                          60.0, f"the samples up to the end of {move.name}")
+        self.wait_samples(end, move.name)
         return MoveRun(index, move.name, start, move.duration, end)
 
     def run_cycle(self, cycle: int, moves: list[Any], progress: Callable[[], None]) -> list[MoveRun]:
@@ -267,10 +309,21 @@ def _table(rows: list[dict[str, Any]]) -> list[str]:
             "shaper delay s", "path deviation mm"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        out.append(f"| {r['case']} | {r['move']} | {r['residual_rms']:.4f} | {r['percent']:.1f} | {r['peak_mm']:.4f} |"
+        move = f"{r['move']} ({r['lost']})" if r.get("lost") else r["move"]
+        out.append(f"| {r['case']} | {move} | {r['residual_rms']:.4f} | {r['percent']:.1f} | {r['peak_mm']:.4f} |"
                    f" {r['settling_s']:.3f} | {r['move_and_settle_s']:.3f} | {r['delay_s']:.3f} |"
                    f" {r['path_deviation_mm']:.3f} |")
     return out
+
+
+def _losses(client: ArmClient) -> str:
+    """One line: the samples the client checked and those lost (gaps in the stamps), per stream."""
+    gaps = client.lockstep.gaps
+    lost = client.lockstep.describe_lost()
+    checked = ", ".join(f"{name} {g.samples}" for name, g in gaps.items())
+    return (f"Samples lost: {lost.removeprefix('lost ')} (the moves they touch are marked above); received:"
+            f" {checked}" if lost else
+            f"Samples lost: none (no gap in the stamps; received: {checked})")
 
 
 def _sums(rows: list[dict[str, Any]], cases: list[str], noise: float) -> list[str]:
@@ -285,10 +338,12 @@ def _sums(rows: list[dict[str, Any]], cases: list[str], noise: float) -> list[st
     out = ["| case | summed residual RMS m/s^2 | % of unshaped | % of fixed | above the noise m/s^2 | % of fixed |",
            "|---|---|---|---|---|---|"]
     for c in cases:
+        lost = sum(1 for r in rows if r["case"] == c and r.get("lost"))
+        name = f"{c} ({lost} move{'s' if lost != 1 else ''} with lost samples)" if lost else c
         has = "fixed" in total and total["fixed"] > 0 and clean["fixed"] > 0
         fixed = f"{100 * total[c] / total['fixed']:.1f}" if has else "-"
         fixed_clean = f"{100 * clean[c] / clean['fixed']:.1f}" if has else "-"
-        out.append(f"| {c} | {total[c]:.4f} | {100 * total[c] / total['none']:.1f} | {fixed} | {clean[c]:.4f} |"
+        out.append(f"| {name} | {total[c]:.4f} | {100 * total[c] / total['none']:.1f} | {fixed} | {clean[c]:.4f} |"
                    f" {fixed_clean} |")
     return out
 
@@ -371,9 +426,15 @@ def calibrate(out: pathlib.Path, noise_log: pathlib.Path) -> pathlib.Path:
     proc = NodeProcess("shaper_nodes", "calibrate", {}, log_path=noise_log, params_file=config,
                        args=["--execute", "--out", str(out)]).start()
     assert proc.proc is not None
+    import subprocess
+
     try:
         code = proc.proc.wait(timeout=CALIBRATION_TIMEOUT)
-    except Exception:
+    except subprocess.TimeoutExpired:
+        proc.stop()
+        raise RuntimeError(f"the calibration did not finish within {CALIBRATION_TIMEOUT:g} s (its log:"
+                           f" {noise_log})") from None
+    except BaseException:
         proc.stop()
         raise
     proc.stop()
@@ -465,6 +526,14 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:
+        return _main(argv)
+    except (TimeoutError, RuntimeError) as err:  # a wait that failed, a refused goal: one line, no traceback
+        print(f"demo arm: {err}", file=sys.stderr)
+        return 1
+
+
+def _main(argv: list[str] | None) -> int:
     args = parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from shaper_msgs.srv import Identify
@@ -494,7 +563,8 @@ def main(argv: list[str] | None = None) -> int:
     with node_session(out, "arm") as (start, ctx):
         start("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
                                               "task.start": HOME.tolist(), "imu.noise_stddev": args.noise,
-                                              "lockstep_timeout": 60.0})
+                                              "lockstep_timeout": 60.0, "arm.substeps": SUBSTEPS,
+                                              "lockstep.readers": READERS})
         shaper_params = {"joint_names": list(JOINT_NAMES), "command_rate": RATE, "use_sim_time": True,
                          "action.server_timeout": 30.0}
         session = Session(start, start("shaper_nodes", "shaper_node", shaper_params), shaper_params,
@@ -507,7 +577,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{len(report['poses'])} poses, {len(report['flagged_poses'])} flagged; scheduler over"
                   f" {', '.join(report['scheduler']['premises'])} ({time.monotonic() - t_wall:.0f} s)", flush=True)
         start("shaper_nodes", "identifier", {"use_sim_time": True, "buffer_cycles": 20, "settle_tolerance": 1e-4,
-                                             "max_modes": 3})
+                                             "max_modes": 3, "topics.imu_reliable": True})
         start("shaper_nodes", "recorder", {"output": str(out / "recording"), "topics": RECORDED,
                                            "use_sim_time": True})
         conductor = Conductor(context=ctx)
@@ -541,7 +611,8 @@ def main(argv: list[str] | None = None) -> int:
                     traces[(case, f"{run.index + 1}. {run.name}")] = (
                         lt - planned_end, 1e3 * np.linalg.norm(tool - tool[-1], axis=1))
                     rows.append({"case": case, "move": f"{run.index + 1}. {run.name}", **m.__dict__,
-                                 "move_and_settle_s": m.move_and_settle_s, "installed": installed})
+                                 "move_and_settle_s": m.move_and_settle_s, "installed": installed,
+                                 "lost": client.lockstep.describe_lost(run.start, run.end)})
         finally:
             arrays: dict[str, Any] = {k: np.asarray(v) for k, v in client.s.__dict__.items()}
             np.savez_compressed(out / "streams.npz", **arrays)
@@ -550,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
         base = next(x for x in rows if x["case"] == "none" and x["move"] == r["move"])
         r["percent"] = 100.0 * r["residual_rms"] / base["residual_rms"] if base["residual_rms"] > 0 else math.nan
     keys = ["case", "move", "residual_rms", "percent", "residual_peak", "peak_mm", "settling_s", "move_s",
-            "move_and_settle_s", "delay_s", "path_deviation_mm", "installed"]
+            "move_and_settle_s", "delay_s", "path_deviation_mm", "installed", "lost"]
     with open(out / "results.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
@@ -568,6 +639,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(note)
     print("\n".join(table))
+    print(_losses(client))
     print()
     print(f"results:   {out / 'results.csv'}, {out / 'results.md'}")
     print(f"plot:      {out / 'tool_deviation.png'}")

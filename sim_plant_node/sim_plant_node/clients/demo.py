@@ -115,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     traces = {}
     t_start = time.monotonic()
+    failed = ""
     try:
         for p in procs:
             p.start()
@@ -136,12 +137,14 @@ def main(argv: list[str] | None = None) -> int:
                              "residual_peak": float(np.mean([r.residual.peak for r in results])),
                              "per_cycle_rms": [r.residual.rms for r in results]})
                 print(f" residual RMS {rows[-1]['residual_rms']:.4g} m/s^2", flush=True)
+    except (TimeoutError, RuntimeError) as err:  # a wait that failed, a refusal: one line, no traceback
+        failed = f": {err}"
     finally:
         conductor.close()
         ctx.try_shutdown()
         codes = [p.stop() for p in reversed(procs)]
     if not rows or len(rows) < len(offsets) * len(shapers):
-        print(f"demo: incomplete (exit codes {codes}); logs in {out}", file=sys.stderr)
+        print(f"\ndemo: incomplete{failed} (exit codes {codes}); logs in {out}", file=sys.stderr)
         return 1
 
     with open(out / "results.csv", "w", newline="") as f:

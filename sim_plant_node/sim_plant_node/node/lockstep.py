@@ -3,6 +3,8 @@
 The rules (numbering, labels, layouts, late answers) are :mod:`shaper_nodes.core.lockstep`'s; this is their
 ROS glue: :class:`Exchange` publishes the asks as std_msgs/Float64MultiArray, keeps the steps asked and not
 yet answered, tells a late answer (counted and warned about), and when ``lockstep_timeout`` went by.
+:class:`Readers` subscribes the acknowledgements of the readers a run declares (``lockstep.readers``) and tells
+whether the plant may step (:class:`shaper_nodes.core.lockstep.ReaderGate`).
 """
 
 from __future__ import annotations
@@ -12,11 +14,60 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from shaper_nodes.core.lockstep import Asks
+from shaper_nodes.core.lockstep import Asks, ReaderGate
+from shaper_nodes.ros.conversions import time_to_sec
+from shaper_nodes.ros.lockstep_reader import ACK_QOS, ack_topic
 
-__all__ = ["Exchange"]
+__all__ = ["Exchange", "Readers"]
+
+
+class Readers:
+    """The readers a lockstep run waits for (``lockstep.readers``), from their acknowledgements.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The sim plant node.
+    readers : sequence of str
+        The readers' node names.
+    lead, timeout : float
+        ``lockstep.lead`` (simulated s) and ``lockstep.reader_timeout`` (wall s).
+    now : callable
+        The plant's simulated time, s.
+    """
+
+    def __init__(self, node: Any, readers: Any, lead: float, timeout: float, now: Callable[[], float]) -> None:
+        names = ["/" + str(r).strip("/") for r in readers]
+        self.gate = ReaderGate(names, lead, timeout)
+        self._log = node.get_logger()
+        self._now = now
+        self._subs = {r: node.create_subscription(Clock, ack_topic(r), lambda m, r=r: self._on_ack(r, m), ACK_QOS)
+                      for r in names}
+
+    def _on_ack(self, reader: str, msg: Clock) -> None:
+        t = -1.0 if msg.clock.sec < 0 else time_to_sec(msg.clock)
+        line = self.gate.ack(reader, t, self._now())
+        if line:
+            self._log.info(line)
+
+    def may_step(self, t: float) -> bool:
+        """Whether the plant may step to simulated time ``t`` s now (a reader that went away is dropped, and one
+        that holds the plant past ``lockstep.reader_timeout``, each with one line)."""
+        if not self._subs or not self.gate.holding(t):
+            self.gate.may_step(t, 0.0)  # (not waiting any more)
+            return True
+        for reader, sub in self._subs.items():  # (only while held: a graph query)
+            if sub.get_publisher_count() == 0:
+                line = self.gate.leave(reader)
+                if line:
+                    self._log.warning(line)
+        ok, line = self.gate.may_step(t, time.monotonic())
+        if line:
+            self._log.error(line)
+        return ok
 
 
 class Exchange:

@@ -80,6 +80,18 @@ class LockstepParams:
                        " Only for a feedforward command path: what the plant does within a block cannot change the"
                        " block's setpoints, and a shaper change takes effect at a block's boundary.", (1, 1000),
                        read_only=True)
+    readers: tuple[str, ...] = param(None, "Lockstep: the nodes (fully qualified names, e.g. /recorder) whose"
+                                     " processing the plant waits for: each acknowledges the simulated time it has"
+                                     " processed on <node>/lockstep_ack (shaper_nodes.ros.lockstep_reader), and the"
+                                     " plant never steps more than lockstep.lead beyond the slowest. Empty: it waits"
+                                     " for none.", type=Parameter.Type.STRING_ARRAY, read_only=True)
+    lead: float = param(0.25, "Lockstep with readers: how far the plant may run beyond the slowest reader's"
+                        " acknowledgement, s of simulated time (the readers' reliable queues hold 10 s).",
+                        (0.001, 5.0), read_only=True)
+    reader_timeout: float = param(30.0, "Lockstep with readers: wall time the plant waits for a reader that holds"
+                                  " it before it steps on without it (one line names it), s. A reader whose"
+                                  " acknowledgements go away (the process ended) is dropped at once.",
+                                  (0.1, 3600.0), read_only=True)
 
 
 @dataclass(frozen=True)

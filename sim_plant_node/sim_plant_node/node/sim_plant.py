@@ -27,6 +27,8 @@ lockstep
     machine; idle (no task) it does not step. ``~/start_task`` refuses with 'waiting for subscribers'
     until the loop through the shaper is matched on DDS. With ``lockstep.block`` N > 1 the raw setpoints
     of N steps go out as one block. Asks, blocks and late answers follow :mod:`shaper_nodes.core.lockstep`.
+    With ``lockstep.readers`` it never steps more than ``lockstep.lead`` beyond the slowest of those readers'
+    acknowledgements (:class:`.lockstep.Readers`), and its per-step streams are reliable and 10000 deep.
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -55,6 +57,7 @@ from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.core.cycles import CycleMonitor
 from shaper_nodes.recordings.cdr import clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
+from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare, flat
 from shaper_nodes.ros.qos import LATCHED
@@ -64,7 +67,7 @@ from ..controller.server import ControllerServer, tolerances_from
 from ..models.plants import CycleTask
 from ..models.two_mass import StaircaseTask
 from .feedforward import Feedforward
-from .lockstep import Exchange
+from .lockstep import Exchange, Readers
 from .models import START_ONLY, PlantValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
 from .sensors import Sensors
@@ -106,9 +109,10 @@ class SimPlantNode(Node):
         self._active_shaper = ShaperMsg()
 
         t = p.topics
+        deep = STREAM_QOS if self.mode == "lockstep" else 10  # every sample counts in lockstep (lockstep.lead)
         self._cmd_pub = self.create_publisher(Float64MultiArray, t.command_out, 10)
-        self._js_pub = self.create_publisher(JointState, t.joint_states, 10)
-        self._tip_pub = self.create_publisher(JointState, t.tip_state, 10)
+        self._js_pub = self.create_publisher(JointState, t.joint_states, deep)
+        self._tip_pub = self.create_publisher(JointState, t.tip_state, deep)
         self._loop_pub = self.create_publisher(JointState, "~/loop_state", 10)  # loop models only
         # in lockstep every sample counts (simulated time runs faster than a reader may take them): a reliable
         # writer keeps 10000 for a reliable reader, and still matches best-effort readers as a sensor driver does
@@ -119,7 +123,7 @@ class SimPlantNode(Node):
         self._report_pub = self.create_publisher(CycleReport, t.cycle_reports, 10)
         # /clock is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
-        self._ref_pub = self.create_publisher(JointState, t.reference, 10)
+        self._ref_pub = self.create_publisher(JointState, t.reference, deep)
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward)
         self._ff = Feedforward()
         self._cmd_sub = self.create_subscription(Float64MultiArray, t.command_in, self._on_command, 10)
@@ -135,6 +139,9 @@ class SimPlantNode(Node):
         self._preroll_left = 0
         self._latest_shaped: np.ndarray | None = None
         self.exchange = Exchange(self._cmd_pub, self.n, int(p.lockstep.block), self.get_logger())
+        self.readers = Readers(self, p.lockstep.readers if self.mode == "lockstep" else (), float(p.lockstep.lead),
+                               float(p.lockstep.reader_timeout), self._now)
+        self._held = False  # lockstep, a task running: the next ask waits for the readers
         self.refused = 0
         self.plant.reset(self._values(p).vector("task.start", p.task.start))
         self._applied = self.plant.setpoint_at_rest
@@ -156,6 +163,8 @@ class SimPlantNode(Node):
             self.create_timer(idle, self._idle_joint_states, clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         if self.mode == "lockstep":
             self.create_timer(0.05, self._watchdog)
+            if p.lockstep.readers:
+                self.create_timer(0.002, self._resume)
             self._publish_clock()
         else:
             self.create_timer(1.0 / self.rate, self._realtime_tick)
@@ -288,8 +297,9 @@ class SimPlantNode(Node):
         the task's end). Their events go out as each step is integrated (:meth:`_step_asked`)."""
         steps: list[tuple[list, bool]] = []
         raws: list[np.ndarray] = []
-        while len(raws) < self.exchange.block and self.task is not None and (self._preroll_left > 0
-                                                                              or not self.task.done):
+        self._held = not self.readers.may_step(self.sim_time + self.exchange.block / self.rate)
+        while not self._held and len(raws) < self.exchange.block and self.task is not None and (
+                self._preroll_left > 0 or not self.task.done):
             steps.append(self._next_raw())
             raws.append(self._raw)
         if raws:
@@ -387,7 +397,8 @@ class SimPlantNode(Node):
         if self.jtc is None or self.task is not None or self.exchange.waiting_since is not None:
             return
         deadline = time.monotonic() + 0.02
-        while self.jtc.running and time.monotonic() < deadline:
+        while self.jtc.running and time.monotonic() < deadline and self.readers.may_step(
+                self.sim_time + 1.0 / self.rate):
             self._jtc_step()
             self._publish_clock()  # the commanded positions (what "at rest" means)
 
@@ -413,6 +424,11 @@ class SimPlantNode(Node):
         if self.exchange.waiting_since is None:
             return  # not waiting (idle, or a late answer after a timeout): ignore
         self._step_asked(None if command is None else command.reshape(-1, self.n))
+
+    def _resume(self) -> None:
+        """Lockstep, a task running: ask for the next steps once the readers that held them caught up."""
+        if self._held and self.task is not None and self.exchange.waiting_since is None:
+            self._publish_next()
 
     def _watchdog(self) -> None:
         if self.exchange.overdue(lambda: float(self.params.value.lockstep_timeout)):

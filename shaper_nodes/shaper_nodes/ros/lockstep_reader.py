@@ -1,0 +1,105 @@
+"""A lockstep reader's side on the wire: its acknowledgements to the sim plant, and its lost samples.
+
+A node that the sim plant waits for (named in the plant's ``lockstep.readers``) makes one
+:class:`LockstepReader` and calls :meth:`LockstepReader.took` with the stamp of every sample it takes on
+its per-step streams (joint states, tip state, reference, IMU). It publishes on ``<node>/lockstep_ack``
+(rosgraph_msgs/Clock, reliable, transient local, depth 1) the simulated time it has processed, the
+oldest of its streams' latest stamps, every :data:`~shaper_nodes.core.lockstep.ACK_PERIOD` s of simulated
+time; at construction it announces itself (``clock.sec`` -1: nothing taken yet). It also counts each
+stream's lost samples from gaps in the stamps (:class:`~shaper_nodes.core.lockstep.Gaps`), for the
+reader to report beside the numbers they touch. The rules are :mod:`shaper_nodes.core.lockstep`'s.
+
+The QoS a reader's per-step streams need: :data:`STREAM_QOS` (reliable, deep enough for the plant's lead).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping
+from typing import Any
+
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from ..core.lockstep import ACK_PERIOD, ANNOUNCE, Acks, Gaps
+from .conversions import sec_to_time
+from .qos import LATCHED
+
+__all__ = ["ACK_QOS", "ACK_SUFFIX", "HEADER_FIRST", "STREAM_QOS", "LockstepReader", "ack_topic", "header_stamp"]
+
+#: the acknowledgement topic is the reader node's fully qualified name plus this
+ACK_SUFFIX = "/lockstep_ack"
+#: the acknowledgements: the latest one is what counts (a late-joining plant gets it)
+ACK_QOS = LATCHED
+#: a reader's per-step streams in lockstep: reliable, 10000 samples (10 s of a 1 kHz IMU; the plant's lead,
+#: ``lockstep.lead``, is well inside it)
+STREAM_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+
+#: the per-step stream types whose serialized message begins with a std_msgs/Header (:func:`header_stamp`)
+HEADER_FIRST = frozenset({"sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"})
+
+
+def header_stamp(raw: bytes) -> float:
+    """The header stamp, s, of a serialized (CDR) message that begins with a std_msgs/Header."""
+    sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)
+    return sec + nanosec * 1e-9
+
+
+def ack_topic(reader: str) -> str:
+    """The acknowledgement topic of reader node ``reader`` (its fully qualified name, e.g. ``/recorder``)."""
+    return "/" + reader.strip("/") + ACK_SUFFIX
+
+
+class LockstepReader:
+    """Acknowledge the simulated time a node processed; count its streams' lost samples.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The reader.
+    periods : mapping of str to float or None, optional
+        Per stream the sample period, s, for loss detection (None: learned, the smallest spacing seen);
+        a stream not listed is acknowledged but not checked for gaps.
+    period : float
+        Simulated s between two acknowledgements.
+    """
+
+    def __init__(self, node: Any, periods: Mapping[str, float | None] | None = None,
+                 period: float = ACK_PERIOD) -> None:
+        self._acks = Acks(period)
+        self.gaps: dict[str, Gaps] = {name: Gaps(p) for name, p in (periods or {}).items()}
+        self._pub = node.create_publisher(Clock, ack_topic(node.get_fully_qualified_name()), ACK_QOS)
+        self._send(ANNOUNCE)
+
+    def _send(self, t: float) -> None:
+        msg = Clock()
+        if t < 0:
+            msg.clock.sec, msg.clock.nanosec = -1, 0
+        else:
+            msg.clock = sec_to_time(t)
+        self._pub.publish(msg)
+
+    def took(self, stream: str, t: float) -> None:
+        """A sample of ``stream`` stamped ``t`` (simulated s) was taken."""
+        gaps = self.gaps.get(stream)
+        if gaps is not None:
+            gaps.add(t)
+        ack = self._acks.took(stream, t)
+        if ack is not None:
+            self._send(ack)
+
+    @property
+    def processed(self) -> float | None:
+        """The simulated time processed on every stream, s (None before any sample)."""
+        return self._acks.processed
+
+    def lost(self, t0: float = float("-inf"), t1: float = float("inf")) -> dict[str, int]:
+        """Per checked stream, the samples lost with stamps in (t0, t1] s (streams with none left out)."""
+        out = {name: g.lost(t0, t1) for name, g in self.gaps.items()}
+        return {name: n for name, n in out.items() if n}
+
+    def describe_lost(self, t0: float = float("-inf"), t1: float = float("inf")) -> str:
+        """The samples lost in (t0, t1] as one phrase ('' if none): ``"lost 12 samples of /tip_imu, ..."``."""
+        lost = self.lost(t0, t1)
+        return ("lost " + ", ".join(f"{n} sample{'s' if n != 1 else ''} of {name}" for name, n in lost.items())
+                if lost else "")

@@ -1,0 +1,102 @@
+"""The lockstep wait for readers and the loss detection (shaper_nodes.core.lockstep), without rclpy."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from shaper_nodes.core.lockstep import ANNOUNCE, Acks, Gaps, ReaderGate
+
+DT = 0.002
+
+
+def test_acks_send_the_oldest_stream_once_it_advanced_a_period():
+    acks = Acks(period=0.02)
+    assert acks.took("imu", 0.001) == 0.001  # the first is sent at once
+    assert acks.took("js", 0.002) is None  # oldest still 0.001: nothing new to say
+    assert acks.processed == 0.001
+    for k in range(1, 30):
+        acks.took("imu", 0.001 * k)
+    assert acks.processed == 0.002  # the joint states hold it back
+    sent = [acks.took("js", DT * k) for k in range(2, 16)]
+    assert [s for s in sent if s is not None] == [pytest.approx(0.022)]
+    assert acks.sent == pytest.approx(0.022)
+
+
+def test_acks_refuse_a_bad_period():
+    with pytest.raises(ValueError, match="period"):
+        Acks(period=math.nan)
+
+
+def test_gate_holds_the_plant_a_lead_beyond_the_slowest_reader():
+    gate = ReaderGate(["/a", "/b"], lead=0.1, timeout=5.0)
+    assert gate.may_step(10.0, 0.0) == (True, "")  # nobody heard from yet: not started, nothing to wait for
+    gate.ack("/a", 1.0, sim_time=1.0)
+    gate.ack("/b", ANNOUNCE, sim_time=1.05)  # started, nothing taken: holds the plant where it is
+    assert gate.acked == {"/a": 1.0, "/b": 1.05}
+    assert gate.may_step(1.1, 0.0) == (True, "")
+    assert gate.may_step(1.1 + DT, 0.0) == (False, "")
+    assert gate.holding(1.1 + DT) == ["/a"]
+    gate.ack("/a", 1.2, sim_time=1.1)
+    assert gate.may_step(1.1 + DT, 0.1) == (True, "")  # /b now allows up to 1.15
+    assert gate.may_step(1.15 + DT, 0.2) == (False, "")
+    gate.ack("/c", 9.0, sim_time=1.1)  # not declared: ignored
+    assert "/c" not in gate.acked
+    assert gate.ack("/a", 1.0, sim_time=1.1) == "" and gate.acked["/a"] == 1.2  # never goes back
+
+
+def test_gate_drops_a_silent_reader_after_the_timeout_with_one_line_and_takes_it_back():
+    gate = ReaderGate(["/slow"], lead=0.1, timeout=5.0)
+    gate.ack("/slow", 1.0, sim_time=1.0)
+    assert gate.may_step(1.2, 100.0) == (False, "")
+    assert gate.may_step(1.2, 104.9) == (False, "")
+    ok, line = gate.may_step(1.2, 105.0)
+    assert ok and "/slow" in line and "reader_timeout" in line and "\n" not in line
+    assert gate.may_step(5.0, 106.0) == (True, "")  # dropped: no longer waited for
+    back = gate.ack("/slow", 1.3, sim_time=5.0)
+    assert "/slow" in back and "back" in back
+    assert gate.may_step(5.0, 107.0) == (False, "")  # waited for again
+
+
+def test_gate_drops_a_reader_that_went_away():
+    gate = ReaderGate(["/gone"], lead=0.1, timeout=60.0)
+    assert gate.leave("/gone") == ""  # never counted
+    gate.ack("/gone", 2.0, sim_time=2.0)
+    line = gate.leave("/gone")
+    assert "/gone" in line and "went away" in line
+    assert gate.leave("/gone") == ""  # said once
+    assert gate.may_step(9.0, 0.0) == (True, "")
+
+
+@pytest.mark.parametrize("lead, timeout", [(0.0, 1.0), (math.inf, 1.0), (0.1, 0.0), (0.1, math.nan)])
+def test_gate_refuses_bad_settings(lead, timeout):
+    with pytest.raises(ValueError, match="lockstep"):
+        ReaderGate(["/a"], lead, timeout)
+
+
+def stamps(n: int, period: float, missing: set[int] = frozenset()) -> list[float]:
+    return [k * period for k in range(1, n + 1) if k not in missing]
+
+
+def test_gaps_count_the_missing_stamps_and_where_they_are():
+    gaps = Gaps(DT)
+    for t in stamps(100, DT, {10, 11, 12, 50}):
+        gaps.add(t)
+    assert gaps.samples == 96
+    assert gaps.lost() == 4
+    assert gaps.lost(0.0, 0.022) == 2  # stamps 0.020, 0.022 (of 0.020, 0.022, 0.024) within (0, 0.022]
+    assert gaps.lost(0.022, 0.2) == 2
+    assert gaps.lost(0.03, 0.09) == 0
+
+
+def test_gaps_ignore_a_repeated_stamp_and_learn_the_period():
+    gaps = Gaps()
+    for t in [0.001, 0.002, 0.002, 0.002, 0.003, 0.006, 0.007]:
+        gaps.add(t)
+    assert gaps.period == pytest.approx(0.001)
+    assert gaps.lost() == 2
+    clean = Gaps(0.001)
+    for t in [0.001, 0.002, 0.002, 0.003]:  # the joint states at rest: the last state again
+        clean.add(t)
+    assert clean.lost() == 0
