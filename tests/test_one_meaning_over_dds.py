@@ -68,7 +68,8 @@ class Rig:
 
     def set(self, *params: ParameterMsg):
         """`ros2 param set /shaper NAME VALUE` (one parameter each), the results."""
-        return self.call(SetParameters, "/shaper/set_parameters", SetParameters.Request(parameters=list(params))).results
+        request = SetParameters.Request(parameters=list(params))
+        return self.call(SetParameters, "/shaper/set_parameters", request).results
 
     def set_atomically(self, *params: ParameterMsg):
         return self.call(SetParametersAtomically, "/shaper/set_parameters_atomically",

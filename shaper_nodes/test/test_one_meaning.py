@@ -52,9 +52,9 @@ def test_a_mode_below_rate_over_4_passes_both_paths():
 
 
 def test_several_modes_are_checked_one_by_one_and_named():
-    with pytest.raises(ShaperError, match=r"shaper.frequencies_hz 1 130 Hz is too high"):
+    with pytest.raises(ShaperError, match=r"shaper.frequencies_hz 130 Hz is too high"):
         design_from_params(params(family="zv", frequencies_hz=(10.0, 130.0), damping_ratios=(0.05, 0.05)), RATE)
-    with pytest.raises(ShaperError, match=r"design mode 1 130 Hz is too high"):
+    with pytest.raises(ShaperError, match=r"design mode 130 Hz is too high"):
         check_design(design("zv", [Mode.from_hz(10.0, 0.05), Mode.from_hz(130.0, 0.05)]), RATE)
 
 

@@ -67,7 +67,8 @@ class DesignParams:
         None, "Several modes: their natural frequencies, Hz (undamped), one per entry"
         " of shaper.damping_ratios. When set (non-empty), the family is designed on all these modes (the"
         " single-mode designs convolved; si designs them jointly) and shaper.frequency_hz and"
-        f" shaper.damping_ratio are not used (a change of either is refused). At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
+        " shaper.damping_ratio are not used (a change of either is refused)."
+        f" At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
         " A change of the number of modes sets both lists at once (ros2 param load, or one atomic set).",
         type=Parameter.Type.DOUBLE_ARRAY, check=lambda v: modes_from_hz(v, [0.05] * len(v)))
     damping_ratios: tuple[float, ...] = param(

@@ -34,7 +34,7 @@ from shaper_nodes.core.shaping.stream import FIELDS, check_times
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
 from shaper_nodes.core.stamps import stamp_to_sec
 
-
+#: rad per turn: Hz on the messages, rad/s in the core
 TWO_PI = 2.0 * math.pi
 
 

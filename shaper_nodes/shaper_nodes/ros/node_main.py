@@ -157,9 +157,9 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
 
     A configuration error (``ValueError`` or ``OSError`` such as ``FileExistsError`` from the
     constructor, or a parameter rclpy refuses) is printed on stderr as ``name: message`` and gives
-    exit code 1, as is a ``--params-file`` that cannot be used (:func:`params_file_problem`). A node with a ``close()`` method gets it called before it is destroyed. A node that
-    sets ``exit_code`` (and ``exit_reason``) ends with that code, the reason printed as
-    ``name: reason``.
+    exit code 1, as does a ``--params-file`` that cannot be used (:func:`params_file_problem`). A
+    node with a ``close()`` method gets it called before it is destroyed. A node that sets
+    ``exit_code`` (and ``exit_reason``) ends with that code, the reason printed as ``name: reason``.
     """
     argv = list(sys.argv if args is None else args)
     if wants_help(argv):
@@ -179,8 +179,8 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
     try:
         rclpy.init(args=argv)
     except Exception as err:  # rcl's own refusal of the arguments (e.g. a params file it cannot parse)
-        text = str(err).strip().splitlines()
-        print(f"{name}: the ROS arguments were refused: {text[0] if text else type(err).__name__}",
+        said = str(err).strip().splitlines()
+        print(f"{name}: the ROS arguments were refused: {said[0] if said else type(err).__name__}",
               file=sys.stderr, flush=True)
         return EXIT_CONFIG
     node = None

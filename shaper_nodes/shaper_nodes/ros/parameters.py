@@ -11,7 +11,8 @@ spec without a default is an array whose default is the empty array of its type,
 read as "not set". Values are taken as ``ros2 param set`` and params YAML files write them: a
 double parameter takes an integer (``8`` is ``8.0``, range still checked), a double array an
 integer array, and an array parameter an empty array of any type (``[]`` carries no type) or no
-value at all (what rcl makes of ``[]`` in a params file, so a dump loads back); any other type is refused with a reason naming the expected one. Such a parameter is declared with
+value at all (what rcl makes of ``[]`` in a params file, so a dump loads back); any other type
+is refused with a reason naming the expected one. Such a parameter is declared with
 ``dynamic_typing`` (so that a start-up value of another type reaches :func:`declare_all`, which
 converts it or refuses it), then given its static type; later a pre-set callback converts what a
 parameter service request sends before rclpy checks type and range (added once per node, whatever

@@ -70,13 +70,11 @@ def check_modes(family: str, modes: Iterable[Mode], rate: float, name: str = "de
     if family in ("none", "custom"):
         return
     lo, hi = FREQUENCY_RANGE_HZ
-    modes = list(modes)
-    for i, m in enumerate(modes):
-        which = name if len(modes) == 1 else f"{name} {i}"
+    for m in modes:
         if not lo <= m.hz <= hi:
-            raise ShaperError(f"{which} {m.hz:.6g} Hz is outside [{lo:g}, {hi:g}] Hz")
+            raise ShaperError(f"{name} {m.hz:.6g} Hz is outside [{lo:g}, {hi:g}] Hz")
         if m.hz >= rate / RATE_FACTOR:
-            raise ShaperError(f"{which} {m.hz:.6g} Hz is too high for command_rate {rate:g} Hz"
+            raise ShaperError(f"{name} {m.hz:.6g} Hz is too high for command_rate {rate:g} Hz"
                               f" (must be below rate / {RATE_FACTOR:g} = {rate / RATE_FACTOR:g} Hz)")
 
 
