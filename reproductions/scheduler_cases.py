@@ -185,7 +185,10 @@ class _Recorder:
         self.cmd.append(m.data[0])
 
     def _on_mode(self, m: Any) -> None:
-        self.modes.append((self._sec(m.header.stamp), m.modes[0].natural_frequency, m.modes[0].damping_ratio))
+        from shaper_nodes.ros.conversions import estimate_modes
+
+        hz, zeta = estimate_modes(m)[0]
+        self.modes.append((self._sec(m.header.stamp), 2 * math.pi * hz, zeta))  # rad/s, as the rules
 
     def _on_event(self, m: Any) -> None:
         self.events.append((int(m.event), int(m.cycle), self._sec(m.header.stamp)))

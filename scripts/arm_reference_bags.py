@@ -113,12 +113,14 @@ def run_production(start, ctx, out: pathlib.Path, calibration: pathlib.Path, arg
     try:
         conductor.wait_ready(60.0, {"/cycle_events": 3})  # this node, the identifier, the recorder
         client.wait_ready(3)
+        from shaper_nodes.ros.conversions import msg_hz
+
         request = fallback_request(calibration)
         resp = conductor.call(conductor.set_shaper_cli, request)
         if not resp.success:
             raise RuntimeError(f"the shaper refused the calibrated fallback: {resp.message}")
         print("production: calibrated fixed shaper " + request.shaper.family + " at " + ", ".join(
-            f"{m.natural_frequency / 6.283185307179586:.3f} Hz" for m in request.shaper.design_modes), flush=True)
+            f"{msg_hz(m):.3f} Hz" for m in request.shaper.design_modes), flush=True)
         moves = cycle_moves()
         for cycle in range(args.cycles_before + args.cycles_after):
             if cycle == args.cycles_before:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import math
 import time
 from collections.abc import Callable
 from functools import partial
@@ -24,11 +25,11 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.nodes.shaper import ShaperNode
+from shaper_nodes.ros.conversions import mode_msg
 
 JOINTS = [f"joint_{i + 1}" for i in range(6)]
 ZEROS = [0.0] * 6
@@ -151,7 +152,7 @@ class Table:
                 partial(_set, node, custom))
         for n in (25, 12):
             many = ShaperMsg(family="zvd", source="user", design_modes=[
-                ModeMsg(natural_frequency=6.0 + k, damping_ratio=0.05) for k in range(n)])
+                mode_msg((6.0 + k) / (2 * math.pi), 0.05) for k in range(n)])
             row(f"4. zvd for {n} design modes", "out of memory, node killed" if n == 25 else "531,441 impulses",
                 partial(_set, node, many))
         row("4. custom shaper, 10,000 impulses over 60 s", "accepted, throughput 25 msg/s",

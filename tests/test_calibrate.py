@@ -94,7 +94,7 @@ def test_calibration_meets_modal_analysis_and_recomputes_from_its_bag(start_node
         answer = future.result()
         assert answer is not None and answer.success, answer
         home = next(p for p in report["poses"] if p["name"] == "home")
-        got = sorted(m.natural_frequency / (2 * math.pi) for m in answer.shaper.design_modes)
+        got = sorted(m.frequency_hz for m in answer.shaper.design_modes)
         assert got == pytest.approx(sorted(m["frequency_hz"] for m in home["modes"]), rel=1e-4)
     finally:
         node.destroy_node()

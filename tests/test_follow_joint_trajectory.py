@@ -30,7 +30,6 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint, MultiDOFJointTrajectoryPoint
 
-from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict, triangular_partition
@@ -40,7 +39,7 @@ from shaper_nodes.core.shaping.trajectory import shape_trajectory
 from shaper_nodes.nodes.scheduler import SchedulerNode
 from shaper_nodes.nodes.shaper import ShaperNode
 from shaper_nodes.ros.action_client import ResilientActionClient
-from shaper_nodes.ros.conversions import duration_to_sec
+from shaper_nodes.ros.conversions import duration_to_sec, mode_msg
 from shaper_nodes.ros.shaper_client import wait_for
 
 pytestmark = pytest.mark.integration
@@ -501,14 +500,15 @@ class FakeScheduler:
      "/fake/shaper_at refused the final pose: no rule fires at j1 = 1.5"),
     (ShaperAt.Response(success=True, shaper=ShaperMsg(family="custom", amplitudes=[2.0, -1.0], times=[0.0, 0.1])),
      "is refused here: the impulses amplify: their gain sum |A| = 3 exceeds max_gain 1"),
-    (ShaperAt.Response(success=True, shaper=ShaperMsg(family="zv", design_modes=[ModeMsg(
-        natural_frequency=2 * math.pi * 1000.0, damping_ratio=0.0)])),
+    (ShaperAt.Response(success=True, shaper=ShaperMsg(family="zv", design_modes=[mode_msg(1000.0, 0.0)])),
      "is refused here: shaper duration 0.5 ms is shorter than one command period (10 ms)"),
+    (ShaperAt.Response(success=True, shaper=ShaperMsg(family="zv", design_modes=[mode_msg(30.0, 0.0)])),
+     "is refused here: design mode 30 Hz is too high for command_rate 100 Hz (must be below rate / 4 = 25 Hz)"),
     (ShaperAt.Response(success=True, shaper=ShaperMsg(family="custom", amplitudes=[1.0 / 1001] * 1001,
                                                       times=[k * 1e-3 for k in range(1001)])),
      "is refused here: 1001 impulses exceed the limit of 1000"),
     (None, "no answer from the scheduler: /fake/shaper_at did not answer within 0.5 s"),
-], ids=["refused", "gain", "too_short", "too_many_impulses", "no_answer"])
+], ids=["refused", "gain", "too_short", "above_rate_over_4", "too_many_impulses", "no_answer"])
 def test_a_refused_pose_or_shaper_falls_back_to_the_active_shaper_with_a_warning(ros_context, controller, answer,
                                                                                   words):
     rig = Rig(ros_context, controller, **{"action.scheduler": "/fake", "action.server_timeout": 0.5})

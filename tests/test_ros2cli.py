@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import pathlib
 import re
+import shutil
 import subprocess
 import time
 
@@ -157,6 +158,98 @@ def test_param_dump_gives_every_parameter_a_value(case, ros_context, tmp_path):
         if callable(getattr(node, "close", None)):
             node.close()
         node.destroy_node()
+
+
+def dump_yaml(node: str, dump: dict[str, ParameterValue]) -> str:
+    """What ``ros2 param dump NODE`` prints (ros2param's dump verb): the node's full name, then
+    ``ros__parameters`` with the names split on '.' into nested mappings, the values as
+    ros2param's ``get_value`` gives them (arrays as lists), by ``yaml.dump(default_flow_style=False)``."""
+    tree: dict = {}
+    for name in sorted(dump):
+        *groups, last = name.split(".")
+        here = tree
+        for g in groups:
+            here = here.setdefault(g, {})
+        value = value_of(dump[name])
+        here[last] = list(value) if isinstance(value, (list, tuple)) or hasattr(value, "tolist") else value
+    return yaml.dump({node: {"ros__parameters": tree}}, default_flow_style=False)
+
+
+def _same(a, b) -> bool:
+    """Two parameter values are the same (NaN equals NaN; arrays element by element)."""
+    arrays = [isinstance(v, (list, tuple)) or hasattr(v, "tolist") for v in (a, b)]
+    if any(arrays):
+        return all(arrays) and len(a) == len(b) and all(_same(x, y) for x, y in zip(list(a), list(b), strict=True))
+    if isinstance(a, float) and isinstance(b, float) and a != a:
+        return b != b
+    return type(a) is type(b) and a == b
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_a_param_dump_loads_back_with_params_file(case, ros_context, domain_id, tmp_path):
+    """`ros2 param dump /NODE > dump.yaml`, then the node started with `--params-file dump.yaml` alone:
+    it starts (every parameter, empty arrays and read-only ones included, is taken) and its own dump
+    is the same, parameter by parameter."""
+    factory, overrides = CASES[case]
+    node = factory(context=ros_context, parameter_overrides=_overrides(overrides(tmp_path)))
+    svc = Services(ros_context, node)
+    try:
+        name = node.get_fully_qualified_name()
+        first = svc.dump(name)
+    finally:
+        svc.close()
+        if callable(getattr(node, "close", None)):
+            node.close()
+        node.destroy_node()
+    if case == "recorder":  # the recorder refuses to write into a recording that exists: the first one goes
+        shutil.rmtree(tmp_path / "rec")
+    path = tmp_path / "dump.yaml"
+    path.write_text(dump_yaml(name, first))
+    if case == "shaper":
+        assert "position_lower: []" in path.read_text()  # the issue's case: an empty array in the dump
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=domain_id, args=["test", "--ros-args", "--params-file", str(path)])
+    again = None
+    try:
+        again = factory(context=ctx)
+        svc = Services(ctx, again)
+        try:
+            second = svc.dump(again.get_fully_qualified_name())
+        finally:
+            svc.close()
+        assert sorted(second) == sorted(first)
+        differ = [n for n in first if not (first[n].type == second[n].type
+                                           and _same(value_of(first[n]), value_of(second[n])))]
+        assert not differ, f"{case}: not loaded back: {[(n, value_of(first[n]), value_of(second[n])) for n in differ]}"
+    finally:
+        if again is not None:
+            if callable(getattr(again, "close", None)):
+                again.close()
+            again.destroy_node()
+        ctx.try_shutdown()
+
+
+@pytest.mark.parametrize(("content", "words"), [
+    (None, "no such file"),
+    ("/**:\n  ros__parameters:\n    joint_names: [a\n", "not valid YAML at line"),
+    ("joint_names: [a]\n", "has no 'ros__parameters'"),
+    ("- 1\n", "not a params file"),
+])
+@pytest.mark.parametrize("command", ["shaper_node", "scheduler", "identifier", "learner", "recorder", "bag_play",
+                                     "sim_plant", "calibrate"])
+def test_a_params_file_that_cannot_be_used_says_why_in_one_line(command, content, words, domain_id, tmp_path):
+    """A missing or unparsable --params-file: one line naming the file and the problem, rc != 0, for every node."""
+    path = tmp_path / "params.yaml"
+    if content is not None:
+        path.write_text(content)
+    package = "sim_plant_node" if command in console_scripts("sim_plant_node") else "shaper_nodes"
+    done = _run([str(executable(package, command)), "--ros-args", "--params-file", str(path)], tmp_path, domain_id)
+    assert done.returncode != 0, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith(command + ":"), done.stderr
+    assert str(path) in lines[0] and words in lines[0], lines[0]
+    assert "Traceback" not in done.stderr + done.stdout
 
 
 def _int(name: str, value: int) -> ParameterMsg:

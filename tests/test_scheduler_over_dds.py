@@ -126,13 +126,13 @@ def test_scheduled_mode_follows_the_pose_and_out_of_range_is_clamped(graph):
     for x in (0.05, 0.3, 0.65):
         active = settle_at(sched, peer, ex, x)
         assert active.source == "scheduler" and active.family == "zv"
-        omega = active.design_modes[0].natural_frequency
-        assert omega == pytest.approx(true_mode(x).omega, rel=0.07)  # interpolation error, docs/design/scheduler.md
+        hz = active.design_modes[0].frequency_hz
+        assert hz == pytest.approx(true_mode(x).hz, rel=0.07)  # interpolation error, docs/design/scheduler.md
         est = peer.modes[-1].modes[0]
-        assert est.natural_frequency == pytest.approx(omega, rel=0.011)  # sent when it moved by 1 %
+        assert est.frequency_hz == pytest.approx(hz, rel=0.011)  # sent when it moved by 1 %
     active = settle_at(sched, peer, ex, 1.5)  # beyond the rule base: clamped at 0.7, not extrapolated
     assert sched._interp.clamped == (True,)
-    assert active.design_modes[0].natural_frequency == pytest.approx(true_mode(0.7).omega, rel=1e-9)
+    assert active.design_modes[0].frequency_hz == pytest.approx(true_mode(0.7).hz, rel=1e-9)
     # bad joint states are refused, the node keeps going
     refused = sched.refused
     peer.pose(0.2, names=("elbow",))
@@ -194,7 +194,7 @@ def test_the_real_learner_speaks_to_the_scheduler(graph, start_node):
 def test_shaper_at_gives_the_schedules_shaper_at_any_pose_and_sends_nothing(graph):
     sched, peer, ex = graph
     settle_at(sched, peer, ex, 0.1)
-    sent, revision, here = sched.sent, peer.real[-1].revision, peer.modes[-1].modes[0].natural_frequency
+    sent, revision, here = sched.sent, peer.real[-1].revision, peer.modes[-1].modes[0].frequency_hz
     core = Scheduler(rule_base_from_dict(rule_base_spec(np.linspace(0.0, 0.7, 8))), "model", "zv")
     for x, where in ((0.05, 0.05), (0.45, 0.45), (1.5, 0.7)):  # 1.5 is clamped to the range's end, 0.7
         resp = shaper_at(peer, ex, ["elbow", "joint_1"], [9.0, x])  # other joints are ignored
@@ -203,10 +203,10 @@ def test_shaper_at_gives_the_schedules_shaper_at_any_pose_and_sends_nothing(grap
         assert resp.shaper.family == expected.family == "zv" and resp.shaper.source == "scheduler"
         np.testing.assert_allclose(resp.shaper.times, expected.times, rtol=1e-12)
         np.testing.assert_allclose(resp.shaper.amplitudes, expected.amplitudes, rtol=1e-12)
-        assert [(m.natural_frequency, m.damping_ratio) for m in resp.shaper.design_modes] == \
-            [(m.omega, m.zeta) for m in interp.modes]
-        assert [(m.natural_frequency, m.damping_ratio) for m in resp.estimate.modes] == \
-            [(m.omega, m.zeta) for m in interp.modes]
+        assert [(m.frequency_hz, m.damping_ratio) for m in resp.shaper.design_modes] == \
+            [(pytest.approx(m.hz, rel=1e-12), m.zeta) for m in interp.modes]
+        assert [(m.frequency_hz, m.damping_ratio) for m in resp.estimate.modes] == \
+            [(pytest.approx(m.hz, rel=1e-12), m.zeta) for m in interp.modes]
         assert resp.estimate.source == "scheduler" and f"joint_1 = {x:.6g}" in resp.message
         assert ("joint_1 = 1.5 outside [0, 0.7]: clamped, not extrapolated" in resp.message) == (x == 1.5)
     for names, positions, words in ((["elbow"], [0.2], "missing premise joints ['joint_1']"),
@@ -219,7 +219,7 @@ def test_shaper_at_gives_the_schedules_shaper_at_any_pose_and_sends_nothing(grap
     # nothing went to the shaper node, and the schedule is still at the pose of the joint states
     spin_until(ex, lambda: not sched._pending, 10.0, "no request in flight")
     assert sched.sent == sent and peer.real[-1].revision == revision
-    assert peer.modes[-1].modes[0].natural_frequency == here
+    assert peer.modes[-1].modes[0].frequency_hz == here
 
 
 def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_context):
@@ -265,7 +265,7 @@ def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_contex
             return True
 
         spin_until(lambda: pose() and modes, "a mode estimate from the matching publisher's pose")
-        assert modes[-1].modes[0].natural_frequency == pytest.approx(15.0)
+        assert modes[-1].modes[0].frequency_hz == pytest.approx(15.0 / (2 * math.pi))  # the rule's 15 rad/s
     finally:
         ex.shutdown()
         node.destroy_node()

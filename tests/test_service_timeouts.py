@@ -8,6 +8,7 @@ conftest.py: a lost reply, or a stuck node). Each must report the timeout (its l
 
 from __future__ import annotations
 
+import math
 import time
 
 import pytest
@@ -129,4 +130,4 @@ def test_scheduler_reports_the_timeout_sends_again_and_answers_the_learner(ros_c
     assert not resp.success and "did not answer within" in resp.message
     seen = len(modes)
     g.spin_until(lambda: pose() and len(modes) > seen + 3, "the schedule still evaluated")
-    assert modes[-1].modes[0].natural_frequency == pytest.approx(15.0)
+    assert modes[-1].modes[0].frequency_hz == pytest.approx(15.0 / (2 * math.pi))  # the rule's 15 rad/s

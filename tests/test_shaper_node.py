@@ -19,11 +19,11 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.shaping import design, modes_from_hz
 from shaper_nodes.nodes.shaper import ShaperNode
+from shaper_nodes.ros.conversions import mode_msg
 from shaper_nodes.ros.qos import LATCHED
 
 pytestmark = pytest.mark.integration
@@ -196,7 +196,7 @@ def test_set_shaper_service_validates_and_policy_applies(rig):
     assert not resp.success and "gain sum |A| = 1999 exceeds max_gain 1" in resp.message
     assert resp.active.family == "zv"
     req = SetShaper.Request(shaper=ShaperMsg(family="zvd", source="intruder",
-                                             design_modes=[ModeMsg(natural_frequency=20.0, damping_ratio=0.1)]))
+                                             design_modes=[mode_msg(20.0 / (2 * math.pi), 0.1)]))
     resp = rig.call(SetShaper, "/shaper/set_shaper", req)
     assert not resp.success and "update policy" in resp.message
     req.shaper.source = "learner"
@@ -245,7 +245,8 @@ def test_whole_trajectory_service(rig):
 
 
 def modes_of(msg):
-    return [(m.natural_frequency, m.damping_ratio) for m in msg.design_modes]
+    """(frequency rad/s, damping ratio) of each design mode (the message holds Hz)."""
+    return [(pytest.approx(2 * math.pi * m.frequency_hz, rel=1e-12), m.damping_ratio) for m in msg.design_modes]
 
 
 def test_several_modes_from_parameters_give_the_convolved_shaper_and_change_live(ros_context):

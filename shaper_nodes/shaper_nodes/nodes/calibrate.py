@@ -472,9 +472,14 @@ def main(args: list[str] | None = None) -> int:
     from rclpy.signals import SignalHandlerOptions
     from rclpy.utilities import remove_ros_args
 
+    from shaper_nodes.ros.node_main import params_file_problem
     from shaper_nodes.ros.parameters import read
 
     argv = list(sys.argv if args is None else args)
+    problem = params_file_problem(argv)  # before rcl reads the file (remove_ros_args does)
+    if problem is not None:
+        print(f"calibrate: refused: {problem}", file=sys.stderr)
+        return EXIT_REFUSED
     opts = parse_args(remove_ros_args(argv)[1:])
     if opts.from_bag is not None:
         return from_bag(opts.from_bag, opts.out or opts.from_bag.parent, opts.workers)

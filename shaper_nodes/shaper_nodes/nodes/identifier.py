@@ -52,7 +52,6 @@ from rclpy.node import Node
 from sensor_msgs.msg import Imu, JointState
 
 from shaper_msgs.msg import CycleEvent, ModeEstimate
-from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
@@ -60,7 +59,7 @@ from shaper_nodes.core.identification import METHODS, IdentificationError, ModeF
 from shaper_nodes.core.identification.drift import DriftWatch, ModeCheck, check_mode
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sensor_fault
 from shaper_nodes.core.shaping import ShaperError, none_shaper
-from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
+from shaper_nodes.ros.conversions import estimate_msg, msg_hz, shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
 from shaper_nodes.ros.node_main import run_node, with_config
@@ -361,7 +360,7 @@ class IdentifierNode(Node):
         if not modes:
             return None
         tol = float(self.params.value.watch.tolerance)
-        design = [m.natural_frequency / (2 * math.pi) for m in active.design_modes if m.natural_frequency > 0]
+        design = [hz for hz in map(msg_hz, active.design_modes) if hz > 0]
         if design:
             chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
         else:
@@ -412,11 +411,8 @@ class IdentifierNode(Node):
 
         now = self.get_clock().now().to_msg()
         by_freq = sorted(modes, key=lambda m: m.omega)
-        est = ModeEstimate(source="identification")
-        est.header.stamp = now
-        est.modes = [ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta) for m in by_freq]
-        est.natural_frequency_std = [m.omega_std for m in by_freq]
-        est.damping_ratio_std = [m.zeta_std for m in by_freq]
+        est = estimate_msg("identification", by_freq,
+                           [m.omega_std for m in by_freq], [m.zeta_std for m in by_freq], now)
         self._estimate_pub.publish(est)
         resp.estimate = est
         for c in rec.candidates:

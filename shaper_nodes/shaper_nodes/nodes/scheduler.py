@@ -34,7 +34,7 @@ simulated time stands still).
 Interfaces
 ----------
 /joint_states (sensor_msgs/JointState)                in
-~/mode_estimate (shaper_msgs/ModeEstimate, latched)   the interpolated mode(s), rad/s and -
+~/mode_estimate (shaper_msgs/ModeEstimate, latched)   the interpolated mode(s), Hz and -
 <shaper>/set_shaper (shaper_msgs/SetShaper)           out, source "scheduler" (or "learner")
 ~/set_shaper, ~/get_shaper, ~/active_shaper           the shaper node's interface, for the learner
 ~/shaper_at (shaper_msgs/ShaperAt)                    the shaper the schedule gives at any pose
@@ -75,14 +75,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.scheduling import FuzzyError, Interpolation, RateLimit, Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
-from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
+from shaper_nodes.ros.conversions import estimate_msg, shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, declare_all, flat, param, read, table
@@ -463,11 +462,7 @@ class SchedulerNode(Node):
 
 def _estimate(interp: Interpolation, stamp: Any) -> ModeEstimate:
     """The interpolated mode(s) as a ModeEstimate (source "scheduler") stamped ``stamp``."""
-    est = ModeEstimate(source=SOURCE, modes=[ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta)
-                                             for m in interp.modes])
-    if stamp is not None:
-        est.header.stamp = stamp
-    return est
+    return estimate_msg(SOURCE, interp.modes, stamp=stamp)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -56,7 +56,9 @@ on a long trajectory yields within a fraction of a command period.
 
 Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its source;
 ``allowed_sources`` lists the sources that may change the shaper (parameters count as source
-"parameters"); the last accepted change wins. Changes from the sources in ``retime_sources``
+"parameters"); every path gets the same check; the last accepted change wins, and a change that
+replaces another source's shaper is reported; a setting that cannot take effect is refused
+(docs/guide/shaper_node.md, "Who sets the shaper"). Changes from the sources in ``retime_sources``
 (e.g. the scheduler) re-time the motion already commanded instead of switching bumplessly
 (time-varying shaping, see core/shaping/fir.py).
 
@@ -87,7 +89,7 @@ from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFi
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
 from shaper_nodes.core.shaping.stream import NS, CommandStream, normal_stamp
 from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
-from shaper_nodes.ros.diagnostics import Diagnostics
+from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare
@@ -107,6 +109,8 @@ from .shaper_parameters import (  # the table and its constants, importable from
     ShaperParams,
     describe,
     design_from_params,
+    displacement,
+    ineffective,
     limits_from_params,
 )
 from .trajectory_action import TrajectoryActionProxy
@@ -149,6 +153,8 @@ class ShaperNode(Node):
         self._source = PARAMETERS_SOURCE
         self._revision = 1
         self._pending_params: tuple[Shaper, str] | None = None
+        #: what the last change displaced ("replaces the shaper set by <source> (revision N)"), or None
+        self.displaced: str | None = None
         self.limits = limits_from_params(self.joint_names, p.limits)  # the parameters' and the URDF's
         #: the streamed inputs' filters and rules (core/shaping/stream.py); it owns the stream lock
         self.stream = CommandStream(self._fir, self.limits, retiming=bool(self.policy.retime_sources),
@@ -229,6 +235,10 @@ class ShaperNode(Node):
         self.create_timer(float(p.diagnostics_period), self._publish_summary,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(WATCH_PERIOD, self.watch.watch, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        #: which node of this process serves which input (``ros2 node info`` lists a node's own entities)
+        self.side_nodes = {stream_node.get_fully_qualified_name(): "array_in, stream_in",
+                           side.get_fully_qualified_name(): "trajectory_in, ~/shape_trajectory"
+                           + (", action.server_name" if self._action else "")}
         self._publish_active()
         self.graph.start()
         self._side.start()
@@ -239,7 +249,8 @@ class ShaperNode(Node):
             f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}"
             + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else "")
             + (f", each goal shaped for its final pose by {self.pose_shaper.srv_name}" if self.pose_shaper else "")
-            + f"; {self.limits.describe()}")
+            + f"; {self.limits.describe()}; inputs served by "
+            + "; ".join(f"{k} ({v})" for k, v in self.side_nodes.items()))
 
     # ----------------------------------------------------------------- shaper changes
     def _describe(self) -> str:
@@ -249,8 +260,12 @@ class ShaperNode(Node):
         if not any(p.name in DESIGN_PARAMS for p in params):
             return SetParametersResult(successful=True)
         try:
+            proposed = self.params.with_changes(params)
+            why = ineffective(self.params.value, proposed, {p.name for p in params})
+            if why is not None:
+                return SetParametersResult(successful=False, reason=why)
             self.policy.allow(PARAMETERS_SOURCE)
-            shaper, method = design_from_params(self.params.with_changes(params), self.rate)
+            shaper, method = design_from_params(proposed, self.rate)
             self.policy.settled(self.stream.stages())
             discretize(shaper, self.rate, method)  # may refuse; nothing has changed yet
         except (ShaperError, PolicyError, ValueError) as err:
@@ -275,15 +290,26 @@ class ShaperNode(Node):
             self._commit(shaper, source, self._method)
         except (PolicyError, RuntimeError, ValueError) as err:
             return False, str(err)
-        return True, f"active: {self._describe()}, revision {self._revision}"
+        note = f"; {self.displaced}" if self.displaced else ""
+        return True, f"active: {self._describe()}, revision {self._revision}{note}"
 
     def _commit(self, shaper: Shaper, source: str, method: str) -> None:
         fir = discretize(shaper, self.rate, method)  # may raise; nothing changed yet
         self.stream.switch(fir, retime=self.policy.how(source) == "retime")  # between two streamed samples
+        before, before_revision = self._source, self._revision
         self._shaper, self._fir, self._source, self._method = shaper, fir, source, method
         self._revision += 1
         self._publish_active()
-        self.get_logger().info(f"shaper changed by {source}: {self._describe()}, revision {self._revision}")
+        self.displaced = displacement(before, before_revision, source)  # reported: log, /diagnostics, answer
+        line = f"shaper changed by {source}: {self._describe()}, revision {self._revision}"
+        level = OK if before in (source, PARAMETERS_SOURCE) else WARN  # the start-up design is there to be replaced
+        if level == WARN:  # one call site per severity, as rclpy's logger wants
+            self.get_logger().warning(f"{line}; {self.displaced}")
+        else:
+            self.get_logger().info(line + (f"; {self.displaced}" if self.displaced else ""))
+        if self.displaced:
+            self.diagnostics.publish("source", level, f"{source} {self.displaced}: {self._describe()}",
+                                     [("displaced", before), ("by", source), ("revision", str(self._revision))])
 
     def active_msg(self) -> ShaperMsg:
         return shaper_to_msg(self._shaper, self._source, self._revision, self.get_clock().now().to_msg())
@@ -317,7 +343,8 @@ class ShaperNode(Node):
 
     def _publish_summary(self) -> None:
         head = [("revision", str(self._revision)), ("source", self._source), ("family", self._shaper.family),
-                ("command_rate_hz", f"{self.rate:g}")]
+                ("command_rate_hz", f"{self.rate:g}"),
+                *((f"inputs on {k}", v) for k, v in self.side_nodes.items())]
         tail = [] if self.pose_shaper is None else [("action.scheduler.shaped", str(self.pose_shaper.shaped)),
                                                      ("action.scheduler.fallbacks", str(self.pose_shaper.fallbacks))]
         level, msg, values = self.watch.summary(f"shaping with {self._describe()}", head, tail)

@@ -9,6 +9,7 @@ functions here only interpret them.
 from __future__ import annotations
 
 import pathlib
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from rclpy.parameter import Parameter
@@ -27,6 +28,7 @@ from shaper_nodes.core.shaping import (
     none_shaper,
 )
 from shaper_nodes.core.shaping.limits import JointLimits, urdf_limits
+from shaper_nodes.core.shaping.policy import FREQUENCY_RANGE_HZ, MIN_INSENSITIVITY, check_design
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_SAMPLES
 from shaper_nodes.ros.parameters import Spec, param, table, topic
 
@@ -54,15 +56,19 @@ class DesignParams:
     family: str = param("none", "Shaper family: " + ", ".join(f"{k} ({v})" for k, v in FAMILIES.items()
                                                              if k != "custom"),
                         check=lambda v: design(v, [_PROBE]))
-    frequency_hz: float = param(10.0, "Natural frequency of the mode to shape for, Hz (undamped).", (0.01, 1000.0),
+    frequency_hz: float = param(10.0, "Natural frequency of the mode to shape for, Hz (undamped); not used, and"
+                                " a change refused, while shaper.frequencies_hz is set. Below command_rate / 4.",
+                                FREQUENCY_RANGE_HZ,
                                 check=lambda v: design("zv", [Mode.from_hz(v, 0.05)]))
-    damping_ratio: float = param(0.05, "Damping ratio of the mode to shape for, dimensionless.", (0.0, 0.95),
+    damping_ratio: float = param(0.05, "Damping ratio of the mode to shape for, dimensionless; not used, and a"
+                                 " change refused, while shaper.frequencies_hz is set.", (0.0, 0.95),
                                  check=lambda v: design("zv", [Mode.from_hz(10.0, v)]))
     frequencies_hz: tuple[float, ...] = param(
         None, "Several modes: their natural frequencies, Hz (undamped), one per entry"
         " of shaper.damping_ratios. When set (non-empty), the family is designed on all these modes (the"
         " single-mode designs convolved; si designs them jointly) and shaper.frequency_hz and"
-        f" shaper.damping_ratio are not used. At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
+        " shaper.damping_ratio are not used (a change of either is refused)."
+        f" At most {MAX_DESIGN_MODES} modes, each below command_rate / 4."
         " A change of the number of modes sets both lists at once (ros2 param load, or one atomic set).",
         type=Parameter.Type.DOUBLE_ARRAY, check=lambda v: modes_from_hz(v, [0.05] * len(v)))
     damping_ratios: tuple[float, ...] = param(
@@ -76,7 +82,7 @@ class DesignParams:
         " fraction (0.05 = 5 %).", (0.001, 0.3), check=lambda v: design("ei", [_PROBE], vibration_tolerance=v))
     insensitivity: float = param(
         0.4, "SI family: width of the band where V <= vibration_tolerance, fraction of"
-        " the design frequency (0.4 = +-20 %).", (0.01, 1.5),
+        " the design frequency (0.4 = +-20 %).", (MIN_INSENSITIVITY, 1.5),
         check=lambda v: design("si", [_PROBE], insensitivity=v))
     max_gain: float = param(
         DEFAULT_MAX_GAIN, "Largest gain sum |A| of a custom shaper sent to ~/set_shaper:"
@@ -238,15 +244,11 @@ def design_from_params(p: ShaperParams, rate: float) -> tuple[Shaper, str]:
     if family == "custom":
         raise ShaperError("family 'custom' is set through the ~/set_shaper service, not parameters")
     modes, name = modes_from_params(s)
-    high = [m.hz for m in modes if m.hz >= rate / 4.0]
-    if family != "none" and high:
-        raise ShaperError(
-            f"{name} {high[0]:.6g} Hz is too high for command_rate {rate:g} Hz"
-            f" (must be below rate / 4 = {rate / 4:g} Hz)")
     shaper = design(family, modes,
                     derivative_order=int(s.derivative_order),
                     vibration_tolerance=float(s.vibration_tolerance),
                     insensitivity=float(s.insensitivity))
+    check_design(shaper, rate, name)  # the check every path that sets the shaper makes (~/set_shaper too)
     return shaper, method
 
 
@@ -267,6 +269,38 @@ def modes_from_params(s: DesignParams) -> tuple[tuple[Mode, ...], str]:
         return modes_from_hz(freqs, zetas), "shaper.frequencies_hz"
     except ShaperError as err:
         raise ShaperError(f"shaper.frequencies_hz / shaper.damping_ratios: {err}") from None
+
+
+#: the single-mode design parameters that shaper.frequencies_hz displaces
+SINGLE_MODE = ("shaper.frequency_hz", "shaper.damping_ratio")
+
+
+def ineffective(now: ShaperParams, proposed: ShaperParams, names: Iterable[str]) -> str | None:
+    """Why a change of the parameters ``names`` from ``now`` to ``proposed`` cannot take effect, or
+    None if it can: shaper.frequency_hz or shaper.damping_ratio changed while shaper.frequencies_hz
+    is (and stays) set, which takes precedence (a value equal to the present one, as ``ros2 param
+    load`` of a dump sends it, is no change)."""
+    if not proposed.shaper.frequencies_hz:
+        return None
+    for name in SINGLE_MODE:
+        if name not in names:
+            continue
+        field_name = name.split(".", 1)[1]
+        old, new = getattr(now.shaper, field_name), getattr(proposed.shaper, field_name)
+        if float(old) != float(new):
+            hz = ", ".join(f"{f:g}" for f in proposed.shaper.frequencies_hz)
+            return (f"{name} {float(new):g} cannot take effect: shaper.frequencies_hz is set ([{hz}] Hz) and takes"
+                    " precedence; set shaper.frequencies_hz and shaper.damping_ratios instead, or empty both"
+                    f" in the same atomic request that sets {name}")
+    return None
+
+
+def displacement(before: str, revision: int, source: str) -> str | None:
+    """How a change by ``source`` displaces the active shaper of source ``before`` (revision
+    ``revision``), in words; None if it is the same source's (no other source's shaper is replaced)."""
+    if before == source:
+        return None
+    return f"replaces the shaper set by {before} (revision {revision})"
 
 
 def limits_from_params(joint_names: list[str], lim: LimitParams) -> JointLimits:

@@ -1,10 +1,16 @@
 """Conversions between messages and the core's arrays and objects (the nodes' edge), written once:
-shapers, stamps and durations, trajectories."""
+modes and mode estimates, shapers, stamps and durations, trajectories.
+
+Messages carry frequencies in Hz (``shaper_msgs/Mode.frequency_hz``); the core's :class:`Mode`
+holds rad/s. Only :func:`mode_to_msg`, :func:`mode_from_msg` and :func:`estimate_msg` read or write
+the message's frequency fields, so a change of the message lands here.
+"""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import Protocol
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -12,6 +18,7 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_msgs.msg import Mode as ModeMsg
+from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_nodes.core.checks import MAX_JOINT_NAMES, InputError, finite_array, joint_permutation
 from shaper_nodes.core.shaping import (
@@ -27,6 +34,66 @@ from shaper_nodes.core.shaping.stream import FIELDS, check_times
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
 from shaper_nodes.core.stamps import stamp_to_sec
 
+#: rad per turn: Hz on the messages, rad/s in the core
+TWO_PI = 2.0 * math.pi
+
+
+class AnyMode(Protocol):
+    """A mode as the core holds one (:class:`Mode`, an identified ``ModeFit``): rad/s and damping."""
+
+    @property
+    def omega(self) -> float: ...
+    @property
+    def zeta(self) -> float: ...
+
+
+def mode_to_msg(mode: AnyMode) -> ModeMsg:
+    """The core's mode (or an identified one: ``omega`` in rad/s, ``zeta``) as a shaper_msgs/Mode (Hz)."""
+    return ModeMsg(frequency_hz=float(mode.omega) / TWO_PI, damping_ratio=float(mode.zeta))
+
+
+def mode_from_msg(msg: ModeMsg) -> Mode:
+    """A shaper_msgs/Mode (Hz) as the core's mode (rad/s).
+
+    Raises
+    ------
+    ShaperError
+        The frequency is not finite and > 0, or the damping ratio is out of range.
+    """
+    hz = float(msg.frequency_hz)
+    if not (math.isfinite(hz) and hz > 0.0):
+        raise ShaperError(f"mode frequency_hz must be finite and > 0 Hz, got {hz!r}")
+    return Mode.from_hz(hz, float(msg.damping_ratio))
+
+
+def mode_msg(hz: float, zeta: float) -> ModeMsg:
+    """A shaper_msgs/Mode of natural frequency ``hz`` (Hz) and damping ratio ``zeta``, unchecked (a
+    request as a client writes it; the receiver checks it)."""
+    return ModeMsg(frequency_hz=float(hz), damping_ratio=float(zeta))
+
+
+def msg_hz(msg: ModeMsg) -> float:
+    """The natural frequency of a shaper_msgs/Mode, Hz (unchecked: a request's value as sent)."""
+    return float(msg.frequency_hz)
+
+
+def estimate_msg(source: str, modes: Sequence[AnyMode], omega_std: Sequence[float] = (),
+                 zeta_std: Sequence[float] = (), stamp: Time | None = None) -> ModeEstimate:
+    """A shaper_msgs/ModeEstimate of ``modes`` (the core's or identified ones, rad/s) with their one-sigma
+    uncertainties (``omega_std`` in rad/s, ``zeta_std`` dimensionless; empty: not given), the
+    frequencies and their uncertainties in Hz."""
+    est = ModeEstimate(source=source, modes=[mode_to_msg(m) for m in modes])
+    est.frequency_hz_std = [float(w) / TWO_PI for w in omega_std]
+    est.damping_ratio_std = [float(z) for z in zeta_std]
+    if stamp is not None:
+        est.header.stamp = stamp
+    return est
+
+
+def estimate_modes(msg: ModeEstimate) -> list[tuple[float, float]]:
+    """The (frequency Hz, damping ratio) pairs of a shaper_msgs/ModeEstimate, unchecked."""
+    return [(float(m.frequency_hz), float(m.damping_ratio)) for m in msg.modes]
+
 
 def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None = None) -> ShaperMsg:
     """The core shaper as a shaper_msgs/Shaper."""
@@ -36,7 +103,7 @@ def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None
     msg.family = shaper.family
     msg.amplitudes = shaper.amplitudes.tolist()
     msg.times = shaper.times.tolist()
-    msg.design_modes = [ModeMsg(natural_frequency=m.omega, damping_ratio=m.zeta) for m in shaper.modes]
+    msg.design_modes = [mode_to_msg(m) for m in shaper.modes]
     msg.derivative_order = int(shaper.params.get("derivative_order", 0))
     # 0 where the family does not use the parameter (in requests 0 means the family default)
     msg.vibration_tolerance = float(shaper.params.get("vibration_tolerance", 0.0))
@@ -47,7 +114,9 @@ def shaper_to_msg(shaper: Shaper, source: str, revision: int, stamp: Time | None
 
 
 def shaper_from_msg(msg: ShaperMsg, max_gain: float = DEFAULT_MAX_GAIN) -> Shaper:
-    """Design or validate the shaper a shaper_msgs/Shaper asks for (a custom one within ``max_gain``).
+    """Design or validate the shaper a shaper_msgs/Shaper asks for (a custom one within ``max_gain``);
+    its design modes in Hz (``Mode.frequency_hz``). The shaper node then checks it as it checks a
+    design from its parameters (``core.shaping.policy.check_design``).
 
     ``vibration_tolerance`` and ``insensitivity`` equal to 0 mean the family default (5 % and
     0.4); any other value is passed on and checked by the design (families that do not use a
@@ -58,7 +127,7 @@ def shaper_from_msg(msg: ShaperMsg, max_gain: float = DEFAULT_MAX_GAIN) -> Shape
     ShaperError
         If the request is invalid; the message names the problem.
     """
-    modes = tuple(Mode(float(m.natural_frequency), float(m.damping_ratio)) for m in msg.design_modes)
+    modes = tuple(mode_from_msg(m) for m in msg.design_modes)
     family = msg.family.strip().lower() or ("custom" if len(msg.amplitudes) else "")
     if not family:
         raise ShaperError("family is empty")

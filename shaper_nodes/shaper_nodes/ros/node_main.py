@@ -3,7 +3,9 @@
 ``run_node`` answers ``-h``/``--help`` (among the arguments before ``--ros-args``) with the
 node's usage, generated from its module docstring and its parameter tables, without starting
 anything: no ``rclpy.init``, no file written. A configuration error (a missing or invalid
-parameter) ends the node with one line on stderr and exit status 1, no traceback.
+parameter) ends the node with one line on stderr and exit status 1, no traceback; so does a
+``--params-file`` that is missing, unreadable or not a params file (:func:`params_file_problem`,
+checked before ``rclpy.init``, which would otherwise end in a traceback).
 """
 
 from __future__ import annotations
@@ -36,6 +38,51 @@ def wants_help(argv: Sequence[str]) -> bool:
     if "--ros-args" in args:
         args = args[:args.index("--ros-args")]
     return "-h" in args or "--help" in args
+
+
+def params_files(argv: Sequence[str]) -> list[str]:
+    """The files given with ``--params-file FILE`` among the ROS arguments of ``argv`` (after
+    ``--ros-args``, up to ``--`` or the end)."""
+    files: list[str] = []
+    inside = False
+    args = list(argv)
+    for i, arg in enumerate(args):
+        if arg == "--ros-args":
+            inside = True
+        elif arg == "--":
+            inside = False
+        elif inside and arg == "--params-file" and i + 1 < len(args):
+            files.append(args[i + 1])
+    return files
+
+
+def params_file_problem(argv: Sequence[str]) -> str | None:
+    """Why a ``--params-file`` of ``argv`` cannot be used, in one line naming the file (None if
+    every one can be): missing, unreadable, not YAML, or not a params file (a mapping of node
+    names, ``/**`` or ``/name``, each to a mapping with ``ros__parameters``). rcl reads the file
+    again at ``rclpy.init``; these are the problems it would otherwise report as a traceback."""
+    import yaml
+
+    for path in params_files(argv):
+        try:
+            with open(path, encoding="utf-8") as f:
+                tree = yaml.safe_load(f)
+        except FileNotFoundError:
+            return f"--params-file {path}: no such file"
+        except (OSError, UnicodeDecodeError) as err:
+            return f"--params-file {path}: cannot read it ({getattr(err, 'strerror', None) or err})"
+        except yaml.YAMLError as err:
+            mark = getattr(err, "problem_mark", None)
+            where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+            problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+            return f"--params-file {path}: not valid YAML{where}: {problem}"
+        if not isinstance(tree, dict) or not tree:
+            return f"--params-file {path}: not a params file (expected '<node name or /**>: ros__parameters: ...')"
+        for key, body in tree.items():
+            if not isinstance(body, dict) or "ros__parameters" not in body:
+                return (f"--params-file {path}: key {key!r} has no 'ros__parameters' mapping"
+                        " (expected '<node name or /**>: ros__parameters: ...')")
+    return None
 
 
 def yaml_value(value: Any) -> str:
@@ -110,9 +157,9 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
 
     A configuration error (``ValueError`` or ``OSError`` such as ``FileExistsError`` from the
     constructor, or a parameter rclpy refuses) is printed on stderr as ``name: message`` and gives
-    exit code 1. A node with a ``close()`` method gets it called before it is destroyed. A node that
-    sets ``exit_code`` (and ``exit_reason``) ends with that code, the reason printed as
-    ``name: reason``.
+    exit code 1, as does a ``--params-file`` that cannot be used (:func:`params_file_problem`). A
+    node with a ``close()`` method gets it called before it is destroyed. A node that sets
+    ``exit_code`` (and ``exit_reason``) ends with that code, the reason printed as ``name: reason``.
     """
     argv = list(sys.argv if args is None else args)
     if wants_help(argv):
@@ -120,11 +167,22 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
         text = node_help(module, name, tables or {"": getattr(module, "PARAMETERS", ())}, examples)
         return quiet_closed_pipe(lambda: print(text, end="", flush=True) or 0)
 
+    problem = params_file_problem(argv)
+    if problem is not None:
+        print(f"{name}: {problem}", file=sys.stderr, flush=True)
+        return EXIT_CONFIG
+
     import rclpy
     from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
 
-    rclpy.init(args=argv)
+    try:
+        rclpy.init(args=argv)
+    except Exception as err:  # rcl's own refusal of the arguments (e.g. a params file it cannot parse)
+        said = str(err).strip().splitlines()
+        print(f"{name}: the ROS arguments were refused: {said[0] if said else type(err).__name__}",
+              file=sys.stderr, flush=True)
+        return EXIT_CONFIG
     node = None
     try:
         node = factory()

@@ -10,8 +10,9 @@ Every parameter has a value after :func:`declare_all` (``ros2 param dump`` lists
 spec without a default is an array whose default is the empty array of its type, which the nodes
 read as "not set". Values are taken as ``ros2 param set`` and params YAML files write them: a
 double parameter takes an integer (``8`` is ``8.0``, range still checked), a double array an
-integer array, and an array parameter an empty array of any type (``[]`` carries no type); any
-other type is refused with a reason naming the expected one. Such a parameter is declared with
+integer array, and an array parameter an empty array of any type (``[]`` carries no type) or no
+value at all (what rcl makes of ``[]`` in a params file, so a dump loads back); any other type
+is refused with a reason naming the expected one. Such a parameter is declared with
 ``dynamic_typing`` (so that a start-up value of another type reaches :func:`declare_all`, which
 converts it or refuses it), then given its static type; later a pre-set callback converts what a
 parameter service request sends before rclpy checks type and range (added once per node, whatever
@@ -156,14 +157,16 @@ class Spec:
 
     def convert(self, param: Parameter) -> Parameter:
         """``param`` converted to this spec's type where the value says the same: an integer to a
-        double, an integer array to a double array, an empty array of any type to this array type;
-        ``param`` itself otherwise (also when it has the right type already)."""
+        double, an integer array to a double array, an empty array of any type to this array type,
+        and no value to the empty array of this array type (rcl reads ``[]`` in a params file, as
+        ``ros2 param dump`` writes an empty array, as no value); ``param`` itself otherwise (also
+        when it has the right type already)."""
         want, got = self.param_type, param.type_
         if got == want or not self.converts:
             return param
         if want == _T.DOUBLE and got == _T.INTEGER:
             return Parameter(param.name, _T.DOUBLE, float(param.value))
-        if want in ARRAYS and got in ARRAYS and len(param.value) == 0:
+        if want in ARRAYS and (got == _T.NOT_SET or (got in ARRAYS and len(param.value) == 0)):
             return Parameter(param.name, want, [])
         if want == _T.DOUBLE_ARRAY and got == _T.INTEGER_ARRAY:
             return Parameter(param.name, want, [float(v) for v in param.value])

@@ -33,7 +33,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.shaping import Shaper, ShaperError
-from shaper_nodes.core.shaping.policy import PolicyError, check_representable
+from shaper_nodes.core.shaping.policy import PolicyError, check_design
 
 from .conversions import shaper_from_msg
 from .diagnostics import WARN, Diagnostics
@@ -113,7 +113,7 @@ class PoseShaperClient:
             msg.amplitudes, msg.times = [], []
         try:
             shaper = shaper_from_msg(msg, self._max_gain())
-            check_representable(shaper, self._rate)
+            check_design(shaper, self._rate)  # the check every path that sets a shaper makes
         except (ShaperError, PolicyError, ValueError) as err:
             return PoseAnswer(None, f"the shaper of {self.srv_name} ({resp.shaper.family}) is refused here: {err}")
         except Exception as err:  # a design that fails otherwise: the goal falls back, the node runs on

@@ -410,8 +410,9 @@ def identify(conductor: Any, identifier_cli: Any, cycles: int) -> tuple[Any, str
         conductor.spin_until(lambda: time.monotonic() > pause, 5.0, "the identifier's buffer")  # noqa: B023
     if not resp.success:
         raise RuntimeError(f"identification failed: {resp.message}")
-    modes = ", ".join(f"{m.natural_frequency / (2 * math.pi):.3f} Hz zeta {m.damping_ratio:.3f}"
-                      for m in resp.estimate.modes)
+    from shaper_nodes.ros.conversions import estimate_modes
+
+    modes = ", ".join(f"{hz:.3f} Hz zeta {zeta:.3f}" for hz, zeta in estimate_modes(resp.estimate))
     return resp.recommended, f"{resp.recommended.family} for {modes}"
 
 
@@ -448,14 +449,13 @@ def fallback_request(calibration: pathlib.Path) -> Any:
     """The SetShaper request for the calibration's fallback shaper (shaper.yaml)."""
     import yaml
 
-    from shaper_msgs.msg import Mode as ModeMsg
     from shaper_msgs.msg import Shaper as ShaperMsg
     from shaper_msgs.srv import SetShaper
+    from shaper_nodes.ros.conversions import mode_msg
 
     (body,) = yaml.safe_load((calibration / "shaper.yaml").read_text()).values()
     sh = body["ros__parameters"]["shaper"]
-    modes = [ModeMsg(natural_frequency=2 * math.pi * float(f), damping_ratio=float(z))
-             for f, z in zip(sh["frequencies_hz"], sh["damping_ratios"], strict=True)]
+    modes = [mode_msg(float(f), float(z)) for f, z in zip(sh["frequencies_hz"], sh["damping_ratios"], strict=True)]
     return SetShaper.Request(shaper=ShaperMsg(family=str(sh["family"]), design_modes=modes, source="user"))
 
 
@@ -509,8 +509,10 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
         resp = conductor.call(conductor.set_shaper_cli, req)
         if not resp.success:
             raise RuntimeError(f"the shaper refused the calibrated fallback: {resp.message}")
+        from shaper_nodes.ros.conversions import msg_hz
+
         return (f"calibrated fallback: {req.shaper.family} on the home pose's modes "
-                + ", ".join(f"{m.natural_frequency / (2 * math.pi):.3f} Hz" for m in req.shaper.design_modes))
+                + ", ".join(f"{msg_hz(m):.3f} Hz" for m in req.shaper.design_modes))
     if case in SCHEDULED:
         _schedule(session, client)
         if case == "scheduled":

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import pathlib
 import time
 from collections.abc import Callable, Iterator
@@ -26,11 +27,10 @@ from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent
-from shaper_msgs.msg import Mode as ModeMsg
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
 from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
-from shaper_nodes.ros.conversions import time_to_sec
+from shaper_nodes.ros.conversions import mode_msg, time_to_sec
 
 from ..models.plants import mck_from_mode
 from ..node.parameters import WAITING
@@ -126,7 +126,7 @@ class Conductor(Node):
         req = SetShaper.Request()
         req.shaper = ShaperMsg(family=family, source=source, **extra)
         if family not in ("none", "custom"):
-            req.shaper.design_modes = [ModeMsg(natural_frequency=float(omega), damping_ratio=float(zeta))]
+            req.shaper.design_modes = [mode_msg(float(omega) / (2.0 * math.pi), float(zeta))]  # omega in rad/s
         resp = self.call(self.set_shaper_cli, req)
         if not resp.success:
             raise RuntimeError(f"shaper refused {family}: {resp.message}")

@@ -6,8 +6,11 @@ parameters, else the request's ``source``: ``user``, ``identification``, ``learn
 
 - **who**: only sources in ``allowed_sources`` may change the shaper; the last accepted change
   wins;
-- **what**: a shaper shorter than one command period (other than the identity) is refused, as
-  the FIR could not represent it (:func:`check_representable`);
+- **what**: one check for every path that sets the shaper (parameters, ``~/set_shaper``, the
+  scheduler, the learner, identification): :func:`check_design` refuses a design mode outside
+  :data:`FREQUENCY_RANGE_HZ` or not below ``command_rate`` / :data:`RATE_FACTOR`, an ``si``
+  insensitivity below :data:`MIN_INSENSITIVITY`, and a shaper shorter than one command period
+  (other than the identity: the FIR could not represent it, :func:`check_representable`);
 - **how**: a change from a source in ``retime_sources`` re-times the motion already commanded
   (the impulses still pending follow the new shaper: the mode moved, e.g. the scheduler's
   pose-dependent shaper), any other change switches bumplessly (the motion already commanded
@@ -28,7 +31,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from .fir import MAX_STAGES
-from .types import Shaper
+from .types import MAX_INSENSITIVITY, Mode, Shaper, ShaperError
 
 #: the source of a request that names none
 DEFAULT_SOURCE = "service"
@@ -36,6 +39,14 @@ DEFAULT_SOURCE = "service"
 PARAMETERS_SOURCE = "parameters"
 
 How = Literal["switch", "retime"]
+
+#: Hz, the natural frequencies a designed shaper's modes may have (the shaper.frequency_hz range)
+FREQUENCY_RANGE_HZ = (0.01, 1000.0)
+#: a designed shaper's modes lie below command_rate / RATE_FACTOR: above it a mode's half period
+#: spans fewer than two command periods and the discretised FIR no longer cancels it
+RATE_FACTOR = 4.0
+#: the least si insensitivity (band width / design frequency) a shaper may have (the parameter's)
+MIN_INSENSITIVITY = 0.01
 
 
 class PolicyError(ValueError):
@@ -49,6 +60,43 @@ def check_representable(shaper: Shaper, rate: float) -> None:
     if shaper.family != "none" and shaper.duration > 0 and shaper.duration * rate < 1.0:
         raise PolicyError(f"shaper duration {shaper.duration * 1e3:.3g} ms is shorter than one"
                           f" command period ({1e3 / rate:.3g} ms)")
+
+
+def check_modes(family: str, modes: Iterable[Mode], rate: float, name: str = "design mode") -> None:
+    """Raise :class:`~.types.ShaperError` if a design mode of a ``family`` shaper (other than
+    ``none`` and ``custom``, whose modes are labels) is outside :data:`FREQUENCY_RANGE_HZ` or not
+    below ``rate`` / :data:`RATE_FACTOR` (``rate``: the command rate, Hz). ``name`` names the
+    modes in the message (a parameter's name)."""
+    if family in ("none", "custom"):
+        return
+    lo, hi = FREQUENCY_RANGE_HZ
+    for m in modes:
+        if not lo <= m.hz <= hi:
+            raise ShaperError(f"{name} {m.hz:.6g} Hz is outside [{lo:g}, {hi:g}] Hz")
+        if m.hz >= rate / RATE_FACTOR:
+            raise ShaperError(f"{name} {m.hz:.6g} Hz is too high for command_rate {rate:g} Hz"
+                              f" (must be below rate / {RATE_FACTOR:g} = {rate / RATE_FACTOR:g} Hz)")
+
+
+def check_design(shaper: Shaper, rate: float, name: str = "design mode") -> None:
+    """The one check of a shaper about to become active or to shape a goal, whatever path it came
+    by (parameters, ``~/set_shaper``, scheduler, learner, identification): its modes
+    (:func:`check_modes`), its ``si`` insensitivity (at least :data:`MIN_INSENSITIVITY`) and its
+    duration (:func:`check_representable`, first). ``rate``: the command rate, Hz.
+
+    Raises
+    ------
+    ShaperError
+        A mode or the insensitivity is out of range (the message names it).
+    PolicyError
+        The shaper is shorter than one command period.
+    """
+    check_representable(shaper, rate)
+    check_modes(shaper.family, shaper.modes, rate, name)
+    insensitivity = shaper.params.get("insensitivity")
+    if insensitivity is not None and not MIN_INSENSITIVITY <= float(insensitivity) <= MAX_INSENSITIVITY:
+        raise ShaperError(f"insensitivity {float(insensitivity):g} is outside [{MIN_INSENSITIVITY:g},"
+                          f" {MAX_INSENSITIVITY:g}]")
 
 
 @dataclass(frozen=True)
@@ -118,9 +166,11 @@ class UpdatePolicy:
         PolicyError
             The source may not change the shaper, the shaper is shorter than one command period,
             or a switch would exceed the stage limit.
+        ShaperError
+            A design mode or parameter is out of range (:func:`check_design`).
         """
         self.allow(source)
-        check_representable(shaper, rate)
+        check_design(shaper, rate)
         how = self.how(source)
         if how == "switch":
             self.settled(stages)
