@@ -46,6 +46,8 @@ from .model import MrilcError
 STATE_VERSION = 1
 #: rounds of the projection's active-set loop per joint
 PROJECTION_ROUNDS = 8
+#: what a limit may be exceeded by, relative to it (rounding: a row the projection meets with equality)
+TOLERANCE = 1e-12
 #: cycles the history keeps (the newest)
 HISTORY = 200
 #: what an update may do
@@ -175,7 +177,8 @@ def project(coefficients: Array, profile: Profile, limits: JointLimits, feasible
     sweeps of Hildreth's method over the violated samples (limits tightened by ``margin``, relative), then
     the least change that meets the rows still violated (at most :data:`PROJECTION_ROUNDS` times); if a
     violation remains, the step from ``feasible`` (coefficients known to hold the limits, default
-    zero) is shortened until none does, so the result always holds them (:func:`excess` is 0). Where the
+    zero) is shortened until none does, so the result holds them (:func:`excess` at most :data:`TOLERANCE`
+    relative, rounding). Where the
     uncorrected profile is past a limit, the correction may not take it further.
     """
     c = np.array(coefficients, dtype=float)
@@ -193,7 +196,7 @@ def project(coefficients: Array, profile: Profile, limits: JointLimits, feasible
         slacks.append(slack[used])
         scales.append(scale[used])
     rows, slack, scale = np.vstack(blocks), np.concatenate(slacks), np.concatenate(scales)
-    bound = slack - margin * scale  # rows x <= bound
+    bound = np.where(slack > margin * scale, slack - margin * scale, slack)  # rows x <= bound
     target = c.T.ravel()
     if metric is None:
         x = _hildreth(rows, bound, target)
@@ -210,8 +213,8 @@ def project(coefficients: Array, profile: Profile, limits: JointLimits, feasible
     start = base.T.ravel()
     step = x - start
     grow = rows @ step
-    room = slack - rows @ start  # >= 0: the start holds the limits
-    pos = grow > 0
+    room = np.maximum(slack - rows @ start, 0.0)  # the start holds the limits (to TOLERANCE)
+    pos = grow > TOLERANCE * scale
     alpha = float(np.min(np.append(room[pos] / grow[pos], 1.0))) if pos.any() else 1.0
     return np.asarray((start + max(0.0, min(1.0, alpha)) * step).reshape(joints, basis).T)
 
