@@ -199,11 +199,11 @@ def project(coefficients: Array, profile: Profile, limits: JointLimits, feasible
     bound = np.where(slack > margin * scale, slack - margin * scale, slack)  # rows x <= bound
     target = c.T.ravel()
     if metric is None:
-        x = _hildreth(rows, bound, target)
+        x = np.asarray(_hildreth(rows, bound, target), dtype=float)
     else:
         r = np.linalg.cholesky(np.asarray(metric, dtype=float)).T  # metric = r^T r; z = r x
         rows_z = np.linalg.solve(r.T, rows.T).T                  # rows r^-1
-        x = np.linalg.solve(r, _hildreth(rows_z, bound, r @ target))
+        x = np.asarray(np.linalg.solve(r, _hildreth(rows_z, bound, r @ target)), dtype=float)
     for _ in range(PROJECTION_ROUNDS):  # what Hildreth left violated: the least change that meets those rows
         over = rows @ x - bound
         bad = over > 0
