@@ -12,6 +12,10 @@ session
     :class:`MrilcSession`: whole cycles on the sample grid from the streams (joint states, the
     applied reference, cycle events), handed to the learner; memory bounded (the cycle duration
     limit, a margin between cycles), implausible samples refused.
+moves
+    MRILC per move: :class:`~.moves.MoveLearner`, a lifted (matrix) ILC of a move's joint profile
+    correction on B-splines, kept inside :class:`~.moves.JointLimits`, with a divergence guard and a
+    versioned state per move (:func:`~.moves.moves_to_dict`, :func:`~.moves.moves_from_dict`).
 params
     The learner node's parameters (:data:`DEFAULTS`, :data:`RANGES`, :data:`DESCRIPTIONS`) and
     the model and settings they build (:func:`model_from_params`, :class:`MrilcSettings`), and the check of one value

@@ -1,0 +1,468 @@
+"""MRILC per move: a feedforward correction of each joint's commanded profile, learned cycle by cycle, free of ROS.
+
+Seed 000's structure on a multi-joint robot whose controller takes position setpoints: for one
+move, the commanded joint profile q_c(t) (the shaped planned trajectory) gets a correction
+
+    dq_j(t) = sum_i c_ij b_i(t),    dq_j'(t), dq_j''(t) from the same sum,
+
+over cubic B-splines b_i on uniform knots that lie inside the shaped motion [0, T] (so the
+correction and its first two derivatives are zero at the move's start and end: the goal pose
+and the move's timing do not change). The measured output y is the tool's response (e.g. a
+flange accelerometer, stacked samples x axes) and the reference y_m the response of the
+reference model (e.g. the rigid arm following q_c). The learning operator is lifted (a matrix):
+G maps the coefficients c (basis functions x joints, flattened joint-major) to y, given by the
+caller (e.g. the arm linearised at the move's end pose), and every cycle
+
+    c_{j+1} = P( c_j + gamma L e_j ),   e_j = y_m - y_j,   L = (G^T W G + rho I)^-1 G^T W,
+
+P the projection (in the norm of G^T W G + rho I, :func:`project`) onto the corrections that keep
+the corrected profile inside the joint limits
+(:class:`JointLimits`: position range, velocity and acceleration bounds; checked on the
+profile's sample times). The work per cycle is bounded: one product with the precomputed L and
+a projection of at most :data:`PROJECTION_ROUNDS` x 8 sweeps of Hildreth's method over the violated samples.
+
+Divergence guard: the learner keeps the coefficients that gave the smallest cost
+(the weighted RMS(e)); when the cost exceeds ``growth`` times the best (and the noise floor) for ``patience``
+cycles in a row, it falls back to the best coefficients and halves gamma; after
+``max_fallbacks`` fallbacks it holds the best. The state round-trips through
+:meth:`MoveLearner.to_dict` / :meth:`MoveLearner.from_dict` (JSON-compatible, with
+:data:`STATE_VERSION`), checked entry by entry before any of it is used; :func:`moves_to_dict`
+and :func:`moves_from_dict` do the same for one learner per move.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .model import MrilcError
+
+#: version of :meth:`MoveLearner.to_dict`'s document
+STATE_VERSION = 1
+#: rounds of the projection's active-set loop per joint
+PROJECTION_ROUNDS = 8
+#: what a limit may be exceeded by, relative to it (rounding: a row the projection meets with equality)
+TOLERANCE = 1e-12
+#: cycles the history keeps (the newest)
+HISTORY = 200
+#: what an update may do
+ACTIONS = ("learn", "fallback", "hold")
+_KEYS = {"version", "basis", "joints", "outputs", "gain", "cycle", "coefficients", "best_cost", "best_coefficients",
+         "grew", "fallbacks", "holding", "history"}
+
+Array = npt.NDArray[np.float64]
+
+
+def spline_basis(times: npt.ArrayLike, spacing: float, count: int) -> tuple[Array, Array, Array]:
+    """Cubic B-splines ``b_i`` (i < ``count``) on knots ``i * spacing``, at ``times`` (s), and their derivatives.
+
+    b_i has support [i spacing, (i + 4) spacing]; outside it b_i, b_i', b_i'' are zero, so a sum of
+    them and its first two derivatives vanish at 0 and after (count + 3) spacing.
+
+    Returns
+    -------
+    (b, b', b'') : three (len(times), count) arrays: 1, 1/s, 1/s^2.
+    """
+    if not (math.isfinite(spacing) and spacing > 0):
+        raise MrilcError(f"the knot spacing must be finite and > 0 s, got {spacing!r}")
+    if count < 1:
+        raise MrilcError(f"the basis needs at least one function, got {count}")
+    t = np.asarray(times, dtype=float)[:, None] / spacing - np.arange(count)[None, :]  # in knot units
+    out = [np.zeros_like(t) for _ in range(3)]
+    for k in range(4):  # the uniform cubic B-spline on [0, 4], piece by piece (u in [0, 1) within piece k)
+        sel = (t >= k) & (t < k + 1)
+        u = t[sel] - k
+        out[0][sel], d1, d2 = _piece(k, u)
+        out[1][sel], out[2][sel] = d1 / spacing, d2 / spacing**2
+    return out[0], out[1], out[2]
+
+
+def _piece(k: int, u: Array) -> tuple[Array, Array, Array]:
+    """Piece ``k`` of the uniform cubic B-spline: value and first two derivatives, in knot units."""
+    if k == 0:
+        return u**3 / 6, u**2 / 2, u
+    if k == 1:
+        return (-3 * u**3 + 3 * u**2 + 3 * u + 1) / 6, (-9 * u**2 + 6 * u + 3) / 6, -3 * u + 1
+    if k == 2:
+        return (3 * u**3 - 6 * u**2 + 4) / 6, (9 * u**2 - 12 * u) / 6, 3 * u - 2
+    return (1 - u) ** 3 / 6, -((1 - u) ** 2) / 2, 1 - u
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Joint limits the corrected profile must hold: position range, rad; |velocity| rad/s; |acceleration| rad/s^2."""
+
+    position_min: Array
+    position_max: Array
+    velocity: Array
+    acceleration: Array
+
+    def __post_init__(self) -> None:
+        n = np.asarray(self.velocity).size
+        for name in ("position_min", "position_max", "velocity", "acceleration"):
+            a = np.asarray(getattr(self, name), dtype=float)
+            if a.shape != (n,) or not np.all(np.isfinite(a)):
+                raise MrilcError(f"joint limits: {name} must be {n} finite numbers, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, a)
+        if np.any(self.velocity <= 0) or np.any(self.acceleration <= 0) or np.any(self.position_max
+                                                                                  <= self.position_min):
+            raise MrilcError("joint limits: velocity and acceleration must be > 0 and position_max > position_min")
+
+    def violation(self, q: Array, v: Array, a: Array) -> float:
+        """The largest excess of a (samples, joints) profile over the limits (0: all held), in its own unit."""
+        return float(max(np.max(self.position_min - q, initial=0.0), np.max(q - self.position_max, initial=0.0),
+                         np.max(np.abs(v) - self.velocity, initial=0.0),
+                         np.max(np.abs(a) - self.acceleration, initial=0.0)))
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A move's commanded profile at its sample times (each (samples, joints)) and the basis there."""
+
+    positions: Array
+    velocities: Array
+    accelerations: Array
+    basis: tuple[Array, Array, Array]
+
+    def correction(self, coefficients: Array) -> tuple[Array, Array, Array]:
+        """dq, dq', dq'' (samples, joints) of ``coefficients`` (basis, joints)."""
+        return tuple(b @ coefficients for b in self.basis)  # type: ignore[return-value]
+
+    def corrected(self, coefficients: Array) -> tuple[Array, Array, Array]:
+        dq, dv, da = self.correction(coefficients)
+        return self.positions + dq, self.velocities + dv, self.accelerations + da
+
+
+def _rows(profile: Profile, limits: JointLimits, joint: int) -> tuple[Array, Array, Array]:
+    """Joint ``joint``'s limits as rows ``a c <= slack`` on its coefficients c, the slack held at >= 0 (where the
+    uncorrected profile is already past a limit, the correction may not take it further), and each row's scale."""
+    b0, b1, b2 = profile.basis
+    a = np.vstack([b0, -b0, b1, -b1, b2, -b2])
+    j = joint
+    lo, hi = limits.position_min[j], limits.position_max[j]
+    vm, am = limits.velocity[j], limits.acceleration[j]
+    slack = np.concatenate([hi - profile.positions[:, j], profile.positions[:, j] - lo,
+                            vm - profile.velocities[:, j], vm + profile.velocities[:, j],
+                            am - profile.accelerations[:, j], am + profile.accelerations[:, j]])
+    n = b0.shape[0]
+    scale = np.concatenate([np.full(2 * n, max(abs(hi), abs(lo), 1.0)), np.full(2 * n, vm), np.full(2 * n, am)])
+    return a, np.maximum(slack, 0.0), scale
+
+
+def excess(coefficients: Array, profile: Profile, limits: JointLimits) -> float:
+    """The largest amount by which the correction of ``coefficients`` takes the profile past a limit (0: none).
+
+    A sample where the uncorrected profile is already past a limit counts only by what the correction
+    adds there. Units of the limit broken (rad, rad/s or rad/s^2).
+    """
+    worst = 0.0
+    for j in range(coefficients.shape[1]):
+        a, slack, _ = _rows(profile, limits, j)
+        worst = max(worst, float(np.max(a @ coefficients[:, j] - slack)))
+    return worst
+
+
+def project(coefficients: Array, profile: Profile, limits: JointLimits, feasible: Array | None = None,
+            metric: Array | None = None, margin: float = 1e-5) -> Array:
+    """The coefficients nearest ``coefficients`` whose correction keeps the profile inside ``limits``.
+
+    Nearest in the norm of ``metric`` (symmetric positive definite over the coefficients flattened
+    joint-major, e.g. the learner's G^T W G + rho I, so that the limits cost as little of the step's
+    effect on the output as they can; default the Euclidean norm): at most :data:`PROJECTION_ROUNDS` x 8
+    sweeps of Hildreth's method over the violated samples (limits tightened by ``margin``, relative), then
+    the least change that meets the rows still violated (at most :data:`PROJECTION_ROUNDS` times); if a
+    violation remains, the step from ``feasible`` (coefficients known to hold the limits, default
+    zero) is shortened until none does, so the result holds them (:func:`excess` at most :data:`TOLERANCE`
+    relative, rounding). Where the
+    uncorrected profile is past a limit, the correction may not take it further.
+    """
+    c = np.array(coefficients, dtype=float)
+    basis, joints = c.shape
+    base = np.zeros_like(c) if feasible is None else np.asarray(feasible, dtype=float)
+    if excess(base, profile, limits) > 1e-9:
+        raise MrilcError(f"the feasible coefficients break the joint limits by {excess(base, profile, limits):.3g}")
+    blocks, slacks, scales = [], [], []
+    for j in range(joints):
+        a, slack, scale = _rows(profile, limits, j)
+        used = np.any(a != 0, axis=1)  # samples the basis reaches
+        full = np.zeros((int(used.sum()), basis * joints))
+        full[:, j * basis:(j + 1) * basis] = a[used]
+        blocks.append(full)
+        slacks.append(slack[used])
+        scales.append(scale[used])
+    rows, slack, scale = np.vstack(blocks), np.concatenate(slacks), np.concatenate(scales)
+    bound = np.where(slack > margin * scale, slack - margin * scale, slack)  # rows x <= bound
+    target = c.T.ravel()
+    if metric is None:
+        x = np.asarray(_hildreth(rows, bound, target), dtype=float)
+    else:
+        r = np.linalg.cholesky(np.asarray(metric, dtype=float)).T  # metric = r^T r; z = r x
+        rows_z = np.linalg.solve(r.T, rows.T).T                  # rows r^-1
+        x = np.asarray(np.linalg.solve(r, _hildreth(rows_z, bound, r @ target)), dtype=float)
+    for _ in range(PROJECTION_ROUNDS):  # what Hildreth left violated: the least change that meets those rows
+        over = rows @ x - bound
+        bad = over > 0
+        if not bad.any():
+            break
+        x = x - np.linalg.lstsq(rows[bad], over[bad], rcond=None)[0]
+    start = base.T.ravel()
+    step = x - start
+    grow = rows @ step
+    room = np.maximum(slack - rows @ start, 0.0)  # the start holds the limits (to TOLERANCE)
+    pos = grow > TOLERANCE * scale
+    alpha = float(np.min(np.append(room[pos] / grow[pos], 1.0))) if pos.any() else 1.0
+    return np.asarray((start + max(0.0, min(1.0, alpha)) * step).reshape(joints, basis).T)
+
+
+def _hildreth(a: Array, bound: Array, target: Array) -> Array:
+    """The point nearest ``target`` with ``a x <= bound`` by Hildreth's dual coordinate ascent over the rows
+    that ``target`` or an iterate violates, at most :data:`PROJECTION_ROUNDS` x 8 sweeps (near the nearest point
+    when it stops early; :func:`project` makes the result feasible)."""
+    x = target.copy()
+    active = np.flatnonzero(a @ x > bound)
+    if active.size == 0:
+        return x
+    lam: dict[int, float] = {}
+    norms = np.einsum("ij,ij->i", a, a)
+    for _ in range(PROJECTION_ROUNDS * 8):
+        moved = 0.0
+        for i in active:
+            if norms[i] <= 0:
+                continue
+            old = lam.get(int(i), 0.0)
+            new = max(0.0, old + (float(a[i] @ x) - bound[i]) / norms[i])
+            if new != old:
+                x -= (new - old) * a[i]
+                lam[int(i)] = new
+                moved = max(moved, abs(new - old) * math.sqrt(norms[i]))
+        more = np.flatnonzero(a @ x > bound)
+        grown = np.union1d(active, more)
+        if moved <= 1e-12 * (1.0 + float(np.max(np.abs(x)))) and grown.size == active.size:
+            break
+        active = grown
+    return x
+
+
+@dataclass(frozen=True)
+class MoveUpdate:
+    """One cycle of one move: the cost measured, what was done, the coefficients for the next cycle."""
+
+    cycle: int       # 1-based: the cycle that ran with the coefficients of this cycle
+    cost: float      # RMS(e) over the move's samples, the output's unit
+    action: str      # "learn", "fallback" or "hold"
+    gain: float      # gamma after this update
+    coefficients: Array
+
+
+class MoveLearner:
+    """The lifted ILC of one move (module docstring).
+
+    Parameters
+    ----------
+    operator : (outputs, basis * joints) array
+        G: the output's response to each coefficient (coefficient index = joint * basis + i).
+    profile : Profile
+        The move's commanded profile and the basis at its sample times.
+    limits : JointLimits
+        The limits the corrected profile must hold.
+    gain : float
+        gamma in (0, 1].
+    regularisation : float
+        rho relative to the mean of diag(G^T G) (> 0: bounds the step where G is nearly singular).
+    weights : (outputs,) array, optional
+        W >= 0 per output sample: L = (G^T W G + rho I)^-1 G^T W and the cost is the weighted RMS(e)
+        (default 1).
+    patience, growth, noise_floor, max_fallbacks
+        The divergence guard: cost > growth x best and > noise_floor (output unit) for ``patience``
+        cycles in a row -> fall back to the best coefficients, halve gamma; after ``max_fallbacks``
+        falls back: hold.
+    """
+
+    def __init__(self, operator: npt.ArrayLike, profile: Profile, limits: JointLimits, gain: float = 0.5,
+                 regularisation: float = 1e-3, patience: int = 2, growth: float = 1.2, noise_floor: float = 0.0,
+                 max_fallbacks: int = 3, weights: npt.ArrayLike | None = None) -> None:
+        g = np.asarray(operator, dtype=float)
+        basis, joints = profile.basis[0].shape[1], profile.positions.shape[1]
+        if g.ndim != 2 or g.shape[1] != basis * joints or not np.all(np.isfinite(g)):
+            raise MrilcError(f"the operator must be finite, outputs x {basis * joints} (basis x joints),"
+                             f" got shape {g.shape}")
+        if not (0 < gain <= 1) or not regularisation > 0 or patience < 1 or not growth > 1 or noise_floor < 0:
+            raise MrilcError("gain must be in (0, 1], regularisation > 0, patience >= 1, growth > 1,"
+                             " noise_floor >= 0")
+        w = np.ones(g.shape[0]) if weights is None else np.asarray(weights, dtype=float).ravel()
+        if w.shape != (g.shape[0],) or not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+            raise MrilcError(f"weights must be {g.shape[0]} finite numbers >= 0, not all zero")
+        self.weights = w
+        self.operator, self.profile, self.limits = g, profile, limits
+        self.basis, self.joints, self.outputs = basis, joints, g.shape[0]
+        self.patience, self.growth, self.noise_floor, self.max_fallbacks = patience, growth, noise_floor, max_fallbacks
+        gw = g.T * w
+        gtg = gw @ g
+        rho = regularisation * max(float(np.mean(np.diag(gtg))), 1e-300)
+        self._metric = gtg + rho * np.eye(gtg.shape[0])
+        self._law = np.linalg.solve(self._metric, gw)
+        self.gain = float(gain)
+        self.cycle = 1
+        self.coefficients = np.zeros((basis, joints))
+        self.best: tuple[float, Array] | None = None
+        self.grew = 0
+        self.fallbacks = 0
+        self.holding = False
+        self.history: list[tuple[int, float, str]] = []
+
+    def correction(self) -> tuple[Array, Array, Array]:
+        """The next cycle's dq, dq', dq'' at the profile's samples, (samples, joints) each."""
+        return self.profile.correction(self.coefficients)
+
+    def update(self, error: npt.ArrayLike) -> MoveUpdate:
+        """One cycle: ``error`` = y_m - y (outputs,) measured with the present coefficients."""
+        e = np.asarray(error, dtype=float).ravel()
+        if e.size != self.outputs or not np.all(np.isfinite(e)):
+            raise MrilcError(f"the error must be {self.outputs} finite samples, got {e.size}"
+                             + ("" if e.size != self.outputs else " with a non-finite value"))
+        cost = float(np.sqrt(np.sum(self.weights * e**2) / np.sum(self.weights)))
+        if self.best is None or cost < self.best[0]:
+            self.best = (cost, self.coefficients.copy())
+            self.grew = 0
+        elif cost > self.growth * self.best[0] and cost > self.noise_floor:
+            self.grew += 1
+        else:
+            self.grew = 0
+        if self.holding:
+            action, nxt = "hold", self.best[1].copy()
+        elif self.grew >= self.patience:
+            self.fallbacks += 1
+            self.gain *= 0.5
+            self.grew = 0
+            self.holding = self.fallbacks >= self.max_fallbacks
+            action, nxt = ("hold" if self.holding else "fallback"), self.best[1].copy()
+        else:
+            step = (self._law @ e).reshape(self.joints, self.basis).T
+            nxt = project(self.coefficients + self.gain * step, self.profile, self.limits, self.coefficients,
+                          self._metric)
+            action = "learn"
+        self.history.append((self.cycle, cost, action))
+        del self.history[:-HISTORY]
+        self.coefficients = nxt
+        self.cycle += 1
+        return MoveUpdate(self.cycle - 1, cost, action, self.gain, nxt.copy())
+
+    # ------------------------------------------------------------------ persistence
+    def to_dict(self) -> dict[str, Any]:
+        """The state as a JSON-compatible dictionary (the operator and profile are the caller's: not saved)."""
+        return {"version": STATE_VERSION, "basis": self.basis, "joints": self.joints, "outputs": self.outputs,
+                "gain": self.gain, "cycle": self.cycle, "coefficients": self.coefficients.tolist(),
+                "best_cost": None if self.best is None else self.best[0],
+                "best_coefficients": None if self.best is None else self.best[1].tolist(),
+                "grew": self.grew, "fallbacks": self.fallbacks, "holding": self.holding,
+                "history": [list(h) for h in self.history]}
+
+    @classmethod
+    def from_dict(cls, doc: Any, operator: npt.ArrayLike, profile: Profile, limits: JointLimits,
+                  **settings: Any) -> MoveLearner:
+        """Restore :meth:`to_dict`'s state for this operator and profile, every entry checked before use.
+
+        Raises MrilcError ``inconsistent per-move MRILC state: ...`` naming the entry (missing or unknown
+        entries, another version, sizes that do not match the operator, a wrong type, a non-finite value,
+        coefficients outside the limits).
+        """
+        try:
+            return cls._from_dict(doc, operator, profile, limits, settings)
+        except MrilcError as err:
+            raise MrilcError(f"inconsistent per-move MRILC state: {err}") from None
+
+    @classmethod
+    def _from_dict(cls, doc: Any, operator: npt.ArrayLike, profile: Profile, limits: JointLimits,
+                   settings: dict[str, Any]) -> MoveLearner:
+        if not isinstance(doc, dict):
+            raise MrilcError(f"the state must be a dictionary, got {type(doc).__name__}")
+        missing, unknown = _KEYS - set(doc), set(doc) - _KEYS
+        if missing or unknown:
+            raise MrilcError(f"entries missing {sorted(missing)}, unknown {sorted(unknown)}")
+        if doc["version"] != STATE_VERSION:
+            raise MrilcError(f"version {doc['version']!r}, this learner reads {STATE_VERSION}")
+        gain = _number("gain", doc["gain"])
+        if not 0 < gain <= 1:
+            raise MrilcError(f"gain must be in (0, 1], got {gain}")
+        learner = cls(operator, profile, limits, **{**settings, "gain": gain})
+        for key, have in (("basis", learner.basis), ("joints", learner.joints), ("outputs", learner.outputs)):
+            if _integer(key, doc[key], 1) != have:
+                raise MrilcError(f"{key} is {doc[key]}, the move's operator has {have}")
+        learner.cycle = _integer("cycle", doc["cycle"], 1)
+        learner.grew = _integer("grew", doc["grew"], 0)
+        learner.fallbacks = _integer("fallbacks", doc["fallbacks"], 0)
+        if not isinstance(doc["holding"], bool):
+            raise MrilcError(f"holding must be true or false, got {doc['holding']!r}")
+        learner.holding = doc["holding"]
+        shape = (learner.basis, learner.joints)
+        learner.coefficients = _coefficients("coefficients", doc["coefficients"], shape, profile, limits)
+        if (doc["best_cost"] is None) != (doc["best_coefficients"] is None) or (doc["best_cost"] is None) != (
+                learner.cycle == 1):
+            raise MrilcError("best_cost and best_coefficients must be given exactly when a cycle has been learned")
+        if doc["best_cost"] is not None:
+            cost = _number("best_cost", doc["best_cost"])
+            if cost < 0:
+                raise MrilcError(f"best_cost must be >= 0, got {cost}")
+            learner.best = (cost, _coefficients("best_coefficients", doc["best_coefficients"], shape, profile, limits))
+        hist = doc["history"]
+        if not isinstance(hist, list) or not all(
+                isinstance(h, list) and len(h) == 3 and isinstance(h[0], int) and h[2] in ACTIONS for h in hist):
+            raise MrilcError("history must be a list of [cycle, cost, action]")
+        learner.history = [(int(h[0]), _number(f"history cost of cycle {h[0]}", h[1]), str(h[2])) for h in hist]
+        if hist and [h[0] for h in hist] != list(range(learner.cycle - len(hist), learner.cycle)):
+            raise MrilcError(f"history cycles must run consecutively up to {learner.cycle - 1}")
+        return learner
+
+
+def moves_to_dict(learners: Mapping[str, MoveLearner]) -> dict[str, Any]:
+    """One document for a learner per move (``version`` and ``moves``: name -> :meth:`MoveLearner.to_dict`)."""
+    return {"version": STATE_VERSION, "moves": {name: lr.to_dict() for name, lr in learners.items()}}
+
+
+def moves_from_dict(doc: Any, make: Callable[[str, Any | None], MoveLearner]) -> dict[str, MoveLearner]:
+    """The learners of :func:`moves_to_dict`'s document; ``make(name, state)`` builds one (state None: new).
+
+    Raises MrilcError naming the entry or the move whose state is inconsistent.
+    """
+    if not isinstance(doc, dict) or set(doc) != {"version", "moves"} or not isinstance(doc["moves"], dict):
+        raise MrilcError("inconsistent per-move MRILC state: a dictionary with version and moves expected")
+    if doc["version"] != STATE_VERSION:
+        raise MrilcError(f"inconsistent per-move MRILC state: version {doc['version']!r}, this reads {STATE_VERSION}")
+    out = {}
+    for name, state in doc["moves"].items():
+        try:
+            out[name] = make(name, state)
+        except MrilcError as err:
+            raise MrilcError(f"move {name!r}: {err}") from None
+    return out
+
+
+def _number(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise MrilcError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _integer(name: str, value: Any, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise MrilcError(f"{name} must be an integer >= {lo}, got {value!r}")
+    return value
+
+
+def _coefficients(name: str, value: Any, shape: tuple[int, int], profile: Profile, limits: JointLimits) -> Array:
+    if (not isinstance(value, list) or len(value) != shape[0]
+            or not all(isinstance(r, list) and len(r) == shape[1] for r in value)):
+        raise MrilcError(f"{name} must be {shape[0]} rows of {shape[1]} numbers")
+    for r in value:
+        for x in r:
+            _number(name, x)
+    c = np.array(value, dtype=float)
+    worst = excess(c, profile, limits)
+    if worst > 1e-9:
+        raise MrilcError(f"{name} take the profile past the joint limits by {worst:.3g}")
+    return c
