@@ -44,6 +44,7 @@ from shaper_nodes.ros.conversions import ns_to_time
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare, param, table
+from shaper_nodes.ros.qos import SERVICE_QOS
 
 LATCHED_TYPES = ("shaper_msgs/msg/Shaper",)
 LATCHED_NAMES = ("/tf_static",)
@@ -155,7 +156,7 @@ class BagPlayNode(Node):
         self.published: dict[str, int] = {t: 0 for t in self._pubs}
         self.finished = threading.Event()
         self._stop = threading.Event()
-        self.create_service(Trigger, "~/stop", self._on_stop)
+        self.create_service(Trigger, "~/stop", self._on_stop, qos_profile=SERVICE_QOS)
         self._thread = threading.Thread(target=self._run, name="bag-play", daemon=True)
         self._thread.start()
         self.get_logger().info(f"playing {sorted(self._pubs)} from {path} at {self.rate:g}x ({self.bag.reader_name})")

@@ -64,7 +64,7 @@ from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
-from shaper_nodes.ros.qos import IMU_QOS, LATCHED
+from shaper_nodes.ros.qos import IMU_QOS, LATCHED, SERVICE_QOS
 from shaper_nodes.ros.shaper_client import ShaperClient
 
 SOURCE = "identification"
@@ -236,7 +236,7 @@ class IdentifierNode(Node):
         self.diagnostics = Diagnostics(self)
         self.shaper = ShaperClient(self, str(p.shaper), SOURCE, lambda: float(self.params.value.service_timeout),
                                    self.diagnostics)
-        self.create_service(Identify, "~/identify", self._on_identify)
+        self.create_service(Identify, "~/identify", self._on_identify, qos_profile=SERVICE_QOS)
         self.watch = DriftWatch(int(p.watch.confirm))
         self._active: ShaperMsg | None = None
         self._warned = False

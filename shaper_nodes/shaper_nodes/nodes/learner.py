@@ -51,6 +51,7 @@ from shaper_msgs.msg import CycleEvent
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR
 from shaper_nodes.ros.node_main import run_node, with_config
+from shaper_nodes.ros.qos import SERVICE_QOS
 
 from .learner_base import MODES, PARAMETERS, SOURCE, STATE_VERSION, LearnerBase, LearnerParams, Mode
 
@@ -74,7 +75,8 @@ class LearnerNode(LearnerBase):
             self.mode = ListMode(self)
         # a coroutine callback: rclpy runs it as a task (its typing knows only plain callbacks)
         self.create_subscription(CycleEvent, self.mode.events_topic, self._on_event, 100)  # type: ignore[arg-type]
-        self.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup(),
+                            qos_profile=SERVICE_QOS)
         # steady clock: with use_sim_time, ROS time stands still while the lockstep plant is idle
         self._startup = self.create_timer(0.2, self._start, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._waiting_logged = False

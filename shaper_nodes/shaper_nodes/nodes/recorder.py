@@ -39,6 +39,7 @@ from shaper_nodes.ros.lockstep_reader import HEADER_FIRST, STREAM_QOS, LockstepR
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare, param, table
+from shaper_nodes.ros.qos import SERVICE_QOS
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,7 @@ class RecorderNode(Node):
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(float(p.discovery_period), self._discover, clock=wall)
         self.create_timer(1.0, self._publish_status, clock=wall)
-        self.create_service(Trigger, "~/stop", self._on_stop)
+        self.create_service(Trigger, "~/stop", self._on_stop, qos_profile=SERVICE_QOS)
         # a lockstep sim plant that names this node in lockstep.readers waits for it: the stamps of the per-step
         # streams it records (IMU, joint states) say what it has taken; gaps in them are losses
         self.lockstep = LockstepReader(self)

@@ -85,7 +85,7 @@ from shaper_nodes.ros.conversions import estimate_msg, shaper_from_msg, shaper_t
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, declare_all, flat, param, read, table
-from shaper_nodes.ros.qos import LATCHED
+from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
@@ -190,9 +190,9 @@ class SchedulerNode(Node):
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
         self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
-        self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
-        self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
-        self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at)
+        self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper, qos_profile=SERVICE_QOS)
+        self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
+        self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at, qos_profile=SERVICE_QOS)
 
         # latest (premise values, node clock time they arrived s, their header stamp), set by the feed's thread
         self._pose: tuple[list[float], float, Any] | None = None

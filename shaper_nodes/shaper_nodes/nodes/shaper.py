@@ -94,7 +94,7 @@ from shaper_nodes.ros.graph_watch import GraphWatch
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
-from shaper_nodes.ros.qos import LATCHED
+from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 from shaper_nodes.ros.side_node import SideNode
 from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
@@ -211,10 +211,10 @@ class ShaperNode(Node):
         }
         self._subs = subs
         self._in_topics = {k: sub.topic_name for k, sub in subs.items()}  # fully qualified, for messages
-        self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper)
-        self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper)
+        self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper, qos_profile=SERVICE_QOS)
+        self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
         side.create_service(ShapeTrajectory, self.resolve_service_name("~/shape_trajectory"),
-                            self._on_shape_trajectory)
+                            self._on_shape_trajectory, qos_profile=SERVICE_QOS)
         self._action: TrajectoryActionProxy | None = None
         self.pose_shaper: PoseShaperClient | None = None
         server_name = str(p.action.server_name)

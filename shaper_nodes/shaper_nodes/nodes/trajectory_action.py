@@ -45,6 +45,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.ros.action_client import ResilientActionClient
+from shaper_nodes.ros.qos import ACTION_QOS
 from shaper_nodes.ros.shaper_client import wait_for
 
 Goal: TypeAlias = FollowJointTrajectory.Goal
@@ -143,7 +144,7 @@ class TrajectoryActionProxy:
         self._server = ActionServer(
             node, FollowJointTrajectory, server_name, execute_callback=self._execute,
             goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
-            cancel_callback=self._on_cancel)
+            cancel_callback=self._on_cancel, **ACTION_QOS)
 
     def destroy(self) -> None:
         self._server.destroy()

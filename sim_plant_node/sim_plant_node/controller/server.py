@@ -26,6 +26,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_nodes.core.stamps import stamp_to_sec
 from shaper_nodes.ros.conversions import sec_to_time
+from shaper_nodes.ros.qos import ACTION_QOS
 
 from .jtc import (
     INVALID_GOAL,
@@ -83,7 +84,7 @@ class ControllerServer:
         self.refused: list[str] = []  # the reasons of refused trajectories, newest last
         self.server = ActionServer(node, FollowJointTrajectory, action, execute_callback=self._execute,
                                    goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
-                                   cancel_callback=self._on_cancel)
+                                   cancel_callback=self._on_cancel, **ACTION_QOS)
         node.create_subscription(JointTrajectory, topic, self._on_topic, 10)
 
     # ------------------------------------------------------------------ validation

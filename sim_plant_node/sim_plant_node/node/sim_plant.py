@@ -60,7 +60,7 @@ from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare, flat
-from shaper_nodes.ros.qos import LATCHED
+from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 
 from ..controller.jtc import JointTrajectoryController
 from ..controller.server import ControllerServer, tolerances_from
@@ -124,12 +124,12 @@ class SimPlantNode(Node):
         # /clock is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
         self._ref_pub = self.create_publisher(JointState, t.reference, deep)
-        self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward)
+        self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward, qos_profile=SERVICE_QOS)
         self._ff = Feedforward()
         self._cmd_sub = self.create_subscription(Float64MultiArray, t.command_in, self._on_command, 10)
         self.create_subscription(ShaperMsg, t.active_shaper, self._on_shaper, LATCHED)
-        self.create_service(Trigger, "~/start_task", self._on_start)
-        self.create_service(Trigger, "~/stop_task", self._on_stop)
+        self.create_service(Trigger, "~/start_task", self._on_start, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, "~/stop_task", self._on_stop, qos_profile=SERVICE_QOS)
         self.add_on_set_parameters_callback(self._validate_params)
 
         self.step_index = 0
