@@ -111,11 +111,28 @@ def accuracy(cal: Any) -> list[dict[str, Any]]:
     return rows
 
 
+def goal_waypoints(move: Any, shaper: Any, rate: float = RATE, dwell: float = DWELL
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The goal the demo sends for ``move`` (its waypoints after the start, then ``dwell`` s holding the
+    goal), shaped by ``shaper`` as the shaper node shapes a whole goal (None: unshaped): times (s from the
+    start), positions, velocities, accelerations ((N, 6) each)."""
+    from shaper_nodes.core.shaping.fir import discretize
+    from shaper_nodes.core.shaping.trajectory import shape_trajectory
+
+    times = np.append(move.times[1:], move.duration + dwell)
+    pos = np.vstack([move.positions[1:], move.positions[-1]])
+    vel = np.vstack([move.velocities[1:], np.zeros(6)])
+    acc = np.vstack([move.accelerations[1:], np.zeros(6)])
+    if shaper is None:
+        return times, pos, vel, acc
+    shaped = shape_trajectory(np.append(0.0, times), np.vstack([move.positions[0], pos]),
+                              discretize(shaper, rate), rate, np.vstack([np.zeros(6), vel]))
+    return shaped.times[1:], shaped.positions[1:], shaped.velocities[1:], shaped.accelerations[1:]
+
+
 def cycle(shaper_for: Any, from_rest: bool = False) -> list[Any]:
     """The demo's cycle with ``shaper_for(goal_pose)`` (None: unshaped) on the offline arm: per move its measures.
     ``from_rest``: every move starts with the arm at rest (no leftover of the move before)."""
-    from shaper_nodes.core.shaping.fir import discretize
-    from shaper_nodes.core.shaping.trajectory import shape_trajectory
     from sim_plant_node.arm.metrics import measure_move, motion_end
     from sim_plant_node.arm.offline import OfflineArm
     from sim_plant_node.arm.task import HOME, cycle_moves
@@ -125,16 +142,7 @@ def cycle(shaper_for: Any, from_rest: bool = False) -> list[Any]:
     for move in cycle_moves():
         if from_rest:
             arm = OfflineArm(move.positions[0], RATE)
-        times = np.append(move.times[1:], move.duration + DWELL)
-        pos = np.vstack([move.positions[1:], move.positions[-1]])
-        vel = np.vstack([move.velocities[1:], np.zeros(6)])
-        acc = np.vstack([move.accelerations[1:], np.zeros(6)])
-        shaper = shaper_for(move.positions[-1])
-        if shaper is not None:
-            shaped = shape_trajectory(np.append(0.0, times), np.vstack([move.positions[0], pos]),
-                                      discretize(shaper, RATE), RATE, np.vstack([np.zeros(6), vel]))
-            times, pos, vel, acc = (shaped.times[1:], shaped.positions[1:], shaped.velocities[1:],
-                                    shaped.accelerations[1:])
+        times, pos, vel, acc = goal_waypoints(move, shaper_for(move.positions[-1]))
         start = arm.run(times, pos, vel, acc)
         end = start + float(times[-1])
         ct, cq = arm.record.window("cmd", start, end)

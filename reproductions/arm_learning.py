@@ -197,21 +197,12 @@ class Cell:
 
     def run(self, move: Any, shaper: Any = None, factor: float = 1.0) -> Run:
         """Run ``move`` (time-scaled by ``factor``, shaped by ``shaper``; None: unshaped), then dwell."""
-        from shaper_nodes.core.shaping.fir import discretize
-        from shaper_nodes.core.shaping.trajectory import shape_trajectory
+        from reproductions.arm_calibration import goal_waypoints
         from sim_plant_node.arm.metrics import inverse_dynamics_peaks, late_residual, measure_move, motion_end
         from sim_plant_node.arm.task import time_scaled
 
         mv = time_scaled(move, factor)
-        times = np.append(mv.times[1:], mv.duration + DWELL)
-        pos = np.vstack([mv.positions[1:], mv.positions[-1]])
-        vel = np.vstack([mv.velocities[1:], np.zeros(6)])
-        acc = np.vstack([mv.accelerations[1:], np.zeros(6)])
-        if shaper is not None:
-            shaped = shape_trajectory(np.append(0.0, times), np.vstack([mv.positions[0], pos]),
-                                      discretize(shaper, RATE), RATE, np.vstack([np.zeros(6), vel]))
-            times, pos, vel, acc = (shaped.times[1:], shaped.positions[1:], shaped.velocities[1:],
-                                    shaped.accelerations[1:])
+        times, pos, vel, acc = goal_waypoints(mv, shaper, RATE, DWELL)
         arm = self.arm
         start = arm.run(times, pos, vel, acc)
         end = start + float(times[-1])

@@ -91,24 +91,14 @@ def limits() -> Any:
 
 def plan_moves(shaper_for: Callable[[np.ndarray], Any], model: Any, moves: int | None = None) -> list[MovePlan]:
     """The cycle's moves shaped by ``shaper_for(goal)``, with their basis, reference and operator."""
+    from reproductions.arm_calibration import goal_waypoints
     from shaper_nodes.core.learning.mrilc.moves import Profile, spline_basis
-    from shaper_nodes.core.shaping.fir import discretize
-    from shaper_nodes.core.shaping.trajectory import shape_trajectory
     from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, motion_end
     from sim_plant_node.arm.task import cycle_moves
 
     out = []
     for move in cycle_moves()[:moves]:
-        times = np.append(move.times[1:], move.duration + DWELL)
-        pos = np.vstack([move.positions[1:], move.positions[-1]])
-        vel = np.vstack([move.velocities[1:], np.zeros(6)])
-        acc = np.vstack([move.accelerations[1:], np.zeros(6)])
-        shaper = shaper_for(move.positions[-1])
-        if shaper is not None:
-            shaped = shape_trajectory(np.append(0.0, times), np.vstack([move.positions[0], pos]),
-                                      discretize(shaper, RATE), RATE, np.vstack([np.zeros(6), vel]))
-            times, pos, vel, acc = (shaped.times[1:], shaped.positions[1:], shaped.velocities[1:],
-                                    shaped.accelerations[1:])
+        times, pos, vel, acc = goal_waypoints(move, shaper_for(move.positions[-1]), RATE, DWELL)
         end = motion_end(np.append(0.0, times), np.vstack([move.positions[0], pos]))
         grid = OUTPUT_PERIOD * np.arange(1, int(round((end + RESIDUAL_WINDOW) / OUTPUT_PERIOD)) + 1)
         offset = max(0.0, math.floor((end - TAIL) / OUTPUT_PERIOD + 1e-9) * OUTPUT_PERIOD)
