@@ -408,8 +408,9 @@ def pose_scheduler(ctx) -> SchedulerNode:
     spec = pose_rule_base()
     params = {"premises": spec["premises"], "rule_names": list(spec["rules"]), "interpolation": "modes",
               "family": "zvd", "error_throttle": 0.0}
-    for name, rule in spec["rules"].items():
-        params.update({f"rules.{name}.{k}": v for k, v in rule.items()})
+    for name, rule in spec["rules"].items():  # the node takes Hz where the core's spec has rad/s
+        params.update({f"rules.{name}.{k}": v for k, v in rule.items() if k != "natural_frequency"})
+        params[f"rules.{name}.frequency_hz"] = [w / (2 * math.pi) for w in rule["natural_frequency"]]
     return SchedulerNode(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
 
 

@@ -209,3 +209,28 @@ def test_ros2_node_info_of_the_shaper_and_its_side_nodes_show_every_input(ros_co
         assert values["inputs on /shaper_trajectories"] == "trajectory_in, ~/shape_trajectory, action.server_name"
     finally:
         rig.close()
+
+
+def test_the_scheduler_takes_its_rules_in_hz_and_refuses_the_old_rad_s_key_by_its_new_name(ros_context):
+    """rules.<name>.frequency_hz is Hz (the mode estimate says 15 Hz between rules of 10 and 20 Hz); a
+    parameter file of before issue 32 (rules.<name>.natural_frequency, rad/s) is refused with the rename."""
+    from shaper_nodes.nodes.scheduler import SchedulerNode
+
+    def overrides(key: str) -> list[Parameter]:
+        out = [Parameter(k, value=v) for k, v in {"premises": ["joint_1"], "rule_names": ["low", "high"],
+                                                  "interpolation": "modes"}.items()]
+        for name, peak, f in (("low", 0.0, 10.0), ("high", 1.0, 20.0)):
+            out += [Parameter(f"rules.{name}.membership", value=["triangular"]),
+                    Parameter(f"rules.{name}.membership_params", value=[peak - 1.0, peak, peak + 1.0]),
+                    Parameter(f"rules.{name}.{key}", value=[f]), Parameter(f"rules.{name}.damping_ratio", value=[0.05])]
+        return out
+
+    node = SchedulerNode(context=ros_context, parameter_overrides=overrides("frequency_hz"))
+    try:
+        _, shaper = node.core.at([0.5])
+        assert [m.hz for m in shaper.modes] == pytest.approx([15.0])
+    finally:
+        node.destroy_node()
+    renamed = r"rules\.low\.natural_frequency \(rad/s\) was renamed rules\.low\.frequency_hz"
+    with pytest.raises(ValueError, match=renamed):
+        SchedulerNode(context=ros_context, parameter_overrides=overrides("natural_frequency"))

@@ -229,14 +229,14 @@ def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_contex
     from conftest import Diagnosed
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    rule = {"membership": ["triangular"], "natural_frequency": [10.0], "damping_ratio": [0.05]}
+    rule = {"membership": ["triangular"], "frequency_hz": [10.0], "damping_ratio": [0.05]}
     overrides = [Parameter(k, value=v) for k, v in {"premises": ["joint_1"], "rule_names": ["low", "high"],
                                                     "interpolation": "modes", "period": 0.02,
                                                     "stale_timeout": 3600.0, "error_throttle": 0.0}.items()]
     for name, peak, hz in (("low", 0.0, 10.0), ("high", 1.0, 20.0)):
         overrides += [Parameter(f"rules.{name}.{k}", value=v) for k, v in rule.items()]
         overrides += [Parameter(f"rules.{name}.membership_params", value=[peak - 1.0, peak, peak + 1.0]),
-                      Parameter(f"rules.{name}.natural_frequency", value=[hz])]
+                      Parameter(f"rules.{name}.frequency_hz", value=[hz])]
     node = SchedulerNode(context=ros_context, parameter_overrides=overrides)
     probe = Node("probe", context=ros_context)
     diag = Diagnosed(probe)

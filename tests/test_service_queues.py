@@ -27,13 +27,13 @@ CALLERS, EACH = 4, 500
 
 
 def scheduler(ctx) -> SchedulerNode:
-    rule = {"membership": ["triangular"], "natural_frequency": [10.0], "damping_ratio": [0.05]}
+    rule = {"membership": ["triangular"], "frequency_hz": [10.0], "damping_ratio": [0.05]}
     overrides = [Parameter(k, value=v) for k, v in {"premises": ["joint_1"], "rule_names": ["low", "high"],
                                                     "interpolation": "modes", "stale_timeout": 3600.0}.items()]
-    for name, peak, omega in (("low", 0.0, 10.0), ("high", 1.0, 20.0)):
+    for name, peak, hz in (("low", 0.0, 10.0), ("high", 1.0, 20.0)):
         overrides += [Parameter(f"rules.{name}.{k}", value=v) for k, v in rule.items()]
         overrides += [Parameter(f"rules.{name}.membership_params", value=[peak - 1.0, peak, peak + 1.0]),
-                      Parameter(f"rules.{name}.natural_frequency", value=[omega])]
+                      Parameter(f"rules.{name}.frequency_hz", value=[hz])]
     return SchedulerNode(context=ctx, parameter_overrides=overrides)
 
 

@@ -8,7 +8,6 @@ conftest.py: a lost reply, or a stuck node). Each must report the timeout (its l
 
 from __future__ import annotations
 
-import math
 import time
 
 import pytest
@@ -103,13 +102,13 @@ def test_mrilc_learner_reports_the_timeout_and_still_installs_its_profile(ros_co
 
 
 def test_scheduler_reports_the_timeout_sends_again_and_answers_the_learner(ros_context, graphs):
-    rule = {"membership": ["triangular"], "natural_frequency": [10.0], "damping_ratio": [0.05]}
+    rule = {"membership": ["triangular"], "frequency_hz": [10.0], "damping_ratio": [0.05]}
     overrides = params(premises=["joint_1"], rule_names=["low", "high"], interpolation="modes", period=0.02,
                        min_interval=0.0, stale_timeout=3600.0, error_throttle=0.0, service_timeout=TIMEOUT)
     for name, peak, hz in (("low", 0.0, 10.0), ("high", 1.0, 20.0)):
         overrides += params(**{f"rules__{name}__{k}": v for k, v in rule.items()})
         overrides += params(**{f"rules__{name}__membership_params": [peak - 1.0, peak, peak + 1.0],
-                               f"rules__{name}__natural_frequency": [hz]})
+                               f"rules__{name}__frequency_hz": [hz]})
     node = SchedulerNode(context=ros_context, parameter_overrides=overrides)
     g = graphs(ros_context, node)
     modes: list[ModeEstimate] = []
@@ -130,4 +129,4 @@ def test_scheduler_reports_the_timeout_sends_again_and_answers_the_learner(ros_c
     assert not resp.success and "did not answer within" in resp.message
     seen = len(modes)
     g.spin_until(lambda: pose() and len(modes) > seen + 3, "the schedule still evaluated")
-    assert modes[-1].modes[0].frequency_hz == pytest.approx(15.0 / (2 * math.pi))  # the rule's 15 rad/s
+    assert modes[-1].modes[0].frequency_hz == pytest.approx(15.0)  # between the rules' 10 and 20 Hz

@@ -596,7 +596,7 @@ def test_the_report_is_plain_json_and_the_parameter_files_load_as_the_nodes_read
     numbers = list(params["range"])
     for rule in params["rules"].values():
         assert rule["membership"] == ["triangular"]
-        numbers += rule["membership_params"] + rule["natural_frequency"] + rule["damping_ratio"]
+        numbers += rule["membership_params"] + rule["frequency_hz"] + rule["damping_ratio"]
     assert all(type(x) is float for x in numbers)  # DOUBLE_ARRAY parameters: no integer, no string
     got = rule_base_from_dict(params)
     want = rule_base_from_dict(cal.rule_base)

@@ -162,6 +162,11 @@ def test_rule_base_from_dict_checks_everything():
     rule_base_from_dict({**good, "rules": {"r": {**good["rules"]["r"], "a_matrix": big}}})
     bad("unknown membership", membership=["sigmoid"])
     bad("1 natural frequencies but 0", natural_frequency=[1.0])
+    bad("1 natural frequencies but 0", frequency_hz=[1.0])
+    bad("not both", frequency_hz=[1.0], natural_frequency=[6.3], damping_ratio=[0.1])
+    hz = rule_base_from_dict({**good, "rules": {"r": {**good["rules"]["r"], "frequency_hz": [2.0],
+                                                      "damping_ratio": [0.1]}}})
+    assert hz.rules[0].modes[0].omega == pytest.approx(4 * np.pi)  # Hz in, rad/s in the core
     with pytest.raises(FuzzyError, match="premise values"):
         base.evaluate([0.0, 1.0])
     with pytest.raises(FuzzyError, match="finite"):

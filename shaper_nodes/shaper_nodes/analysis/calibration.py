@@ -337,8 +337,8 @@ def scheduler_yaml(cal: Calibration, node: str = "/**") -> str:
     spec = cal.rule_base
     w = cal.wiring
     lines = [f"# Scheduler rule base from a calibration ({len(cal.results)} poses): ros2 run shaper_nodes scheduler",
-             "# --ros-args --params-file scheduler.yaml. Premises: joint positions, rad; natural_frequency in",
-             "# rad/s, one per mode (sorted by frequency); damping_ratio dimensionless.",
+             "# --ros-args --params-file scheduler.yaml. Premises: joint positions, rad; frequency_hz in Hz,",
+             "# one per mode (sorted by frequency); damping_ratio dimensionless.",
              f"{node}:", "  ros__parameters:",
              f"    joint_states: {json.dumps(w['joint_states'])}   # the topic the calibration read the pose from",
              f"    shaper: {json.dumps(w['shaper_node'])}   # the shaper node (its set_shaper)",
@@ -352,7 +352,7 @@ def scheduler_yaml(cal: Calibration, node: str = "/**") -> str:
         lines += [f"      {name}:",
                   f"        membership: {json.dumps(rule['membership'])}",
                   f"        membership_params: {_floats(rule['membership_params'])}",
-                  f"        natural_frequency: {_floats(rule['natural_frequency'])}",
+                  f"        frequency_hz: {_floats([w / (2 * math.pi) for w in rule['natural_frequency']])}",
                   f"        damping_ratio: {_floats(rule['damping_ratio'])}"]
     return "\n".join(lines) + "\n"
 

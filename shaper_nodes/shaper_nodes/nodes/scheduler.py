@@ -122,7 +122,7 @@ class SchedulerParams:
     rule_names: tuple[str, ...] = param(
         None, "Names of the rules (operating points); each has rules.<name>.membership (one kind per"
         " premise: triangular, trapezoidal, gaussian), .membership_params (their parameters, concatenated), and"
-        " .a_matrix (n*n, row-major) with .b_matrix (n*m), and/or .natural_frequency (rad/s) with"
+        " .a_matrix (n*n, row-major) with .b_matrix (n*m), and/or .frequency_hz (Hz) with"
         " .damping_ratio, one per mode.", read_only=True, type=Parameter.Type.STRING_ARRAY)
     interpolation: str = param(
         "model", "'model': interpolate the linear models and take the modes of the result (seed"
@@ -158,8 +158,8 @@ class RuleParams:
                                         type=Parameter.Type.DOUBLE_ARRAY)
     b_matrix: tuple[float, ...] = param(None, "Rule <name>: b_matrix.", read_only=True,
                                         type=Parameter.Type.DOUBLE_ARRAY)
-    natural_frequency: tuple[float, ...] = param(None, "Rule <name>: natural_frequency.", read_only=True,
-                                                 type=Parameter.Type.DOUBLE_ARRAY)
+    frequency_hz: tuple[float, ...] = param(None, "Rule <name>: natural frequency of each mode, Hz.",
+                                            read_only=True, type=Parameter.Type.DOUBLE_ARRAY)
     damping_ratio: tuple[float, ...] = param(None, "Rule <name>: damping_ratio.", read_only=True,
                                              type=Parameter.Type.DOUBLE_ARRAY)
 
@@ -235,6 +235,9 @@ class SchedulerNode(Node):
         rules: dict[str, dict[str, Any]] = {}
         for name in p.rule_names:
             declare_all(self, rule_table(name))
+            if f"rules.{name}.natural_frequency" in self._parameter_overrides:
+                raise ValueError(f"rules.{name}.natural_frequency (rad/s) was renamed rules.{name}.frequency_hz (Hz):"
+                                 " frequencies are in Hz on every interface (CHANGELOG); divide by 2 pi")
             rules[name] = flat(read(self, RuleParams, f"rules.{name}."))
         spec = {"premises": list(p.premises), "rules": rules, "range": list(p.range),
                 "max_damping": float(p.max_damping)}

@@ -373,8 +373,8 @@ def rule_base_from_dict(spec: Mapping[str, Any]) -> RuleBase:
     optional ``max_damping``, and ``rules``: a mapping name -> {``membership``: list of kinds,
     one per premise; ``membership_params``: the parameters of all of them, concatenated;
     ``a_matrix``: n*n values row-major and ``b_matrix``: n*m values (optional; every entry finite and
-    within :data:`MAX_MATRIX_ENTRY`); or/and ``natural_frequency`` (rad/s) and ``damping_ratio`` lists,
-    one per mode}.
+    within :data:`MAX_MATRIX_ENTRY`); or/and ``frequency_hz`` (Hz; the node's parameters and scheduler.yaml)
+    or ``natural_frequency`` (rad/s; the core's own specs) and ``damping_ratio`` lists, one per mode}.
     """
     premises = list(spec.get("premises") or [])
     rules = []
@@ -401,7 +401,12 @@ def rule_base_from_dict(spec: Mapping[str, Any]) -> RuleBase:
             if bv.size == 0 or bv.size % n:
                 raise FuzzyError(f"rule {name}: b_matrix needs n*m values (n = {n}), got {bv.size}")
             a, b = av.reshape(n, n), bv.reshape(n, -1)
-        freqs = finite_values(f"rule {name} natural_frequency", r.get("natural_frequency") or [], FuzzyError)
+        if len(r.get("frequency_hz") or []) and len(r.get("natural_frequency") or []):
+            raise FuzzyError(f"rule {name}: give frequency_hz (Hz) or natural_frequency (rad/s), not both")
+        if len(r.get("frequency_hz") or []):
+            freqs = 2 * math.pi * finite_values(f"rule {name} frequency_hz", r["frequency_hz"], FuzzyError)
+        else:
+            freqs = finite_values(f"rule {name} natural_frequency", r.get("natural_frequency") or [], FuzzyError)
         zetas = finite_values(f"rule {name} damping_ratio", r.get("damping_ratio") or [], FuzzyError)
         if freqs.size != zetas.size:
             raise FuzzyError(f"rule {name}: {freqs.size} natural frequencies but {zetas.size} damping ratios")
