@@ -80,6 +80,8 @@ def scheduler_parameters(spec: dict) -> dict:
         out["range"] = [float(v) for v in spec["range"]]
     for name, rule in spec["rules"].items():
         for key, value in rule.items():
+            if key == "natural_frequency":  # the core's rad/s; the node takes Hz
+                key, value = "frequency_hz", [float(w) / (2 * math.pi) for w in value]
             out[f"rules.{name}.{key}"] = [v if isinstance(v, str) else float(v) for v in value]
     return out
 

@@ -144,6 +144,8 @@ def test_positions_ringing_about_their_final_value_are_at_rest_once_they_reach_i
     assert 0.15 < rest < 0.25  # where the approach ends and the ringing about the final value begins
     still = np.where(t < 0.2, 0.01 * (1 - t / 0.2) ** 2, 0.0)[:, None]  # no ringing: the tolerance rule's time
     assert reached_rest(t, still, 0.0, 1e-6) == pytest.approx(0.2, abs=0.01)
+    # a recording without joint states: the motion's end (the window starts there)
+    assert reached_rest(np.zeros(0), np.zeros((0, 1)), 1.5, 1e-6) == 1.5
 
 
 def test_a_swap_of_dominance_between_close_modes_is_one_plant_and_a_damped_fit_glues_nothing():

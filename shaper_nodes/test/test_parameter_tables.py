@@ -127,7 +127,7 @@ def config_node(path: pathlib.Path) -> str:
     """The node a shipped config file is for (its file name: the files are keyed '/**')."""
     if path.parent == SIM_CONFIG:
         return "sim_plant"
-    return {"mrilc": "learner"}.get(path.stem, path.stem)
+    return {"mrilc": "learner", "calibrate_quick": "calibrate"}.get(path.stem, path.stem)
 
 
 @pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")) + sorted(SIM_CONFIG.glob("*.yaml")),

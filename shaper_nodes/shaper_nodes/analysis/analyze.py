@@ -340,6 +340,8 @@ def reached_rest(times: np.ndarray, positions: np.ndarray, after: float, toleran
     ``positions`` (N, J), ``after``: the motion's end, s.
     """
     t = np.asarray(times, dtype=float)
+    if t.size == 0:  # no positions in the cycle (a recording without joint states): the motion's end
+        return float(after)
     p = np.asarray(positions, dtype=float).reshape(t.size, -1)
     sel = t >= after
     t, p = t[sel], p[sel]
