@@ -188,3 +188,33 @@ def test_an_aborted_goal_stops_the_run_and_leaves_no_half_written_pose_or_report
     assert "aborted" in log and "error_code -4" in log, log
     assert not list((out / "recording").iterdir())  # no pose, no partial
     assert not (out / "report.json").exists() and not (out / "scheduler.yaml").exists()
+
+
+def test_a_controller_killed_mid_goal_ends_calibrate_with_one_line_and_resume_completes(start_node, tmp_path):
+    """The simulator (the controller) killed with -9 during the second pose: calibrate notices from the
+    controller's silence (timeouts.peer, 10 s: the DDS lease alone takes 20 s), ends with one line and the
+    aborted status, no traceback; with a new simulator, --resume completes the calibration."""
+    from shaper_nodes.nodes.calibrate import EXIT_ABORTED
+
+    plant = sim(start_node, noise=0.0)
+    out = tmp_path / "cal"
+    proc = start_node("shaper_nodes", "calibrate", SMALL, params_file=CONFIG, args=["--execute", "--out", str(out)])
+    first = out / "recording" / "pose_000"
+    deadline = time.monotonic() + 300.0
+    while not (first / "metadata.yaml").exists():  # the first pose is complete: the second is under way
+        assert proc.running() and time.monotonic() < deadline, proc.log_path.read_text()
+        time.sleep(0.05)
+    plant.proc.kill()  # kill -9: no goodbye on the graph
+    killed = time.monotonic()
+    code = proc.proc.wait(timeout=300.0)
+    ended = time.monotonic() - killed
+    log = proc.log_path.read_text()
+    assert code == EXIT_ABORTED, log
+    assert "Traceback" not in log, log
+    last = [ln for ln in log.splitlines() if ln.startswith("calibrate: aborted:")]
+    assert len(last) == 1 and ("no feedback from the controller" in last[0] or "left the graph" in last[0]), log
+    print(f"calibrate ended {ended:.1f} s after the controller was killed: {last[0]}")
+    sim(start_node, noise=0.0)
+    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out)], SMALL)
+    assert code == 0, log
+    assert "resuming" in log and (out / "report.json").exists()

@@ -179,6 +179,10 @@ class TimeoutsParams:
     data: float = param(30.0, "Wait for joint states and accelerometer data, s (wall).", (0.1, 3600.0),
                         read_only=True)
     result: float = param(600.0, "Wait for a goal's result, s (wall).", (1.0, 36000.0), read_only=True)
+    peer: float = param(10.0, "While a goal runs, the controller's silence that ends the run, s (wall): no feedback"
+                        " for this long, or its action server gone from the graph (at once), is a dead or stalled"
+                        " controller (the DDS lease alone takes 20 s to notice a killed process).",
+                        (0.5, 3600.0), read_only=True)
 
 
 @dataclass(frozen=True)
@@ -328,6 +332,28 @@ class Calibrator:
         self.spin_until(lambda: self.imu_stamp >= stamp, float(self.p.timeouts.data),
                         f"accelerometer data on {self.imu_topic} up to {what} (t = {stamp:.3f} s)")
 
+    def _await_result(self, result: Any, stamps: list[float], what: str) -> None:
+        """Wait for a goal's result while watching the controller (timeouts.peer): its action server must stay
+        in the graph, and its feedback (20 Hz of its time while a goal runs) must keep coming."""
+        silence = float(self.p.timeouts.peer)
+        deadline = time.monotonic() + float(self.p.timeouts.result)
+        heard, count = time.monotonic(), len(stamps)
+        while not result.done():
+            now = time.monotonic()
+            if len(stamps) != count:
+                heard, count = now, len(stamps)
+            if not self.action.server_is_ready():
+                self.goal = None
+                raise Aborted(f"the controller's action server {self.p.action} left the graph during {what}"
+                              " (the controller stopped?); rerun with --resume once it is back")
+            if now - heard > silence:
+                self.goal = None
+                raise Aborted(f"no feedback from the controller for {silence:g} s during {what} (timeouts.peer): it"
+                              " died or stalled; rerun with --resume once it is back")
+            if now > deadline:
+                raise Aborted(f"no result of {what} within {float(self.p.timeouts.result):g} s")
+            self.executor.spin_once(timeout_sec=POLL)
+
     # ------------------------------------------------------------------ moving
     def move(self, waypoints: tuple[Waypoint, ...], what: str) -> float:
         """Send one trajectory and wait for its success; returns its start (first feedback stamp, s)."""
@@ -357,7 +383,7 @@ class Calibrator:
             raise Aborted(f"the controller rejected the goal of {what} (see its log)")
         self.goal = handle
         result = handle.get_result_async()
-        self.spin_until(result.done, float(self.p.timeouts.result), f"result of {what}")
+        self._await_result(result, stamps, what)
         self.goal = None
         res = result.result()
         from action_msgs.msg import GoalStatus
