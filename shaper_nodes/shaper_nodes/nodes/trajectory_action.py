@@ -45,12 +45,15 @@ from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError, finite_array
 from shaper_nodes.ros.action_client import ResilientActionClient
-from shaper_nodes.ros.qos import ACTION_QOS
+from shaper_nodes.ros.qos import ACTION_CLIENT_QOS, ACTION_QOS
 from shaper_nodes.ros.shaper_client import wait_for
 
 Goal: TypeAlias = FollowJointTrajectory.Goal
 Result: TypeAlias = FollowJointTrajectory.Result
 POLL = 0.05  # s, how often a goal waiting for the controller's server looks again
+#: goals the proxy holds at once (being shaped, forwarded, or wound down at the controller); one more is
+#: rejected at once, with the reason: a storm of goals is refused, not queued behind a controller that lags
+MAX_LIVE = 16
 WATCH = 1.0  # s, how often a running goal checks that the controller's server is still there
 
 
@@ -140,7 +143,8 @@ class TrajectoryActionProxy:
         # a goal response lost at start-up is recovered from the status topic, or the request sent
         # again, within the timeout (ros/action_client.py)
         self._client = ResilientActionClient(node, FollowJointTrajectory, controller_name,
-                                             resend_period=max(0.05, self._timeout / 4))
+                                             resend_period=max(0.05, self._timeout / 4),
+                                             give_up_after=self._timeout, **ACTION_CLIENT_QOS)
         self._server = ActionServer(
             node, FollowJointTrajectory, server_name, execute_callback=self._execute,
             goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
@@ -167,6 +171,10 @@ class TrajectoryActionProxy:
         return _with_trajectory(goal, self._shape(goal.trajectory))
 
     def _on_goal(self, goal: Goal) -> GoalResponse:
+        if len(self._live) + len(self._shaped) >= MAX_LIVE:
+            self._on_refused(InputError("too_large", f"{len(self._live)} goals are still being forwarded or wound"
+                                        f" down at the controller (at most {MAX_LIVE}); this one is rejected at once"))
+            return GoalResponse.REJECT
         try:
             shaped = self.shaped_goal(goal)
         except InputError as err:

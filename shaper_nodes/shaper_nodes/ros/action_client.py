@@ -25,7 +25,11 @@ without guessing:
 
 Nothing here waits a fixed time for a state: the periods are resend intervals, and every outcome
 is a message (a response or a status). The work is bounded: one timer, active only while a request
-is pending, and at most :data:`MAX_STATUSES` goal statuses remembered.
+is pending, and at most :data:`MAX_STATUSES` goal statuses remembered. With ``give_up_after`` a goal
+request is sent again only until that many seconds after its first sending (its caller has given
+up by then): a storm of goals against a server that does not answer costs at most
+``give_up_after / resend_period`` resends each; a goal abandoned so and accepted late is cancelled
+at once. ``pending`` says how many goal requests await an answer, for a caller that bounds them.
 """
 
 from __future__ import annotations
@@ -56,6 +60,7 @@ class _GoalSend:
     future: Future
     sent_at: float
     attempts: int = 1
+    first_at: float = 0.0
     rejected: Any = None  # the rejection of a resent request, waiting one period for a status
     rejected_at: float = 0.0
 
@@ -88,11 +93,15 @@ class ResilientActionClient(ActionClient):
     """
 
     def __init__(self, node: Any, action_type: Any, action_name: str, *, resend_period: float = 2.0,
-                 **kwargs: Any) -> None:
+                 give_up_after: float | None = None, **kwargs: Any) -> None:
         if not resend_period > 0:
             raise ValueError(f"resend_period must be positive, got {resend_period!r}")
         super().__init__(node, action_type, action_name, **kwargs)
         self.resend_period = float(resend_period)
+        self.give_up_after = None if give_up_after is None else float(give_up_after)
+        #: goal requests given up (no answer within give_up_after); a late acceptance of one is cancelled
+        self.given_up = 0
+        self._abandoned: dict[bytes, None] = {}
         self._lock = threading.Lock()
         self._statuses: dict[bytes, tuple[int, Any]] = {}  # goal id -> (status, goal_info)
         self._sends: dict[bytes, _GoalSend] = {}
@@ -113,7 +122,8 @@ class ResilientActionClient(ActionClient):
         goal_id = self._generate_random_uuid() if goal_uuid is None else goal_uuid
         outer = Future()
         self.add_future(outer)
-        send = _GoalSend(goal, feedback_callback, goal_id, outer, time.monotonic())
+        now = time.monotonic()
+        send = _GoalSend(goal, feedback_callback, goal_id, outer, now, first_at=now)
         with self._lock:
             self._sends[bytes(goal_id.uuid)] = send
         self._request_goal(send)
@@ -124,9 +134,21 @@ class ResilientActionClient(ActionClient):
         inner = super().send_goal_async(send.goal, send.feedback, send.goal_id)
         inner.add_done_callback(lambda f, s=send: self._on_goal_response(s, f))
 
+    @property
+    def pending(self) -> int:
+        """Goal requests sent and not yet answered (nor given up)."""
+        with self._lock:
+            return len(self._sends)
+
     def _on_goal_response(self, send: _GoalSend, inner: Future) -> None:
         handle = inner.result()
         key = bytes(send.goal_id.uuid)
+        with self._lock:
+            late = self._abandoned.pop(key, 0) is None
+        if late:
+            if handle is not None and handle.accepted:  # accepted after its caller gave up: not left running
+                handle.cancel_goal_async()
+            return
         with self._lock:
             if send.future.done() or self._sends.get(key) is not send:
                 return
@@ -207,27 +229,40 @@ class ResilientActionClient(ActionClient):
             for key in [k for k, r in self._own_handles.items() if r() is None]:
                 del self._own_handles[key]
 
+    def _due_goals(self, now: float, period: float) -> tuple[list[_GoalSend], list[tuple[Future, Any]]]:
+        """The goal requests to send again, and the futures to complete with their handle (refused after
+        a resend, or recovered from the status topic); the abandoned ones dropped (lock held)."""
+        goals, done = [], []
+        for key, send in list(self._sends.items()):
+            if send.future.done():
+                del self._sends[key]
+            elif send.rejected is not None:
+                if now - send.rejected_at > period:
+                    del self._sends[key]
+                    done.append((send.future, send.rejected))
+            elif now - send.sent_at <= period:
+                continue
+            elif self.give_up_after is not None and now - send.first_at > self.give_up_after:
+                del self._sends[key]
+                self._abandoned[key] = None
+                while len(self._abandoned) > MAX_STATUSES:
+                    self._abandoned.pop(next(iter(self._abandoned)))
+                self.given_up += 1
+            elif key in self._statuses:  # accepted (the status says so), and no response came
+                del self._sends[key]
+                done.append((send.future, self._handle_from_status(key)))
+            else:
+                send.sent_at, send.attempts = now, send.attempts + 1
+                goals.append(send)
+        return goals, done
+
     def _check(self) -> None:
         """Resend what has had no answer for a period; conclude the refusals of resent goals."""
         now = time.monotonic()
         period = self.resend_period
-        goals, results, refused, recovered = [], [], [], []
+        results = []
         with self._lock:
-            for key, send in list(self._sends.items()):
-                if send.future.done():
-                    del self._sends[key]
-                elif send.rejected is not None:
-                    if now - send.rejected_at > period:
-                        del self._sends[key]
-                        refused.append((send.future, send.rejected))
-                elif now - send.sent_at <= period:
-                    continue
-                elif key in self._statuses:  # accepted (the status says so), and no response came
-                    del self._sends[key]
-                    recovered.append((send.future, self._handle_from_status(key)))
-                else:
-                    send.sent_at, send.attempts = now, send.attempts + 1
-                    goals.append(send)
+            goals, done = self._due_goals(now, period)
             for key, wait in list(self._results.items()):
                 if wait.future.done():
                     del self._results[key]
@@ -235,7 +270,7 @@ class ResilientActionClient(ActionClient):
                     wait.asked_at, wait.attempts = now, wait.attempts + 1
                     results.append(wait)
             idle = not self._sends and not self._results
-        for future, handle in refused + recovered:
+        for future, handle in done:
             future.set_result(handle)
         for send in goals:
             self.resent += 1

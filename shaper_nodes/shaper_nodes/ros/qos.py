@@ -37,5 +37,7 @@ SERVICE_QOS = QoSProfile(depth=SERVICE_DEPTH, history=HistoryPolicy.KEEP_ALL, re
                          durability=DurabilityPolicy.VOLATILE)
 ACTION_QOS = {"goal_service_qos_profile": SERVICE_QOS, "result_service_qos_profile": SERVICE_QOS,
               "cancel_service_qos_profile": SERVICE_QOS}
+#: the same for an action client's goal, cancel and result services (keyword arguments of ActionClient)
+ACTION_CLIENT_QOS = ACTION_QOS
 
-__all__ = ["ACTION_QOS", "IMU_QOS", "LATCHED", "SERVICE_DEPTH", "SERVICE_QOS"]
+__all__ = ["ACTION_CLIENT_QOS", "ACTION_QOS", "IMU_QOS", "LATCHED", "SERVICE_DEPTH", "SERVICE_QOS"]
