@@ -62,7 +62,8 @@ class LossyHandle:
 class Rig:
     """A server node and a client node in one executor."""
 
-    def __init__(self, ctx: Any, *, accept: bool = True, lose_goal: int = 0, lose_result: int = 0) -> None:
+    def __init__(self, ctx: Any, *, accept: bool = True, lose_goal: int = 0, lose_result: int = 0,
+                 give_up_after: float | None = None) -> None:
         self.server_node = rclpy.create_node("lossy_controller", context=ctx)
         self.client_node = rclpy.create_node("resilient_client", context=ctx)
         self.executed = 0
@@ -76,7 +77,8 @@ class Rig:
                                    goal_callback=lambda _goal: GoalResponse.ACCEPT if accept else GoalResponse.REJECT)
         self.lossy = LossyHandle(self.server._handle, lose_goal, lose_result)
         self.server._handle = self.lossy
-        self.client = ResilientActionClient(self.client_node, FollowJointTrajectory, ACTION, resend_period=0.5)
+        self.client = ResilientActionClient(self.client_node, FollowJointTrajectory, ACTION, resend_period=0.5,
+                                            give_up_after=give_up_after)
         self.ex = SingleThreadedExecutor(context=ctx)
         self.ex.add_node(self.server_node)
         self.ex.add_node(self.client_node)
@@ -145,6 +147,17 @@ def test_a_lost_result_is_asked_for_again(rig):
     res = r.result(handle)
     assert res.status == GoalStatus.STATUS_SUCCEEDED and res.result.error_string == "done 1"
     assert r.lossy.lost == 1 and r.client.resent >= 1
+
+
+def test_a_goal_request_nobody_answers_is_resent_only_until_give_up_after(rig):
+    """Every answer lost (a rejection: no status names the goal either): the request is sent again every
+    0.5 s until 2 s after its first sending, then given up: at most 4 resends, nothing left pending (so
+    nothing more is sent), the caller's future left to its own timeout (the proxy's server_timeout)."""
+    r = rig(accept=False, lose_goal=1000, give_up_after=2.0)
+    future = r.client.send_goal_async(Goal())
+    r.spin_until(lambda: r.client.given_up == 1, "the request given up")
+    assert r.client.pending == 0 and not future.done()
+    assert 1 <= r.client.resent <= 4 and r.lossy.goal_requests <= 1 + r.client.resent
 
 
 def test_without_losses_it_is_the_plain_client(rig):
