@@ -265,13 +265,16 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
 def _stream(bag: pathlib.Path, topic: str) -> list[bytes]:
     """The serialized messages of ``topic`` in the recording folder ``bag``, in the order written, from the first
     step on (the joint states at rest before the first move, republished every 0.1 s of wall time, are recorded or
-    not by when the recorder's subscription matched) and a repeat of the message before left out (the same at rest
-    between moves)."""
+    not by when the recorder's subscription matched) to the end of the run (the last cycle event; the plant may
+    take a few steps more while the demo stops its nodes, as many as the wall time lets it), and a repeat of the
+    message before left out (the same at rest between moves)."""
     (path,) = bag.glob("*.mcap")
+    with open(path, "rb") as f:
+        end = max(header_stamp(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/cycle_events"]))
     out: list[bytes] = []
     with open(path, "rb") as f:
         for _, _, m in make_reader(f).iter_messages(topics=[topic], log_time_order=False):
-            if header_stamp(m.data) > 0 and (not out or m.data != out[-1]):
+            if 0 < header_stamp(m.data) <= end + 1e-9 and (not out or m.data != out[-1]):
                 out.append(m.data)
     return out
 
@@ -292,6 +295,8 @@ def test_the_demo_client_identifier_and_recorder_paused_give_the_unpaused_number
     for topic in ("/tip_imu", "/joint_states"):
         qa, qb = _stream(a / "recording", topic), _stream(b / "recording", topic)
         assert len(qa) > 1000 and qb == qa, topic
+    # from the first step on: the demo waited for the recorder's subscriptions before the first goal
+    assert header_stamp(_stream(a / "recording", "/tip_imu")[0]) == pytest.approx(1.0 / (2 * RATE), abs=1e-9)
     # the identifier's measure of the cycle
     def measured(folder: pathlib.Path) -> list[str]:
         log = (folder / "arm-identifier.log").read_text()

@@ -24,6 +24,18 @@ def test_acks_send_the_oldest_stream_once_it_advanced_a_period():
     assert acks.sent == pytest.approx(0.022)
 
 
+def test_acks_flush_says_the_last_samples_the_period_held_back_once():
+    acks = Acks(period=0.02)
+    assert acks.flush() is None  # nothing taken
+    assert acks.took("imu", 0.001) == 0.001
+    assert acks.flush() is None  # nothing beyond what was sent
+    for k in range(2, 10):  # the run's last samples: less than a period beyond the last acknowledgement
+        assert acks.took("imu", 0.001 * k) is None
+    assert acks.flush() == pytest.approx(0.009)  # the end of the run, said
+    assert acks.flush() is None  # once
+    assert acks.took("imu", 0.010) is None and acks.took("imu", 0.030) == pytest.approx(0.030)  # the period goes on
+
+
 def test_acks_refuse_a_bad_period():
     with pytest.raises(ValueError, match="period"):
         Acks(period=math.nan)

@@ -224,6 +224,17 @@ class Acks:
         self.sent = done
         return done
 
+    def flush(self) -> float | None:
+        """The time processed, if it is beyond the last acknowledgement sent (the last samples before the plant
+        rests, which :meth:`took` holds back until ``period`` more are in); else None. A reader calls it on a
+        wall-clock timer, so that its acknowledgement reaches the end of a run: the run's client waits on it to
+        know the reader has taken every sample (the recorder, before its recording is closed)."""
+        done = self.processed
+        if done is None or (self.sent is not None and done <= self.sent + _EPS):
+            return None
+        self.sent = done
+        return done
+
 
 class ReaderGate:
     """The plant's side of the lockstep wait: how far it may step given what its declared readers processed.

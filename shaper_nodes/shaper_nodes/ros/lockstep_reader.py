@@ -5,7 +5,9 @@ A node that the sim plant waits for (named in the plant's ``lockstep.readers``) 
 its per-step streams (joint states, tip state, reference, IMU). It publishes on ``<node>/lockstep_ack``
 (rosgraph_msgs/Clock, reliable, transient local, depth 1) the simulated time it has processed, the
 oldest of its streams' latest stamps, every :data:`~shaper_nodes.core.lockstep.ACK_PERIOD` s of simulated
-time; at construction it announces itself (``clock.sec`` -1: nothing taken yet). It also counts each
+time, and every :data:`FLUSH_PERIOD` s of wall time the time processed if it went further (the last samples
+before the plant rests: a client that waits for this reader to have taken a run's end sees it); at
+construction it announces itself (``clock.sec`` -1: nothing taken yet). It also counts each
 stream's lost samples from gaps in the stamps (:class:`~shaper_nodes.core.lockstep.Gaps`), for the
 reader to report beside the numbers they touch. The rules are :mod:`shaper_nodes.core.lockstep`'s.
 
@@ -18,6 +20,8 @@ import struct
 from collections.abc import Mapping
 from typing import Any
 
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
@@ -25,7 +29,8 @@ from ..core.lockstep import ACK_PERIOD, ANNOUNCE, Acks, Gaps
 from .conversions import sec_to_time
 from .qos import LATCHED
 
-__all__ = ["ACK_QOS", "ACK_SUFFIX", "HEADER_FIRST", "STREAM_QOS", "LockstepReader", "ack_topic", "header_stamp"]
+__all__ = ["ACK_QOS", "ACK_SUFFIX", "FLUSH_PERIOD", "HEADER_FIRST", "STREAM_QOS", "LockstepReader", "ack_topic",
+           "header_stamp"]
 
 #: the acknowledgement topic is the reader node's fully qualified name plus this
 ACK_SUFFIX = "/lockstep_ack"
@@ -34,6 +39,10 @@ ACK_QOS = LATCHED
 #: a reader's per-step streams in lockstep: reliable, 10000 samples (10 s of a 1 kHz IMU; the plant's lead,
 #: ``lockstep.lead``, is well inside it)
 STREAM_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+
+#: wall s between two checks for samples taken since the last acknowledgement (a wall-clock timer: the simulated
+#: clock stands still while the plant rests)
+FLUSH_PERIOD = 0.1
 
 #: the per-step stream types whose serialized message begins with a std_msgs/Header (:func:`header_stamp`)
 HEADER_FIRST = frozenset({"sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"})
@@ -70,6 +79,12 @@ class LockstepReader:
         self.gaps: dict[str, Gaps] = {name: Gaps(p) for name, p in (periods or {}).items()}
         self._pub = node.create_publisher(Clock, ack_topic(node.get_fully_qualified_name()), ACK_QOS)
         self._send(ANNOUNCE)
+        self._timer = node.create_timer(FLUSH_PERIOD, self._flush, clock=RosClock(clock_type=ClockType.STEADY_TIME))
+
+    def _flush(self) -> None:
+        ack = self._acks.flush()
+        if ack is not None:
+            self._send(ack)
 
     def _send(self, t: float) -> None:
         msg = Clock()

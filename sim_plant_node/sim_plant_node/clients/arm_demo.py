@@ -44,7 +44,8 @@ SUBSTEPS = 2  # the sim plant's arm.substeps (its default): the flange IMU at RA
 IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/reference", "/joint_states"
 #: the nodes the sim plant waits for in lockstep (lockstep.readers): calibrate, this demo's client, the
 #: identifier and the recorder
-READERS = ["/calibrate", "/conductor", "/identifier", "/recorder"]
+RECORDER = "/recorder"
+READERS = ["/calibrate", "/conductor", "/identifier", RECORDER]
 WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stops with one line
 #: s of wall time the calibration may take (a guard against a hang: on a loaded machine, load average 30 and two
 #: CPU hogs, its identification alone took over 6 min of a 15 min run)
@@ -124,7 +125,7 @@ class ArmClient:
         from shaper_msgs.msg import CycleEvent, CycleReport
         from shaper_nodes.ros.action_client import ResilientActionClient
         from shaper_nodes.ros.conversions import time_to_sec
-        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
+        from shaper_nodes.ros.lockstep_reader import ACK_QOS, STREAM_QOS, LockstepReader, ack_topic
 
         from ..arm.dynamics import ArmModel
 
@@ -132,6 +133,8 @@ class ArmClient:
         self.model = ArmModel()
         self.s = Streams()
         self.reports: list[Any] = []
+        #: the simulated time the recorder has taken every sample up to (its lockstep acknowledgement), s
+        self.recorded = -math.inf
         sec = time_to_sec
         # the plant waits for this node (its lockstep.readers): acknowledged, and each stream checked for gaps
         self.lockstep = LockstepReader(conductor, {IMU: 1.0 / (RATE * SUBSTEPS), LINK: 1.0 / RATE, CMD: 1.0 / RATE,
@@ -167,6 +170,10 @@ class ArmClient:
         def on_clock(m: Any) -> None:
             self.s.clock = max(self.s.clock, sec(m.clock))
 
+        def on_recorded(m: Any) -> None:
+            if m.clock.sec >= 0:  # not the announcement
+                self.recorded = max(self.recorded, sec(m.clock))
+
         # every stream a measure depends on: reliable, deeper than the plant's lead over this reader
         conductor.create_subscription(Imu, IMU, on_imu, STREAM_QOS)
         conductor.create_subscription(JointState, LINK, on_link, STREAM_QOS)
@@ -174,6 +181,7 @@ class ArmClient:
         conductor.create_subscription(JointState, JOINTS, on_joints, STREAM_QOS)
         conductor.create_subscription(Clock, "/clock", on_clock, 100)
         conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        conductor.create_subscription(Clock, ack_topic(RECORDER), on_recorded, ACK_QOS)
         self.events = conductor.create_publisher(CycleEvent, "/cycle_events", 10)
         self.action = ResilientActionClient(conductor, FollowJointTrajectory, "/shaper/follow_joint_trajectory")
         self._Goal = FollowJointTrajectory.Goal
@@ -193,6 +201,16 @@ class ArmClient:
         self.wait_listeners(listeners, timeout)
         for topic in ("/sim_plant/reference", "/sim_plant/tip_state"):  # published only to subscribers
             self.c.spin_until(lambda t=topic: self.c.count_publishers(t) > 0, timeout, f"the sim plant's {topic}")
+
+    def wait_recorder(self, topics: list[str], timeout: float = 60.0) -> None:
+        """Wait until the recorder subscribes to ``topics`` (it subscribes to a topic once it sees it on the graph;
+        the plant, which steps only once a goal comes, would otherwise run the first samples past it)."""
+        name = RECORDER.strip("/")
+
+        def subscribed(topic: str) -> bool:
+            return any(i.node_name == name for i in self.c.get_subscriptions_info_by_topic(topic))
+        for topic in topics:
+            self.c.spin_until(lambda t=topic: subscribed(t), timeout, f"the recorder's subscription of {topic}")
 
     def _goal(self, move: Any) -> Any:
         from builtin_interfaces.msg import Duration
@@ -238,6 +256,16 @@ class ArmClient:
             late = ", ".join(f"{name} (up to t = {t:.3f} s)" for name, t in reached().items() if t < end - 0.0025)
             raise TimeoutError(f"no samples up to the end of {what} (t = {end:.3f} s) within {WAIT:g} s on"
                                f" {late}") from None
+
+    def wait_recorded(self, end: float) -> None:
+        """Wait until the recorder has taken every sample up to simulated time ``end`` s (its acknowledgement,
+        which it sends on a wall-clock timer once the plant rests): closed before, the recording would lack the
+        last samples still on their way to it."""
+        try:
+            self.c.spin_until(lambda: self.recorded >= end - 1e-6, WAIT, "")
+        except TimeoutError:
+            raise TimeoutError(f"the recorder did not take the samples up to the end of the run (t = {end:.3f} s)"
+                               f" within {WAIT:g} s; it has them up to t = {self.recorded:.3f} s") from None
 
     def run_move(self, index: int, move: Any, on_start: Callable[[float], None] | None = None) -> MoveRun:
         """Send one move and wait for its end. It starts where the arm rests (the controller's clock: the plant
@@ -588,6 +616,7 @@ def _main(argv: list[str] | None) -> int:
         try:
             conductor.wait_ready(60.0, {"/cycle_events": 2})
             client.wait_ready(3)  # this node, the identifier and the recorder
+            client.wait_recorder([IMU, JOINTS])  # the per-step streams, from the first step on
             cycle_index = 0
             recommended = None
             for case in cases:
@@ -601,6 +630,7 @@ def _main(argv: list[str] | None) -> int:
                         client.c.spin_until(lambda c=cycle_index: any(r.cycle == c for r in client.reports), 120.0,
                                             "the learner's report")
                     cycle_index += 1
+                    last_end = runs[-1].end
                 print(f" ({time.monotonic() - t_wall:.0f} s)", flush=True)
                 if case == "none" and "identified" in cases:
                     recommended = identify(conductor, identifier_cli, n)
@@ -615,6 +645,7 @@ def _main(argv: list[str] | None) -> int:
                     rows.append({"case": case, "move": f"{run.index + 1}. {run.name}", **m.__dict__,
                                  "move_and_settle_s": m.move_and_settle_s, "installed": installed,
                                  "lost": client.lockstep.describe_lost(run.start, run.end)})
+            client.wait_recorded(last_end)
         finally:
             arrays: dict[str, Any] = {k: np.asarray(v) for k, v in client.s.__dict__.items()}
             np.savez_compressed(out / "streams.npz", **arrays)
