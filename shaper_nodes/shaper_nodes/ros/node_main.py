@@ -13,14 +13,16 @@ a node being made is finished first, then the spin ends, the node's ``close()`` 
 valid (a proxy can still cancel its running goal at the controller, a recorder finishes its bag), the node is
 destroyed (its executor threads joined) and the process exits with status 0. A second SIGINT (Ctrl-C twice)
 stops at once (``KeyboardInterrupt``); more SIGTERMs change nothing (the parent-death signal may come once per
-thread of a parent killed with ``kill -9``; SIGKILL is the way to end a stop that hangs). rclpy's own signal handlers are not installed: they shut the context down first, so
-``close()`` could no longer talk to the graph, and their ``KeyboardInterrupt`` could land inside a node's
-constructor after it had started an executor thread, which then outlived the interpreter and aborted the
-process at exit ("terminate called without an active exception", ros2/rclpy#1484).
+thread of a parent killed with ``kill -9``; SIGKILL is the way to end a stop that hangs). rclpy's own signal
+handlers are not installed: they shut the context down first, so ``close()`` could no longer talk to the graph,
+and their ``KeyboardInterrupt`` could land inside a node's constructor after it had started an executor thread,
+which then outlived the interpreter and aborted the process at exit ("terminate called without an active
+exception", ros2/rclpy#1484).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -81,10 +83,8 @@ class StopSignals:
         while os.read(self._read, 64) and not self._closed:
             wake = self._wake
             if wake is not None:
-                try:
+                with contextlib.suppress(Exception):  # the node is being destroyed: the stop is under way
                     wake()
-                except Exception:  # noqa: BLE001 - the node is being destroyed: the stop is under way
-                    pass
 
     def wake_with(self, node: Any) -> None:
         """Wake ``node``'s executor on a signal: a guard condition of the node, triggered by the watch thread."""
