@@ -411,6 +411,12 @@ class ShaperNode(Node):
         self._traj_pub.publish(answer[1])
         self._count_forwarded("trajectory")
 
+    def close(self) -> None:
+        """The node stops (run_node, on SIGINT or SIGTERM): a FollowJointTrajectory goal still running is
+        cancelled at the controller, waiting up to ``action.server_timeout`` s for it to end."""
+        if self._action is not None:
+            self._action.stop()
+
     def destroy_node(self) -> None:
         if self._stream_side is not None:  # the streamed inputs stop first
             self._stream_side.close()

@@ -16,6 +16,10 @@ does) and is a client of the controller's. For each goal:
   ``goal_time_tolerance`` unchanged, relays every feedback, and ends with the controller's status
   and result (error_code, error_string).
 - cancel: accepted and forwarded to the controller goal; the final status is the controller's.
+- the node stops (:meth:`TrajectoryActionProxy.stop`, from the node's ``close()`` on SIGINT or SIGTERM):
+  new goals are rejected, every goal still running is cancelled at the controller (or not sent, if it
+  has not been yet), and the stop waits up to ``timeout`` s for them to end, so the client sees each
+  goal CANCELED (or ABORTED) rather than a server that vanished with its goal still moving the arm.
 
 Everything here runs in the node's executor without blocking it: the execute callback is a
 coroutine that awaits the controller's futures, so a SingleThreadedExecutor (``rclpy.spin``) is
@@ -29,6 +33,7 @@ with it every subscription and service of the node, for as long as the wait last
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from typing import TypeAlias
@@ -87,10 +92,11 @@ class _Forward:
         self.cancel_wanted = False  # our client asked to cancel
         self.preempted = False  # a newer goal took over
         self.cancel_sent = False
+        self.node_stopping = False  # the node is stopping (TrajectoryActionProxy.stop)
 
     @property
     def stop(self) -> bool:
-        return self.cancel_wanted or self.preempted
+        return self.cancel_wanted or self.preempted or self.node_stopping
 
     @property
     def key(self) -> bytes:
@@ -139,6 +145,7 @@ class TrajectoryActionProxy:
         self._shaped: dict[int, tuple[Goal, Goal]] = {}  # id(request) -> (request, shaped goal)
         self._live: dict[bytes, _Forward] = {}
         self._active: _Forward | None = None
+        self._stopping = False  # stop() was called: new goals are rejected
         self.controller_name = controller_name
         # a goal response lost at start-up is recovered from the status topic, or the request sent
         # again, within the timeout (ros/action_client.py)
@@ -149,6 +156,36 @@ class TrajectoryActionProxy:
             node, FollowJointTrajectory, server_name, execute_callback=self._execute,
             goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
             cancel_callback=self._on_cancel, **ACTION_QOS)
+
+    def stop(self) -> int:
+        """Cancel every running goal at the controller, as the node stops; returns how many goals were still
+        running after waiting ``timeout`` s for them to end (0: all ended).
+
+        From another thread than the one spinning the node (the node's ``close()`` in the main thread, the
+        node served by its side node's thread): the cancels are sent from that executor, which must go on
+        spinning meanwhile. New goals are rejected from now on.
+        """
+        executor = self._node.executor
+        if not self._live or executor is None or not self._node.context.ok():
+            self._stopping = True
+            return len(self._live)
+        ended = threading.Event()
+
+        async def cancel_all() -> None:
+            self._stopping = True
+            for fwd in list(self._live.values()):
+                fwd.node_stopping = True
+                self._cancel_at_controller(fwd)
+            while self._live:  # each one ends in _run with the controller's status, or before it was sent
+                await wait_for(self._node, Future(), POLL)
+            ended.set()
+
+        executor.create_task(cancel_all)
+        ended.wait(self._timeout)
+        if self._live:
+            self._log.warning(f"{len(self._live)} goal(s) still running at the controller {self._timeout:g} s after"
+                              " their cancel was sent; the node stops anyway")
+        return len(self._live)
 
     def destroy(self) -> None:
         self._server.destroy()
@@ -171,6 +208,9 @@ class TrajectoryActionProxy:
         return _with_trajectory(goal, self._shape(goal.trajectory))
 
     def _on_goal(self, goal: Goal) -> GoalResponse:
+        if self._stopping:
+            self._log.warning("goal rejected: the node is stopping")
+            return GoalResponse.REJECT
         if len(self._live) + len(self._shaped) >= MAX_LIVE:
             self._on_refused(InputError("too_large", f"{len(self._live)} goals are still being forwarded or wound"
                                         f" down at the controller (at most {MAX_LIVE}); this one is rejected at once"))
@@ -279,6 +319,8 @@ class TrajectoryActionProxy:
         elif status == GoalStatus.STATUS_CANCELED:
             if fwd.preempted and not result.error_string:
                 result.error_string = "preempted by a newer goal"
+            elif fwd.node_stopping and not fwd.cancel_wanted and not result.error_string:
+                result.error_string = "the shaper node stopped: the goal was cancelled at the controller"
             if not _to_canceling(handle):
                 handle.abort()
                 return result
@@ -293,6 +335,9 @@ class TrajectoryActionProxy:
         if fwd.preempted:
             result = Result(error_code=Result.INVALID_GOAL,
                             error_string="preempted by a newer goal before it was sent to the controller")
+        elif fwd.node_stopping and not fwd.cancel_wanted:
+            result = Result(error_code=Result.SUCCESSFUL,
+                            error_string="the shaper node stopped before the goal was sent to the controller")
         else:
             result = Result(error_code=Result.SUCCESSFUL,
                             error_string="canceled before it was sent to the controller")

@@ -2,10 +2,18 @@
 
 The executable is looked up in the installed layout ``<prefix>/lib/<package>/<executable>`` of
 the package's ament index prefix, which is exactly where ``ros2 run`` looks.
+
+A started process ends with the process that started it: it gets SIGTERM (a clean stop for the suite's
+nodes, ros/node_main.py) when its parent ends, even by ``kill -9`` (core/lifetime.py ``die_with_parent``,
+Linux). The kernel sends it when the *thread* that started the child ends: start children from the main
+thread (or one that lives as long as they should). A parent with several threads (an rclpy context has DDS
+threads) killed with ``kill -9`` may deliver it more than once, as the child passes from thread to thread of
+the dying parent (measured: two SIGTERMs); the suite's nodes take a repeated SIGTERM as the same stop.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import pathlib
@@ -13,6 +21,8 @@ import signal
 import subprocess
 from collections.abc import Mapping, Sequence
 from typing import IO
+
+from shaper_nodes.core.lifetime import die_with_parent
 
 
 def executable(package: str, name: str) -> pathlib.Path:
@@ -38,7 +48,11 @@ def ros_args(params: Mapping[str, object], remaps: Mapping[str, str] | None = No
 
 
 class ChildProcess:
-    """A command running in its own process, output to a log file; stop() sends SIGINT like Ctrl-C."""
+    """A command running in its own process, output to a log file; stop() sends SIGINT like Ctrl-C.
+
+    The process gets SIGTERM when the process that started it ends, however it ends (see the module
+    docstring).
+    """
 
     def __init__(self, cmd: list[str], log_path: str | pathlib.Path | None = None,
                  env: Mapping[str, str] | None = None, cwd: str | pathlib.Path | None = None) -> None:
@@ -52,7 +66,8 @@ class ChildProcess:
     def start(self) -> ChildProcess:
         self._log = open(self.log_path, "w") if self.log_path else None  # noqa: SIM115
         out = self._log if self._log else subprocess.DEVNULL
-        self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env, cwd=self.cwd)
+        self.proc = subprocess.Popen(self.cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env, cwd=self.cwd,
+                                     preexec_fn=functools.partial(die_with_parent, signal.SIGTERM, os.getpid()))
         return self
 
     def running(self) -> bool:

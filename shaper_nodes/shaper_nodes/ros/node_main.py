@@ -6,14 +6,30 @@ anything: no ``rclpy.init``, no file written. A configuration error (a missing o
 parameter) ends the node with one line on stderr and exit status 1, no traceback; so does a
 ``--params-file`` that is missing, unreadable or not a params file (:func:`params_file_problem`,
 checked before ``rclpy.init``, which would otherwise end in a traceback).
+
+Stops (:class:`StopSignals`): SIGINT (Ctrl-C) and SIGTERM (``kill``, a supervisor, or the parent-death signal
+of a node started by a script, ros/launching.py) are the same clean stop. The first one asks the node to stop:
+a node being made is finished first, then the spin ends, the node's ``close()`` runs while its context is still
+valid (a proxy can still cancel its running goal at the controller, a recorder finishes its bag), the node is
+destroyed (its executor threads joined) and the process exits with status 0. A second SIGINT (Ctrl-C twice)
+stops at once (``KeyboardInterrupt``); more SIGTERMs change nothing (the parent-death signal may come once per
+thread of a parent killed with ``kill -9``; SIGKILL is the way to end a stop that hangs). rclpy's own signal
+handlers are not installed: they shut the context down first, so ``close()`` could no longer talk to the graph,
+and their ``KeyboardInterrupt`` could land inside a node's constructor after it had started an executor thread,
+which then outlived the interpreter and aborted the process at exit ("terminate called without an active
+exception", ros2/rclpy#1484).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import re
+import signal
 import sys
 import textwrap
+import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
@@ -23,6 +39,71 @@ from shaper_nodes.core.closed_pipe import quiet_closed_pipe
 EXIT_CONFIG = 1
 #: width of the --help text
 WIDTH = 100
+
+
+#: the signals that stop a node cleanly
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class StopSignals:
+    """SIGINT and SIGTERM as a request to stop, acted on between callbacks (see the module docstring).
+
+    From the main thread only (Python runs signal handlers there); elsewhere it installs nothing. The
+    first signal sets :attr:`signal` and wakes the executor through a guard condition (:meth:`wake_with`):
+    Python's own handler runs only when the main thread returns from rcl's wait, so a thread reading the
+    signal wake-up pipe (``signal.set_wakeup_fd``) triggers it. A second SIGINT raises ``KeyboardInterrupt``;
+    a repeated SIGTERM is ignored (see the module docstring).
+    """
+
+    def __init__(self) -> None:
+        #: the first stop signal received (None: none yet)
+        self.signal: int | None = None
+        self.interrupts = 0  # SIGINTs received
+        self._wake: Callable[[], None] | None = None
+        self._installed = threading.current_thread() is threading.main_thread()
+        if not self._installed:
+            return
+        self._read, self._write = os.pipe()
+        os.set_blocking(self._write, False)
+        self._old_handlers = {sig: signal.signal(sig, self._on_signal) for sig in STOP_SIGNALS}
+        self._old_fd = signal.set_wakeup_fd(self._write, warn_on_full_buffer=False)
+        self._closed = False
+        self._thread = threading.Thread(target=self._watch, name="stop signals", daemon=True)
+        self._thread.start()
+
+    def _on_signal(self, signum: int, frame: object) -> None:
+        if signum == signal.SIGINT:
+            self.interrupts += 1
+            if self.interrupts > 1:
+                raise KeyboardInterrupt
+        if self.signal is None:
+            self.signal = signum
+
+    def _watch(self) -> None:
+        while os.read(self._read, 64) and not self._closed:
+            wake = self._wake
+            if wake is not None:
+                with contextlib.suppress(Exception):  # the node is being destroyed: the stop is under way
+                    wake()
+
+    def wake_with(self, node: Any) -> None:
+        """Wake ``node``'s executor on a signal: a guard condition of the node, triggered by the watch thread."""
+        if self._installed:
+            self._wake = node.create_guard_condition(lambda: None).trigger
+
+    def close(self) -> None:
+        """Restore the previous handlers and stop the watch thread."""
+        if not self._installed or self._closed:
+            return
+        self._closed = True
+        self._wake = None
+        signal.set_wakeup_fd(self._old_fd)
+        for sig, handler in self._old_handlers.items():
+            signal.signal(sig, handler)
+        os.write(self._write, b"\0")
+        self._thread.join(1.0)
+        os.close(self._write)
+        os.close(self._read)
 
 
 def with_config(package: str, executable: str, config: str, extra: str = "") -> str:
@@ -150,7 +231,7 @@ def node_help(module: Any, executable: str, tables: Mapping[str, Iterable[Any]],
 
 def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = None, *,
              tables: Mapping[str, Iterable[Any]] | None = None, examples: Sequence[str] = ()) -> int:
-    """init, spin until Ctrl-C or shutdown, then close, destroy and shut down.
+    """init, spin until SIGINT (Ctrl-C), SIGTERM or shutdown, then close, destroy and shut down (exit status 0).
 
     With ``-h``/``--help`` before ``--ros-args``, print the node's usage (its module docstring,
     ``tables`` or the module's ``PARAMETERS``, ``examples``) and return 0 without starting it.
@@ -158,8 +239,9 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
     A configuration error (``ValueError`` or ``OSError`` such as ``FileExistsError`` from the
     constructor, or a parameter rclpy refuses) is printed on stderr as ``name: message`` and gives
     exit code 1, as does a ``--params-file`` that cannot be used (:func:`params_file_problem`). A
-    node with a ``close()`` method gets it called before it is destroyed. A node that sets
-    ``exit_code`` (and ``exit_reason``) ends with that code, the reason printed as ``name: reason``.
+    node with a ``close()`` method gets it called before it is destroyed, with its context still valid
+    when a signal stopped it (:class:`StopSignals`). A node that sets ``exit_code`` (and ``exit_reason``)
+    ends with that code, the reason printed as ``name: reason``.
     """
     argv = list(sys.argv if args is None else args)
     if wants_help(argv):
@@ -171,22 +253,37 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
     if problem is not None:
         print(f"{name}: {problem}", file=sys.stderr, flush=True)
         return EXIT_CONFIG
+    stop = StopSignals()  # from here on SIGINT and SIGTERM ask for a clean stop
+    try:
+        return _run(factory, name, argv, stop)
+    except KeyboardInterrupt:  # a second Ctrl-C: stopped at once
+        return 0
+    finally:
+        stop.close()
 
+
+def _run(factory: Callable[[], Any], name: str, argv: list[str], stop: StopSignals) -> int:
+    """:func:`run_node` after the arguments were checked: init, make, spin until ``stop``, close, destroy."""
     import rclpy
     from rclpy.exceptions import ParameterException
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     try:
-        rclpy.init(args=argv)
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as err:  # rcl's own refusal of the arguments (e.g. a params file it cannot parse)
         said = str(err).strip().splitlines()
         print(f"{name}: the ROS arguments were refused: {said[0] if said else type(err).__name__}",
               file=sys.stderr, flush=True)
         return EXIT_CONFIG
     node = None
+    executor = SingleThreadedExecutor()
     try:
-        node = factory()
-        rclpy.spin(node)
+        node = factory()  # a signal meanwhile is acted on once the node is made
+        executor.add_node(node)
+        stop.wake_with(node)
+        while stop.signal is None and rclpy.ok():
+            executor.spin_once()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, OSError, ParameterException) as err:
@@ -194,10 +291,11 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
         print(f"{name}: {message}", file=sys.stderr, flush=True)
         return EXIT_CONFIG
     except Exception:
-        if not rclpy.ok():  # a signal shut the context down while the node was being made: as Ctrl-C
+        if not rclpy.ok():  # the context was shut down while the node was being made: a stop
             return 0
         raise
     finally:
+        executor.shutdown()
         if node is not None:
             close = getattr(node, "close", None)
             if callable(close):

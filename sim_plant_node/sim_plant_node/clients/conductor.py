@@ -12,6 +12,8 @@ import contextlib
 import functools
 import math
 import pathlib
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -207,10 +209,18 @@ StartNode = Callable[..., Any]
 def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, rclpy.context.Context]]:
     """Yield ``(start, ctx)``: ``start(package, executable, params)`` starts a node process (log in
     ``logs/<prefix>-<executable>.log``), ``ctx`` a fresh rclpy context; at exit the context is
-    shut down and every process started is stopped (in reverse order)."""
+    shut down and every process started is stopped (in reverse order).
+
+    Every way the session's process can end stops the nodes: an exception or Ctrl-C leaves the block;
+    SIGTERM (in the main thread) is turned into the same ``KeyboardInterrupt`` for the session's time; and
+    ``kill -9`` leaves the nodes their parent-death signal (ros/launching.py), a SIGTERM each.
+    """
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
     procs: list[ChildProcess] = []
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _interrupt)
 
     def start(package: str, executable: str, params: dict[str, Any], **kwargs: Any) -> NodeProcess:
         proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log", **kwargs)
@@ -224,3 +234,10 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
         ctx.try_shutdown()
         for proc in reversed(procs):
             proc.stop()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM as Ctrl-C: the session's block is left through its ``finally``, which stops the nodes."""
+    raise KeyboardInterrupt
