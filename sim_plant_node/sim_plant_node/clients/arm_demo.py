@@ -561,6 +561,9 @@ def main(argv: list[str] | None = None) -> int:
     except (TimeoutError, RuntimeError) as err:  # a wait that failed, a refused goal: one line, no traceback
         print(f"demo arm: {err}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the nodes were stopped on the way out; one line, no traceback
+        print("\ndemo arm: interrupted; the nodes were stopped", file=sys.stderr)
+        return 130
 
 
 def _main(argv: list[str] | None) -> int:
