@@ -172,6 +172,23 @@ class Calibrator:
         self.spin_until(lambda: self.imu_stamp >= stamp, float(self.p.timeouts.data),
                         f"accelerometer data on {self.imu_topic} up to {what} (t = {stamp:.3f} s)")
 
+    def _await_answer(self, sent: Any, what: str) -> None:
+        """Wait for the controller's answer to a goal while watching it as :meth:`_await_result` does: a live
+        controller answers at once, so its silence for timeouts.peer (or timeouts.server if shorter), or its
+        action server gone from the graph, is a dead or stalled controller (a kill between two goals)."""
+        bound, name = min((float(self.p.timeouts.peer), "timeouts.peer"), (float(self.p.timeouts.server),
+                                                                           "timeouts.server"))
+        with contextlib.suppress(Aborted):
+            self.spin_until(lambda: sent.done() or not self.action.server_is_ready(), bound, "")
+        if sent.done():
+            return
+        self.peer_lost = True
+        if not self.action.server_is_ready():
+            raise Aborted(f"the controller's action server {self.p.action} left the graph before it answered the"
+                          f" goal of {what} (the controller stopped?); rerun with --resume once it is back")
+        raise Aborted(f"no answer and no feedback from the controller for {bound:g} s after the goal of {what}"
+                      f" was sent ({name}): it died or stalled; rerun with --resume once it is back")
+
     def _await_result(self, result: Any, stamps: list[float], what: str) -> None:
         """Wait for a goal's result while watching the controller (timeouts.peer): its action server must stay
         in the graph, and its feedback (20 Hz of its time while a goal runs) must keep coming."""
@@ -218,7 +235,7 @@ class Calibrator:
 
         self.goal_what = what
         sent = self.sent = self.action.send_goal_async(goal, feedback_callback=on_feedback)
-        self.spin_until(sent.done, server, f"answer to the goal of {what}")
+        self._await_answer(sent, what)
         self.sent = None
         handle = sent.result()
         if not handle.accepted:

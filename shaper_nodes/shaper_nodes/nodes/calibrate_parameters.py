@@ -123,14 +123,15 @@ class SchedulerParams:
 class TimeoutsParams:
     """The parameters timeouts.*."""
 
-    server: float = param(30.0, "Wait for the action server and each goal's answer, s (wall).", (0.1, 3600.0),
+    server: float = param(30.0, "Wait for the action server, and for each goal's answer (at most timeouts.peer), s"
+                          " (wall).", (0.1, 3600.0),
                           read_only=True)
     data: float = param(30.0, "Wait for joint states and accelerometer data, s (wall).", (0.1, 3600.0),
                         read_only=True)
     result: float = param(600.0, "Wait for a goal's result, s (wall).", (1.0, 36000.0), read_only=True)
-    peer: float = param(10.0, "While a goal runs, the controller's silence that ends the run, s (wall): no feedback"
-                        " for this long, or its action server gone from the graph (at once), is a dead or stalled"
-                        " controller (the DDS lease alone takes 20 s to notice a killed process).",
+    peer: float = param(10.0, "While a goal is sent or runs, the controller's silence that ends the run, s (wall):"
+                        " no answer or feedback for this long, or its action server gone from the graph (at once), is"
+                        " a dead or stalled controller (the DDS lease alone takes 20 s to notice a killed process).",
                         (0.5, 3600.0), read_only=True)
 
 

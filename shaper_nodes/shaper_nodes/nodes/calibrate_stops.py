@@ -38,7 +38,8 @@ EXIT_ABORTED, EXIT_REFUSED, EXIT_WRITE_FAILED = 1, 2, 3
 EXIT_CANCELLED, EXIT_TERMINATED = 128 + signal.SIGINT, 128 + signal.SIGTERM  # 130, 143: the shells' convention
 #: the largest params file calibrate reads, bytes. The largest plan it takes (core.calibration.plan.MAX_POSES
 #: = 100 explicit poses of 6 joints) takes about 15 kB; a larger file is refused before anything parses it
-#: (rcl's parser and PyYAML took more than 240 s over a 37 MB file of 10^6 poses, deaf to Ctrl-C in rcl's).
+#: (before, a 37 MB file of 10^6 poses was still being parsed 90 s after calibrate started and 60 s after a
+#: SIGINT; the issue saw more than 240 s).
 MAX_PARAMS_FILE_BYTES = 1 << 20
 
 
