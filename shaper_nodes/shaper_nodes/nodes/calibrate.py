@@ -83,7 +83,7 @@ __all__ = ["EXIT_ABORTED", "EXIT_CANCELLED", "EXIT_REFUSED", "EXIT_TERMINATED", 
 
 POLL = 0.02  # s, executor spin granularity
 #: s, the longest a stop waits for the controller's answer to the cancel of the running goal
-CANCEL_WAIT = 2.0
+CANCEL_WAIT = 5.0
 
 
 class Calibrator:
