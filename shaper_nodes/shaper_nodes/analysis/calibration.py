@@ -19,11 +19,13 @@ each written to a temporary name and renamed, so a folder never holds half a fil
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import pathlib
-from collections.abc import Mapping, Sequence
+import signal
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +44,8 @@ from shaper_nodes.core.calibration import (
     worst_residual,
 )
 from shaper_nodes.core.calibration.plan import PlanError, config_from_dict, config_to_dict, plan_to_dict
+from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sensor_fault
+from shaper_nodes.core.lifetime import die_with_parent
 from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import Shaper
 from shaper_nodes.core.stamps import stamp_to_sec
@@ -61,6 +65,8 @@ WIRING = {"action": "/joint_trajectory_controller/follow_joint_trajectory", "joi
 #: of several processes on few cores spin against each other (on 2 cores: the default calibration's
 #: identification 10.8 s with them, 4.3 s without)
 SINGLE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: the flag of a pose whose accelerometer failed (flat, stuck, saturated, silent): no mode of it is used
+SENSOR_FAULT = "sensor_fault"
 
 
 @dataclass
@@ -140,31 +146,91 @@ def decays_of(index: int, data: PoseData) -> list[Decay]:
     return out
 
 
+def _worker_start(parent: int) -> None:
+    """A pool worker's start: it ends with the process that started it (``kill -9`` of calibrate leaves no
+    worker behind), and leaves Ctrl-C (sent to the whole process group) to that process, which stops it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(signal.SIGTERM, parent)
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int) -> Iterator[Any]:
+    """A pool of ``workers`` identifying processes (spawned, one BLAS thread each) that do not outlive the
+    process that started them: each asks for SIGTERM when its parent ends (:func:`.core.lifetime.die_with_parent`).
+
+    prctl's parent-death signal follows the *thread* that started the worker: use the pool (submit, map) from
+    the main thread (calibrate and ``--from-bag`` do), whose life is the process's. Leaving the ``with`` block by
+    an exception (Ctrl-C, SIGTERM) ends the workers at once instead of waiting for their poses.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    saved = {k: os.environ.get(k) for k in SINGLE_THREAD}
+    os.environ.update(SINGLE_THREAD)  # read by each worker as it starts (spawn copies the environment)
+    try:
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_worker_start, initargs=(os.getpid(),))
+        try:
+            yield pool
+        except BaseException:
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def pose_sensor_fault(data: PoseData, max_abs: float = MAX_ABS_ACCEL) -> str | None:
+    """Why a pose's accelerometer cannot be trusted, or None: per excitation (START to END, the motion and its
+    decay) no sample (silent), non-finite samples, every axis on one value (stuck or dead: a working sensor's
+    reading moves with the motion and its noise), or samples at or beyond ``max_abs`` m/s^2 (saturated).
+    The words are :func:`.core.learning.samples.sensor_fault`'s, the identifier's and learners' check."""
+    t = np.asarray(data.imu_t, dtype=float)
+    y = np.asarray(data.imu, dtype=float).reshape(-1, 3)
+    starts = {rep: s for kind, rep, s in data.events if kind == START}
+    for kind, rep, end in sorted(data.events, key=lambda e: (e[1], e[0])):
+        if kind != END:
+            continue
+        begin = starts.get(rep, min((s for k, r, s in data.events if r == rep), default=end))
+        window = y[(t >= begin) & (t <= end)]
+        why = sensor_fault(window)
+        over = out_of_range(window, max_abs) if why is None else None
+        if over is not None:
+            why = over.describe("accelerometer", "m/s^2", "saturated")
+        if why is not None:
+            return f"excitation {rep + 1}: {why}"
+    return None
+
+
 def compute(setup: dict[str, Any], poses: Sequence[PoseData], workers: int = 1) -> Calibration:
     """The pose map from the recorded samples, and the rule base, fallback and predictions it gives.
 
-    ``workers`` > 1 identifies poses in that many processes; the result does not depend on it."""
+    A pose whose accelerometer failed (:func:`pose_sensor_fault`) is not identified: its result has no
+    mode and the flag ``sensor_fault: ...`` (so it is not OK, and its place in the rule base takes its
+    neighbour's modes, as for any pose without modes). ``workers`` > 1 identifies poses in that many
+    processes (:func:`worker_pool`); the result does not depend on it."""
     plan, settings, family, threshold = plan_from_setup(setup)
     by_index = {p.index: p for p in poses}
+    faults = {i: pose_sensor_fault(p) for i, p in by_index.items()}
+    steps = [step for step in plan.steps if step.index in by_index]
     jobs = [(step.index, step.name, step.pose, step.grid_index, decays_of(step.index, by_index[step.index]), settings)
-            for step in plan.steps if step.index in by_index]
+            for step in steps if faults[step.index] is None]
     if workers > 1 and len(jobs) > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        saved = {k: os.environ.get(k) for k in SINGLE_THREAD}
-        os.environ.update(SINGLE_THREAD)  # read by each worker as it starts (spawn copies the environment)
-        try:
-            with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as pool:
-                results = list(pool.map(identify_pose, *zip(*jobs, strict=True)))
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+        with worker_pool(min(workers, len(jobs))) as pool:
+            identified = list(pool.map(identify_pose, *zip(*jobs, strict=True)))
     else:
-        results = [identify_pose(*job) for job in jobs]
+        identified = [identify_pose(*job) for job in jobs]
+    found = iter(identified)
+    results = [next(found) if faults[step.index] is None else
+               PoseResult(step.index, step.name, np.asarray(step.pose, float), step.grid_index, [], [],
+                          [f"{SENSOR_FAULT}: {faults[step.index]}"])
+               for step in steps]
     return assemble(plan, settings, family, threshold, results, wiring_of(setup))
 
 
@@ -276,6 +342,10 @@ def _mode_dict(m: Any) -> dict[str, float]:
             "damping_ratio": _r(m.zeta), "damping_ratio_std": _r(m.zeta_std, 3), "amplitude": _r(m.amplitude, 4)}
 
 
+def _sensor_fault(r: PoseResult) -> str | None:
+    return next((f[len(SENSOR_FAULT) + 2:] for f in r.flags if f.startswith(SENSOR_FAULT + ": ")), None)
+
+
 def report_dict(cal: Calibration) -> dict[str, Any]:
     """report.json: plan, settings, per pose its positions, modes (one-sigma) and flags, the choices."""
     names = list(cal.plan.config.joint_names)
@@ -287,7 +357,8 @@ def report_dict(cal: Calibration) -> dict[str, Any]:
                       "modes": [_mode_dict(m) for m in r.modes],
                       "repeats": [[{"frequency_hz": _r(m.hz), "damping_ratio": _r(m.zeta)} for m in rep]
                                   for rep in r.repeats],
-                      "flags": list(r.flags), "ok": r.ok,
+                      "flags": list(r.flags), "ok": r.ok and not _sensor_fault(r),
+                      "sensor_fault": _sensor_fault(r),
                       "predicted_residual": {k: _r(v, 4) for k, v in res.items()}})
     s = cal.settings
     out: dict[str, Any] = {

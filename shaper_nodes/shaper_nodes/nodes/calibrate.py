@@ -16,11 +16,13 @@ its MCAP file ``pose_NNN.mcap`` with it, when the pose is complete). At the end 
 goes back home and writes, from the recording (:mod:`shaper_nodes.analysis.calibration`),
 ``report.json``, ``report.md`` with figures, ``scheduler.yaml`` and ``shaper.yaml``.
 
-Stops: a goal the controller rejects or aborts, a missing action server or accelerometer, or
-Ctrl-C (the running goal is cancelled at the controller) end the run with a message naming the
-cause; the pose in progress is discarded, completed poses stay, no report is written, and
-``--resume`` continues from the first pose not completed (also after ``kill -9``). A refused
-plan (limits, sizes) writes nothing.
+Stops: a goal the controller rejects or aborts, a dead or silent controller (``timeouts.peer``), a missing
+action server or accelerometer, a failed write (a full disk), Ctrl-C or SIGTERM end the run with one line
+naming the cause and a status of its own (:mod:`.calibrate_stops`); on every one of them the running goal is
+cancelled at the controller, the pose in progress is discarded, completed poses stay, no report is written, and
+``--resume`` continues from the first pose not completed (also after ``kill -9``, which leaves no analysis
+worker behind). A refused plan (limits, sizes; a params file over 1 MiB before it is parsed) writes nothing.
+A pose whose accelerometer was flat, stuck, saturated or silent is reported as a sensor fault and not used.
 
 Every wait is on the robot's data (feedback stamps, accelerometer stamps), so it runs the same
 on a robot, on a simulator in lockstep, or under load. Parameters: :data:`PARAMETERS`
@@ -39,12 +41,10 @@ import shutil
 import struct
 import sys
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from rclpy.parameter import Parameter
 
 from shaper_nodes.analysis.calibration import (
     EVENTS_TOPIC,
@@ -56,208 +56,34 @@ from shaper_nodes.analysis.calibration import (
     setup_dict,
 )
 from shaper_nodes.analysis.calibration_report import write_outputs
-from shaper_nodes.core.calibration import IdentifySettings, Plan, PlanConfig, PlanError, PoseStep, Waypoint
-from shaper_nodes.core.calibration.plan import MAX_AMPLITUDE, make_limits, make_plan, quintic_time
+from shaper_nodes.core.calibration import Plan, PlanError, PoseStep, Waypoint
 from shaper_nodes.core.calibration.plan import approach as plan_approach
+from shaper_nodes.core.calibration.plan import make_plan, quintic_time
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
 from shaper_nodes.core.files import write_atomic
-from shaper_nodes.recordings import COMPRESSIONS
 from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.parameters import Spec, declare_all, param, table, unflat
+from shaper_nodes.ros.parameters import declare_all
 
-EXIT_REFUSED, EXIT_ABORTED, EXIT_CANCELLED = 2, 1, 130
+from .calibrate_parameters import PARAMETERS, CalibrateParams, config_from_values, settings_from_values
+from .calibrate_stops import (
+    EXIT_ABORTED,
+    EXIT_CANCELLED,
+    EXIT_REFUSED,
+    EXIT_TERMINATED,
+    EXIT_WRITE_FAILED,
+    Aborted,
+    Stopped,
+    WriteFailed,
+    params_file_too_large,
+    stop_on_signals,
+)
+
+__all__ = ["EXIT_ABORTED", "EXIT_CANCELLED", "EXIT_REFUSED", "EXIT_TERMINATED", "EXIT_WRITE_FAILED", "PARAMETERS",
+           "Aborted", "CalibrateParams", "Calibrator", "config_from_values", "main", "settings_from_values"]
+
 POLL = 0.02  # s, executor spin granularity
-_SA, _DA = Parameter.Type.STRING_ARRAY, Parameter.Type.DOUBLE_ARRAY
-
-
-class Aborted(RuntimeError):
-    """The run stopped: the message names why."""
-
-
-@dataclass(frozen=True)
-class TopicsParams:
-    """The parameters topics.*."""
-
-    joint_states: str = param("/joint_states", "Joint states (positions, rad): where the arm is.",
-                              read_only=True)
-    imu: str = param("/tip_imu", "Accelerometer (sensor_msgs/Imu, linear_acceleration m/s^2) on the tool.",
-                     read_only=True)
-    imu_reliable: bool = param(False, "Subscribe to the accelerometer RELIABLE (lossless from a reliable"
-         " publisher such as the simulator in lockstep; a best-effort sensor driver does not match it)."
-         " Default best effort, deep queue.", read_only=True)
-
-
-@dataclass(frozen=True)
-class LimitsParams:
-    """The parameters limits.*."""
-
-    lower: tuple[float, ...] = param([-2 * math.pi], "Lowest joint positions, rad (one per joint, or one for all).",
-                                     read_only=True)
-    upper: tuple[float, ...] = param([2 * math.pi], "Highest joint positions, rad.", read_only=True)
-    max_velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s.", read_only=True)
-    max_acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2.", read_only=True)
-
-
-@dataclass(frozen=True)
-class GridParams:
-    """The parameters grid.*."""
-
-    joints: tuple[str, ...] = param(None, "Joints whose positions change the dynamics: the grid's axes (and the"
-                                    " scheduler's premises).", read_only=True, type=_SA)
-    lower: tuple[float, ...] = param(None, "Lowest grid value per grid joint, rad.", read_only=True, type=_DA)
-    upper: tuple[float, ...] = param(None, "Highest grid value per grid joint, rad.", read_only=True, type=_DA)
-    counts: tuple[int, ...] = param(None, "Grid values per grid joint (evenly spaced; the home pose's value is added).",
-                                    read_only=True, type=Parameter.Type.INTEGER_ARRAY)
-
-
-@dataclass(frozen=True)
-class FollowParams:
-    """The parameters follow.*."""
-
-    joints: tuple[str, ...] = param(None, "Joints that move with the grid to keep the tool's orientation.",
-                                    read_only=True, type=_SA)
-    gains: tuple[float, ...] = param(None, "Per follow joint, one gain per grid joint: q_f = base_f + sum_j g_j (q_j -"
-                                     " base_j).", read_only=True, type=_DA)
-
-
-@dataclass(frozen=True)
-class ExcitationParams:
-    """The parameters excitation.*."""
-
-    joints: tuple[str, ...] = param(None, "Joints moved by the excitation.", read_only=True, type=_SA)
-    amplitude: tuple[float, ...] = param(
-        None, f"Excursion per excitation joint, rad (signed, at most {MAX_AMPLITUDE:g}).",
-        read_only=True, type=_DA)
-    max_velocity: float = param(0.5, "Largest speed of the excitation, rad/s.", (1e-3, 10.0), read_only=True)
-    max_acceleration: float = param(10.0, "Largest acceleration of the excitation, rad/s^2.", (1e-3, 100.0),
-                                    read_only=True)
-    repeats: int = param(3, "Excitations per pose.", (1, 10), read_only=True)
-    decay: float = param(2.0, "Free vibration recorded after each excitation, s.", (0.2, 10.0),
-                         read_only=True)
-
-
-@dataclass(frozen=True)
-class ApproachParams:
-    """The parameters approach.*."""
-
-    max_velocity: float = param(0.5, "Largest speed between poses, rad/s.", (1e-3, 10.0), read_only=True)
-    max_acceleration: float = param(2.0, "Largest acceleration between poses, rad/s^2.", (1e-3, 100.0),
-                                    read_only=True)
-    settle: float = param(1.0, "Rest at a pose before its first excitation, s.", (0.0, 60.0), read_only=True)
-
-
-@dataclass(frozen=True)
-class IdentificationParams:
-    """The parameters identification.*."""
-
-    method: str = param("fit", "Identification method (fit, spectral, matrix_pencil).",
-                        choices=("fit", "spectral", "matrix_pencil"), read_only=True)
-    max_modes: int = param(4, "Most modes mapped per pose (one more is fitted beside them).", (1, 6),
-                           read_only=True)
-    band_hz: tuple[float, ...] = param([2.0, 45.0], "Band searched for modes [low, high], Hz.", read_only=True)
-    max_damping: float = param(0.15, "Modes damped more than this are not mapped (they do not ring).",
-                               (0.01, 0.9), read_only=True)
-    agreement: float = param(0.02, "Largest relative spread of a mode's frequency over the repeats"
-                             " before the pose is flagged.", (1e-4, 0.5), read_only=True)
-
-
-@dataclass(frozen=True)
-class SchedulerParams:
-    """The parameters scheduler.*."""
-
-    family: str = param("zv", "Shaper family of the rule base and the fallback.", read_only=True)
-    premise_threshold: float = param(0.02, "A grid joint along which the modes change less than this"
-                                     " (relative) is not a premise.", (0.0, 1.0), read_only=True)
-
-
-@dataclass(frozen=True)
-class TimeoutsParams:
-    """The parameters timeouts.*."""
-
-    server: float = param(30.0, "Wait for the action server and each goal's answer, s (wall).", (0.1, 3600.0),
-                          read_only=True)
-    data: float = param(30.0, "Wait for joint states and accelerometer data, s (wall).", (0.1, 3600.0),
-                        read_only=True)
-    result: float = param(600.0, "Wait for a goal's result, s (wall).", (1.0, 36000.0), read_only=True)
-    peer: float = param(10.0, "While a goal runs, the controller's silence that ends the run, s (wall): no feedback"
-                        " for this long, or its action server gone from the graph (at once), is a dead or stalled"
-                        " controller (the DDS lease alone takes 20 s to notice a killed process).",
-                        (0.5, 3600.0), read_only=True)
-
-
-@dataclass(frozen=True)
-class CalibrateParams:
-    """The calibrate node's parameters (see config/calibrate.yaml)."""
-
-    joint_names: tuple[str, ...] = param(None, "The controller's joints, in the order of every per-joint list below.",
-                                         read_only=True, type=_SA)
-    action: str = param("/joint_trajectory_controller/follow_joint_trajectory", "FollowJointTrajectory action to"
-         " send the moves to (the controller's, or the shaper node's proxy with its shaper set to none).",
-         read_only=True)
-    topics: TopicsParams = field(default_factory=TopicsParams)
-    limits: LimitsParams = field(default_factory=LimitsParams)
-    base_pose: tuple[float, ...] = param(None, "Pose of the joints not on the grid, rad; empty: where the arm is now.",
-                                         read_only=True, type=_DA)
-    home_pose: tuple[float, ...] = param(
-        None, "Home pose, rad (calibrated first; its modes give the fallback shaper; on the grid"
-        " when inside its ranges); empty: base_pose.", read_only=True, type=_DA)
-    grid: GridParams = field(default_factory=GridParams)
-    poses: tuple[float, ...] = param(
-        None, "Instead of a grid: explicit poses, rad, one after the other (len(joint_names) values"
-        " each).", read_only=True, type=_DA)
-    follow: FollowParams = field(default_factory=FollowParams)
-    excitation: ExcitationParams = field(default_factory=ExcitationParams)
-    approach: ApproachParams = field(default_factory=ApproachParams)
-    identification: IdentificationParams = field(default_factory=IdentificationParams)
-    scheduler: SchedulerParams = field(default_factory=SchedulerParams)
-    compression: str = param("none", "MCAP chunk compression of the recording: 'zstd' compresses each chunk (as the"
-         " recorder's compression), 'none' writes them as they are.", choices=COMPRESSIONS, read_only=True)
-    timeouts: TimeoutsParams = field(default_factory=TimeoutsParams)
-
-
-#: the calibrate node's parameters (derived from CalibrateParams; see config/calibrate.yaml)
-PARAMETERS: tuple[Spec, ...] = table(CalibrateParams)
-
-
-def config_from_values(v: CalibrateParams | Mapping[str, Any], here: np.ndarray | None) -> PlanConfig:
-    """The plan's configuration from the node's parameters (or a mapping of them keyed by name, as a
-    params file gives them; ``here``: the arm's pose now)."""
-    p = v if isinstance(v, CalibrateParams) else unflat(CalibrateParams, v)
-    names = p.joint_names
-    if not names:
-        raise PlanError("joint_names is empty: the controller's joints are needed")
-    n = len(names)
-    base = np.asarray(p.base_pose or (here if here is not None else []), dtype=float)
-    if base.size == 0:
-        raise PlanError("base_pose is empty and no joint states came to take the present pose")
-    home = np.asarray(p.home_pose or base, dtype=float)
-    grid = p.grid.joints
-    follow_joints = list(p.follow.joints)
-    gains = np.asarray(p.follow.gains, dtype=float)
-    if follow_joints and gains.size != len(follow_joints) * len(grid):
-        raise PlanError(f"follow.gains needs {len(grid)} gains per follow joint ({len(follow_joints) * len(grid)}"
-                        f" values), got {gains.size}")
-    follow = {j: tuple(gains[i * len(grid):(i + 1) * len(grid)]) for i, j in enumerate(follow_joints)}
-    flat = np.asarray(p.poses, dtype=float)
-    if flat.size % n:
-        raise PlanError(f"poses needs {n} values per pose, got {flat.size} values")
-    lim, exc, app = p.limits, p.excitation, p.approach
-    return PlanConfig(
-        names, make_limits(n, list(lim.lower), list(lim.upper), list(lim.max_velocity), list(lim.max_acceleration)),
-        base, home, grid, p.grid.lower, p.grid.upper, tuple(int(c) for c in p.grid.counts),
-        tuple(tuple(q) for q in flat.reshape(-1, n)), follow, exc.joints, exc.amplitude,
-        float(exc.max_velocity), float(exc.max_acceleration), int(exc.repeats),
-        float(exc.decay), float(app.max_velocity), float(app.max_acceleration), float(app.settle))
-
-
-def settings_from_values(v: CalibrateParams | Mapping[str, Any]) -> IdentifySettings:
-    """The identification settings from the node's parameters (or a mapping of them keyed by name)."""
-    ident = (v if isinstance(v, CalibrateParams) else unflat(CalibrateParams, v)).identification
-    band = [float(x) for x in ident.band_hz]
-    if len(band) != 2 or not 0 <= band[0] < band[1]:
-        raise PlanError(f"identification.band_hz must be [low, high] with 0 <= low < high, got {band}")
-    return IdentifySettings(str(ident.method), int(ident.max_modes), (band[0], band[1]), float(ident.agreement),
-                            float(ident.max_damping))
+#: s, the longest a stop waits for the controller's answer to the cancel of the running goal
+CANCEL_WAIT = 5.0
 
 
 class Calibrator:
@@ -276,7 +102,11 @@ class Calibrator:
         self.position: np.ndarray | None = None
         self.imu_stamp = -math.inf
         self.writer: Any = None
-        self.goal: Any = None
+        self.write_failed: WriteFailed | None = None  # the recording's failure: nothing more is written
+        self.goal: Any = None  # the running goal's handle (cancelled on every stop), what it is, its answer
+        self.goal_what = ""
+        self.sent: Any = None
+        self.peer_lost = False  # the controller went away or went silent: a cancel is sent, not awaited
         reliability = ReliabilityPolicy.RELIABLE if params.topics.imu_reliable else ReliabilityPolicy.BEST_EFFORT
         deep = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
         self.imu_topic = params.topics.imu
@@ -289,12 +119,24 @@ class Calibrator:
         self._fjt = FollowJointTrajectory
 
     # ------------------------------------------------------------------ data
+    def _write(self, topic: str, type_name: str, stamp_ns: int, data: bytes) -> None:
+        """Record one message; a failed write (a full disk) abandons the pose's file and raises
+        :class:`WriteFailed` out of the callback, through the executor, to the run."""
+        if self.writer is None or self.write_failed is not None:
+            return
+        try:
+            self.writer.add_topic(topic, type_name)
+            self.writer.write(topic, stamp_ns, data)
+        except OSError as err:
+            self.write_failed = WriteFailed(err, self.writer.file)
+            self.writer.abandon()
+            raise self.write_failed from None
+
     def _record(self, topic: str, type_name: str, msg: Any, stamp: float) -> None:
         if self.writer is not None:
             from rclpy.serialization import serialize_message
 
-            self.writer.add_topic(topic, type_name)
-            self.writer.write(topic, int(round(stamp * 1e9)), serialize_message(msg))
+            self._write(topic, type_name, int(round(stamp * 1e9)), serialize_message(msg))
 
     def _on_imu(self, raw: bytes) -> None:
         """Raw CDR (the cheapest callback at the simulator's rates): the header stamp read in place."""
@@ -302,9 +144,7 @@ class Calibrator:
         t = sec + nanosec * 1e-9
         self.imu_stamp = max(self.imu_stamp, t)
         self.lockstep.took(self.imu_topic, t)
-        if self.writer is not None:
-            self.writer.add_topic(self.imu_topic, "sensor_msgs/msg/Imu")
-            self.writer.write(self.imu_topic, sec * 1_000_000_000 + nanosec, raw)
+        self._write(self.imu_topic, "sensor_msgs/msg/Imu", sec * 1_000_000_000 + nanosec, raw)
 
     def _on_joint_states(self, msg: Any) -> None:
         try:
@@ -332,6 +172,23 @@ class Calibrator:
         self.spin_until(lambda: self.imu_stamp >= stamp, float(self.p.timeouts.data),
                         f"accelerometer data on {self.imu_topic} up to {what} (t = {stamp:.3f} s)")
 
+    def _await_answer(self, sent: Any, what: str) -> None:
+        """Wait for the controller's answer to a goal while watching it as :meth:`_await_result` does: a live
+        controller answers at once, so its silence for timeouts.peer (or timeouts.server if shorter), or its
+        action server gone from the graph, is a dead or stalled controller (a kill between two goals)."""
+        bound, name = min((float(self.p.timeouts.peer), "timeouts.peer"), (float(self.p.timeouts.server),
+                                                                           "timeouts.server"))
+        with contextlib.suppress(Aborted):
+            self.spin_until(lambda: sent.done() or not self.action.server_is_ready(), bound, "")
+        if sent.done():
+            return
+        self.peer_lost = True
+        if not self.action.server_is_ready():
+            raise Aborted(f"the controller's action server {self.p.action} left the graph before it answered the"
+                          f" goal of {what} (the controller stopped?); rerun with --resume once it is back")
+        raise Aborted(f"no answer and no feedback from the controller for {bound:g} s after the goal of {what}"
+                      f" was sent ({name}): it died or stalled; rerun with --resume once it is back")
+
     def _await_result(self, result: Any, stamps: list[float], what: str) -> None:
         """Wait for a goal's result while watching the controller (timeouts.peer): its action server must stay
         in the graph, and its feedback (20 Hz of its time while a goal runs) must keep coming."""
@@ -343,11 +200,11 @@ class Calibrator:
             if len(stamps) != count:
                 heard, count = now, len(stamps)
             if not self.action.server_is_ready():
-                self.goal = None
+                self.peer_lost = True
                 raise Aborted(f"the controller's action server {self.p.action} left the graph during {what}"
                               " (the controller stopped?); rerun with --resume once it is back")
             if now - heard > silence:
-                self.goal = None
+                self.peer_lost = True
                 raise Aborted(f"no feedback from the controller for {silence:g} s during {what} (timeouts.peer): it"
                               " died or stalled; rerun with --resume once it is back")
             if now > deadline:
@@ -376,8 +233,10 @@ class Calibrator:
         def on_feedback(m: Any) -> None:
             stamps.append(time_to_sec(m.feedback.header.stamp))
 
-        sent = self.action.send_goal_async(goal, feedback_callback=on_feedback)
-        self.spin_until(sent.done, server, f"answer to the goal of {what}")
+        self.goal_what = what
+        sent = self.sent = self.action.send_goal_async(goal, feedback_callback=on_feedback)
+        self._await_answer(sent, what)
+        self.sent = None
         handle = sent.result()
         if not handle.accepted:
             raise Aborted(f"the controller rejected the goal of {what} (see its log)")
@@ -397,13 +256,32 @@ class Calibrator:
             raise Aborted(f"no feedback from the controller for {what}: its start time is unknown")
         return min(stamps)
 
-    def cancel(self) -> None:
-        """Cancel the goal in progress at the controller (after Ctrl-C)."""
+    def cancel(self) -> str:
+        """Cancel the goal running at the controller, on every stop (a signal, a failed write, a dead
+        controller, an error); returns what happened in words for the stop's line ('' if no goal ran).
+
+        A goal sent but not answered yet is awaited (at most :data:`CANCEL_WAIT` s) and cancelled if
+        accepted; the controller's answer to the cancel is awaited at most :data:`CANCEL_WAIT` s, and not
+        at all when the controller went away or silent (the cancel is still sent, for a stalled one)."""
+        wait = 0.0 if self.peer_lost else CANCEL_WAIT
+        if self.goal is None and self.sent is not None and wait:
+            with contextlib.suppress(Aborted):
+                self.spin_until(self.sent.done, wait, "answer to the goal")
+            if self.sent.done() and self.sent.result().accepted:
+                self.goal = self.sent.result()
+        self.sent = None
         if self.goal is None:
-            return
-        future = self.goal.cancel_goal_async()
+            return ""
+        handle, self.goal = self.goal, None
+        future = handle.cancel_goal_async()
+        if not wait:
+            self.executor.spin_once(timeout_sec=0.0)
+            return f"; a cancel of {self.goal_what} was sent to the controller"
         with contextlib.suppress(Aborted):
-            self.spin_until(future.done, 5.0, "answer to the cancel request")
+            self.spin_until(future.done, wait, "answer to the cancel request")
+        if future.done() and future.result() is not None and future.result().goals_canceling:
+            return f"; {self.goal_what} was cancelled at the controller"
+        return f"; a cancel of {self.goal_what} was sent to the controller (not confirmed within {wait:g} s)"
 
     # ------------------------------------------------------------------ one pose
     def event(self, kind: int, repeat: int, pose: PoseStep, stamp: float) -> None:
@@ -425,7 +303,11 @@ class Calibrator:
         partial = folder.with_name(folder.name + ".partial")
         if partial.exists():
             shutil.rmtree(partial)
-        self.writer = BagWriter(partial, compression=str(self.p.compression))
+        try:
+            self.writer = BagWriter(partial, compression=str(self.p.compression))
+        except OSError as err:
+            raise WriteFailed(err, partial) from None
+        self.write_failed = None
         try:
             self._record(SETUP_TOPIC, "std_msgs/msg/String", String(data=json.dumps(setup, sort_keys=True)),
                          max(self.imu_stamp, 0.0))
@@ -438,9 +320,13 @@ class Calibrator:
                 self.event(0, rep, step, start)
                 self.event(1, rep, step, motion_end)
                 self.event(2, rep, step, motion_end + step.decay)
-            self.writer.close()
-            self.writer = None
-            rename_recording(partial, folder)  # pose_NNN/pose_NNN.mcap; the folder's rename is the commit
+            file = self.writer.file
+            try:
+                self.writer.close()
+                self.writer = None
+                rename_recording(partial, folder)  # pose_NNN/pose_NNN.mcap; the folder's rename is the commit
+            except OSError as err:
+                raise WriteFailed(err, file) from None
             return self.lockstep.describe_lost(first, self.imu_stamp)
         finally:
             if self.writer is not None:  # stopped in the middle: the pose is discarded
@@ -476,7 +362,11 @@ def from_bag(recording: pathlib.Path, out: pathlib.Path, workers: int) -> int:
     except PlanError as err:
         print(f"calibrate: {err}", file=sys.stderr)
         return EXIT_REFUSED
-    written = write_outputs(out, cal, str(recording))
+    try:
+        written = write_outputs(out, cal, str(recording))
+    except OSError as err:
+        print(f"calibrate: stopped: {WriteFailed(err, err.filename or out)}", file=sys.stderr)
+        return EXIT_WRITE_FAILED
     summary(cal)
     print("written: " + ", ".join(str(p) for p in written))
     return 0
@@ -490,34 +380,58 @@ def summary(cal: Any) -> None:
         print(f"  note: {n}")
 
 
+KEPT = "the pose in progress was discarded, completed poses are kept"
+
+
 @survives_closed_pipe
 def main(args: list[str] | None = None) -> int:
+    from rclpy.utilities import remove_ros_args
+
+    from shaper_nodes.ros.node_main import params_file_problem, params_files
+
+    stop_on_signals()  # SIGINT and SIGTERM: Stopped, wherever the run is (parsing included)
+    argv = list(sys.argv if args is None else args)
+    try:
+        # before any parser reads the file: its size, then what rcl would report as a traceback
+        problem = params_file_too_large(params_files(argv)) or params_file_problem(argv)
+        if problem is not None:
+            print(f"calibrate: refused: {problem}", file=sys.stderr)
+            return EXIT_REFUSED
+        opts = parse_args(remove_ros_args(argv)[1:])
+        if opts.from_bag is not None:
+            return from_bag(opts.from_bag, opts.out or opts.from_bag.parent, opts.workers)
+        if opts.resume and (opts.out is None or not opts.execute):
+            print("calibrate: --resume needs --execute and the --out folder of the calibration to continue",
+                  file=sys.stderr)
+            return EXIT_REFUSED
+        return _node_main(argv, opts)
+    except KeyboardInterrupt as err:  # before or after the node ran
+        code, head = _signalled(err)
+        print(f"{head}; nothing was moved or is running", file=sys.stderr)
+        return code
+
+
+def _signalled(err: KeyboardInterrupt) -> tuple[int, str]:
+    if isinstance(err, Stopped):
+        return err.status, f"\ncalibrate: cancelled by {err}"
+    return EXIT_CANCELLED, "\ncalibrate: cancelled by SIGINT"
+
+
+def _node_main(argv: list[str], opts: argparse.Namespace) -> int:
+    """The run with its node; every way out cancels the running goal and ends in one line (see calibrate_stops)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.signals import SignalHandlerOptions
-    from rclpy.utilities import remove_ros_args
 
-    from shaper_nodes.ros.node_main import params_file_problem
     from shaper_nodes.ros.parameters import read
 
-    argv = list(sys.argv if args is None else args)
-    problem = params_file_problem(argv)  # before rcl reads the file (remove_ros_args does)
-    if problem is not None:
-        print(f"calibrate: refused: {problem}", file=sys.stderr)
-        return EXIT_REFUSED
-    opts = parse_args(remove_ros_args(argv)[1:])
-    if opts.from_bag is not None:
-        return from_bag(opts.from_bag, opts.out or opts.from_bag.parent, opts.workers)
-    if opts.resume and (opts.out is None or not opts.execute):
-        print("calibrate: --resume needs --execute and the --out folder of the calibration to continue",
-              file=sys.stderr)
-        return EXIT_REFUSED
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = Node("calibrate")
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     cal: Calibrator | None = None
+    code, head, tail = 0, "", ""
     try:
         declare_all(node, PARAMETERS)
         v = read(node, CalibrateParams)  # a one-shot command: its parameters do not change while it runs
@@ -525,22 +439,25 @@ def main(args: list[str] | None = None) -> int:
             raise PlanError("parameter joint_names is required: the controller's joints (see config/calibrate.yaml)")
         cal = Calibrator(node, executor, v)
         return _run(cal, v, opts)
-    except KeyboardInterrupt:
-        if cal is not None:
-            cal.cancel()
-        print("\ncalibrate: cancelled; the pose in progress was discarded, completed poses are kept (--resume)",
-              file=sys.stderr)
-        return EXIT_CANCELLED
+    except KeyboardInterrupt as err:  # Ctrl-C, SIGTERM
+        (code, head), tail = _signalled(err), f"; {KEPT} (--resume)"
     except (PlanError, ValueError) as err:
-        print(f"calibrate: refused: {err}", file=sys.stderr)
-        return EXIT_REFUSED
+        code, head = EXIT_REFUSED, f"calibrate: refused: {err}"
+    except WriteFailed as err:
+        code, head, tail = EXIT_WRITE_FAILED, f"calibrate: stopped: {err}", f"; {KEPT}: free space, then --resume"
     except Aborted as err:
-        print(f"calibrate: aborted: {err}", file=sys.stderr)
-        return EXIT_ABORTED
+        code, head = EXIT_ABORTED, f"calibrate: aborted: {err}"
     finally:
+        try:
+            note = cal.cancel() if cal is not None else ""  # on every stop, an unforeseen error's too
+        except Exception as err:
+            note = f"; the running goal could not be cancelled ({err})"
+        if head:
+            print(head + note + tail, file=sys.stderr)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
+    return code
 
 
 def _run(cal: Calibrator, v: CalibrateParams, opts: argparse.Namespace) -> int:
@@ -567,8 +484,11 @@ def _run(cal: Calibrator, v: CalibrateParams, opts: argparse.Namespace) -> int:
     if not opts.resume:
         if out.exists():
             raise PlanError(f"{out} exists: give another --out, or --resume to continue it")
-        (out / "recording").mkdir(parents=True)
-        write_atomic(out / "plan.json", json.dumps(setup, indent=1, sort_keys=True) + "\n")
+        try:
+            (out / "recording").mkdir(parents=True)
+            write_atomic(out / "plan.json", json.dumps(setup, indent=1, sort_keys=True) + "\n")
+        except OSError as err:
+            raise WriteFailed(err, err.filename or out / "plan.json") from None
     return _execute(cal, plan, setup, out, opts.workers)
 
 
@@ -607,7 +527,10 @@ def _execute(cal: Calibrator, plan: Plan, setup: dict[str, Any], out: pathlib.Pa
     print("calibrate: identifying the modes at every pose ...", flush=True)
     setup_read, poses = read_recording(recording)
     result = compute(setup_read, poses, workers=workers)
-    written = write_outputs(out, result, "recording")
+    try:
+        written = write_outputs(out, result, "recording")
+    except OSError as err:
+        raise WriteFailed(err, err.filename or out) from None
     summary(result)
     print(f"calibrate: done in {time.monotonic() - t_wall:.0f} s; written: " + ", ".join(p.name for p in written))
     return 0
