@@ -556,14 +556,16 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .conductor import interrupted
+
     try:
         return _main(argv)
-    except (TimeoutError, RuntimeError) as err:  # a wait that failed, a refused goal: one line, no traceback
-        print(f"demo arm: {err}", file=sys.stderr)
+    except (TimeoutError, RuntimeError, KeyboardInterrupt) as err:
+        if interrupted() or isinstance(err, KeyboardInterrupt):  # Ctrl-C or SIGTERM: the nodes were stopped
+            print(f"\ndemo arm: interrupted ({interrupted() or 'SIGINT'}); the nodes were stopped", file=sys.stderr)
+            return 130
+        print(f"demo arm: {err}", file=sys.stderr)  # a wait that failed, a refused goal: one line, no traceback
         return 1
-    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the nodes were stopped on the way out; one line, no traceback
-        print("\ndemo arm: interrupted; the nodes were stopped", file=sys.stderr)
-        return 130
 
 
 def _main(argv: list[str] | None) -> int:

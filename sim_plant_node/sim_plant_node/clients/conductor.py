@@ -218,9 +218,11 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
     procs: list[ChildProcess] = []
-    previous = None
+    previous: dict[signal.Signals, Any] = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _interrupt)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            if signal.getsignal(sig) is not signal.SIG_IGN:  # a background job of a shell ignores SIGINT
+                previous[sig] = signal.signal(sig, _interrupt)
 
     def start(package: str, executable: str, params: dict[str, Any], **kwargs: Any) -> NodeProcess:
         proc = NodeProcess(package, executable, params, log_path=logs / f"{prefix}-{executable}.log", **kwargs)
@@ -234,10 +236,22 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
         ctx.try_shutdown()
         for proc in reversed(procs):
             proc.stop()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for num, handler in previous.items():
+            signal.signal(num, handler)
+
+
+#: the stop signals a session received (its caller reports an interruption, whatever the exception it ended in:
+#: an interrupt raised inside rclpy's wait can surface as another error from the clean-up after it)
+RECEIVED: list[int] = []
+
+
+def interrupted() -> str:
+    """The name of the first stop signal a session received ('' if none)."""
+    return signal.Signals(RECEIVED[0]).name if RECEIVED else ""
 
 
 def _interrupt(signum: int, frame: object) -> None:
-    """SIGTERM as Ctrl-C: the session's block is left through its ``finally``, which stops the nodes."""
+    """SIGINT or SIGTERM: recorded, then Ctrl-C's ``KeyboardInterrupt``: the session's block is left through its
+    ``finally``, which stops the nodes."""
+    RECEIVED.append(signum)
     raise KeyboardInterrupt
