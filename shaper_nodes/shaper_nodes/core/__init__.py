@@ -27,6 +27,8 @@ cycles
     cycle event codes (those of shaper_msgs/CycleEvent).
 checks
     The one home of the number and array checks, with errors that name the problem.
+memory
+    Freed memory given back to the system after something large was dropped (glibc ``malloc_trim``).
 files
     Files written whole (:func:`~shaper_nodes.core.files.write_atomic`): the old one or the new one.
 stamps

@@ -4,9 +4,16 @@ The shaper node serves ``control_msgs/action/FollowJointTrajectory`` (as joint_t
 does) and is a client of the controller's. For each goal:
 
 - goal request: the trajectory is shaped at once (which validates it: the node's joints in any
-  order, sizes, finite values, strictly increasing times; tolerances finite; no multi-DOF part).
-  An invalid goal is **rejected**, as joint_trajectory_controller rejects one, and the reason goes
-  to the node's log and ``/diagnostics``; nothing reaches the controller.
+  order, sizes, finite values, strictly increasing times; tolerances finite, at most one per joint;
+  no multi-DOF part). Its size is checked first, from the number of points and joints and the first
+  and last points' times, before any work on its points (``WholeShaping.check_size``): a goal too large
+  to shape is refused at once, whatever its length. An invalid goal is **rejected**, as
+  joint_trajectory_controller rejects one, and the reason goes to the node's log and ``/diagnostics``;
+  nothing reaches the controller. After refusing a large goal (:data:`RELEASE_ABOVE` values) the node
+  gives the memory its request held back to the system (core/memory.py), once rclpy has dropped it.
+  rclpy itself converts the whole request into Python objects before any of this runs: that part of a
+  huge goal's cost (about 2 s and 70 MiB per 10^5 points of 6 joints) is beyond the node's reach
+  (docs/guide/shaper_node.md, "Goal size").
 - accepted: a goal still running is preempted (its controller goal is cancelled), as
   joint_trajectory_controller does; one goal is active at a time.
 - execution: with a ``reshape`` coroutine (the node's ``action.scheduler``: the trajectory shaped
@@ -43,12 +50,15 @@ from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.client import ClientGoalHandle
 from rclpy.action.server import ServerGoalHandle
+from rclpy.clock import Clock, ClockType
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.task import Future
+from rclpy.timer import Timer
 from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.core.memory import release_freed_memory
 from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.qos import ACTION_CLIENT_QOS, ACTION_QOS
 from shaper_nodes.ros.shaper_client import wait_for
@@ -60,6 +70,27 @@ POLL = 0.05  # s, how often a goal waiting for the controller's server looks aga
 #: rejected at once, with the reason: a storm of goals is refused, not queued behind a controller that lags
 MAX_LIVE = 16
 WATCH = 1.0  # s, how often a running goal checks that the controller's server is still there
+#: a refused goal of at least this many values (points x joints) is followed by giving the freed memory back to
+#: the system (a 10^5-point goal of 6 joints held about 130 MiB, most of which the allocator kept)
+RELEASE_ABOVE = 60_000
+#: s after such a refusal: rclpy drops the request once the goal request's task has sent the answer
+RELEASE_DELAY = 0.5
+
+
+def check_tolerance_counts(goal: Goal) -> None:
+    """Refuse a tolerance list with more entries than the trajectory has joints (one per joint at most).
+
+    Raises
+    ------
+    InputError
+        ``too_large``, naming the list and the counts.
+    """
+    joints = len(goal.trajectory.joint_names)
+    for field in ("path_tolerance", "goal_tolerance", "component_path_tolerance", "component_goal_tolerance"):
+        count = len(getattr(goal, field))
+        if count > joints:
+            raise InputError("too_large", f"{field} has {count} entries, more than the trajectory's {joints}"
+                             " joints (one per joint at most)")
 
 
 def check_tolerances(goal: Goal) -> None:
@@ -146,6 +177,7 @@ class TrajectoryActionProxy:
         self._live: dict[bytes, _Forward] = {}
         self._active: _Forward | None = None
         self._stopping = False  # stop() was called: new goals are rejected
+        self._release: Timer | None = None  # the timer that gives a refused large goal's memory back
         self.controller_name = controller_name
         # a goal response lost at start-up is recovered from the status topic, or the request sent
         # again, within the timeout (ros/action_client.py)
@@ -204,8 +236,10 @@ class TrajectoryActionProxy:
         if multi.joint_names or multi.points:
             raise InputError("unsupported", "multi_dof_trajectory is not supported (only single-DOF joints"
                              " are shaped); send it empty")
+        check_tolerance_counts(goal)
+        shaped = self._shape(goal.trajectory)  # its size first, then its points (the node's joints from here)
         check_tolerances(goal)
-        return _with_trajectory(goal, self._shape(goal.trajectory))
+        return _with_trajectory(goal, shaped)
 
     def _on_goal(self, goal: Goal) -> GoalResponse:
         if self._stopping:
@@ -219,9 +253,25 @@ class TrajectoryActionProxy:
             shaped = self.shaped_goal(goal)
         except InputError as err:
             self._on_refused(err)
+            if len(goal.trajectory.points) * max(1, len(goal.trajectory.joint_names)) >= RELEASE_ABOVE:
+                self._release_later()
             return GoalResponse.REJECT
         self._shaped[id(goal)] = (goal, shaped)  # the request object itself keeps the id unique
         return GoalResponse.ACCEPT
+
+    def _release_later(self) -> None:
+        """Give the freed memory back to the system :data:`RELEASE_DELAY` s from now (once, however many
+        large goals are refused meanwhile): rclpy still holds the request while its goal callback runs."""
+        if self._release is not None:
+            return
+
+        def release() -> None:
+            timer, self._release = self._release, None
+            if timer is not None:
+                self._node.destroy_timer(timer)
+            release_freed_memory()
+
+        self._release = self._node.create_timer(RELEASE_DELAY, release, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _on_accepted(self, handle: ServerGoalHandle) -> None:
         entry = self._shaped.pop(id(handle.request), None)

@@ -18,18 +18,27 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
+import numpy as np
 from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.lifetime import die_with_parent
 from shaper_nodes.core.shaping import SparseFir, shape_trajectory
 from shaper_nodes.core.shaping.limits import JointLimits
+from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS, check_extent
 
-from .conversions import trajectory_arrays, trajectory_msg
+from .conversions import duration_to_sec, trajectory_arrays, trajectory_msg
+
+#: most values of one field of a whole trajectory's input (its points x joints: 100,000 points of a 6-joint arm,
+#: 85,714 of a 7-joint one), refused before any per-point work; the points alone are bounded by
+#: :data:`~shaper_nodes.core.shaping.trajectory.MAX_TRAJECTORY_POINTS`
+MAX_TRAJECTORY_VALUES = 600_000
 
 
 @dataclass(frozen=True)
@@ -43,9 +52,33 @@ class WholeShaping:
     max_abs: float
     max_samples: int
 
+    def check_size(self, msg: JointTrajectory) -> None:
+        """Refuse a trajectory too large to shape before any work on its points: more than
+        :data:`~shaper_nodes.core.shaping.trajectory.MAX_TRAJECTORY_POINTS` points, more than
+        :data:`MAX_TRAJECTORY_VALUES` points x joints (the message's joint names or the node's, the larger),
+        or a span from its first to its last point that resamples to more than ``max_samples`` samples at
+        the rate (with the shaper's length). Reads the number of points and two points' times only.
+
+        Raises
+        ------
+        InputError
+            ``too_large``, with the sizes and the limit.
+        """
+        points, joints = len(msg.points), max(len(msg.joint_names), len(self.joint_names))
+        if points > MAX_TRAJECTORY_POINTS or points * joints > MAX_TRAJECTORY_VALUES:
+            raise InputError("too_large", f"{points} points x {joints} joints exceed the limits of"
+                             f" {MAX_TRAJECTORY_POINTS} points and {MAX_TRAJECTORY_VALUES} values (points x joints)")
+        if points:
+            ends = np.array([duration_to_sec(msg.points[0].time_from_start),
+                             duration_to_sec(msg.points[-1].time_from_start)])
+            if np.all(ends >= 0.0):  # a negative time is refused with its point's index by the full check
+                check_extent(ends, self.rate, self.fir.length, self.max_samples)
+
     def shape(self, msg: JointTrajectory, pause: Callable[[], None] | None = None) -> JointTrajectory:
-        """``msg`` shaped and checked: resampled at the rate, convolved, differentiated, held against
-        the limits (positions, velocities, accelerations) and the time range. Raises InputError."""
+        """``msg`` shaped and checked: its size first (:meth:`check_size`), then resampled at the rate,
+        convolved, differentiated, held against the limits (positions, velocities, accelerations) and
+        the time range. Raises InputError."""
+        self.check_size(msg)
         times, fields = trajectory_arrays(msg, self.joint_names, require_times=True, limit=self.max_abs)
         result = shape_trajectory(times, fields["positions"], self.fir, self.rate, fields.get("velocities"),
                                   max_samples=self.max_samples)
@@ -74,7 +107,9 @@ def shape_serialized(how: WholeShaping, data: bytes) -> Answer:
     return "shaped", serialize_message(out), len(out.points)
 
 
-def _worker_init() -> None:
+def _worker_init(parent: int) -> None:
+    """The worker's start: it ends with the node (``kill -9`` of the node leaves no worker), one BLAS thread."""
+    die_with_parent(signal.SIGKILL, parent)  # nothing of the worker's needs a clean stop
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one core's work; the node has the other
 
 
@@ -82,7 +117,11 @@ class TrajectoryWorker:
     """One worker process that shapes serialized trajectories (see the module docstring).
 
     It is started with the first request (spawned, so it shares nothing with the node's threads)
-    and restarted if it died; :meth:`close` stops it.
+    and restarted if it died; :meth:`close` stops it. It ends with the node's process even when that is
+    killed with ``kill -9`` (``prctl(PR_SET_PDEATHSIG)``, core/lifetime.py). The kernel sends that signal when
+    the *thread* that started the worker ends: :meth:`submit` starts it (concurrent.futures starts a spawned
+    pool's workers in ``submit``), so call it from a thread that lives as long as the node (the node's side
+    thread does), never from a short-lived one.
     """
 
     def __init__(self) -> None:
@@ -91,7 +130,7 @@ class TrajectoryWorker:
     def _executor(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_worker_init)
+                                             initializer=_worker_init, initargs=(os.getpid(),))
         return self._pool
 
     def submit(self, how: WholeShaping, data: bytes) -> Future[Answer]:
