@@ -116,3 +116,46 @@ def test_malformed_bytes_are_refused_and_the_stream_goes_on(raw: bytes, words: s
         got = deserialize_message(path.shape(serialize_message(_msg(y))), Float64MultiArray).data.tolist()
         assert got == reference.shape_array(y)
         assert all(np.isfinite(got)) and all(-2.0 <= v <= 2.0 for v in got)
+
+
+@pytest.mark.parametrize("names", [[], ["j"], list(NAMES), ["ä", "bb", "ccc", "dddd", "eeeee"]])
+@pytest.mark.parametrize("sizes", [(0, 0), (3, 0), (0, 5), (2, 2)])
+def test_joint_states_read_raw_as_rclpy_reads_them(names: list[str], sizes: tuple[int, int]) -> None:
+    from sensor_msgs.msg import JointState
+
+    from shaper_nodes.ros.raw_stream import RawJointStates
+
+    poses, rng = RawJointStates(), np.random.default_rng(len(names))
+    for stamp in [(0, 0), (5, 999_999_999), (-2, 1), (5, 999_999_999)]:
+        msg = JointState(name=names, position=rng.normal(0.0, 2.0, len(names)).tolist(),
+                         velocity=[1.5] * sizes[0], effort=[-2.5] * sizes[1])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+        msg.header.frame_id = "base"[:len(names)]
+        got = poses.decode(serialize_message(msg))
+        assert got == (tuple(names), tuple(msg.position.tolist()), stamp)
+
+
+def test_malformed_joint_states_are_refused_with_the_reason() -> None:
+    """Every truncation before the positions' end, a name not UTF-8, big-endian bytes: refused as malformed."""
+    from sensor_msgs.msg import JointState
+
+    from shaper_nodes.ros.raw_stream import RawJointStates
+
+    raw = serialize_message(JointState(name=list(NAMES), position=[0.25] * 7, velocity=[1.0] * 7))
+    poses = RawJointStates()
+    poses.decode(raw)
+    end = poses._decoder.positions_end  # only what is read is checked: names, positions, stamp
+    for poses in (RawJointStates(), RawJointStates()):
+        for n in range(end):
+            if n == 0:
+                poses.decode(raw)  # the second decoder knows the layout: a short message must not pass its shortcut
+                continue
+            with pytest.raises(InputError) as err:
+                poses.decode(raw[:n])
+            assert err.value.kind == "malformed" and "\n" not in str(err.value)
+    bad = bytearray(raw)
+    bad[20:22] = b"\xff\xfe"  # inside the first name
+    with pytest.raises(InputError, match="UTF-8"):
+        RawJointStates().decode(bytes(bad))
+    with pytest.raises(InputError, match="little-endian"):
+        RawJointStates().decode(b"\x00\x00" + raw[2:])

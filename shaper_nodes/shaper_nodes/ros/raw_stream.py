@@ -1,4 +1,5 @@
-"""The shaper node's streamed array input on serialized messages: bytes in, the core's rules, bytes out.
+"""Streamed inputs on serialized messages: the shaper node's array input (bytes in, the core's rules,
+bytes out) and the scheduler's joint states (:class:`RawJointStates`).
 
 The array input (std_msgs/Float64MultiArray at ``command_rate``, 1 kHz and more) is taken by a
 subscription with ``raw=True``: its callback gets the serialized ``bytes``, read by
@@ -16,10 +17,15 @@ Float64MultiArray are refused as ``malformed`` with the reason the codec gives, 
 
 from __future__ import annotations
 
+import struct
+
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping.stream import CommandStream
+from shaper_nodes.recordings.cdr import JointStateDecoder, little_endian
 from shaper_nodes.recordings.cdr_arrays import CdrError, Float64ArrayCodec
+
+_STAMP = struct.Struct("<iI")
 
 
 class RawArrays:
@@ -54,3 +60,39 @@ class RawArrays:
             if rows > 1:
                 return self.codec.encode(stream.shape_block(data, rows))
         return self.codec.encode(stream.shape_array(data.tolist()))
+
+
+class RawJointStates:
+    """sensor_msgs/JointState taken serialized: the names, positions and header stamp only.
+
+    For the scheduler's ``/joint_states`` feed (500 Hz and more): read by
+    :class:`~shaper_nodes.recordings.cdr.JointStateDecoder`, which skips the names when they are the
+    previous message's; velocities and efforts are not read (nor checked: a message cut after its
+    positions is read). Bytes that are not a well-formed
+    little-endian CDR JointState (truncated, a name not UTF-8, positions past the end) are refused as
+    ``malformed``.
+    """
+
+    def __init__(self) -> None:
+        self._decoder = JointStateDecoder()
+
+    def decode(self, raw: bytes) -> tuple[tuple[str, ...], tuple[float, ...], tuple[int, int]]:
+        """(names, positions in rad or m, header stamp as (sec, nanosec)) of the serialized ``raw``.
+
+        Raises
+        ------
+        InputError
+            ``malformed``, the message naming the problem.
+        """
+        if not little_endian(raw):
+            head = bytes(raw[:2]).hex(" ") or "none"
+            raise InputError("malformed", f"not a little-endian CDR JointState (encapsulation {head},"
+                             f" {len(raw)} bytes)")
+        try:
+            _, names, positions = self._decoder(raw)
+            sec, nanosec = _STAMP.unpack_from(raw, 4)
+        except struct.error as err:
+            raise InputError("malformed", f"truncated JointState ({len(raw)} bytes: {err})") from None
+        except UnicodeDecodeError as err:
+            raise InputError("malformed", f"a JointState name is not UTF-8 ({err.reason})") from None
+        return names, positions, (sec, nanosec)
