@@ -181,26 +181,38 @@ class Float64ArrayCodec:
     writes values into a buffer of that layout, with the last message's ``data_offset``.
     """
 
-    def __init__(self) -> None:
-        self._last: _Parsed | None = None
-        self._dims = b""
-        self._count = b""
-        self._out: Float64MultiArrayCdr | None = None
+    #: most values returned as a tuple of floats (a struct unpack, cheaper than a numpy view for a few values)
+    SMALL = 64
 
-    def decode(self, raw: Any) -> tuple[tuple[int, ...], np.ndarray]:
-        """The layout's sizes and the data (a read-only view) of ``raw``; CdrError when malformed."""
-        p = self._last
-        if (p is None or len(raw) < p.data_at + 8 * p.count or raw[0:p.offset_at] != self._dims
-                or raw[p.offset_at + 4:p.count_end] != self._count):
+    def __init__(self) -> None:
+        self._out: Float64MultiArrayCdr | None = None
+        self._head = b""   # the bytes up to data_offset (encapsulation and dimensions) of the last layout
+        self._count = b""  # the bytes of the data count
+        self._at = (0, 0, 0)  # the offsets of data_offset, after the data count, of the data
+        self._end = -1     # the bytes the data need (-1: no layout yet)
+        self._sizes: tuple[int, ...] = ()
+        self._unpack: struct.Struct | None = None
+        self._n = 0
+
+    def decode(self, raw: Any) -> tuple[tuple[int, ...], tuple[float, ...] | np.ndarray]:
+        """The layout's sizes and the data of ``raw``: a tuple of floats for up to :attr:`SMALL` values, a
+        read-only numpy view beyond; CdrError when malformed."""
+        offset_at, count_end, data_at = self._at
+        if not (0 <= self._end <= len(raw) and raw[0:offset_at] == self._head
+                and raw[offset_at + 4:count_end] == self._count):
             p = _parse(raw)
-            self._last = None  # until the answer's buffer is there too
-            self._dims, self._count = bytes(raw[0:p.offset_at]), bytes(raw[p.offset_at + 4:p.count_end])
+            self._end = -1  # until every cached part is of this layout
+            offset_at, count_end, data_at = self._at = (p.offset_at, p.count_end, p.data_at)
+            self._head, self._count = bytes(raw[0:offset_at]), bytes(raw[offset_at + 4:count_end])
             if self._out is None or (self._out.layout.dims, self._out.count) != (p.layout.dims, p.count):
                 self._out = Float64MultiArrayCdr(p.layout, p.count)
-            self._last = p
-        assert self._out is not None
-        self._out._buffer[p.offset_at:p.offset_at + 4] = raw[p.offset_at:p.offset_at + 4]
-        return p.layout.sizes, np.frombuffer(raw, dtype="<f8", count=p.count, offset=p.data_at)
+            self._sizes, self._n = p.layout.sizes, p.count
+            self._unpack = struct.Struct(f"<{p.count}d") if p.count <= self.SMALL else None
+            self._end = data_at + 8 * p.count
+        self._out._buffer[offset_at:offset_at + 4] = raw[offset_at:offset_at + 4]  # type: ignore[union-attr]
+        if self._unpack is not None:
+            return self._sizes, self._unpack.unpack_from(raw, data_at)
+        return self._sizes, np.frombuffer(raw, dtype="<f8", count=self._n, offset=data_at)
 
     def encode(self, values: Any) -> bytes:
         """The last message decoded, its data replaced by ``values`` (as many), serialized."""

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import struct
 
+import numpy as np
+
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping.stream import CommandStream
@@ -59,7 +61,7 @@ class RawArrays:
             rows = block_rows(sizes, len(data), stream.joints, stream.max_samples)
             if rows > 1:
                 return self.codec.encode(stream.shape_block(data, rows))
-        return self.codec.encode(stream.shape_array(data.tolist()))
+        return self.codec.encode(stream.shape_array(data.tolist() if isinstance(data, np.ndarray) else data))
 
 
 class RawJointStates:
