@@ -33,6 +33,9 @@ _STAMP = struct.Struct("<iI")
 class RawArrays:
     """The shaper node's array input and output as serialized Float64MultiArray (module docstring).
 
+    One caller at a time (the array subscription's callback, on one executor's thread): the codec's
+    buffers are not locked; the filters are, by the stream's lock.
+
     Parameters
     ----------
     stream : CommandStream
