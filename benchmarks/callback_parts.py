@@ -4,7 +4,8 @@
 node (ZVD 8 Hz, 7 joints, 1 kHz) at once, each in a process of its own started through this module,
 and drives them in turns (:func:`benchmarks.latency.measure_interleaved`). In the node's process it
 wraps the callback and, for the shaper, its parts (``_arrived``, ``_shape_array``, the filter's
-``process_values``, the publish, ``_count_forwarded``) with wall-clock timers, and prints per node:
+``process_values``, the publish, ``_count_forwarded``, the codec's ``decode`` and ``encode`` of the serialized
+messages) with wall-clock timers, and prints per node:
 
 ``wake``
     from the middleware's reception of the message (its ``received_timestamp``) to the callback's start:
@@ -37,7 +38,10 @@ import numpy as np
 #: the shaper's parts timed in the node: (name in the results, its module, class and method)
 SHAPER_PARTS = (("_arrived", "shaper_nodes.ros.stream_watch", "StreamWatch", "arrived"),
                 ("_shape_array", "shaper_nodes.core.shaping.stream", "CommandStream", "shape_array"),
-                ("_count_forwarded", "shaper_nodes.ros.stream_watch", "StreamWatch", "count_forwarded"))
+                ("_count_forwarded", "shaper_nodes.ros.stream_watch", "StreamWatch", "count_forwarded"),
+                # the array input's serialized bytes read and the answer's written (ros/raw_stream.py)
+                ("codec.decode", "shaper_nodes.recordings.cdr_arrays", "Float64ArrayCodec", "decode"),
+                ("codec.encode", "shaper_nodes.recordings.cdr_arrays", "Float64ArrayCodec", "encode"))
 ZVD = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03, "discretization": "split"}
 
 
@@ -89,7 +93,7 @@ def _node_main(kind: str, out: str, argv: list[str]) -> None:
             on_array(self, msg, info)
             parts.setdefault("callback", []).append(time.perf_counter_ns() - t)
 
-        cls._on_array = timed_on_array  # type: ignore[method-assign]  # before the node is made: its subscription takes this
+        cls._on_array = timed_on_array  # type: ignore[method-assign,assignment]  # before the node is made: its subscription takes this
         sys.argv = [sys.argv[0], *argv]
         shaper_module.main()
         return

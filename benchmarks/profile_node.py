@@ -48,6 +48,8 @@ KEY_FUNCTIONS = (
     ("take (deserialise the message)", "rclpy/subscription.py", "handle.take_message"),
     ("take_message (C)", "~", "<built-in method rclpy._rclpy_pybind11.take_message>"),
     ("callback: echo's publish / shaper's _on_array", "", "_on_array"),
+    ("  decode (the serialized input read)", "recordings/cdr_arrays.py", "decode"),
+    ("  encode (the serialized answer written)", "recordings/cdr_arrays.py", "encode"),
     ("  arrived (rate watch)", "ros/stream_watch.py", "arrived"),
     ("  finite_array", "core/checks.py", "finite_array"),
     ("  _shape_checked", "core/shaping/stream.py", "_shape_checked"),
@@ -58,6 +60,7 @@ KEY_FUNCTIONS = (
     ("  Float64MultiArray()", "std_msgs/msg/_float64_multi_array.py", "__init__"),
     ("  Publisher.publish", "rclpy/publisher.py", "publish"),
     ("  publish (C: serialise, write)", "~", "<built-in method rclpy._rclpy_pybind11.publish>"),
+    ("  publish_raw (C: write the bytes)", "~", "<built-in method rclpy._rclpy_pybind11.publish_raw>"),
     ("  count_forwarded", "ros/stream_watch.py", "count_forwarded"),
 )
 

@@ -17,6 +17,7 @@ import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
 from reproductions.scheduler_cases import CASES, rule_base_spec, run_case, scheduler_parameters
@@ -137,7 +138,9 @@ def test_scheduled_mode_follows_the_pose_and_out_of_range_is_clamped(graph):
     refused = sched.refused
     peer.pose(0.2, names=("elbow",))
     peer.js.publish(JointState(name=["joint_1"], position=[math.nan]))
-    spin_until(ex, lambda: sched.refused >= refused + 2, 10.0, "the refusals")
+    # the feed is taken serialized: bytes that are not a JointState (cut short) are refused, not a crash
+    peer.js.publish(serialize_message(JointState(name=["joint_1"], position=[0.2]))[:20])
+    spin_until(ex, lambda: sched.refused >= refused + 3, 10.0, "the refusals")
     settle_at(sched, peer, ex, 0.2)
 
 

@@ -112,10 +112,20 @@ CHANGE = st.tuples(st.just("change"), SHAPERS)
 STEPS = st.lists(st.one_of(ARRAY, STREAM, WHOLE, CHANGE), max_size=40)
 
 
+def send_array(node: ShaperNode, data) -> None:
+    """A sample on the array path, as its raw subscription gives it (serialized)."""
+    node._on_array(serialize_message(Float64MultiArray(data=list(data))), None)
+
+
+def array_data(sent: bytes) -> np.ndarray:
+    """The data of what the array path published (serialized bytes)."""
+    return deserialize_message(sent, Float64MultiArray).data
+
+
 def run_step(node: ShaperNode, step, k: int) -> None:
     kind = step[0]
     if kind == "array":
-        node._on_array(Float64MultiArray(data=step[1]), None)
+        send_array(node, step[1])
     elif kind == "stream":
         rows, with_vel = step[1], step[2]
         msg = JointTrajectory(joint_names=JOINTS)
@@ -155,7 +165,7 @@ def test_every_path_passes_on_only_finite_in_limit_time_ordered_output_and_settl
     for k, step in enumerate(steps):
         run_step(node, step, k)
     for msg in node._array_pub.sent:
-        check_positions(msg.data)
+        check_positions(array_data(msg))
     for msg in node._stream_pub.sent:
         t = [sec(p.time_from_start) for p in msg.points]
         assert np.all(np.diff(t) > 0)
@@ -168,10 +178,10 @@ def test_every_path_passes_on_only_finite_in_limit_time_ordered_output_and_settl
     # a constant input afterwards: the output settles to it exactly (to rounding), whatever came before
     node._array_pub.sent.clear()
     for _ in range(SETTLE):
-        node._on_array(Float64MultiArray(data=final), None)
+        send_array(node, final)
     assert len(node._array_pub.sent) == SETTLE  # every sample of it shaped and passed on
     scale = max(1.0, *(abs(x) for x in final))
-    np.testing.assert_allclose(node._array_pub.sent[-1].data, final, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(array_data(node._array_pub.sent[-1]), final, rtol=0, atol=1e-9 * scale)
 
 
 def test_the_node_is_alive_and_shaping_after_every_refusal(node):
@@ -180,8 +190,10 @@ def test_the_node_is_alive_and_shaping_after_every_refusal(node):
     node._array_pub.sent.clear()
     bad = [[math.nan, 0, 0], [math.inf, 0, 0], [1.7e308, 0, 0], [500.0, 0, 0], [0, 0], []]
     for data in bad:
-        node._on_array(Float64MultiArray(data=data), None)
+        send_array(node, data)
+    for raw in (b"", b"\x00\x01\x00\x00\x00", serialize_message(Float64MultiArray(data=[0.1] * 3))[:-1]):
+        node._on_array(raw, None)  # bytes that are not a Float64MultiArray (truncated, no header)
     assert not node._array_pub.sent
-    assert {"non_finite", "too_large", "beyond_limits", "wrong_size", "empty"} <= set(node.rejections)
-    node._on_array(Float64MultiArray(data=[0.1, 0.1, 0.1]), None)
-    assert len(node._array_pub.sent) == 1 and np.all(np.isfinite(node._array_pub.sent[0].data))
+    assert {"non_finite", "too_large", "beyond_limits", "wrong_size", "empty", "malformed"} <= set(node.rejections)
+    send_array(node, [0.1, 0.1, 0.1])
+    assert len(node._array_pub.sent) == 1 and np.all(np.isfinite(array_data(node._array_pub.sent[0])))

@@ -16,6 +16,7 @@ import threading
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray
 
 from shaper_nodes.core.shaping import Mode, StreamingShaper, design, discretize
@@ -57,7 +58,7 @@ def test_shaper_changes_on_the_main_thread_land_between_two_streamed_samples(ros
 
         filt.process_values, filt.switch = counting_process, recording_switch
         published: list[np.ndarray] = []
-        node._array_pub.publish = lambda msg: published.append(np.array(msg.data))
+        node._array_pub.publish = lambda raw: published.append(deserialize_message(raw, Float64MultiArray).data)
         moves = motion(6000)
         sent: list[np.ndarray] = []
         done = threading.Event()
@@ -69,7 +70,7 @@ def test_shaper_changes_on_the_main_thread_land_between_two_streamed_samples(ros
             while len(sent) < MIN_SAMPLES or (len(changes) < MIN_CHANGES and len(sent) < MAX_SAMPLES):
                 row = moves[len(sent) % moves.shape[0]]
                 sent.append(row)
-                node._on_array(Float64MultiArray(data=row.tolist()), None)
+                node._on_array(serialize_message(Float64MultiArray(data=row.tolist())), None)  # as taken raw
             done.set()
 
         thread = threading.Thread(target=stream)

@@ -34,6 +34,7 @@ KINDS = (
     "unsupported",
     "too_large",
     "beyond_limits",
+    "malformed",
 )
 
 

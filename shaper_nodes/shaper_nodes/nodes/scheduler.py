@@ -20,7 +20,9 @@ the scheduler stops updating and says so.
 Cost at a fast joint state stream: /joint_states is taken on a lean node of its own
 (``<name>_joint_states``, ros/side_node.py) spun by a thread of its own, so that each message
 wakes a wait set of one subscription rather than all of this node's entities; the message gives
-the latest premise values and their time, nothing more. The subscription has no middleware event
+the latest premise values and their time, nothing more: it is taken serialized (``raw``) and only its
+names, positions and stamp are read from the bytes (ros/raw_stream.py ``RawJointStates``; bytes that
+are not a JointState are refused as ``malformed``), no message object is built. The subscription has no middleware event
 handlers (rclpy's defaults, for an incompatible QoS or type, add two waitables to every wait: about a
 tenth of the feed's CPU): instead, once a second, the node looks for joint-state publishers on the
 graph of which none has matched for UNMATCHED_WARN s, and reports them (a WARN naming the topic).
@@ -69,6 +71,7 @@ from collections import deque
 from dataclasses import dataclass, replace
 from typing import Any
 
+from builtin_interfaces.msg import Time
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -86,6 +89,7 @@ from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, declare_all, flat, param, read, table
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
+from shaper_nodes.ros.raw_stream import RawJointStates
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
@@ -194,8 +198,10 @@ class SchedulerNode(Node):
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
         self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at, qos_profile=SERVICE_QOS)
 
-        # latest (premise values, node clock time they arrived s, their header stamp), set by the feed's thread
-        self._pose: tuple[list[float], float, Any] | None = None
+        # latest (premise values, node clock time they arrived s, their header stamp (sec, nanosec)), set by the
+        # feed's thread
+        self._pose: tuple[list[float], float, tuple[int, int]] | None = None
+        self._poses = RawJointStates()
         self._interp: Interpolation | None = None  # the rule base at the latest evaluation
         self._estimate: ModeEstimate | None = None  # ... as published
         self._clamped = ""                         # ... what it clamped
@@ -219,7 +225,7 @@ class SchedulerNode(Node):
         # its executor, 13 % of its CPU under a profiler): an unmatched publisher is found by _watch_match instead
         self._feed_sub = self._feed.node.create_subscription(
             JointState, self.resolve_topic_name(p.joint_states), self._on_joint_states,
-            JOINT_STATES_DEPTH, event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+            JOINT_STATES_DEPTH, event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False), raw=True)
         self._unmatched_since: float | None = None
         self.create_timer(1.0, self._watch_match, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._feed.start()
@@ -264,17 +270,19 @@ class SchedulerNode(Node):
         super().destroy_node()
 
     # ----------------------------------------------------------------- inputs
-    def _on_joint_states(self, msg: JointState) -> None:
+    def _on_joint_states(self, raw: bytes) -> None:
         """On the feed's thread: the premise values and their time, one assignment; anything else is
-        left to this node's executor (woken through ``_wake``)."""
+        left to this node's executor (woken through ``_wake``). The message comes serialized, and only
+        its names, positions and stamp are read (ros/raw_stream.py)."""
         try:
-            z = self.core.premise_values(msg.name, msg.position)
+            names, positions, stamp = self._poses.decode(raw)
+            z = self.core.premise_values(names, positions)
         except InputError as err:
             self.refused += 1  # (written by this thread only)
             self._refusals.append(str(err))
             self._wake.trigger()
             return
-        self._pose = (z, self._now(), msg.header.stamp)
+        self._pose = (z, self._now(), stamp)
         if self.last_sent is None:
             # the first shaper goes out as soon as a pose and the shaper node are there, also while
             # simulated time stands still (a lockstep plant at rest) and the period timer does not fire
@@ -308,7 +316,8 @@ class SchedulerNode(Node):
         pose = self._pose
         if pose is None:
             return None
-        z, z_stamp, stamp = pose
+        z, z_stamp, (sec, nanosec) = pose
+        stamp = Time(sec=sec, nanosec=nanosec)
         if self._now() - z_stamp > float(self.params.value.stale_timeout):
             self.diagnostics.report("stale", WARN, "no joint states for stale_timeout; not updating the shaper")
             return None
@@ -321,7 +330,7 @@ class SchedulerNode(Node):
                 return None
             self._clamped = self.core.clamping(interp)
             estimate = _estimate(interp, stamp)
-        elif stamp is not None:
+        else:
             estimate.header.stamp = stamp
         if self._clamped:
             self.diagnostics.report("clamped", WARN, self._clamped)

@@ -7,7 +7,8 @@ topics.array_in -> topics.array_out
     forward_command_controller), one sample per message at ``command_rate``. A message whose layout
     has two dimensions, [samples, joints], carries a block of consecutive samples (the sim plant's
     lockstep exchange, ``lockstep.block``): shaped as those samples one by one would be, and sent on
-    as one message with the same layout.
+    as one message with the same layout. Taken and sent as serialized bytes, never as message
+    objects (ros/raw_stream.py); bytes that are not a Float64MultiArray are refused as ``malformed``.
 topics.stream_in -> topics.stream_out
     trajectory_msgs/JointTrajectory streamed with one or a few points per message (as MoveIt
     Servo does); every point is one sample at ``command_rate``; positions are shaped, and
@@ -84,7 +85,6 @@ from trajectory_msgs.msg import JointTrajectory
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFir, UpdatePolicy, discretize
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
 from shaper_nodes.core.shaping.stream import NS, CommandStream, normal_stamp
@@ -95,6 +95,7 @@ from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
+from shaper_nodes.ros.raw_stream import RawArrays
 from shaper_nodes.ros.side_node import SideNode
 from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
@@ -164,6 +165,7 @@ class ShaperNode(Node):
         #: with stream_executor 'thread'); a holder stalls the streamed inputs
         self.stream_lock = self.stream.lock
         self._array_filter = self.stream.array_filter
+        self._raw_arrays = RawArrays(self.stream)  # the array input and output as serialized messages
         self.diagnostics = Diagnostics(self, lambda: float(self.params.value.error_throttle))
         # arrivals, rate watches, forwarded and refused counts (ros/stream_watch.py)
         self.watch = StreamWatch(self.rate, self.diagnostics, lambda k: self._subs[f"{k}_in"].get_publisher_count())
@@ -201,8 +203,9 @@ class ShaperNode(Node):
             streamed = {k: self.resolve_topic_name(name) for k, name in streamed.items()}
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
+            # raw: read and written as serialized bytes (ros/raw_stream.py)
             "array_in": self.graph.subscription(Float64MultiArray, streamed["array_in"], self._on_array, depth,
-                                                on=stream_node),
+                                                on=stream_node, raw=True),
             "stream_in": self.graph.subscription(JointTrajectory, streamed["stream_in"], self._on_stream, depth,
                                                  on=stream_node),
             # raw: the bytes go to the trajectory worker process undecoded (ros/whole_trajectory.py)
@@ -351,23 +354,15 @@ class ShaperNode(Node):
         self.diagnostics.publish("shaper", level, msg, values)
 
     # ----------------------------------------------------------------- data paths
-    def _on_array(self, msg: Float64MultiArray, info: dict[str, Any] | None) -> None:
+    def _on_array(self, data: bytes, info: dict[str, Any] | None) -> None:
+        """The array input, serialized: shaped and published as bytes (ros/raw_stream.py)."""
         self._arrived("array", info)
         try:
-            if msg.layout.dim:  # a layout: one sample, or a block of samples (core/lockstep.py block_rows)
-                rows = block_rows([d.size for d in msg.layout.dim], len(msg.data), self.stream.joints,
-                                  self.stream.max_samples)
-                if rows > 1:
-                    msg.data = self.stream.shape_block(msg.data, rows)
-                    self._array_pub.publish(msg)
-                    self._count_forwarded("array")
-                    return
-            y = self.stream.shape_array(msg.data)
+            out = self._raw_arrays.shape(data)
         except InputError as err:
             self._reject(self._in_topics["array_in"], err)
             return
-        msg.data = y  # the input message goes on, its layout unchanged, with the shaped data
-        self._array_pub.publish(msg)
+        self._array_pub.publish(out)
         self._count_forwarded("array")
 
     def _on_stream(self, msg: JointTrajectory, info: dict[str, Any] | None) -> None:
