@@ -70,7 +70,7 @@ class LearnerDriver:
     """A :class:`Conductor` on ``ctx`` that also collects the learner's reports and the active shaper.
 
     With ``measure`` False the conductor takes neither the accelerometer nor the joint states (it measures no
-    residual of its own: :meth:`cycle` returns None for it), for a reproduction that reads only the learner's
+    residual of its own; :meth:`report_of_cycle` runs its cycles), for a reproduction that reads only the learner's
     reports: per cycle that is two messages fewer per sample to take in the driver's process, which on two
     cores shared with the plant, the shaper and the learner was a quarter of the run's CPU.
     """
@@ -98,18 +98,23 @@ class LearnerDriver:
         self.conductor.spin_until(lambda: bool(self.active) and self.active[-1].source == "learner", 60.0, what)
         settle(self.conductor)
 
-    def cycle(self, k: int) -> tuple[CycleResult | None, Any]:
+    def cycle(self, k: int) -> tuple[CycleResult, Any]:
         """Run one cycle, the run's ``k``-th (from 0), and wait for the learner's report of it;
-        returns the driver's own result of the cycle (None when it does not measure) and the report.
-
-        Without measuring, the cycle is over when its report is in: the learner reports a cycle after its END,
-        and the plant ends its run at that END (a start while a run goes on is refused, and raises)."""
-        result = self.conductor.run_cycles(1, timeout=300.0)[0] if self.conductor.measure else None
-        if result is None:
-            self.conductor.start_run(1)
-        self.conductor.spin_until(lambda: len(self.reports) > k, 300.0 if result is None else 120.0,
-                                  f"the learner's report of cycle {k}")
+        returns the driver's own result of the cycle and the report."""
+        result = self.conductor.run_cycles(1, timeout=300.0)[0]
+        self.conductor.spin_until(lambda: len(self.reports) > k, 120.0, f"the learner's report of cycle {k}")
         return result, self.reports[k]
+
+    def report_of_cycle(self, k: int) -> Any:
+        """Run one cycle, the run's ``k``-th (from 0), and return the learner's report of it; the driver's own
+        result of the cycle is measured only when the driver measures (then as :meth:`cycle`). Without, the
+        cycle is over when its report is in: the learner reports a cycle after its END, and the plant ends its
+        run at that END (a start while a run goes on is refused, and raises)."""
+        if self.conductor.measure:
+            return self.cycle(k)[1]
+        self.conductor.start_run(1)
+        self.conductor.spin_until(lambda: len(self.reports) > k, 300.0, f"the learner's report of cycle {k}")
+        return self.reports[k]
 
     def close(self) -> None:
         self.conductor.close()
