@@ -73,18 +73,24 @@ def _nodes(start: StartNode, plant_mode: tuple[float, float]) -> None:
 
 
 def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartNode, ctx, learner: dict | None = None,
-                 progress: Callable[[Iteration], None] | None = None) -> list[Iteration]:
-    """``iterations`` cycles with the MRILC learner on the plant (omega, zeta); one Iteration each."""
+                 progress: Callable[[Iteration], None] | None = None, measure: bool = False) -> list[Iteration]:
+    """``iterations`` cycles with the MRILC learner on the plant (omega, zeta); one Iteration each.
+
+    The driver reads only the learner's reports: with ``measure`` False (the default) it takes no accelerometer
+    or joint state samples (:class:`~reproductions.common.LearnerDriver`) and starts the next cycle as soon as
+    the report is in; ``measure`` True paces the cycles as before, each also measured by the driver (a
+    recorder that is no lockstep reader then has the time it had)."""
     _nodes(start, plant_mode)
     start("shaper_nodes", "learner", {"mode": "mrilc", "mrilc.rate": RATE, "use_sim_time": True,
                                       "joint_names": JOINT, **LOCKSTEP_LEARNER, **(learner or {})})
-    driver = LearnerDriver(ctx)
+    driver = LearnerDriver(ctx, measure=measure)
     out: list[Iteration] = []
     try:
         driver.wait_ready({"/shaper/commands": 1, "/forward_position_controller/commands": 1,
-                           "/joint_states": 2, "/sim_plant/reference": 1, "/cycle_events": 2}, "the learner's shaper")
+                           "/joint_states": 2 if measure else 1, "/sim_plant/reference": 1, "/cycle_events": 2},
+                          "the learner's shaper")
         for k in range(iterations):
-            _, r = driver.cycle(k)
+            r = driver.report_of_cycle(k)
             done = action(r)
             it = Iteration(int(metric(r, "iteration")) if done != "skipped" else -1, metric(r, "rms_e"),
                            metric(r, "rms_u1"), metric(r, "rms_u2"), done, metric(r, "residual"))

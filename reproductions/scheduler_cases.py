@@ -152,9 +152,10 @@ def residuals(t: np.ndarray, x0: np.ndarray, x1: np.ndarray, step_times: np.ndar
 
 
 class _Recorder:
-    """What a case's run publishes, as it arrives (times in s of simulated time)."""
+    """What a case's run publishes, as it arrives (times in s of simulated time); the shaped commands only
+    with ``commands`` (the plot of the docs shows them; without, ``Run.v_shaped`` is empty)."""
 
-    def __init__(self, node: Any) -> None:
+    def __init__(self, node: Any, commands: bool = True) -> None:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
@@ -172,7 +173,8 @@ class _Recorder:
         self.active: list[tuple[float, str, str]] = []     # time, source, family
         node.create_subscription(JointState, "/joint_states", self._on_js, 1000)
         node.create_subscription(JointState, "/sim_plant/tip_state", self._on_tip, 1000)
-        node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self._on_cmd, 1000)
+        if commands:
+            node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self._on_cmd, 1000)
         node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, LATCHED)
         node.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         node.create_subscription(ShaperMsg, "/shaper/active_shaper", self._on_shaper, LATCHED)
@@ -240,11 +242,11 @@ def _start_nodes(case: Case, start: StartNode) -> None:
 
 
 def _wait_for_nodes(case: Case, node: Any, until: Callable[[Callable[[], bool], float, str], None],
-                    rec: _Recorder, start_cli: Any) -> None:
+                    rec: _Recorder, start_cli: Any, commands: bool = True) -> None:
     """Wait for the services, the subscribers and the first active shaper, then let discovery settle."""
     until(start_cli.service_is_ready, 60.0, "the sim plant")
-    need = {"/shaper/commands": 1, "/forward_position_controller/commands": 2, "/joint_states": 1,
-            "/sim_plant/tip_state": 1}
+    need = {"/shaper/commands": 1, "/forward_position_controller/commands": 2 if commands else 1,
+            "/joint_states": 1, "/sim_plant/tip_state": 1}
     if case.scheduler is not None:
         need["/joint_states"] = 2
         from shaper_msgs.srv import GetShaper
@@ -291,23 +293,30 @@ def _has_subscribers(node: Any, topic: str, n: int) -> bool:
 
 
 def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
-             progress: Callable[[str], None] | None = None) -> Run:
-    """Run the five steps of ``case``; ``start(package, executable, params)`` starts a node process."""
+             progress: Callable[[str], None] | None = None, commands: bool = True) -> Run:
+    """Run the five steps of ``case``; ``start(package, executable, params)`` starts a node process.
+    ``commands``: also record the shaped commands (``Run.v_shaped``, which only the docs' plot shows; a
+    message fewer per step to take without)."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
     from std_srvs.srv import Trigger
 
     from sim_plant_node.clients.conductor import spin_until
 
     _start_nodes(case, start)
-    node = Node("scheduler_cases", context=ctx)
+    # no parameter or type description services: rclpy's executor builds its wait set over every entity of the
+    # node at each of the run's thousands of wake-ups (as the Conductor's)
+    node = Node("scheduler_cases", context=ctx, start_parameter_services=False,
+                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    rec = _Recorder(node)
+    rec = _Recorder(node, commands)
     start_cli = node.create_client(Trigger, "/sim_plant/start_task")
     until = functools.partial(spin_until, ex)
     try:
-        _wait_for_nodes(case, node, until, rec, start_cli)
+        _wait_for_nodes(case, node, until, rec, start_cli, commands)
         _start_task(start_cli, until)
         n_steps = len(STEP_LEVELS)
         seen = 0

@@ -55,7 +55,7 @@ class Conductor(Node):
     """Drive the sim plant and the shaper; collect per-cycle results."""
 
     def __init__(self, *args, plant: str = "/sim_plant", shaper: str = "/shaper", imu_topic: str = "/tip_imu",
-                 settle_tolerance: float = 1e-6, **kwargs) -> None:
+                 settle_tolerance: float = 1e-6, measure: bool = True, **kwargs) -> None:
         # no parameter services (nothing sets the conductor's parameters): six services fewer in the wait set of
         # every spin, about 17 % less CPU per message taken (it takes every accelerometer sample of a run)
         kwargs.setdefault("start_parameter_services", False)
@@ -68,8 +68,12 @@ class Conductor(Node):
         # best effort as the sensor publishes, but a deep queue: with the default sensor-data depth (5) a busy
         # machine drops samples here and the measured residual depends on the load
         imu_qos = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.create_subscription(Imu, imu_topic, self._on_imu, imu_qos)
-        self.create_subscription(JointState, "/joint_states", self._on_js, 100)
+        # measure False: no accelerometer or joint state subscription (a driver that does not use the residuals
+        # this conductor measures: they were most of its CPU, a message taken per sample); run_cycles needs them
+        self.measure = measure
+        if measure:
+            self.create_subscription(Imu, imu_topic, self._on_imu, imu_qos)
+            self.create_subscription(JointState, "/joint_states", self._on_js, 100)
         self.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         self.set_shaper_cli = self.create_client(SetShaper, f"{shaper}/set_shaper")
         self.plant_params_cli = self.create_client(SetParameters, f"{plant}/set_parameters")
@@ -154,10 +158,10 @@ class Conductor(Node):
                    progress: Callable[[int], None] | None = None) -> list[CycleResult]:
         """Start a run of ``cycles`` cycles on the plant and return their results (``task.cycles`` is set
         when it differs from what this conductor set last: a learner's loop of one-cycle runs sets it once)."""
-        if self._task_cycles != int(cycles):
-            self.set_plant(task__cycles=int(cycles))
+        if not self.measure:
+            raise RuntimeError("run_cycles measures the cycles: this conductor was made with measure=False")
         first = len(self.results)
-        self.start_task(timeout)
+        self.start_run(cycles, timeout)
         seen = first
 
         def done() -> bool:
@@ -170,6 +174,13 @@ class Conductor(Node):
 
         self.spin_until(done, timeout, f"{cycles} cycles")
         return self.results[first:]
+
+    def start_run(self, cycles: int, timeout: float = 60.0) -> str:
+        """Start a run of ``cycles`` cycles on the plant without waiting for it (``task.cycles`` is set when it
+        differs from what this conductor set last). Returns the plant's message."""
+        if self._task_cycles != int(cycles):
+            self.set_plant(task__cycles=int(cycles))
+        return self.start_task(timeout)
 
     def start_task(self, timeout: float = 60.0) -> str:
         """Start a run on the plant; while the plant waits for its ``task.subscribers`` to match, ask

@@ -88,6 +88,65 @@ def _hump_equations(x: FloatArray, humps: int, v: float, zeta: float) -> FloatAr
     return np.concatenate([np.abs(rh) - v, (np.conj(rh) * dr).real / v, rz.real, rz.imag])
 
 
+def _hump_rows(x: FloatArray, humps: int) -> tuple[list[int | None], list[int | None]]:
+    """Which unknown each hump and each zero frequency is (index into ``x``; None: the design frequency 1), in
+    the sorted order of :func:`_hump_unpack` (its rows of :func:`_hump_equations`)."""
+    n = humps + 2
+    free_h = humps - 1 if humps % 2 else humps
+    hump: list[tuple[float, int | None]] = [(float(x[k]), k) for k in range(2 * n - 2, 2 * n - 2 + free_h)]
+    zero: list[tuple[float, int | None]] = [(float(x[k]), k) for k in range(2 * n - 2 + free_h, x.size)]
+    (hump if humps % 2 else zero).append((1.0, None))
+    return ([k for _, k in sorted(hump, key=lambda p: p[0])], [k for _, k in sorted(zero, key=lambda p: p[0])])
+
+
+def _hump_jacobian(x: FloatArray, humps: int, v: float, zeta: float) -> FloatArray:
+    """The Jacobian of :func:`_hump_equations` with respect to ``x``, in closed form.
+
+    With e_i = A_i exp(w g_i), g_i = zeta tau_i + j sd t_i (sd = sqrt(1 - zeta^2)), R = sum e_i and
+    D = sum e_i w g_i: dR/dA_k = E_k - E_n and dD/dA_k = w (E_k g_k - E_n g_n) (E_i = exp(w g_i), the
+    last amplitude is 1 - the others); for the time s_m of impulse m in damped periods (t = 2 pi / sd s,
+    tau = t - t_n) dR/ds_m = w c sum_i e_i h_im and dD/ds_m = w c sum_i e_i h_im (w g_i + 1), with
+    c = 2 pi / sd and h_im = zeta (delta_im - delta_in) + j sd delta_im; for a free frequency w of a row
+    dR/dw = sum e_i g_i and dD/dw = sum e_i g_i (w g_i + 1). Then d|R| = Re(conj(R) dR) / |R|,
+    d Re(conj(R) D) = Re(conj(dR) D + conj(R) dD). (The least-squares solve took most of its time in
+    finite differences of the equations, one evaluation per unknown for each Jacobian.)
+    """
+    n = humps + 2
+    amps, times, hump, zero = _hump_unpack(x, humps, zeta)
+    rows_h, rows_z = _hump_rows(x, humps)
+    w = np.array(hump + zero)[:, None]
+    sd = math.sqrt(1.0 - zeta * zeta)
+    c = 2.0 * math.pi / sd
+    tau = times - times[-1]
+    g = zeta * tau + 1j * sd * times                      # (n,)
+    big_e = np.exp(w * g)                                 # (q, n)
+    e = amps * big_e
+    r = e.sum(axis=1)
+    d = (e * w * g).sum(axis=1)
+    q = w.shape[0]
+    dr = np.zeros((q, x.size), dtype=complex)
+    dd = np.zeros((q, x.size), dtype=complex)
+    # amplitudes A_1..A_{n-1}
+    dr[:, : n - 1] = big_e[:, : n - 1] - big_e[:, n - 1 : n]
+    dd[:, : n - 1] = w * (big_e[:, : n - 1] * g[: n - 1] - big_e[:, n - 1 : n] * g[n - 1])
+    # times s_2..s_n (impulse m = 1..n-1 from 0)
+    h = np.zeros((n, n - 1), dtype=complex)
+    h[np.arange(1, n), np.arange(n - 1)] = zeta + 1j * sd
+    h[:, n - 2] -= zeta
+    dr[:, n - 1 : 2 * n - 2] = w * c * (e @ h)
+    dd[:, n - 1 : 2 * n - 2] = w * c * ((e * (w * g + 1.0)) @ h)
+    # free frequencies: each in its own row
+    for row, k in enumerate(rows_h + rows_z):
+        if k is not None:
+            dr[row, k] = (e[row] * g).sum()
+            dd[row, k] = (e[row] * g * (w[row, 0] * g + 1.0)).sum()
+    nh = len(hump)
+    rh, dh = r[:nh, None], d[:nh, None]
+    return np.concatenate([(np.conj(rh) * dr[:nh]).real / np.abs(rh),
+                           (np.conj(dr[:nh]) * dh + np.conj(rh) * dd[:nh]).real / v,
+                           dr[nh:].real, dr[nh:].imag])
+
+
 def _hump_valid(x: FloatArray, residual: float, humps: int, v: float, zeta: float) -> bool:
     """Residual < 1e-9, positive amplitudes, increasing times, zeros and humps alternating,
     and V <= V_tol between the outer zeros."""
@@ -119,8 +178,8 @@ def _hump_solve(humps: int, v: float, zeta: float, x0: FloatArray) -> FloatArray
         start[top] = min(start[top] * factor, 50.0)
         start = np.clip(start, lower + 1e-12, upper - 1e-12)
         with np.errstate(over="ignore", invalid="ignore"):
-            sol = least_squares(_hump_equations, start, bounds=(lower, upper), args=(humps, v, zeta),
-                                xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=40 * nx)
+            sol = least_squares(_hump_equations, start, jac=_hump_jacobian, bounds=(lower, upper),
+                                args=(humps, v, zeta), xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=40 * nx)
         if np.all(np.isfinite(sol.fun)) and _hump_valid(sol.x, float(np.max(np.abs(sol.fun))), humps, v, zeta):
             return np.asarray(sol.x)
     return None
