@@ -231,3 +231,41 @@ def _alive(pid: int) -> bool:
     except OSError:
         return False
 
+
+
+def test_a_sensor_fault_is_published_on_diagnostics_naming_the_pose(ros_context):
+    """calibrate's report of the poses whose accelerometer failed (analysis.calibration.sensor_faults), as a
+    monitor subscribed to /diagnostics receives it."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.executors import SingleThreadedExecutor
+
+    from shaper_nodes.nodes.calibrate import publish_sensor_faults
+    from shaper_nodes.ros.diagnostics import Diagnostics
+
+    node = rclpy.create_node("calibrate", context=ros_context)
+    monitor = rclpy.create_node("monitor", context=ros_context)
+    got: list = []
+    monitor.create_subscription(DiagnosticArray, "/diagnostics", lambda m: got.extend(m.status), 10)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    ex.add_node(monitor)
+    diagnostics = Diagnostics(node)
+    try:
+        deadline = time.monotonic() + 60.0
+        while diagnostics._pub.get_subscription_count() < 1:
+            assert time.monotonic() < deadline, "the monitor's subscription did not match"
+            ex.spin_once(timeout_sec=0.05)
+        publish_sensor_faults(diagnostics, [])  # no fault: nothing published
+        why = "excitation 1: every accelerometer axis read one value through the whole cycle ([3, 3, 3], 500 samples)"
+        publish_sensor_faults(diagnostics, [(1, "elbow_joint=1.000", why)])
+        while not got:
+            assert time.monotonic() < deadline, "no status on /diagnostics"
+            ex.spin_once(timeout_sec=0.05)
+        (status,) = got
+        assert status.level == DiagnosticStatus.ERROR and status.name == "calibrate: sensor"
+        assert status.message == f"sensor fault at 1 pose(s), not identified: pose 1 (elbow_joint=1.000): {why}"
+        assert [(kv.key, kv.value) for kv in status.values] == [("pose 1 (elbow_joint=1.000)", why)]
+    finally:
+        ex.shutdown()
+        monitor.destroy_node()
+        node.destroy_node()

@@ -26,6 +26,7 @@ from shaper_nodes.analysis.calibration import (
     compute,
     pose_sensor_fault,
     report_dict,
+    sensor_faults,
     setup_dict,
 )
 from shaper_nodes.core.calibration import IdentifySettings
@@ -81,6 +82,7 @@ def test_a_pose_with_a_dead_accelerometer_is_flagged_and_never_ok_nor_used(worke
     row = report["poses"][1]
     assert row["ok"] is False and row["sensor_fault"].startswith("excitation 1: every accelerometer axis")
     assert report["poses"][0]["sensor_fault"] is None and stuck.name in report["flagged_poses"]
+    assert sensor_faults(cal) == [(stuck.index, stuck.name, row["sensor_fault"])]  # what calibrate publishes
     # its place in the rule base holds its neighbour's measured modes, said so, never its own (it has none)
     assert cal.rule_base is not None
     assert any(n.startswith(f"{stuck.name}: mode(s)") and "taken from" in n for n in cal.notes), cal.notes

@@ -346,6 +346,11 @@ def _sensor_fault(r: PoseResult) -> str | None:
     return next((f[len(SENSOR_FAULT) + 2:] for f in r.flags if f.startswith(SENSOR_FAULT + ": ")), None)
 
 
+def sensor_faults(cal: Calibration) -> list[tuple[int, str, str]]:
+    """The poses whose accelerometer failed: (index, name, why) each, in pose order."""
+    return [(r.index, r.name, why) for r in cal.results if (why := _sensor_fault(r)) is not None]
+
+
 def report_dict(cal: Calibration) -> dict[str, Any]:
     """report.json: plan, settings, per pose its positions, modes (one-sigma) and flags, the choices."""
     names = list(cal.plan.config.joint_names)

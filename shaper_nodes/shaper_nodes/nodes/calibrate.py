@@ -53,6 +53,7 @@ from shaper_nodes.analysis.calibration import (
     plan_from_setup,
     pose_folders,
     read_recording,
+    sensor_faults,
     setup_dict,
 )
 from shaper_nodes.analysis.calibration_report import write_outputs
@@ -62,6 +63,7 @@ from shaper_nodes.core.calibration.plan import make_plan, quintic_time
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
 from shaper_nodes.core.files import write_atomic
 from shaper_nodes.ros.conversions import time_to_sec
+from shaper_nodes.ros.diagnostics import ERROR, Diagnostics
 from shaper_nodes.ros.parameters import declare_all
 
 from .calibrate_parameters import PARAMETERS, CalibrateParams, config_from_values, settings_from_values
@@ -116,6 +118,8 @@ class Calibrator:
         node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
         node.create_subscription(JointState, self.js_topic, self._on_joint_states, STREAM_QOS)
         self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
+        # made now, so that a monitor's subscription has matched by the time a sensor fault is reported
+        self.diagnostics = Diagnostics(node)
         self._fjt = FollowJointTrajectory
 
     # ------------------------------------------------------------------ data
@@ -505,6 +509,15 @@ def _start_pose(cal: Calibrator, v: CalibrateParams, execute: bool) -> np.ndarra
         return None
 
 
+def publish_sensor_faults(diagnostics: Diagnostics, faults: list[tuple[int, str, str]]) -> None:
+    """``calibrate: sensor`` (ERROR) on /diagnostics naming each pose whose accelerometer failed (index, name,
+    why); nothing if none did."""
+    if faults:
+        poses = "; ".join(f"pose {i} ({name}): {why}" for i, name, why in faults)
+        diagnostics.publish("sensor", ERROR, f"sensor fault at {len(faults)} pose(s), not identified: {poses}",
+                            [(f"pose {i} ({name})", why) for i, name, why in faults])
+
+
 def _execute(cal: Calibrator, plan: Plan, setup: dict[str, Any], out: pathlib.Path, workers: int) -> int:
     recording = out / "recording"
     for partial in recording.glob("*.partial"):
@@ -527,6 +540,7 @@ def _execute(cal: Calibrator, plan: Plan, setup: dict[str, Any], out: pathlib.Pa
     print("calibrate: identifying the modes at every pose ...", flush=True)
     setup_read, poses = read_recording(recording)
     result = compute(setup_read, poses, workers=workers)
+    publish_sensor_faults(cal.diagnostics, sensor_faults(result))
     try:
         written = write_outputs(out, result, "recording")
     except OSError as err:
