@@ -123,9 +123,11 @@ def test_a_lost_sample_is_counted_exactly(start_node, ros_context):
     mover.spin_until(sent.done, "the goal response")
     result = sent.result().get_result_async()
     mover.spin_until(result.done, "the goal result")
-    while True:  # drain what the reader's queue kept
-        n = len(stamps)
-        ex.spin_once(timeout_sec=0.5)
+    while True:  # drain what the reader's queue kept: until 0.5 s bring no sample (the reader's acknowledgement
+        n = len(stamps)  # timer runs in between, so one spin that took nothing says nothing)
+        quiet = time.monotonic() + 0.5
+        while time.monotonic() < quiet:
+            ex.spin_once(timeout_sec=0.05)
         if len(stamps) == n:
             break
     ex.shutdown()
