@@ -86,6 +86,10 @@ __all__ = ["EXIT_ABORTED", "EXIT_CANCELLED", "EXIT_REFUSED", "EXIT_TERMINATED", 
 POLL = 0.02  # s, executor spin granularity
 #: s, the longest a stop waits for the controller's answer to the cancel of the running goal
 CANCEL_WAIT = 5.0
+#: s the controller's action server must stay out of the graph before calibrate takes it as gone: under load the
+#: graph briefly reads it unavailable while it runs (seen in CI: a live controller 'left the graph' 0.8 s after it
+#: accepted a goal); a dead controller is still caught in this time, or by its silence (timeouts.peer)
+SERVER_GONE = 2.0
 
 
 class Calibrator:
@@ -109,13 +113,14 @@ class Calibrator:
         self.goal_what = ""
         self.sent: Any = None
         self.peer_lost = False  # the controller went away or went silent: a cancel is sent, not awaited
+        self._absent_since: float | None = None  # wall time the action server was first seen out of the graph
         reliability = ReliabilityPolicy.RELIABLE if params.topics.imu_reliable else ReliabilityPolicy.BEST_EFFORT
         deep = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
         self.imu_topic = params.topics.imu
         self.js_topic = params.topics.joint_states
         # a lockstep sim plant that names this node in lockstep.readers waits for it; gaps in the stamps are losses
         self.lockstep = LockstepReader(node, {self.imu_topic: None, self.js_topic: None})
-        node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
+        self._imu_sub = node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
         node.create_subscription(JointState, self.js_topic, self._on_joint_states, STREAM_QOS)
         self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
         # made now, so that a monitor's subscription has matched by the time a sensor fault is reported
@@ -176,6 +181,16 @@ class Calibrator:
         self.spin_until(lambda: self.imu_stamp >= stamp, float(self.p.timeouts.data),
                         f"accelerometer data on {self.imu_topic} up to {what} (t = {stamp:.3f} s)")
 
+    def _server_gone(self) -> bool:
+        """Whether the controller's action server has been out of the graph for :data:`SERVER_GONE` s."""
+        if self.action.server_is_ready():
+            self._absent_since = None
+            return False
+        now = time.monotonic()
+        if self._absent_since is None:
+            self._absent_since = now
+        return now - self._absent_since >= SERVER_GONE
+
     def _await_answer(self, sent: Any, what: str) -> None:
         """Wait for the controller's answer to a goal while watching it as :meth:`_await_result` does: a live
         controller answers at once, so its silence for timeouts.peer (or timeouts.server if shorter), or its
@@ -183,11 +198,11 @@ class Calibrator:
         bound, name = min((float(self.p.timeouts.peer), "timeouts.peer"), (float(self.p.timeouts.server),
                                                                            "timeouts.server"))
         with contextlib.suppress(Aborted):
-            self.spin_until(lambda: sent.done() or not self.action.server_is_ready(), bound, "")
+            self.spin_until(lambda: sent.done() or self._server_gone(), bound, "")
         if sent.done():
             return
         self.peer_lost = True
-        if not self.action.server_is_ready():
+        if self._server_gone():
             raise Aborted(f"the controller's action server {self.p.action} left the graph before it answered the"
                           f" goal of {what} (the controller stopped?); rerun with --resume once it is back")
         raise Aborted(f"no answer and no feedback from the controller for {bound:g} s after the goal of {what}"
@@ -203,7 +218,7 @@ class Calibrator:
             now = time.monotonic()
             if len(stamps) != count:
                 heard, count = now, len(stamps)
-            if not self.action.server_is_ready():
+            if self._server_gone():
                 self.peer_lost = True
                 raise Aborted(f"the controller's action server {self.p.action} left the graph during {what}"
                               " (the controller stopped?); rerun with --resume once it is back")
@@ -232,6 +247,9 @@ class Calibrator:
         goal = self._fjt.Goal(trajectory=JointTrajectory(joint_names=self.names, points=points))
         server = float(self.p.timeouts.server)
         self.spin_until(self.action.server_is_ready, server, f"the FollowJointTrajectory server {self.p.action}")
+        # the accelerometer matched before the arm moves: a simulator in lockstep runs a goal in a blink, and the
+        # samples published before the match never come (the rest after the goal publishes none)
+        self.spin_until(lambda: self._imu_sub.get_publisher_count() > 0, server, f"a publisher of {self.imu_topic}")
         stamps: list[float] = []
 
         def on_feedback(m: Any) -> None:
