@@ -22,7 +22,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from reproductions.common import (
     LOCKSTEP_LEARNER,
@@ -64,23 +64,27 @@ def plant_params(mode: tuple[float, float]) -> dict:
     return {"plant.model": "mck_pid", "plant.mass": [m], "plant.damping": [c], "plant.stiffness": [k]}
 
 
-def _nodes(start: StartNode, plant_mode: tuple[float, float]) -> None:
+def _nodes(start: StartNode, plant_mode: tuple[float, float], plant: dict | None = None) -> None:
     start("sim_plant_node", "sim_plant", {"joint_names": JOINT, "rate": RATE, "mode": "lockstep",
                                           "lockstep.block": lockstep_block(RATE),
                                           "lockstep_timeout": LOCKSTEP_TIMEOUT, "imu.axes": [0, -1, -1],
-                                          **plant_params(plant_mode), **TASK})
+                                          **plant_params(plant_mode), **TASK, **(plant or {})})
     start("shaper_nodes", "shaper_node", {"joint_names": JOINT, "command_rate": RATE, "use_sim_time": True})
 
 
 def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartNode, ctx, learner: dict | None = None,
-                 progress: Callable[[Iteration], None] | None = None, measure: bool = False) -> list[Iteration]:
+                 progress: Callable[[Iteration], None] | None = None, measure: bool = False,
+                 plant: dict | None = None, before: Callable[[Any], None] | None = None,
+                 after: Callable[[Any, list[Any]], None] | None = None) -> list[Iteration]:
     """``iterations`` cycles with the MRILC learner on the plant (omega, zeta); one Iteration each.
 
     The driver reads only the learner's reports: with ``measure`` False (the default) it takes no accelerometer
     or joint state samples (:class:`~reproductions.common.LearnerDriver`) and starts the next cycle as soon as
     the report is in; ``measure`` True paces the cycles as before, each also measured by the driver (a
-    recorder that is no lockstep reader then has the time it had)."""
-    _nodes(start, plant_mode)
+    recorder that is no lockstep reader then has the time it had). ``plant`` adds sim plant parameters (e.g.
+    ``lockstep.readers``); ``before(conductor)`` runs once the nodes are ready, before the first cycle, and
+    ``after(conductor, reports)`` after the last report (e.g. to wait for a recorder)."""
+    _nodes(start, plant_mode, plant)
     start("shaper_nodes", "learner", {"mode": "mrilc", "mrilc.rate": RATE, "use_sim_time": True,
                                       "joint_names": JOINT, **LOCKSTEP_LEARNER, **(learner or {})})
     driver = LearnerDriver(ctx, measure=measure)
@@ -89,6 +93,8 @@ def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartN
         driver.wait_ready({"/shaper/commands": 1, "/forward_position_controller/commands": 1,
                            "/joint_states": 2 if measure else 1, "/sim_plant/reference": 1, "/cycle_events": 2},
                           "the learner's shaper")
+        if before is not None:
+            before(driver.conductor)
         for k in range(iterations):
             r = driver.report_of_cycle(k)
             done = action(r)
@@ -97,6 +103,8 @@ def run_learning(plant_mode: tuple[float, float], iterations: int, start: StartN
             out.append(it)
             if progress:
                 progress(it)
+        if after is not None:
+            after(driver.conductor, driver.reports)
     finally:
         driver.close()
     return out

@@ -19,6 +19,7 @@ from reproductions.mrilc_cases import JOINT, NOMINAL, PERTURBED, RATE, plant_par
 from shaper_msgs.msg import FeedforwardProfile
 from shaper_msgs.srv import SetFeedforward, SetShaper
 from shaper_nodes.nodes.learner import LearnerNode
+from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.clients.conductor import Conductor
 
 pytestmark = pytest.mark.integration
@@ -95,11 +96,19 @@ def test_a_recorded_mrilc_run_replays_offline_to_the_live_updates(starter, ros_c
 
     start = starter
     bag = tmp_path / "bag"
-    recorder = start("shaper_nodes", "recorder", {
-        "output": str(bag), "use_sim_time": True,
-        "topics": ["/tip_imu", "/joint_states", "/sim_plant/reference", "/cycle_events"]})
-    live = run_learning(PERTURBED, 3, start, ros_context, measure=True)  # (the recorder is no lockstep reader)
-    time.sleep(0.5)  # the recorder drains its queue
+    topics = ["/tip_imu", "/joint_states", "/sim_plant/reference", "/cycle_events"]
+    recorder = start("shaper_nodes", "recorder", {"output": str(bag), "use_sim_time": True, "topics": topics})
+    watch: list[AckWatch] = []
+
+    def before(conductor) -> None:  # the plant waits for the recorder (lockstep.readers), from the first step on
+        watch.append(AckWatch(conductor, "/recorder"))
+        watch[0].wait_subscribed(conductor.spin_until, topics, 60.0)
+
+    def after(conductor, reports) -> None:  # every sample up to the last cycle's residual window recorded
+        watch[0].wait_processed(conductor.spin_until, reports[-1].window_end, 120.0)
+
+    live = run_learning(PERTURBED, 3, start, ros_context, measure=True, plant={"lockstep.readers": ["/recorder"]},
+                        before=before, after=after)
     assert recorder.stop() == 0
     start.stop_all()
     assert [r.action for r in live] == ["learn"] * 3

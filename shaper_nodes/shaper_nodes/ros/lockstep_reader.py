@@ -16,8 +16,10 @@ The QoS a reader's per-step streams need: :data:`STREAM_QOS` (reliable, deep eno
 
 from __future__ import annotations
 
+import functools
+import math
 import struct
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from rclpy.clock import Clock as RosClock
@@ -26,11 +28,11 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from ..core.lockstep import ACK_PERIOD, ANNOUNCE, Acks, Gaps
-from .conversions import sec_to_time
+from .conversions import sec_to_time, time_to_sec
 from .qos import LATCHED
 
-__all__ = ["ACK_QOS", "ACK_SUFFIX", "FLUSH_PERIOD", "HEADER_FIRST", "STREAM_QOS", "LockstepReader", "ack_topic",
-           "header_stamp"]
+__all__ = ["ACK_QOS", "ACK_SUFFIX", "FLUSH_PERIOD", "HEADER_FIRST", "STREAM_QOS", "AckWatch", "LockstepReader",
+           "ack_topic", "header_stamp", "subscribes"]
 
 #: the acknowledgement topic is the reader node's fully qualified name plus this
 ACK_SUFFIX = "/lockstep_ack"
@@ -118,3 +120,57 @@ class LockstepReader:
         lost = self.lost(t0, t1)
         return ("lost " + ", ".join(f"{n} sample{'s' if n != 1 else ''} of {name}" for name, n in lost.items())
                 if lost else "")
+
+
+def subscribes(node: Any, reader: str, topic: str) -> bool:
+    """Whether node ``reader`` (its name, e.g. ``/recorder``) subscribes to ``topic``, as ``node`` sees the graph
+    (a recorder subscribes to a topic once it sees it: a lockstep plant would run the first samples past it)."""
+    name = reader.strip("/").rsplit("/", 1)[-1]
+    return any(i.node_name == name for i in node.get_subscriptions_info_by_topic(topic))
+
+
+class AckWatch:
+    """What a lockstep reader has processed, from its acknowledgements, as another node sees them: for a client
+    that must not stop the reader (a recorder) before it has taken every sample up to a time.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The watching node (its executor must spin for :attr:`processed` to move).
+    reader : str
+        The reader's node name, e.g. ``/recorder``.
+    """
+
+    def __init__(self, node: Any, reader: str) -> None:
+        self.reader = reader
+        #: the simulated time the reader has taken every sample up to, s (-inf before its first sample)
+        self.processed = -math.inf
+        #: whether the reader has announced itself (then a lockstep plant that names it waits for it)
+        self.announced = False
+        self._node = node
+        self._sub = node.create_subscription(Clock, ack_topic(reader), self._on_ack, ACK_QOS)
+
+    def _on_ack(self, msg: Clock) -> None:
+        self.announced = True
+        if msg.clock.sec >= 0:  # not the announcement
+            self.processed = max(self.processed, time_to_sec(msg.clock))
+
+    def wait_subscribed(self, spin_until: Callable[[Callable[[], bool], float, str], None], topics: Iterable[str],
+                        timeout: float) -> None:
+        """Spin (``spin_until(done, timeout, what)``, which raises TimeoutError naming ``what``) until the reader
+        subscribes to every one of ``topics`` and has announced itself."""
+        for topic in topics:
+            spin_until(functools.partial(subscribes, self._node, self.reader, topic), timeout,
+                       f"{self.reader}'s subscription of {topic}")
+        spin_until(lambda: self.announced, timeout,
+                   f"{self.reader}'s lockstep announcement on {ack_topic(self.reader)}")
+
+    def wait_processed(self, spin_until: Callable[[Callable[[], bool], float, str], None], end: float,
+                       timeout: float) -> None:
+        """Spin until the reader has taken every sample up to simulated time ``end`` s; on a time-out one
+        TimeoutError line says how far it got."""
+        try:
+            spin_until(lambda: self.processed >= end - 1e-6, timeout, "")
+        except TimeoutError:
+            raise TimeoutError(f"{self.reader} did not take the samples up to t = {end:.3f} s within {timeout:g} s;"
+                               f" it has them up to t = {self.processed:.3f} s") from None

@@ -125,7 +125,7 @@ class ArmClient:
         from shaper_msgs.msg import CycleEvent, CycleReport
         from shaper_nodes.ros.action_client import ResilientActionClient
         from shaper_nodes.ros.conversions import time_to_sec
-        from shaper_nodes.ros.lockstep_reader import ACK_QOS, STREAM_QOS, LockstepReader, ack_topic
+        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, AckWatch, LockstepReader
 
         from ..arm.dynamics import ArmModel
 
@@ -133,8 +133,6 @@ class ArmClient:
         self.model = ArmModel()
         self.s = Streams()
         self.reports: list[Any] = []
-        #: the simulated time the recorder has taken every sample up to (its lockstep acknowledgement), s
-        self.recorded = -math.inf
         sec = time_to_sec
         # the plant waits for this node (its lockstep.readers): acknowledged, and each stream checked for gaps
         self.lockstep = LockstepReader(conductor, {IMU: 1.0 / (RATE * SUBSTEPS), LINK: 1.0 / RATE, CMD: 1.0 / RATE,
@@ -170,10 +168,6 @@ class ArmClient:
         def on_clock(m: Any) -> None:
             self.s.clock = max(self.s.clock, sec(m.clock))
 
-        def on_recorded(m: Any) -> None:
-            if m.clock.sec >= 0:  # not the announcement
-                self.recorded = max(self.recorded, sec(m.clock))
-
         # every stream a measure depends on: reliable, deeper than the plant's lead over this reader
         conductor.create_subscription(Imu, IMU, on_imu, STREAM_QOS)
         conductor.create_subscription(JointState, LINK, on_link, STREAM_QOS)
@@ -181,7 +175,8 @@ class ArmClient:
         conductor.create_subscription(JointState, JOINTS, on_joints, STREAM_QOS)
         conductor.create_subscription(Clock, "/clock", on_clock, 100)
         conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
-        conductor.create_subscription(Clock, ack_topic(RECORDER), on_recorded, ACK_QOS)
+        #: what the recorder has taken (its lockstep acknowledgements)
+        self.recorder = AckWatch(conductor, RECORDER)
         self.events = conductor.create_publisher(CycleEvent, "/cycle_events", 10)
         self.action = ResilientActionClient(conductor, FollowJointTrajectory, "/shaper/follow_joint_trajectory")
         self._Goal = FollowJointTrajectory.Goal
@@ -205,12 +200,7 @@ class ArmClient:
     def wait_recorder(self, topics: list[str], timeout: float = 60.0) -> None:
         """Wait until the recorder subscribes to ``topics`` (it subscribes to a topic once it sees it on the graph;
         the plant, which steps only once a goal comes, would otherwise run the first samples past it)."""
-        name = RECORDER.strip("/")
-
-        def subscribed(topic: str) -> bool:
-            return any(i.node_name == name for i in self.c.get_subscriptions_info_by_topic(topic))
-        for topic in topics:
-            self.c.spin_until(lambda t=topic: subscribed(t), timeout, f"the recorder's subscription of {topic}")
+        self.recorder.wait_subscribed(self.c.spin_until, topics, timeout)
 
     def _goal(self, move: Any) -> Any:
         from builtin_interfaces.msg import Duration
@@ -261,11 +251,7 @@ class ArmClient:
         """Wait until the recorder has taken every sample up to simulated time ``end`` s (its acknowledgement,
         which it sends on a wall-clock timer once the plant rests): closed before, the recording would lack the
         last samples still on their way to it."""
-        try:
-            self.c.spin_until(lambda: self.recorded >= end - 1e-6, WAIT, "")
-        except TimeoutError:
-            raise TimeoutError(f"the recorder did not take the samples up to the end of the run (t = {end:.3f} s)"
-                               f" within {WAIT:g} s; it has them up to t = {self.recorded:.3f} s") from None
+        self.recorder.wait_processed(self.c.spin_until, end, WAIT)
 
     def run_move(self, index: int, move: Any, on_start: Callable[[float], None] | None = None) -> MoveRun:
         """Send one move and wait for its end. It starts where the arm rests (the controller's clock: the plant
