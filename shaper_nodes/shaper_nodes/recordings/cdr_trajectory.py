@@ -14,7 +14,8 @@ aligned to their size counted from the end of the 4-byte encapsulation header)::
                      time_from_start: int32 sec, uint32 nanosec
 
 :func:`decode_joint_trajectory` (and :meth:`JointTrajectoryCodec.decode`, which skips the frame_id
-and the names when their bytes are the previous message's) parses any such buffer and refuses a
+and the names when their bytes are the previous message's, and reads points of the previous message's
+layout in one unpack) parses any such buffer and refuses a
 malformed one with a :class:`~.cdr_arrays.CdrError` whose one-line message names the problem
 (truncated, not little-endian CDR, a string without its NUL, with one inside or not UTF-8, a count
 that the bytes left cannot hold); more points than the caller's ``max_points`` is a
@@ -29,10 +30,10 @@ The module imports neither rclpy nor message types.
 
 from __future__ import annotations
 
+import operator
 import struct
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from .cdr import _HEAD, ENCAPSULATION, _Writer
 from .cdr_arrays import CdrError, _string, _u32
@@ -49,8 +50,7 @@ class TooManyPoints(CdrError):
     """A JointTrajectory with more points than the reader takes (counted before any point is read)."""
 
 
-@dataclass(frozen=True, slots=True)
-class Stamp:
+class Stamp(NamedTuple):
     """A builtin_interfaces/Time or Duration: ``sec`` (int32) and ``nanosec`` (uint32), as the message holds
     them (not normalised)."""
 
@@ -58,8 +58,7 @@ class Stamp:
     nanosec: int
 
 
-@dataclass(frozen=True, slots=True)
-class TrajectoryPoint:
+class TrajectoryPoint(NamedTuple):
     """A trajectory_msgs/JointTrajectoryPoint: the four sequences (rad or m, and their derivatives; N or N m)
     as tuples of floats, and ``time_from_start``."""
 
@@ -70,8 +69,7 @@ class TrajectoryPoint:
     time_from_start: Stamp
 
 
-@dataclass(frozen=True, slots=True)
-class Trajectory:
+class Trajectory(NamedTuple):
     """A trajectory_msgs/JointTrajectory read from its bytes (the fields named as the message's, the header's
     as ``stamp`` and ``frame_id``)."""
 
@@ -144,6 +142,59 @@ def _points(raw: Any, pos: int, max_points: int | None) -> tuple[TrajectoryPoint
         t, pos = _stamp(raw, pos, f"point {k} time_from_start")
         points.append(TrajectoryPoint(pos_, vel, acc, eff, t))
     return tuple(points)
+
+
+class _PointsLayout:
+    """One Struct that reads every point of a known layout (the counts of each point's fields) from a known
+    offset, with the counts among what it reads: a message whose counts are not those is parsed instead."""
+
+    def __init__(self, start: int, counts: Sequence[Sequence[int]]) -> None:
+        fmt, pos, index = ["<"], start, 0
+        count_at: list[int] = []  # where the point count and every field's count are among the values read
+        expected: list[int] = []
+        self.plan: list[tuple[tuple[int, int], ...]] = []  # per point: each field's (start, end), then the time's
+
+        def align(size: int) -> None:
+            nonlocal pos
+            to = _HEAD + ((pos - _HEAD + size - 1) & ~(size - 1))
+            if to > pos:
+                fmt.append(f"{to - pos}x")
+                pos = to
+
+        def take(code: str, values: int, size: int) -> int:
+            nonlocal pos, index
+            align(size)
+            fmt.append(code)
+            pos += size * values
+            index += values
+            return index - values
+
+        count_at.append(take("I", 1, 4))
+        expected.append(len(counts))
+        for point in counts:
+            spans = []
+            for n in point:
+                count_at.append(take("I", 1, 4))
+                expected.append(n)
+                first = take(f"{n}d", n, 8) if n else index
+                spans.append((first, first + n))
+            first = take("iI", 2, 4)
+            spans.append((first, first + 2))
+            self.plan.append(tuple(spans))
+        self.struct = struct.Struct("".join(fmt))
+        self.start, self.points = start, len(counts)
+        self.counts = operator.itemgetter(*count_at)
+        self.expected = tuple(expected) if len(expected) > 1 else expected[0]
+
+    def read(self, raw: Any) -> tuple[TrajectoryPoint, ...] | None:
+        """The points of ``raw`` if they are of this layout (else None)."""
+        if len(raw) < self.start + self.struct.size:
+            return None
+        v = self.struct.unpack_from(raw, self.start)
+        if self.counts(v) != self.expected:
+            return None
+        return tuple(TrajectoryPoint(v[p[0][0]:p[0][1]], v[p[1][0]:p[1][1]], v[p[2][0]:p[2][1]], v[p[3][0]:p[3][1]],
+                                     Stamp(v[p[4][0]], v[p[4][0] + 1])) for p in self.plan)
 
 
 def decode_joint_trajectory(raw: Any, max_points: int | None = None) -> Trajectory:
@@ -234,9 +285,12 @@ class JointTrajectoryCodec:
 
     #: most layouts :meth:`encode` keeps (it starts afresh when full)
     MAX_LAYOUTS = 8
+    #: most points whose layout :meth:`decode` keeps for the next message
+    MAX_POINTS_LAYOUT = 64
 
     def __init__(self) -> None:
         self._prefix = b""  # the bytes of the last frame_id and names (from after the stamp)
+        self._points: _PointsLayout | None = None  # the last points' layout, read in one unpack
         self._names: tuple[str, tuple[str, ...]] = ("", ())
         self._layouts: dict[tuple[str, tuple[str, ...], tuple[tuple[int, ...], ...]], _Layout] = {}
         #: the layout :meth:`encode` wrote last (its ``padding`` for tests)
@@ -244,7 +298,8 @@ class JointTrajectoryCodec:
 
     def decode(self, raw: Any, max_points: int | None = None) -> Trajectory:
         """:func:`decode_joint_trajectory`, the names taken from the last message when their bytes are
-        the same."""
+        the same, and the points read in one unpack when their layout is the last message's (the counts
+        of their fields are among the values that unpack reads, and compared)."""
         _check_head(raw)
         stamp, pos = _stamp(raw, _HEAD, "the header's stamp")
         n = len(self._prefix)
@@ -253,7 +308,15 @@ class JointTrajectoryCodec:
         else:
             frame_id, names, end = _names(raw, pos)
             self._prefix, self._names = bytes(raw[pos:end]), (frame_id, names)
-        return Trajectory(stamp, frame_id, names, _points(raw, end, max_points))
+        known = self._points
+        if known is not None and known.start == end and (max_points is None or known.points <= max_points):
+            points = known.read(raw)
+            if points is not None:
+                return Trajectory(stamp, frame_id, names, points)
+        points = _points(raw, end, max_points)
+        if len(points) <= self.MAX_POINTS_LAYOUT:
+            self._points = _PointsLayout(end, [tuple(len(getattr(p, f)) for f in POINT_FIELDS) for p in points])
+        return Trajectory(stamp, frame_id, names, points)
 
     def encode(self, stamp: tuple[int, int], frame_id: str, joint_names: Sequence[str],
                durations: Sequence[tuple[int, int]], fields: Mapping[str, Sequence[Sequence[float]]]) -> bytes:

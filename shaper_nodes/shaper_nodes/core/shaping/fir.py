@@ -220,6 +220,10 @@ def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
     return fir.gains.copy(), fir.delays / float(rate)
 
 
+#: rows a stage's linear buffer has room for after the history, at least (the block path moves the history to
+#: the front when they are used up: a stream of one-row blocks moves it once every this many rows)
+LINEAR_ROWS = 1024
+
 #: the most taps :func:`_tap_sum` writes a comprehension for (more: a loop over the taps)
 UNROLLED_TAPS = 32
 
@@ -268,8 +272,9 @@ class _Stage:
     - a linear buffer (``_ext``): the block path writes a block's deviations right after the
       ``length - 1`` inputs before it, and each tap is then one strided pass over that buffer
       (``out += g x[k - d]`` as BLAS ``daxpy`` on the flat rows). The buffer is kept from block to
-      block (grown only for a larger block), so a block allocates nothing but its output; the
-      history is moved to the front before the next block (``length - 1`` rows).
+      block (grown only for a larger block), so a block allocates nothing but its output; the next
+      block goes after it while there is room (:data:`LINEAR_ROWS`), else the history (``length - 1``
+      rows) is moved to the front first.
     """
 
     __slots__ = ("_buf", "_buf_ok", "_delays", "_ext", "_ext_end", "_gain_list", "_gains", "_idx", "_origin_flat",
@@ -350,54 +355,55 @@ class _Stage:
         self._pos = p + 1 if p + 1 < self._size else 0
         return self._sum(self._gain_list, [rows[t] for t in self._taps[p]], offset)
 
-    def _history(self, n: int) -> np.ndarray:
-        """The linear buffer with the last ``size - 1`` inputs in its first rows, oldest first, and room for
-        ``n`` more after them; the flat view of it is returned (the buffer is ``self._ext``)."""
+    def _history(self, n: int) -> tuple[np.ndarray, int]:
+        """The flat linear buffer (``self._ext``) with room for ``n`` inputs from its row ``at`` on, the last
+        ``size - 1`` inputs in the rows just before, oldest first; returns (flat, at). The history is moved to
+        the front only when the room after it runs out (for blocks of a few rows, once every
+        :data:`LINEAR_ROWS` rows or so)."""
         hist = self._size - 1
-        need = hist + n
         ext, end = self._ext, self._ext_end
         if end >= 0:  # the block path wrote last: the history is the rows end - hist .. end - 1
-            if ext.shape[0] < need:
-                grown = np.empty((need, ext.shape[1]))
+            if end + n <= ext.shape[0]:
+                return ext.reshape(-1), end
+            if hist + n > ext.shape[0]:
+                grown = np.empty((hist + max(n, LINEAR_ROWS), ext.shape[1]))
                 grown[:hist] = ext[end - hist : end]
                 self._ext = ext = grown
             elif end != hist:
                 ext[:hist] = ext[end - hist : end]  # (numpy copies through a buffer when the two overlap)
         else:
             self._numpy_ring()
-            if ext.shape[0] < need:
-                self._ext = ext = np.empty((need, self._buf.shape[1]))
+            if ext.shape[0] < hist + n:
+                self._ext = ext = np.empty((hist + max(n, LINEAR_ROWS), self._buf.shape[1]))
             p, buf = self._pos, self._buf  # the ring's next row holds its oldest input, not in the history
             ext[: hist - p] = buf[p + 1 :]
             ext[hist - p : hist] = buf[:p]
-        flat: np.ndarray = ext.reshape(-1)
-        return flat
+        return ext.reshape(-1), hist
 
-    def _tap_sum_block(self, flat: np.ndarray, n: int) -> np.ndarray:
-        """The FIR output of the ``n`` inputs written after the history in the flat buffer ``flat``; the
-        block path's state then lives in the linear buffer."""
+    def _tap_sum_block(self, flat: np.ndarray, at: int, n: int) -> np.ndarray:
+        """The FIR output of the ``n`` inputs written from row ``at`` of the flat buffer ``flat``, after the
+        history; the block path's state then lives in the linear buffer."""
         c = self._ext.shape[1]
-        hist = self._size - 1
         nc = n * c
         delays, gains = self._delays, self._gains
         out = np.empty((n, c))
         acc = out.reshape(-1)
-        start = (hist - delays[0]) * c
+        start = (at - delays[0]) * c
         np.multiply(gains[0], flat[start : start + nc], out=acc)
         # the other taps added in place, one pass each (BLAS daxpy: out += g x) on the flat rows
         for d, g in zip(delays[1:], self._gain_list[1:], strict=True):
-            start = (hist - d) * c
+            start = (at - d) * c
             daxpy(flat[start : start + nc], acc, a=g)
-        self._ext_end = hist + n
+        self._ext_end = at + n
         self._buf_ok = self._rows_ok = False
         return out
 
     def run(self, block: np.ndarray) -> np.ndarray:
         """A block of inputs (deviations, shape (N, channels)); returns the FIR output (a new array)."""
         n = block.shape[0]
-        flat = self._history(n)
-        self._ext[self._size - 1 : self._size - 1 + n] = block
-        return self._tap_sum_block(flat, n)
+        flat, at = self._history(n)
+        self._ext[at : at + n] = block
+        return self._tap_sum_block(flat, at, n)
 
     def run_values(self, block: np.ndarray) -> np.ndarray:
         """:meth:`run` for a block of input values (not deviations, C-contiguous, shape (N, channels)): their
@@ -405,13 +411,13 @@ class _Stage:
         to ``run(block - origin)``, bit for bit). Returns a new array."""
         n, c = block.shape
         nc = n * c
-        flat = self._history(n)
+        flat, at = self._history(n)
         neg = self._origin_flat
         if neg.size < nc:
             neg = self._origin_flat = np.tile(-self.origin, n)
-        start = (self._size - 1) * c
+        start = at * c
         np.add(block.reshape(-1), neg[:nc], out=flat[start : start + nc])
-        return self._tap_sum_block(flat, n)
+        return self._tap_sum_block(flat, at, n)
 
 
 class _ChannelShaper:
