@@ -19,6 +19,7 @@ from shaper_nodes.recordings.cdr_arrays import CdrError
 from shaper_nodes.recordings.cdr_trajectory import (
     POINT_FIELDS,
     JointTrajectoryCodec,
+    TooManyNames,
     TooManyPoints,
     Trajectory,
     decode_joint_trajectory,
@@ -162,12 +163,15 @@ def test_malformed_buffers_are_refused_with_the_reason(raw: bytes, words: str) -
         _one_line(err.value)
 
 
-def test_too_many_points_are_refused_before_any_is_read() -> None:
-    raw = serialize_message(JointTrajectory(points=[JointTrajectoryPoint()] * 4))
-    assert len(decode_joint_trajectory(raw, max_points=4).points) == 4
+def test_too_many_points_or_names_are_refused_before_any_is_read() -> None:
+    raw = serialize_message(JointTrajectory(joint_names=["a", "b"], points=[JointTrajectoryPoint()] * 4))
+    assert len(decode_joint_trajectory(raw, max_points=4, max_names=2).points) == 4
     for decode in (decode_joint_trajectory, JointTrajectoryCodec().decode):
         with pytest.raises(TooManyPoints, match="4 points exceed the limit of 3"):
             decode(raw, max_points=3)
+        with pytest.raises(TooManyNames, match="2 joint names exceed the limit of 1") as err:
+            decode(raw, max_names=1)
+        assert err.value.count == 2
 
 
 def test_corrupted_bytes_are_read_or_refused_never_crash() -> None:

@@ -18,7 +18,7 @@ from builtin_interfaces.msg import Duration
 from rclpy.serialization import deserialize_message, serialize_message
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.checks import MAX_JOINT_NAMES, InputError
 from shaper_nodes.core.shaping import Mode, design, discretize
 from shaper_nodes.core.shaping.limits import JointLimits
 from shaper_nodes.core.shaping.stream import NS, CommandStream, normal_stamp
@@ -209,3 +209,15 @@ def test_too_many_points_are_refused_before_any_is_read() -> None:
         RawTrajectories(_stream(names), names).shape(raw)
     assert err.value.kind == "too_large"
     assert str(err.value) == f"{MAX_TRAJECTORY_POINTS + 1} points exceed the limit of {MAX_TRAJECTORY_POINTS}"
+
+
+def test_too_many_names_are_refused_as_the_message_path_refuses_them() -> None:
+    """The message path's too_large for the names, with its text, before any name is decoded."""
+    names = ("a", "b")
+    msg = JointTrajectory(joint_names=["a"] * (MAX_JOINT_NAMES + 1), points=[_point([0.0], 1_000_000)])
+    with pytest.raises(InputError) as expected:
+        _message_path(_stream(names), names, msg)
+    with pytest.raises(InputError) as got:
+        RawTrajectories(_stream(names), names).shape(serialize_message(msg))
+    text = f"{MAX_JOINT_NAMES + 1} joint names exceed the limit of {MAX_JOINT_NAMES} (2 joints are shaped here)"
+    assert (got.value.kind, str(got.value)) == (expected.value.kind, str(expected.value)) == ("too_large", text)

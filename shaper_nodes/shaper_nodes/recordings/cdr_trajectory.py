@@ -19,7 +19,8 @@ layout in one unpack) parses any such buffer and refuses a
 malformed one with a :class:`~.cdr_arrays.CdrError` whose one-line message names the problem
 (truncated, not little-endian CDR, a string without its NUL, with one inside or not UTF-8, a count
 that the bytes left cannot hold); more points than the caller's ``max_points`` is a
-:class:`TooManyPoints` (refused before any point is read). The values are tuples of Python floats.
+:class:`TooManyPoints`, more names than ``max_names`` a :class:`TooManyNames` (each refused before
+any is read). The values are tuples of Python floats.
 :meth:`JointTrajectoryCodec.encode` writes a trajectory with one :class:`struct.Struct` per layout
 (frame_id, names, points and their fields' counts), kept for the next message of that layout; the
 bytes equal rclpy's ``serialize_message`` outside the padding bytes (zero here; Fast CDR does not
@@ -48,6 +49,15 @@ _MIN_NAME, _MIN_POINT = 5, 24
 
 class TooManyPoints(CdrError):
     """A JointTrajectory with more points than the reader takes (counted before any point is read)."""
+
+
+class TooManyNames(CdrError):
+    """A JointTrajectory with more joint names than the reader takes (counted before any name is read);
+    ``count`` is their number."""
+
+    def __init__(self, count: int, limit: int) -> None:
+        super().__init__(f"{count} joint names exceed the limit of {limit}")
+        self.count = count
 
 
 class Stamp(NamedTuple):
@@ -114,12 +124,14 @@ def _check_head(raw: Any) -> None:
         raise CdrError(f"not a little-endian plain CDR message (encapsulation {head}, {len(raw)} bytes)")
 
 
-def _names(raw: Any, pos: int) -> tuple[str, tuple[str, ...], int]:
+def _names(raw: Any, pos: int, max_names: int | None) -> tuple[str, tuple[str, ...], int]:
     """The frame_id and the joint names from byte ``pos`` (after the stamp); the position after them."""
     frame_id, pos = _string(raw, pos, "the header's frame_id", _TYPE)
     count, pos = _u32(raw, pos, "the joint names' count", _TYPE)
     if count * _MIN_NAME > len(raw) - pos:
         raise CdrError(f"truncated {_TYPE}: {count} joint names at byte {pos} do not fit in {len(raw)} bytes")
+    if max_names is not None and count > max_names:
+        raise TooManyNames(count, max_names)
     names = []
     for i in range(count):
         name, pos = _string(raw, pos, f"joint name {i}", _TYPE)
@@ -197,7 +209,7 @@ class _PointsLayout:
                                      Stamp(v[p[4][0]], v[p[4][0] + 1])) for p in self.plan)
 
 
-def decode_joint_trajectory(raw: Any, max_points: int | None = None) -> Trajectory:
+def decode_joint_trajectory(raw: Any, max_points: int | None = None, max_names: int | None = None) -> Trajectory:
     """A serialized trajectory_msgs/JointTrajectory, read.
 
     Parameters
@@ -206,6 +218,9 @@ def decode_joint_trajectory(raw: Any, max_points: int | None = None) -> Trajecto
         The serialized message (what a ``raw=True`` subscription receives).
     max_points : int, optional
         Most points taken; more is a :class:`TooManyPoints` before any point is read.
+    max_names : int, optional
+        Most joint names taken; more is a :class:`TooManyNames` before any name is read (the names come
+        before the points: a message with too many of both is refused for its names).
 
     Raises
     ------
@@ -214,7 +229,7 @@ def decode_joint_trajectory(raw: Any, max_points: int | None = None) -> Trajecto
     """
     _check_head(raw)
     stamp, pos = _stamp(raw, _HEAD, "the header's stamp")
-    frame_id, names, pos = _names(raw, pos)
+    frame_id, names, pos = _names(raw, pos, max_names)
     return Trajectory(stamp, frame_id, names, _points(raw, pos, max_points))
 
 
@@ -296,7 +311,8 @@ class JointTrajectoryCodec:
         #: the layout :meth:`encode` wrote last (its ``padding`` for tests)
         self.last_layout: _Layout | None = None
 
-    def decode(self, raw: Any, max_points: int | None = None) -> Trajectory:
+    def decode(self, raw: Any, max_points: int | None = None,
+               max_names: int | None = None) -> Trajectory:
         """:func:`decode_joint_trajectory`, the names taken from the last message when their bytes are
         the same, and the points read in one unpack when their layout is the last message's (the counts
         of their fields are among the values that unpack reads, and compared)."""
@@ -305,8 +321,10 @@ class JointTrajectoryCodec:
         n = len(self._prefix)
         if n and len(raw) >= pos + n and raw[pos:pos + n] == self._prefix:
             (frame_id, names), end = self._names, pos + n
+            if max_names is not None and len(names) > max_names:
+                raise TooManyNames(len(names), max_names)
         else:
-            frame_id, names, end = _names(raw, pos)
+            frame_id, names, end = _names(raw, pos, max_names)
             self._prefix, self._names = bytes(raw[pos:end]), (frame_id, names)
         known = self._points
         if known is not None and known.start == end and (max_points is None or known.points <= max_points):
@@ -358,5 +376,5 @@ class JointTrajectoryCodec:
         return layout.pack(stamp, durations, fields)
 
 
-__all__ = ["POINT_FIELDS", "JointTrajectoryCodec", "Stamp", "TooManyPoints", "Trajectory", "TrajectoryPoint",
-           "decode_joint_trajectory"]
+__all__ = ["POINT_FIELDS", "JointTrajectoryCodec", "Stamp", "TooManyNames", "TooManyPoints", "Trajectory",
+           "TrajectoryPoint", "decode_joint_trajectory"]

@@ -33,13 +33,13 @@ from typing import Any, cast
 
 import numpy as np
 
-from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.checks import MAX_JOINT_NAMES, InputError, joint_permutation
 from shaper_nodes.core.lockstep import block_rows
 from shaper_nodes.core.shaping.stream import CommandStream, normal_stamp
 from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
 from shaper_nodes.recordings.cdr import JointStateDecoder, little_endian
 from shaper_nodes.recordings.cdr_arrays import CdrError, Float64ArrayCodec
-from shaper_nodes.recordings.cdr_trajectory import JointTrajectoryCodec, TooManyPoints
+from shaper_nodes.recordings.cdr_trajectory import JointTrajectoryCodec, TooManyNames, TooManyPoints
 
 from .conversions import trajectory_arrays
 
@@ -109,13 +109,17 @@ class RawTrajectories:
         ------
         InputError
             ``malformed`` (not a well-formed JointTrajectory), ``too_large`` (more points than
-            MAX_TRAJECTORY_POINTS, before any is read), or the refusals of the message path (unknown or
-            missing joints, fields on some points only, wrong sizes, non-finite values, times out of
-            order, a stamp that goes back, outputs beyond the limits, ...); nothing is to be published then.
+            MAX_TRAJECTORY_POINTS or names than MAX_JOINT_NAMES, before any is read), or the refusals of the
+            message path (unknown or missing joints, fields on some points only, wrong sizes, non-finite
+            values, times out of order, a stamp that goes back, outputs beyond the limits, ...); nothing is
+            to be published then.
         """
         try:
-            msg = self.codec.decode(raw, MAX_TRAJECTORY_POINTS)
+            msg = self.codec.decode(raw, MAX_TRAJECTORY_POINTS, MAX_JOINT_NAMES)
         except TooManyPoints as err:
+            raise InputError("too_large", str(err)) from None
+        except TooManyNames as err:  # the message path's refusal and its text, from the count (only len is read)
+            joint_permutation(self.joint_names, cast(Sequence[str], range(err.count)))
             raise InputError("too_large", str(err)) from None
         except CdrError as err:
             raise InputError("malformed", str(err)) from None
