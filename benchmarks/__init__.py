@@ -12,8 +12,10 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
   time goes inside the echo and shaper nodes (wake-up, callback and its parts), timed in their processes.
 * :mod:`benchmarks.raw_path` (run on its own): the array hop's conversions in one process, message
   objects against the serialized bytes the shaper node reads and writes (no DDS).
+* :mod:`benchmarks.raw_trajectory` (run on its own): the same for the stream topic's JointTrajectory.
 * :mod:`benchmarks.fir_throughput`: joint-samples per second of the FIR core
-  (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter``.
+  (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter`` (median per
+  block or per 100 samples; ``python -m benchmarks.fir_throughput --runs 3`` on its own).
 * :mod:`benchmarks.list_update`: one LIST update for a 10 s cycle of 1 kHz 3-axis accelerometer
   data, against ``filtfilt`` + ``hilbert`` on the same data.
 * :mod:`benchmarks.scheduler`: one rule-base evaluation plus design against the design alone, and

@@ -22,6 +22,7 @@ import rclpy
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -33,6 +34,11 @@ from shaper_nodes.ros.conversions import mode_msg
 
 JOINTS = [f"joint_{i + 1}" for i in range(6)]
 ZEROS = [0.0] * 6
+
+
+def _data(sent: bytes) -> list[float]:
+    """The data of what the array input published (serialized bytes: the node takes and sends it raw)."""
+    return list(deserialize_message(sent, Float64MultiArray).data)
 
 
 class Captured:
@@ -95,17 +101,17 @@ class Table:
             what = f"EXCEPTION {type(err).__name__}: {err}"
         dt = time.perf_counter() - t0
         sent = len(node._array_pub.sent)
-        node._on_array(Float64MultiArray(data=ZEROS), None)
+        node._on_array(serialize_message(Float64MultiArray(data=ZEROS)), None)
         alive = "yes" if len(node._array_pub.sent) == sent + 1 else "NO"
         self.rows.append((name, before, what, dt, alive))
 
     def array(self, values: list[float]) -> str:
         node = self.node
         n = len(node._array_pub.sent)
-        node._on_array(Float64MultiArray(data=values), None)
+        node._on_array(serialize_message(Float64MultiArray(data=values)), None)
         if len(node._array_pub.sent) == n:
             return f"refused {self.refusals[-1].kind}: {self.refusals[-1]}"
-        return f"passed on {np.round(node._array_pub.sent[n].data, 3).tolist()[:2]}..."
+        return f"passed on {np.round(_data(node._array_pub.sent[n]), 3).tolist()[:2]}..."
 
     def goal(self, msg: JointTrajectory) -> str:
         try:
@@ -119,9 +125,9 @@ class Table:
         self.array([1e17, *ZEROS[1:]])
         node.request(_design("zv", 5.0), "service")
         for _ in range(400):
-            node._on_array(Float64MultiArray(data=[0.3] * 6), None)
+            node._on_array(serialize_message(Float64MultiArray(data=[0.3] * 6)), None)
         return (f"1e17 refused ({self.refusals[-1].kind}); after a shaper change, steady 0.3 gives"
-                f" {node._array_pub.sent[-1].data[0]!r}")
+                f" {_data(node._array_pub.sent[-1])[0]!r}")
 
     def fields(self) -> str:
         node, out = self.node, []
@@ -130,13 +136,13 @@ class Table:
             if with_vel:
                 pt.velocities = [0.1] * 6
             n = len(node._stream_pub.sent)
-            node._on_stream(JointTrajectory(joint_names=JOINTS, points=[pt]), None)
+            node._on_stream(serialize_message(JointTrajectory(joint_names=JOINTS, points=[pt])), None)
             out.append("shaped" if len(node._stream_pub.sent) > n else f"refused {self.refusals[-1].kind}")
         return "positions / +velocities / +velocities / positions: " + ", ".join(out)
 
     def shaper_rows(self) -> None:
         node, row = self.node, self.row
-        node._on_array(Float64MultiArray(data=ZEROS), None)
+        node._on_array(serialize_message(Float64MultiArray(data=ZEROS)), None)
         row("1. array -1.7e308 then +1.7e308", "non-finite setpoints",
             lambda: self.array([-1.7e+308, *ZEROS[1:]]) + "; " + self.array([1.7e+308, *ZEROS[1:]]))
         big = traj([(0.0, ZEROS), (1.0, [1e+308, *ZEROS[1:]])])
@@ -204,7 +210,7 @@ def _set(node: ShaperNode, msg: ShaperMsg) -> str:
 
 def _stream(node: ShaperNode, refusals: list[InputError], msg: JointTrajectory) -> str:
     n = len(node._stream_pub.sent)
-    node._on_stream(msg, None)
+    node._on_stream(serialize_message(msg), None)
     return "passed on" if len(node._stream_pub.sent) > n else f"refused {refusals[-1].kind}: {refusals[-1]}"
 
 

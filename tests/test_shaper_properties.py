@@ -134,7 +134,7 @@ def run_step(node: ShaperNode, step, k: int) -> None:
             if with_vel:
                 pt.velocities = [0.0, 0.1, -0.1]
             msg.points.append(pt)
-        node._on_stream(msg, None)
+        node._on_stream(serialize_message(msg), None)  # as its raw subscription gives it
     elif kind == "whole":
         path, pts = step[1], sorted(step[2])
         msg = JointTrajectory(joint_names=JOINTS,
@@ -166,7 +166,8 @@ def test_every_path_passes_on_only_finite_in_limit_time_ordered_output_and_settl
         run_step(node, step, k)
     for msg in node._array_pub.sent:
         check_positions(array_data(msg))
-    for msg in node._stream_pub.sent:
+    for data in node._stream_pub.sent:
+        msg = deserialize_message(data, JointTrajectory)
         t = [sec(p.time_from_start) for p in msg.points]
         assert np.all(np.diff(t) > 0)
         for p in msg.points:

@@ -12,7 +12,7 @@ topics.array_in -> topics.array_out
 topics.stream_in -> topics.stream_out
     trajectory_msgs/JointTrajectory streamed with one or a few points per message (as MoveIt
     Servo does); every point is one sample at ``command_rate``; positions are shaped, and
-    velocities and accelerations too when given.
+    velocities and accelerations too when given. Taken and sent as serialized bytes as well.
 topics.trajectory_in -> topics.trajectory_out, and service ~/shape_trajectory
     A whole trajectory for joint_trajectory_controller, resampled at ``command_rate`` and shaped.
 action.server_name (~/follow_joint_trajectory) -> action.controller
@@ -87,15 +87,15 @@ from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFir, UpdatePolicy, discretize
 from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
-from shaper_nodes.core.shaping.stream import NS, CommandStream, normal_stamp
-from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg, trajectory_arrays, trajectory_msg
+from shaper_nodes.core.shaping.stream import CommandStream
+from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
-from shaper_nodes.ros.raw_stream import RawArrays
+from shaper_nodes.ros.raw_stream import RawArrays, RawTrajectories
 from shaper_nodes.ros.side_node import SideNode
 from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
@@ -166,6 +166,7 @@ class ShaperNode(Node):
         self.stream_lock = self.stream.lock
         self._array_filter = self.stream.array_filter
         self._raw_arrays = RawArrays(self.stream)  # the array input and output as serialized messages
+        self._raw_trajectories = RawTrajectories(self.stream, self.joint_names)  # the stream topic's, likewise
         self.diagnostics = Diagnostics(self, lambda: float(self.params.value.error_throttle))
         # arrivals, rate watches, forwarded and refused counts (ros/stream_watch.py)
         self.watch = StreamWatch(self.rate, self.diagnostics, lambda k: self._subs[f"{k}_in"].get_publisher_count())
@@ -207,7 +208,7 @@ class ShaperNode(Node):
             "array_in": self.graph.subscription(Float64MultiArray, streamed["array_in"], self._on_array, depth,
                                                 on=stream_node, raw=True),
             "stream_in": self.graph.subscription(JointTrajectory, streamed["stream_in"], self._on_stream, depth,
-                                                 on=stream_node),
+                                                 on=stream_node, raw=True),
             # raw: the bytes go to the trajectory worker process undecoded (ros/whole_trajectory.py)
             "trajectory_in": self.graph.subscription(JointTrajectory, self.resolve_topic_name(tp.trajectory_in),
                                                      self._on_trajectory, 10, on=side, raw=True),
@@ -365,21 +366,15 @@ class ShaperNode(Node):
         self._array_pub.publish(out)
         self._count_forwarded("array")
 
-    def _on_stream(self, msg: JointTrajectory, info: dict[str, Any] | None) -> None:
+    def _on_stream(self, data: bytes, info: dict[str, Any] | None) -> None:
+        """The stream topic's JointTrajectory, serialized: shaped and published as bytes (ros/raw_stream.py)."""
         self._arrived("stream", info)
         try:
-            times, fields = trajectory_arrays(msg, self.joint_names, require_times=False, limit=self.stream.max_abs)
-            stamp = msg.header.stamp
-            stamp.sec, stamp.nanosec = normal_stamp(stamp.sec, stamp.nanosec)
-            durations = [p.time_from_start for p in msg.points]
-            for d in durations:
-                if d.nanosec >= NS:  # normalised as the stamp (the times were checked as seconds already)
-                    d.sec, d.nanosec = normal_stamp(d.sec, d.nanosec)
-            shaped = self.stream.shape_points(times, fields, (stamp.sec, stamp.nanosec))
+            out = self._raw_trajectories.shape(data)
         except InputError as err:
             self._reject(self._in_topics["stream_in"], err)
             return
-        self._stream_pub.publish(trajectory_msg(msg.header, self.joint_names, durations, shaped))
+        self._stream_pub.publish(out)
         self._count_forwarded("stream")
 
     def whole_shaping(self, shaper: Shaper | None = None) -> WholeShaping:

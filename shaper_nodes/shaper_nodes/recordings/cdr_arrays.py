@@ -70,11 +70,30 @@ def _pad4(pos: int) -> int:
     return _HEAD + ((pos - _HEAD + 3) & ~3)
 
 
-def _u32(raw: Any, pos: int, what: str) -> tuple[int, int]:
+def _u32(raw: Any, pos: int, what: str, kind: str = "Float64MultiArray") -> tuple[int, int]:
+    """The uint32 at ``pos`` aligned to 4, and the position after it; CdrError (naming ``what`` of the message
+    type ``kind``) when it is past the end."""
     pos = _pad4(pos)
     if pos + 4 > len(raw):
-        raise CdrError(f"truncated Float64MultiArray: {what} at byte {pos} is past its end ({len(raw)} bytes)")
+        raise CdrError(f"truncated {kind}: {what} at byte {pos} is past its end ({len(raw)} bytes)")
     return _U32.unpack_from(raw, pos)[0], pos + 4
+
+
+def _string(raw: Any, pos: int, what: str, kind: str = "Float64MultiArray") -> tuple[str, int]:
+    """The CDR string at ``pos`` (its uint32 length aligned to 4, counting the NUL), and the position after
+    its NUL; CdrError naming ``what`` when it does not fit, lacks its NUL, holds one before or is not UTF-8."""
+    n, pos = _u32(raw, pos, f"the length of {what}", kind)
+    if n == 0 or pos + n > len(raw):
+        raise CdrError(f"{what}: a string of length {n} at byte {pos} does not fit in {len(raw)} bytes")
+    if raw[pos + n - 1] != 0:
+        raise CdrError(f"{what} does not end with its NUL")
+    if 0 in raw[pos:pos + n - 1]:
+        raise CdrError(f"{what} holds a NUL before its end")
+    try:
+        text = bytes(raw[pos:pos + n - 1]).decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise CdrError(f"{what} is not UTF-8 ({err.reason} at byte {pos + err.start})") from None
+    return text, pos + n
 
 
 def _parse(raw: Any) -> _Parsed:
@@ -87,18 +106,8 @@ def _parse(raw: Any) -> _Parsed:
         raise CdrError(f"a layout of {ndims} dimensions (at most {MAX_DIMS})")
     dims = []
     for i in range(ndims):
-        n, pos = _u32(raw, pos, f"the length of dim {i}'s label")
-        if n == 0 or pos + n > len(raw):
-            raise CdrError(f"dim {i}'s label: a string of length {n} at byte {pos} does not fit in {len(raw)} bytes")
-        if raw[pos + n - 1] != 0:
-            raise CdrError(f"dim {i}'s label does not end with its NUL")
-        if 0 in raw[pos:pos + n - 1]:
-            raise CdrError(f"dim {i}'s label holds a NUL before its end")
-        try:
-            label = bytes(raw[pos:pos + n - 1]).decode("utf-8")
-        except UnicodeDecodeError as err:
-            raise CdrError(f"dim {i}'s label is not UTF-8 ({err.reason} at byte {pos + err.start})") from None
-        pos = _pad4(pos + n)
+        label, pos = _string(raw, pos, f"dim {i}'s label")
+        pos = _pad4(pos)
         if pos + 8 > len(raw):
             raise CdrError(f"truncated Float64MultiArray: dim {i}'s size and stride are past its end")
         size, stride = _DIM.unpack_from(raw, pos)

@@ -220,19 +220,9 @@ def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
     return fir.gains.copy(), fir.delays / float(rate)
 
 
-def _add_row(block: np.ndarray, row: np.ndarray, tiles: dict[bytes, np.ndarray], sign: float = 1.0) -> np.ndarray:
-    """``block + sign * row`` for a C-contiguous block (N, channels) and a row (channels,), as one flat
-    loop over a tiled copy of the row kept in ``tiles`` (numpy's broadcast over rows of a few values
-    loops per row: about three times slower on blocks of 1000 x 7)."""
-    n = block.size
-    key = row.tobytes()
-    tiled = tiles.get(key)
-    if tiled is None or tiled.size < n:
-        tiles.clear()  # one row at a time: a filter's origin or offset
-        tiled = tiles[key] = sign * np.tile(row, max(block.shape[0], 1))
-    out: np.ndarray = np.add(block.reshape(-1), tiled[:n]).reshape(block.shape)
-    return out
-
+#: rows a stage's linear buffer has room for after the history, at least (the block path moves the history to
+#: the front when they are used up: a stream of one-row blocks moves it once every this many rows)
+LINEAR_ROWS = 1024
 
 #: the most taps :func:`_tap_sum` writes a comprehension for (more: a loop over the taps)
 UNROLLED_TAPS = 32
@@ -273,13 +263,23 @@ def _tap_sum(k: int) -> Callable[[list[float], list[list[float]], list[float]], 
 class _Stage:
     """One FIR running on its own input stream (deviation from ``origin``).
 
-    The last ``fir.length`` inputs live in a ring buffer; the single-sample path writes one row
-    and gathers the few rows the taps need (one ``take`` with precomputed indices), the block
-    path unrolls the ring into the history it prepends to the block.
+    The last ``fir.length`` inputs are kept in one of three forms, whichever path wrote last (the
+    others are rebuilt from it when a path that reads them runs):
+
+    - a numpy ring (``_buf``, the next input at row ``_pos``): the single-sample numpy path writes one
+      row and gathers the few rows the taps need (one ``take`` with precomputed indices);
+    - the same ring as Python lists (``_rows``): one sample of a few channels on Python floats;
+    - a linear buffer (``_ext``): the block path writes a block's deviations right after the
+      ``length - 1`` inputs before it, and each tap is then one strided pass over that buffer
+      (``out += g x[k - d]`` as BLAS ``daxpy`` on the flat rows). The buffer is kept from block to
+      block (grown only for a larger block), so a block allocates nothing but its output; the next
+      block goes after it while there is room (:data:`LINEAR_ROWS`), else the history (``length - 1``
+      rows) is moved to the front first.
     """
 
-    __slots__ = ("_buf", "_buf_ok", "_delays", "_gain_list", "_gains", "_idx", "_origin_list", "_pos", "_rows",
-                 "_rows_ok", "_size", "_sum", "_taps", "_tiles", "fir", "held", "held_samples", "origin")
+    __slots__ = ("_buf", "_buf_ok", "_delays", "_ext", "_ext_end", "_gain_list", "_gains", "_idx", "_origin_flat",
+                 "_origin_list", "_pos", "_rows", "_rows_ok", "_size", "_sum", "_taps", "fir", "held",
+                 "held_samples", "origin")
 
     def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
         self.fir = fir
@@ -293,11 +293,15 @@ class _Stage:
         self._gains = np.asarray(fir.gains, dtype=float)
         # per ring position, the rows holding x(k - delays[i]) when x(k) is at that position
         self._idx = [(p - fir.delays) % size for p in range(size)]
-        self._tiles: dict[bytes, np.ndarray] = {}
         # the same ring as Python lists, for one sample of a few channels (step_values): numpy's calls cost
-        # more than the arithmetic there; whichever form was written last is the current one
+        # more than the arithmetic there
         self._rows: list[list[float]] = self._buf.tolist()
         self._rows_ok = self._buf_ok = True
+        # the block path's linear buffer: the newest `size` inputs are its rows _ext_end - size .. _ext_end - 1
+        # when _ext_end >= 0 (the form written last); -1: the ring is current
+        self._ext = np.zeros((0, origin.size))
+        self._ext_end = -1
+        self._origin_flat = np.tile(-self.origin, 1)  # -origin repeated row after row (grown as blocks need)
         self._taps = [ix.tolist() for ix in self._idx]
         self._gain_list: list[float] = self._gains.tolist()
         self._origin_list: list[float] = self.origin.tolist()
@@ -306,12 +310,14 @@ class _Stage:
     def _numpy_ring(self) -> None:
         """Make the numpy ring current (before a numpy path reads it); the list ring stays current."""
         if not self._buf_ok:
-            self._buf[:] = self._rows
+            end = self._ext_end
+            if end >= 0:  # the block path wrote last: its newest `size` inputs, the oldest at row 0
+                self._buf[:] = self._ext[end - self._size : end]
+                self._pos = 0
+                self._ext_end = -1
+            else:
+                self._buf[:] = self._rows
             self._buf_ok = True
-
-    def deviation(self, block: np.ndarray) -> np.ndarray:
-        """``block - origin`` for a block of inputs (N, channels), as a new array."""
-        return _add_row(np.ascontiguousarray(block), self.origin, self._tiles, -1.0)
 
     def step(self, x: np.ndarray) -> np.ndarray:
         """One input (deviation, shape (channels,)); returns the FIR output for it (a new array)."""
@@ -339,6 +345,7 @@ class _Stage:
         goes into the list ring, and the output is the same sum of the tapped inputs times the gains, in the
         order of the delays, then plus the offset (equal to the numpy paths to rounding). Returns a new list."""
         if not self._rows_ok:
+            self._numpy_ring()
             self._rows = self._buf.tolist()
             self._rows_ok = True
         self._buf_ok = False
@@ -348,29 +355,69 @@ class _Stage:
         self._pos = p + 1 if p + 1 < self._size else 0
         return self._sum(self._gain_list, [rows[t] for t in self._taps[p]], offset)
 
-    def run(self, block: np.ndarray) -> np.ndarray:
-        """A block of inputs (deviations, shape (N, channels)); returns the FIR output."""
-        self._numpy_ring()
-        self._rows_ok = False
-        n = block.shape[0]
-        size = self._size
-        hist_len = size - 1
-        if hist_len:  # the last size - 1 inputs, oldest first
-            p = self._pos
-            ext = np.concatenate([self._buf[p + 1 :], self._buf[:p], block])
+    def _history(self, n: int) -> tuple[np.ndarray, int]:
+        """The flat linear buffer (``self._ext``) with room for ``n`` inputs from its row ``at`` on, the last
+        ``size - 1`` inputs in the rows just before, oldest first; returns (flat, at). The history is moved to
+        the front only when the room after it runs out (for blocks of a few rows, once every
+        :data:`LINEAR_ROWS` rows or so)."""
+        hist = self._size - 1
+        ext, end = self._ext, self._ext_end
+        if end >= 0:  # the block path wrote last: the history is the rows end - hist .. end - 1
+            if end + n <= ext.shape[0]:
+                return ext.reshape(-1), end
+            if hist + n > ext.shape[0]:
+                grown = np.empty((hist + max(n, LINEAR_ROWS), ext.shape[1]))
+                grown[:hist] = ext[end - hist : end]
+                self._ext = ext = grown
+            elif end != hist:
+                ext[:hist] = ext[end - hist : end]  # (numpy copies through a buffer when the two overlap)
         else:
-            ext = block
+            self._numpy_ring()
+            if ext.shape[0] < hist + n:
+                self._ext = ext = np.empty((hist + max(n, LINEAR_ROWS), self._buf.shape[1]))
+            p, buf = self._pos, self._buf  # the ring's next row holds its oldest input, not in the history
+            ext[: hist - p] = buf[p + 1 :]
+            ext[hist - p : hist] = buf[:p]
+        return ext.reshape(-1), hist
+
+    def _tap_sum_block(self, flat: np.ndarray, at: int, n: int) -> np.ndarray:
+        """The FIR output of the ``n`` inputs written from row ``at`` of the flat buffer ``flat``, after the
+        history; the block path's state then lives in the linear buffer."""
+        c = self._ext.shape[1]
+        nc = n * c
         delays, gains = self._delays, self._gains
-        start = hist_len - delays[0]
-        out: np.ndarray = np.multiply(gains[0], ext[start : start + n])
+        out = np.empty((n, c))
+        acc = out.reshape(-1)
+        start = (at - delays[0]) * c
+        np.multiply(gains[0], flat[start : start + nc], out=acc)
         # the other taps added in place, one pass each (BLAS daxpy: out += g x) on the flat rows
-        flat, acc, c = ext.reshape(-1), out.reshape(-1), ext.shape[1]
-        for d, g in zip(delays[1:], gains[1:], strict=True):
-            start = (hist_len - d) * c
-            daxpy(flat[start : start + n * c], acc, a=float(g))
-        self._buf[:] = ext[-size:]  # the last `size` inputs, the newest at row size - 1
-        self._pos = 0
+        for d, g in zip(delays[1:], self._gain_list[1:], strict=True):
+            start = (at - d) * c
+            daxpy(flat[start : start + nc], acc, a=g)
+        self._ext_end = at + n
+        self._buf_ok = self._rows_ok = False
         return out
+
+    def run(self, block: np.ndarray) -> np.ndarray:
+        """A block of inputs (deviations, shape (N, channels)); returns the FIR output (a new array)."""
+        n = block.shape[0]
+        flat, at = self._history(n)
+        self._ext[at : at + n] = block
+        return self._tap_sum_block(flat, at, n)
+
+    def run_values(self, block: np.ndarray) -> np.ndarray:
+        """:meth:`run` for a block of input values (not deviations, C-contiguous, shape (N, channels)): their
+        deviations from :attr:`origin` are written straight into the linear buffer, as one flat pass (equal
+        to ``run(block - origin)``, bit for bit). Returns a new array."""
+        n, c = block.shape
+        nc = n * c
+        flat, at = self._history(n)
+        neg = self._origin_flat
+        if neg.size < nc:
+            neg = self._origin_flat = np.tile(-self.origin, n)
+        start = at * c
+        np.add(block.reshape(-1), neg[:nc], out=flat[start : start + nc])
+        return self._tap_sum_block(flat, at, n)
 
 
 class _ChannelShaper:
@@ -427,7 +474,7 @@ class StreamingShaper(_ChannelShaper):
         super().__init__(fir, channels)
         self._stages: list[_Stage] = []
         self._offset = np.zeros(self.channels)
-        self._offset_tiles: dict[bytes, np.ndarray] = {}
+        self._offset_tiled: tuple[np.ndarray, np.ndarray] = (self._offset, self._offset)  # see _offset_row
         self._one = (self.channels,)  # the shape of one sample
         self._offset_list: tuple[np.ndarray, list[float]] = (self._offset, self._offset.tolist())
 
@@ -492,16 +539,18 @@ class StreamingShaper(_ChannelShaper):
         if self._last is None:
             self._start(x2[0])
         stages = self._stages
+        x2 = np.ascontiguousarray(x2)
         if len(stages) == 1 and stages[0].held is None:  # the usual case: one filter, no change settling
-            stage = stages[0]
-            out = _add_row(stage.run(stage.deviation(x2)), self._offset, self._offset_tiles)
+            out = stages[0].run_values(x2)
+            flat = out.reshape(-1)
+            np.add(flat, self._offset_row(flat.size), out=flat)
             self._last = x2[-1].copy()
             return out.reshape(x.shape) if single else out
         out = np.broadcast_to(self._offset, x2.shape).copy()
         keep: list[_Stage] = []
         for stage in stages:
             if stage.held is None:
-                out += stage.run(stage.deviation(x2))
+                out += stage.run_values(x2)
                 keep.append(stage)
                 continue
             out += stage.run(np.broadcast_to(stage.held, x2.shape))
@@ -514,6 +563,16 @@ class StreamingShaper(_ChannelShaper):
         self._stages = keep
         self._last = x2[-1].copy()
         return out.reshape(x.shape) if single else out
+
+    def _offset_row(self, size: int) -> np.ndarray:
+        """The offset repeated row after row, ``size`` values (flat); kept until the offset changes (its
+        array is replaced, never changed in place) or a larger block comes."""
+        offset, tiled = self._offset_tiled
+        if offset is not self._offset or tiled.size < size:
+            offset = self._offset
+            tiled = np.tile(offset, max(size // offset.size, 1))
+            self._offset_tiled = (offset, tiled)
+        return tiled[:size]
 
     def process_values(self, values: list[float]) -> list[float]:
         """:meth:`process` for one sample given as a list of ``channels`` floats; returns the shaped sample as
