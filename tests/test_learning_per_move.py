@@ -159,3 +159,34 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
         print("residual RMS per move and cycle, m/s^2:", json.dumps(cell.residual))
     finally:
         conductor.close()
+
+
+def test_a_broken_move_entry_is_left_out_and_the_others_resume(ros_context, tmp_path):
+    """The state file is loaded move by move: a broken entry is reported (its move starts afresh), the others
+    are kept (an in-process learner: no peer is needed to load its state)."""
+    from rclpy.parameter import Parameter
+
+    from shaper_nodes.core.learning.list import ListConfig, ListLearner, ListParams
+    from shaper_nodes.core.learning.moves import MoveStore
+    from shaper_nodes.core.shaping import Mode
+    from shaper_nodes.nodes.learner import LearnerNode
+
+    store = MoveStore()
+    for move in MOVES:
+        entry, _ = store.entry(move.positions[0], move.positions[-1])
+        entry.list_state = ListLearner(ListConfig(), ListParams.from_mode(Mode.from_hz(10.0, 0.02))).to_dict()
+    doc = {"version": 1, "structure": "zv2", "per_move": True, "moves": store.to_doc(), "joint_names": {},
+           "at_schedule": []}
+    good, bad = (move_key(m.positions[0], m.positions[-1]) for m in MOVES)
+    doc["moves"]["moves"][bad]["cycles"] = -1
+    path = tmp_path / "state.json"
+    path.write_text(json.dumps(doc))
+    node = LearnerNode(context=ros_context, parameter_overrides=[
+        Parameter("list.per_move", value=True), Parameter("shaper", value="/scheduler"),
+        Parameter("state_file", value=str(path))])
+    try:
+        assert [e.key for e in node.mode.store] == [good]
+        assert bad in node.state_problem and "cycles must be an integer >= 0" in node.state_problem
+        assert path.exists()  # the file is kept: only the broken entry is left out
+    finally:
+        node.destroy_node()

@@ -106,3 +106,19 @@ def test_the_session_learns_each_move_with_its_own_learner():
     # each learner saw only its move's cycles: two updates each, and its own reference's amplitude
     assert [len(learners[k].history) for k in "ab"] == [2, 2]
     assert learners["b"].history[0]["m"] == pytest.approx(3.0 * learners["a"].history[0]["m"], rel=1e-6)
+
+
+# ----------------------------------------------------------------------------- a factor kept only when it pays
+def test_a_factor_worse_than_the_base_stops_the_moves_learning_at_the_best_measured():
+    from shaper_nodes.core.learning.moves import MoveStore, keep_when_it_pays
+
+    entry, _ = MoveStore().entry(A0, A1)
+    assert keep_when_it_pays(entry, 0.010, False, None) == "learn"  # the reference: the schedule alone
+    assert entry.base == entry.best == {"residual_rms": 0.010}
+    assert keep_when_it_pays(entry, 0.005, True, 0.005) == "learn"  # better: go on
+    assert entry.best == {"residual_rms": 0.005} and entry.base == {"residual_rms": 0.010}
+    assert keep_when_it_pays(entry, 0.012, True, 0.005) == "best"  # worse than the base, a factor beat it
+    other, _ = MoveStore().entry(A0, B1)
+    keep_when_it_pays(other, 0.0003, False, None)
+    assert keep_when_it_pays(other, 0.0007, True, 0.0007) == "base"  # no factor beat the schedule alone
+    assert other.best == {"residual_rms": 0.0003}

@@ -15,9 +15,14 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   after the schedule's shaper there plus the factor's longest T2 (unless ``list.window_delay`` is
   set). Without joint names in the event, or without an answer, the start is the mode identified
   in the reference cycle, as the task-wide LIST does.
+- **A factor is kept only when it pays** (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`): the
+  reference cycle's M (the schedule alone) is the move's base; a trial that measures more stops the
+  move's learning at the best measured: LIST holds at its best factor if one beat the base, otherwise
+  the move is held at the schedule alone (its cycles are then reported with the metric ``held``, not
+  learned from, until ``~/hold`` false). So at most one cycle per move is worse than the schedule.
 - **State**: every move's learner in the state file, one entry per move
   (:class:`~shaper_nodes.core.learning.moves.MoveStore`, ``{"version": 1, "structure", "per_move",
-  "moves", "joint_names", "saved_at"}``), saved atomically after each update and loaded entry by
+  "moves", "joint_names", "at_schedule", "saved_at"}``), saved atomically after each update and loaded entry by
   entry: a broken entry is left out and reported (``/diagnostics``, ``learner: state_file``), its
   move starts afresh, the others resume. At start the learner sends every saved move's factor to
   the scheduler again, so each move resumes from its saved state (also after a kill -9, and for a
@@ -46,7 +51,7 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetMoveShaper, ShaperAt
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession
-from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, store_from_doc
+from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, keep_when_it_pays, store_from_doc
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, OK
@@ -308,24 +313,18 @@ class MovesMode:
         return report
 
     def _keep_when_it_pays(self, entry: MoveEntry, learner: ListLearner, update: Any) -> str:
-        """A factor is kept only when it pays: the reference cycle's M (the schedule alone) is the move's base;
-        a trial with a larger M stops the move's learning at the best measured, the learner's best factor if
-        it beat the base, else the schedule alone. Returns what was decided, for the log ("" if nothing)."""
-        m = {"residual_rms": float(update.m)}
-        if update.used is None:
-            entry.base = entry.best = m
-            return ""
-        base = entry.base["residual_rms"] if entry.base is not None else math.inf
-        if entry.best is None or update.m < entry.best["residual_rms"]:
-            entry.best = m
-        if not update.m > base:
-            return ""
+        """A factor is kept only when it pays (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`);
+        returns what was decided, for the log ("" if the move learns on)."""
         best = learner.best
-        if best is not None and best[1] < base:
+        decision = keep_when_it_pays(entry, update.m, update.used is not None, None if best is None else best[1])
+        base = entry.base["residual_rms"] if entry.base is not None else math.nan
+        if decision == "best":
             learner.hold()
             return f"; M above the schedule's ({base:.4g}): holding at the best factor measured"
-        self.held.add(entry.key)
-        return f"; M above the schedule's ({base:.4g}) and no factor better: the schedule alone, held"
+        if decision == "base":
+            self.held.add(entry.key)
+            return f"; M above the schedule's ({base:.4g}) and no factor better: the schedule alone, held"
+        return ""
 
     def _shaper_msg(self, params: ListParams | None) -> ShaperMsg:
         shaper = none_shaper() if params is None else params.shaper(self.structure)

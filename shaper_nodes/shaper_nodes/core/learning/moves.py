@@ -38,8 +38,8 @@ from .list import ListError, ListLearner
 from .speed import SpeedError, SpeedLearner
 from .state_file import write_state
 
-__all__ = ["KEY_DECIMALS", "MOVES_FORMAT", "MOVES_VERSION", "MoveEntry", "MoveError", "MoveStore", "move_key",
-           "store_from_doc"]
+__all__ = ["KEY_DECIMALS", "MOVES_FORMAT", "MOVES_VERSION", "MoveEntry", "MoveError", "MoveStore", "keep_when_it_pays",
+           "move_key", "store_from_doc"]
 
 #: version of :meth:`MoveStore.to_doc`'s documents
 MOVES_VERSION = 1
@@ -270,3 +270,28 @@ def store_from_doc(doc: Any) -> tuple[MoveStore, dict[str, str]]:
             continue
         store._entries[str(key)] = entry
     return store, problems
+
+
+def keep_when_it_pays(entry: MoveEntry, m: float, shaped: bool, learner_best: float | None) -> str:
+    """Whether a move's learned factor pays, after a cycle of residual ``m`` (m/s^2, the learner's measure).
+
+    The move's unshaped-by-the-learner cycle (``shaped`` False: the base alone, the LIST reference) sets
+    :attr:`MoveEntry.base` (and :attr:`MoveEntry.best`); a cycle with a factor updates ``best``. A factor
+    whose cycle measured more than the base stops the move's learning at the best measured: the learner's
+    best factor if it beat the base (``learner_best``: its best residual, None if none), else the base alone.
+
+    Returns
+    -------
+    str
+        ``"learn"`` (go on), ``"best"`` (hold at the learner's best factor) or ``"base"`` (the base alone).
+    """
+    measured = {"residual_rms": float(m)}
+    if not shaped:
+        entry.base = entry.best = measured
+        return "learn"
+    if entry.best is None or m < entry.best["residual_rms"]:
+        entry.best = measured
+    base = entry.base["residual_rms"] if entry.base is not None else math.inf
+    if not m > base:
+        return "learn"
+    return "best" if learner_best is not None and learner_best < base else "base"
