@@ -7,13 +7,18 @@ a cycle on ``/cycle_events`` (its START carries the move's start and goal), so t
 from that move's own residual window and the scheduler applies each move's factor to that move's goals only.
 Then the learner is killed (SIGKILL) mid-run and started again on the same state file: every move resumes
 from its saved state (its next update starts from the factor saved, at the next iteration).
+
+Also: the learner's state file loaded move by move (a broken entry left out, the others kept), and the
+scheduler's side alone (in-process, with a peer speaking the learner's and the proxy's sides).
 """
 
 from __future__ import annotations
 
 import json
+import time
 
 import pytest
+import rclpy
 
 from reproductions.arm_learning import modal_calibration
 from reproductions.scheduler_cases import scheduler_parameters
@@ -190,3 +195,99 @@ def test_a_broken_move_entry_is_left_out_and_the_others_resume(ros_context, tmp_
         assert path.exists()  # the file is kept: only the broken entry is left out
     finally:
         node.destroy_node()
+
+
+def test_the_scheduler_applies_a_moves_factor_to_that_move_only(ros_context):
+    """The scheduler's side, in-process over DDS with a peer speaking the learner's (``~/set_move_shaper``) and
+    the shaper node's proxy's (``~/shaper_at`` with ``start``) sides: the factor over the schedule for the move's
+    goals only, the schedule alone elsewhere, refusals named, ``none`` forgetting the move."""
+    import numpy as np
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState
+
+    from shaper_msgs.msg import Shaper as ShaperMsg
+    from shaper_msgs.srv import SetMoveShaper, ShaperAt
+    from shaper_nodes.core.learning.list import ListParams
+    from shaper_nodes.core.shaping import Mode
+    from shaper_nodes.core.shaping.families import convolve, design
+    from shaper_nodes.nodes.scheduler import SchedulerNode
+    from shaper_nodes.ros.conversions import shaper_to_msg
+
+    params = {"premises": ["j1"], "rule_names": ["lo", "hi"], "interpolation": "modes", "family": "zv",
+              "rules.lo.membership": ["triangular"], "rules.lo.membership_params": [0.0, 0.0, 2.0],
+              "rules.lo.frequency_hz": [4.0, 11.0], "rules.lo.damping_ratio": [0.02, 0.02],
+              "rules.hi.membership": ["triangular"], "rules.hi.membership_params": [0.0, 2.0, 2.0],
+              "rules.hi.frequency_hz": [8.0, 15.0], "rules.hi.damping_ratio": [0.02, 0.02]}
+    scheduler = SchedulerNode(context=ros_context, parameter_overrides=[Parameter(k, value=v)
+                                                                        for k, v in params.items()])
+    peer = rclpy.create_node("peer", context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(scheduler)
+    ex.add_node(peer)
+    set_move = peer.create_client(SetMoveShaper, "/scheduler/set_move_shaper")
+    at = peer.create_client(ShaperAt, "/scheduler/shaper_at")
+    names = ["j1", "j2"]
+
+    def call(client, request):
+        deadline = time.monotonic() + 60.0
+        while not client.service_is_ready():
+            assert time.monotonic() < deadline, f"{client.srv_name} not discovered"
+            ex.spin_once(timeout_sec=0.05)
+        future = client.call_async(request)
+        while not future.done():
+            assert time.monotonic() < deadline, f"no answer from {client.srv_name}"
+            ex.spin_once(timeout_sec=0.05)
+        return future.result()
+
+    def pose(q):
+        return JointState(name=names, position=[float(x) for x in q])
+
+    factor = ListParams(0.55, 0.06).shaper("zv2")
+    try:
+        start, goal = [0.0, 0.0], [1.5, 0.3]
+        ok = call(set_move, SetMoveShaper.Request(start=pose(start), goal=pose(goal),
+                                                  shaper=shaper_to_msg(factor, "learner", 0)))
+        assert ok.success, ok.message
+        schedule = call(at, ShaperAt.Request(pose=pose(goal))).shaper  # no start: the schedule, as before
+        assert schedule.family == "zv" and "move" not in call(at, ShaperAt.Request(pose=pose(goal))).message
+        interp = [Mode.from_hz(m.frequency_hz, m.damping_ratio) for m in schedule.design_modes]
+        base = design("zv", interp)
+        want = convolve((base.amplitudes, base.times), (factor.amplitudes, factor.times))
+        # the move (its first point a fraction of a milliradian off the start): the factor over the schedule
+        mine = call(at, ShaperAt.Request(pose=pose(goal), start=pose([3e-4, 0.0])))
+        assert mine.success and mine.shaper.family == "custom" and "learned factor" in mine.message
+        np.testing.assert_allclose(mine.shaper.amplitudes, want[0], atol=1e-12)
+        np.testing.assert_allclose(mine.shaper.times, want[1], atol=1e-12)
+        # another move to the same goal, and the same start to another goal: the schedule alone
+        for other in (ShaperAt.Request(pose=pose(goal), start=pose([0.5, 0.0])),
+                      ShaperAt.Request(pose=pose([1.0, 0.3]), start=pose(start))):
+            resp = call(at, other)
+            assert resp.shaper.family == "zv" and "no learned correction" in resp.message
+        # refusals name the problem; nothing is kept
+        for req, words in (
+                (SetMoveShaper.Request(start=pose(start), goal=pose(goal),
+                                       shaper=shaper_to_msg(factor, "user", 0)), "from the learner only"),
+                (SetMoveShaper.Request(start=pose([0.0]), goal=pose(goal), shaper=shaper_to_msg(factor, "learner", 0)),
+                 "1 positions for 2 names"),
+                (SetMoveShaper.Request(start=JointState(name=["j2", "j1"], position=[0.0, 0.0]), goal=pose(goal),
+                                       shaper=shaper_to_msg(factor, "learner", 0)), "different joints"),
+                (SetMoveShaper.Request(start=pose(start), goal=pose([1.5, float("nan")]),
+                                       shaper=shaper_to_msg(factor, "learner", 0)), "non-empty and finite"),
+                (SetMoveShaper.Request(start=pose(start), goal=pose([0.2, 0.2]),
+                                       shaper=ShaperMsg(family="custom", amplitudes=[0.25, 0.5, 0.25],
+                                                        times=[0.0, 0.05, 0.1], source="learner")),
+                 "two-impulse factor, got 3")):
+            resp = call(set_move, req)
+            assert not resp.success and words in resp.message, (words, resp.message)
+        assert len(scheduler.moves.moves) == 1
+        # "none" forgets the move's factor: the schedule alone again
+        forget = call(set_move, SetMoveShaper.Request(start=pose(start), goal=pose(goal),
+                                                      shaper=ShaperMsg(family="none", source="learner")))
+        assert forget.success and "forgotten" in forget.message
+        again = call(at, ShaperAt.Request(pose=pose(goal), start=pose(start)))
+        assert again.shaper.family == "zv" and list(again.shaper.times) == list(schedule.times)
+    finally:
+        ex.shutdown()
+        peer.destroy_node()
+        scheduler.destroy_node()
