@@ -153,7 +153,8 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
             after = [metrics(report(client, k)) for k in cell.cycles[move.name] if k >= mark]
             if "iteration" not in saved or saved["a1_next"] != saved["a1_next"]:
                 # held at the schedule alone before the kill: still held (no new reference, no factor)
-                assert all(m.get("held") == 1.0 and "iteration" not in m for m in after), (move.name, after)
+                assert all("iteration" not in m for m in after), (move.name, after)
+                assert any(m.get("held") == 1.0 for m in after), (move.name, after)
                 continue
             resumed = next((m for m in after if "iteration" in m), None)
             assert resumed is not None, f"{move.name}: no cycle learned from after the restart: {after}"
