@@ -215,7 +215,8 @@ def suite_policy(overrides: Mapping[str, str] | None = None) -> dict[str, Access
       ``~/active_shaper`` and diagnostics, calls the controller's action and (``action.scheduler``)
       the scheduler's ``~/shaper_at``.
     - ``learner``, ``scheduler``, ``identifier``, ``calibrate``: the only callers of the shaper's
-      ``~/set_shaper`` (the learner also of the scheduler's, when it is pointed at it).
+      ``~/set_shaper`` (the learner also of the scheduler's, when it is pointed at it, and, learning per
+      move, of its ``~/set_move_shaper`` and ``~/shaper_at``).
     - ``motion_source``: the only publisher of the shaper's command inputs, the only client of its
       action and ``~/shape_trajectory``; it marks the cycles (``/cycle_events``).
     - ``recorder``: reads every topic of the table, publishes none of them.
@@ -269,12 +270,14 @@ def suite_policy(overrides: Mapping[str, str] | None = None) -> dict[str, Access
             subscribe=frozenset({imu, events, joint_states, reference, f"{shaper}/active_shaper",
                                  f"{scheduler}/active_shaper"}),
             serve=frozenset({f"{fqn('learner')}/hold"}),
-            call=set_get | {f"{scheduler}/set_shaper", f"{scheduler}/get_shaper", feedforward}),
+            call=set_get | {f"{scheduler}/set_shaper", f"{scheduler}/get_shaper", feedforward,
+                            f"{scheduler}/set_move_shaper", f"{scheduler}/shaper_at"}),  # (list.per_move)
         "scheduler": Access(
             nodes=(scheduler,),
             publish=frozenset({f"{scheduler}/active_shaper", f"{scheduler}/mode_estimate", diagnostics}),
             subscribe=frozenset({joint_states, f"{shaper}/active_shaper"}),
-            serve=frozenset({f"{scheduler}/set_shaper", f"{scheduler}/get_shaper", f"{scheduler}/shaper_at"}),
+            serve=frozenset({f"{scheduler}/set_shaper", f"{scheduler}/get_shaper", f"{scheduler}/shaper_at",
+                             f"{scheduler}/set_move_shaper"}),
             call=set_get),
         "identifier": Access(
             nodes=(fqn("identifier"),),

@@ -5,7 +5,8 @@
 list (default, :mod:`.learner_list`)
     The Learning Input Shaping Technique of seed 003: a two-impulse shaper tuned from the tip
     accelerometer's residual vibration, sent to the shaper node with source "learner"
-    (config/learner.yaml).
+    (config/learner.yaml). With ``list.per_move`` (:mod:`.learner_moves`): one factor per move,
+    each learned from its own cycles and kept by the scheduler over its schedule.
 mrilc (:mod:`.learner_mrilc`)
     Model-Reference Iterative Learning Control of seed 000: a feedforward profile learned so that
     the loop matches a reference model, installed at the injection point; the shaper is designed
@@ -70,9 +71,15 @@ class LearnerNode(LearnerBase):
 
             self.mode = MrilcMode(self)
         else:
-            from .learner_list import ListMode
+            from .learner_list import ListMode, declare_list
 
-            self.mode = ListMode(self)
+            declared = declare_list(self)
+            if declared[0].value.list.per_move:
+                from .learner_moves import MovesMode
+
+                self.mode = MovesMode(self, declared)
+            else:
+                self.mode = ListMode(self, declared)
         # a coroutine callback: rclpy runs it as a task (its typing knows only plain callbacks)
         self.create_subscription(CycleEvent, self.mode.events_topic, self._on_event, 100)  # type: ignore[arg-type]
         self.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup(),

@@ -112,6 +112,9 @@ class ListGroup:
                               " limit).", (0.0, 1e6), read_only=True, check=_check("saturation"))
     min_samples: int = param(_D.min_samples, "Fewest accelerometer samples in the residual window.", (2, 10**7),
                              read_only=True, check=_check("min_samples"))
+    per_move: bool = param(False, "Learn one LIST factor per move (start and goal of each cycle's START event),"
+                           " kept by the scheduler named by 'shaper' and applied over its schedule to that move's"
+                           " goals (nodes/learner_moves.py); false: one shaper for the task.", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -149,17 +152,22 @@ def _describe(params: ListParams | None) -> str:
     return "no shaping (reference cycle next)" if params is None else f"A1 {params.a1:.5f}, T2 {params.t2:.5f} s"
 
 
+def declare_list(node: LearnerBase) -> tuple[Any, ListConfig]:
+    """Declare the LIST mode's parameters on ``node``; returns them and the core's ListConfig of ``list.*``."""
+    params = declare(node, ListModeParams)
+    try:
+        return params, list_config(flat(params.value.list))
+    except ListError as err:
+        raise ValueError(str(err)) from None
+
+
 class ListMode:
     """The LIST adapter of the learner node (see the module docstring)."""
 
-    def __init__(self, node: LearnerBase) -> None:
+    def __init__(self, node: LearnerBase, declared: tuple[Any, ListConfig]) -> None:
         self.node = node
-        self.params = declare(node, ListModeParams)
+        self.params, self.config = declared
         v = self.params.value
-        try:
-            self.config = list_config(flat(v.list))
-        except ListError as err:
-            raise ValueError(str(err)) from None
         self.structure = self.config.structure
         learner = node.restore(learner_from_state, {"structure": self.structure})
         self.session = ListSession(learner or ListLearner(self.config, self._initial_params(v)), self.structure,

@@ -39,13 +39,17 @@ Interfaces
 ~/mode_estimate (shaper_msgs/ModeEstimate, latched)   the interpolated mode(s), Hz and -
 <shaper>/set_shaper (shaper_msgs/SetShaper)           out, source "scheduler" (or "learner")
 ~/set_shaper, ~/get_shaper, ~/active_shaper           the shaper node's interface, for the learner
-~/shaper_at (shaper_msgs/ShaperAt)                    the shaper the schedule gives at any pose
+~/shaper_at (shaper_msgs/ShaperAt)                    the shaper the schedule gives at any pose (or move)
+~/set_move_shaper (shaper_msgs/SetMoveShaper)         the learner's correction of one move (nodes/scheduler_moves.py)
 /diagnostics                                          clamping, refused or unmatched input, stale data
 
 ``~/shaper_at`` answers with the shaper this node would send at the request's pose (the family's
 design on the interpolated modes, times the learner's correction of that region) and the
 interpolated modes, without sending anything to the shaper node; the shaper node asks it for the
-final pose of each whole trajectory (its parameter ``action.scheduler``). The premise joints are
+final pose of each whole trajectory (its parameter ``action.scheduler``), and names the move by
+the trajectory's first point (``start``): a move the learner set a correction for
+(``~/set_move_shaper``, per-move learning) gets the schedule convolved with the move's factor
+instead of the region's correction (nodes/scheduler_moves.py). The premise joints are
 picked from the pose by name; a pose without one of them, with non-finite values or with sizes
 that differ is refused with the reason, and clamping is said in the message. The work is linear
 in the pose and otherwise that of one scheduled design.
@@ -82,7 +86,14 @@ from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShaperAt
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.scheduling import FuzzyError, Interpolation, RateLimit, Scheduler, rule_base_from_dict
+from shaper_nodes.core.scheduling import (
+    MOVE_TOLERANCE,
+    FuzzyError,
+    Interpolation,
+    RateLimit,
+    Scheduler,
+    rule_base_from_dict,
+)
 from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import estimate_msg, shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
@@ -92,6 +103,8 @@ from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 from shaper_nodes.ros.raw_stream import RawJointStates
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
+
+from .scheduler_moves import MoveService
 
 SOURCE = "scheduler"
 #: wall time between discovering the shaper's set_shaper service and the first request, s
@@ -148,6 +161,10 @@ class SchedulerParams:
         " 0.01), fraction.", (0.0, 10.0), check=lambda v: RateLimit(relative_change=v))
     stale_timeout: float = param(1.0, "Joint states older than this stop the updates, s.", (0.001, 3600.0))
     error_throttle: float = param(1.0, "Least time between two reports of the same problem, s.", (0.0, 3600.0))
+    move_tolerance: float = param(
+        MOVE_TOLERANCE, "A ~/shaper_at request is a move the learner corrected (~/set_move_shaper) when every"
+        " joint of its start and pose is within this of the move's start and goal, rad or m.", (1e-6, 1.0),
+        read_only=True)
 
 
 @dataclass(frozen=True)
@@ -197,6 +214,7 @@ class SchedulerNode(Node):
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper, qos_profile=SERVICE_QOS)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
         self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at, qos_profile=SERVICE_QOS)
+        self.moves = MoveService(self, float(p.move_tolerance))
 
         # latest (premise values, node clock time they arrived s, their header stamp (sec, nanosec)), set by the
         # feed's thread
@@ -405,6 +423,7 @@ class SchedulerNode(Node):
             resp.success, resp.message = False, f"no shaper for this pose: {err}"
             self.diagnostics.report("shaper_at", WARN, f"~/shaper_at refused: {err}")
             return resp
+        shaper, move = self.moves.shaper(req, shaper, lambda: self.core.scheduled(interp))
         resp.shaper = shaper_to_msg(shaper, SOURCE, 0, self.get_clock().now().to_msg())
         resp.estimate = _estimate(interp, req.pose.header.stamp)
         modes = ", ".join(f"{m.hz:.4g} Hz zeta {m.zeta:.3g}" for m in interp.modes)
@@ -413,7 +432,7 @@ class SchedulerNode(Node):
         resp.success = True
         resp.message = (f"{shaper.family} ({len(shaper)} impulses, {shaper.duration * 1e3:.1f} ms) on {modes}"
                         f" at " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.premises, interp.z_in, strict=True))
-                        + f" (region {region})" + (f"; {clamped}" if clamped else ""))
+                        + f" (region {region})" + (f"; {clamped}" if clamped else "") + move)
         return resp
 
     # ----------------------------------------------------------------- the learner's interface

@@ -6,7 +6,8 @@ pose the robot is at when the goal arrives. The shaper node's parameter ``action
 names a scheduler node; :class:`PoseShaperClient` then, for each goal:
 
 1. asks ``<scheduler>/shaper_at`` (shaper_msgs/ShaperAt) for the shaper at the trajectory's final
-   point (its joint names and the last point's positions), waiting at most ``timeout`` s of wall
+   point (its joint names and the last point's positions), naming the move by its first point
+   (``start``: the scheduler applies a per-move learned correction to it), waiting at most ``timeout`` s of wall
    time for the service and its reply together;
 2. checks the answer as the shaper node checks any shaper: a family design is designed again from
    its family, modes and parameters (as the shaper node designs the scheduler's ``set_shaper``
@@ -54,6 +55,12 @@ def final_pose(trajectory: JointTrajectory) -> JointState:
     return JointState(name=list(trajectory.joint_names), position=[float(x) for x in last])
 
 
+def first_pose(trajectory: JointTrajectory) -> JointState:
+    """The trajectory's first point as a pose (the move's start, for ``ShaperAt.start``)."""
+    first = trajectory.points[0].positions if trajectory.points else []
+    return JointState(name=list(trajectory.joint_names), position=[float(x) for x in first])
+
+
 class PoseShaperClient:
     """Shapes whole trajectories for their final pose with a scheduler's shaper (module docstring).
 
@@ -99,9 +106,11 @@ class PoseShaperClient:
     def destroy(self) -> None:
         self._client.destroy()
 
-    async def shaper_at(self, pose: JointState) -> PoseAnswer:
-        """The scheduler's shaper for ``pose``, checked as this node checks shapers (or None, why)."""
-        answer = await self._client.call(ShaperAt.Request(pose=pose), self._timeout, total=True)
+    async def shaper_at(self, pose: JointState, start: JointState | None = None) -> PoseAnswer:
+        """The scheduler's shaper for ``pose`` (of the move from ``start``, if given), checked as this node
+        checks shapers (or None, why)."""
+        req = ShaperAt.Request(pose=pose) if start is None else ShaperAt.Request(pose=pose, start=start)
+        answer = await self._client.call(req, self._timeout, total=True)
         if answer.response is None:
             return PoseAnswer(None, f"no answer from the scheduler: {answer.error}")
         resp = answer.response
@@ -124,7 +133,7 @@ class PoseShaperClient:
     async def __call__(self, trajectory: JointTrajectory) -> JointTrajectory | None:
         """``trajectory`` shaped for its final pose, or None (then the caller keeps the trajectory
         shaped with the active shaper; the reason has been reported)."""
-        answer = await self.shaper_at(final_pose(trajectory))
+        answer = await self.shaper_at(final_pose(trajectory), first_pose(trajectory))
         why = answer.message
         if answer.shaper is not None:
             try:

@@ -11,7 +11,8 @@ suit another. :class:`MoveStore` keeps one :class:`MoveEntry` per move:
 - **what was learned**: the LIST learner's state (:meth:`ListLearner.to_dict`), the impulses of
   the correction applied to the move (a factor over the base shaper, or the whole shaper when
   there is no base), what the move started from (``schedule``, ``design``, ``identified``), the
-  base's and the best cycle's measures (to keep a correction only when it pays), and the
+  base's and the best cycle's measures (to keep a correction only when it pays: ``residual_rms``, and
+  ``move_settle_s`` where the learner measures it), and the
   time-scaling learner's state (:class:`~.speed.SpeedLearner`).
 
 :meth:`MoveStore.to_doc` gives a versioned JSON-ready document; :meth:`MoveStore.save` writes it
@@ -37,8 +38,8 @@ from .list import ListError, ListLearner
 from .speed import SpeedError, SpeedLearner
 from .state_file import write_state
 
-__all__ = ["KEY_DECIMALS", "MOVES_FORMAT", "MOVES_VERSION", "MoveEntry", "MoveError", "MoveStore", "move_key",
-           "store_from_doc"]
+__all__ = ["KEY_DECIMALS", "MOVES_FORMAT", "MOVES_VERSION", "MoveEntry", "MoveError", "MoveStore", "keep_when_it_pays",
+           "move_key", "store_from_doc"]
 
 #: version of :meth:`MoveStore.to_doc`'s documents
 MOVES_VERSION = 1
@@ -91,10 +92,10 @@ def move_key(start: Sequence[float] | np.ndarray, goal: Sequence[float] | np.nda
 def _measures(name: str, value: Any) -> dict[str, float] | None:
     if value is None:
         return None
-    if not isinstance(value, Mapping) or set(value) != _MEASURE_KEYS:
-        raise MoveError(f"{name} must have entries {sorted(_MEASURE_KEYS)}, got {value!r}")
+    if not isinstance(value, Mapping) or not {"residual_rms"} <= set(value) <= _MEASURE_KEYS:
+        raise MoveError(f"{name} must have the entry residual_rms (and may have move_settle_s), got {value!r}")
     out = {}
-    for k in sorted(_MEASURE_KEYS):
+    for k in sorted(value):
         v = value[k]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)) or v < 0:
             raise MoveError(f"{name}.{k} must be a finite number >= 0, got {v!r}")
@@ -269,3 +270,28 @@ def store_from_doc(doc: Any) -> tuple[MoveStore, dict[str, str]]:
             continue
         store._entries[str(key)] = entry
     return store, problems
+
+
+def keep_when_it_pays(entry: MoveEntry, m: float, shaped: bool, learner_best: float | None) -> str:
+    """Whether a move's learned factor pays, after a cycle of residual ``m`` (m/s^2, the learner's measure).
+
+    The move's unshaped-by-the-learner cycle (``shaped`` False: the base alone, the LIST reference) sets
+    :attr:`MoveEntry.base` (and :attr:`MoveEntry.best`); a cycle with a factor updates ``best``. A factor
+    whose cycle measured more than the base stops the move's learning at the best measured: the learner's
+    best factor if it beat the base (``learner_best``: its best residual, None if none), else the base alone.
+
+    Returns
+    -------
+    str
+        ``"learn"`` (go on), ``"best"`` (hold at the learner's best factor) or ``"base"`` (the base alone).
+    """
+    measured = {"residual_rms": float(m)}
+    if not shaped:
+        entry.base = entry.best = measured
+        return "learn"
+    if entry.best is None or m < entry.best["residual_rms"]:
+        entry.best = measured
+    base = entry.base["residual_rms"] if entry.base is not None else math.inf
+    if not m > base:
+        return "learn"
+    return "best" if learner_best is not None and learner_best < base else "base"

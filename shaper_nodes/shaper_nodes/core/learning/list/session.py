@@ -202,6 +202,21 @@ class ListSession:
         """The learner's parameters were sent to the shaper node (None: the identity)."""
         self._previous, self._sent = self._sent, params
 
+    def switch(self, learner: ListLearner, sent: ListParams | None) -> None:
+        """Learn the next cycle with another learner (per-move learning: the learner of the move that starts
+        next, called before its START). ``sent``: the parameters applied to that move (None: none, its
+        reference cycle). The move's goals are shaped per move (the scheduler's ``~/shaper_at``), not by the
+        shaper node's active shaper: the cycle is taken to run with ``sent``, as the learner's request for
+        the move was acknowledged, and the active shaper is set to match it."""
+        self.learner, self._sent, self._previous = learner, sent, None
+        self._ref_displacement = None  # each move is its own direction of reference
+        if sent is None:
+            self.active = ActiveShaper((1.0,), (0.0,), "learner", 0)
+        else:
+            sh = sent.shaper(self.structure)
+            self.active = ActiveShaper(tuple(float(a) for a in sh.amplitudes), tuple(float(t) for t in sh.times),
+                                       "learner", 0)
+
     def on_shaper(self, amplitudes: Iterable[float], times: Iterable[float], source: str, revision: int) -> None:
         self.active = ActiveShaper(tuple(float(a) for a in amplitudes), tuple(float(t) for t in times),
                                    str(source), int(revision))

@@ -1,0 +1,331 @@
+"""The learner node's LIST mode per move (``list.per_move: true``): one learned factor per move, over the schedule.
+
+A cycle event's START names the move that runs (its ``start_positions`` and ``goal_positions``:
+the move's identity is :func:`shaper_nodes.core.learning.moves.move_key` of them). For each move
+the learner keeps its own LIST learner (:mod:`shaper_nodes.core.learning.list`), learns it from
+that move's own residual window only, and sends the move's two-impulse factor to the scheduler
+named by ``shaper`` (``<shaper>/set_move_shaper``, shaper_msgs/SetMoveShaper, with the move's start
+and goal). The scheduler convolves the factor with its schedule at the goal pose for every goal of
+that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's first point as
+``start``; nodes/scheduler_moves.py). The shaper node's active shaper is not touched.
+
+- **A new move** runs its first cycle with the schedule alone (the scheduler has no factor for it):
+  that cycle is the LIST reference. The move's learner starts from the schedule's lowest mode at
+  the goal pose (asked of ``<shaper>/shaper_at``; ZV formulas), and its residual window starts
+  after the schedule's shaper there plus the factor's longest T2 (unless ``list.window_delay`` is
+  set). Without joint names in the event, or without an answer, the start is the mode identified
+  in the reference cycle, as the task-wide LIST does.
+- **A factor is kept only when it pays** (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`): the
+  reference cycle's M (the schedule alone) is the move's base; a trial that measures more stops the
+  move's learning at the best measured: LIST holds at its best factor if one beat the base, otherwise
+  the move is held at the schedule alone (its cycles are then reported with the metric ``held``, not
+  learned from, until ``~/hold`` false). So at most one cycle per move is worse than the schedule.
+- **State**: every move's learner in the state file, one entry per move
+  (:class:`~shaper_nodes.core.learning.moves.MoveStore`, ``{"version": 1, "structure", "per_move",
+  "moves", "joint_names", "at_schedule", "saved_at"}``), saved atomically after each update and loaded entry by
+  entry: a broken entry is left out and reported (``/diagnostics``, ``learner: state_file``), its
+  move starts afresh, the others resume. At start the learner sends every saved move's factor to
+  the scheduler again, so each move resumes from its saved state (also after a kill -9, and for a
+  restarted scheduler).
+- **A correction not acknowledged** (the scheduler refused or did not answer) is sent again at the
+  move's next START, and that cycle is not learned from (it may have run with either).
+- ``~/hold``: every move holds at its best factor (or learns again).
+- ``/diagnostics``: once the saved factors are sent at start, an OK status ``learner: moves`` with the
+  number of moves resumed and, per move key, what its goals run with.
+
+Reports (``~/reports``): one per cycle as in the task-wide mode, the metric ``move`` being the
+move's index in the state file's order (stable across restarts).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from sensor_msgs.msg import Imu, JointState
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_msgs.srv import SetMoveShaper, ShaperAt
+from shaper_nodes.core.cycles import END, START
+from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession
+from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, keep_when_it_pays, store_from_doc
+from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
+from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg, time_to_sec
+from shaper_nodes.ros.diagnostics import ERROR, OK
+from shaper_nodes.ros.qos import IMU_QOS
+from shaper_nodes.ros.shaper_client import ServiceClient
+
+from .learner_base import LearnerBase
+
+#: why a move's cycle is not learned from once it is held at the schedule alone
+HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
+_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", "saved_at"}
+
+
+def _sent(learner: ListLearner) -> ListParams | None:
+    """What a move's learner has its goals run with next (None: the schedule alone, its reference cycle)."""
+    return learner.params if learner.reference is not None else None
+
+
+def _describe(params: ListParams | None) -> str:
+    return "schedule alone" if params is None else f"factor A1 {params.a1:.5f}, T2 {params.t2:.5f} s"
+
+
+class MovesMode:
+    """The per-move LIST adapter of the learner node (see the module docstring)."""
+
+    def __init__(self, node: LearnerBase, declared: tuple[Any, ListConfig]) -> None:
+        self.node = node
+        self.params, self.config = declared
+        v = self.params.value
+        self.structure = self.config.structure
+        self.user_delay = float(v.list.window_delay) > 0.0
+        restored = node.restore(self._build, {"structure": self.structure, "per_move": True})
+        #: the moves, their joint names, and those held at the schedule alone (no factor measured better)
+        self.store, self.names, self.held = restored if restored is not None else (MoveStore(), {}, set())
+        self._restored = [e.key for e in self.store]  # the moves of the state file, sent again at start
+        self.learners: dict[str, ListLearner] = {}
+        for entry in self.store:
+            learner = entry.learner()
+            if learner is not None:
+                self.learners[entry.key] = learner
+        #: per move, the factor the scheduler acknowledged (absent: not acknowledged since start)
+        self.applied: dict[str, ListParams | None] = {}
+        self.session = ListSession(ListLearner(self.config), self.structure, float(node.params.value.stale_after),
+                                   node.max_cycle_duration, float(v.sensor.max_abs_accel))
+        self.events_topic = v.topics.cycle_events
+        self.imu_topic = v.topics.imu
+        self._cycle_move: dict[int, str] = {}  # cycle -> move key, or why the cycle is not learned from
+        self._skip: dict[int, str] = {}
+        scheduler = node.shaper.srv_name.rsplit("/", 1)[0]
+        self.set_move = ServiceClient(node, SetMoveShaper, f"{scheduler}/set_move_shaper", node.service_timeout,
+                                      node.diagnostics)
+        self.shaper_at = ServiceClient(node, ShaperAt, f"{scheduler}/shaper_at", node.service_timeout,
+                                       node.diagnostics)
+        node.create_subscription(Imu, self.imu_topic, self._on_imu, IMU_QOS,
+                                 callback_group=MutuallyExclusiveCallbackGroup())
+
+    def _wanted(self, key: str) -> ListParams | None:
+        """What the move's goals run with next (None: the schedule alone)."""
+        learner = self.learners.get(key)
+        return None if learner is None or key in self.held else _sent(learner)
+
+    # ----------------------------------------------------------------- state
+    def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], set[str]]:
+        if set(doc) - _DOC_KEYS or "moves" not in doc:
+            raise MoveError(f"per-move state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
+        store, problems = store_from_doc(doc["moves"])
+        names = doc.get("joint_names") or {}
+        if not isinstance(names, dict) or not all(isinstance(n, list) and all(isinstance(x, str) for x in n)
+                                                  for n in names.values()):
+            raise MoveError("joint_names must map each move to a list of joint names")
+        if problems:
+            text = "; ".join(f"move {k}: {why}" for k, why in problems.items())
+            self.node.state_problem = f"{len(problems)} move entr{'y' if len(problems) == 1 else 'ies'} left out" \
+                                      f" (they start afresh): {text}"
+            self.node.diagnostics.report("state_file", ERROR, self.node.state_problem)
+        held = doc.get("at_schedule") or []
+        if not isinstance(held, list) or not all(isinstance(k, str) for k in held):
+            raise MoveError("at_schedule must be a list of move keys")
+        return store, {k: list(n) for k, n in names.items() if k in store}, {k for k in held if k in store}
+
+    def state(self) -> dict[str, Any]:
+        for key, learner in self.learners.items():
+            entry = self.store.get(key)
+            if entry is not None:
+                entry.list_state = learner.to_dict()
+        return {"structure": self.structure, "per_move": True, "moves": self.store.to_doc(),
+                "joint_names": self.names, "at_schedule": sorted(self.held)}
+
+    def describe(self) -> str:
+        return (f"LIST per move ({self.structure}, rule {self.config.rule}) on {self.imu_topic}, factors kept by"
+                f" {self.set_move.srv_name}; {len(self.store)} moves saved")
+
+    def latest(self) -> float:
+        return float(self.session.latest_imu)
+
+    def ready(self) -> bool:
+        return self.set_move.service_is_ready() and self.shaper_at.service_is_ready()
+
+    # ----------------------------------------------------------------- the scheduler
+    async def start(self) -> bool:
+        """Every saved move's factor to the scheduler (the moves resume from their saved state)."""
+        answered = True
+        for key in self._restored:
+            entry = self.store.get(key)
+            if entry is not None and key in self.learners and key not in self.applied:  # (a START may have sent it)
+                answered = await self._send(entry, self._wanted(key)) is not None and answered
+        if answered:  # the moves' state, once, on the log and /diagnostics ("learner: moves")
+            moves = [(k, _describe(self._wanted(k)) if k in self.learners else "afresh") for k in self._restored]
+            text = f"learning per move: {len(moves)} moves resumed from the state file"
+            self.node.get_logger().info(text + "".join(f"; {k}: {d}" for k, d in moves))
+            self.node.diagnostics.publish("moves", OK, text, moves)
+        return answered
+
+    async def _send(self, entry: MoveEntry, params: ListParams | None) -> bool | None:
+        """The move's factor to the scheduler; True if acknowledged, False if refused, None if unanswered."""
+        names = self.names.get(entry.key, [])
+        msg = ShaperMsg(family="none", source=self.node.shaper.source) if params is None else \
+            shaper_to_msg(params.shaper(self.structure), self.node.shaper.source, 0)
+        req = SetMoveShaper.Request(start=JointState(name=names, position=entry.start),
+                                    goal=JointState(name=names, position=entry.goal), shaper=msg)
+        answer = await self.set_move.call(req)
+        if answer.response is None:
+            self.node.get_logger().error(f"move {entry.key}: {answer.error}")
+            return None
+        if not answer.response.success:
+            self.node.get_logger().error(f"move {entry.key}: the scheduler refused the factor:"
+                                         f" {answer.response.message}")
+            return False
+        self.applied[entry.key] = params
+        sh = None if params is None else params.shaper(self.structure)
+        entry.correction = None if sh is None else (sh.amplitudes.tolist(), sh.times.tolist())
+        return True
+
+    async def _learner_for(self, entry: MoveEntry, names: list[str]) -> ListLearner:
+        """A new move's learner: from the schedule's lowest mode at the goal (module docstring)."""
+        config, initial, why = self.config, None, "no joint names in the cycle event"
+        if names:
+            req = ShaperAt.Request(pose=JointState(name=names, position=entry.goal),
+                                   start=JointState(name=names, position=entry.start))
+            answer = await self.shaper_at.call(req)
+            resp = answer.response
+            why = answer.error if resp is None else resp.message
+            if resp is not None and resp.success and len(resp.estimate.modes):
+                try:
+                    lowest = min((mode_from_msg(m) for m in resp.estimate.modes), key=lambda m: m.omega)
+                    initial = ListParams.from_mode(Mode(lowest.omega, lowest.zeta))
+                    if not self.user_delay:
+                        t2_max = 2.0 * initial.t2 * (2.0 if self.structure == "zvd3" else 1.0)
+                        delay = (float(resp.shaper.times[-1]) if len(resp.shaper.times) else 0.0) + t2_max
+                        config = dataclasses.replace(self.config, window_delay=delay)
+                    learner = ListLearner(config, initial)
+                    entry.origin = "schedule"
+                    self.node.get_logger().info(f"move {entry.key}: starts from the schedule's lowest mode"
+                                                f" {lowest.hz:.4g} Hz, zeta {lowest.zeta:.3g} at its goal")
+                    return learner
+                except (ShaperError, ListError, ValueError) as err:
+                    why = str(err)
+        entry.origin = "identified"
+        self.node.get_logger().warning(f"move {entry.key}: no schedule at its goal ({why}); the mode identified"
+                                       " in its reference cycle is the start")
+        return ListLearner(self.config)
+
+    # ----------------------------------------------------------------- inputs
+    def _on_imu(self, msg: Imu) -> None:
+        a = msg.linear_acceleration
+        self.node.notice(self.session.on_imu(time_to_sec(msg.header.stamp), (a.x, a.y, a.z)))
+
+    async def hold(self, on: bool) -> tuple[bool, str]:
+        ok = True
+        for entry in list(self.store):
+            learner = self.learners.get(entry.key)
+            if learner is None:
+                continue
+            if not on:
+                learner.resume()
+                self.held.discard(entry.key)
+            elif learner.reference is not None and entry.key not in self.held:
+                learner.hold()
+            wanted = self._wanted(entry.key)
+            if entry.key not in self.applied or self.applied[entry.key] != wanted:
+                ok = bool(await self._send(entry, wanted)) and ok
+        what = "holding every move at its best factor" if on else "learning resumed on every move"
+        return ok, what + ("" if ok else "; the scheduler did not take every factor")
+
+    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+        cycle = int(msg.cycle)
+        if msg.event == START:
+            await self._on_start(msg, stamp)
+            return None
+        result = self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
+        if msg.event != END:
+            return None
+        key = self._cycle_move.pop(cycle, None)
+        skip = self._skip.pop(cycle, "")
+        if skip == HELD and key is not None:  # not learned from, and not a fault: a report saying so
+            self.node.get_logger().info(f"cycle {cycle}, move {key}: {HELD}")
+            index = [e.key for e in self.store].index(key)
+            return self.node.report(msg, (math.nan, stamp), ["move", "held"], [float(index), 1.0])
+        if result is None or key is None or skip:
+            window = (math.nan, stamp) if result is None else (result.start, result.end)
+            why = skip or (result.skipped if result is not None else "") or "END without its START"
+            return self.node.skipped(msg, window, why, result.refusal if result is not None else "")
+        return await self._on_end(msg, key, result)
+
+    async def _on_start(self, msg: CycleEvent, stamp: float) -> None:
+        cycle = int(msg.cycle)
+        try:
+            entry, new = self.store.entry(msg.start_positions, msg.goal_positions)
+        except MoveError as err:
+            self._skip[cycle] = f"the cycle's move cannot be identified: {err}"
+            return
+        self._cycle_move[cycle] = entry.key
+        if new:
+            self.names[entry.key] = list(msg.joint_names)
+        learner = self.learners.get(entry.key)
+        if learner is None:
+            learner = self.learners[entry.key] = await self._learner_for(entry, list(msg.joint_names))
+            self.applied[entry.key] = None  # a new move: the scheduler has no factor for it
+        wanted = self._wanted(entry.key)
+        if entry.key not in self.applied or self.applied[entry.key] != wanted:
+            await self._send(entry, wanted)  # (again): the cycle may have run with either
+            self._skip[cycle] = "the move's factor was not acknowledged by the scheduler before its start"
+        if entry.key in self.held:
+            self._skip[cycle] = HELD  # not learned from either way
+        if cycle in self._skip:
+            return
+        self.session.switch(learner, wanted)
+        self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
+
+    async def _on_end(self, msg: CycleEvent, key: str, result: Any) -> CycleReport:
+        entry = self.store.get(key)
+        assert entry is not None
+        update = result.update
+        window = (result.start, result.end)
+        if update is None or update.action == "rejected" or update.next is None:
+            return self.node.skipped(msg, window, result.skipped or (update.reason if update else ""),
+                                     result.refusal)
+        learner = self.learners[key]
+        kept = self._keep_when_it_pays(entry, learner, update)
+        nxt = self._wanted(key)
+        applied = True
+        if nxt != self.applied.get(key):
+            applied = bool(await self._send(entry, nxt))
+        entry.cycles += 1
+        self.node.save()
+        index = [e.key for e in self.store].index(key)
+        used = update.used or ListParams(math.nan, math.nan)
+        after = nxt or ListParams(math.nan, math.nan)
+        names = ["move", "M", "phi", "iteration", "a1_used", "t2_used", "a1_next", "t2_next", "applied", "held",
+                 f"action.{update.action}", f"parameter.{update.parameter}"]
+        values = [float(index), update.m, update.phi, float(update.iteration), used.a1, used.t2, after.a1, after.t2,
+                  1.0 if applied else 0.0, 1.0 if key in self.held or learner.holding else 0.0, 1.0, 1.0]
+        report = self.node.report(msg, window, names, values, residual=update.m)
+        report.shaper_used = self._shaper_msg(update.used)
+        report.shaper_next = self._shaper_msg(nxt)
+        log = self.node.get_logger().info if applied else self.node.get_logger().error
+        log(f"cycle {msg.cycle}, move {key}: M {update.m:.4g}, {update.action} ({update.parameter}):"
+            f" {_describe(update.used)} -> {_describe(nxt)}" + kept + ("" if applied else "; not acknowledged"))
+        return report
+
+    def _keep_when_it_pays(self, entry: MoveEntry, learner: ListLearner, update: Any) -> str:
+        """A factor is kept only when it pays (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`);
+        returns what was decided, for the log ("" if the move learns on)."""
+        best = learner.best
+        decision = keep_when_it_pays(entry, update.m, update.used is not None, None if best is None else best[1])
+        base = entry.base["residual_rms"] if entry.base is not None else math.nan
+        if decision == "best":
+            learner.hold()
+            return f"; M above the schedule's ({base:.4g}): holding at the best factor measured"
+        if decision == "base":
+            self.held.add(entry.key)
+            return f"; M above the schedule's ({base:.4g}) and no factor better: the schedule alone, held"
+        return ""
+
+    def _shaper_msg(self, params: ListParams | None) -> ShaperMsg:
+        shaper = none_shaper() if params is None else params.shaper(self.structure)
+        return shaper_to_msg(shaper, self.node.shaper.source, 0)
