@@ -85,14 +85,17 @@ def new_subscription(conductor: Conductor, before: set[bytes]) -> bool:
 def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, ros_context, tmp_path):
     cal = modal_calibration()
     state = tmp_path / "learner_state.json"
-    start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist(), "rate": RATE})
+    # the plant waits for its readers (the learner and this test's client take every sample, reliable), so a
+    # starved learner loses no sample of a move
+    start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist(), "rate": RATE,
+                                               "lockstep.readers": ["/learner", "/conductor"]})
     start_node("shaper_nodes", "scheduler", {**scheduler_parameters(cal["rule_base"]), "interpolation": "modes",
                                              "family": "zv", "use_sim_time": True})
     start_node("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": RATE,
                                                "use_sim_time": True, "action.server_timeout": 30.0,
                                                "action.scheduler": "/scheduler"})
     learner_params = {"mode": "list", "use_sim_time": True, "shaper": "/scheduler", "list.structure": "zv2",
-                      "list.per_move": True, "state_file": str(state)}
+                      "list.per_move": True, "state_file": str(state), "topics.imu_reliable": True}
     learner = start_node("shaper_nodes", "learner", learner_params)
     conductor = Conductor(context=ros_context)
     client = ArmClient(conductor)

@@ -9,7 +9,8 @@ and sends it to the shaper node with source "learner". Started as ``learner`` wi
 Interfaces (names are parameters)
 ---------------------------------
 topics.imu (sensor_msgs/Imu, sensor QoS), topics.cycle_events, ``<shaper>/active_shaper``
-    Inputs. A cycle is learned from only if it ran with the shaper the learner sent (or
+    Inputs (the IMU reliable with topics.imu_reliable, acknowledged to a lockstep sim plant).
+    A cycle is learned from only if it ran with the shaper the learner sent (or
     unshaped: the reference) from START to END; missing, stale, gappy, saturated or
     non-finite accelerometer data is reported and skipped, never learned from. A sample at or
     beyond the sensor's range (``sensor.max_abs_accel``) is saturated: the cycle is refused
@@ -37,6 +38,7 @@ held against it by the tests).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,6 +59,7 @@ from shaper_nodes.core.learning.list import (
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
+from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader
 from shaper_nodes.ros.parameters import Spec, declare, flat, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
 
@@ -132,6 +135,24 @@ class TopicParams:
 
     imu: str = topic("/tip_imu", "imu")
     cycle_events: str = topic("/cycle_events", "cycle_events")
+    imu_reliable: bool = param(False, IMU_RELIABLE_DOC, read_only=True)
+
+
+def subscribe_imu(node: Any, topics: TopicParams, on_sample: Callable[[float, tuple[float, float, float]], None],
+                  group: Any) -> LockstepReader:
+    """Subscribe ``node`` to the accelerometer (``topics.imu``; RELIABLE and deep with ``topics.imu_reliable``)
+    and call ``on_sample(t, (ax, ay, az))`` with each sample. The node acknowledges the samples it took, so a
+    lockstep sim plant that names it in ``lockstep.readers`` waits for it (the LIST modes' one input glue)."""
+    reader = LockstepReader(node, {topics.imu: None})
+    took, name = reader.took, topics.imu
+
+    def on_imu(msg: Imu) -> None:
+        t = time_to_sec(msg.header.stamp)
+        a = msg.linear_acceleration
+        on_sample(t, (a.x, a.y, a.z))
+        took(name, t)
+    node.create_subscription(Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS, callback_group=group)
+    return reader
 
 
 @dataclass(frozen=True)
@@ -176,7 +197,7 @@ class ListMode:
         self.events_topic = v.topics.cycle_events
         self.imu_topic = v.topics.imu
         inputs = MutuallyExclusiveCallbackGroup()  # taken while an END's update awaits the shaper node
-        node.create_subscription(Imu, self.imu_topic, self._on_imu, IMU_QOS, callback_group=inputs)
+        subscribe_imu(node, v.topics, lambda t, a: node.notice(self.session.on_imu(t, a)), inputs)
         node.create_subscription(ShaperMsg, f"{node.shaper.srv_name.rsplit('/', 1)[0]}/active_shaper",
                                  self._on_active, LATCHED, callback_group=inputs)
 
@@ -223,10 +244,6 @@ class ListMode:
         return await self.node.shaper.send(msg, exact=params is not None)  # the learned impulses exactly
 
     # ----------------------------------------------------------------- inputs
-    def _on_imu(self, msg: Imu) -> None:
-        a = msg.linear_acceleration
-        self.node.notice(self.session.on_imu(time_to_sec(msg.header.stamp), (a.x, a.y, a.z)))
-
     def _on_active(self, msg: ShaperMsg) -> None:
         self.session.on_shaper(msg.amplitudes, msg.times, msg.source, msg.revision)
 

@@ -44,7 +44,7 @@ import math
 from typing import Any
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import JointState
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
@@ -53,12 +53,12 @@ from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession
 from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, keep_when_it_pays, store_from_doc
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
-from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg, time_to_sec
+from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK
-from shaper_nodes.ros.qos import IMU_QOS
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
+from .learner_list import subscribe_imu
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
 HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
@@ -105,8 +105,8 @@ class MovesMode:
                                       node.diagnostics)
         self.shaper_at = ServiceClient(node, ShaperAt, f"{scheduler}/shaper_at", node.service_timeout,
                                        node.diagnostics)
-        node.create_subscription(Imu, self.imu_topic, self._on_imu, IMU_QOS,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
+        subscribe_imu(node, v.topics, lambda t, a: node.notice(self.session.on_imu(t, a)),
+                      MutuallyExclusiveCallbackGroup())
 
     def _wanted(self, key: str) -> ListParams | None:
         """What the move's goals run with next (None: the schedule alone)."""
@@ -215,10 +215,6 @@ class MovesMode:
         return ListLearner(self.config)
 
     # ----------------------------------------------------------------- inputs
-    def _on_imu(self, msg: Imu) -> None:
-        a = msg.linear_acceleration
-        self.node.notice(self.session.on_imu(time_to_sec(msg.header.stamp), (a.x, a.y, a.z)))
-
     async def hold(self, on: bool) -> tuple[bool, str]:
         ok = True
         for entry in list(self.store):

@@ -31,8 +31,8 @@ from ..core.lockstep import ACK_PERIOD, ANNOUNCE, Acks, Gaps
 from .conversions import sec_to_time, time_to_sec
 from .qos import LATCHED
 
-__all__ = ["ACK_QOS", "ACK_SUFFIX", "FLUSH_PERIOD", "HEADER_FIRST", "STREAM_QOS", "AckWatch", "LockstepReader",
-           "ack_topic", "header_stamp", "subscribes"]
+__all__ = ["ACK_QOS", "ACK_SUFFIX", "FLUSH_PERIOD", "HEADER_FIRST", "IMU_RELIABLE_DOC", "STREAM_QOS", "AckWatch",
+           "LockstepReader", "ack_topic", "header_stamp", "subscribes"]
 
 #: the acknowledgement topic is the reader node's fully qualified name plus this
 ACK_SUFFIX = "/lockstep_ack"
@@ -41,6 +41,11 @@ ACK_QOS = LATCHED
 #: a reader's per-step streams in lockstep: reliable, 10000 samples (10 s of a 1 kHz IMU; the plant's lead,
 #: ``lockstep.lead``, is well inside it)
 STREAM_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+
+#: what a node's ``topics.imu_reliable`` parameter means (the identifier's and the learner's)
+IMU_RELIABLE_DOC = ("Subscribe to the accelerometer RELIABLE (lossless from a reliable publisher such as the simulator"
+                    " in lockstep, which then waits for this node when it is in lockstep.readers; a best-effort sensor"
+                    " driver does not match it). Default best effort, deep queue.")
 
 #: wall s between two checks for samples taken since the last acknowledgement (a wall-clock timer: the simulated
 #: clock stands still while the plant rests)
