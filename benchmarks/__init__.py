@@ -12,6 +12,8 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
   time goes inside the echo and shaper nodes (wake-up, callback and its parts), timed in their processes.
 * :mod:`benchmarks.raw_path` (run on its own): the array hop's conversions in one process, message
   objects against the serialized bytes the shaper node reads and writes (no DDS).
+* :mod:`benchmarks.arm_readers` (run on its own): the arm's readers' callbacks on message objects against
+  serialized bytes, and the sim plant in lockstep with one reader of the demo client's streams.
 * :mod:`benchmarks.fir_throughput`: joint-samples per second of the FIR core
   (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter``.
 * :mod:`benchmarks.list_update`: one LIST update for a 10 s cycle of 1 kHz 3-axis accelerometer
