@@ -140,18 +140,17 @@ class ArmClient:
                                                    JOINTS: 1.0 / RATE})
         took = self.lockstep.took
 
-        # the per-step streams taken raw (serialized bytes, no message objects: what lets the plant run fast in
-        # lockstep with this client); the stamp and the fields used read by checked decoders, and a message that
+        # the per-step streams taken raw (serialized bytes, no message objects: a fraction of the CPU per message,
+        # docs/results/benchmarks.md); the stamp and the fields used read by checked decoders, and a message that
         # does not decode logged and dropped (its gap then counts as lost)
-        imu_read, joints_read = decode_imu, JointStateReader()
-        link_read, cmd_read = JointStateReader(), JointStateReader()
+        joints_read, link_read, cmd_read = JointStateReader(), JointStateReader(), JointStateReader()
 
         def refused(topic: str, err: CdrError) -> None:
             conductor.get_logger().error(f"{topic}: a message dropped: {err}", throttle_duration_sec=1.0)
 
         def on_imu(raw: bytes) -> None:
             try:
-                t, a = imu_read(raw)
+                t, a = decode_imu(raw)
             except CdrError as err:
                 return refused(IMU, err)
             self.s.imu_t.append(t)
