@@ -62,6 +62,7 @@ from shaper_nodes.core.calibration.plan import approach as plan_approach
 from shaper_nodes.core.calibration.plan import make_plan, quintic_time
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
 from shaper_nodes.core.files import write_atomic
+from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, Diagnostics
 from shaper_nodes.ros.parameters import declare_all
@@ -121,7 +122,10 @@ class Calibrator:
         # a lockstep sim plant that names this node in lockstep.readers waits for it; gaps in the stamps are losses
         self.lockstep = LockstepReader(node, {self.imu_topic: None, self.js_topic: None})
         self._imu_sub = node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
-        node.create_subscription(JointState, self.js_topic, self._on_joint_states, STREAM_QOS)
+        self._js_read = JointStateReader()
+        self._js_names: tuple[str, ...] | None = None  # the names of the last layout, and this node's joints' indices
+        self._js_index: list[int] = []
+        node.create_subscription(JointState, self.js_topic, self._on_joint_states, STREAM_QOS, raw=True)
         self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
         # made now, so that a monitor's subscription has matched by the time a sensor fault is reported
         self.diagnostics = Diagnostics(node)
@@ -155,13 +159,21 @@ class Calibrator:
         self.lockstep.took(self.imu_topic, t)
         self._write(self.imu_topic, "sensor_msgs/msg/Imu", sec * 1_000_000_000 + nanosec, raw)
 
-    def _on_joint_states(self, msg: Any) -> None:
+    def _on_joint_states(self, raw: bytes) -> None:
+        """Raw CDR: the stamp, names and positions read by a checked decoder; the bytes recorded as they came."""
         try:
-            self.position = np.array([msg.position[list(msg.name).index(j)] for j in self.names], dtype=float)
-        except (ValueError, IndexError):
+            t, names, positions = self._js_read(raw)
+        except CdrError as err:  # dropped (its gap then counts as lost)
+            self.node.get_logger().error(f"{self.js_topic}: a message dropped: {err}", throttle_duration_sec=1.0)
             return
-        self.lockstep.took(self.js_topic, time_to_sec(msg.header.stamp))
-        self._record(self.js_topic, "sensor_msgs/msg/JointState", msg, time_to_sec(msg.header.stamp))
+        if names is not self._js_names:  # a new layout: where this node's joints are in it
+            self._js_names = names
+            self._js_index = [names.index(j) if j in names else -1 for j in self.names]
+        if any(i < 0 or i >= len(positions) for i in self._js_index):
+            return
+        self.position = np.array([positions[i] for i in self._js_index], dtype=float)
+        self.lockstep.took(self.js_topic, t)
+        self._write(self.js_topic, "sensor_msgs/msg/JointState", int(round(t * 1e9)), raw)
 
     # ------------------------------------------------------------------ waiting
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:

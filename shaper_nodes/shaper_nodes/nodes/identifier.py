@@ -59,6 +59,7 @@ from shaper_nodes.core.identification import METHODS, IdentificationError, ModeF
 from shaper_nodes.core.identification.drift import DriftWatch, ModeCheck, check_mode
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sensor_fault
 from shaper_nodes.core.shaping import ShaperError, none_shaper
+from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import estimate_msg, msg_hz, shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
@@ -229,8 +230,11 @@ class IdentifierNode(Node):
         self._imu_topic, self._js_topic = p.topics.imu, p.topics.joint_states
         self.lockstep = LockstepReader(self, {self._imu_topic: None, self._js_topic: None})
         self._cycle_start = -math.inf
-        self.create_subscription(Imu, p.topics.imu, self._on_imu, STREAM_QOS if p.topics.imu_reliable else IMU_QOS)
-        self.create_subscription(JointState, p.topics.joint_states, self._on_joints, STREAM_QOS)
+        # the per-step streams taken raw (serialized bytes, no message objects), read by checked decoders
+        self._js_read = JointStateReader()
+        self.create_subscription(Imu, p.topics.imu, self._on_imu, STREAM_QOS if p.topics.imu_reliable else IMU_QOS,
+                                 raw=True)
+        self.create_subscription(JointState, p.topics.joint_states, self._on_joints, STREAM_QOS, raw=True)
         self.create_subscription(CycleEvent, p.topics.cycle_events, self._on_event, 100)
         self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
         self.diagnostics = Diagnostics(self)
@@ -248,17 +252,26 @@ class IdentifierNode(Node):
             f" applies to {self.shaper.srv_name}")
 
     # ----------------------------------------------------------------- data
-    def _on_imu(self, msg: Imu) -> None:
-        a = msg.linear_acceleration
-        t = time_to_sec(msg.header.stamp)
-        self.monitor.add_accel(t, (a.x, a.y, a.z))
+    def _on_imu(self, raw: bytes) -> None:
+        try:
+            t, accel = decode_imu(raw)
+        except CdrError as err:
+            return self._refused(self._imu_topic, err)
+        self.monitor.add_accel(t, accel)
         self.lockstep.took(self._imu_topic, t)
 
-    def _on_joints(self, msg: JointState) -> None:
-        t = time_to_sec(msg.header.stamp)
-        if msg.position:
-            self.monitor.add_positions(t, msg.position)
+    def _on_joints(self, raw: bytes) -> None:
+        try:
+            t, _, positions = self._js_read(raw)
+        except CdrError as err:
+            return self._refused(self._js_topic, err)
+        if positions:
+            self.monitor.add_positions(t, positions)
         self.lockstep.took(self._js_topic, t)
+
+    def _refused(self, topic: str, err: CdrError) -> None:
+        """A message that does not decode: logged and dropped (its gap then counts as lost)."""
+        self.get_logger().error(f"{topic}: a message dropped: {err}", throttle_duration_sec=1.0)
 
     def _on_event(self, msg: CycleEvent) -> None:
         if msg.event == CycleEvent.END and not self.monitor.in_cycle:

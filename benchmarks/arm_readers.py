@@ -1,0 +1,373 @@
+"""The arm's readers: message objects against serialized bytes, per message and with the sim plant in lockstep.
+
+Run on its own (not by ``./run bench``): ``python -m benchmarks.arm_readers [--seconds S] [--rounds N]``.
+
+Two parts, each a ratio of one run:
+
+``callbacks``
+    In one process, no DDS: the CPU time per message of the demo client's callbacks as they were
+    (``deserialize_message``, the conversion rclpy does for a subscription that is not raw, then the
+    callback reading the message object) and as they are (the serialized bytes read by
+    :mod:`shaper_nodes.recordings.cdr_sensors`), on the bytes the sim plant publishes (an Imu and a
+    six-joint JointState with positions, velocities and efforts). Also calibrate's and the identifier's
+    joint-state callbacks the same way.
+``lockstep``
+    The sim plant node (``plant.model: arm``, ``mode: lockstep``, ``lockstep.readers`` naming the reader)
+    executing a FollowJointTrajectory goal of ``--seconds`` simulated s sent to its controller, with one
+    reader process that takes the demo client's four per-step streams (/tip_imu at 1 kHz,
+    /joint_states, /sim_plant/tip_state and /sim_plant/reference at 500 Hz; reliable, STREAM_QOS) and
+    acknowledges them (LockstepReader), either as message objects (``objects``) or raw (``raw``), in
+    rounds that alternate the two. Per run: the plant's simulated s per wall s (from the goal's request
+    to its result), the reader's CPU time per simulated s (its process, DDS threads included, from its
+    first message to its last), and the samples it lost (gaps in the stamps; 0 expected: the plant
+    waits for it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import pathlib
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
+RATE, SUBSTEPS = 500.0, 2
+IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/reference", "/joint_states"
+READER = "arm_readers_reader"
+#: the reader's modes: message objects (the readers before issue 34), raw bytes, raw bytes on rclpy's EventsExecutor
+MODES = ("objects", "raw", "raw_events")
+#: the plant in lockstep with no reader (the ceiling of the runs with one)
+ALONE = "alone"
+
+
+# ------------------------------------------------------------------------------------------- callbacks
+def _cpu_per_call(fn: Callable[[], None], n: int, repeats: int = 5) -> float:
+    """Least CPU time per call of ``fn``, s, over ``repeats`` passes of ``n`` calls."""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.process_time()
+        for _ in range(n):
+            fn()
+        best = min(best, time.process_time() - t0)
+    return best / n
+
+
+def callbacks(n: int = 20000) -> dict[str, float]:
+    """CPU per message, us, of each reader's callbacks on objects (deserialize + read) and on raw bytes."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import Imu, JointState
+
+    from shaper_nodes.core.stamps import stamp_to_sec
+    from shaper_nodes.recordings.cdr import ImuCdr, JointStateCdr
+    from shaper_nodes.recordings.cdr_sensors import JointStateReader, decode_imu
+    from sim_plant_node.arm.description import JOINT_NAMES
+
+    imu = ImuCdr("tool0")
+    imu.set_stamp(12, 500_000)
+    imu.linear_acceleration[:] = (0.1, -9.8, 0.3)
+    js = JointStateCdr(list(JOINT_NAMES), 6, 6, 6)
+    js.set_stamp(12, 500_000)
+    js.position[:] = np.linspace(-1, 1, 6)
+    imu_raw, js_raw = imu.data(), js.data()
+    store: list[Any] = []
+    names = list(JOINT_NAMES)
+
+    def imu_objects() -> None:  # the demo client's and the identifier's IMU callback as it was
+        m = deserialize_message(imu_raw, Imu)
+        t = stamp_to_sec(m.header.stamp)
+        a = m.linear_acceleration
+        store.append((t, (a.x, a.y, a.z)))
+
+    def imu_bytes() -> None:
+        store.append(decode_imu(imu_raw))
+
+    def js_objects() -> None:  # the demo client's tip state and reference callbacks as they were
+        m = deserialize_message(js_raw, JointState)
+        store.append((stamp_to_sec(m.header.stamp), list(m.position)))
+
+    reader = JointStateReader()
+
+    def js_bytes() -> None:
+        t, _, position = reader(js_raw)
+        store.append((t, list(position)))
+
+    def calibrate_objects() -> None:  # calibrate's joint-state callback as it was (its recording left out)
+        m = deserialize_message(js_raw, JointState)
+        store.append(np.array([m.position[list(m.name).index(j)] for j in names], dtype=float))
+
+    index = [names.index(j) for j in names]
+
+    def calibrate_bytes() -> None:
+        _, _, position = reader(js_raw)
+        store.append(np.array([position[i] for i in index], dtype=float))
+
+    out = {}
+    for label, fn in (("Imu, objects", imu_objects), ("Imu, raw", imu_bytes), ("JointState, objects", js_objects),
+                      ("JointState, raw", js_bytes), ("calibrate JointState, objects", calibrate_objects),
+                      ("calibrate JointState, raw", calibrate_bytes)):
+        out[label] = 1e6 * _cpu_per_call(fn, n)
+        store.clear()
+    return out
+
+
+# -------------------------------------------------------------------------------------------- lockstep
+def _reader(mode: str) -> None:
+    """The reader process: the demo client's four per-step streams, as objects or raw; prints JSON on SIGTERM."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from sensor_msgs.msg import Imu, JointState
+
+    from shaper_nodes.recordings.cdr_sensors import JointStateReader, decode_imu
+    from shaper_nodes.ros.conversions import time_to_sec
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
+
+    rclpy.init()
+    node = rclpy.create_node(READER)
+    lock = LockstepReader(node, {IMU: 1.0 / (RATE * SUBSTEPS), LINK: 1.0 / RATE, CMD: 1.0 / RATE, JOINTS: 1.0 / RATE})
+    took = lock.took
+    seen = {"n": 0, "cpu0": 0.0, "cpu1": 0.0, "t0": float("inf"), "t1": float("-inf")}
+    kept: dict[str, list[Any]] = {IMU: [], LINK: [], CMD: [], JOINTS: []}
+
+    def count(t: float) -> None:
+        cpu = time.process_time()
+        if seen["n"] == 0:
+            seen["cpu0"] = cpu
+        seen["n"] += 1
+        seen["cpu1"] = cpu
+        seen["t0"], seen["t1"] = min(seen["t0"], t), max(seen["t1"], t)
+
+    if mode == "objects":  # the demo client's callbacks before issue 34
+        def on_imu(m: Any) -> None:
+            t = time_to_sec(m.header.stamp)
+            a = m.linear_acceleration
+            kept[IMU].append((t, (a.x, a.y, a.z)))
+            took(IMU, t)
+            count(t)
+
+        def on_js(topic: str) -> Callable[[Any], None]:
+            def cb(m: Any) -> None:
+                t = time_to_sec(m.header.stamp)
+                kept[topic].append((t, list(m.position)))
+                took(topic, t)
+                count(t)
+            return cb
+    else:
+        def on_imu(m: Any) -> None:
+            t, a = decode_imu(m)
+            kept[IMU].append((t, a))
+            took(IMU, t)
+            count(t)
+
+        def on_js(topic: str) -> Callable[[Any], None]:
+            read = JointStateReader()
+
+            def cb(m: Any) -> None:
+                t, _, position = read(m)
+                kept[topic].append((t, list(position)))
+                took(topic, t)
+                count(t)
+            return cb
+    raw = mode != "objects"
+    subs = [node.create_subscription(Imu, IMU, on_imu, STREAM_QOS, raw=raw)]
+    for topic in (LINK, CMD, JOINTS):
+        subs.append(node.create_subscription(JointState, topic, on_js(topic), STREAM_QOS, raw=raw))
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    if mode == "raw_events":
+        from rclpy.experimental import EventsExecutor
+
+        ex: Any = EventsExecutor()
+    else:
+        ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    ready = False
+    try:
+        while not stop:
+            ex.spin_once(timeout_sec=0.05)
+            if not ready and all(sub.get_publisher_count() > 0 for sub in subs):
+                ready = True  # every stream matched: the bench may send the goal
+                print("ready", flush=True)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    print(json.dumps({"messages": seen["n"], "cpu": seen["cpu1"] - seen["cpu0"], "span": seen["t1"] - seen["t0"],
+                      "lost": lock.lost(), "processed": lock.processed,
+                      "counts": {k: len(v) for k, v in kept.items()}}), flush=True)
+    ex.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def _cpu_of(pid: int) -> float:
+    """CPU time, s, of process ``pid`` so far (user and system, all its threads; Linux /proc)."""
+    fields = pathlib.Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str], None]) -> dict[str, Any]:
+    import rclpy
+    from builtin_interfaces.msg import Duration
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.executors import SingleThreadedExecutor
+    from rosgraph_msgs.msg import Clock
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from shaper_nodes.ros.action_client import ResilientActionClient
+    from shaper_nodes.ros.conversions import time_to_sec
+    from shaper_nodes.ros.launching import NodeProcess
+    from shaper_nodes.ros.lockstep_reader import AckWatch
+    from sim_plant_node.arm.description import JOINT_NAMES
+
+    env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    alone = mode == ALONE
+    sim = NodeProcess("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
+                                                      "arm.substeps": SUBSTEPS, "task.start": HOME,
+                                                      "lockstep_timeout": 60.0,
+                                                      "lockstep.readers": [] if alone else ["/" + READER]},
+                      log_path=tmp / f"sim-{mode}.log", env=env).start()
+    # the reader (alone: a process that exits at once, the plant waits for no reader)
+    command = ["-c", ""] if alone else ["-m", "benchmarks.arm_readers", "--reader", mode]
+    reader = subprocess.Popen([sys.executable, *command], stdout=subprocess.PIPE)
+    assert reader.stdout is not None
+    fd = reader.stdout.fileno()
+    os.set_blocking(fd, False)
+    said: list[bytes] = []
+
+    def reader_ready() -> bool:
+        with contextlib.suppress(BlockingIOError):
+            said.append(os.read(fd, 65536))
+        return b"ready" in b"".join(said)
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx)
+    n = rclpy.create_node("arm_readers_bench", context=ctx)
+    clock = [0.0]
+
+    def on_clock(m: Any) -> None:
+        clock[0] = max(clock[0], time_to_sec(m.clock))
+
+    n.create_subscription(Clock, "/clock", on_clock, 100)
+    acks = AckWatch(n, "/" + READER)
+    client = ResilientActionClient(n, FollowJointTrajectory, "/joint_trajectory_controller/follow_joint_trajectory")
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(n)
+
+    def spin_until(done: Callable[[], bool], timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not done():
+            if time.monotonic() > deadline or not sim.running() or (not alone and reader.poll() is not None):
+                raise RuntimeError(f"arm_readers: no {what} within {timeout:g} s (or a process ended; {tmp})")
+            ex.spin_once(timeout_sec=0.01)
+    try:
+        spin_until(client.server_is_ready, 60.0, "action server")
+        if not alone:
+            acks.wait_subscribed(spin_until, (IMU, LINK, CMD, JOINTS), 60.0)
+            spin_until(reader_ready, 60.0, "match of the reader's four subscriptions with the plant's publishers")
+            end_ready = time.monotonic() + 0.5  # the writers' side of the match (a benchmark: no test waits on it)
+            spin_until(lambda: time.monotonic() > end_ready, 5.0, "")
+        target = [q + 0.3 for q in HOME]
+        point = JointTrajectoryPoint(positions=target, velocities=[0.0] * 6, time_from_start=Duration(sec=int(seconds)))
+        goal = FollowJointTrajectory.Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES), points=[point]))
+        progress(f"arm readers: {mode}, a {seconds:g} s goal in lockstep")
+        assert sim.proc is not None
+        cpu0, t0 = _cpu_of(sim.proc.pid), time.perf_counter()
+        sent = client.send_goal_async(goal)
+        spin_until(sent.done, 60.0, "goal response")
+        result = sent.result().get_result_async()
+        spin_until(result.done, 600.0, "result")
+        wall, plant_cpu = time.perf_counter() - t0, (_cpu_of(sim.proc.pid) - cpu0) / seconds
+        end = clock[0]
+        if alone:
+            return {"mode": mode, "sim s per wall s": seconds / wall, "plant CPU per sim s": plant_cpu}
+        try:  # the samples of the run's last period (the reference is stamped at its period's start)
+            spin_until(lambda: acks.processed >= end - 1.0 / RATE - 1e-6, 60.0, "")
+        except RuntimeError:
+            raise RuntimeError(f"arm_readers: the reader acknowledged up to {acks.processed:.4f} s, the clock is at"
+                               f" {end:.4f} s") from None
+    finally:
+        if reader.poll() is None:
+            reader.send_signal(signal.SIGTERM)
+        os.set_blocking(fd, True)
+        out = (b"".join(said) + (reader.communicate(timeout=60)[0] or b"")).decode()
+        ex.shutdown()
+        client.destroy()
+        n.destroy_node()
+        ctx.try_shutdown()
+        sim.stop()
+    got = json.loads(out.strip().splitlines()[-1])
+    if got["messages"] < 2 or got["span"] <= 0:
+        raise RuntimeError(f"arm_readers: the {mode} reader took {got['messages']} messages ({got}; {wall:.3f} s)")
+    return {"mode": mode, "sim s per wall s": seconds / wall, "plant CPU per sim s": plant_cpu,
+            "reader CPU per sim s": got["cpu"] / got["span"],
+            "reader CPU per message, us": 1e6 * got["cpu"] / max(got["messages"] - 1, 1), "lost": got["lost"],
+            "counts": got["counts"]}
+
+
+def lockstep(seconds: float = 10.0, rounds: int = 2, progress: Callable[[str], None] = print) -> list[dict[str, Any]]:
+    """``rounds`` x (objects, raw) runs of the plant in lockstep with one reader (module docstring)."""
+    runs = []
+    with tempfile.TemporaryDirectory(prefix="arm_readers_") as tmp:
+        for k in range(rounds):
+            for mode in ((ALONE, *MODES) if k % 2 == 0 else (*MODES[::-1], ALONE)):
+                runs.append(_one(mode, seconds, pathlib.Path(tmp), progress))
+    return runs
+
+
+def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> None:
+    print("\nThe arm's readers' callbacks, CPU per message (one process, no DDS; least of 5 passes)")
+    print(f"{'callback':>30} | {'us':>7} | {'raw / objects':>13}")
+    for key, value in per_message.items():
+        base = per_message.get(key.replace(", raw", ", objects"), value)
+        print(f"{key:>30} | {value:7.2f} | {value / base:13.2f}")
+    if not runs:
+        return
+    print("\nThe sim plant in lockstep with one reader of the demo client's four streams")
+    print(f"{'reader':>10} | {'sim s / wall s':>14} | {'plant CPU s / sim s':>19} | {'reader CPU s / sim s':>20} |"
+          f" {'us / message':>12} | taken | lost")
+    for r in runs:
+        if r["mode"] == ALONE:
+            print(f"{'no reader':>10} | {r['sim s per wall s']:14.2f} | {r['plant CPU per sim s']:19.3f} |")
+            continue
+        print(f"{r['mode']:>10} | {r['sim s per wall s']:14.2f} | {r['plant CPU per sim s']:19.3f} |"
+              f" {r['reader CPU per sim s']:20.3f} |"
+              f" {r['reader CPU per message, us']:12.1f} | {sum(r['counts'].values()):5d} | {r['lost'] or 0}")
+    keys = ("sim s per wall s", "reader CPU per sim s")
+    med = {m: {k: statistics.median(r[k] for r in runs if r["mode"] == m) for k in keys} for m in MODES}
+    for mode in MODES[1:]:
+        speed, cpu = (med[mode][k] / med["objects"][k] for k in keys)
+        print(f"medians, {mode} / objects: sim s per wall s {speed:.2f}, reader CPU per sim s {cpu:.2f}")
+    alone = [r["sim s per wall s"] for r in runs if r["mode"] == ALONE]
+    if alone:
+        print(f"the plant with no reader: median {statistics.median(alone):.2f} sim s per wall s")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.arm_readers", description=__doc__.splitlines()[0])
+    p.add_argument("--seconds", type=float, default=10.0, help="simulated s of each lockstep run (default 10)")
+    p.add_argument("--rounds", type=int, default=2, help="rounds of (objects, raw) lockstep runs (default 2; 0: none)")
+    p.add_argument("--reader", choices=MODES, help=argparse.SUPPRESS)
+    p.add_argument("--json", type=pathlib.Path, help="also write the figures to this JSON file")
+    args = p.parse_args(argv)
+    if args.reader:
+        _reader(args.reader)
+        return 0
+    per_message = callbacks()
+    runs = lockstep(args.seconds, args.rounds, lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True))
+    print_tables(per_message, runs)
+    if args.json:
+        args.json.write_text(json.dumps({"callbacks": per_message, "lockstep": runs}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
