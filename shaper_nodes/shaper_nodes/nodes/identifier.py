@@ -62,7 +62,7 @@ from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import estimate_msg, msg_hz, shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
-from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
+from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED, SERVICE_QOS
@@ -175,10 +175,7 @@ class TopicParams:
     imu: str = topic("/tip_imu", "imu")
     joint_states: str = topic("/joint_states", "joint_states")
     cycle_events: str = topic("/cycle_events", "cycle_events")
-    imu_reliable: bool = param(False, "Subscribe to the accelerometer RELIABLE (lossless from a reliable publisher"
-                               " such as the simulator in lockstep, which then waits for this node when it is in"
-                               " lockstep.readers; a best-effort sensor driver does not match it). Default best"
-                               " effort, deep queue.", read_only=True)
+    imu_reliable: bool = param(False, IMU_RELIABLE_DOC, read_only=True)
 
 
 @dataclass(frozen=True)
