@@ -18,7 +18,9 @@ zero-order hold at Ts by the shaped command keeps a residual proportional to |S(
 so on the design modes the FIR leaves exactly what the continuous shaper leaves (zero for the
 ZV family: no discretisation floor). The correction is refused (``ValueError``) when the command
 period leaves no solution on the samples next to the impulses (for a positive shaper, none with
-taps >= 0: then the least change is found with the taps bounded below by zero).
+taps >= 0: then the least change is found with the taps bounded below by zero), and, before any
+arithmetic, for a design mode far above the command rate, one that decays by more than
+:data:`MAX_EXACT_DECAY` (zeta omega Ts) over one command period.
 
 Bumpless switching
 ------------------
@@ -145,10 +147,23 @@ def _exact_order(shaper: Shaper) -> int:
     return _EXACT_ORDER.get(shaper.family, 0)
 
 
+#: the most a design mode may decay over one command period, zeta omega Ts, for ``exact``: the conditions'
+#: rows hold exp(zeta omega (t - t_last)) for taps up to one period after the last impulse, and
+#: exp(700) ~ 1e304 leaves them finite (exp overflows beyond ~709.8)
+MAX_EXACT_DECAY = 700.0
+
+
 def _exact_taps(shaper: Shaper, rate: float, split: np.ndarray, base: np.ndarray) -> np.ndarray:
     """The split taps ``split`` corrected to meet the shaper's conditions at its modes (``exact``)."""
     if not shaper.modes or split.size == 1:
         return split
+    for i, mode in enumerate(shaper.modes):  # before any exp() of it
+        decay = mode.zeta * mode.omega / rate
+        if not decay <= MAX_EXACT_DECAY:
+            raise ValueError(
+                f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz cannot hold design mode {i}"
+                f" ({mode.hz:.6g} Hz, damping ratio {mode.zeta:g}): it decays by zeta omega Ts = {decay:.3g} over"
+                f" one command period, beyond the limit of {MAX_EXACT_DECAY:g}; use 'split'")
     order = _exact_order(shaper)
     amps, times = np.asarray(shaper.amplitudes), np.asarray(shaper.times)
     span = max(float(times[-1]), 1.0 / rate)
