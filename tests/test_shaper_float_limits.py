@@ -1,7 +1,8 @@
 """The shaper node's ~/set_shaper over real DDS with the core's float-limit refusals: a design mode too
 slow to have a float period (5e-324 Hz), amplitudes near 1.7e308, and modes far above the command rate
 (a designed family's, refused by check_design; a custom shaper's label, refused by ``exact``) are each
-refused with a reason that names the problem, the active shaper stays, and the node keeps shaping.
+refused with a reason that names the problem, the active shaper stays, and the node keeps shaping;
+the slow mode through the parameters too (shaper.frequencies_hz).
 
 The node and a probe in one executor with a fresh Context (``Rig`` of test_shaper_node.py); every wait
 is for a state (the service's answer, a shaped sample) with a timeout, never a fixed sleep.
@@ -10,6 +11,7 @@ is for a state (the service's answer, a shaped sample) with a timeout, never a f
 from __future__ import annotations
 
 import pytest
+from rclpy.parameter import Parameter
 from test_shaper_node import Rig, send_valid_array_and_expect_output
 
 from shaper_msgs.msg import Shaper as ShaperMsg
@@ -58,6 +60,12 @@ def test_set_shaper_refuses_float_limit_modes_and_amplitudes_by_name_and_keeps_s
         assert "design failed" not in resp.message and "Warning" not in resp.message  # no overflow on the way
         assert resp.active.family == "zv" and resp.active.revision == before.revision
         send_valid_array_and_expect_output(rig, 0.5)  # still shaping, with the old shaper
+    # the parameters' path: the same mode through shaper.frequencies_hz (no range of its own but Mode's)
+    result = rig.node.set_parameters_atomically([Parameter("shaper.frequencies_hz", value=[5e-324]),
+                                                 Parameter("shaper.damping_ratios", value=[0.05])])
+    assert not result.successful and "too slow to design for" in result.reason, result.reason
+    assert rig.active[-1].revision == before.revision
+    send_valid_array_and_expect_output(rig, 0.5)
     # the same custom shaper with modes the command rate can hold is accepted, discretised exactly
     ok = ShaperMsg(family="custom", amplitudes=[0.5, 0.5], times=[0.0, 0.1234], design_modes=[mode_msg(3.0, 0.05)],
                    source="user")
