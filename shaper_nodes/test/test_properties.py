@@ -32,6 +32,7 @@ arithmetic, with a message that names it and the limit.
 from __future__ import annotations
 
 import math
+import os
 import time
 import tracemalloc
 from typing import Any
@@ -94,10 +95,13 @@ MAX_LEN = 1000
 #: numpy's floating-point errors raised (underflow to 0 is harmless and stays quiet), for the tests of
 #: values at the float limits: an overflow on the way to a refusal fails them (so does RuntimeWarning)
 NO_OVERFLOW = {"over": "raise", "divide": "raise", "invalid": "raise"}
-FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-MEDIUM = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-STREAMS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-CHEAP = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+#: every test's examples times this, e.g. ``SHAPER_EXAMPLES_FACTOR=10 ./run test
+#: shaper_nodes/test/test_properties.py --hypothesis-seed=1`` for a ten-times run (a factor below 1 is 1)
+FACTOR = max(1.0, float(os.environ.get("SHAPER_EXAMPLES_FACTOR", "1")))
+FAST = settings(max_examples=int(60 * FACTOR), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+MEDIUM = settings(max_examples=int(120 * FACTOR), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+STREAMS = settings(max_examples=int(150 * FACTOR), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+CHEAP = settings(max_examples=int(300 * FACTOR), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 # ---------------------------------------------------------------------------------- values
 #: the extremes named in the issue: every float class, the limit and its neighbours, the 1e17 of the
@@ -494,6 +498,28 @@ def test_exact_refuses_a_mode_it_cannot_meet_by_name(ratio, zeta, family, capfd)
         assert f"zeta omega Ts = {decay:.3g}" in str(err.value) and f"limit of {MAX_EXACT_DECAY:g}" in str(err.value)
     out, errs = capfd.readouterr()
     assert "DLASCL" not in out + errs  # LAPACK's complaint of a non-finite matrix
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@settings(FAST, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(rate=rates, omega=omegas, zeta=dampings, data=st.data())
+@example(rate=500.0, omega=1.7e308, zeta=0.0, data=None)  # omega_d t overflowed in _exact_taps
+def test_exact_on_a_custom_shaper_labelled_with_any_mode_gives_a_fir_or_refuses_by_name(rate, omega, zeta, data, capfd):
+    """A custom shaper's modes are labels (no rate / 4 check): any mode over the float range, any damping.
+    'exact' gives finite taps summing to 1, or a ValueError suggesting 'split'; never an overflow."""
+    base = design("custom", amplitudes=[0.5, 0.5], times=[0.0, 2.0]) if data is None else data.draw(custom(rate))
+    shaper = Shaper(base.amplitudes, base.times, "custom", (Mode(omega, zeta),))
+    with np.errstate(**NO_OVERFLOW):
+        try:
+            fir = discretize(shaper, rate, "exact")
+        except ValueError as err:
+            assert "use 'split'" in str(err)
+            fir = None
+    if fir is not None:
+        assert np.all(np.isfinite(fir.gains)) and fir.delays[0] >= 0 and np.all(np.diff(fir.delays) > 0)
+        assert abs(math.fsum(fir.gains.tolist()) - 1.0) <= 1e-6
+    out, errs = capfd.readouterr()
+    assert "DLASCL" not in out + errs
 
 
 # ---------------------------------------------------------------------------------- 1, 2. streaming
