@@ -29,9 +29,9 @@ MAX_IMPULSES = 1000
 #: most modes one design may cover (a convolved design has the product of the single-mode counts)
 MAX_DESIGN_MODES = 8
 #: the longest damped period (s) of a mode a family is designed for: every design lasts a sizeable
-#: fraction of its mode's period (ZV half of it), so a slower mode's shaper would exceed
-#: MAX_DURATION a thousand times over; refused before the design divides by its frequency (a
-#: frequency near 5e-324 rad/s has no finite period)
+#: fraction of its mode's period (ZV 0.5, the shortest si, I = 0.01 at V_tol = 0.3, 0.405, measured),
+#: so a slower mode's shaper would exceed MAX_DURATION some 400 times over; refused before the design
+#: divides by its frequency (a frequency near 5e-324 rad/s has no finite period)
 MAX_DESIGN_PERIOD = 1000.0 * MAX_DURATION
 #: the largest |amplitude| a shaper may hold, far beyond any gain a shaper may have (MAX_GAIN):
 #: checked before any sum, so that sums over MAX_IMPULSES of them stay finite (1.7e308 + 1.7e308 is not)
@@ -93,9 +93,21 @@ class Mode:
         return cls(2.0 * math.pi * float(hz), float(zeta))
 
     def check_designable(self, name: str = "design mode") -> None:
-        """Raise :class:`ShaperError` if the mode's damped period exceeds :data:`MAX_DESIGN_PERIOD`,
-        checked by multiplying (a frequency near 5e-324 rad/s has no finite period to compare);
-        ``name`` names the mode in the message."""
+        """Refuse a mode too slow to design a shaper for.
+
+        The damped period may not exceed :data:`MAX_DESIGN_PERIOD` (s); checked by multiplying, as a
+        frequency near 5e-324 rad/s has no finite period to compare.
+
+        Parameters
+        ----------
+        name : str
+            What the message calls the mode (``"design mode 0"``).
+
+        Raises
+        ------
+        ShaperError
+            The damped period exceeds the limit; the message names the mode, in rad/s, and the limit.
+        """
         if not self.damped_omega * MAX_DESIGN_PERIOD >= 2.0 * math.pi:
             lowest = 2.0 * math.pi / MAX_DESIGN_PERIOD / math.sqrt(1.0 - self.zeta**2)
             raise ShaperError(f"{name} {self.omega!r} rad/s (damping ratio {self.zeta:g}) is too slow to design for:"
