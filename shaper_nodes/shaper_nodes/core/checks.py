@@ -139,9 +139,10 @@ def strictly_increasing(name: str, times: np.ndarray) -> np.ndarray:
         raise InputError("empty", f"{name} is empty")
     if not np.all(np.isfinite(times)):
         raise InputError("non_finite", f"{name} has non-finite values")
-    steps = np.diff(times)
-    if np.any(steps <= 0.0):
-        i = int(np.flatnonzero(steps <= 0.0)[0])
+    # compared, not subtracted: the difference of two finite times may overflow (1.7e308 - -1.7e308)
+    back = times[1:] <= times[:-1]
+    if np.any(back):
+        i = int(np.flatnonzero(back)[0])
         raise InputError(
             "non_increasing_time",
             f"{name} not strictly increasing: {times[i]:.6g} s at index {i} then {times[i + 1]:.6g} s",

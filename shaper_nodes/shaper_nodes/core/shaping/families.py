@@ -288,7 +288,8 @@ def design(
     modes : sequence of Mode
         Modes to design for (one or more). ``si`` designs them jointly; the other families
         convolve single-mode designs. Ignored for ``none``; for ``custom`` recorded as the
-        modes it is meant for.
+        modes it is meant for. A design mode's damped period may not exceed
+        :data:`~.types.MAX_DESIGN_PERIOD` (checked before any design divides by its frequency).
     derivative_order : int
         n of the ZV-D^n family (``zvdn`` only), in [0, 10].
     vibration_tolerance : float
@@ -309,8 +310,9 @@ def design(
     Raises
     ------
     ShaperError
-        Unknown family, missing or invalid modes or parameters, or an invalid sequence; the
-        message names the problem.
+        Unknown family, missing or invalid modes or parameters (a design mode too slow to design
+        for), or an invalid sequence (an amplitude beyond :data:`~.types.MAX_AMPLITUDE` among
+        them); the message names the problem.
     """
     name = str(family).strip().lower()
     info = family_info(name)
@@ -326,6 +328,8 @@ def design(
         return _custom(amplitudes, times, modes, max_gain)
     if not modes:
         raise ShaperError(f"shaper family {name!r} needs at least one mode")
+    for i, m in enumerate(modes):  # before any design divides by a frequency
+        m.check_designable(f"design mode {i}")
     params = family_params(name, derivative_order=derivative_order, vibration_tolerance=vibration_tolerance,
                            insensitivity=insensitivity)
     assert info.design is not None

@@ -18,7 +18,10 @@ zero-order hold at Ts by the shaped command keeps a residual proportional to |S(
 so on the design modes the FIR leaves exactly what the continuous shaper leaves (zero for the
 ZV family: no discretisation floor). The correction is refused (``ValueError``) when the command
 period leaves no solution on the samples next to the impulses (for a positive shaper, none with
-taps >= 0: then the least change is found with the taps bounded below by zero).
+taps >= 0: then the least change is found with the taps bounded below by zero), and, before any
+arithmetic, for a design mode far above the command rate, one that decays by more than
+:data:`MAX_EXACT_DECAY` (zeta omega Ts) over one command period or turns through more than
+:data:`MAX_EXACT_PHASE` over the shaper.
 
 Bumpless switching
 ------------------
@@ -145,10 +148,32 @@ def _exact_order(shaper: Shaper) -> int:
     return _EXACT_ORDER.get(shaper.family, 0)
 
 
+#: the most a design mode may decay over one command period, zeta omega Ts, for ``exact``: the conditions'
+#: rows hold exp(zeta omega (t - t_last)) for taps up to one period after the last impulse, and
+#: exp(700) ~ 1e304 leaves them finite (exp overflows beyond ~709.8)
+MAX_EXACT_DECAY = 700.0
+#: the largest phase omega_d (t_n + Ts) (rad) a design mode may turn through over the shaper for ``exact``:
+#: beyond 2**53 a float phase has no fraction left, its cos and sin mean nothing (and near 1.8e308 it overflows)
+MAX_EXACT_PHASE = 2.0**53
+
+
 def _exact_taps(shaper: Shaper, rate: float, split: np.ndarray, base: np.ndarray) -> np.ndarray:
     """The split taps ``split`` corrected to meet the shaper's conditions at its modes (``exact``)."""
     if not shaper.modes or split.size == 1:
         return split
+    for i, mode in enumerate(shaper.modes):  # before any exp() of it
+        decay = mode.zeta * mode.omega / rate
+        if not decay <= MAX_EXACT_DECAY:
+            raise ValueError(
+                f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz cannot hold design mode {i}"
+                f" ({mode.hz:.6g} Hz, damping ratio {mode.zeta:g}): it decays by zeta omega Ts = {decay:.3g} over"
+                f" one command period, beyond the limit of {MAX_EXACT_DECAY:g}; use 'split'")
+        phase = mode.damped_omega * (float(shaper.times[-1]) + 1.0 / rate)
+        if not phase <= MAX_EXACT_PHASE:
+            raise ValueError(
+                f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz cannot hold design mode {i}"
+                f" ({mode.hz:.6g} Hz, damping ratio {mode.zeta:g}): it turns through omega_d (t_n + Ts) = {phase:.3g}"
+                f" rad over the shaper, beyond the limit of {MAX_EXACT_PHASE:.4g} rad (2**53); use 'split'")
     order = _exact_order(shaper)
     amps, times = np.asarray(shaper.amplitudes), np.asarray(shaper.times)
     span = max(float(times[-1]), 1.0 / rate)

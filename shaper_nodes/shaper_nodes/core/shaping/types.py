@@ -28,6 +28,14 @@ MAX_DURATION = 60.0
 MAX_IMPULSES = 1000
 #: most modes one design may cover (a convolved design has the product of the single-mode counts)
 MAX_DESIGN_MODES = 8
+#: the longest damped period (s) of a mode a family is designed for: every design lasts a sizeable
+#: fraction of its mode's period (ZV 0.5, the shortest si, I = 0.01 at V_tol = 0.3, 0.405, measured),
+#: so a slower mode's shaper would exceed MAX_DURATION some 400 times over; refused before the design
+#: divides by its frequency (a frequency near 5e-324 rad/s has no finite period)
+MAX_DESIGN_PERIOD = 1000.0 * MAX_DURATION
+#: the largest |amplitude| a shaper may hold, far beyond any gain a shaper may have (MAX_GAIN):
+#: checked before any sum, so that sums over MAX_IMPULSES of them stay finite (1.7e308 + 1.7e308 is not)
+MAX_AMPLITUDE = 1e300
 #: a custom shaper's default gain bound, sum |A|: 1 admits non-negative impulses only (no overshoot)
 DEFAULT_MAX_GAIN = 1.0
 #: the largest gain bound that may be allowed (``max_gain``), for shapers with negative impulses
@@ -83,6 +91,28 @@ class Mode:
     def from_hz(cls, hz: float, zeta: float) -> Mode:
         """Mode from a natural frequency in Hz."""
         return cls(2.0 * math.pi * float(hz), float(zeta))
+
+    def check_designable(self, name: str = "design mode") -> None:
+        """Refuse a mode too slow to design a shaper for.
+
+        The damped period may not exceed :data:`MAX_DESIGN_PERIOD` (s); checked by multiplying, as a
+        frequency near 5e-324 rad/s has no finite period to compare.
+
+        Parameters
+        ----------
+        name : str
+            What the message calls the mode (``"design mode 0"``).
+
+        Raises
+        ------
+        ShaperError
+            The damped period exceeds the limit; the message names the mode, in rad/s, and the limit.
+        """
+        if not self.damped_omega * MAX_DESIGN_PERIOD >= 2.0 * math.pi:
+            lowest = 2.0 * math.pi / MAX_DESIGN_PERIOD / math.sqrt(1.0 - self.zeta**2)
+            raise ShaperError(f"{name} {self.omega!r} rad/s (damping ratio {self.zeta:g}) is too slow to design for:"
+                              f" its damped period exceeds the limit of {MAX_DESIGN_PERIOD:g} s (at least"
+                              f" {lowest:.3g} rad/s at this damping)")
 
 
 def modes_from_hz(frequencies_hz: Sequence[float], damping_ratios: Sequence[float]) -> tuple[Mode, ...]:
@@ -146,9 +176,14 @@ class Shaper:
             raise ShaperError(f"{amps.size} impulses exceed the limit of {MAX_IMPULSES}")
         if not (np.all(np.isfinite(amps)) and np.all(np.isfinite(times))):
             raise ShaperError("amplitudes and times must be finite")
+        big = np.abs(amps) > MAX_AMPLITUDE
+        if np.any(big):  # before any sum of them
+            i = int(np.flatnonzero(big)[0])
+            raise ShaperError(f"amplitude {amps[i]:.6g} of impulse {i} exceeds the limit of {MAX_AMPLITUDE:g}"
+                              " in magnitude")
         if abs(times[0]) > 1e-12:
             raise ShaperError(f"the first impulse must be at t = 0 s, got {times[0]!r}")
-        if np.any(np.diff(times) < 0.0):
+        if np.any(times[1:] < times[:-1]):  # compared, not subtracted: a difference may overflow
             raise ShaperError("impulse times must be non-decreasing")
         if times[-1] > MAX_DURATION:
             raise ShaperError(f"shaper duration {times[-1]:.4g} s exceeds {MAX_DURATION} s")
