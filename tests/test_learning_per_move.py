@@ -25,6 +25,7 @@ from reproductions.scheduler_cases import scheduler_parameters
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key, store_from_doc
 from shaper_nodes.ros.conversions import sec_to_time
+from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.metrics import measure_move, motion_end
 from sim_plant_node.arm.task import HOME, PICK, trapezoid_move
@@ -77,9 +78,16 @@ def metrics(r) -> dict[str, float]:
     return dict(zip(r.metric_names, r.metric_values, strict=True))
 
 
-def new_subscription(conductor: Conductor, before: set[bytes]) -> bool:
-    """A /cycle_events subscription not among ``before`` (their endpoint GIDs) is on the graph."""
-    return any(bytes(i.endpoint_gid) not in before for i in conductor.get_subscriptions_info_by_topic("/cycle_events"))
+def subscriptions(conductor: Conductor) -> set[bytes]:
+    """The endpoint GIDs of the learner's inputs' subscriptions (/cycle_events and the accelerometer)."""
+    return {bytes(i.endpoint_gid) for topic in ("/cycle_events", "/tip_imu")
+            for i in conductor.get_subscriptions_info_by_topic(topic)}
+
+
+def new_subscriptions(conductor: Conductor, before: set[bytes]) -> bool:
+    """A /cycle_events and a /tip_imu subscription not among ``before`` (their endpoint GIDs) are on the graph."""
+    return all(any(bytes(i.endpoint_gid) not in before for i in conductor.get_subscriptions_info_by_topic(topic))
+               for topic in ("/cycle_events", "/tip_imu"))
 
 
 def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, ros_context, tmp_path):
@@ -102,6 +110,9 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
     cell = Cell(client)
     try:
         client.wait_ready(listeners=2)  # this client's and the learner's subscriptions of /cycle_events
+        # and the learner's accelerometer, from the first step on (its subscription, and its announcement as a
+        # lockstep reader: from then on the plant waits for it)
+        AckWatch(conductor, "/learner").wait_subscribed(conductor.spin_until, ["/tip_imu"], 120.0)
         rounds = 4  # per move: the reference (the schedule alone), the schedule's lowest mode, learned steps
         for _ in range(rounds):
             for i, move in enumerate(MOVES):
@@ -140,13 +151,13 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
             assert (entry.correction is None) == (entry.key in held), (entry.key, held, entry.correction)
 
         # kill -9 mid-run, and start again on the same state file
-        before = {bytes(i.endpoint_gid) for i in conductor.get_subscriptions_info_by_topic("/cycle_events")}
+        before = subscriptions(conductor)
         assert learner.proc is not None
         learner.proc.kill()
         learner.proc.wait(timeout=30)
         start_node("shaper_nodes", "learner", learner_params)
-        conductor.spin_until(lambda: new_subscription(conductor, before), 120.0,
-                             "the restarted learner's subscription of /cycle_events")
+        conductor.spin_until(lambda: new_subscriptions(conductor, before), 120.0,
+                             "the restarted learner's subscriptions of /cycle_events and /tip_imu")
         mark = cell.cycle
         for _ in range(2):
             for i, move in enumerate(MOVES):

@@ -232,6 +232,25 @@ def test_without_cycle_events_the_buffer_stays_bounded():
     assert s.buffered_bytes < 200_000
 
 
+def test_the_samples_of_a_start_whose_handling_waits_are_kept_and_then_bounded():
+    """Per-move learning receives a START and asks the scheduler before it hands the START on: the samples stamped
+    from that START on that arrive meanwhile are the cycle's (they were cut to the last KEEP_BEFORE_START)."""
+    s = fresh()
+    s.expect_start(1.0)
+    times = np.arange(0.5, 4.0, 1.0 / 1000.0)  # 3000 samples from the START on, more than 2 * KEEP_BEFORE_START
+    for t in times:
+        s.on_imu(t, (0.1, 0.0, 0.0))
+    assert s.buffered == int(np.sum(times >= 1.0))
+    s.on_event(START, 0, 1.0, [0.0], [1.0])
+    assert s.buffered == int(np.sum(times >= 1.0))
+    # a START that never comes is not kept for longer than max_cycle_duration: the bound between cycles returns
+    s = ListSession(ListLearner(ListConfig(highpass_hz=0.5)), "zv2", stale_after=0.1, max_cycle_duration=10.0)
+    s.expect_start(0.0)
+    for t in np.arange(0.0, s.max_cycle_duration + 5.0, 1.0 / 1000.0):
+        s.on_imu(t, (0.1, 0.0, 0.0))
+    assert s.buffered <= 2 * KEEP_BEFORE_START
+
+
 @pytest.mark.parametrize("value, saturated", [(1e9, True), (160.0, True), (-160.0, True), (159.9, False)])
 def test_a_sample_at_or_beyond_the_sensors_range_is_saturation_and_refuses_the_cycle(value, saturated):
     s = fresh()

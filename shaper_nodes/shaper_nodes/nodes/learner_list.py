@@ -142,16 +142,21 @@ def subscribe_imu(node: Any, topics: TopicParams, on_sample: Callable[[float, tu
                   group: Any) -> LockstepReader:
     """Subscribe ``node`` to the accelerometer (``topics.imu``; RELIABLE and deep with ``topics.imu_reliable``)
     and call ``on_sample(t, (ax, ay, az))`` with each sample. The node acknowledges the samples it took, so a
-    lockstep sim plant that names it in ``lockstep.readers`` waits for it (the LIST modes' one input glue)."""
-    reader = LockstepReader(node, {topics.imu: None})
-    took, name = reader.took, topics.imu
+    lockstep sim plant that names it in ``lockstep.readers`` waits for it, from the moment its subscription
+    matched the accelerometer's publisher (the LIST modes' one input glue)."""
+    name = topics.imu
+    reader: LockstepReader | None = None
 
     def on_imu(msg: Imu) -> None:
         t = time_to_sec(msg.header.stamp)
         a = msg.linear_acceleration
         on_sample(t, (a.x, a.y, a.z))
-        took(name, t)
-    node.create_subscription(Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS, callback_group=group)
+        if reader is not None:
+            reader.took(name, t)
+    sub = node.create_subscription(Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS,
+                                   callback_group=group)
+    # announced to a lockstep plant once the accelerometer's publisher matched: no sample is lost before
+    reader = LockstepReader(node, {name: None}, ready=lambda: sub.get_publisher_count() > 0)
     return reader
 
 

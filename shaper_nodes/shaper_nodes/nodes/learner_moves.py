@@ -254,6 +254,7 @@ class MovesMode:
 
     async def _on_start(self, msg: CycleEvent, stamp: float) -> None:
         cycle = int(msg.cycle)
+        self.session.expect_start(stamp)  # the samples that come while this START awaits the scheduler are kept
         try:
             entry, new = self.store.entry(msg.start_positions, msg.goal_positions)
         except MoveError as err:

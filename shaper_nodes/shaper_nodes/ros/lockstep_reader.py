@@ -78,17 +78,29 @@ class LockstepReader:
         a stream not listed is acknowledged but not checked for gaps.
     period : float
         Simulated s between two acknowledgements.
+    ready : callable, optional
+        When given, the reader announces itself only once ``ready()`` is true (checked on the wall-clock
+        timer), e.g. once its subscriptions have matched the plant's publishers: a plant that names it waits
+        for it from then on, and a client that waits for the announcement then knows samples will reach it.
     """
 
     def __init__(self, node: Any, periods: Mapping[str, float | None] | None = None,
-                 period: float = ACK_PERIOD) -> None:
+                 period: float = ACK_PERIOD, ready: Callable[[], bool] | None = None) -> None:
         self._acks = Acks(period)
         self.gaps: dict[str, Gaps] = {name: Gaps(p) for name, p in (periods or {}).items()}
         self._pub = node.create_publisher(Clock, ack_topic(node.get_fully_qualified_name()), ACK_QOS)
-        self._send(ANNOUNCE)
+        self._ready = ready
+        self.announced = ready is None
+        if self.announced:
+            self._send(ANNOUNCE)
         self._timer = node.create_timer(FLUSH_PERIOD, self._flush, clock=RosClock(clock_type=ClockType.STEADY_TIME))
 
     def _flush(self) -> None:
+        if not self.announced:
+            if self._ready is None or not self._ready():
+                return
+            self.announced = True
+            self._send(ANNOUNCE)
         ack = self._acks.flush()
         if ack is not None:
             self._send(ack)
@@ -106,6 +118,7 @@ class LockstepReader:
         gaps = self.gaps.get(stream)
         if gaps is not None:
             gaps.add(t)
+        self.announced = True  # (samples come: the announcement is past)
         ack = self._acks.took(stream, t)
         if ack is not None:
             self._send(ack)

@@ -182,6 +182,7 @@ class ListSession:
         self._malformed = 0        # samples of the cycle with another number of axes
         self._ref_displacement: npt.NDArray[np.float64] | None = None
         self._latest = -math.inf
+        self._pending: float | None = None  # the stamp of a START received and not handled yet (s)
         #: accelerometer samples counted as saturated, over all cycles refused for it
         self.saturated = 0
         #: accelerometer samples stamped before the START of the cycle in progress that arrived after it (dropped)
@@ -256,14 +257,25 @@ class ListSession:
                     f" {self.max_cycle_duration:g} s: its samples are dropped, no more are kept for it, and it will"
                     " not be learned from")
         if not in_cycle and len(buf) > 2 * KEEP_BEFORE_START:
-            buf.keep_last(KEEP_BEFORE_START)
+            pending = self._pending
+            if pending is not None and t - pending <= self.max_cycle_duration:
+                buf.keep(buf.times >= pending)  # the samples of a START on its way in are the cycle's
+            else:
+                buf.keep_last(KEEP_BEFORE_START)
         return None
+
+    def expect_start(self, t: float) -> None:
+        """A START stamped ``t`` s was received and its handling waits (per-move learning asks the scheduler for
+        a new move's first factor): the samples stamped from ``t`` on are kept until it comes to
+        :meth:`on_event` (within ``max_cycle_duration``), not cut to the last ones kept between cycles."""
+        self._pending = float(t)
 
     def on_event(self, kind: int, cycle: int, t: float, start_positions: npt.ArrayLike = (),
                  goal_positions: npt.ArrayLike = ()) -> SessionResult | None:
         """A cycle event; returns the result at a cycle's END, else None."""
         t = float(t)
         if kind == START:
+            self._pending = None
             self._cycle, self._start, self._motion_end = int(cycle), t, None
             self._at_start = self.active
             self._overlong, self._malformed = False, 0
