@@ -20,7 +20,6 @@ median of ``P`` passes taken in turns (the order reversed every other pass), as
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -33,6 +32,8 @@ from shaper_nodes.core.shaping.limits import JointLimits
 from shaper_nodes.core.shaping.stream import NS, CommandStream, normal_stamp
 from shaper_nodes.ros.conversions import trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.raw_stream import RawTrajectories
+
+from .raw_path import time_paths
 
 JOINTS = 7
 NAMES = tuple(f"joint_{i}" for i in range(1, JOINTS + 1))
@@ -76,14 +77,7 @@ def run(messages: int = 20_000, passes: int = 5, points: int = 1,
 
     paths: list[tuple[str, Callable[[bytes], bytes]]] = [("objects", objects), ("raw", raw.shape),
                                                          ("conversions", conversions)]
-    times: dict[str, list[float]] = {name: [] for name, _ in paths}
-    for k in range(passes):
-        for name, fn in paths if k % 2 else paths[::-1]:
-            t = time.process_time_ns()
-            for data in raws:
-                fn(data)
-            times[name].append((time.process_time_ns() - t) / messages / 1000)
-    return {name: (min(v), sorted(v)[len(v) // 2]) for name, v in times.items()}
+    return time_paths(paths, raws, passes)
 
 
 def main(argv: list[str] | None = None) -> int:
