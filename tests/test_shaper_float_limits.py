@@ -64,6 +64,7 @@ def test_set_shaper_refuses_float_limit_modes_and_amplitudes_by_name_and_keeps_s
     result = rig.node.set_parameters_atomically([Parameter("shaper.frequencies_hz", value=[5e-324]),
                                                  Parameter("shaper.damping_ratios", value=[0.05])])
     assert not result.successful and "too slow to design for" in result.reason, result.reason
+    assert "shaper.frequencies_hz[0] 5e-324 Hz" in result.reason, result.reason  # the parameter, in its unit
     assert rig.active[-1].revision == before.revision
     send_valid_array_and_expect_output(rig, 0.5)
     # the same custom shaper with modes the command rate can hold is accepted, discretised exactly

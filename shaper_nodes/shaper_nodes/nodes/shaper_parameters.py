@@ -260,15 +260,21 @@ def modes_from_params(s: DesignParams) -> tuple[tuple[Mode, ...], str]:
     Raises
     ------
     ShaperError
-        The lists do not make modes.
+        The lists do not make modes, or a mode is too slow to design for (the message names the
+        parameter, its entry and its value in Hz).
     """
     freqs, zetas = list(s.frequencies_hz), list(s.damping_ratios)
     if not freqs and not zetas:
-        return (Mode.from_hz(float(s.frequency_hz), float(s.damping_ratio)),), "shaper.frequency_hz"
+        mode = Mode.from_hz(float(s.frequency_hz), float(s.damping_ratio))
+        mode.check_designable(f"shaper.frequency_hz {float(s.frequency_hz)!r} Hz, that is")
+        return (mode,), "shaper.frequency_hz"
     try:
-        return modes_from_hz(freqs, zetas), "shaper.frequencies_hz"
+        modes = modes_from_hz(freqs, zetas)
     except ShaperError as err:
         raise ShaperError(f"shaper.frequencies_hz / shaper.damping_ratios: {err}") from None
+    for i, (mode, hz) in enumerate(zip(modes, freqs, strict=True)):  # named by the parameter, in Hz
+        mode.check_designable(f"shaper.frequencies_hz[{i}] {float(hz)!r} Hz, that is")
+    return modes, "shaper.frequencies_hz"
 
 
 #: the single-mode design parameters that shaper.frequencies_hz displaces
