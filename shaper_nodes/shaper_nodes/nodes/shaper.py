@@ -198,8 +198,8 @@ class ShaperNode(Node):
         self._stream_side: SideNode | None = None
         stream_node: Node = self
         streamed = {"array_in": tp.array_in, "stream_in": tp.stream_in}  # resolved here for a lean node of their own
-        if str(p.stream_executor) == "thread":
-            self._stream_side = SideNode(self, "stream", lean=True)
+        if str(p.stream_executor) != "node":  # thread, take (ros/take_loop.py)
+            self._stream_side = SideNode(self, "stream", lean=True, take=str(p.stream_executor) == "take")
             stream_node = self._stream_side.node
             streamed = {k: self.resolve_topic_name(name) for k, name in streamed.items()}
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch

@@ -46,7 +46,7 @@ _PROBE = Mode.from_hz(10.0, 0.05)  # a mode to hold one design parameter against
 #: default of limits.max_trajectory_samples (see there)
 DEFAULT_MAX_SAMPLES = 5_000
 #: choices of the stream_executor parameter
-STREAM_EXECUTORS = ("thread", "node")
+STREAM_EXECUTORS = ("thread", "take", "node")
 
 
 @dataclass(frozen=True)
@@ -194,8 +194,9 @@ class ShaperParams:
     stream_executor: str = param(
         "thread", "Who takes the streamed inputs (array_in, stream_in): 'thread' (default), a"
         " lean second node of this process, '<name>_stream', with nothing but those two subscriptions, spun on a"
-        " thread of its own (the topics stay this node's: ~/commands is /<name>/commands); 'node': this node's"
-        " executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
+        " thread of its own (the topics stay this node's: ~/commands is /<name>/commands); 'take': the same lean"
+        " node served by a take loop (one wait set built once, no rclpy executor: ros/take_loop.py); 'node': this"
+        " node's executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
         " waits on all of them, which costs the stream CPU and latency: docs/benchmarks.md).",
         choices=STREAM_EXECUTORS, read_only=True)
     queue_depth: int = param(
