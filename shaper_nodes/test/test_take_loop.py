@@ -82,3 +82,13 @@ def test_the_loop_stops_when_asked_with_nothing_received(context):
         assert loop.taken == {"/take_probe": 0}
     finally:
         node.destroy_node()
+
+
+def test_a_shutdown_of_the_context_ends_the_loop(context):
+    node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+    node.create_subscription(Float64MultiArray, "take_probe", lambda m: None, 1)
+    loop = TakeLoop(node, "loop").start()
+    context.try_shutdown()
+    loop.join(10.0)  # a state: the thread's end, with a generous bound
+    assert not loop.running, "the take loop kept waiting after its context was shut down"

@@ -238,7 +238,7 @@ class SchedulerNode(Node):
         self._ready_since: float | None = None
         self._watch = self.create_timer(0.05, self._watch_service, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._wake = self.create_guard_condition(self._on_wake)  # the feed's thread calls on this node
-        self._feed = SideNode(self, "joint_states", lean=True)
+        self._feed = SideNode(self, "joint_states", take=True)  # a take loop: ros/take_loop.py
         # no middleware event handlers on the 500 Hz feed (rclpy's defaults add two waitables to every wait of
         # its executor, 13 % of its CPU under a profiler): an unmatched publisher is found by _watch_match instead
         self._feed_sub = self._feed.node.create_subscription(

@@ -73,8 +73,13 @@ class TakeLoop:
 
     def start(self) -> TakeLoop:
         """Start the loop's thread (after the node's subscriptions are made)."""
+        self.node.context.on_shutdown(self._wake_up)  # a shutdown of the context ends the wait too
         self._thread.start()
         return self
+
+    def _wake_up(self) -> None:
+        with contextlib.suppress(Exception):
+            self._wake.trigger_guard_condition()
 
     def _run(self) -> None:
         node = self.node
@@ -138,12 +143,15 @@ class TakeLoop:
     def stop(self, timeout: float = 5.0) -> None:
         """Wake the loop, let it finish the callback it runs, and wait for its thread (up to ``timeout`` s)."""
         self._stop = True
-        with contextlib.suppress(Exception):  # the context may be shut down already
-            self._wake.trigger_guard_condition()
+        self._wake_up()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout)
         if not self._thread.is_alive():
             self._wake.destroy_when_not_in_use()
+
+    def join(self, timeout: float) -> None:
+        """Wait up to ``timeout`` s for the loop's thread to end (it ends on :meth:`stop` or the context's shutdown)."""
+        self._thread.join(timeout)
 
     @property
     def running(self) -> bool:
