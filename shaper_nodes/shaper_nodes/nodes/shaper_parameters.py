@@ -196,8 +196,9 @@ class ShaperParams:
         " node of this process, '<name>_stream', with nothing but those two subscriptions, served on a thread of its"
         " own by a take loop (one wait set built once, no rclpy executor: ros/take_loop.py; about half the echo"
         " node's CPU per message); the topics stay this node's: ~/commands is /<name>/commands; 'thread': the same"
-        " lean node spun by rclpy's SingleThreadedExecutor on its thread; 'node': this node's executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
-        " waits on all of them, which costs the stream CPU and latency: docs/benchmarks.md).",
+        " lean node spun by rclpy's SingleThreadedExecutor on its thread; 'node': this node's executor, with its"
+        " services, parameters and timers (one thread; every wake-up of the executor then waits on all"
+        " of them, which costs the stream CPU and latency: docs/results/benchmarks.md).",
         choices=STREAM_EXECUTORS, read_only=True)
     queue_depth: int = param(
         100, "Depth of the streamed inputs' subscription queues (array_in, stream_in), messages:"
