@@ -141,7 +141,7 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, repeats: int = 2,
                 progress(f"scheduler: CPU of the {label} at {rate:g} Hz joint states ({seconds:g} s)")
                 popen = proc.start().proc
                 assert popen is not None  # (start() sets it)
-                deadline = time.monotonic() + 30.0
+                deadline = time.monotonic() + 120.0  # generous: a start-up at load 30 took more than 30 s
                 while pub.get_subscription_count() < 1:
                     if time.monotonic() > deadline or not proc.running():
                         raise RuntimeError(f"{label} did not start or subscribe (see its log)")
