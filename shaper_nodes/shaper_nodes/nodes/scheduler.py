@@ -18,7 +18,8 @@ non-finite positions are refused and reported; without joint states for ``stale_
 the scheduler stops updating and says so.
 
 Cost at a fast joint state stream: /joint_states is taken on a lean node of its own
-(``<name>_joint_states``, ros/side_node.py) spun by a thread of its own, so that each message
+(``<name>_joint_states``, ros/side_node.py) served on a thread of its own by a take loop (``feed``
+'take': one wait set built once, ros/take_loop.py; 'thread': rclpy's executor), so that each message
 wakes a wait set of one subscription rather than all of this node's entities; the message gives
 the latest premise values and their time, nothing more: it is taken serialized (``raw``) and only its
 names, positions and stamp are read from the bytes (ros/raw_stream.py ``RawJointStates``; bytes that
@@ -150,6 +151,9 @@ class SchedulerParams:
                         read_only=True, check=lambda v: _one_rule_base(family=v))
     shaper: str = param("/shaper", "Fully qualified name of the shaper node.", read_only=True)
     joint_states: str = param("/joint_states", "Joint state topic.", read_only=True)
+    feed: str = param("take", "Who takes joint_states on the lean node <name>_joint_states: 'take' (a take loop,"
+                      " ros/take_loop.py) or 'thread' (rclpy's SingleThreadedExecutor).", choices=("take", "thread"),
+                      read_only=True)
     period: float = param(0.05, "How often the rule base is evaluated, s (node clock).", (0.001, 60.0),
                           read_only=True)
     min_interval: float = param(0.1, "Least time between two shapers sent, s.", (0.0, 3600.0),
@@ -238,7 +242,7 @@ class SchedulerNode(Node):
         self._ready_since: float | None = None
         self._watch = self.create_timer(0.05, self._watch_service, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._wake = self.create_guard_condition(self._on_wake)  # the feed's thread calls on this node
-        self._feed = SideNode(self, "joint_states", lean=True)
+        self._feed = SideNode(self, "joint_states", lean=True, take=p.feed == "take")  # ros/take_loop.py
         # no middleware event handlers on the 500 Hz feed (rclpy's defaults add two waitables to every wait of
         # its executor, 13 % of its CPU under a profiler): an unmatched publisher is found by _watch_match instead
         self._feed_sub = self._feed.node.create_subscription(

@@ -41,10 +41,10 @@ filters after a refused output, blocks, fields that appear or vanish) are the co
 
 Threads
 -------
-The streamed inputs (array, stream) are taken by a lean second node, ``<name>_stream``, spun on a
-thread of its own (``stream_executor`` 'thread', the default): it has nothing but those two
-subscriptions, so its executor's wake-up, which rclpy rebuilds over every entity of its nodes, costs
-what a bare node's does (docs/benchmarks.md). Their topic names are resolved by this node, so
+The streamed inputs (array, stream) are taken by a lean second node, ``<name>_stream``, served on a
+thread of its own by a take loop (``stream_executor`` 'take', the default: one wait set built once,
+ros/take_loop.py) or spun there by rclpy's executor ('thread'); it has nothing but those two
+subscriptions (docs/results/benchmarks.md). Their topic names are resolved by this node, so
 ``~/commands`` is ``/<name>/commands`` as before. Shaper changes and parameters run in this node's
 executor; :attr:`ShaperNode.stream_lock` keeps them between two streamed samples. With
 ``stream_executor`` 'node' the streamed inputs run in this node's executor as well. Whole
@@ -162,7 +162,7 @@ class ShaperNode(Node):
                                     max_abs=float(p.limits.max_abs_value),
                                     max_samples=int(p.limits.max_trajectory_samples))
         #: held while a streamed sample is shaped and while the shaper changes (they run on different threads
-        #: with stream_executor 'thread'); a holder stalls the streamed inputs
+        #: with stream_executor 'take' or 'thread'); a holder stalls the streamed inputs
         self.stream_lock = self.stream.lock
         self._array_filter = self.stream.array_filter
         self._raw_arrays = RawArrays(self.stream)  # the array input and output as serialized messages
@@ -198,8 +198,8 @@ class ShaperNode(Node):
         self._stream_side: SideNode | None = None
         stream_node: Node = self
         streamed = {"array_in": tp.array_in, "stream_in": tp.stream_in}  # resolved here for a lean node of their own
-        if str(p.stream_executor) == "thread":
-            self._stream_side = SideNode(self, "stream", lean=True)
+        if str(p.stream_executor) != "node":  # thread, take (ros/take_loop.py)
+            self._stream_side = SideNode(self, "stream", lean=True, take=str(p.stream_executor) == "take")
             stream_node = self._stream_side.node
             streamed = {k: self.resolve_topic_name(name) for k, name in streamed.items()}
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch

@@ -46,7 +46,7 @@ _PROBE = Mode.from_hz(10.0, 0.05)  # a mode to hold one design parameter against
 #: default of limits.max_trajectory_samples (see there)
 DEFAULT_MAX_SAMPLES = 5_000
 #: choices of the stream_executor parameter
-STREAM_EXECUTORS = ("thread", "node")
+STREAM_EXECUTORS = ("thread", "take", "node")
 
 
 @dataclass(frozen=True)
@@ -192,11 +192,13 @@ class ShaperParams:
         check=lambda v: discretize(design("zv", [_PROBE]), 500.0, v))
     limits: LimitParams = field(default_factory=LimitParams)
     stream_executor: str = param(
-        "thread", "Who takes the streamed inputs (array_in, stream_in): 'thread' (default), a"
-        " lean second node of this process, '<name>_stream', with nothing but those two subscriptions, spun on a"
-        " thread of its own (the topics stay this node's: ~/commands is /<name>/commands); 'node': this node's"
-        " executor, with its services, parameters and timers (one thread; every wake-up of the executor then"
-        " waits on all of them, which costs the stream CPU and latency: docs/benchmarks.md).",
+        "take", "Who takes the streamed inputs (array_in, stream_in): 'take' (default), a lean second"
+        " node of this process, '<name>_stream', with nothing but those two subscriptions, served on a thread of its"
+        " own by a take loop (one wait set built once, no rclpy executor: ros/take_loop.py; about half the echo"
+        " node's CPU per message); the topics stay this node's: ~/commands is /<name>/commands; 'thread': the same"
+        " lean node spun by rclpy's SingleThreadedExecutor on its thread; 'node': this node's executor, with its"
+        " services, parameters and timers (one thread; every wake-up of the executor then waits on all"
+        " of them, which costs the stream CPU and latency: docs/results/benchmarks.md).",
         choices=STREAM_EXECUTORS, read_only=True)
     queue_depth: int = param(
         100, "Depth of the streamed inputs' subscription queues (array_in, stream_in), messages:"

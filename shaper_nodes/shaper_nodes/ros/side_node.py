@@ -15,7 +15,8 @@ command-line arguments (the owner resolves the names it uses, remappings include
 ``-r __node:=NAME`` meant for the owner does not rename it too). rclpy's executor builds its wait
 set again over every entity of its nodes at each wake-up, so a fast stream served by a lean node
 wakes a wait set of one subscription instead of the owner's dozens of entities (the scheduler's
-500 Hz ``/joint_states``).
+500 Hz ``/joint_states``). With ``take=True`` a lean side node is served by a
+:class:`~.take_loop.TakeLoop` instead (one wait set built once, no executor; subscriptions only).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
+
+from .take_loop import TakeLoop
 
 
 class SideNode:
@@ -41,9 +44,12 @@ class SideNode:
     lean : bool
         Nothing but the owner's entities on it (see the module docstring): rclpy's executor builds its
         wait set over every entity of its nodes at each wake-up.
+    take : bool
+        Served by a :class:`~.take_loop.TakeLoop` (subscriptions only) instead of an executor; implies lean.
     """
 
-    def __init__(self, parent: Node, suffix: str, *, lean: bool = False) -> None:
+    def __init__(self, parent: Node, suffix: str, *, lean: bool = False, take: bool = False) -> None:
+        lean = lean or take
         name = f"{parent.get_name()}_{suffix}"
         extra: dict = {}
         if lean:
@@ -52,6 +58,8 @@ class SideNode:
         # a local __node rule comes before the process's global one (which names the parent)
         self.node = Node(name, namespace=parent.get_namespace(), context=parent.context,
                          cli_args=["--ros-args", "-r", f"__node:={name}"], start_parameter_services=False, **extra)
+        self._take = take
+        self._loop: TakeLoop | None = None
         self._executor = SingleThreadedExecutor(context=parent.context)
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=f"{self.node.get_name()} executor", daemon=True)
@@ -59,6 +67,9 @@ class SideNode:
 
     def start(self) -> SideNode:
         """Start spinning (after the side node's entities are created)."""
+        if self._take:
+            self._loop = TakeLoop(self.node, self._thread.name, on_error=self._error).start()
+            return self
         self._thread.start()
         return self
 
@@ -71,11 +82,17 @@ class SideNode:
             if self.node.context.ok():
                 self.node.get_logger().error(f"executor stopped: {err!r}")
 
+    def _error(self, err: Exception) -> None:
+        """A callback's exception in the take loop: logged, the loop goes on (an executor would stop)."""
+        self.node.get_logger().error(f"callback raised: {err!r}")
+
     def close(self, timeout: float = 5.0) -> None:
         """Stop the executor and wait for its thread (entities are the owner's to destroy first); once."""
         if self._closed:
             return
         self._closed = True
+        if self._loop is not None:
+            self._loop.stop(timeout)
         self._executor.shutdown(timeout_sec=timeout)
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout)

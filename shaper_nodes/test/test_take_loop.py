@@ -1,0 +1,94 @@
+"""The take loop's use of rclpy internals (pinned to the locked rclpy), and what it refuses to serve."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import inspect
+
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.subscription import Subscription
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
+from std_msgs.msg import Float64MultiArray
+
+from shaper_nodes.ros.take_loop import INTERNALS, TakeLoop
+
+#: the rclpy the loop was written and measured against (requirements.lock)
+LOCKED_RCLPY = "7.1.6"
+
+
+@pytest.fixture
+def context():
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=199)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def test_the_rclpy_internals_the_take_loop_uses_are_there(context):
+    """Fails by name when rclpy changes what ros/take_loop.py relies on (then read it again)."""
+    version = importlib.metadata.version("ros-rclpy")
+    assert version == LOCKED_RCLPY, f"rclpy {version}, the take loop was checked against {LOCKED_RCLPY}"
+    for name in INTERNALS:
+        assert hasattr(_rclpy, name), f"rclpy's implementation has no {name}"
+    for method in ("clear_entities", "add_subscription", "add_guard_condition", "wait", "get_ready_entities",
+                   "destroy_when_not_in_use"):
+        assert hasattr(_rclpy.WaitSet, method), f"_rclpy.WaitSet has no {method}"
+    assert hasattr(_rclpy.GuardCondition, "trigger_guard_condition")
+    assert hasattr(_rclpy.Subscription, "take_message"), "_rclpy.Subscription has no take_message"
+    assert {"MessageOnly", "WithMessageInfo"} <= set(Subscription.CallbackType.__members__)
+    node = Node("take_probe", context=context)
+    try:
+        sub = node.create_subscription(Float64MultiArray, "take_probe", lambda m, i: None, 1, raw=True)
+        assert sub._callback_type is Subscription.CallbackType.WithMessageInfo
+        assert sub.handle.take_message(Float64MultiArray, True) is None  # nothing sent: None, not a tuple
+        ws = _rclpy.WaitSet(1, 1, 0, 0, 0, 0, context.handle)
+        ws.clear_entities()
+        ws.add_subscription(sub.handle)
+        gc = _rclpy.GuardCondition(context.handle)
+        ws.add_guard_condition(gc)
+        gc.trigger_guard_condition()
+        ws.wait(-1)  # the guard condition wakes it
+        assert gc.pointer in ws.get_ready_entities("guard_condition")
+        assert sub.handle.pointer not in ws.get_ready_entities("subscription")
+    finally:
+        node.destroy_node()
+    assert "raw" in inspect.signature(Node.create_subscription).parameters
+
+
+def test_a_node_with_more_than_subscriptions_is_refused_by_name(context):
+    node = Node("take_probe", context=context)
+    try:
+        node.create_timer(1.0, lambda: None)
+        with pytest.raises(ValueError, match="subscriptions only; node take_probe has timers"):
+            TakeLoop(node, "loop")
+    finally:
+        node.destroy_node()
+
+
+def test_the_loop_stops_when_asked_with_nothing_received(context):
+    node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+    try:
+        node.create_subscription(Float64MultiArray, "take_probe", lambda m: None, 1)
+        loop = TakeLoop(node, "loop").start()
+        assert loop.running
+        loop.stop(timeout=10.0)
+        assert not loop.running
+        assert loop.taken == {"/take_probe": 0}
+    finally:
+        node.destroy_node()
+
+
+def test_a_shutdown_of_the_context_ends_the_loop(context):
+    node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+    node.create_subscription(Float64MultiArray, "take_probe", lambda m: None, 1)
+    loop = TakeLoop(node, "loop").start()
+    context.try_shutdown()
+    loop.join(10.0)  # a state: the thread's end, with a generous bound
+    assert not loop.running, "the take loop kept waiting after its context was shut down"
