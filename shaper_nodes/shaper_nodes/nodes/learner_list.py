@@ -118,6 +118,9 @@ class ListGroup:
     per_move: bool = param(False, "Learn one LIST factor per move (start and goal of each cycle's START event),"
                            " kept by the scheduler named by 'shaper' and applied over its schedule to that move's"
                            " goals (nodes/learner_moves.py); false: one shaper for the task.", read_only=True)
+    drift_status: str = param("identifier: drift", "With per_move: the /diagnostics status whose WARN (a drift"
+                              " warning: the plant changed) restarts every move's learning from the current schedule,"
+                              " once per warning episode (an OK ends it); '' = not watched.", read_only=True)
 
 
 @dataclass(frozen=True)

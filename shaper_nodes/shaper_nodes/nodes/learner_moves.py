@@ -32,6 +32,16 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
 - ``~/hold``: every move holds at its best factor (or learns again).
 - ``/diagnostics``: once the saved factors are sent at start, an OK status ``learner: moves`` with the
   number of moves resumed and, per move key, what its goals run with.
+- **A drift warning relearns every move** (a payload change: what was learned no longer fits). At the
+  first WARN of the status ``list.drift_status`` (default the identifier's ``identifier: drift``) on
+  ``/diagnostics`` (:mod:`.learner_drift`: once per warning episode, an OK ends it), every move starts
+  again from the current schedule (:meth:`~shaper_nodes.core.learning.moves.MoveStore.relearn`): its
+  learner, factor, base and hold are dropped, one line on the log names the moves reset, the state is
+  saved (atomically, with the episode flag ``drift_warned``), and every move's factor is withdrawn from the
+  scheduler (``set_move_shaper`` with family ``none``: the schedule alone). Each move's next cycle is
+  then its new reference, its learner made from the schedule's lowest mode at its goal as for a new move;
+  a cycle under way at the warning is not learned from; a withdrawal the scheduler did not acknowledge is
+  sent again at the move's next START (and that cycle is not learned from).
 
 Reports (``~/reports``): one per cycle as in the task-wide mode, the metric ``move`` being the
 move's index in the state file's order (stable across restarts).
@@ -58,11 +68,14 @@ from shaper_nodes.ros.diagnostics import ERROR, OK
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
+from .learner_drift import DriftWarnings
 from .learner_list import subscribe_imu
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
 HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
-_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", "saved_at"}
+_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", "drift_warned", "saved_at"}
+#: why a cycle under way when the moves were relearned is not learned from
+RESET = "every move was relearned (drift warning) while this cycle ran"
 
 
 def _sent(learner: ListLearner) -> ListParams | None:
@@ -85,7 +98,8 @@ class MovesMode:
         self.user_delay = float(v.list.window_delay) > 0.0
         restored = node.restore(self._build, {"structure": self.structure, "per_move": True})
         #: the moves, their joint names, and those held at the schedule alone (no factor measured better)
-        self.store, self.names, self.held = restored if restored is not None else (MoveStore(), {}, set())
+        self.store, self.names, self.held, warned = restored if restored is not None else (MoveStore(), {}, set(),
+                                                                                             False)
         self._restored = [e.key for e in self.store]  # the moves of the state file, sent again at start
         self.learners: dict[str, ListLearner] = {}
         for entry in self.store:
@@ -94,6 +108,8 @@ class MovesMode:
                 self.learners[entry.key] = learner
         #: per move, the factor the scheduler acknowledged (absent: not acknowledged since start)
         self.applied: dict[str, ListParams | None] = {}
+        #: the moves whose withdrawal after a relearn the scheduler did not acknowledge (sent again at START)
+        self.unreset: set[str] = set()
         self.session = ListSession(ListLearner(self.config), self.structure, float(node.params.value.stale_after),
                                    node.max_cycle_duration, float(v.sensor.max_abs_accel))
         self.events_topic = v.topics.cycle_events
@@ -107,6 +123,7 @@ class MovesMode:
                                        node.diagnostics)
         subscribe_imu(node, v.topics, lambda t, a: node.notice(self.session.on_imu(t, a)),
                       MutuallyExclusiveCallbackGroup())
+        self.drift = DriftWarnings(node, str(v.list.drift_status).strip(), self.relearn, warned)
 
     def _wanted(self, key: str) -> ListParams | None:
         """What the move's goals run with next (None: the schedule alone)."""
@@ -114,7 +131,7 @@ class MovesMode:
         return None if learner is None or key in self.held else _sent(learner)
 
     # ----------------------------------------------------------------- state
-    def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], set[str]]:
+    def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], set[str], bool]:
         if set(doc) - _DOC_KEYS or "moves" not in doc:
             raise MoveError(f"per-move state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
         store, problems = store_from_doc(doc["moves"])
@@ -130,7 +147,10 @@ class MovesMode:
         held = doc.get("at_schedule") or []
         if not isinstance(held, list) or not all(isinstance(k, str) for k in held):
             raise MoveError("at_schedule must be a list of move keys")
-        return store, {k: list(n) for k, n in names.items() if k in store}, {k for k in held if k in store}
+        warned = doc.get("drift_warned", False)
+        if not isinstance(warned, bool):
+            raise MoveError(f"drift_warned must be true or false, got {warned!r}")
+        return store, {k: list(n) for k, n in names.items() if k in store}, {k for k in held if k in store}, warned
 
     def state(self) -> dict[str, Any]:
         for key, learner in self.learners.items():
@@ -138,7 +158,7 @@ class MovesMode:
             if entry is not None:
                 entry.list_state = learner.to_dict()
         return {"structure": self.structure, "per_move": True, "moves": self.store.to_doc(),
-                "joint_names": self.names, "at_schedule": sorted(self.held)}
+                "joint_names": self.names, "at_schedule": sorted(self.held), "drift_warned": self.drift.warned}
 
     def describe(self) -> str:
         return (f"LIST per move ({self.structure}, rule {self.config.rule}) on {self.imu_topic}, factors kept by"
@@ -181,9 +201,31 @@ class MovesMode:
                                          f" {answer.response.message}")
             return False
         self.applied[entry.key] = params
+        if params is None:
+            self.unreset.discard(entry.key)
         sh = None if params is None else params.shaper(self.structure)
         entry.correction = None if sh is None else (sh.amplitudes.tolist(), sh.times.tolist())
         return True
+
+    async def relearn(self, warning: str) -> None:
+        """A drift warning: every move learns again from the current schedule (module docstring)."""
+        keys = self.store.relearn("schedule")
+        self.learners.clear()
+        self.held.clear()
+        for cycle in self._cycle_move:  # under way: it ran with the factor withdrawn now
+            self._skip.setdefault(cycle, RESET)
+        self.node.save()
+        self.node.get_logger().warning(
+            f"drift warning ({self.drift.status}): relearning {len(keys)} move{'' if len(keys) == 1 else 's'} from"
+            f" the current schedule: {', '.join(keys) or 'none yet'} (the warning: {warning})")
+        for key in keys:
+            entry = self.store.get(key)
+            if entry is not None and not await self._send(entry, None):
+                self.applied.pop(key, None)
+                self.unreset.add(key)
+        if self.unreset:
+            self.node.get_logger().error(f"the scheduler did not take the reset of {', '.join(sorted(self.unreset))};"
+                                         " sent again at each move's next start")
 
     async def _learner_for(self, entry: MoveEntry, names: list[str]) -> ListLearner:
         """A new move's learner: from the schedule's lowest mode at the goal (module docstring)."""
@@ -266,7 +308,8 @@ class MovesMode:
         learner = self.learners.get(entry.key)
         if learner is None:
             learner = self.learners[entry.key] = await self._learner_for(entry, list(msg.joint_names))
-            self.applied[entry.key] = None  # a new move: the scheduler has no factor for it
+            if entry.key not in self.unreset:  # a new or relearned move: the scheduler has no factor for it
+                self.applied[entry.key] = None
         wanted = self._wanted(entry.key)
         if entry.key not in self.applied or self.applied[entry.key] != wanted:
             await self._send(entry, wanted)  # (again): the cycle may have run with either

@@ -12,7 +12,10 @@ unshaped cycles (applied through its ``~/identify``); LIST learning over the cyc
 node); ``fixed``, the calibration's fallback (``shaper.yaml``: ZV on the home pose's modes);
 ``scheduled``, the calibrated scheduler (``scheduler.yaml``) with the shaper node's
 ``action.scheduler``, so each goal is shaped for the modes at its final pose; ``scheduled_list``,
-LIST learning on top of the schedule (the learner sends to the scheduler).
+LIST learning on top of the schedule (the learner sends to the scheduler); ``scheduled_list_moves``,
+LIST per move on top of the schedule (the learner's ``list.per_move``: every move marked as its own
+cycle, each learning its own factor, which the scheduler applies to that move's goals; opt-in, with a
+per-move, per-cycle table of its own).
 For every move and case it measures (:mod:`sim_plant_node.arm.metrics`) the residual vibration
 at the tool, the settling time, the move time plus settling time, the shaper's delay and the
 tool-path deviation the shaping causes, and writes them as CSV, Markdown and a PNG plot.
@@ -23,6 +26,7 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import functools
 import itertools
 import json
 import math
@@ -51,13 +55,17 @@ WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stop
 #: CPU hogs, its identification alone took over 6 min of a 15 min run)
 CALIBRATION_TIMEOUT = 3600.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
-CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list")
+CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list", "scheduled_list_moves")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
 DEFAULT_CASES = ("none", "fixed", "scheduled")
 #: cases that need a calibration
-CALIBRATED = ("fixed", "scheduled", "scheduled_list")
+CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves")
 #: cases whose shaper node asks the scheduler for each goal (the shaper node is restarted for them)
-SCHEDULED = ("scheduled", "scheduled_list")
+SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves")
+#: cases that mark every move as its own cycle on /cycle_events (the learner per move)
+PER_MOVE = ("scheduled_list_moves",)
+#: cases that learn (their cycles: --list-cycles)
+LEARNING = ("list", "scheduled_list", *PER_MOVE)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -243,7 +251,9 @@ class ArmClient:
     def _event(self, kind: int, cycle: int, t: float, start: np.ndarray, goal: np.ndarray) -> None:
         from shaper_nodes.ros.conversions import sec_to_time
 
-        msg = self._CycleEvent(event=kind, cycle=cycle, task="pick_and_place", joint_names=[],
+        from ..arm.description import JOINT_NAMES
+
+        msg = self._CycleEvent(event=kind, cycle=cycle, task="pick_and_place", joint_names=list(JOINT_NAMES),
                                start_positions=start.tolist(), goal_positions=goal.tolist())
         msg.header.stamp = sec_to_time(t)
         self.events.publish(msg)
@@ -317,6 +327,27 @@ class ArmClient:
         self._event(self._CycleEvent.END, cycle, runs[-1].end, start, goal)
         return runs
 
+    def run_cycle_per_move(self, first: int, moves: list[Any], progress: Callable[[], None],
+                           learned: Callable[[int], None]) -> list[MoveRun]:
+        """One pick-and-place cycle with every move marked as its own cycle on ``/cycle_events`` (cycles ``first``
+        to ``first + len(moves) - 1``, each START naming the joints and the move's start and goal), for the learner
+        per move; ``learned(cycle)`` waits for what the learner does with a move's cycle before the next move."""
+        runs = []
+        for i, move in enumerate(moves):
+            cycle, q0, q1 = first + i, move.positions[0], move.positions[-1]
+
+            def mark(t: float, cycle: int = cycle, q0: np.ndarray = q0, q1: np.ndarray = q1) -> None:
+                self._event(self._CycleEvent.START, cycle, t, q0, q1)
+            run = self.run_move(i, move, mark)
+            self._event(self._CycleEvent.MOTION_END, cycle, run.start + run.planned, q0, q1)
+            self._event(self._CycleEvent.END, cycle, run.end, q0, q1)
+            learned(cycle)
+            runs.append(run)
+            progress()
+        for run, nxt in itertools.pairwise(runs):
+            run.end = nxt.start  # the sim is idle between goals: a move ends where the next one starts
+        return runs
+
     # ------------------------------------------------------------------ measuring
     def tool_path(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         t, q = self.window(which, t0, t1)
@@ -347,6 +378,46 @@ def _table(rows: list[dict[str, Any]]) -> list[str]:
         out.append(f"| {r['case']} | {move} | {r['residual_rms']:.4f} | {r['percent']:.1f} | {r['peak_mm']:.4f} |"
                    f" {r['settling_s']:.3f} | {r['move_and_settle_s']:.3f} | {r['delay_s']:.3f} |"
                    f" {r['path_deviation_mm']:.3f} |")
+    return out
+
+
+def _learned(client: ArmClient, cycle: int) -> Any:
+    """The learner's report of ``cycle``, once it came (what the learner did with a move's cycle)."""
+    client.c.spin_until(lambda: any(r.cycle == cycle for r in client.reports), 120.0, f"the learner's report of"
+                        f" cycle {cycle}")
+    return next(r for r in reversed(client.reports) if r.cycle == cycle)
+
+
+def _per_move_table(per_move: list[list[tuple[MoveRun, Any, Any]]], rows: list[dict[str, Any]],
+                    noise: float) -> list[str]:
+    """The per-move case, per move and cycle: the residual RMS (m/s^2) and the move + settle time (s), the last
+    cycle's against the schedule's (its row of the case ``scheduled``, if run), and what the learner's last
+    report of the move says."""
+    def status(report: Any) -> str:
+        m = dict(zip(report.metric_names, report.metric_values, strict=True))
+        if m.get("skipped"):
+            return "skipped"
+        if m.get("held") and "a1_next" not in m:
+            return "held at the schedule alone"
+        if "a1_next" not in m or m["a1_next"] != m["a1_next"]:
+            return "the schedule alone next"
+        return (f"factor A1 {m['a1_next']:.3f}, T2 {1e3 * m['t2_next']:.1f} ms"
+                + (" (held)" if m.get("held") else ""))
+
+    cycles = len(per_move)
+    head = ["move", *[f"c{k + 1}" for k in range(cycles)], "last % of scheduled", "learner's last report"]
+    out = [f"Per move and cycle (the per-move learner's cycles; accelerometer noise {noise:g} m/s^2, its floor"
+           f" {math.sqrt(3) * noise:.4f} m/s^2 in this RMS): residual RMS m/s^2, then move + settle s", "",
+           "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for what, key in (("residual", "residual_rms"), ("move+settle", "move_and_settle_s")):
+        for i, (run, _, _) in enumerate(per_move[0]):
+            name = f"{run.index + 1}. {run.name}"
+            values = [float(getattr(c[i][1], key)) for c in per_move]
+            sched = next((r[key] for r in rows if r["case"] == "scheduled" and r["move"] == run.name), None)
+            ratio = f"{100 * values[-1] / sched:.1f}" if sched else "-"
+            fmt = "{:.4f}" if key == "residual_rms" else "{:.3f}"
+            out.append(f"| {name} {what} | " + " | ".join(fmt.format(v) for v in values)
+                       + f" | {ratio} | {status(per_move[-1][i][2]) if what == 'residual' else ''} |")
     return out
 
 
@@ -551,6 +622,17 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
         _schedule(session, client)
         if case == "scheduled":
             return "calibrated schedule: each goal shaped for the modes at its final pose"
+        if case in PER_MOVE:
+            from shaper_nodes.ros.lockstep_reader import AckWatch
+
+            # every sample of a move, reliable (the plant rests between goals, and the next goal waits for the
+            # learner's report of the move: its queue of 10 s holds a move)
+            session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2",
+                                                       "shaper": "/scheduler", "list.per_move": True,
+                                                       "topics.imu_reliable": True})
+            client.wait_listeners(4)  # and the learner
+            AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
+            return "calibrated schedule with LIST (zv2) per move on top"
         session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2",
                                                    "shaper": "/scheduler"})
         client.wait_listeners(4)  # and the learner
@@ -591,6 +673,10 @@ def _main(argv: list[str] | None) -> int:
     if unknown or "none" not in cases:
         print(f"demo arm: --cases must include none and be among {', '.join(CASES)}; got {args.cases}", file=sys.stderr)
         return 2
+    if len(set(cases) & {"list", "scheduled_list", *PER_MOVE}) > 1:
+        print(f"demo arm: --cases may name one learning case (list, scheduled_list, {', '.join(PER_MOVE)}: each"
+              f" runs its own learner); got {args.cases}", file=sys.stderr)
+        return 2
     out = args.out or pathlib.Path("out") / datetime.datetime.now().strftime("demo-arm-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     moves = cycle_moves()
@@ -601,6 +687,7 @@ def _main(argv: list[str] | None) -> int:
     rows: list[dict[str, Any]] = []
     traces: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
     reference_paths: dict[int, np.ndarray] = {}
+    per_move: list[list[tuple[MoveRun, Any, Any]]] = []  # per cycle of the per-move case: (run, measure, report)
     with node_session(out, "arm") as (start, ctx):
         start("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
                                               "task.start": HOME.tolist(), "imu.noise_stddev": args.noise,
@@ -632,12 +719,19 @@ def _main(argv: list[str] | None) -> int:
             recommended = None
             for case in cases:
                 installed = _apply_case(case, client, recommended, home_mode, session)
-                learning = case in ("list", "scheduled_list")
+                learning = case in LEARNING
                 n = args.list_cycles if learning else args.cycles
                 print(f"{case:>10}: {installed}; {n} cycles ", end="", flush=True)
                 for _ in range(n):
-                    runs = client.run_cycle(cycle_index, moves, lambda: print(".", end="", flush=True))
-                    if learning:
+                    if case in PER_MOVE:  # every move a cycle of the learner's: cycle_index up to its last move's
+                        runs = client.run_cycle_per_move(cycle_index, moves, lambda: print(".", end="", flush=True),
+                                                         functools.partial(_learned, client))
+                        per_move.append([(run, client.measure(run, reference_paths[run.index])[0],
+                                          _learned(client, cycle_index + run.index)) for run in runs])
+                        cycle_index += len(moves) - 1
+                    else:
+                        runs = client.run_cycle(cycle_index, moves, lambda: print(".", end="", flush=True))
+                    if learning and case not in PER_MOVE:
                         client.c.spin_until(lambda c=cycle_index: any(r.cycle == c for r in client.reports), 120.0,
                                             "the learner's report")
                     cycle_index += 1
@@ -671,6 +765,8 @@ def _main(argv: list[str] | None) -> int:
         w.writeheader()
         w.writerows(rows)
     table = [*_table(rows), "", *_sums(rows, cases, args.noise)]
+    if per_move:
+        table += ["", *_per_move_table(per_move, rows, args.noise)]
     from ..arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
 
     note = (f"Residual vibration: the flange IMU's specific force minus its mean, over {RESIDUAL_WINDOW:g} s after"

@@ -1,0 +1,91 @@
+"""The learner's watch of the drift warning: one status on ``/diagnostics``, acted on once per warning episode.
+
+The identifier's drift watch (:mod:`.identifier`) publishes the status ``identifier: drift`` on
+``/diagnostics`` after every cycle it rates: WARN while the mode stays out of the active shaper's
+working band (``watch.confirm`` cycles in a row and after), OK when it is back inside or the residual
+is at the noise floor, ERROR when a sensor fault leaves it unable to rate. :class:`DriftWarnings`
+subscribes to ``/diagnostics`` and calls its ``on_warning`` coroutine at the first WARN of the status
+it watches (its name is the learner's ``list.drift_status``), not at the WARNs that repeat it; an OK
+ends the episode, so the next WARN is a new one. An ERROR (cannot rate) neither starts nor ends an
+episode. The flag is saved in the learner's state file at both ends of an episode, so that a
+restarted learner neither acts twice on one episode nor misses the next. Statuses of other names are
+ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus``
+level (OK, WARN, ERROR, STALE) is ignored and reported (log and ``/diagnostics``, throttled, kind
+``drift_status``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+
+from shaper_nodes.ros.diagnostics import WARN, Diagnostics
+
+from .learner_base import LearnerBase
+
+#: diagnostic_msgs/DiagnosticStatus levels, as integers
+LEVEL_OK, LEVEL_WARN, LEVEL_ERROR, LEVEL_STALE = 0, 1, 2, 3
+
+
+def level_of(value: Any) -> int | None:
+    """A DiagnosticStatus ``level`` (a one-byte ``bytes`` as rclpy gives it, or an integer) as an integer; None
+    if it is neither."""
+    if isinstance(value, (bytes, bytearray)):
+        return value[0] if len(value) == 1 else None
+    if isinstance(value, int) and not isinstance(value, bool):
+        return value
+    return None
+
+
+class DriftWarnings:
+    """Watch ``/diagnostics`` for the WARN of one status (module docstring).
+
+    Parameters
+    ----------
+    node : LearnerBase
+        The learner node (its ``/diagnostics`` reporter names bad statuses).
+    status : str
+        The watched status's full name (``"<node>: <name>"``); "" watches nothing.
+    on_warning : coroutine function of str
+        Called with the warning's message at the first WARN of an episode.
+    warned : bool
+        Whether an episode was under way when the learner last saved its state (a restarted learner does
+        not act twice on one episode).
+    """
+
+    def __init__(self, node: LearnerBase, status: str, on_warning: Callable[[str], Awaitable[None]],
+                 warned: bool = False) -> None:
+        self.node = node
+        self.status = status
+        self.on_warning = on_warning
+        #: a warning episode is under way (its first WARN was acted on; an OK ends it)
+        self.warned = bool(warned)
+        #: warning episodes acted on since start
+        self.resets = 0
+        self.diagnostics: Diagnostics = node.diagnostics
+        if status:
+            # the node's default group, as the cycle events': an episode's action never interleaves with a
+            # cycle event's handling (a coroutine holds its group until it returns)
+            node.create_subscription(DiagnosticArray, "/diagnostics", self._on_array, 100)  # type: ignore[arg-type]
+
+    async def _on_array(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name != self.status:
+                continue
+            level = level_of(status.level)
+            if level == LEVEL_WARN:
+                if not self.warned:
+                    self.warned = True
+                    self.resets += 1
+                    await self.on_warning(str(status.message))
+            elif level == LEVEL_OK:
+                if self.warned:
+                    self.warned = False
+                    self.node.get_logger().info(f"'{self.status}' is OK again: the drift warning episode is over")
+                    self.node.save()  # (a restarted learner acts on the next WARN)
+            elif level not in (LEVEL_ERROR, LEVEL_STALE):
+                self.diagnostics.report("drift_status", WARN,
+                                        f"'{self.status}' with level {status.level!r}, not a DiagnosticStatus level"
+                                        " (0 OK, 1 WARN, 2 ERROR, 3 STALE): ignored")
