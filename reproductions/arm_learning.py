@@ -24,8 +24,11 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
   factor costs in time;
 - ``list``: LIST per move with no calibration: the first cycle unshaped is the reference, the
   start is the ZV of the lowest mode the identifier finds in that move's residual; once that
-  factor holds (or after :data:`FACTOR_CYCLES` cycles) it is frozen, and the next mode that rings
-  gets its own factor, with the frozen ones' cycle as its reference;
+  factor holds (or after :data:`FACTOR_CYCLES` cycles) it is frozen at the trial with the move's
+  smallest residual, and the next mode that rings (not within 5 % of where a frozen factor
+  ended) gets its own factor, with the frozen ones' cycle as its reference;
+- ``rigid``: one cycle unshaped, fixed and scheduled on the arm with its joints 100x stiffer (the
+  physics section: what removing the flexibility does);
 - ``speedup``: the schedule with a time-scaling factor per move
   (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`),
   raised while the flange settles within 0.05 mm and the joint velocity and torque limits hold;
@@ -37,7 +40,9 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
 Each row (the JSON's ``rows``): case, move, cycle, residual_rms (m/s^2, 1 s after the commanded
 motion's end), late_rms (the same without the servo's first 0.1 s), peak_mm, settle_s,
 move_settle_s (0.05 mm), speed_factor, delay_s, torque_ratio (largest joint torque / its limit),
-velocity_ratio. Writes docs/results/arm_learning.md and its figures.
+velocity_ratio, and the residual's servo and vibration parts (servo_rms, vibration_rms, linear_rms: the two
+together; :mod:`reproductions.arm_physics`). Writes docs/results/arm_learning.md and its figures; its goals
+section states the issue's goals and the corrected ones (on the vibration part) and whether each is met.
 """
 
 from __future__ import annotations
@@ -179,18 +184,20 @@ class Run:
     torque_ratio: float
     velocity_ratio: float
     late: float
+    parts: Any = None  # reproductions.arm_physics.Parts: the residual's servo and vibration parts
 
 
 class Cell:
     """The arm and its controller, running the cycle's moves one after another (one arm for all cycles)."""
 
-    def __init__(self, ctx: Context) -> None:
+    def __init__(self, ctx: Context, model: Any = None) -> None:
         from sim_plant_node.arm.description import TORQUE_LIMITS
         from sim_plant_node.arm.offline import OfflineArm
         from sim_plant_node.arm.task import HOME
 
-        self.arm = OfflineArm(HOME, RATE, noise=ctx.noise, seed=ctx.seed)
+        self.arm = OfflineArm(HOME, RATE, noise=ctx.noise, seed=ctx.seed, model=model, states=True)
         self.torque_limits = np.asarray(TORQUE_LIMITS, dtype=float)
+        self.linear: dict[Any, Any] = {}  # the arm linearised at each goal (reproductions.arm_physics)
 
     def set_payload(self, mass: float) -> None:
         self.arm.plant.set_payload(mass)
@@ -198,6 +205,7 @@ class Cell:
     def run(self, move: Any, shaper: Any = None, factor: float = 1.0) -> Run:
         """Run ``move`` (time-scaled by ``factor``, shaped by ``shaper``; None: unshaped), then dwell."""
         from reproductions.arm_calibration import goal_waypoints
+        from reproductions.arm_physics import residual_parts
         from sim_plant_node.arm.metrics import inverse_dynamics_peaks, late_residual, measure_move, motion_end
         from sim_plant_node.arm.task import time_scaled
 
@@ -218,7 +226,11 @@ class Cell:
         qd = np.abs(np.gradient(cq[moving], ct[moving], axis=0)).max(axis=0)
         run = Run(m, it - start, imu, mv.duration, end - start, float(np.max(torque / self.torque_limits)),
                   float(np.max(qd) / UR5E_MAX_VELOCITY), late_residual(it, imu, c_end))
-        for name in ("imu_t", "imu", "cmd_t", "cmd", "link_t", "link"):
+        # the state at the commanded end (stamped at the end of the period before the final command's)
+        k = int(np.argmin(np.abs(np.asarray(rec.state_t) - c_end)))
+        # the parts of the arm's own response (noise-free: the noise is the sensor's, not the arm's)
+        run.parts = residual_parts(arm.plant.model, cq[-1], rec.state[k], it, c_end, self.linear)
+        for name in ("imu_t", "imu", "cmd_t", "cmd", "link_t", "link", "state_t", "state"):
             getattr(rec, name).clear()
         return run
 
@@ -229,6 +241,9 @@ def row(case: str, cycle: int, run: Run, factor: float = 1.0, **extra: Any) -> R
            "late_rms": run.late, "peak_mm": m.peak_mm, "settle_s": m.settling_s,
            "move_settle_s": m.move_and_settle_s, "speed_factor": factor, "delay_s": m.delay_s,
            "torque_ratio": run.torque_ratio, "velocity_ratio": run.velocity_ratio}
+    if run.parts is not None:
+        out.update(servo_rms=run.parts.servo_rms, vibration_rms=run.parts.vibration_rms,
+                   linear_rms=run.parts.linear_rms)
     out.update(extra)
     return out
 
@@ -259,6 +274,27 @@ def fixed(ctx: Context, cycles: int) -> list[Row]:
 def scheduled(ctx: Context, cycles: int) -> list[Row]:
     sched = ctx.schedule()
     return _fixed_case("scheduled", lambda mv: sched(mv.positions[-1]))(ctx, cycles)
+
+
+@register("rigid")
+def rigid(ctx: Context, cycles: int) -> list[Row]:
+    """One cycle unshaped, fixed and scheduled on the arm with its flexibility removed
+    (:func:`~sim_plant_node.arm.dynamics.rigid_model`): what the position loop alone leaves at the flange
+    (rows ``shaping``: unshaped, fixed, scheduled; not a learning case, one cycle whatever ``cycles``)."""
+    from sim_plant_node.arm.dynamics import rigid_model
+    from sim_plant_node.arm.task import cycle_moves
+
+    sched, fallback = ctx.schedule(), ctx.fallback()
+    rows = []
+    for name, shaper_for in (("unshaped", lambda mv: None), ("fixed", lambda mv: fallback),
+                             ("scheduled", lambda mv: sched(mv.positions[-1]))):
+        cell = Cell(ctx, rigid_model())
+        rows += [row("rigid", 1, cell.run(mv, shaper_for(mv)), shaping=name) for mv in cycle_moves()]
+    return rows
+
+
+#: cases shown only in the physics section (not learning over cycles)
+SIDE_CASES = ("rigid",)
 
 
 # ------------------------------------------------------------------------------------------ LIST per move
@@ -410,6 +446,7 @@ def list_alone(ctx: Context, cycles: int) -> list[Row]:
     frozen: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     covered: dict[str, list[float]] = {}
     learning: dict[str, int] = {}  # cycles the present factor has learned
+    tried: dict[str, list[tuple[float, Any]]] = {}  # the present factor's trials: (move's residual, parameters)
     for c in range(1, cycles + 1):
         for mv in cycle_moves():
             entry, _ = store.entry(mv.positions[0], mv.positions[-1], origin="identified")
@@ -437,8 +474,15 @@ def list_alone(ctx: Context, cycles: int) -> list[Row]:
                 run = cell.run(mv, Shaper(a, t, "custom"))
                 action = learner.update(run.times, run.imu, run.planned_end, run.end, used).action
                 learning[entry.key] += 1
+                tried.setdefault(entry.key, []).append((run.measures.residual_rms, used))
                 if learner.holding or learning[entry.key] >= FACTOR_CYCLES:
-                    best = learner.best[0] if learner.best else learner.params
+                    # frozen at the trial with the smallest residual of the move (the identified mode's ZV, the
+                    # first trial, included): LIST's own measure starts later in the window and can prefer a
+                    # pair that leaves more in the residual's first part
+                    best = min(tried.pop(entry.key), key=lambda x: x[0])[1]
+                    # what the factor covers is where it ended, not where it started (on home->rotated the
+                    # factor started at 9.95 Hz learned 12 Hz, and 9.95 Hz was then never given a factor)
+                    covered[entry.key][-1] = 1.0 / (2.0 * best.t2)
                     bp = best.shaper()
                     frozen[entry.key] = ((bp.amplitudes, bp.times) if fixed is None
                                          else convolve(fixed, (bp.amplitudes, bp.times)))
@@ -555,7 +599,7 @@ def figures(rows: list[Row], docs: pathlib.Path, tag: str) -> list[str]:
     import matplotlib.pyplot as plt
 
     names = []
-    cases = list(dict.fromkeys(r["case"] for r in rows))
+    cases = [c for c in dict.fromkeys(r["case"] for r in rows) if c not in SIDE_CASES]
     for key, label, fname in (("residual_rms", "residual RMS summed over the moves, m/s^2", "residual"),
                               ("move_settle_s", "move + settle time summed over the moves, s", "time")):
         fig, ax = plt.subplots(figsize=(7, 4))
@@ -607,11 +651,16 @@ def checks(rows: list[Row], noise: float) -> list[str]:
     moves = list(dict.fromkeys(r["move"] for r in rows if r["case"] == "scheduled"))
     base = {m: _get(rows, "scheduled", m, last) for m in moves}
     out = [f"Against the schedule's cycle {last} (per move); noise floor {floor:.4f} m/s^2 (sqrt(3) x the noise).", ""]
+    out.append("The issue's goals for LIST over the schedule and for LIST alone are stated on the whole residual;"
+               " the [physics section](#what-the-schedule-leaves-the-servo-part-and-the-vibration-part) shows"
+               " which part of it a shaper can act on, and the corrected goal is stated on that part (**corrected**"
+               " lines).")
+    out.append("")
     for case in ("scheduled_list", "scheduled_list_factor", "list"):
         if case not in have:
             continue
         n = max(r["cycle"] for r in rows if r["case"] == case)
-        parts, worse = [], []
+        parts, worse, vib, missed = [], [], [], []
         for m in moves:
             r, b = _get(rows, case, m, n), base[m]
             if r is None or b is None:
@@ -619,12 +668,31 @@ def checks(rows: list[Row], noise: float) -> list[str]:
             above = b["residual_rms"] > floor
             parts.append(f"{m} {100 * r['residual_rms'] / b['residual_rms']:.0f} %"
                          f" (late {100 * r['late_rms'] / b['late_rms']:.0f} %){'' if above else ' [below the floor]'}")
+            if "vibration_rms" in r and "vibration_rms" in b:
+                ratio = r["vibration_rms"] / b["vibration_rms"]
+                judged = b["vibration_rms"] > floor
+                vib.append(f"{m} {100 * ratio:.0f} %{'' if judged else ' [below the floor]'}")
+                fails = ((above and r["residual_rms"] > 1.01 * b["residual_rms"]) if case == "list"
+                         else (judged and ratio > 0.25))
+                if fails:
+                    missed.append(m)
             for c in range(2, n + 1):
                 x = _get(rows, case, m, c)
                 if x is not None and (x["residual_rms"] > 1.01 * b["residual_rms"]
                                       or x["move_settle_s"] > b["move_settle_s"] + 0.0021):
                     worse.append(f"{m} c{c}")
         out.append(f"- **{case}**, cycle {n}, residual against the schedule's: " + "; ".join(parts) + ".")
+        if vib and case != "list":
+            out.append(f"  Vibration part against the schedule's: {'; '.join(vib)}.")
+            out.append(f"  **Corrected goal** (vibration part <= 25 % of the schedule's on every move where the"
+                       f" schedule's is above the noise floor, never worse than the schedule after cycle 1):"
+                       f" {'met' if not missed and not worse else 'not met'}"
+                       + (f" (above 25 %: {', '.join(missed)})" if missed else "") + ".")
+        elif case == "list":
+            out.append(f"  Goal (at most the schedule's residual, to 1 %, on every move within {n} cycles; not"
+                       " corrected: the schedule's residual holds its servo part too):"
+                       f" {'met' if not missed else 'not met'}"
+                       + (f" (above: {', '.join(missed)})" if missed else "") + ".")
         if case != "list":
             out.append(f"  Cycles after the first worse than the schedule (residual by > 1 %, or move + settle by more"
                        f" than one 2 ms sample): {', '.join(worse) if worse else 'none'}.")
@@ -657,29 +725,76 @@ def checks(rows: list[Row], noise: float) -> list[str]:
     return [*out, ""]
 
 
+def decomposition(rows: list[Row]) -> list[str]:
+    """Per case (its last cycle) and move: the residual, its servo part and its vibration part, m/s^2
+    (:mod:`reproductions.arm_physics`), and the rigid arm's residual for the same shaping (lines of markdown)."""
+    cases = [c for c in dict.fromkeys(r["case"] for r in rows) if c not in SIDE_CASES]
+    moves = list(dict.fromkeys(r["move"] for r in rows if r["case"] in cases))
+    rigid = {(r["shaping"], r["move"]): r for r in rows if r["case"] == "rigid"}
+    out = ["| case (last cycle) | " + " | ".join(moves) + " |", "|---|" + "---|" * len(moves)]
+    for case in cases:
+        last = max(r["cycle"] for r in rows if r["case"] == case)
+        cells = []
+        for m in moves:
+            r = _get(rows, case, m, last)
+            cells.append("" if r is None or "servo_rms" not in r else
+                         f"{r['residual_rms']:.4f} / {r['servo_rms']:.4f} / {r['vibration_rms']:.4f}")
+        out.append(f"| {case} | " + " | ".join(cells) + " |")
+        if any((case, m) in rigid for m in moves):
+            out.append(f"| {case}, rigid arm | " + " | ".join(
+                f"{rigid[(case, m)]['residual_rms']:.4f}" if (case, m) in rigid else "" for m in moves) + " |")
+    return out
+
+
 def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
-    """Why the schedule's residual is not a mode that a shaper factor can take out (lines of markdown)."""
+    """What the schedule's residual is made of, measured (lines of markdown)."""
+    from reproductions.arm_physics import SERVO_ZETA
+
     sc = [r for r in rows if r["case"] == "scheduled"]
-    if not sc:
+    if not sc or "servo_rms" not in sc[0]:
         return []
-    if noise > 0:
-        return ["The schedule's residual lies below the noise floor here on every move; what it is made of is"
-                " measured noise-free ([arm_learning.md](arm_learning.md)).", ""]
     last = max(r["cycle"] for r in sc)
     sc = [r for r in sc if r["cycle"] == last]
-    share = [f"{r['move']} {100 * (1 - (r['late_rms'] / r['residual_rms']) ** 2 * 0.9):.0f} %" for r in sc]
-    return ["## What the schedule leaves, and what learning can take out", "",
-            "The schedule's residual is mostly the joints' position loop settling its tracking lag in the first"
-            " 0.1 s after the commanded motion ends (a 50 Hz loop, damping 0.7; identified in the residual as a"
-            " heavily damped 30 Hz 'mode'), not the arm's modes ringing: share of the residual's mean square in"
-            " the first 0.1 s of the 1 s window (1 - 0.9 late^2 / residual^2): " + ", ".join(share) + ". No input"
-            " shaper removes that transient without ending the motion later: retuning the schedule's own factors"
-            " within their duration (`scheduled_list`) leaves the residual where the schedule has it, and a LIST"
-            " factor convolved with the schedule (`scheduled_list_factor`, the learner node's factor over the"
-            " schedule) lowers it only by ending the command later (its T2 goes to the upper bound, A1 near 1: a"
-            " small late impulse that moves the window past the transient), which costs move + settle time. The"
-            " goal '25 % of the schedule's residual, never slower' is out of reach on this arm with this"
-            " measure; the late RMS (without the first 0.1 s) is what a shaper can act on.", ""]
+    floor = math.sqrt(3.0) * noise
+    share = [f"{r['move']} {100 * r['servo_rms'] / r['residual_rms']:.0f} %" for r in sc]
+    high = [r["move"] for r in sc if r["servo_rms"] > 0.25 * r["residual_rms"]]
+    fit = max(abs(r["linear_rms"] / r["residual_rms"] - 1) for r in rows if r["case"] != "rigid" and "linear_rms" in r)
+    lines = ["## What the schedule leaves: the servo part and the vibration part", "",
+             "After the commanded motion ends the setpoint holds still, so the residual is the free response of"
+             " the arm and its position loop from the state the move leaves them in; about the goal pose it is"
+             " linear, and its eigenvalues split it exactly into a **servo part** (eigenvalues damped"
+             f" >= {SERVO_ZETA:g} or overdamped: the motor position loop settling its tracking lag through the"
+             " joints' springs) and a **vibration part** (the lightly damped ones: the arm's modes, which a shaper"
+             " or a feedforward acts on through the state it leaves them in). Both are computed from the arm's"
+             " simulated state at the commanded end (`reproductions/arm_physics.py`)"
+             " on the IMU's samples with the residual's window and mean removal; the two together reproduce the"
+             f" simulated residual within {100 * fit:.1f} % on every move and cycle here (their RMS do not add:"
+             " the parts are not orthogonal over a 1 s window). The noise is the sensor's, not the arm's: the"
+             " parts are of the noise-free response.", "",
+             "Residual / servo part / vibration part, m/s^2 (RMS over the same 1 s window):", "",
+             *decomposition(rows), "",
+             "The schedule's servo part against its residual: " + ", ".join(share) + ". "
+             + (f"Above 25 % of the residual on {', '.join(high)}: there the goal '25 % of the schedule's residual'"
+                " asks for less than the loop's own transient, which no shaper of the command takes out without"
+                " ending the motion later or changing the loop; the corrected goal is stated on the vibration"
+                " part." if high else "Below 25 % everywhere: the servo part is no floor here.")]
+    rig = {r["move"]: r for r in rows if r["case"] == "rigid" and r.get("shaping") == "scheduled"}
+    if rig:
+        ratio = [rig[r["move"]]["residual_rms"] / r["servo_rms"] for r in sc if r["move"] in rig]
+        larger = [r["move"] for r in sc if r["move"] in rig and rig[r["move"]]["residual_rms"] > r["residual_rms"]]
+        lines += ["", "Removing the flexibility instead (the `rigid` rows: the same moves and shapers on the arm with"
+                  " joints 100x stiffer, `sim_plant_node.arm.dynamics.rigid_model`) does not isolate the servo part"
+                  " of this arm: with rigid joints the loop, tuned on the motors' inertia, drives the links' inertia"
+                  " directly (several times the motors' on the shoulder and elbow) and rings on its own; under the"
+                  f" schedule the rigid arm's residual is {min(ratio):.1f} to {max(ratio):.1f} times the flexible"
+                  " arm's servo part, and larger than the flexible arm's whole residual on "
+                  + (", ".join(larger) or "no move") + ". On the flexible arm the springs filter the loop's"
+                  " transient; its servo part is the one above."]
+    if noise > 0:
+        lines += ["", f"With the IMU noise the floor is {floor:.4f} m/s^2 (sqrt(3) x the noise): the schedule's"
+                  " vibration part lies below it on "
+                  + (", ".join(r["move"] for r in sc if r["vibration_rms"] <= floor) or "no move") + "."]
+    return [*lines, ""]
 
 
 def markdown(rows: list[Row], ctx: Context, cycles: int, seconds: float, figs: list[str]) -> str:
@@ -689,8 +804,9 @@ def markdown(rows: list[Row], ctx: Context, cycles: int, seconds: float, figs: l
              + (f" --noise {ctx.noise:g}" if ctx.noise > 0 else "") + f" --cycles {cycles}`"
              f" ({seconds:.0f} s). Per move and cycle: residual RMS m/s^2 (1 s after the commanded end),"
              " late RMS (the same without the servo's first 0.1 s), peak flange deviation mm, move + settle"
-             " time s (0.05 mm), time-scaling factor.", ""]
-    cases = list(dict.fromkeys(r["case"] for r in rows))
+             " time s (0.05 mm), time-scaling factor; the residual's servo and vibration parts"
+             " ([below](#what-the-schedule-leaves-the-servo-part-and-the-vibration-part)).", ""]
+    cases = [c for c in dict.fromkeys(r["case"] for r in rows) if c not in SIDE_CASES]
     lines += ["## The issue's goals, measured", "", *checks(rows, ctx.noise)]
     lines += physics(rows, ctx.noise)
     lines += ["## Summed over the cycle's six moves, per cycle", "",

@@ -322,3 +322,38 @@ class ElasticArm:
     def tool_position(self) -> np.ndarray:
         """The flange's position, m (from the link angles)."""
         return self.model.tool_position(self.q)
+
+
+#: how much stiffer than the arm's joints :func:`rigid_model`'s are: at HOME its joint modes lie at 200-320 Hz
+#: (damped 42-55 %), far above the arm's 10-21 Hz and still below the 1 kHz physics step's 500 Hz limit (1000x
+#: puts them near it, where the trapezoidal rule warps them); what is left below 50 Hz is the position loop
+#: driving the links' inertia (23-45 Hz, damped 31 % and more), measured with :func:`.modal.modes`
+RIGID_FACTOR = 100.0
+
+
+def rigid_model(factor: float = RIGID_FACTOR, spec: ArmSpec | None = None, loop: LoopGains | None = None) -> ArmModel:
+    """The arm with its flexibility removed: the same links, motors and position loop, the joints ``factor``
+    times stiffer (their damping scales with them, :data:`~.description.DAMPING_TIME`).
+
+    What the flange's accelerometer shows on it after a move is the position loop's transient alone (the
+    links follow the motors); on the flexible arm the same move adds the joints' vibration.
+
+    Parameters
+    ----------
+    factor : float
+        Stiffness multiplier, >= 1.
+    spec : ArmSpec, optional
+        The arm to stiffen (default: the module figures).
+    loop : LoopGains, optional
+        The motor position loop (default: the arm's).
+
+    Raises
+    ------
+    ValueError
+        ``factor`` is not a finite number >= 1.
+    """
+    if not (isinstance(factor, (int, float)) and math.isfinite(factor) and factor >= 1.0):
+        raise ValueError(f"rigid_model: factor must be finite and >= 1, got {factor!r}")
+    spec = spec or ArmSpec()
+    stiff = dataclasses.replace(spec, stiffness=tuple(float(factor) * k for k in spec.stiffness))
+    return ArmModel(stiff, loop)

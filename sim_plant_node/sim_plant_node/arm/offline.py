@@ -16,6 +16,7 @@ import numpy as np
 
 from ..controller.jtc import JointTrajectoryController, RawPoint, Tolerances
 from .description import JOINT_NAMES
+from .dynamics import ArmModel
 from .plant import ArmPlant
 
 
@@ -29,6 +30,9 @@ class Record:
     cmd: list[np.ndarray] = field(default_factory=list)
     link_t: list[float] = field(default_factory=list)
     link: list[np.ndarray] = field(default_factory=list)
+    #: the arm's state (links, motors: positions then velocities, (2 n + 2 n,)) after each period, when kept
+    state_t: list[float] = field(default_factory=list)
+    state: list[np.ndarray] = field(default_factory=list)
 
     def window(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """Samples in [t0, t1) (commands, stamped at their period's start) or (t0, t1] (the others)."""
@@ -39,12 +43,18 @@ class Record:
 
 
 class OfflineArm:
-    """The arm at ``rate`` Hz holding ``start``; :meth:`run` executes one trajectory goal."""
+    """The arm at ``rate`` Hz holding ``start``; :meth:`run` executes one trajectory goal.
+
+    ``model`` (default: the arm of :mod:`.description`) lets a run use another arm, e.g. the same arm with
+    its flexibility removed (:func:`.dynamics.rigid_model`); ``states`` keeps the arm's state after every
+    period in the record (``state_t``, ``state``).
+    """
 
     def __init__(self, start: Sequence[float] | np.ndarray, rate: float = 500.0, substeps: int = 2,
-                 noise: float = 0.0, seed: int = 0) -> None:
+                 noise: float = 0.0, seed: int = 0, model: ArmModel | None = None,
+                 states: bool = False) -> None:
         self.rate = float(rate)
-        self.plant = ArmPlant(rate, substeps)
+        self.plant = ArmPlant(rate, substeps, model)
         self.plant.reset(np.asarray(start, dtype=float))
         free = Tolerances(np.zeros(6), np.zeros(6))
         self.controller = JointTrajectoryController(JOINT_NAMES, 1.0 / rate, free, np.asarray(start, dtype=float))
@@ -52,6 +62,7 @@ class OfflineArm:
         self.noise = float(noise)
         self._rng = np.random.default_rng(seed)
         self.record = Record()
+        self.states = bool(states)
 
     def run(self, times: Sequence[float] | np.ndarray, positions: np.ndarray, velocities: np.ndarray | None = None,
             accelerations: np.ndarray | None = None) -> float:
@@ -79,5 +90,8 @@ class OfflineArm:
                 self.record.imu.append(noisy)
             self.record.link_t.append(self.time)
             self.record.link.append(self.plant.tip_position.copy())
+            if self.states:
+                self.record.state_t.append(self.time)
+                self.record.state.append(self.plant.state)
         c.end_goal()
         return start
