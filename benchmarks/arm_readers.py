@@ -16,8 +16,10 @@ Two parts, each a ratio of one run:
     executing a FollowJointTrajectory goal of ``--seconds`` simulated s sent to its controller, with one
     reader process that takes the demo client's four per-step streams (/tip_imu at 1 kHz,
     /joint_states, /sim_plant/tip_state and /sim_plant/reference at 500 Hz; reliable, STREAM_QOS) and
-    acknowledges them (LockstepReader), either as message objects (``objects``) or raw (``raw``), in
-    rounds that alternate the two. Per run: the plant's simulated s per wall s (from the goal's request
+    acknowledges them (LockstepReader), either as message objects (``objects``), raw (``raw``), raw with
+    every queued message taken per wake-up (``raw_drain``: ``subscribe_draining``) or raw on rclpy's
+    EventsExecutor (``raw_events``), in rounds that alternate them (``--modes`` picks some). Per run: the
+    plant's simulated s per wall s (from the goal's request
     to its result), the reader's CPU time per simulated s (its process, DDS threads included, from its
     first message to its last), and the samples it lost (gaps in the stamps; 0 expected: the plant
     waits for it).
@@ -45,8 +47,9 @@ HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
 RATE, SUBSTEPS = 500.0, 2
 IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/reference", "/joint_states"
 READER = "arm_readers_reader"
-#: the reader's modes: message objects (the readers before issue 34), raw bytes, raw bytes on rclpy's EventsExecutor
-MODES = ("objects", "raw", "raw_events")
+#: the reader's modes: message objects (the readers before issue 34), raw bytes, raw bytes with every queued message
+#: taken per wake-up (``subscribe_draining``, the readers now), raw bytes on rclpy's EventsExecutor
+MODES = ("objects", "raw", "raw_drain", "raw_events")
 #: the plant in lockstep with no reader (the ceiling of the runs with one)
 ALONE = "alone"
 
@@ -122,6 +125,15 @@ def callbacks(n: int = 20000) -> dict[str, float]:
 
 
 # -------------------------------------------------------------------------------------------- lockstep
+def _subscribe(node: Any, mode: str, cls: Any, topic: str, callback: Callable[[Any], None]) -> Any:
+    """The reader's subscription of ``topic`` in ``mode`` (STREAM_QOS)."""
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS, subscribe_draining
+
+    if mode == "raw_drain":
+        return subscribe_draining(node, cls, topic, callback, STREAM_QOS)
+    return node.create_subscription(cls, topic, callback, STREAM_QOS, raw=mode != "objects")
+
+
 def _reader(mode: str) -> None:
     """The reader process: the demo client's four per-step streams, as objects or raw; prints JSON on SIGTERM."""
     import rclpy
@@ -130,7 +142,7 @@ def _reader(mode: str) -> None:
 
     from shaper_nodes.recordings.cdr_sensors import JointStateReader, decode_imu
     from shaper_nodes.ros.conversions import time_to_sec
-    from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
+    from shaper_nodes.ros.lockstep_reader import LockstepReader
 
     rclpy.init()
     node = rclpy.create_node(READER)
@@ -178,10 +190,9 @@ def _reader(mode: str) -> None:
                 took(topic, t)
                 count(t)
             return cb
-    raw = mode != "objects"
-    subs = [node.create_subscription(Imu, IMU, on_imu, STREAM_QOS, raw=raw)]
+    subs = [_subscribe(node, mode, Imu, IMU, on_imu)]
     for topic in (LINK, CMD, JOINTS):
-        subs.append(node.create_subscription(JointState, topic, on_js(topic), STREAM_QOS, raw=raw))
+        subs.append(_subscribe(node, mode, JointState, topic, on_js(topic)))
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     if mode == "raw_events":
@@ -313,12 +324,14 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
             "counts": got["counts"]}
 
 
-def lockstep(seconds: float = 10.0, rounds: int = 2, progress: Callable[[str], None] = print) -> list[dict[str, Any]]:
-    """``rounds`` x (objects, raw) runs of the plant in lockstep with one reader (module docstring)."""
+def lockstep(seconds: float = 10.0, rounds: int = 2, progress: Callable[[str], None] = print,
+             modes: tuple[str, ...] = (ALONE, *MODES)) -> list[dict[str, Any]]:
+    """``rounds`` x ``modes`` runs of the plant in lockstep with one reader (module docstring), the order reversed
+    every other round."""
     runs = []
     with tempfile.TemporaryDirectory(prefix="arm_readers_") as tmp:
         for k in range(rounds):
-            for mode in ((ALONE, *MODES) if k % 2 == 0 else (*MODES[::-1], ALONE)):
+            for mode in (modes if k % 2 == 0 else modes[::-1]):
                 runs.append(_one(mode, seconds, pathlib.Path(tmp), progress))
     return runs
 
@@ -342,10 +355,11 @@ def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> N
               f" {r['reader CPU per sim s']:20.3f} |"
               f" {r['reader CPU per message, us']:12.1f} | {sum(r['counts'].values()):5d} | {r['lost'] or 0}")
     keys = ("sim s per wall s", "reader CPU per sim s")
-    med = {m: {k: statistics.median(r[k] for r in runs if r["mode"] == m) for k in keys} for m in MODES}
-    for mode in MODES[1:]:
-        speed, cpu = (med[mode][k] / med["objects"][k] for k in keys)
-        print(f"medians, {mode} / objects: sim s per wall s {speed:.2f}, reader CPU per sim s {cpu:.2f}")
+    ran = [m for m in MODES if any(r["mode"] == m for r in runs)]
+    med = {m: {k: statistics.median(r[k] for r in runs if r["mode"] == m) for k in keys} for m in ran}
+    for mode in ran[1:]:
+        speed, cpu = (med[mode][k] / med[ran[0]][k] for k in keys)
+        print(f"medians, {mode} / {ran[0]}: sim s per wall s {speed:.2f}, reader CPU per sim s {cpu:.2f}")
     alone = [r["sim s per wall s"] for r in runs if r["mode"] == ALONE]
     if alone:
         print(f"the plant with no reader: median {statistics.median(alone):.2f} sim s per wall s")
@@ -354,7 +368,9 @@ def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> N
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.arm_readers", description=__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=10.0, help="simulated s of each lockstep run (default 10)")
-    p.add_argument("--rounds", type=int, default=2, help="rounds of (objects, raw) lockstep runs (default 2; 0: none)")
+    p.add_argument("--rounds", type=int, default=2, help="rounds of lockstep runs, one per mode (default 2; 0: none)")
+    p.add_argument("--modes", default=",".join((ALONE, *MODES)),
+                   help=f"the runs of a round, comma-separated, of {', '.join((ALONE, *MODES))} (default all)")
     p.add_argument("--reader", choices=MODES, help=argparse.SUPPRESS)
     p.add_argument("--json", type=pathlib.Path, help="also write the figures to this JSON file")
     args = p.parse_args(argv)
@@ -362,7 +378,11 @@ def main(argv: list[str] | None = None) -> int:
         _reader(args.reader)
         return 0
     per_message = callbacks()
-    runs = lockstep(args.seconds, args.rounds, lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True))
+    modes = tuple(m.strip() for m in args.modes.split(",") if m.strip())
+    unknown = [m for m in modes if m not in (ALONE, *MODES)]
+    if unknown or not modes:
+        p.error(f"--modes: unknown mode(s) {', '.join(unknown) or '(none given)'}; known: {', '.join((ALONE, *MODES))}")
+    runs = lockstep(args.seconds, args.rounds, lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True), modes)
     print_tables(per_message, runs)
     if args.json:
         args.json.write_text(json.dumps({"callbacks": per_message, "lockstep": runs}, indent=1))
