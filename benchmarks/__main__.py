@@ -301,6 +301,11 @@ def _arm_rows(res: dict) -> list[dict[str, Any]]:
             bound = 1.0 / (1.0 / res["DDS writes alone"] + 1.0 / res["ArmPlant + controller"])
             rows.append(_row("arm lockstep: sim plant node over DDS", res["sim plant node over DDS"], "sim s/wall s",
                              "one-process bound: 1 / (1/writes alone + 1/ArmPlant + controller)", bound))
+    drained = res.get("readers: sim plant node with a drained reader")
+    if drained is not None and "sim plant node over DDS" in res:  # the node with a reader as the demo's read
+        rows.append(_row(f"arm lockstep: sim plant node with a drained reader (lost {res['readers: lost']})",
+                         drained, "sim s/wall s", "the node over DDS with no reader", res["sim plant node over DDS"],
+                         goal=GOALS["arm_node"]))
     if "one Python reader's limit" in res:  # a reader of the node's topics at this rate takes a whole core
         rows.append(_row("arm lockstep: one Python reader's limit", res["one Python reader's limit"], "sim s/wall s",
                          f"the reader's CPU per message ({res['reader CPU per message, us']:.1f} us) x 2000 msg per"

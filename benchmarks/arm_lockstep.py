@@ -26,6 +26,11 @@ Methods:
     message to its last) with the writer paced at 4x real time, which it follows, as the simulated
     rate at which the node's 2000 messages per simulated second take all of one core: no Python node
     reading all these topics follows faster.
+``readers: sim plant node with a drained reader``
+    The sim plant node in lockstep (``lockstep.readers``) with one reader process of the demo client's
+    four per-step streams taken as the demo's readers take them (raw, every queued message per wake-up:
+    :func:`shaper_nodes.ros.lockstep_reader.subscribe_draining`), a 10 s goal
+    (:func:`benchmarks.arm_readers.lockstep`, mode ``raw_drain``); with the samples it lost (0 expected).
 """
 
 from __future__ import annotations
@@ -264,6 +269,11 @@ def run(*, progress: Callable[[str], None] = print) -> dict:
     out.update(node(progress=progress))
     progress("arm: the node's DDS writes alone")
     out.update(writes())
+    from .arm_readers import lockstep as readers_lockstep
+
+    drained = readers_lockstep(10.0, 1, progress, ("raw_drain",))[0]
+    out["readers: sim plant node with a drained reader"] = drained["sim s per wall s"]
+    out["readers: lost"] = sum((drained["lost"] or {}).values())
     return out
 
 
@@ -289,6 +299,10 @@ def print_table(fig: dict) -> None:
     if rec:
         print(f"(the writes alone: received {rec['joint_states']} joint states, {rec['imu']} IMU messages and"
               f" {rec['clock']} clock ticks)")
+    if "readers: sim plant node with a drained reader" in fig:
+        print(f"(the node in lockstep with a drained reader of the demo client's four streams:"
+              f" {fig['readers: sim plant node with a drained reader']:.2f} sim s per wall s,"
+              f" {fig['readers: lost']} samples lost)")
     if "DDS writes alone" in fig and "sim plant node over DDS" in fig:
         bound = 1.0 / (1.0 / fig["DDS writes alone"] + 1.0 / fig["ArmPlant + controller"])
         print(f"the node over DDS at {fig['sim plant node over DDS'] / fig['DDS writes alone']:.2f} of the writes"

@@ -11,13 +11,19 @@ Two parts, each a ratio of one run:
     :mod:`shaper_nodes.recordings.cdr_sensors`), on the bytes the sim plant publishes (an Imu and a
     six-joint JointState with positions, velocities and efforts). Also calibrate's and the identifier's
     joint-state callbacks the same way.
+``batch``
+    Over DDS, in one process: a raw Imu reader's CPU per message taking a burst already in its queue, one
+    message per wake-up of rclpy's executor (``raw``) or all of them per wake-up (``raw_drain``,
+    :func:`shaper_nodes.ros.lockstep_reader.subscribe_draining`).
 ``lockstep``
     The sim plant node (``plant.model: arm``, ``mode: lockstep``, ``lockstep.readers`` naming the reader)
     executing a FollowJointTrajectory goal of ``--seconds`` simulated s sent to its controller, with one
     reader process that takes the demo client's four per-step streams (/tip_imu at 1 kHz,
     /joint_states, /sim_plant/tip_state and /sim_plant/reference at 500 Hz; reliable, STREAM_QOS) and
-    acknowledges them (LockstepReader), either as message objects (``objects``) or raw (``raw``), in
-    rounds that alternate the two. Per run: the plant's simulated s per wall s (from the goal's request
+    acknowledges them (LockstepReader), either as message objects (``objects``), raw (``raw``), raw with
+    every queued message taken per wake-up (``raw_drain``: ``subscribe_draining``) or raw on rclpy's
+    EventsExecutor (``raw_events``), in rounds that alternate them (``--modes`` picks some). Per run: the
+    plant's simulated s per wall s (from the goal's request
     to its result), the reader's CPU time per simulated s (its process, DDS threads included, from its
     first message to its last), and the samples it lost (gaps in the stamps; 0 expected: the plant
     waits for it).
@@ -45,8 +51,9 @@ HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
 RATE, SUBSTEPS = 500.0, 2
 IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/reference", "/joint_states"
 READER = "arm_readers_reader"
-#: the reader's modes: message objects (the readers before issue 34), raw bytes, raw bytes on rclpy's EventsExecutor
-MODES = ("objects", "raw", "raw_events")
+#: the reader's modes: message objects (the readers before issue 34), raw bytes, raw bytes with every queued message
+#: taken per wake-up (``subscribe_draining``, the readers now), raw bytes on rclpy's EventsExecutor
+MODES = ("objects", "raw", "raw_drain", "raw_events")
 #: the plant in lockstep with no reader (the ceiling of the runs with one)
 ALONE = "alone"
 
@@ -121,7 +128,80 @@ def callbacks(n: int = 20000) -> dict[str, float]:
     return out
 
 
+# ----------------------------------------------------------------------------------------------- batch
+def batch(n: int = 2000, repeats: int = 3) -> dict[str, float]:
+    """CPU per message, us, of a raw Imu reader over DDS (one process: a writer node and a reader node on one
+    executor) taking a burst of ``n`` messages already queued (published reliable, acknowledged by the reader's
+    DDS endpoint, none taken yet): one message per wake-up (rclpy's executor, ``raw``) or every queued message
+    per wake-up (``subscribe_draining``, ``raw_drain``). The least of ``repeats`` bursts each; the process's
+    CPU time (its DDS threads included) from the first spin to the last message taken."""
+    import rclpy
+    from rclpy.duration import Duration
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import Imu
+
+    from shaper_nodes.recordings.cdr import ImuCdr, stamp_parts
+    from shaper_nodes.recordings.cdr_sensors import decode_imu
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx)
+    writer = rclpy.create_node("arm_readers_batch_writer", context=ctx)
+    reader = rclpy.create_node("arm_readers_batch_reader", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    for node in (writer, reader):
+        ex.add_node(node)
+    got: list[Any] = []
+    imu = ImuCdr("tool0")
+    out: dict[str, float] = {}
+    try:
+        for mode in ("raw", "raw_drain"):
+            topic = f"/arm_readers_batch_{mode}"
+            pub = writer.create_publisher(Imu, topic, _stream_qos())
+            sub = _subscribe(reader, mode, Imu, topic, lambda raw: got.append(decode_imu(raw)))
+            deadline = time.monotonic() + 60.0
+            while not (pub.get_subscription_count() and sub.get_publisher_count()):
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"arm_readers: the batch reader of {topic} did not match within 60 s")
+                ex.spin_once(timeout_sec=0.01)
+            best = float("inf")
+            for _ in range(repeats):
+                got.clear()
+                for k in range(n):
+                    imu.set_stamp(*stamp_parts(k * 1e-3))
+                    pub.publish(imu.data())
+                if not pub.wait_for_all_acked(Duration(seconds=60)):
+                    raise RuntimeError("arm_readers: the batch reader did not acknowledge the burst within 60 s")
+                cpu0 = time.process_time()
+                while len(got) < n:
+                    ex.spin_once(timeout_sec=1.0)
+                best = min(best, time.process_time() - cpu0)
+            out[mode] = 1e6 * best / n
+            reader.destroy_subscription(sub)
+            writer.destroy_publisher(pub)
+    finally:
+        ex.shutdown()
+        writer.destroy_node()
+        reader.destroy_node()
+        ctx.try_shutdown()
+    return out
+
+
+def _stream_qos() -> Any:
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS
+
+    return STREAM_QOS
+
+
 # -------------------------------------------------------------------------------------------- lockstep
+def _subscribe(node: Any, mode: str, cls: Any, topic: str, callback: Callable[[Any], None]) -> Any:
+    """The reader's subscription of ``topic`` in ``mode`` (STREAM_QOS)."""
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS, subscribe_draining
+
+    if mode == "raw_drain":
+        return subscribe_draining(node, cls, topic, callback, STREAM_QOS)
+    return node.create_subscription(cls, topic, callback, STREAM_QOS, raw=mode != "objects")
+
+
 def _reader(mode: str) -> None:
     """The reader process: the demo client's four per-step streams, as objects or raw; prints JSON on SIGTERM."""
     import rclpy
@@ -130,7 +210,7 @@ def _reader(mode: str) -> None:
 
     from shaper_nodes.recordings.cdr_sensors import JointStateReader, decode_imu
     from shaper_nodes.ros.conversions import time_to_sec
-    from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
+    from shaper_nodes.ros.lockstep_reader import LockstepReader
 
     rclpy.init()
     node = rclpy.create_node(READER)
@@ -178,10 +258,9 @@ def _reader(mode: str) -> None:
                 took(topic, t)
                 count(t)
             return cb
-    raw = mode != "objects"
-    subs = [node.create_subscription(Imu, IMU, on_imu, STREAM_QOS, raw=raw)]
+    subs = [_subscribe(node, mode, Imu, IMU, on_imu)]
     for topic in (LINK, CMD, JOINTS):
-        subs.append(node.create_subscription(JointState, topic, on_js(topic), STREAM_QOS, raw=raw))
+        subs.append(_subscribe(node, mode, JointState, topic, on_js(topic)))
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     if mode == "raw_events":
@@ -214,7 +293,8 @@ def _cpu_of(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str], None]) -> dict[str, Any]:
+def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str], None],
+         profile: pathlib.Path | None = None) -> dict[str, Any]:
     import rclpy
     from builtin_interfaces.msg import Duration
     from control_msgs.action import FollowJointTrajectory
@@ -224,17 +304,21 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
 
     from shaper_nodes.ros.action_client import ResilientActionClient
     from shaper_nodes.ros.conversions import time_to_sec
-    from shaper_nodes.ros.launching import NodeProcess
+    from shaper_nodes.ros.launching import ChildProcess, NodeProcess, executable, ros_args
     from shaper_nodes.ros.lockstep_reader import AckWatch
     from sim_plant_node.arm.description import JOINT_NAMES
 
     env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     alone = mode == ALONE
-    sim = NodeProcess("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
-                                                      "arm.substeps": SUBSTEPS, "task.start": HOME,
-                                                      "lockstep_timeout": 60.0,
-                                                      "lockstep.readers": [] if alone else ["/" + READER]},
-                      log_path=tmp / f"sim-{mode}.log", env=env).start()
+    params = {"plant.model": "arm", "mode": "lockstep", "rate": RATE, "arm.substeps": SUBSTEPS, "task.start": HOME,
+              "lockstep_timeout": 60.0, "lockstep.readers": [] if alone else ["/" + READER]}
+    if profile is None:
+        sim: Any = NodeProcess("sim_plant_node", "sim_plant", params, log_path=tmp / f"sim-{mode}.log", env=env)
+    else:  # cProfile in every thread of the plant (benchmarks._profiled), written to profile-<mode>.prof
+        sim = ChildProcess([sys.executable, "-m", "benchmarks._profiled", str(profile / f"profile-{mode}.prof"),
+                            str(executable("sim_plant_node", "sim_plant")), *ros_args(params)],
+                           tmp / f"sim-{mode}.log", env, cwd=pathlib.Path(__file__).resolve().parents[1])
+    sim.start()
     # the reader (alone: a process that exits at once, the plant waits for no reader)
     command = ["-c", ""] if alone else ["-m", "benchmarks.arm_readers", "--reader", mode]
     reader = subprocess.Popen([sys.executable, *command], stdout=subprocess.PIPE)
@@ -313,22 +397,25 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
             "counts": got["counts"]}
 
 
-def lockstep(seconds: float = 10.0, rounds: int = 2, progress: Callable[[str], None] = print) -> list[dict[str, Any]]:
-    """``rounds`` x (objects, raw) runs of the plant in lockstep with one reader (module docstring)."""
+def lockstep(seconds: float = 10.0, rounds: int = 2, progress: Callable[[str], None] = print,
+             modes: tuple[str, ...] = (ALONE, *MODES), profile: pathlib.Path | None = None) -> list[dict[str, Any]]:
+    """``rounds`` x ``modes`` runs of the plant in lockstep with one reader (module docstring), the order reversed
+    every other round."""
     runs = []
     with tempfile.TemporaryDirectory(prefix="arm_readers_") as tmp:
         for k in range(rounds):
-            for mode in ((ALONE, *MODES) if k % 2 == 0 else (*MODES[::-1], ALONE)):
-                runs.append(_one(mode, seconds, pathlib.Path(tmp), progress))
+            for mode in (modes if k % 2 == 0 else modes[::-1]):
+                runs.append(_one(mode, seconds, pathlib.Path(tmp), progress, profile))
     return runs
 
 
 def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> None:
     print("\nThe arm's readers' callbacks, CPU per message (one process, no DDS; least of 5 passes)")
-    print(f"{'callback':>30} | {'us':>7} | {'raw / objects':>13}")
+    print(f"{'callback':>38} | {'us':>7} | {'raw / objects':>13}  (a burst: raw_drain / raw)")
     for key, value in per_message.items():
-        base = per_message.get(key.replace(", raw", ", objects"), value)
-        print(f"{key:>30} | {value:7.2f} | {value / base:13.2f}")
+        base = per_message.get(key.replace("raw_drain", "raw") if "burst" in key else
+                               key.replace(", raw", ", objects"), value)
+        print(f"{key:>38} | {value:7.2f} | {value / base:13.2f}")
     if not runs:
         return
     print("\nThe sim plant in lockstep with one reader of the demo client's four streams")
@@ -342,10 +429,11 @@ def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> N
               f" {r['reader CPU per sim s']:20.3f} |"
               f" {r['reader CPU per message, us']:12.1f} | {sum(r['counts'].values()):5d} | {r['lost'] or 0}")
     keys = ("sim s per wall s", "reader CPU per sim s")
-    med = {m: {k: statistics.median(r[k] for r in runs if r["mode"] == m) for k in keys} for m in MODES}
-    for mode in MODES[1:]:
-        speed, cpu = (med[mode][k] / med["objects"][k] for k in keys)
-        print(f"medians, {mode} / objects: sim s per wall s {speed:.2f}, reader CPU per sim s {cpu:.2f}")
+    ran = [m for m in MODES if any(r["mode"] == m for r in runs)]
+    med = {m: {k: statistics.median(r[k] for r in runs if r["mode"] == m) for k in keys} for m in ran}
+    for mode in ran[1:]:
+        speed, cpu = (med[mode][k] / med[ran[0]][k] for k in keys)
+        print(f"medians, {mode} / {ran[0]}: sim s per wall s {speed:.2f}, reader CPU per sim s {cpu:.2f}")
     alone = [r["sim s per wall s"] for r in runs if r["mode"] == ALONE]
     if alone:
         print(f"the plant with no reader: median {statistics.median(alone):.2f} sim s per wall s")
@@ -354,15 +442,26 @@ def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> N
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.arm_readers", description=__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=10.0, help="simulated s of each lockstep run (default 10)")
-    p.add_argument("--rounds", type=int, default=2, help="rounds of (objects, raw) lockstep runs (default 2; 0: none)")
+    p.add_argument("--rounds", type=int, default=2, help="rounds of lockstep runs, one per mode (default 2; 0: none)")
+    p.add_argument("--modes", default=",".join((ALONE, *MODES)),
+                   help=f"the runs of a round, comma-separated, of {', '.join((ALONE, *MODES))} (default all)")
     p.add_argument("--reader", choices=MODES, help=argparse.SUPPRESS)
     p.add_argument("--json", type=pathlib.Path, help="also write the figures to this JSON file")
+    p.add_argument("--profile-plant", type=pathlib.Path, metavar="DIR",
+                   help="run the sim plant under cProfile (every thread's CPU time), one profile-<mode>.prof per mode"
+                   " in DIR")
     args = p.parse_args(argv)
     if args.reader:
         _reader(args.reader)
         return 0
     per_message = callbacks()
-    runs = lockstep(args.seconds, args.rounds, lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True))
+    per_message.update({f"Imu over DDS, a burst, {mode}": us for mode, us in batch().items()})
+    modes = tuple(m.strip() for m in args.modes.split(",") if m.strip())
+    unknown = [m for m in modes if m not in (ALONE, *MODES)]
+    if unknown or not modes:
+        p.error(f"--modes: unknown mode(s) {', '.join(unknown) or '(none given)'}; known: {', '.join((ALONE, *MODES))}")
+    runs = lockstep(args.seconds, args.rounds, lambda s: print(f"[bench] {s}", file=sys.stderr, flush=True), modes,
+                    args.profile_plant)
     print_tables(per_message, runs)
     if args.json:
         args.json.write_text(json.dumps({"callbacks": per_message, "lockstep": runs}, indent=1))

@@ -102,7 +102,7 @@ class Calibrator:
         from sensor_msgs.msg import Imu, JointState
 
         from shaper_nodes.ros.action_client import ResilientActionClient
-        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader
+        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader, subscribe_draining
 
         self.node, self.executor, self.p = node, executor, params
         self.names = list(params.joint_names)
@@ -121,11 +121,12 @@ class Calibrator:
         self.js_topic = params.topics.joint_states
         # a lockstep sim plant that names this node in lockstep.readers waits for it; gaps in the stamps are losses
         self.lockstep = LockstepReader(node, {self.imu_topic: None, self.js_topic: None})
-        self._imu_sub = node.create_subscription(Imu, self.imu_topic, self._on_imu, deep, raw=True)
+        # raw, every queued sample per wake-up (a plant running ahead costs one executor turn per batch)
+        self._imu_sub = subscribe_draining(node, Imu, self.imu_topic, self._on_imu, deep)
         self._js_read = JointStateReader()
         self._js_names: tuple[str, ...] | None = None  # the names of the last layout, and this node's joints' indices
         self._js_index: list[int] = []
-        node.create_subscription(JointState, self.js_topic, self._on_joint_states, STREAM_QOS, raw=True)
+        subscribe_draining(node, JointState, self.js_topic, self._on_joint_states, STREAM_QOS)
         self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
         # made now, so that a monitor's subscription has matched by the time a sensor fault is reported
         self.diagnostics = Diagnostics(node)

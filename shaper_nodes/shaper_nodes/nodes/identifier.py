@@ -62,7 +62,7 @@ from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import estimate_msg, msg_hz, shaper_to_msg, time_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
-from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader
+from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader, subscribe_draining
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED, SERVICE_QOS
@@ -229,9 +229,9 @@ class IdentifierNode(Node):
         self._cycle_start = -math.inf
         # the per-step streams taken raw (serialized bytes, no message objects), read by checked decoders
         self._js_read = JointStateReader()
-        self.create_subscription(Imu, p.topics.imu, self._on_imu, STREAM_QOS if p.topics.imu_reliable else IMU_QOS,
-                                 raw=True)
-        self.create_subscription(JointState, p.topics.joint_states, self._on_joints, STREAM_QOS, raw=True)
+        # (every queued sample per wake-up: a plant running ahead costs one executor turn per batch)
+        subscribe_draining(self, Imu, p.topics.imu, self._on_imu, STREAM_QOS if p.topics.imu_reliable else IMU_QOS)
+        subscribe_draining(self, JointState, p.topics.joint_states, self._on_joints, STREAM_QOS)
         self.create_subscription(CycleEvent, p.topics.cycle_events, self._on_event, 100)
         self._estimate_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
         self.diagnostics = Diagnostics(self)

@@ -58,8 +58,9 @@ from shaper_nodes.core.learning.list import (
 )
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
-from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
-from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader
+from shaper_nodes.recordings.cdr_sensors import CdrError, decode_imu
+from shaper_nodes.ros.conversions import shaper_to_msg
+from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader, subscribe_draining
 from shaper_nodes.ros.parameters import Spec, declare, flat, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED
 
@@ -146,18 +147,24 @@ def subscribe_imu(node: Any, topics: TopicParams, on_sample: Callable[[float, tu
     """Subscribe ``node`` to the accelerometer (``topics.imu``; RELIABLE and deep with ``topics.imu_reliable``)
     and call ``on_sample(t, (ax, ay, az))`` with each sample. The node acknowledges the samples it took, so a
     lockstep sim plant that names it in ``lockstep.readers`` waits for it, from the moment its subscription
-    matched the accelerometer's publisher (the LIST modes' one input glue)."""
+    matched the accelerometer's publisher (the LIST modes' one input glue). The samples are taken raw, every
+    queued one per wake-up; bytes that are not an Imu are dropped with a throttled error (their gap counts as
+    lost)."""
     name = topics.imu
     reader: LockstepReader | None = None
+    log = node.get_logger()
 
-    def on_imu(msg: Imu) -> None:
-        t = time_to_sec(msg.header.stamp)
-        a = msg.linear_acceleration
-        on_sample(t, (a.x, a.y, a.z))
+    def on_imu(raw: bytes) -> None:
+        try:
+            t, a = decode_imu(raw)
+        except CdrError as err:
+            log.error(f"{name}: a message dropped: {err}", throttle_duration_sec=1.0)
+            return
+        on_sample(t, a)
         if reader is not None:
             reader.took(name, t)
-    sub = node.create_subscription(Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS,
-                                   callback_group=group)
+    sub = subscribe_draining(node, Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS,
+                             callback_group=group)
     # announced to a lockstep plant once the accelerometer's publisher matched: no sample is lost before
     reader = LockstepReader(node, {name: None}, ready=lambda: sub.get_publisher_count() > 0)
     return reader

@@ -35,7 +35,7 @@ from std_srvs.srv import Trigger
 
 from shaper_nodes.recordings import COMPRESSIONS, HEARTBEAT_SUFFIX, BagWriter, QueuedRecording
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
-from shaper_nodes.ros.lockstep_reader import HEADER_FIRST, STREAM_QOS, LockstepReader, header_stamp
+from shaper_nodes.ros.lockstep_reader import HEADER_FIRST, STREAM_QOS, LockstepReader, header_stamp, subscribe_draining
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
 from shaper_nodes.ros.parameters import Spec, declare, param, table
@@ -139,7 +139,8 @@ class RecorderNode(Node):
                 continue
             # (bytes, message info): rclpy passes both to two-argument callbacks
             callback: Any = self._queuer(topic, type_name in HEADER_FIRST)
-            self._subs[topic] = self.create_subscription(cls, topic, callback, self._qos_for(topic), raw=True)
+            # raw, every queued message per wake-up (one executor turn per batch)
+            self._subs[topic] = subscribe_draining(self, cls, topic, callback, self._qos_for(topic), info=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
     def _queuer(self, topic: str, stamped: bool) -> Callable[[bytes, dict], None]:

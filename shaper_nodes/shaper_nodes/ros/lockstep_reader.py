@@ -12,6 +12,11 @@ stream's lost samples from gaps in the stamps (:class:`~shaper_nodes.core.lockst
 reader to report beside the numbers they touch. The rules are :mod:`shaper_nodes.core.lockstep`'s.
 
 The QoS a reader's per-step streams need: :data:`STREAM_QOS` (reliable, deep enough for the plant's lead).
+
+:func:`subscribe_draining` subscribes a reader to a per-step stream raw and hands its callback every message
+already queued at each wake-up, in order (rclpy's executor otherwise builds a wait set for every message, the
+most of what a Python reader pays per message): a reader that falls behind a plant running ahead pays the
+executor once per batch.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from typing import Any
 
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
+from rclpy.exceptions import InvalidHandle
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
@@ -31,8 +37,8 @@ from ..core.lockstep import ACK_PERIOD, ANNOUNCE, Acks, Gaps
 from .conversions import sec_to_time, time_to_sec
 from .qos import LATCHED
 
-__all__ = ["ACK_QOS", "ACK_SUFFIX", "FLUSH_PERIOD", "HEADER_FIRST", "IMU_RELIABLE_DOC", "STREAM_QOS", "AckWatch",
-           "LockstepReader", "ack_topic", "header_stamp", "subscribes"]
+__all__ = ["ACK_QOS", "ACK_SUFFIX", "BATCH", "FLUSH_PERIOD", "HEADER_FIRST", "IMU_RELIABLE_DOC", "STREAM_QOS",
+           "AckWatch", "LockstepReader", "ack_topic", "header_stamp", "subscribe_draining", "subscribes"]
 
 #: the acknowledgement topic is the reader node's fully qualified name plus this
 ACK_SUFFIX = "/lockstep_ack"
@@ -53,6 +59,79 @@ FLUSH_PERIOD = 0.1
 
 #: the per-step stream types whose serialized message begins with a std_msgs/Header (:func:`header_stamp`)
 HEADER_FIRST = frozenset({"sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"})
+
+
+#: the most messages one wake-up of a draining subscription hands its callback (the rest wait for the executor's
+#: next turn, so a stream that never runs dry cannot starve the node's other callbacks); the plant's lead,
+#: ``lockstep.lead`` (0.25 s: 250 samples of a 1 kHz stream), fits in one batch
+BATCH = 1000
+
+
+def subscribe_draining(node: Any, msg_type: Any, topic: str, callback: Callable[..., None], qos: Any, *,
+                       info: bool = False, batch: int = BATCH, **kwargs: Any) -> Any:
+    """Subscribe ``node`` to ``topic`` raw; each wake-up hands ``callback`` every message already queued.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The reader.
+    msg_type : message class
+        The topic's type (the bytes are not converted to it).
+    topic : str
+        The topic.
+    callback : callable
+        Called with each message's serialized bytes (and its message info, a dict, with ``info``), in the
+        order they arrived, one call per message.
+    qos : QoSProfile or int
+        The subscription's QoS.
+    info : bool
+        Pass the message info too (``received_timestamp``, ns, ...).
+    batch : int
+        At most this many messages per wake-up (:data:`BATCH`).
+    **kwargs
+        Passed to ``create_subscription`` (``callback_group``, ...).
+
+    Returns
+    -------
+    rclpy Subscription
+        The subscription (destroyed by the node as any other; a callback may destroy it: the batch stops).
+
+    Notes
+    -----
+    rclpy's executor takes one message per wake-up and rebuilds its wait set before the next; here the
+    callback takes the rest of the queue itself (``take_message`` on the subscription's handle until it
+    returns None), so a lockstep reader's acknowledgements still follow the samples they cover.
+    """
+    if batch < 1:
+        raise ValueError(f"subscribe_draining: batch must be at least 1, got {batch}")
+    subs: list[Any] = []
+
+    def drain() -> None:
+        handle = subs[0].handle
+        for _ in range(batch - 1):
+            try:
+                with handle:
+                    got = handle.take_message(msg_type, True)
+            except InvalidHandle:  # the callback destroyed the subscription
+                return
+            if got is None:
+                return
+            if info:
+                callback(got[0], got[1])
+            else:
+                callback(got[0])
+
+    if info:
+        def on_message_info(raw: bytes, message_info: Any) -> None:
+            callback(raw, message_info)
+            drain()
+        subs.append(node.create_subscription(msg_type, topic, on_message_info, qos, raw=True, **kwargs))
+    else:
+        def on_message(raw: bytes) -> None:
+            callback(raw)
+            drain()
+        subs.append(node.create_subscription(msg_type, topic, on_message, qos, raw=True, **kwargs))
+    return subs[0]
 
 
 def header_stamp(raw: bytes) -> float:

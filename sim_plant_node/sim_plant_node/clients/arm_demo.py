@@ -133,8 +133,13 @@ class ArmClient:
         from shaper_msgs.msg import CycleEvent, CycleReport
         from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
         from shaper_nodes.ros.action_client import ResilientActionClient
-        from shaper_nodes.ros.conversions import time_to_sec
-        from shaper_nodes.ros.lockstep_reader import STREAM_QOS, AckWatch, LockstepReader
+        from shaper_nodes.ros.lockstep_reader import (
+            STREAM_QOS,
+            AckWatch,
+            LockstepReader,
+            header_stamp,
+            subscribe_draining,
+        )
 
         from ..arm.dynamics import ArmModel
 
@@ -142,7 +147,6 @@ class ArmClient:
         self.model = ArmModel()
         self.s = Streams()
         self.reports: list[Any] = []
-        sec = time_to_sec
         # the plant waits for this node (its lockstep.readers): acknowledged, and each stream checked for gaps
         self.lockstep = LockstepReader(conductor, {IMU: 1.0 / (RATE * SUBSTEPS), LINK: 1.0 / RATE, CMD: 1.0 / RATE,
                                                    JOINTS: 1.0 / RATE})
@@ -193,15 +197,18 @@ class ArmClient:
             self.s.js_last = t
             took(JOINTS, t)
 
-        def on_clock(m: Any) -> None:
-            self.s.clock = max(self.s.clock, sec(m.clock))
+        def on_clock(raw: bytes) -> None:  # rosgraph_msgs/Clock: the stamp right after the encapsulation
+            if len(raw) < 12:
+                return refused("/clock", CdrError(f"truncated /clock: {len(raw)} bytes, 12 expected"))
+            self.s.clock = max(self.s.clock, header_stamp(raw))
 
-        # every stream a measure depends on: reliable, deeper than the plant's lead over this reader
-        conductor.create_subscription(Imu, IMU, on_imu, STREAM_QOS, raw=True)
-        conductor.create_subscription(JointState, LINK, on_link, STREAM_QOS, raw=True)
-        conductor.create_subscription(JointState, CMD, on_cmd, STREAM_QOS, raw=True)
-        conductor.create_subscription(JointState, JOINTS, on_joints, STREAM_QOS, raw=True)
-        conductor.create_subscription(Clock, "/clock", on_clock, 100)
+        # every stream a measure depends on: reliable, deeper than the plant's lead over this reader; every queued
+        # sample taken per wake-up (one executor turn per batch while the plant runs ahead)
+        subscribe_draining(conductor, Imu, IMU, on_imu, STREAM_QOS)
+        subscribe_draining(conductor, JointState, LINK, on_link, STREAM_QOS)
+        subscribe_draining(conductor, JointState, CMD, on_cmd, STREAM_QOS)
+        subscribe_draining(conductor, JointState, JOINTS, on_joints, STREAM_QOS)
+        subscribe_draining(conductor, Clock, "/clock", on_clock, 100)
         conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
         #: what the recorder has taken (its lockstep acknowledgements)
         self.recorder = AckWatch(conductor, RECORDER)

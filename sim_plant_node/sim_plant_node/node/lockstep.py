@@ -37,13 +37,17 @@ class Readers:
         ``lockstep.lead`` (simulated s) and ``lockstep.reader_timeout`` (wall s).
     now : callable
         The plant's simulated time, s.
+    on_ack : callable, optional
+        Called after each acknowledgement is counted (a plant held by a reader resumes on it, not on a poll).
     """
 
-    def __init__(self, node: Any, readers: Any, lead: float, timeout: float, now: Callable[[], float]) -> None:
+    def __init__(self, node: Any, readers: Any, lead: float, timeout: float, now: Callable[[], float],
+                 on_ack: Callable[[], None] | None = None) -> None:
         names = ["/" + str(r).strip("/") for r in readers]
         self.gate = ReaderGate(names, lead, timeout)
         self._log = node.get_logger()
         self._now = now
+        self._on_ack_hook = on_ack
         self._subs = {r: node.create_subscription(Clock, ack_topic(r), lambda m, r=r: self._on_ack(r, m), ACK_QOS)
                       for r in names}
 
@@ -52,6 +56,8 @@ class Readers:
         line = self.gate.ack(reader, t, self._now())
         if line:
             self._log.info(line)
+        if self._on_ack_hook is not None:
+            self._on_ack_hook()
 
     def may_step(self, t: float) -> bool:
         """Whether the plant may step to simulated time ``t`` s now (a reader that went away is dropped, and one

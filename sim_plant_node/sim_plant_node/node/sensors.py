@@ -3,7 +3,8 @@
 :class:`Sensors` applies the sensor parameters (``imu.*`` and ``joint_states.*``: encoder noise and
 quantum, accelerometer and gyro noise and bias, the IMU's frame) to what the model gives
 (:meth:`~sim_plant_node.models.base.Plant.joint_state`, :meth:`~sim_plant_node.models.base.Plant.imu`)
-and publishes it.
+and publishes it. :class:`StateBytes` writes the plant's other JointState outputs (the tip state, the reference)
+as serialized bytes in place, as /joint_states is.
 """
 
 from __future__ import annotations
@@ -19,7 +20,35 @@ from shaper_nodes.recordings.cdr import JointStateCdr, stamp_parts
 from ..models.base import Plant
 from .parameters import ImuParams, JointStatesParams
 
-__all__ = ["Sensors"]
+__all__ = ["Sensors", "StateBytes"]
+
+
+class StateBytes:
+    """A sensor_msgs/JointState of fixed ``names`` as serialized (CDR) bytes, its numbers rewritten in place: the
+    bytes rclpy serializes for ``JointState(name=names, position=..., velocity=...)`` (outside the padding),
+    without building a message object.
+
+    Parameters
+    ----------
+    names : list of str
+        The message's ``name``.
+    """
+
+    def __init__(self, names: list[str]) -> None:
+        self.names = list(names)
+        self._cdr: JointStateCdr | None = None  # made for the array lengths of the last message
+
+    def __call__(self, t: float, position: np.ndarray, velocity: np.ndarray | None = None) -> bytes:
+        """The message stamped ``t`` s with ``position`` (rad or m) and ``velocity`` (None: empty), serialized."""
+        sizes = (len(position), 0 if velocity is None else len(velocity), 0)
+        cdr = self._cdr
+        if cdr is None or cdr.sizes != sizes:
+            cdr = self._cdr = JointStateCdr(self.names, *sizes)
+        cdr.position[:] = position
+        if velocity is not None:
+            cdr.velocity[:] = velocity
+        cdr.set_stamp(*stamp_parts(t))
+        return cdr.data()
 
 
 class Sensors:

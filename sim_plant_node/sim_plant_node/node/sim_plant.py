@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -70,7 +71,7 @@ from .feedforward import Feedforward
 from .lockstep import Exchange, Readers
 from .models import START_ONLY, PlantValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
-from .sensors import Sensors
+from .sensors import Sensors, StateBytes
 
 __all__ = ["IDLE_STATE_PERIOD", "LOCKSTEP_IMU_QOS", "MODELS", "PARAMETERS", "WAITING", "SimPlantNode", "main"]
 
@@ -119,6 +120,8 @@ class SimPlantNode(Node):
         imu_pub = self.create_publisher(Imu, t.imu, LOCKSTEP_IMU_QOS if self.mode == "lockstep"
                                         else qos_profile_sensor_data)
         self.sensors = Sensors(self.joint_names, p.imu, p.joint_states, imu_pub, self._monitor)
+        # the tip state and the reference as serialized bytes written in place (no message objects per step)
+        self._tip_bytes, self._ref_bytes = StateBytes(self.joint_names), StateBytes(self.joint_names)
         self._event_pub = self.create_publisher(CycleEvent, t.cycle_events, 10)
         self._report_pub = self.create_publisher(CycleReport, t.cycle_reports, 10)
         # /clock is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr)
@@ -140,8 +143,12 @@ class SimPlantNode(Node):
         self._latest_shaped: np.ndarray | None = None
         self.exchange = Exchange(self._cmd_pub, self.n, int(p.lockstep.block), self.get_logger())
         self.readers = Readers(self, p.lockstep.readers if self.mode == "lockstep" else (), float(p.lockstep.lead),
-                               float(p.lockstep.reader_timeout), self._now)
+                               float(p.lockstep.reader_timeout), self._now, on_ack=self._reader_acked)
         self._held = False  # lockstep, a task running: the next ask waits for the readers
+        # lockstep, the controller's trajectory held by a reader: its timer is off until an acknowledgement lets it
+        # step (or the watchdog's next look, for lockstep.reader_timeout)
+        self._free_held = False
+        self._free_timer: Any = None
         self.refused = 0
         self.plant.reset(self._values(p).vector("task.start", p.task.start))
         self._applied = self.plant.setpoint_at_rest
@@ -154,7 +161,7 @@ class SimPlantNode(Node):
                                         defaults, self._applied), self._now, lambda: self.plant.joint_state()[:2],
                                         self._jtc_busy, t.jtc_action, t.jtc_topic)
             if self.mode == "lockstep":
-                self.create_timer(0.002, self._free_run)
+                self._free_timer = self.create_timer(0.002, self._free_run)
         idle = float(p.joint_states.idle_period)
         idle = (IDLE_STATE_PERIOD if self.plant.trajectory_controller else 0.0) if idle < 0 else idle
         if self.mode == "lockstep" and idle > 0:
@@ -345,10 +352,8 @@ class SimPlantNode(Node):
             self.jtc.controller.hold(command)  # the forward command's setpoint is held when it stops
         t_start = self._now()
         self._applied = command
-        if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; costly at every step)
-            ref = JointState(name=self.joint_names, position=command.tolist())
-            ref.header.stamp = sec_to_time(self._now())  # the start of the period the setpoint applies to
-            self._ref_pub.publish(ref)
+        if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; serialized in place)
+            self._ref_pub.publish(self._ref_bytes(t_start, command))  # stamped at the period's start
         ff = self._ff.sample(None if self._cycle_start_step is None else self.step_index - self._cycle_start_step)
         if ff is not None and ff[0] == "command":
             command = command + ff[1]
@@ -360,10 +365,7 @@ class SimPlantNode(Node):
         self._last_js = self.sensors.joint_state(self.plant, t)  # (also the idle republisher's)
         self._js_pub.publish(self._last_js)
         if self._tip_pub.get_subscription_count() > 0:
-            position, velocity = self.plant.tip_state()
-            tip = JointState(name=self.joint_names, position=position.tolist(), velocity=velocity.tolist())
-            tip.header.stamp = sec_to_time(t)
-            self._tip_pub.publish(tip)
+            self._tip_pub.publish(self._tip_bytes(t, *self.plant.tip_state()))
         signals = self.plant.loop_state()
         if signals is not None:  # per joint and signal (e.g. output, measured, control, reference)
             loop = JointState(name=[f"{j}/{s}" for s in self.plant.loop_signals for j in self.joint_names],
@@ -397,10 +399,20 @@ class SimPlantNode(Node):
         if self.jtc is None or self.task is not None or self.exchange.waiting_since is not None:
             return
         deadline = time.monotonic() + 0.02
-        while self.jtc.running and time.monotonic() < deadline and self.readers.may_step(
-                self.sim_time + 1.0 / self.rate):
+        while self.jtc.running and time.monotonic() < deadline:
+            if not self.readers.may_step(self.sim_time + 1.0 / self.rate):  # held: resumed by an acknowledgement
+                self._free_held = True
+                self._free_timer.cancel()
+                return
             self._jtc_step()
             self._publish_clock()  # the commanded positions (what "at rest" means)
+
+    def _reader_acked(self) -> None:
+        """A reader's acknowledgement: a trajectory it held steps on at once if none holds it any more."""
+        if self._free_held and not self.readers.gate.holding(self.sim_time + 1.0 / self.rate):
+            self._free_held = False
+            self._free_timer.reset()
+            self._free_run()
 
     # ----------------------------------------------------------------- the shaped setpoints
     def _on_command(self, msg: Float64MultiArray) -> None:
@@ -431,6 +443,9 @@ class SimPlantNode(Node):
             self._publish_next()
 
     def _watchdog(self) -> None:
+        if self._free_held:  # (a reader that holds the trajectory is looked at again: gone, or past its timeout)
+            self._free_held = False
+            self._free_timer.reset()
         if self.exchange.overdue(lambda: float(self.params.value.lockstep_timeout)):
             self._step_asked(None)
 
