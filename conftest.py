@@ -57,15 +57,24 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """On xdist workers, the integration tests (``tests/``) first, each group in its own order.
+    """On xdist workers, deal the integration tests (``tests/``) out evenly, first in each worker's share.
 
-    They are the long ones (seconds to minutes each, waiting on discovery, processes and simulated time);
-    started first, the unit tests (milliseconds to seconds) fill the workers' ends instead of a long test
-    starting last and running alone. A run in one process keeps pytest's order.
+    ``--dist worksteal`` gives worker i the i-th of W contiguous slices of the collection, and an idle worker
+    later takes queued tests from a busy one. The integration tests are the long ones (seconds to minutes
+    each, waiting on discovery, processes and simulated time): in pytest's order (``tests/`` last) they
+    would all be one worker's slice, run one at a time until the others had run out of unit tests. So the
+    collection becomes W slices, each with every W-th integration test followed by a W-th of the unit tests
+    (in their order, so a module's tests stay together). A run in one process keeps pytest's order.
     """
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        integration = config.rootpath / "tests"
-        items.sort(key=lambda item: integration not in item.path.parents)  # (a stable sort)
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if not os.environ.get("PYTEST_XDIST_WORKER") or workers < 2:
+        return
+    integration = config.rootpath / "tests"
+    long = [item for item in items if integration in item.path.parents]
+    short = [item for item in items if integration not in item.path.parents]
+    n = len(short)
+    shares = [long[w::workers] + short[w * n // workers:(w + 1) * n // workers] for w in range(workers)]
+    items[:] = [item for share in shares for item in share]
 
 
 @pytest.hookimpl(hookwrapper=True)
