@@ -1,10 +1,80 @@
-"""Hooks for every test directory (pytest.ini's testpaths): the cyclic garbage collector."""
+"""Hooks for every test directory (pytest.ini's testpaths): the ROS domains of parallel workers, the
+cyclic garbage collector."""
 
 from __future__ import annotations
 
 import gc
+import os
 
 import pytest
+
+#: ROS domains the tests use: 1 + (k % DOMAINS) for k = the base and up (tests/conftest.py's domain_id)
+DOMAINS = 200
+
+
+def worker_domains(base: int, worker: str | None, workers: int) -> tuple[int, int]:
+    """The first domain number (before ``1 + k % DOMAINS``) and the stride of an xdist worker's domains.
+
+    Worker ``gw<i>`` of ``workers`` takes ``base + i``, ``base + i + stride``, ``base + i + 2 stride``, ...
+    where the stride is the smallest divisor of :data:`DOMAINS` not below ``workers``: as the stride divides
+    the range, ``k % DOMAINS`` keeps ``k``'s remainder modulo the stride, so two workers never share a domain,
+    wrapped or not. Without xdist (``worker`` None) the base with stride 1, as before workers.
+
+    Parameters
+    ----------
+    base : int
+        ``ROS_DOMAIN_ID`` of the run (``./run test`` sets one per run).
+    worker : str or None
+        xdist's ``PYTEST_XDIST_WORKER`` ("gw0", "gw1", ...), None without xdist.
+    workers : int
+        xdist's ``PYTEST_XDIST_WORKER_COUNT``.
+
+    Returns
+    -------
+    tuple of int
+        (first domain number, stride).
+    """
+    if worker is None:
+        return base, 1
+    index = int(worker.removeprefix("gw"))
+    stride = next((d for d in range(max(workers, 1), DOMAINS + 1) if DOMAINS % d == 0), 0)
+    if not 0 <= index < workers or stride == 0:
+        raise pytest.UsageError(f"xdist worker {worker} of {workers}: at most {DOMAINS} workers, one domain each")
+    return base + index, stride
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """On an xdist worker, give its tests and the processes they start a domain of their own.
+
+    ``ROS_DOMAIN_ID`` becomes the worker's first domain (what the unit tests that make an rclpy context read,
+    and what a started process inherits), and ``SHAPER_DOMAIN_STRIDE`` the step between the worker's domains
+    (tests/conftest.py's ``domain_id``). Nothing changes without xdist.
+    """
+    first, stride = worker_domains(int(os.environ.get("ROS_DOMAIN_ID", "30")), os.environ.get("PYTEST_XDIST_WORKER"),
+                                   int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    os.environ["ROS_DOMAIN_ID"] = str(first)
+    os.environ["SHAPER_DOMAIN_STRIDE"] = str(stride)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On xdist workers, deal the integration tests (``tests/``) out evenly, first in each worker's share.
+
+    ``--dist worksteal`` gives worker i the i-th of W contiguous slices of the collection, and an idle worker
+    later takes queued tests from a busy one. The integration tests are the long ones (seconds to minutes
+    each, waiting on discovery, processes and simulated time): in pytest's order (``tests/`` last) they
+    would all be one worker's slice, run one at a time until the others had run out of unit tests. So the
+    collection becomes W slices, each with every W-th integration test followed by a W-th of the unit tests
+    (in their order, so a module's tests stay together). A run in one process keeps pytest's order.
+    """
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if not os.environ.get("PYTEST_XDIST_WORKER") or workers < 2:
+        return
+    integration = config.rootpath / "tests"
+    long = [item for item in items if integration in item.path.parents]
+    short = [item for item in items if integration not in item.path.parents]
+    n = len(short)
+    shares = [long[w::workers] + short[w * n // workers:(w + 1) * n // workers] for w in range(workers)]
+    items[:] = [item for share in shares for item in share]
 
 
 @pytest.hookimpl(hookwrapper=True)

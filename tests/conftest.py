@@ -23,12 +23,31 @@ from shaper_msgs.srv import GetShaper, SetFeedforward, SetShaper
 from shaper_nodes.ros.launching import NodeProcess
 
 _counter = itertools.count()
+#: domains 1 .. DOMAINS (the root conftest.py's range)
+DOMAINS = 200
+
+
+def new_domain() -> int:
+    """A ROS domain no test has had in this process yet (until the 200 wrap): the base, then every stride-th.
+
+    Under pytest-xdist the root conftest.py gives each worker a base and a stride of its own
+    (``ROS_DOMAIN_ID``, ``SHAPER_DOMAIN_STRIDE``), so the tests running at once on different workers never
+    share a domain; without xdist the stride is 1, the domains of a run follow each other from the base.
+    """
+    base = int(os.environ.get("ROS_DOMAIN_ID", "30"))
+    stride = int(os.environ.get("SHAPER_DOMAIN_STRIDE", "1"))
+    return 1 + (base + stride * next(_counter)) % DOMAINS
 
 
 @pytest.fixture
 def domain_id() -> int:
-    base = int(os.environ.get("ROS_DOMAIN_ID", "30"))
-    return 1 + (base + next(_counter)) % 200
+    return new_domain()
+
+
+@pytest.fixture
+def another_domain_id(domain_id) -> int:
+    """A second domain of the test's own, for a test that runs two things apart at once or in turn."""
+    return new_domain()
 
 
 @pytest.fixture

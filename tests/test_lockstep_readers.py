@@ -281,9 +281,10 @@ def _stream(bag: pathlib.Path, topic: str) -> list[bytes]:
     return out
 
 
-def test_the_demo_client_identifier_and_recorder_paused_give_the_unpaused_numbers(tmp_path, domain_id):
+def test_the_demo_client_identifier_and_recorder_paused_give_the_unpaused_numbers(tmp_path, domain_id,
+                                                                                  another_domain_id):
     quiet = _run_demo(tmp_path / "quiet", domain_id, [])
-    paused = _run_demo(tmp_path / "paused", domain_id + 1, ["client", "identifier", "recorder"])
+    paused = _run_demo(tmp_path / "paused", another_domain_id, ["client", "identifier", "recorder"])
     for text in (quiet, paused):
         assert "Samples lost: none" in text, text
         assert "Traceback" not in text

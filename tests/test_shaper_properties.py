@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
+from conftest import new_domain
 from control_msgs.action import FollowJointTrajectory
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
@@ -61,7 +62,7 @@ class Captured:
 @pytest.fixture(scope="module")
 def node():
     ctx = rclpy.context.Context()
-    rclpy.init(context=ctx, domain_id=199)
+    rclpy.init(context=ctx, domain_id=new_domain())  # (its own: other workers' tests run at once)
     overrides = [Parameter("joint_names", value=JOINTS), Parameter("command_rate", value=RATE),
                  Parameter("shaper.family", value="zv"), Parameter("shaper.frequency_hz", value=5.0),
                  Parameter("limits.position_lower", value=LOWER), Parameter("limits.position_upper", value=UPPER),
