@@ -142,17 +142,13 @@ def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, firs
     (joint-major columns), on the arm linearised at rest holding ``pose``; the setpoint held 2 ms
     as the controller does, the response integrated exactly every 1 ms (the IMU's period); the first B-spline
     starts ``first`` output samples after the move's start."""
-    import pinocchio as pin
     from scipy.linalg import expm
 
     from shaper_nodes.core.learning.mrilc.moves import spline_basis
-    from sim_plant_node.arm.dynamics import GRAVITY
-    from sim_plant_node.arm.modal import linearised
+    from sim_plant_node.arm.modal import state_matrix, tool_output
 
     n = 6
-    mb, cb, kb = linearised(model, pose)
-    minv = np.linalg.inv(mb)
-    a = np.block([[np.zeros((2 * n, 2 * n)), np.eye(2 * n)], [-minv @ kb, -minv @ cb]])
+    a, minv = state_matrix(model, pose)
     drive = np.zeros((2 * n, 2 * n))  # the loop's torque from (dr, dr'): (Kp + dg/dq(r)) dr + Kd dr'
     drive[n:, :n] = np.diag(model.kp) + model.gravity_stiffness(np.asarray(pose, dtype=float))
     drive[n:, n:] = np.diag(model.kd)
@@ -160,20 +156,7 @@ def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, firs
     h = OUTPUT_PERIOD / 2
     big = expm(np.block([[a, b], [np.zeros((2 * n, 6 * n))]]) * h)
     ad, bd = big[:4 * n, :4 * n], big[:4 * n, 4 * n:]
-    q0, _ = model.rest(np.asarray(pose, dtype=float))
-    pin.computeJointJacobians(model.model, model.data, q0)
-    pin.updateFramePlacements(model.model, model.data)
-    c_acc = pin.getFrameJacobian(model.model, model.data, model.tool, pin.ReferenceFrame.LOCAL)[:3]
-    up = np.array([0.0, 0.0, GRAVITY])
-
-    def tilt(q: np.ndarray) -> np.ndarray:
-        pin.framesForwardKinematics(model.model, model.data, q)
-        return model.data.oMf[model.tool].rotation.T @ up
-
-    c_q = np.column_stack([(tilt(q0 + 1e-6 * e) - tilt(q0 - 1e-6 * e)) / 2e-6 for e in np.eye(n)])
-    c = np.zeros((3, 4 * n))
-    c[:, :n] = c_q
-    c += c_acc @ a[2 * n:3 * n]  # the links' acceleration (no direct feed: the input drives the motors)
+    c = tool_output(model, pose, a)
     shift = int(round(SPACING / OUTPUT_PERIOD))
     periods = np.arange(samples) * OUTPUT_PERIOD  # the controller's periods from the move's start
     b0, b1, _ = spline_basis(periods, SPACING, 1)

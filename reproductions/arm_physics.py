@@ -60,29 +60,11 @@ class LinearArm:
 
 def linear_arm(model: Any, pose: np.ndarray) -> LinearArm:
     """The arm (:class:`~sim_plant_node.arm.dynamics.ArmModel`) linearised at rest holding ``pose`` (rad)."""
-    import pinocchio as pin
+    from sim_plant_node.arm.modal import state_matrix, tool_output
 
-    from sim_plant_node.arm.dynamics import GRAVITY
-    from sim_plant_node.arm.modal import linearised
-
-    n = model.n
-    mb, cb, kb = linearised(model, pose)
-    minv = np.linalg.inv(mb)
-    a = np.block([[np.zeros((2 * n, 2 * n)), np.eye(2 * n)], [-minv @ kb, -minv @ cb]])
+    a, minv = state_matrix(model, pose)
     q0, theta0 = model.rest(np.asarray(pose, dtype=float))
-    pin.computeJointJacobians(model.model, model.data, q0)
-    pin.updateFramePlacements(model.model, model.data)
-    c_acc = pin.getFrameJacobian(model.model, model.data, model.tool, pin.ReferenceFrame.LOCAL)[:3]
-    up = np.array([0.0, 0.0, GRAVITY])
-
-    def tilt(q: np.ndarray) -> np.ndarray:
-        pin.framesForwardKinematics(model.model, model.data, q)
-        return model.data.oMf[model.tool].rotation.T @ up
-
-    c_q = np.column_stack([(tilt(q0 + 1e-6 * e) - tilt(q0 - 1e-6 * e)) / 2e-6 for e in np.eye(n)])
-    c = np.zeros((3, 4 * n))
-    c[:, :n] = c_q
-    c += c_acc @ a[2 * n:3 * n]  # the links' acceleration
+    c = tool_output(model, pose, a)
     return LinearArm(a, c, minv, np.concatenate([q0, theta0]))
 
 

@@ -70,6 +70,42 @@ def linearised(model: ArmModel, pose: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return mb, cb, kb
 
 
+def state_matrix(model: ArmModel, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first-order state matrix A (4 n x 4 n) of the arm linearised at rest holding ``pose``, over the
+    state (link and motor angles, then their rates; rad, rad/s), and the inverse of its mass matrix."""
+    n = model.n
+    mb, cb, kb = linearised(model, pose)
+    minv = np.linalg.inv(mb)
+    a = np.block([[np.zeros((2 * n, 2 * n)), np.eye(2 * n)], [-minv @ kb, -minv @ cb]])
+    return a, minv
+
+
+def tool_output(model: ArmModel, pose: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The tool IMU's specific force (m/s^2, tool frame) as a linear map C (3 x 4 n) of the state of
+    :func:`state_matrix`'s ``a`` at rest holding ``pose``: gravity's tilt with the link angles
+    (central differences of 1e-6 rad) plus the links' acceleration through the tool's Jacobian."""
+    import pinocchio as pin
+
+    from .dynamics import GRAVITY
+
+    n = model.n
+    q0, _ = model.rest(np.asarray(pose, dtype=float))
+    pin.computeJointJacobians(model.model, model.data, q0)
+    pin.updateFramePlacements(model.model, model.data)
+    c_acc = pin.getFrameJacobian(model.model, model.data, model.tool, pin.ReferenceFrame.LOCAL)[:3]
+    up = np.array([0.0, 0.0, GRAVITY])
+
+    def tilt(q: np.ndarray) -> np.ndarray:
+        pin.framesForwardKinematics(model.model, model.data, q)
+        return model.data.oMf[model.tool].rotation.T @ up
+
+    c_q = np.column_stack([(tilt(q0 + 1e-6 * e) - tilt(q0 - 1e-6 * e)) / 2e-6 for e in np.eye(n)])
+    c = np.zeros((3, 4 * n))
+    c[:, :n] = c_q
+    c += c_acc @ a[2 * n:3 * n]  # the links' acceleration (no direct feed: the input drives the motors)
+    return c
+
+
 def modes(model: ArmModel, pose: np.ndarray) -> list[ArmMode]:
     """The vibration modes at ``pose`` (joint setpoint, rad), lowest frequency first."""
     mb, cb, kb = linearised(model, pose)
