@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from reproductions.common import docs_option
+from reproductions.residual_split import SERVO_ZETA  # more damped than this: the position loop's transient
 
 RATE = 500.0
 DWELL = 1.5  # s at rest after each move, as in the demo
@@ -70,8 +71,6 @@ UR5E_MAX_VELOCITY = math.pi
 #: tolerance of the settled flange, m (sim_plant_node.arm.metrics.SETTLE_TOLERANCE)
 PAYLOAD_AT = 3  # the payload changes after this many cycles
 HEAVY = 4.5  # kg
-#: modes identified in a residual with more damping than this are the position loop's transient, not the arm's
-SERVO_ZETA = 0.12
 
 Row = dict[str, Any]
 CaseFn = Callable[["Context", int], list[Row]]
@@ -184,7 +183,7 @@ class Run:
     torque_ratio: float
     velocity_ratio: float
     late: float
-    parts: Any = None  # reproductions.arm_physics.Parts: the residual's servo and vibration parts
+    parts: Any = None  # reproductions.residual_split.Parts: the residual's servo and vibration parts
 
 
 class Cell:
@@ -197,7 +196,7 @@ class Cell:
 
         self.arm = OfflineArm(HOME, RATE, noise=ctx.noise, seed=ctx.seed, model=model, states=True)
         self.torque_limits = np.asarray(TORQUE_LIMITS, dtype=float)
-        self.linear: dict[Any, Any] = {}  # the arm linearised at each goal (reproductions.arm_physics)
+        self.linear: dict[Any, Any] = {}  # the arm linearised at each goal (reproductions.residual_split)
 
     def set_payload(self, mass: float) -> None:
         self.arm.plant.set_payload(mass)
@@ -205,7 +204,7 @@ class Cell:
     def run(self, move: Any, shaper: Any = None, factor: float = 1.0) -> Run:
         """Run ``move`` (time-scaled by ``factor``, shaped by ``shaper``; None: unshaped), then dwell."""
         from reproductions.arm_calibration import goal_waypoints
-        from reproductions.arm_physics import residual_parts
+        from reproductions.residual_split import residual_parts
         from sim_plant_node.arm.metrics import inverse_dynamics_peaks, late_residual, measure_move, motion_end
         from sim_plant_node.arm.task import time_scaled
 
@@ -727,7 +726,7 @@ def checks(rows: list[Row], noise: float) -> list[str]:
 
 def decomposition(rows: list[Row]) -> list[str]:
     """Per case (its last cycle) and move: the residual, its servo part and its vibration part, m/s^2
-    (:mod:`reproductions.arm_physics`), and the rigid arm's residual for the same shaping (lines of markdown)."""
+    (:mod:`reproductions.residual_split`), and the rigid arm's residual for the same shaping (lines of markdown)."""
     cases = [c for c in dict.fromkeys(r["case"] for r in rows) if c not in SIDE_CASES]
     moves = list(dict.fromkeys(r["move"] for r in rows if r["case"] in cases))
     rigid = {(r["shaping"], r["move"]): r for r in rows if r["case"] == "rigid"}
@@ -748,7 +747,6 @@ def decomposition(rows: list[Row]) -> list[str]:
 
 def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
     """What the schedule's residual is made of, measured (lines of markdown)."""
-    from reproductions.arm_physics import SERVO_ZETA
 
     sc = [r for r in rows if r["case"] == "scheduled"]
     if not sc or "servo_rms" not in sc[0]:
@@ -759,6 +757,9 @@ def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
     share = [f"{r['move']} {100 * r['servo_rms'] / r['residual_rms']:.0f} %" for r in sc]
     high = [r["move"] for r in sc if r["servo_rms"] > 0.25 * r["residual_rms"]]
     fit = max(abs(r["linear_rms"] / r["residual_rms"] - 1) for r in rows if r["case"] != "rigid" and "linear_rms" in r)
+    fit_text = (f" simulated residual within {100 * fit:.1f} % on every move and cycle here" if noise == 0.0 else
+                " noise-free residual (checked in arm_learning.md; here the measured residual carries the sensor's"
+                " noise, so it is not compared)")
     lines = ["## What the schedule leaves: the servo part and the vibration part", "",
              "After the commanded motion ends the setpoint holds still, so the residual is the free response of"
              " the arm and its position loop from the state the move leaves them in; about the goal pose it is"
@@ -766,9 +767,9 @@ def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
              f" >= {SERVO_ZETA:g} or overdamped: the motor position loop settling its tracking lag through the"
              " joints' springs) and a **vibration part** (the lightly damped ones: the arm's modes, which a shaper"
              " or a feedforward acts on through the state it leaves them in). Both are computed from the arm's"
-             " simulated state at the commanded end (`reproductions/arm_physics.py`)"
+             " simulated state at the commanded end (`reproductions/residual_split.py`)"
              " on the IMU's samples with the residual's window and mean removal; the two together reproduce the"
-             f" simulated residual within {100 * fit:.1f} % on every move and cycle here (their RMS do not add:"
+             f"{fit_text} (their RMS do not add:"
              " the parts are not orthogonal over a 1 s window). The noise is the sensor's, not the arm's: the"
              " parts are of the noise-free response.", "",
              "Residual / servo part / vibration part, m/s^2 (RMS over the same 1 s window):", "",

@@ -200,7 +200,7 @@ def _window(times: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.ndarr
 def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case: str, seed: int = 0,
              settings: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``cycles`` cycles of ``plans`` on one offline arm (the moves run back to back); rows and the learners."""
-    from reproductions.arm_physics import residual_parts
+    from reproductions.residual_split import residual_parts
     from shaper_nodes.core.learning.mrilc.moves import MoveLearner, excess
     from shaper_nodes.core.shaping.vibration import residual_vibration
     from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, measure_move

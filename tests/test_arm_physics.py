@@ -1,4 +1,4 @@
-"""The residual's servo and vibration parts (reproductions.arm_physics) and the rigid arm (ROS-free)."""
+"""The residual's servo and vibration parts (reproductions.residual_split) and the rigid arm (ROS-free)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from scipy.linalg import expm
 
 from reproductions import arm_learning, arm_mrilc
-from reproductions.arm_physics import SERVO_ZETA, LinearArm, linear_arm, residual_parts, split_response
+from reproductions.residual_split import SERVO_ZETA, LinearArm, linear_arm, residual_parts, split_response
 from sim_plant_node.arm.dynamics import ArmModel, rigid_model
 from sim_plant_node.arm.modal import modes
 from sim_plant_node.arm.task import HOME
