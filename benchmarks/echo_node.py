@@ -5,8 +5,10 @@ very message object), on the output topic: one subscription, one publisher, a
 ``SingleThreadedExecutor`` and nothing else. The difference between the shaper node's hop
 latency and this node's is what the shaper's own work (validation, FIR, message building) costs.
 
-Run it as ``python -m benchmarks.echo_node [--in TOPIC] [--out TOPIC] [--ros-args ...]``;
-SIGINT stops it cleanly.
+Run it as ``python -m benchmarks.echo_node [--in TOPIC] [--out TOPIC] [--take] [--ros-args ...]``;
+SIGINT stops it cleanly. ``--take`` echoes the serialized bytes from a lean side node served by the
+shaper's take loop (:class:`shaper_nodes.ros.side_node.SideNode` with ``take=True``) instead: the
+round trip of a Python node that does no work on the shaper's own path, the floor of the shaper's hop.
 """
 
 from __future__ import annotations
@@ -45,12 +47,31 @@ class EchoNode(Node):
         self.get_logger().info(f"echoing {in_topic} -> {out_topic}")
 
 
+def _spin_take(in_topic: str, out_topic: str, context: rclpy.context.Context, executor: SingleThreadedExecutor) -> None:
+    """Echo the raw bytes from ``in_topic`` to ``out_topic`` on a take loop until the context shuts down."""
+    from shaper_nodes.ros.side_node import SideNode
+
+    parent = Node("bench_echo", context=context)  # names the side node; spun by ``executor`` for SIGINT only
+    side = SideNode(parent, "take", take=True)
+    pub = side.node.create_publisher(Float64MultiArray, out_topic, DEPTH)
+    side.node.create_subscription(Float64MultiArray, in_topic, pub.publish, DEPTH, raw=True)
+    side.start()
+    parent.get_logger().info(f"echoing {in_topic} -> {out_topic} (raw, take loop)")
+    executor.add_node(parent)
+    try:
+        executor.spin()
+    finally:
+        side.close()
+        parent.destroy_node()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     argv = list(sys.argv if argv is None else argv)
     parser = argparse.ArgumentParser(prog="python -m benchmarks.echo_node", description=__doc__.split("\n")[0])
     parser.add_argument("--in", dest="in_topic", default=IN_TOPIC, help=f"input topic (default {IN_TOPIC})")
     parser.add_argument("--out", dest="out_topic", default=OUT_TOPIC, help=f"output topic (default {OUT_TOPIC})")
+    parser.add_argument("--take", action="store_true", help="echo raw bytes on a take loop (the shaper's stream path)")
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
 
     context = rclpy.context.Context()
@@ -60,9 +81,12 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     executor = SingleThreadedExecutor(context=context)
     try:
-        node = EchoNode(args.in_topic, args.out_topic, context=context)
-        executor.add_node(node)
-        executor.spin()
+        if args.take:
+            _spin_take(args.in_topic, args.out_topic, context, executor)
+        else:
+            node = EchoNode(args.in_topic, args.out_topic, context=context)
+            executor.add_node(node)
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -566,14 +566,15 @@ class CpuHog:
             self.proc = None
 
 
-def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_out") -> Target:
-    """The bare echo node (:mod:`benchmarks.echo_node`) run with this interpreter."""
+def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_out", take: bool = False) -> Target:
+    """The bare echo node (:mod:`benchmarks.echo_node`) run with this interpreter; ``take``: its raw
+    echo on the take loop (the floor of the shaper's path), labelled ``echo, take loop``."""
 
     def make(log_path: pathlib.Path) -> ChildProcess:
         cmd = [sys.executable, "-m", "benchmarks.echo_node", "--in", in_topic, "--out", out_topic]
-        return ChildProcess(cmd, log_path, cwd=REPO_ROOT)
+        return ChildProcess(cmd + (["--take"] if take else []), log_path, cwd=REPO_ROOT)
 
-    return Target("echo (baseline)", make, in_topic, out_topic, identity_fir())
+    return Target("echo, take loop" if take else "echo (baseline)", make, in_topic, out_topic, identity_fir())
 
 
 def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any] | None = None) -> Target:

@@ -1,6 +1,7 @@
 """The shaper's hop with each ``stream_executor`` against the bare echo node, in one run (issue 34).
 
-``python -m benchmarks.latency_executors --seconds 20`` starts the echo node and one ZVD shaper node per
+``python -m benchmarks.latency_executors --seconds 20`` starts the echo node, its raw echo on the take loop
+(the round trip of a Python node that does no work on the shaper's path: the floor), and one ZVD shaper node per
 ``stream_executor`` choice ('thread', 'take'; ``--executors``), drives them in turns
 (:func:`~benchmarks.latency.measure_interleaved`: the machine's changes fall on every target alike), and
 again with a busy-loop hog on one core unless ``--skip-hog``. It prints each target's figures and the
@@ -28,8 +29,10 @@ def run(executors: list[str], seconds: float, turn: float, hog: bool, rate: floa
 
     rows: list[dict] = []
     for loaded in ([False, True] if hog else [False]):
-        targets = [echo_target()] + [shaper_target(f"shaper zvd {e}", joints, rate, {**ZVD, "stream_executor": e})
-                                     for e in executors]
+        floor = echo_target("/bench/echo_take_in", "/bench/echo_take_out", take=True)  # no work, the take loop
+        targets = [echo_target(), floor] + [
+            shaper_target(f"shaper zvd {e}", joints, rate, {**ZVD, "stream_executor": e})
+            for e in executors]
         rounds = max(1, round(seconds / turn))
         with tempfile.TemporaryDirectory(prefix="shaper_bench_") as tmp, contextlib.ExitStack() as stack:
             if loaded:
