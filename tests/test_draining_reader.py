@@ -59,6 +59,16 @@ class _Rig:
         self.reader.destroy_node()
 
 
+def _count_wake_ups(sub, wakes: list[int], got: list) -> None:
+    """Wrap the callback rclpy calls once per wake-up so that ``wakes`` gets ``len(got)`` at each."""
+    callback = sub.callback
+
+    def counted(*args):
+        wakes.append(len(got))
+        callback(*args)
+    sub.callback = counted
+
+
 def test_a_burst_is_taken_at_one_wake_up_in_order_once(ros_context):
     rig = _Rig(ros_context, "/drain_burst")
     got: list[tuple[float, float]] = []
@@ -69,12 +79,7 @@ def test_a_burst_is_taken_at_one_wake_up_in_order_once(ros_context):
         got.append((t, a[2]))
 
     sub = subscribe_draining(rig.reader, Imu, "/drain_burst", on_imu, STREAM_QOS)
-    callback = sub.callback  # the wrapper rclpy calls once per wake-up
-
-    def counted(*args):
-        wakes.append(len(got))
-        callback(*args)
-    sub.callback = counted
+    _count_wake_ups(sub, wakes, got)
     try:
         stamps = rig.burst(sub)
         rig.spin_until(lambda: len(got) >= BURST, "the burst")
@@ -94,12 +99,7 @@ def test_a_batch_bound_splits_the_burst_into_wake_ups(ros_context):
 
     sub = subscribe_draining(rig.reader, Imu, "/drain_batches", lambda raw: got.append(decode_imu(raw)[0]),
                              STREAM_QOS, batch=120)
-    callback = sub.callback
-
-    def counted(*args):
-        wakes.append(len(got))
-        callback(*args)
-    sub.callback = counted
+    _count_wake_ups(sub, wakes, got)
     try:
         stamps = rig.burst(sub)
         rig.spin_until(lambda: len(got) >= BURST, "the burst")
