@@ -153,6 +153,8 @@ def test_a_reader_that_stops_acknowledging_is_dropped_with_one_line(start_node, 
     ex.spin_once(timeout_sec=0.1)
     reader_node.create_subscription(Imu, "/tip_imu", lambda m: reader.took("/tip_imu", time_to_sec(m.header.stamp)),
                                     QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE))
+    # the plant counts the reader from its announcement: the move starts once the plant's side has matched it
+    mover.spin_until(lambda: reader.heard, "the plant's subscription of /stalled_reader's acknowledgements")
     assert mover.move(goal(0.1, 0.5, 0.2)) == 0  # the reader is never spun: the plant waits, then goes on
     log = plant.log_path.read_text()
     lines = [ln for ln in log.splitlines() if "/stalled_reader" in ln]

@@ -207,6 +207,12 @@ class LockstepReader:
         """The simulated time processed on every stream, s (None before any sample)."""
         return self._acks.processed
 
+    @property
+    def heard(self) -> bool:
+        """Whether a subscriber (a lockstep plant) has matched this reader's acknowledgements: its announcement,
+        kept by the topic's durability, then reaches it (a plant holds only for a reader it has heard)."""
+        return bool(self._pub.get_subscription_count() > 0)
+
     def lost(self, t0: float = float("-inf"), t1: float = float("inf")) -> dict[str, int]:
         """Per checked stream, the samples lost with stamps in (t0, t1] s (streams with none left out)."""
         out = {name: g.lost(t0, t1) for name, g in self.gaps.items()}
