@@ -27,7 +27,7 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
 - ``list``: LIST per move with no calibration. A reference cycle (unshaped at first, then with the kept
   factors) identifies the modes that ring; LIST learns a factor on the lowest, started at its ZV and kept
   within :data:`LIST_BAND` of it (so it stays on the mode that rings), over ZV factors on the other
-  identified modes. After :data:`FACTOR_CYCLES` trials, or when LIST holds, or at the first trial that
+  identified modes. After :data:`FACTOR_CYCLES` trials, or when LIST holds (converged), or at the first trial that
   does not pay (the same rule against the reference cycle, the time against the move's unshaped cycle:
   there is no schedule), the stage is frozen at its best kept trial (or dropped if none paid), and the
   next reference looks for modes still ringing;
@@ -454,18 +454,26 @@ LIST_BAND = 0.1
 
 def _ringing(run: Run, covered: list[float]) -> list[Any]:
     """The arm modes identified in a run's residual that no factor covers (5 %), lowest first (up to three);
-    when none rings (damped below SERVO_ZETA), the lowest uncovered damped one (the position loop's transient:
-    a factor on it is tried too, and kept only if it pays)."""
+    when none rings (damped below SERVO_ZETA), the lowest uncovered damped one, looked for from the commanded end
+    too (the position loop's transient, nearly gone 0.1 s later: a factor on it is tried, and kept only if it
+    pays)."""
     from shaper_nodes.core.identification import IdentificationError, identify
 
-    sel = run.times > run.planned_end + run.measures.delay_s + 0.1
-    try:
-        fits = identify(run.times[sel], run.imu[sel], max_modes=3)
-    except IdentificationError:
-        return []
-    fits = [f for f in fits if f.hz > 2.0 and all(abs(f.hz / h - 1) > 0.05 for h in covered)]
+    def found(skip: float) -> list[Any]:
+        sel = run.times > run.planned_end + run.measures.delay_s + skip
+        try:
+            fits = identify(run.times[sel], run.imu[sel], max_modes=3)
+        except IdentificationError:
+            return []
+        return [f for f in fits if f.hz > 2.0 and all(abs(f.hz / h - 1) > 0.05 for h in covered)]
+
+    fits = found(0.1)  # the modes that ring: after the loop's first 0.1 s
     ringing = sorted((f for f in fits if f.zeta < SERVO_ZETA), key=lambda f: f.omega)
-    return ringing or sorted(fits, key=lambda f: f.omega)[:1]
+    if ringing:
+        return ringing
+    # the loop's transient has decayed to a few % 0.1 s after the commanded end: look from the end itself
+    damped = sorted((f for f in fits + found(0.0) if f.zeta >= SERVO_ZETA), key=lambda f: f.omega)
+    return damped[:1]
 
 
 def _times(a: tuple[Any, Any] | None, b: tuple[Any, Any] | None) -> tuple[Any, Any] | None:
@@ -508,7 +516,9 @@ def list_alone(ctx: Context, cycles: int) -> list[Row]:
                 action = "reference"
                 if modes:
                     lowest = modes[0]
-                    start = ListParams.from_mode(lowest.mode)
+                    zv = ListParams.from_mode(lowest.mode)
+                    lo, hi = ListConfig().a1_bounds  # a heavily damped pole's ZV may ask for more than A1 allows
+                    start = ListParams(min(max(zv.a1, lo), hi), zv.t2)
                     rest = design("zv", [f.mode for f in modes[1:]]) if len(modes) > 1 else None
                     others[entry.key] = None if rest is None else (rest.amplitudes, rest.times)
                     ahead = _times(fixed, others[entry.key])
@@ -536,7 +546,8 @@ def list_alone(ctx: Context, cycles: int) -> list[Row]:
                     kept[entry.key] = used  # paid, and the best so far
                 action = learner.update(run.times, run.imu, run.planned_end, run.end, used).action
                 learning[entry.key] += 1
-                if decision != "learn" or learner.holding or learning[entry.key] >= FACTOR_CYCLES:
+                done = learner.holding or learner.phase == "hold" or learning[entry.key] >= FACTOR_CYCLES
+                if decision != "learn" or done:
                     best = kept.pop(entry.key, None)
                     if best is None:  # no trial paid: the stage is dropped, its modes stay covered
                         ctx.note("list", f"{mv.name}, cycle {c}: no trial of the factors from"
@@ -714,6 +725,11 @@ def _list_goal(rows: list[Row], base: dict[str, Row | None], n: int, floor: floa
               and (b["residual_rms"] <= floor or x["residual_rms"] <= 1.01 * b["residual_rms"])
               for m, b in base.items()) for c in range(1, n + 1)]
     met_at = next((c for c in range(1, n + 1) if all(ok[c - 1:])), None)
+    own = [(m, r, b) for m, b in base.items() if b is not None and "linear_rms" in b
+           and (r := _get(rows, "list", m, n)) is not None and "linear_rms" in r]
+    if floor > 0 and own:  # the measured residual holds the sensor's noise: the arm's own response too
+        out.append("  The arm's own response (servo and vibration parts together, noise-free) against the schedule's:"
+                   + "; ".join(f" {m} {100 * r['linear_rms'] / b['linear_rms']:.0f} %" for m, r, b in own) + ".")
     out.append(f"  Goal (at most the schedule's residual, to 1 %, on every move within {n} cycles; not"
                " corrected: the schedule's residual holds its servo part too):"
                f" {'met' if not missed else 'not met'}"
