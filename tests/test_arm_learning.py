@@ -8,7 +8,7 @@ import json
 import pytest
 
 from reproductions import arm_learning
-from shaper_nodes.core.learning.moves import move_key, store_from_doc
+from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, move_key, store_from_doc
 from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
 from sim_plant_node.arm.task import cycle_moves
 
@@ -58,3 +58,43 @@ def test_a_case_registers_under_its_name():
         assert arm_learning.CASES["test_only"] is case
     finally:
         del arm_learning.CASES["test_only"]
+
+
+def _rows(tmp_path, case, cycles):
+    path = tmp_path / f"{case}.json"
+    assert arm_learning.main(["--cycles", str(cycles), "--cases", case, "--schedule", "modal", "--no-docs",
+                              "--json", str(path), "--out", str(tmp_path / "out")]) == 0
+    return json.loads(path.read_text())["rows"]
+
+
+def test_list_alone_stays_on_the_mode_it_started_from_and_keeps_only_what_pays(tmp_path):
+    rows = _rows(tmp_path, "list", 5)
+    for m in [mv.name for mv in cycle_moves()]:
+        mine = sorted((r for r in rows if r["move"] == m), key=lambda r: r["cycle"])
+        first = mine[0]
+        assert first["action"] == "reference" and first["t2"] is None  # unshaped: the reference
+        start = None
+        for r in mine[1:]:
+            if r["action"] == "reference":  # the kept factors only: never worse than the unshaped move
+                start = None
+                assert r["residual_rms"] < first["residual_rms"]
+                assert r["move_settle_s"] <= first["move_settle_s"] + TIME_TOLERANCE_S
+                continue
+            start = start or r["t2"]  # the stage's first trial is the identified mode's ZV
+            # the learned frequency stays within the band of the mode that rings
+            assert abs(start / r["t2"] - 1.0) <= arm_learning.LIST_BAND + 1e-9
+        # what the move ends with is a kept state: lower residual than unshaped, no slower
+        assert mine[-1]["residual_rms"] < first["residual_rms"]
+        assert mine[-1]["move_settle_s"] <= first["move_settle_s"] + TIME_TOLERANCE_S
+
+
+def test_a_factor_over_the_schedule_that_costs_time_is_not_kept(tmp_path):
+    rows = {(r["move"], r["cycle"]): r for r in _rows(tmp_path, "scheduled_list_factor", 3)}
+    for m in [mv.name for mv in cycle_moves()]:
+        base, trial, after = rows[(m, 1)], rows[(m, 2)], rows[(m, 3)]
+        assert base["t2"] is None and trial["t2"] is not None  # the schedule alone, then a factor
+        slower = trial["move_settle_s"] > base["move_settle_s"] + TIME_TOLERANCE_S
+        if slower or trial["residual_rms"] >= base["residual_rms"]:
+            assert trial["keep"] == "base" and after["t2"] is None  # back to the schedule alone
+        # after the trial the move is never slower than the schedule
+        assert after["move_settle_s"] <= base["move_settle_s"] + TIME_TOLERANCE_S

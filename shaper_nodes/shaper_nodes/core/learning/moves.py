@@ -38,8 +38,8 @@ from .list import ListError, ListLearner
 from .speed import SpeedError, SpeedLearner
 from .state_file import write_state
 
-__all__ = ["KEY_DECIMALS", "MOVES_FORMAT", "MOVES_VERSION", "MoveEntry", "MoveError", "MoveStore", "keep_when_it_pays",
-           "move_key", "store_from_doc"]
+__all__ = ["KEY_DECIMALS", "MOVES_FORMAT", "MOVES_VERSION", "TIME_TOLERANCE_S", "MoveEntry", "MoveError",
+           "MoveStore", "keep_when_it_pays", "move_key", "pays", "store_from_doc"]
 
 #: version of :meth:`MoveStore.to_doc`'s documents
 MOVES_VERSION = 1
@@ -272,26 +272,88 @@ def store_from_doc(doc: Any) -> tuple[MoveStore, dict[str, str]]:
     return store, problems
 
 
-def keep_when_it_pays(entry: MoveEntry, m: float, shaped: bool, learner_best: float | None) -> str:
-    """Whether a move's learned factor pays, after a cycle of residual ``m`` (m/s^2, the learner's measure).
+#: tolerance of the keep rule on a move's move + settle time, s: one sample of the 500 Hz record the settling is
+#: measured on (the flange within 0.05 mm, ``move_settle_s``), so a trial that settles in the same or the next
+#: sample as the base does not count as slower
+TIME_TOLERANCE_S = 0.0021
 
-    The move's unshaped-by-the-learner cycle (``shaped`` False: the base alone, the LIST reference) sets
-    :attr:`MoveEntry.base` (and :attr:`MoveEntry.best`); a cycle with a factor updates ``best``. A factor
-    whose cycle measured more than the base stops the move's learning at the best measured: the learner's
-    best factor if it beat the base (``learner_best``: its best residual, None if none), else the base alone.
+
+def pays(measured: Mapping[str, float], base: Mapping[str, float], time_tolerance_s: float = TIME_TOLERANCE_S) -> bool:
+    """Whether a trial's measures beat a move's base: a lower residual AND a move + settle time no longer.
+
+    Parameters
+    ----------
+    measured, base : mapping
+        ``residual_rms`` (m/s^2) and, where measured, ``move_settle_s`` (s, to 0.05 mm at the flange).
+    time_tolerance_s : float
+        How much longer (s) the trial's move + settle time may be and still count as no longer.
+
+    Returns
+    -------
+    bool
+        ``measured["residual_rms"] < base["residual_rms"]`` and, when both have ``move_settle_s``,
+        ``measured["move_settle_s"] <= base["move_settle_s"] + time_tolerance_s``.
+    """
+    if not measured["residual_rms"] < base["residual_rms"]:
+        return False
+    if "move_settle_s" in measured and "move_settle_s" in base:
+        return bool(measured["move_settle_s"] <= base["move_settle_s"] + time_tolerance_s)
+    return True
+
+
+def keep_when_it_pays(entry: MoveEntry, m: float, shaped: bool, learner_best: float | None = None,
+                      move_settle_s: float | None = None, time_tolerance_s: float = TIME_TOLERANCE_S) -> str:
+    """Whether a move's learned correction pays, after a cycle of residual ``m`` (m/s^2) and, where measured,
+    move + settle time ``move_settle_s`` (s, the flange within 0.05 mm).
+
+    The rule, weighing residual and time:
+
+    - the move's cycle without the learned correction (``shaped`` False: the base alone, e.g. the schedule;
+      the LIST reference) sets :attr:`MoveEntry.base` and :attr:`MoveEntry.best` to its measures;
+    - a cycle with a correction **pays** (:func:`pays`) when its residual is lower than the base's AND its
+      move + settle time is not longer than the base's by more than ``time_tolerance_s`` (time is weighed
+      only when both cycles measured it); a paying cycle with a lower residual than :attr:`MoveEntry.best`
+      becomes the best (the best *kept* state);
+    - a cycle that does not pay stops the move's learning at its best kept state: ``"best"`` if a
+      correction has paid (:attr:`MoveEntry.best` is not the base's measures), else ``"base"`` (the base
+      alone). So a correction is never kept that makes the move slower or leaves more residual than the
+      base, and at most one cycle per move (the failed trial) is worse than the base.
+
+    Parameters
+    ----------
+    entry : MoveEntry
+        The move; its ``base`` and ``best`` are updated.
+    m : float
+        The cycle's residual, m/s^2 (the same measure for every cycle of the move).
+    shaped : bool
+        Whether the cycle ran with the learned correction.
+    learner_best : float, optional
+        The learner's best residual (m/s^2). Used only when time is not measured (``move_settle_s`` None)
+        and no paying cycle is recorded in ``best`` (e.g. a state saved before ``best`` was kept): then
+        ``"best"`` if it beat the base.
+    move_settle_s : float, optional
+        The cycle's move + settle time, s (None: not measured, the rule weighs the residual alone).
+    time_tolerance_s : float
+        Tolerance on the move + settle time, s (:data:`TIME_TOLERANCE_S`: one sample of 500 Hz).
 
     Returns
     -------
     str
-        ``"learn"`` (go on), ``"best"`` (hold at the learner's best factor) or ``"base"`` (the base alone).
+        ``"learn"`` (go on), ``"best"`` (hold at the best kept correction) or ``"base"`` (the base alone).
     """
     measured = {"residual_rms": float(m)}
+    if move_settle_s is not None:
+        measured["move_settle_s"] = float(move_settle_s)
     if not shaped:
-        entry.base = entry.best = measured
+        entry.base, entry.best = measured, dict(measured)
         return "learn"
-    if entry.best is None or m < entry.best["residual_rms"]:
-        entry.best = measured
-    base = entry.base["residual_rms"] if entry.base is not None else math.inf
-    if not m > base:
+    if entry.base is None:  # nothing to judge against yet
         return "learn"
-    return "best" if learner_best is not None and learner_best < base else "base"
+    if pays(measured, entry.base, time_tolerance_s):
+        if entry.best is None or measured["residual_rms"] < entry.best["residual_rms"]:
+            entry.best = measured
+        return "learn"
+    if entry.best is not None and entry.best != entry.base:
+        return "best"
+    base = entry.base["residual_rms"]
+    return "best" if move_settle_s is None and learner_best is not None and learner_best < base else "base"

@@ -138,6 +138,27 @@ class ListParams:
         except ShaperError:
             return None
 
+    def t2_band(self, band: float) -> tuple[float, float]:
+        """T2 bounds (s) that keep the learned frequency within ``band`` of these parameters' own.
+
+        A two-impulse pair cancels the damped frequency 1 / (2 T2); bounding T2 to
+        [T2 / (1 + band), T2 / (1 - band)] keeps that frequency within +-``band`` (a fraction) of the
+        start's. Started from a mode that rings (the identifier's or the schedule's lowest mode), the
+        learner then stays on that mode: on a multi-mode plant the single-mode measure M can otherwise
+        be lowered by a pair between two modes that covers neither (on the arm, a factor started at
+        12.15 Hz drifted to 14-15 Hz, docs/results/arm_learning.md).
+
+        Raises
+        ------
+        ListError
+            ``band`` not in (0, 1), or the parameters invalid.
+        """
+        self.check()
+        b = finite_value("band", band)
+        if not 0.0 < b < 1.0:
+            raise ListError(f"band must be in (0, 1), got {band!r}")
+        return self.t2 / (1.0 + b), min(self.t2 / (1.0 - b), MAX_DURATION / 2.0)
+
     def shaper(self, structure: str = "zv2") -> Shaper:
         """The impulse sequence as a ``custom`` :class:`Shaper` (design mode: :meth:`mode`)."""
         amps, times = self.impulses(structure)
