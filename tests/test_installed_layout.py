@@ -55,13 +55,18 @@ def test_demo_executable_help():
 
 
 def test_calibrate_prints_its_plan_without_moving_anything(tmp_path, domain_id):
-    """Without --execute, nothing to talk to is needed: the plan (base and home poses given) and its duration."""
+    """Without --execute, nothing to talk to is needed: the plan (base and home poses given) and its duration.
+
+    No joint states come on the test's own domain, so calibrate waits ``timeouts.data`` for them before it plans
+    from the home pose: 2 s here instead of the installed 30 s (the wait's end, not its length, is the point)."""
     config = pathlib.Path(get_package_share_directory("shaper_nodes")) / "config" / "calibrate.yaml"
     out = subprocess.run([str(executable("shaper_nodes", "calibrate")), "--out", str(tmp_path / "cal"),
-                          "--ros-args", "--params-file", str(config)], capture_output=True, text=True, timeout=60,
+                          "--ros-args", "--params-file", str(config), "-p", "timeouts.data:=2.0"],
+                         capture_output=True, text=True, timeout=60,
                          env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)}, cwd=tmp_path)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "calibration plan: 9 poses" in out.stdout and "add --execute" in out.stdout
+    assert "the plan below starts at the home pose" in out.stdout  # it waited for joint states, and none came
     assert not (tmp_path / "cal").exists()
 
 
