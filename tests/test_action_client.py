@@ -18,7 +18,7 @@ from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionClient, ActionServer, GoalResponse
 from rclpy.executors import SingleThreadedExecutor
 
-from shaper_nodes.ros.action_client import ResilientActionClient
+from shaper_nodes.ros.action_client import GoalFeedback, ResilientActionClient
 
 pytestmark = pytest.mark.integration
 ACTION = "/lossy_controller/follow_joint_trajectory"
@@ -63,13 +63,17 @@ class Rig:
     """A server node and a client node in one executor."""
 
     def __init__(self, ctx: Any, *, accept: bool = True, lose_goal: int = 0, lose_result: int = 0,
-                 give_up_after: float | None = None) -> None:
+                 give_up_after: float | None = None, feedback: int = 0) -> None:
         self.server_node = rclpy.create_node("lossy_controller", context=ctx)
         self.client_node = rclpy.create_node("resilient_client", context=ctx)
         self.executed = 0
 
         def execute(handle: Any) -> Any:
             self.executed += 1
+            for k in range(1, feedback + 1):  # stamped k s, then the result at once
+                fb = FollowJointTrajectory.Feedback()
+                fb.header.stamp.sec = k
+                handle.publish_feedback(fb)
             handle.succeed()
             return FollowJointTrajectory.Result(error_code=0, error_string=f"done {self.executed}")
 
@@ -169,6 +173,29 @@ def test_without_losses_it_is_the_plain_client(rig):
         assert res.status == GoalStatus.STATUS_SUCCEEDED and res.result.error_string == f"done {k}"
     assert r.client.resent == 0 and r.client.recovered == 0 and r.lossy.lost == 0
     assert isinstance(r.client, ActionClient)
+
+
+def test_a_goals_feedback_is_kept_when_its_result_comes_first(rig):
+    """rclpy drops a goal's feedback callback when its result is handled, and a busy executor can handle a
+    short goal's result before its feedback: GoalFeedback keeps every stamp of the goal it follows, in order,
+    whatever came first, and nothing of a goal it does not follow."""
+    r = rig(feedback=5)
+    follow = GoalFeedback(r.client_node, FollowJointTrajectory, ACTION)
+    other = r.client.send_goal_async(Goal())  # not followed
+    r.spin_until(other.done, "the first goal's handle")
+    r.result(other.result())
+    goal_id, stamps = follow.new_goal()
+    handed: list[float] = []
+    future = r.client.send_goal_async(Goal(), feedback_callback=lambda m: handed.append(m.feedback.header.stamp.sec),
+                                      goal_uuid=goal_id)
+    r.spin_until(future.done, "the goal's handle")
+    res = r.result(future.result())
+    assert res.status == GoalStatus.STATUS_SUCCEEDED
+    r.spin_until(lambda: len(stamps) == 5, "the five feedbacks")
+    assert stamps == [1.0, 2.0, 3.0, 4.0, 5.0]
+    assert len(handed) <= 5  # (rclpy's own callback: whatever it was handed before the result)
+    follow.forget(goal_id)
+    assert follow.new_goal()[1] == []
 
 
 def test_a_resend_period_that_is_not_positive_is_refused(ros_context):

@@ -101,7 +101,7 @@ class Calibrator:
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu, JointState
 
-        from shaper_nodes.ros.action_client import ResilientActionClient
+        from shaper_nodes.ros.action_client import GoalFeedback, ResilientActionClient
         from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader, subscribe_draining
 
         self.node, self.executor, self.p = node, executor, params
@@ -128,6 +128,7 @@ class Calibrator:
         self._js_index: list[int] = []
         subscribe_draining(node, JointState, self.js_topic, self._on_joint_states, STREAM_QOS)
         self.action = ResilientActionClient(node, FollowJointTrajectory, params.action)
+        self.feedback = GoalFeedback(node, FollowJointTrajectory, params.action)
         # made now, so that a monitor's subscription has matched by the time a sensor fault is reported
         self.diagnostics = Diagnostics(node)
         self._fjt = FollowJointTrajectory
@@ -263,13 +264,17 @@ class Calibrator:
         # the accelerometer matched before the arm moves: a simulator in lockstep runs a goal in a blink, and the
         # samples published before the match never come (the rest after the goal publishes none)
         self.spin_until(lambda: self._imu_sub.get_publisher_count() > 0, server, f"a publisher of {self.imu_topic}")
-        stamps: list[float] = []
+        # the goal's feedback on a subscription of calibrate's own: rclpy's client drops what it has not handed
+        # over when the result comes, and the first stamp is the start (GoalFeedback)
+        goal_id, stamps = self.feedback.new_goal()
+        try:
+            return self._run_goal(goal, goal_id, stamps, what)
+        finally:
+            self.feedback.forget(goal_id)
 
-        def on_feedback(m: Any) -> None:
-            stamps.append(time_to_sec(m.feedback.header.stamp))
-
+    def _run_goal(self, goal: Any, goal_id: Any, stamps: list[float], what: str) -> float:
         self.goal_what = what
-        sent = self.sent = self.action.send_goal_async(goal, feedback_callback=on_feedback)
+        sent = self.sent = self.action.send_goal_async(goal, goal_uuid=goal_id)
         self._await_answer(sent, what)
         self.sent = None
         handle = sent.result()
@@ -287,6 +292,9 @@ class Calibrator:
                 res.status, f"status {res.status}")
             raise Aborted(f"the controller {state} the goal of {what}: error_code {res.result.error_code}"
                           f" {res.result.error_string!r}")
+        if not stamps:  # the result came first: the feedback waits behind a batch of samples (a deep queue)
+            with contextlib.suppress(Aborted):
+                self.spin_until(lambda: bool(stamps), float(self.p.timeouts.data), "")
         if not stamps:
             raise Aborted(f"no feedback from the controller for {what}: its start time is unknown")
         return min(stamps)

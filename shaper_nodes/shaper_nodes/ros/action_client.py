@@ -46,6 +46,8 @@ from rclpy.action.client import ClientGoalHandle
 from rclpy.clock import Clock, ClockType
 from rclpy.task import Future
 
+from .qos import ACTION_CLIENT_QOS
+
 #: goal statuses remembered (the newest), to recognise goals accepted without a response
 MAX_STATUSES = 1024
 #: the goal states after which the server has a result
@@ -89,14 +91,16 @@ class ResilientActionClient(ActionClient):
         s without an answer after which a goal request or a result request is sent again (steady
         clock, so it runs while simulated time stands still).
     **kwargs
-        Passed to :class:`~rclpy.action.ActionClient` (QoS profiles, callback group).
+        Passed to :class:`~rclpy.action.ActionClient` (QoS profiles, callback group); the QoS profiles not given
+        are the suite's (:data:`~shaper_nodes.ros.qos.ACTION_CLIENT_QOS`: queued goal, cancel and result calls, a
+        deep feedback queue).
     """
 
     def __init__(self, node: Any, action_type: Any, action_name: str, *, resend_period: float = 2.0,
                  give_up_after: float | None = None, **kwargs: Any) -> None:
         if not resend_period > 0:
             raise ValueError(f"resend_period must be positive, got {resend_period!r}")
-        super().__init__(node, action_type, action_name, **kwargs)
+        super().__init__(node, action_type, action_name, **{**ACTION_CLIENT_QOS, **kwargs})
         self.resend_period = float(resend_period)
         self.give_up_after = None if give_up_after is None else float(give_up_after)
         #: goal requests given up (no answer within give_up_after); a late acceptance of one is cancelled
@@ -291,3 +295,54 @@ class ResilientActionClient(ActionClient):
         self._timer.cancel()
         self._node.destroy_timer(self._timer)
         super().destroy()
+
+
+class GoalFeedback:
+    """The header stamps of the feedback of chosen goals, kept after their results arrive.
+
+    rclpy's :class:`~rclpy.action.ActionClient` drops a goal's feedback callback as soon as the goal's
+    result response is handled, and hands feedback over one message per executor wake-up: a client
+    whose executor is busy (a batch of samples) can be handed the result of a short goal before any of
+    its feedback, which is then discarded. A caller that needs a goal's feedback, e.g. the controller's
+    time at the goal's start (the first feedback's stamp), reads it here instead: a subscription of its
+    own to the action's feedback topic (``<action>/_action/feedback``, the action's interface), on the
+    deep :data:`~shaper_nodes.ros.qos.FEEDBACK_QOS` queue, which keeps every stamp of the goals it
+    follows until :meth:`forget`.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The client's node (its executor takes the feedback).
+    action_type : action class
+        The action's type (its feedback carries a ``header``, as FollowJointTrajectory's does).
+    action_name : str
+        The action's name, e.g. ``/joint_trajectory_controller/follow_joint_trajectory``.
+    """
+
+    def __init__(self, node: Any, action_type: Any, action_name: str) -> None:
+        from .qos import FEEDBACK_QOS
+
+        self._stamps: dict[bytes, list[float]] = {}
+        self._sub = node.create_subscription(action_type.Impl.FeedbackMessage,
+                                             action_name.rstrip("/") + "/_action/feedback", self._on_feedback,
+                                             FEEDBACK_QOS)
+
+    def _on_feedback(self, msg: Any) -> None:
+        stamps = self._stamps.get(bytes(msg.goal_id.uuid))
+        if stamps is not None:
+            stamp = msg.feedback.header.stamp
+            stamps.append(stamp.sec + stamp.nanosec * 1e-9)
+
+    def new_goal(self) -> tuple[Any, list[float]]:
+        """A new goal id (a unique_identifier_msgs/UUID, to give ``send_goal_async`` as ``goal_uuid``) whose
+        stamps are kept from now on, and the list they are appended to, in arrival order."""
+        import uuid
+
+        from unique_identifier_msgs.msg import UUID
+
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        return goal_id, self._stamps.setdefault(bytes(goal_id.uuid), [])
+
+    def forget(self, goal_id: Any) -> None:
+        """Stop keeping goal ``goal_id``'s stamps."""
+        self._stamps.pop(bytes(goal_id.uuid), None)
