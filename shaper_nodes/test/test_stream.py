@@ -114,7 +114,7 @@ def test_an_output_beyond_the_limits_restarts_the_filter_at_the_last_command_sen
 def test_a_non_finite_output_is_refused_and_the_filter_restarts():
     s = stream()
     s.shape_array([0.0, 0.0])
-    s.array_filter.process_values = lambda v, owned=False: [math.nan, 0.0]  # type: ignore[method-assign]
+    s.array_filter.process_values = lambda v: [math.nan, 0.0]  # type: ignore[method-assign]
     with refused("non_finite", "would not be finite"):
         s.shape_array([0.0, 0.0])
     del s.array_filter.process_values
@@ -292,7 +292,7 @@ def test_retime_needs_retiming_filters():
 def test_the_lock_is_held_by_every_call_on_the_filters():
     s = stream()
     seen = []
-    s.array_filter.process_values = lambda v, owned=False: (seen.append(s.lock.locked()), v)[1]  # type: ignore[method-assign]
+    s.array_filter.process_values = lambda v: (seen.append(s.lock.locked()), v)[1]  # type: ignore[method-assign]
     s.shape_array([0.0, 0.0])
     switch = s.array_filter.switch
     s.array_filter.switch = lambda fir: (seen.append(s.lock.locked()), switch(fir))[1]  # type: ignore[method-assign]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import importlib.metadata
 import inspect
+import queue
+import time
 
 import pytest
 import rclpy
@@ -13,6 +15,7 @@ from rclpy.event_handler import EventHandler, SubscriptionEventCallbacks
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from std_msgs.msg import Float64MultiArray
@@ -104,10 +107,6 @@ def test_a_qos_event_of_a_subscription_is_served_by_the_loop(context):
     """The event handlers the loop adds and checks by their handles still get their events: a best-effort
     publisher on a reliable subscription's topic (over real DDS) reaches the subscription's incompatible-QoS
     callback, and the messages of a compatible publisher still reach the message callback."""
-    import queue
-
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-
     node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
                 parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
     events: queue.Queue = queue.Queue()
@@ -123,10 +122,8 @@ def test_a_qos_event_of_a_subscription_is_served_by_the_loop(context):
         info = events.get(timeout=30.0)  # a state: the event, with a generous bound
         assert info.total_count >= 1
         pub = peer.create_publisher(Float64MultiArray, "take_probe", reliable)
-        deadline = 30.0
-        import time
-        start = time.monotonic()
-        while got.empty() and time.monotonic() - start < deadline:  # until the match: publish, wait for a message
+        deadline = time.monotonic() + 30.0
+        while got.empty() and time.monotonic() < deadline:  # until matched: publish, wait for a message (a state)
             pub.publish(Float64MultiArray(data=[1.0, 2.0]))
             with contextlib.suppress(queue.Empty):
                 got.put(got.get(timeout=0.2))

@@ -481,9 +481,8 @@ class _ChannelShaper:
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         raise NotImplementedError
 
-    def process_values(self, values: list[float], owned: bool = False) -> list[float]:
-        """:meth:`process` for one sample given as a list of ``channels`` floats; returns a list. ``owned``: the
-        filter may keep ``values`` (the caller does not change it after)."""
+    def process_values(self, values: list[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list of ``channels`` floats; returns a list."""
         if len(values) != self.channels:
             raise ValueError(f"expected {self.channels} values, got {len(values)}")
         out: list[float] = self.process(np.array(values, dtype=float)).tolist()
@@ -611,12 +610,11 @@ class StreamingShaper(_ChannelShaper):
             self._offset_tiled = (offset, tiled)
         return tiled[:size]
 
-    def process_values(self, values: list[float], owned: bool = False) -> list[float]:
+    def process_values(self, values: list[float]) -> list[float]:
         """:meth:`process` for one sample given as a list of ``channels`` floats; returns the shaped sample as
-        a list (``owned``: the filter may keep ``values``, which the caller does not change after). In the usual
-        case (started, one filter, no change settling) it runs on Python floats (:meth:`_Stage.step_values`),
-        cheaper than numpy's calls on a few values; equal to :meth:`process` to rounding (tests hold them to
-        1e-12)."""
+        a list. In the usual case (started, one filter, no change settling) it runs on Python floats
+        (:meth:`_Stage.step_values`), cheaper than numpy's calls on a few values; equal to :meth:`process`
+        to rounding (tests hold them to 1e-12)."""
         if len(values) != self.channels:
             raise ValueError(f"expected {self.channels} values, got {len(values)}")
         stages = self._stages
@@ -627,7 +625,7 @@ class StreamingShaper(_ChannelShaper):
         if offset is not self._offset:  # (the offset array is replaced, never changed in place)
             offset, offset_list = self._offset_list = (self._offset, self._offset.tolist())
         y = stages[0].step_values(values, offset_list)
-        self._last = values if owned else list(values)  # (the caller's list may change unless owned)
+        self._last = list(values)  # (the caller's list may change)
         return y
 
     def _sample(self, x: np.ndarray) -> np.ndarray:

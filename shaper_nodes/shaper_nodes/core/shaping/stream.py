@@ -172,8 +172,8 @@ class CommandStream:
         return self.shape_values(data.tolist() if isinstance(data, array.array) else list(data))
 
     def shape_values(self, values: list[float]) -> list[float]:
-        """:meth:`shape_array` for a sample given as a new list of Python floats, which the stream keeps (the
-        caller makes it and does not change it after; the streamed sample's path, one copy fewer)."""
+        """:meth:`shape_array` for a sample given as a new list of Python floats (the streamed sample's path:
+        no conversion)."""
         with self.lock:
             lo, hi = self._bounds if self._bounds_for == self.max_abs else self.input_bounds
             # all(map(le, ...)) stops at the first pair out of order, in C; a NaN compares False
@@ -182,7 +182,7 @@ class CommandStream:
                 x = finite_array("data", values, size=self.joints, limit=self.max_abs)
                 self.limits.check("positions", "the command", x)
                 values = x.tolist()
-            out = self.array_filter.process_values(values, owned=True)
+            out = self.array_filter.process_values(values)
             lo, hi = self.limits.sample_bounds
             if not (all(map(le, lo, out)) and all(map(le, out, hi))):
                 self._check_shaped({"array": (self.array_filter, np.array(values), "positions")},
