@@ -7,9 +7,12 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
 ``docs/results/benchmarks.md``:
 
 * :mod:`benchmarks.latency`: round-trip latency (driver -> node -> driver) and CPU share of the
-  shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`).
+  shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`) and the floor
+  (the same echo's raw bytes on the shaper's take loop, ``echo_node --take``).
 * :mod:`benchmarks.callback_parts` (run on its own, not by ``./run bench``): where a streamed message's
   time goes inside the echo and shaper nodes (wake-up, callback and its parts), timed in their processes.
+* :mod:`benchmarks.hop_work` (run on its own): the shaper hop's own work per message (the array callback's
+  read, rules, FIR and write) in one process, hot; ``--source`` times another checkout's code, for A B A B.
 * :mod:`benchmarks.raw_path` (run on its own): the array hop's conversions in one process, message
   objects against the serialized bytes the shaper node reads and writes (no DDS).
 * :mod:`benchmarks.raw_trajectory` (run on its own): the same for the stream topic's JointTrajectory.

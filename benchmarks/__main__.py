@@ -94,18 +94,21 @@ def _ratios(runs: list[dict], base: dict) -> list[dict]:
 
 
 def run_latency(args: argparse.Namespace) -> dict:
-    """The latency measurements (echo baseline, shaper none, shaper ZVD) and their ratios; unless
-    ``--skip-hog``, echo and shaper ZVD again, each with a busy-loop process on one core (the
-    same load for both), and their ratios."""
+    """The latency measurements (echo baseline, the floor: the echo on the take loop, shaper none, shaper ZVD)
+    and their ratios; unless ``--skip-hog``, echo, floor and shaper ZVD again, each with a busy-loop process on
+    one core (the same load for all), and their ratios."""
     from .latency import CpuHog, echo_target, measure_interleaved, shaper_target
 
     zvd = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03,
            "discretization": "split"}
-    groups = [(False, [echo_target(),
+    # the floor: the echo's raw bytes on the shaper's take loop, a Python node that does no work on its path
+    floor = ("/bench/echo_take_in", "/bench/echo_take_out")
+    groups = [(False, [echo_target(), echo_target(*floor, take=True),
                        shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}),
                        shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)])]
     if not args.skip_hog:
-        groups.append((True, [echo_target(), shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)]))
+        groups.append((True, [echo_target(), echo_target(*floor, take=True),
+                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)]))
     rounds = max(1, round(args.seconds / args.turn)) if args.turn > 0 else 1
     runs: list[dict] = []
     hog_runs: list[dict] = []
@@ -235,6 +238,11 @@ def _module(name: str) -> Any:
 # ----------------------------------------------------------------- the one summary table
 #: goals of issue 34 (Performance), shown beside the figures they concern (never checked: figures, not pass/fail)
 GOALS = {
+    "p50": "<= 0.5x echo (issue 34; out of reach: corrected, <= 1.1x the floor)",
+    "p99": "<= 0.75x echo",
+    "cpu_per_msg": "<= 0.5x echo",
+    # the corrected goal, against the floor of the same run (docs/results/benchmarks.md, "The floor of the hop")
+    "p50_floor": "<= 1.1x the floor (corrected goal)",
     "fir_blocks": ">= 5x lfilter",
     "fir_sample": "<= 5 us",
     "scheduler_cpu": "<= 1.1x idle",
@@ -319,16 +327,22 @@ def _latency_rows(lat: dict) -> list[dict[str, Any]]:
         if not runs:
             continue
         base = runs[0]
+        floor = next((r for r in runs if r["label"].startswith("echo, take loop")), None)
         for r in runs[1:]:
             zvd = "zvd" in r["label"]
             for key, label, unit, goal in (
                     ("lost", "lost", "messages", "0"),
-                    ("p50_us", "p50", "us", "<= 0.5x echo"),
-                    ("p99_us", "p99", "us", "<= 0.75x echo"),
+                    ("p50_us", "p50", "us", GOALS["p50"]),
+                    ("p99_us", "p99", "us", GOALS["p99"]),
                     ("node_cpu_pct", "CPU", "% of a core", ""),
-                    ("node_cpu_us_per_msg", "CPU per message", "us", "<= 0.5x echo")):
+                    ("node_cpu_us_per_msg", "CPU per message", "us", GOALS["cpu_per_msg"])):
                 rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{base['label']} {label}", base[key],
                                  goal=goal if zvd else ""))
+            if floor is not None and r is not floor:  # the shaper against the floor of the same run
+                for key, label, unit in (("p50_us", "p50", "us"), ("p99_us", "p99", "us"),
+                                         ("node_cpu_us_per_msg", "CPU per message", "us")):
+                    rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{floor['label']} {label}",
+                                     floor[key], goal=GOALS["p50_floor"] if zvd and key == "p50_us" else ""))
     return rows
 
 

@@ -3,9 +3,9 @@
 ``python -m benchmarks.callback_parts [--seconds S]`` runs the echo node's pattern and the shaper
 node (ZVD 8 Hz, 7 joints, 1 kHz) at once, each in a process of its own started through this module,
 and drives them in turns (:func:`benchmarks.latency.measure_interleaved`). In the node's process it
-wraps the callback and, for the shaper, its parts (``_arrived``, ``_shape_array``, the filter's
-``process_values``, the publish, ``_count_forwarded``, the codec's ``decode`` and ``encode`` of the serialized
-messages) with wall-clock timers, and prints per node:
+wraps the callback and, for the shaper, its parts (``_arrived``, ``_shape_values``, the filter's
+``process_values``, the publish, ``_count_forwarded``, the codec's ``read_sample`` and ``write_sample`` of the
+serialized messages, or its ``decode`` and ``encode`` when those read them) with wall-clock timers, and prints per node:
 
 ``wake``
     from the middleware's reception of the message (its ``received_timestamp``) to the callback's start:
@@ -37,9 +37,12 @@ import numpy as np
 
 #: the shaper's parts timed in the node: (name in the results, its module, class and method)
 SHAPER_PARTS = (("_arrived", "shaper_nodes.ros.stream_watch", "StreamWatch", "arrived"),
-                ("_shape_array", "shaper_nodes.core.shaping.stream", "CommandStream", "shape_array"),
+                ("_shape_values", "shaper_nodes.core.shaping.stream", "CommandStream", "shape_values"),
                 ("_count_forwarded", "shaper_nodes.ros.stream_watch", "StreamWatch", "count_forwarded"),
-                # the array input's serialized bytes read and the answer's written (ros/raw_stream.py)
+                # the array input's serialized bytes read and the answer's written (ros/raw_stream.py): one sample
+                # of the last layout by read_sample / write_sample, anything else by decode / encode
+                ("codec.read_sample", "shaper_nodes.recordings.cdr_arrays", "Float64ArrayCodec", "read_sample"),
+                ("codec.write_sample", "shaper_nodes.recordings.cdr_arrays", "Float64ArrayCodec", "write_sample"),
                 ("codec.decode", "shaper_nodes.recordings.cdr_arrays", "Float64ArrayCodec", "decode"),
                 ("codec.encode", "shaper_nodes.recordings.cdr_arrays", "Float64ArrayCodec", "encode"))
 ZVD = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03, "discretization": "split"}

@@ -252,11 +252,21 @@ def test_process_values_takes_one_sample_of_the_filters_channels(cls):
 
 
 @pytest.mark.parametrize("k", [1, 2, 5, 18, 32, 33, 60])
-def test_tap_sums_written_out_are_the_loop_over_the_taps_exactly(k):
-    """The one-sample path's written-out sum (up to UNROLLED_TAPS taps) adds in the loop's order: equal bit for bit."""
-    from shaper_nodes.core.shaping.fir import UNROLLED_TAPS, _tap_sum, _tap_sum_loop
+def test_tap_steps_written_out_are_the_loop_over_the_taps_exactly(k):
+    """The one-sample path's written-out step (up to UNROLLED_TAPS taps) writes the deviation to the ring's row and
+    adds in the loop's order: equal bit for bit, the ring alike."""
+    from shaper_nodes.core.shaping.fir import UNROLLED_TAPS, _tap_step, _tap_step_loop
 
     rng = np.random.default_rng(k)
-    gains, rows, offset = rng.normal(size=k).tolist(), rng.normal(size=(k, 7)).tolist(), rng.normal(size=7).tolist()
-    assert _tap_sum(k)(gains, rows, offset) == _tap_sum_loop(gains, rows, offset)
-    assert (_tap_sum(k) is _tap_sum_loop) == (k > UNROLLED_TAPS)
+    size = k + 3
+    gains, offset = rng.normal(size=k).tolist(), rng.normal(size=7).tolist()
+    values, origin = rng.normal(size=7).tolist(), rng.normal(size=7).tolist()
+    taps = [int(t) for t in rng.permutation(size)[:k]]
+    p = taps[0]  # the row written is tapped too (delay 0), as in a FIR
+    rows_a, rows_b = rng.normal(size=(size, 7)).tolist(), None
+    rows_b = [list(r) for r in rows_a]
+    out_a = _tap_step(k)(values, origin, rows_a, taps, p, gains, offset)
+    out_b = _tap_step_loop(values, origin, rows_b, taps, p, gains, offset)
+    assert out_a == out_b and rows_a == rows_b
+    assert rows_a[p] == [v - o for v, o in zip(values, origin, strict=True)]
+    assert (_tap_step(k) is _tap_step_loop) == (k > UNROLLED_TAPS)

@@ -2,20 +2,25 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import inspect
+import queue
+import time
 
 import pytest
 import rclpy
 from rclpy.context import Context
+from rclpy.event_handler import EventHandler, SubscriptionEventCallbacks
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from std_msgs.msg import Float64MultiArray
 
-from shaper_nodes.ros.take_loop import INTERNALS, TakeLoop
+from shaper_nodes.ros.take_loop import EVENT_HANDLE, INTERNALS, TakeLoop
 
 #: the rclpy the loop was written and measured against (requirements.lock)
 LOCKED_RCLPY = "7.1.6"
@@ -35,8 +40,8 @@ def test_the_rclpy_internals_the_take_loop_uses_are_there(context):
     assert version == LOCKED_RCLPY, f"rclpy {version}, the take loop was checked against {LOCKED_RCLPY}"
     for name in INTERNALS:
         assert hasattr(_rclpy, name), f"rclpy's implementation has no {name}"
-    for method in ("clear_entities", "add_subscription", "add_guard_condition", "wait", "get_ready_entities",
-                   "destroy_when_not_in_use"):
+    for method in ("clear_entities", "add_subscription", "add_guard_condition", "add_event", "is_ready", "wait",
+                   "get_ready_entities", "destroy_when_not_in_use"):
         assert hasattr(_rclpy.WaitSet, method), f"_rclpy.WaitSet has no {method}"
     assert hasattr(_rclpy.GuardCondition, "trigger_guard_condition")
     assert hasattr(_rclpy.Subscription, "take_message"), "_rclpy.Subscription has no take_message"
@@ -45,6 +50,10 @@ def test_the_rclpy_internals_the_take_loop_uses_are_there(context):
     try:
         sub = node.create_subscription(Float64MultiArray, "take_probe", lambda m, i: None, 1, raw=True)
         assert sub._callback_type is Subscription.CallbackType.WithMessageInfo
+        handlers = [w for w in node.waitables if type(w) is EventHandler]
+        assert handlers, "a subscription has no rclpy EventHandler any more"
+        assert all(hasattr(w, EVENT_HANDLE) and hasattr(w, "_event_index") for w in handlers), \
+            f"rclpy's EventHandler keeps its handle elsewhere than {EVENT_HANDLE} or has no _event_index"
         assert sub.handle.take_message(Float64MultiArray, True) is None  # nothing sent: None, not a tuple
         ws = _rclpy.WaitSet(1, 1, 0, 0, 0, 0, context.handle)
         ws.clear_entities()
@@ -92,3 +101,35 @@ def test_a_shutdown_of_the_context_ends_the_loop(context):
     context.try_shutdown()
     loop.join(10.0)  # a state: the thread's end, with a generous bound
     assert not loop.running, "the take loop kept waiting after its context was shut down"
+
+
+def test_a_qos_event_of_a_subscription_is_served_by_the_loop(context):
+    """The event handlers the loop adds and checks by their handles still get their events: a best-effort
+    publisher on a reliable subscription's topic (over real DDS) reaches the subscription's incompatible-QoS
+    callback, and the messages of a compatible publisher still reach the message callback."""
+    node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+    events: queue.Queue = queue.Queue()
+    got: queue.Queue = queue.Queue()
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(Float64MultiArray, "take_probe", got.put, reliable,
+                             event_callbacks=SubscriptionEventCallbacks(incompatible_qos=events.put))
+    loop = TakeLoop(node, "loop").start()
+    peer = Node("take_peer", context=context)
+    try:
+        peer.create_publisher(Float64MultiArray, "take_probe",
+                              QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        info = events.get(timeout=30.0)  # a state: the event, with a generous bound
+        assert info.total_count >= 1
+        pub = peer.create_publisher(Float64MultiArray, "take_probe", reliable)
+        deadline = time.monotonic() + 30.0
+        while got.empty() and time.monotonic() < deadline:  # until matched: publish, wait for a message (a state)
+            pub.publish(Float64MultiArray(data=[1.0, 2.0]))
+            with contextlib.suppress(queue.Empty):
+                got.put(got.get(timeout=0.2))
+        assert list(got.get(timeout=1.0).data) == [1.0, 2.0]
+        assert loop.running
+    finally:
+        loop.stop(timeout=10.0)
+        peer.destroy_node()
+        node.destroy_node()

@@ -202,6 +202,11 @@ class Float64ArrayCodec:
         self._sizes: tuple[int, ...] = ()
         self._unpack: struct.Struct | None = None
         self._n = 0
+        # the single-sample fast path (read_sample, write_sample): the layout's bytes up to data_offset (as read,
+        # as written), of the data count, where the count's bytes start, the bytes a message needs, the structs that
+        # read (data_offset, values...) from data_offset on and write the whole answer; None when the last
+        # layout is not one sample of at most SMALL values
+        self._sample: tuple[bytes, bytes, bytes, int, int, struct.Struct, struct.Struct] | None = None
 
     def decode(self, raw: Any) -> tuple[tuple[int, ...], tuple[float, ...] | np.ndarray]:
         """The layout's sizes and the data of ``raw``: a tuple of floats for up to :attr:`SMALL` values, a
@@ -218,10 +223,37 @@ class Float64ArrayCodec:
             self._sizes, self._n = p.layout.sizes, p.count
             self._unpack = struct.Struct(f"<{p.count}d") if p.count <= self.SMALL else None
             self._end = data_at + 8 * p.count
+            pad = data_at - count_end
+            # (the answer's bytes up to data_offset are the new buffer's: zero padding, not the input's)
+            self._sample = None if self._unpack is None or len(p.layout.dims) > 1 else (
+                self._head, bytes(self._out._buffer[:offset_at]), self._count, offset_at + 4, self._end,
+                struct.Struct(f"<I{data_at - offset_at - 4}x{p.count}d"),
+                struct.Struct(f"<{offset_at}sII{pad}x{p.count}d"))
         self._out._buffer[offset_at:offset_at + 4] = raw[offset_at:offset_at + 4]  # type: ignore[union-attr]
         if self._unpack is not None:
             return self._sizes, self._unpack.unpack_from(raw, data_at)
         return self._sizes, np.frombuffer(raw, dtype="<f8", count=self._n, offset=data_at)
+
+    def read_sample(self, raw: Any) -> tuple[Any, ...] | None:
+        """``(data_offset, value, ...)`` of ``raw`` when it is ``bytes`` of the last layout decoded and that layout
+        is one sample (at most one dimension) of at most :attr:`SMALL` values: the streamed sample's path, one
+        comparison of the layout's bytes and one unpack (no slice, no parse). None otherwise: :meth:`decode`
+        reads it then (a new layout, a block, a malformed message). :meth:`write_sample` writes the answer."""
+        fast = self._sample
+        if fast is None or type(raw) is not bytes:
+            return None
+        head, _, count, count_at, end, unpack, _ = fast
+        if end <= len(raw) and raw.startswith(head) and raw.startswith(count, count_at):
+            return unpack.unpack_from(raw, count_at - 4)
+        return None
+
+    def write_sample(self, data_offset: int, values: Any) -> bytes:
+        """The serialized answer to a message :meth:`read_sample` read: its layout, ``data_offset`` and
+        ``values`` (as many as it had), packed in one call (zero padding, as :class:`Float64MultiArrayCdr`)."""
+        if self._sample is None:
+            raise CdrError("Float64ArrayCodec.write_sample: the last layout is not a single sample")
+        _, head, _, _, _, _, pack = self._sample
+        return pack.pack(head, data_offset, self._n, *values)
 
     def encode(self, values: Any) -> bytes:
         """The last message decoded, its data replaced by ``values`` (as many), serialized."""

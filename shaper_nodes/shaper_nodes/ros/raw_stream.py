@@ -71,16 +71,21 @@ class RawArrays:
             ``malformed`` (not a well-formed Float64MultiArray), or the core's refusals (wrong size,
             non-finite, beyond the limits, a block too large, ...); nothing is to be published then.
         """
+        codec = self.codec
+        got = codec.read_sample(raw)  # the usual message: one sample of the last layout
+        if got is not None:
+            data_offset, *values = got
+            return codec.write_sample(data_offset, self.stream.shape_values(values))
         try:
-            sizes, data = self.codec.decode(raw)
+            sizes, data = codec.decode(raw)
         except CdrError as err:
             raise InputError("malformed", str(err)) from None
         stream = self.stream
         if sizes:  # a layout: one sample, or a block of samples
             rows = block_rows(sizes, len(data), stream.joints, stream.max_samples)
             if rows > 1:
-                return self.codec.encode(stream.shape_block(data, rows))
-        return self.codec.encode(stream.shape_array(data.tolist() if isinstance(data, np.ndarray) else data))
+                return codec.encode(stream.shape_block(data, rows))
+        return codec.encode(stream.shape_array(data.tolist() if isinstance(data, np.ndarray) else data))
 
 
 class RawTrajectories:

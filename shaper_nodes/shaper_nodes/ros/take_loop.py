@@ -9,7 +9,10 @@ subscriptions, their event handlers (incompatible QoS or type) and a guard condi
 each wake-up adds the same handles again (rcl_wait clears those that are not ready), waits, and takes
 every message of every ready subscription in arrival order (``take_message``, raw or not as the
 subscription was made), calling its callback with the message, and its info for a two-argument
-callback, as rclpy's executors do.
+callback, as rclpy's executors do. The subscriptions' QoS event handlers (rclpy's ``EventHandler``,
+two or three per subscription) are added and checked by their event handles in C
+(``WaitSet.add_event``, ``WaitSet.is_ready``) rather than through their Python methods at every
+wake-up; a ready one is then served through its own API (``is_ready``, ``take_data``, ``execute``).
 
 The wait set is rclpy's own C++ class (``_rclpy.WaitSet`` from
 ``rclpy.impl.implementation_singleton``), which rclpy exposes in no public API; this module is the
@@ -33,6 +36,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.event_handler import EventHandler
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.subscription import Subscription
@@ -40,6 +44,8 @@ from rclpy.waitable import NumberOfEntities
 
 #: the rclpy internals used here, checked by the test named in the module docstring
 INTERNALS = ("WaitSet", "GuardCondition")
+#: where rclpy's ``EventHandler`` keeps its event handle (a name-mangled attribute; checked by the same test)
+EVENT_HANDLE = "_EventHandler__event"
 
 
 class TakeLoop:
@@ -73,9 +79,13 @@ class TakeLoop:
 
     def start(self) -> TakeLoop:
         """Start the loop's thread (after the node's subscriptions are made)."""
-        self.node.context.on_shutdown(self._wake_up)  # a shutdown of the context ends the wait too
+        self.node.context.on_shutdown(self._on_shutdown)  # a shutdown of the context ends the loop too
         self._thread.start()
         return self
+
+    def _on_shutdown(self) -> None:
+        self._stop = True
+        self._wake_up()
 
     def _wake_up(self) -> None:
         with contextlib.suppress(Exception):
@@ -98,26 +108,37 @@ class TakeLoop:
             wait_set = _rclpy.WaitSet(count.num_subscriptions, count.num_guard_conditions + 1, count.num_timers,
                                       count.num_clients, count.num_services, count.num_events, context)
             two_args = [sub._callback_type is Subscription.CallbackType.WithMessageInfo for sub in subs]
-            pointers = [h.pointer for h in handles]
+            served = list(zip(subs, handles, [h.pointer for h in handles], two_args, strict=True))
             for sub in subs:
                 self.taken.setdefault(sub.topic_name, 0)
-            while not self._stop and node.context.ok():
+            # rclpy's event handlers by their handles (entered above, so no `with` at each wake-up); their
+            # events are the wait set's first, indices 0, 1, ... in this order, at every wake-up
+            handlers = [w for w in waitables if type(w) is EventHandler]
+            events = [getattr(w, EVENT_HANDLE) for w in handlers]
+            for i, w in enumerate(handlers):
+                w._event_index = i  # type: ignore[assignment]  # rclpy types it as its None start
+            others = [w for w in waitables if type(w) is not EventHandler]
+            add_subscription, add_event = wait_set.add_subscription, wait_set.add_event
+            wake = self._wake
+            if not node.context.ok():
+                self._stop = True
+            while not self._stop:
                 wait_set.clear_entities()
+                for e in events:
+                    add_event(e)
                 for h in handles:
-                    wait_set.add_subscription(h)
-                wait_set.add_guard_condition(self._wake)
-                for w in waitables:
+                    add_subscription(h)
+                wait_set.add_guard_condition(wake)
+                for w in others:
                     w.add_to_wait_set(wait_set)
                 wait_set.wait(-1)
                 if self._stop:
                     break
                 ready = wait_set.get_ready_entities("subscription")
-                for i, sub in enumerate(subs):
-                    if pointers[i] in ready:
-                        self._drain(sub, handles[i], two_args[i])
-                for w in waitables:
-                    if w.is_ready(wait_set):
-                        _run_coroutine(w.execute(w.take_data()))
+                for sub, handle, pointer, two in served:
+                    if pointer in ready:
+                        self._drain(sub, handle, two)
+                _serve_events(wait_set, handlers, others)
             wait_set.destroy_when_not_in_use()
 
     def _drain(self, sub: Subscription, handle: Any, two_args: bool) -> None:
@@ -157,6 +178,18 @@ class TakeLoop:
     def running(self) -> bool:
         """The loop's thread is alive."""
         return self._thread.is_alive()
+
+
+def _serve_events(wait_set: Any, handlers: list[EventHandler], others: list[Any]) -> None:
+    """Serve the ready ones of rclpy's event ``handlers`` (the wait set's events 0, 1, ..., checked in C first)
+    and of the ``others`` waitables, through their own API."""
+    is_ready = wait_set.is_ready
+    for i, w in enumerate(handlers):
+        if is_ready("event", i) and w.is_ready(wait_set):
+            _run_coroutine(w.execute(w.take_data()))
+    for w in others:
+        if w.is_ready(wait_set):
+            _run_coroutine(w.execute(w.take_data()))
 
 
 def _run_coroutine(coro: Any) -> None:

@@ -249,12 +249,13 @@ def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
 #: the front when they are used up: a stream of one-row blocks moves it once every this many rows)
 LINEAR_ROWS = 1024
 
-#: the most taps :func:`_tap_sum` writes a comprehension for (more: a loop over the taps)
+#: the most taps :func:`_tap_step` writes a comprehension for (more: a loop over the taps)
 UNROLLED_TAPS = 32
 
 
 def _tap_sum_loop(gains: list[float], rows: list[list[float]], offset: list[float]) -> list[float]:
-    """:func:`_tap_sum`'s sum as a loop over the taps (any number of them), in the same order."""
+    """:func:`_tap_step`'s sum as a loop over the taps (any number of them), in the same order: per column j,
+    ``(gains[0] rows[0][j] + ... + gains[k-1] rows[k-1][j]) + offset[j]``."""
     g = gains[0]
     out = [g * v for v in rows[0]]
     for g, row in zip(gains[1:], rows[1:], strict=True):
@@ -262,27 +263,39 @@ def _tap_sum_loop(gains: list[float], rows: list[list[float]], offset: list[floa
     return [a + o for a, o in zip(out, offset, strict=True)]
 
 
+def _tap_step_loop(values: list[float], origin: list[float], rows: list[list[float]], taps: list[int], p: int,
+                   gains: list[float], offset: list[float]) -> list[float]:
+    """:func:`_tap_step` for any number of taps: the deviation into ``rows[p]``, then :func:`_tap_sum_loop` of
+    the tapped rows."""
+    rows[p] = [v - o for v, o in zip(values, origin, strict=True)]
+    return _tap_sum_loop(gains, [rows[t] for t in taps], offset)
+
+
 @functools.cache
-def _tap_sum(k: int) -> Callable[[list[float], list[list[float]], list[float]], list[float]]:
-    """``f(gains, rows, offset)``: per column j, ``(gains[0] rows[0][j] + ... + gains[k-1] rows[k-1][j]) +
-    offset[j]``, summed left to right, for ``k`` taps. Written out for ``k`` up to :data:`UNROLLED_TAPS` (as
-    the standard library's ``namedtuple`` and ``dataclasses`` write their methods): one comprehension over
-    the columns, with no loop over the taps, is what makes one sample of a few channels cheaper on Python
-    floats than numpy's calls."""
+def _tap_step(k: int) -> Callable[..., list[float]]:
+    """``f(values, origin, rows, taps, p, gains, offset)``: one sample of :meth:`_Stage.step_values` in one call,
+    for ``k`` taps: the deviation ``values - origin`` written to ``rows[p]``, then per column j
+    ``(gains[0] rows[taps[0]][j] + ... + gains[k-1] rows[taps[k-1]][j]) + offset[j]`` summed left to right.
+    Written out for ``k`` up to :data:`UNROLLED_TAPS` (as the standard library's ``namedtuple`` and
+    ``dataclasses`` write their methods): one comprehension over the columns, with no loop over the taps and
+    no list of the tapped rows, is what makes one sample of a few channels cheaper on Python floats than
+    numpy's calls."""
     if k < 1:
         raise ValueError("a FIR has at least one tap")
     if k > UNROLLED_TAPS:
-        return _tap_sum_loop
-    gs, xs, rs = ([f"{c}{i}" for i in range(k)] for c in "gxr")
+        return _tap_step_loop
+    gs, xs, ts = ([f"{c}{i}" for i in range(k)] for c in "gxt")
     terms = " + ".join(f"{g} * {x}" for g, x in zip(gs, xs, strict=True))
-    source = (f"def tap_sum(gains, rows, offset):\n"
+    source = (f"def tap_step(values, origin, rows, taps, p, gains, offset):\n"
+              f"    rows[p] = [v - o for v, o in zip(values, origin)]\n"
               f"    {', '.join(gs)}, = gains\n"
-              f"    {', '.join(rs)}, = rows\n"
-              f"    return [({terms}) + o for o, {', '.join(xs)} in zip(offset, {', '.join(rs)})]\n")
+              f"    {', '.join(ts)}, = taps\n"
+              f"    return [({terms}) + o for o, {', '.join(xs)} in zip(offset, "
+              f"{', '.join(f'rows[{t}]' for t in ts)})]\n")
     namespace: dict[str, Any] = {}
-    exec(compile(source, f"<fir tap sum, {k} taps>", "exec"), namespace)  # our own source text
-    fn: Callable[[list[float], list[list[float]], list[float]], list[float]] = namespace["tap_sum"]
-    return fn
+    exec(compile(source, f"<fir tap step, {k} taps>", "exec"), namespace)  # our own source text
+    fn = namespace["tap_step"]
+    return fn  # type: ignore[no-any-return]
 
 
 class _Stage:
@@ -303,7 +316,7 @@ class _Stage:
     """
 
     __slots__ = ("_buf", "_buf_ok", "_delays", "_ext", "_ext_end", "_gain_list", "_gains", "_idx", "_origin_flat",
-                 "_origin_list", "_pos", "_rows", "_rows_ok", "_size", "_sum", "_taps", "fir", "held",
+                 "_origin_list", "_pos", "_rows", "_rows_ok", "_size", "_step", "_taps", "fir", "held",
                  "held_samples", "origin")
 
     def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
@@ -330,7 +343,7 @@ class _Stage:
         self._taps = [ix.tolist() for ix in self._idx]
         self._gain_list: list[float] = self._gains.tolist()
         self._origin_list: list[float] = self.origin.tolist()
-        self._sum = _tap_sum(len(self._taps[0]))
+        self._step = _tap_step(len(self._taps[0]))
 
     def _numpy_ring(self) -> None:
         """Make the numpy ring current (before a numpy path reads it); the list ring stays current."""
@@ -375,10 +388,8 @@ class _Stage:
             self._rows_ok = True
         self._buf_ok = False
         p = self._pos
-        rows = self._rows
-        rows[p] = [v - o for v, o in zip(values, self._origin_list, strict=True)]
         self._pos = p + 1 if p + 1 < self._size else 0
-        return self._sum(self._gain_list, [rows[t] for t in self._taps[p]], offset)
+        return self._step(values, self._origin_list, self._rows, self._taps[p], p, self._gain_list, offset)
 
     def _history(self, n: int) -> tuple[np.ndarray, int]:
         """The flat linear buffer (``self._ext``) with room for ``n`` inputs from its row ``at`` on, the last

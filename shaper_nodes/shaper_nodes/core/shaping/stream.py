@@ -169,13 +169,17 @@ class CommandStream:
         reason. The sample stays a list of Python floats through the filter
         (:meth:`StreamingShaper.process_values`): on 7 values numpy's calls cost more than the arithmetic.
         Holds :attr:`lock`. Returns the shaped values."""
-        values = data.tolist() if isinstance(data, array.array) else list(data)
+        return self.shape_values(data.tolist() if isinstance(data, array.array) else list(data))
+
+    def shape_values(self, values: list[float]) -> list[float]:
+        """:meth:`shape_array` for a sample given as a new list of Python floats (the streamed sample's path:
+        no conversion)."""
         with self.lock:
-            lo, hi = self.input_bounds
+            lo, hi = self._bounds if self._bounds_for == self.max_abs else self.input_bounds
             # all(map(le, ...)) stops at the first pair out of order, in C; a NaN compares False
             if not (len(values) == self.joints and all(map(le, lo, values)) and all(map(le, values, hi))):
                 # the reason, as the general checks give it
-                x = finite_array("data", data, size=self.joints, limit=self.max_abs)
+                x = finite_array("data", values, size=self.joints, limit=self.max_abs)
                 self.limits.check("positions", "the command", x)
                 values = x.tolist()
             out = self.array_filter.process_values(values)
