@@ -75,7 +75,8 @@ def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after
                                                "action.controller": "/learner/follow_joint_trajectory"})
     learner_params = {"mode": "mrilc_moves", "use_sim_time": True, "state_file": str(state),
                       "topics.imu_reliable": True, "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator",
-                      "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION]}
+                      "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION],
+                      "mrilc_moves.action_timeout": 60.0}
     learner = start_node("shaper_nodes", "learner", learner_params)
     conductor = Conductor(context=ros_context)
     client = ArmClient(conductor)
@@ -144,3 +145,51 @@ def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after
               json.dumps({k: max(m["max_correction_rad"] for m in v) for k, v in got.items()}))
     finally:
         conductor.close()
+
+
+def test_the_operator_is_required_and_named_when_it_cannot_be_loaded(ros_context):
+    """A learner without a usable operator refuses to start, with one line naming the parameter (in-process)."""
+    import pytest
+    from rclpy.parameter import Parameter
+
+    from shaper_nodes.nodes.learner import LearnerNode
+
+    for value, words in (("", "must be 'module:function'"), ("sim_plant_node.arm.nowhere:f", "cannot be loaded"),
+                         ("sim_plant_node.arm.lifted:DELAY", "is not callable")):
+        with pytest.raises(ValueError, match=words) as err:
+            LearnerNode(context=ros_context, parameter_overrides=[Parameter("mode", value="mrilc_moves"),
+                                                                  Parameter("mrilc_moves.operator", value=value)])
+        assert "mrilc_moves.operator" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_saved_state_is_loaded_per_move_and_a_broken_one_set_aside(ros_context, tmp_path):
+    """The state file's moves come back with their saved learners (rebuilt at each move's first goal); a file whose
+    move entry does not match its poses is reported and set aside, and the learner starts afresh (in-process)."""
+    from rclpy.parameter import Parameter
+
+    from shaper_nodes.nodes.learner import LearnerNode
+
+    start, goal = MOVES[0].positions[0].tolist(), MOVES[0].positions[-1].tolist()
+    learner_doc = {"version": 1, "basis": 7, "joints": 6, "outputs": 3, "gain": 0.5, "cycle": 1,
+                   "coefficients": [[0.0] * 6] * 7, "best_cost": None, "best_coefficients": None, "grew": 0,
+                   "fallbacks": 0, "holding": False, "history": []}
+    doc = {"version": 1, "per_move": "mrilc", "moves": {move_key(start, goal): {
+        "start": start, "goal": goal, "joint_names": list(JOINT_NAMES), "learner": learner_doc}}}
+    path = tmp_path / "state.json"
+    params = [Parameter("mode", value="mrilc_moves"), Parameter("state_file", value=str(path)),
+              Parameter("mrilc_moves.operator", value="sim_plant_node.arm.lifted:arm_operator")]
+    path.write_text(json.dumps(doc))
+    node = LearnerNode(context=ros_context, parameter_overrides=params)
+    try:
+        assert list(node.mode.moves) == [move_key(start, goal)] and node.state_problem == ""
+        assert node.mode.state()["moves"][move_key(start, goal)]["learner"] == learner_doc  # kept until rebuilt
+    finally:
+        node.destroy_node()
+    doc["moves"]["pose-0000000000000000"] = doc["moves"].pop(move_key(start, goal))
+    path.write_text(json.dumps(doc))
+    node = LearnerNode(context=ros_context, parameter_overrides=params)
+    try:
+        assert node.mode.moves == {} and "does not match its start and goal" in node.state_problem
+        assert not path.exists() and path.with_name(path.name + ".corrupt").exists()
+    finally:
+        node.destroy_node()
