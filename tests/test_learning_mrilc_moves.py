@@ -76,7 +76,7 @@ def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after
     learner_params = {"mode": "mrilc_moves", "use_sim_time": True, "state_file": str(state),
                       "topics.imu_reliable": True, "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator",
                       "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION],
-                      "mrilc_moves.action_timeout": 60.0}
+                      "mrilc_moves.action_timeout": 60.0, "end_wait": 10.0}
     learner = start_node("shaper_nodes", "learner", learner_params)
     conductor = Conductor(context=ros_context)
     client = ArmClient(conductor)

@@ -32,7 +32,9 @@ it further there (as the learner's projection holds it).
 **State.** Every move's learner (coefficients, best coefficients, gain, guard counters, history) with its start,
 goal and joint names in ``state_file``, saved atomically after each update; after a restart each move resumes
 from its saved state at its first goal (its operator and profile are rebuilt from that goal, the saved state checked
-against them entry by entry; a state that does not fit is reported and the move starts afresh).
+against them entry by entry; a state that does not fit is reported and the move starts afresh). A file whose
+document is broken (an entry missing, a key that does not match its poses) is reported and set aside, and the
+learner starts afresh (:meth:`~.learner_base.LearnerBase.restore`).
 
 Reports (``~/reports``): per move's END, the metrics ``move`` (index in the state's order), ``iteration`` (the
 learner's cycle), ``cost`` (weighted RMS of the error, m/s^2), ``action.<learn|fallback|hold>``,
