@@ -138,46 +138,11 @@ def rigid_reference(model: Any, times: np.ndarray, pos: np.ndarray, vel: np.ndar
 
 
 def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, first: int = 0) -> np.ndarray:
-    """G: the specific force's response ((samples x 3) rows, k-major) to each B-spline coefficient
-    (joint-major columns), on the arm linearised at rest holding ``pose``; the setpoint held 2 ms
-    as the controller does, the response integrated exactly every 1 ms (the IMU's period); the first B-spline
-    starts ``first`` output samples after the move's start."""
-    from scipy.linalg import expm
+    """G on the arm linearised at ``pose`` (:func:`sim_plant_node.arm.lifted.lifted_operator`, with this module's
+    knot spacing and output period)."""
+    from sim_plant_node.arm.lifted import lifted_operator as lifted
 
-    from shaper_nodes.core.learning.mrilc.moves import spline_basis
-    from sim_plant_node.arm.modal import state_matrix, tool_output
-
-    n = 6
-    a, minv = state_matrix(model, pose)
-    drive = np.zeros((2 * n, 2 * n))  # the loop's torque from (dr, dr'): (Kp + dg/dq(r)) dr + Kd dr'
-    drive[n:, :n] = np.diag(model.kp) + model.gravity_stiffness(np.asarray(pose, dtype=float))
-    drive[n:, n:] = np.diag(model.kd)
-    b = np.vstack([np.zeros((2 * n, 2 * n)), minv @ drive])
-    h = OUTPUT_PERIOD / 2
-    big = expm(np.block([[a, b], [np.zeros((2 * n, 6 * n))]]) * h)
-    ad, bd = big[:4 * n, :4 * n], big[:4 * n, 4 * n:]
-    c = tool_output(model, pose, a)
-    shift = int(round(SPACING / OUTPUT_PERIOD))
-    periods = np.arange(samples) * OUTPUT_PERIOD  # the controller's periods from the move's start
-    b0, b1, _ = spline_basis(periods, SPACING, 1)
-    g = np.zeros((samples * 3, count * n))
-    for j in range(n):
-        z = np.zeros(4 * n)
-        resp = np.zeros((samples, 3))
-        u = np.zeros(2 * n)
-        for k in range(samples):
-            u[j], u[n + j] = b0[k, 0], b1[k, 0]
-            for _ in range(2):
-                z = ad @ z + bd @ u
-            resp[k] = c @ z
-        lag = DELAY + first
-        resp = (np.vstack([np.zeros((lag, 3)), resp[:samples - lag]]) if lag >= 0
-                else np.vstack([resp[-lag:], np.zeros((-lag, 3))]))
-        for i in range(count):
-            col = np.zeros((samples, 3))
-            col[i * shift:] = resp[:samples - i * shift]
-            g[:, j * count + i] = col.ravel()
-    return g
+    return lifted(model, pose, count, samples, first, SPACING, OUTPUT_PERIOD, DELAY)
 
 
 def tracking_error(plan: MovePlan, measured: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from shaper_nodes.nodes import (
     identifier,
     learner,
     learner_list,
+    learner_moves_mrilc,
     learner_mrilc,
     recorder,
     scheduler,
@@ -40,7 +41,8 @@ def sections() -> list[tuple[str, str, Sequence[tuple[str, Iterable[Spec]]]]]:
         ("identifier", "Mode identification (`shaper_nodes.nodes.identifier`).", [("", identifier.PARAMETERS)]),
         ("learner", "The learner (`shaper_nodes.nodes.learner`): the parameters of every mode, then those of the"
          " mode chosen by `mode`.", [("every mode", learner.PARAMETERS), ("mode list", learner_list.PARAMETERS),
-                                    ("mode mrilc", learner_mrilc.PARAMETERS)]),
+                                    ("mode mrilc", learner_mrilc.PARAMETERS),
+                                    ("mode mrilc_moves", learner_moves_mrilc.PARAMETERS)]),
         ("scheduler", "Gain scheduling (`shaper_nodes.nodes.scheduler`); each name of `rule_names` adds"
          " `rules.<name>.*` (below, with `<name>` for the rule).",
          [("", scheduler.PARAMETERS), ("each rule", scheduler.rule_table("<name>"))]),

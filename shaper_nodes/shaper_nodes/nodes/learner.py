@@ -11,6 +11,10 @@ mrilc (:mod:`.learner_mrilc`)
     Model-Reference Iterative Learning Control of seed 000: a feedforward profile learned so that
     the loop matches a reference model, installed at the injection point; the shaper is designed
     on the reference model (config/mrilc.yaml).
+mrilc_moves (:mod:`.learner_moves_mrilc`)
+    MRILC per move on a robot arm: per move, a correction of the joints' commanded profile learned from
+    the move's residual window of the tool accelerometer, added to that move's goals by the learner's
+    own FollowJointTrajectory proxy between the shaper node and the controller.
 
 What both share lives here, once:
 
@@ -70,6 +74,10 @@ class LearnerNode(LearnerBase):
             from .learner_mrilc import MrilcMode
 
             self.mode = MrilcMode(self)
+        elif mode == "mrilc_moves":
+            from .learner_moves_mrilc import MrilcMovesMode
+
+            self.mode = MrilcMovesMode(self)
         else:
             from .learner_list import ListMode, declare_list
 
@@ -123,10 +131,11 @@ class LearnerNode(LearnerBase):
 
 
 def main(args: list[str] | None = None) -> int:
-    from . import learner_list, learner_mrilc
+    from . import learner_list, learner_moves_mrilc, learner_mrilc
 
     return run_node(LearnerNode, "learner", args, tables={
-        "every mode": PARAMETERS, "mode list": learner_list.PARAMETERS, "mode mrilc": learner_mrilc.PARAMETERS},
+        "every mode": PARAMETERS, "mode list": learner_list.PARAMETERS, "mode mrilc": learner_mrilc.PARAMETERS,
+        "mode mrilc_moves": learner_moves_mrilc.PARAMETERS},
         examples=(
         with_config("shaper_nodes", "learner", "learner.yaml"),
         with_config("shaper_nodes", "learner", "mrilc.yaml")))

@@ -15,7 +15,9 @@ node); ``fixed``, the calibration's fallback (``shaper.yaml``: ZV on the home po
 LIST learning on top of the schedule (the learner sends to the scheduler); ``scheduled_list_moves``,
 LIST per move on top of the schedule (the learner's ``list.per_move``: every move marked as its own
 cycle, each learning its own factor, which the scheduler applies to that move's goals; opt-in, with a
-per-move, per-cycle table of its own).
+per-move, per-cycle table of its own); ``scheduled_mrilc_moves``, MRILC per move on top of the schedule (the
+learner's ``mode: mrilc_moves``: the shaper node's proxy sends each shaped goal to the learner's, which adds the
+move's learned joint profile correction and sends it to the controller; opt-in, the same per-move table).
 For every move and case it measures (:mod:`sim_plant_node.arm.metrics`) the residual vibration
 at the tool, the settling time, the move time plus settling time, the shaper's delay and the
 tool-path deviation the shaping causes, and writes them as CSV, Markdown and a PNG plot.
@@ -55,15 +57,16 @@ WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stop
 #: CPU hogs, its identification alone took over 6 min of a 15 min run)
 CALIBRATION_TIMEOUT = 3600.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
-CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list", "scheduled_list_moves")
+CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list", "scheduled_list_moves",
+         "scheduled_mrilc_moves")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
 DEFAULT_CASES = ("none", "fixed", "scheduled")
 #: cases that need a calibration
-CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves")
+CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves")
 #: cases whose shaper node asks the scheduler for each goal (the shaper node is restarted for them)
-SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves")
+SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves")
 #: cases that mark every move as its own cycle on /cycle_events (the learner per move)
-PER_MOVE = ("scheduled_list_moves",)
+PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves")
 #: cases that learn (their cycles: --list-cycles)
 LEARNING = ("list", "scheduled_list", *PER_MOVE)
 
@@ -404,6 +407,10 @@ def _per_move_table(per_move: list[list[tuple[MoveRun, Any, Any]]], rows: list[d
         m = dict(zip(report.metric_names, report.metric_values, strict=True))
         if m.get("skipped"):
             return "skipped"
+        if "cost" in m:  # MRILC per move
+            action = next((k.split(".", 1)[1] for k in m if k.startswith("action.")), "?")
+            return (f"cost {m['cost']:.4g} m/s^2, {action}; correction used {m['max_correction_rad']:.2e} rad,"
+                    f" limit excess {m['limit_excess']:.1g}")
         if m.get("held") and "a1_next" not in m:
             return "held at the schedule alone"
         if "a1_next" not in m or m["a1_next"] != m["a1_next"]:
@@ -629,6 +636,8 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
         _schedule(session, client)
         if case == "scheduled":
             return "calibrated schedule: each goal shaped for the modes at its final pose"
+        if case == "scheduled_mrilc_moves":
+            return _mrilc_moves(session, client)
         if case in PER_MOVE:
             from shaper_nodes.ros.lockstep_reader import AckWatch
 
@@ -648,6 +657,30 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
     session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2"})
     client.wait_listeners(4)  # and the learner
     return "LIST (zv2), from unshaped"
+
+
+def _mrilc_moves(session: Session, client: ArmClient) -> str:
+    """MRILC per move: the shaper node again, its proxy sending the shaped goals to the learner's proxy, and the
+    learner (``mode: mrilc_moves``) in front of the controller, the sim arm's operator and the moves' planning
+    limits."""
+    from shaper_nodes.ros.lockstep_reader import AckWatch
+
+    from ..arm.task import MAX_ACCELERATION, MAX_VELOCITY
+
+    session.shaper.stop()
+    session.start("shaper_nodes", "learner", {"mode": "mrilc_moves", "use_sim_time": True,
+                                               "topics.imu_reliable": True,
+                                               "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator",
+                                               "mrilc_moves.velocity": [MAX_VELOCITY],
+                                               "mrilc_moves.acceleration": [MAX_ACCELERATION]})
+    session.shaper = session.start("shaper_nodes", "shaper_node", {
+        **session.shaper_params, "action.scheduler": "/scheduler",
+        "action.controller": "/learner/follow_joint_trajectory"})
+    client.c.wait_ready(60.0, {})
+    client.wait_ready(4)  # and the learner
+    AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
+    return ("calibrated schedule with MRILC per move on top (each move's joint profile correction added by the"
+            " learner's proxy)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,387 @@
+"""The learner node's MRILC per move (``mode: mrilc_moves``): a feedforward correction of each move's joint profile.
+
+Issue 31's item 3 over DDS, on the ROS-free law of :mod:`shaper_nodes.core.learning.mrilc.moves` (the one the
+reproduction ``reproductions.arm_mrilc`` runs) and the move's set-up of :mod:`~shaper_nodes.core.learning.mrilc.plan`.
+
+**Where the correction is added.** The learner serves ``~/follow_joint_trajectory``
+(control_msgs/FollowJointTrajectory, :class:`~.trajectory_action.TrajectoryActionProxy`) between the shaper
+node's proxy and the controller: the shaper node's ``action.controller`` names ``/learner/follow_joint_trajectory``
+and ``mrilc_moves.controller`` the controller's action. Each goal (the shaped trajectory) is matched to the move
+whose cycle START came last (``/cycle_events``: its ``goal_positions`` equal to the goal's last point within
+:data:`MATCH` rad; a goal that came first waits up to ``mrilc_moves.match_timeout`` s for it), the move's correction
+dq(t), dq'(t), dq''(t) is added to the goal's points (positions, velocities, accelerations; missing velocities or
+accelerations are differentiated from the positions), and the goal goes on to the controller. A goal matched to no
+move goes on uncorrected (one line on the log). So each move's correction reaches that move's goals only.
+
+**What is learned.** Per move (the identity :func:`~shaper_nodes.core.learning.moves.move_key` of the START's
+start and goal), one :class:`~shaper_nodes.core.learning.mrilc.moves.MoveLearner`: B-spline coefficients per joint
+in the last ``mrilc_moves.tail`` s of the shaped motion (the goal and the timing do not change), learned at the
+move's END from the tool accelerometer's residual window (``topics.imu``; 1 s after the commanded motion ends, the
+trend taken out: :func:`~shaper_nodes.core.learning.mrilc.plan.residual_error`) with the lifted operator G that
+``mrilc_moves.operator`` gives (``"module:function"``, called as ``f(goal_pose, count, samples, first, spacing,
+period)``; the simulated arm's: ``sim_plant_node.arm.lifted:arm_operator``), computed once per move at its first
+goal. The learner's divergence guard falls back to its best coefficients (and holds after ``max_fallbacks``).
+
+**Limits.** The learner projects every update inside the joint limits (``mrilc_moves.position_min``, ``position_max``,
+``velocity``, ``acceleration``: one value per joint or one for all), and the goal's corrected profile is checked
+again before it is sent: a correction that would break a limit is refused, the goal is sent uncorrected, and one
+line names the joint and the limit. Where the goal itself is already past a limit (a shaped profile's points can
+be: 7.05 rad/s^2 measured on the elbow of pick -> home against the moves' planned 6), the correction may not take
+it further there (as the learner's projection holds it).
+
+**State.** Every move's learner (coefficients, best coefficients, gain, guard counters, history) with its start,
+goal and joint names in ``state_file``, saved atomically after each update; after a restart each move resumes
+from its saved state at its first goal (its operator and profile are rebuilt from that goal, the saved state checked
+against them entry by entry; a state that does not fit is reported and the move starts afresh). A file whose
+document is broken (an entry missing, a key that does not match its poses) is reported and set aside, and the
+learner starts afresh (:meth:`~.learner_base.LearnerBase.restore`).
+
+Reports (``~/reports``): per move's END, the metrics ``move`` (index in the state's order), ``iteration`` (the
+learner's cycle), ``cost`` (weighted RMS of the error, m/s^2), ``action.<learn|fallback|hold>``,
+``max_correction_rad``, ``max_correction_rad_s``, ``max_correction_rad_s2`` (the correction the cycle ran with) and
+``limit_excess`` (0: every limit held); the residual_rms is the cost.
+"""
+
+from __future__ import annotations
+
+import collections
+import importlib
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from trajectory_msgs.msg import JointTrajectory
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.cycles import END, START
+from shaper_nodes.core.learning.moves import MoveError, move_key
+from shaper_nodes.core.learning.mrilc.model import MrilcError
+from shaper_nodes.core.learning.mrilc.moves import JointLimits, MoveLearner, excess
+from shaper_nodes.core.learning.mrilc.plan import MovePlan, PlanSettings, limit_breach, plan_move, residual_error
+from shaper_nodes.ros.conversions import trajectory_arrays, trajectory_msg
+from shaper_nodes.ros.diagnostics import ERROR, OK
+from shaper_nodes.ros.parameters import Spec, declare, param, table
+
+from .learner_base import LearnerBase
+from .learner_list import TopicParams, subscribe_imu
+from .trajectory_action import TrajectoryActionProxy
+
+#: rad: how far a goal's last point may be from a START's goal for the goal to be that move's
+MATCH = 1e-3
+#: most accelerometer samples kept (a bound whatever the cycle events do)
+MAX_SAMPLES = 400_000
+_ENTRY = {"start", "goal", "joint_names", "learner"}
+
+
+@dataclass(frozen=True)
+class MrilcMovesGroup:
+    """mrilc_moves.*: the learner's and the correction's settings."""
+
+    operator: str = param("", "The lifted operator's provider, 'module:function' called as f(goal_pose, count,"
+                          " samples, first, spacing, period) -> G ((samples x 3) x (count x joints), m/s^2 per rad);"
+                          " the simulated arm's: 'sim_plant_node.arm.lifted:arm_operator'. Required.", read_only=True)
+    controller: str = param("/joint_trajectory_controller/follow_joint_trajectory", "The controller's"
+                            " FollowJointTrajectory action the corrected goals go to.", read_only=True)
+    action_timeout: float = param(30.0, "How long a goal waits for the controller's action server and its"
+                                  " answer, s.", (0.1, 600.0), read_only=True)
+    match_timeout: float = param(2.0, "How long a goal waits for the START of its move on the cycle events, s.",
+                                 (0.0, 60.0), read_only=True)
+    gain: float = param(0.5, "Learning gain gamma.", (1e-6, 1.0), read_only=True)
+    regularisation: float = param(1e-3, "rho relative to the mean of diag(G^T G).", (1e-12, 1e6), read_only=True)
+    patience: int = param(2, "Divergence guard: cycles in a row above growth x the best cost before falling back.",
+                          (1, 1000), read_only=True)
+    growth: float = param(1.2, "Divergence guard: cost ratio to the best that counts as growing.", (1.0001, 100.0),
+                          read_only=True)
+    noise_floor: float = param(0.0, "Divergence guard: costs below this never count as growing, m/s^2.",
+                               (0.0, 1e3), read_only=True)
+    max_fallbacks: int = param(3, "Fallbacks to the best coefficients before holding them.", (1, 1000),
+                               read_only=True)
+    spacing: float = param(0.04, "s between the correction's B-spline knots.", (0.004, 1.0), read_only=True)
+    tail: float = param(0.4, "The correction acts in the last tail s of the shaped motion.", (0.02, 10.0),
+                        read_only=True)
+    position_min: tuple[float, ...] = param([-2 * math.pi], "Lowest joint positions, rad (one per joint, or one"
+                                            " for all).", read_only=True)
+    position_max: tuple[float, ...] = param([2 * math.pi], "Highest joint positions, rad.", read_only=True)
+    velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s.", read_only=True)
+    acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2.", read_only=True)
+
+
+@dataclass(frozen=True)
+class MrilcMovesParams:
+    """The MRILC-per-move mode's parameters."""
+
+    mrilc_moves: MrilcMovesGroup = field(default_factory=MrilcMovesGroup)
+    topics: TopicParams = field(default_factory=TopicParams)
+
+
+#: the MRILC-per-move mode's parameters (derived from MrilcMovesParams)
+PARAMETERS: tuple[Spec, ...] = table(MrilcMovesParams)
+
+
+def load_operator(name: str) -> Callable[..., Any]:
+    """The provider ``module:function`` names. Raises ValueError naming the problem."""
+    module, _, func = name.partition(":")
+    if not module or not func:
+        raise ValueError(f"mrilc_moves.operator must be 'module:function', got {name!r}")
+    try:
+        out = getattr(importlib.import_module(module), func)
+    except (ImportError, AttributeError) as err:
+        raise ValueError(f"mrilc_moves.operator {name!r} cannot be loaded: {err}") from None
+    if not callable(out):
+        raise ValueError(f"mrilc_moves.operator {name!r} is not callable")
+    return out
+
+
+@dataclass
+class _Move:
+    """One move: its identity, its poses, and (from its first goal on) its plan and learner."""
+
+    key: str
+    start: list[float]
+    goal: list[float]
+    names: list[str]
+    saved: dict[str, Any] | None = None  # a saved learner not yet rebuilt (no goal since the restart)
+    plan: MovePlan | None = None
+    times: np.ndarray | None = None
+    learner: MoveLearner | None = None
+
+
+@dataclass
+class _Cycle:
+    key: str
+    start: float  # the move's start (the START's stamp), s
+    goal: np.ndarray
+    applied: tuple[float, float, float] | None = None  # the correction the goal ran with (largest dq, dq', dq'')
+    refused: str = ""  # why the goal went uncorrected (the cycle is not learned from)
+
+
+class MrilcMovesMode:
+    """The MRILC-per-move adapter of the learner node (see the module docstring)."""
+
+    def __init__(self, node: LearnerBase) -> None:
+        self.node = node
+        self.params = declare(node, MrilcMovesParams)
+        v = self.params.value.mrilc_moves
+        self.operator = load_operator(str(v.operator))
+        self.settings = PlanSettings(spacing=float(v.spacing), tail=float(v.tail))
+        self.learner_settings = {"gain": float(v.gain), "regularisation": float(v.regularisation),
+                                 "patience": int(v.patience), "growth": float(v.growth),
+                                 "noise_floor": float(v.noise_floor), "max_fallbacks": int(v.max_fallbacks)}
+        self._limit_values = [list(v.position_min), list(v.position_max), list(v.velocity), list(v.acceleration)]
+        for name, values in zip(("position_min", "position_max", "velocity", "acceleration"), self._limit_values,
+                                strict=True):
+            if not values or not all(math.isfinite(x) for x in values):
+                raise ValueError(f"mrilc_moves.{name} must be one or more finite numbers, got {values}")
+        self.match_timeout = float(v.match_timeout)
+        self.moves: dict[str, _Move] = node.restore(self._build, {"per_move": "mrilc"}) or {}
+        self._resumed = len(self.moves)
+        self._cycles: dict[int, _Cycle] = {}
+        self._last: _Cycle | None = None
+        self._samples: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=MAX_SAMPLES)
+        self.latest_imu = -math.inf
+        topics = self.params.value.topics
+        self.events_topic, self.imu_topic = topics.cycle_events, topics.imu
+        subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
+        self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
+                                           self._refused, lambda: None, float(v.action_timeout), self._correct)
+
+    # ----------------------------------------------------------------- state
+    def _build(self, doc: dict[str, Any]) -> dict[str, _Move]:
+        if set(doc) - {"version", "per_move", "moves", "saved_at"} or not isinstance(doc.get("moves"), dict):
+            raise MrilcError(f"per-move MRILC state entries differ: got {sorted(doc)}")
+        out = {}
+        for key, entry in doc["moves"].items():
+            if not isinstance(entry, dict) or set(entry) != _ENTRY or not isinstance(entry["learner"], dict):
+                raise MrilcError(f"move {key}: entries {sorted(_ENTRY)} expected")
+            try:
+                if move_key(entry["start"], entry["goal"]) != key:
+                    raise MrilcError(f"move {key}: its key does not match its start and goal")
+            except MoveError as err:
+                raise MrilcError(f"move {key}: {err}") from None
+            names = entry["joint_names"]
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise MrilcError(f"move {key}: joint_names must be a list of names")
+            out[key] = _Move(key, [float(x) for x in entry["start"]], [float(x) for x in entry["goal"]], names,
+                             saved=entry["learner"])
+        return out
+
+    def state(self) -> dict[str, Any]:
+        moves = {}
+        for key, m in self.moves.items():
+            learner = m.learner.to_dict() if m.learner is not None else m.saved
+            if learner is not None:
+                moves[key] = {"start": m.start, "goal": m.goal, "joint_names": m.names, "learner": learner}
+        return {"per_move": "mrilc", "moves": moves}
+
+    def describe(self) -> str:
+        return (f"MRILC per move on {self.imu_topic}, corrections added to the goals of ~/follow_joint_trajectory"
+                f" sent to {self.proxy.controller_name}; {len(self.moves)} moves saved")
+
+    def latest(self) -> float:
+        return self.latest_imu
+
+    def ready(self) -> bool:
+        return True
+
+    async def start(self) -> bool:
+        text = f"MRILC per move: {self._resumed} moves resumed from the state file"
+        self.node.get_logger().info(text)
+        self.node.diagnostics.publish("moves", OK, text, [(k, "saved") for k in self.moves])
+        return True
+
+    async def hold(self, on: bool) -> tuple[bool, str]:
+        for m in self.moves.values():
+            lr = m.learner
+            if lr is None:
+                continue
+            lr.holding = on
+            if on and lr.best is not None:
+                lr.coefficients = lr.best[1].copy()
+            if not on:
+                lr.fallbacks = 0
+        return True, "holding every move at its best correction" if on else "learning resumed on every move"
+
+    # ----------------------------------------------------------------- inputs
+    def _on_imu(self, t: float, a: tuple[float, float, float]) -> None:
+        self._samples.append((t, a[0], a[1], a[2]))
+        self.latest_imu = max(self.latest_imu, t)
+        keep = self.latest_imu - self.node.max_cycle_duration
+        while self._samples and self._samples[0][0] < keep:
+            self._samples.popleft()
+
+    def _check(self, traj: JointTrajectory) -> JointTrajectory:
+        """The goal request's check (its arrays must read); the correction comes at execution."""
+        trajectory_arrays(traj, list(traj.joint_names), True)
+        return traj
+
+    def _refused(self, err: InputError) -> None:
+        self.node.get_logger().error(f"goal refused: {err}")
+        self.node.diagnostics.report("goal", ERROR, f"goal refused: {err}")
+
+    async def _correct(self, traj: JointTrajectory) -> JointTrajectory | None:
+        """The goal with its move's correction (None: as it came; module docstring)."""
+        names = list(traj.joint_names)
+        times, fields = trajectory_arrays(traj, names, True)
+        q = fields["positions"]
+        deadline = time.monotonic() + self.match_timeout
+        while True:
+            cyc = self._last
+            if cyc is not None and cyc.applied is None and not cyc.refused and self._matches(cyc, q[-1]):
+                break
+            if time.monotonic() >= deadline:
+                self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
+                                               " sent uncorrected")
+                return None
+            await self.node.sleep(0.01)
+        move = self.moves[cyc.key]
+        v = fields.get("velocities")
+        a = fields.get("accelerations")
+        if v is None:
+            v = np.gradient(q, times, axis=0)
+        if a is None:
+            a = np.gradient(v, times, axis=0)
+        try:
+            lr = self._learner(move, times, q, v, a)
+        except (MrilcError, ValueError) as err:
+            cyc.refused = f"no correction ({err}); sent uncorrected"
+            self.node.get_logger().error(f"move {move.key}: {cyc.refused}")
+            return None
+        dq, dv, da = lr.correction()
+        breach = limit_breach(q + dq, v + dv, a + da, self._limits(q.shape[1]), names, (q, v, a))
+        if breach is not None:
+            cyc.refused = f"correction refused, it would break a limit: {breach}; sent uncorrected"
+            self.node.get_logger().error(f"move {move.key}: {cyc.refused}")
+            return None
+        cyc.applied = (float(np.max(np.abs(dq))), float(np.max(np.abs(dv))), float(np.max(np.abs(da))))
+        out = {"positions": q + dq, "velocities": v + dv, "accelerations": a + da}
+        if "effort" in fields:
+            out["effort"] = fields["effort"]
+        return trajectory_msg(traj.header, names, [p.time_from_start for p in traj.points], out)
+
+    @staticmethod
+    def _matches(cyc: _Cycle, last: np.ndarray) -> bool:
+        """Whether a goal whose last point is ``last`` (rad) is the move of ``cyc`` (its START's goal)."""
+        return cyc.goal.shape == last.shape and bool(np.allclose(cyc.goal, last, atol=MATCH, rtol=0))
+
+    def _limits(self, joints: int) -> JointLimits:
+        vals = []
+        for name, values in zip(("position_min", "position_max", "velocity", "acceleration"), self._limit_values,
+                                strict=True):
+            if len(values) not in (1, joints):
+                raise ValueError(f"mrilc_moves.{name} has {len(values)} values for {joints} joints")
+            vals.append(np.resize(np.asarray(values, dtype=float), joints))
+        return JointLimits(*vals)
+
+    def _learner(self, move: _Move, times: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> MoveLearner:
+        """The move's learner for this goal's profile: built at its first goal (from its saved state after a
+        restart), rebuilt (keeping its state) when the profile changed."""
+        if move.learner is not None and move.times is not None and move.times.shape == times.shape and np.allclose(
+                move.times, times) and move.plan is not None and np.allclose(move.plan.profile.positions, q):
+            return move.learner
+        plan = plan_move(times, q, v, a, move.start, self.settings)
+        limits = self._limits(q.shape[1])
+        s = self.settings
+        op = np.asarray(self.operator(np.asarray(move.goal), plan.count, plan.grid.size, plan.first, s.spacing,
+                                      s.output_period), dtype=float)
+        state = move.learner.to_dict() if move.learner is not None else move.saved
+        kw: dict[str, Any] = {**self.learner_settings, "weights": plan.weights}
+        learner = None
+        if state is not None:
+            try:
+                learner = MoveLearner.from_dict(state, op, plan.profile, limits, **kw)
+                self.node.get_logger().info(f"move {move.key}: resumes at cycle {learner.cycle} from its saved state")
+            except MrilcError as err:
+                self.node.get_logger().error(f"move {move.key}: {err}; it starts afresh")
+                self.node.diagnostics.report("state_file", ERROR, f"move {move.key}: {err}")
+        move.learner = learner or MoveLearner(op, plan.profile, limits, **kw)
+        move.plan, move.times, move.saved = plan, times.copy(), None
+        return move.learner
+
+    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+        cycle = int(msg.cycle)
+        if msg.event == START:
+            try:
+                key = move_key(msg.start_positions, msg.goal_positions)
+            except MoveError as err:
+                self.node.get_logger().error(f"cycle {cycle}: the move cannot be identified: {err}")
+                return None
+            if key not in self.moves:
+                self.moves[key] = _Move(key, [float(x) for x in msg.start_positions],
+                                        [float(x) for x in msg.goal_positions], list(msg.joint_names))
+            self._last = self._cycles[cycle] = _Cycle(key, stamp, np.asarray(msg.goal_positions, dtype=float))
+            while len(self._cycles) > 64:  # ENDs that never came
+                self._cycles.pop(next(iter(self._cycles)))
+            return None
+        if msg.event != END:
+            return None
+        cyc = self._cycles.pop(cycle, None)
+        if cyc is None:
+            return self.node.skipped(msg, (math.nan, stamp), "END without its START")
+        move = self.moves[cyc.key]
+        lr, plan = move.learner, move.plan
+        if cyc.applied is None or lr is None or plan is None:
+            why = cyc.refused or "no goal of the move came through the learner"
+            return self.node.skipped(msg, (cyc.start, stamp), why)
+        window = (cyc.start + plan.motion_end, cyc.start + float(plan.grid[-1]))
+        samples = [s for s in self._samples if cyc.start <= s[0] <= window[1] + self.settings.output_period]
+        try:
+            arr = np.asarray(samples, dtype=float).reshape(-1, 4)
+            e = residual_error(plan, arr[:, 0] - cyc.start, arr[:, 1:], self.settings.trend_degree)
+            used = lr.coefficients.copy()
+            upd = lr.update(e)
+        except MrilcError as err:
+            return self.node.skipped(msg, window, str(err))
+        self.node.save()
+        index = list(self.moves).index(cyc.key)
+        over = excess(used, plan.profile, lr.limits)
+        names = ["move", "iteration", "cost", f"action.{upd.action}", "gain", "max_correction_rad",
+                 "max_correction_rad_s", "max_correction_rad_s2", "limit_excess"]
+        values = [float(index), float(upd.cycle), upd.cost, 1.0, upd.gain, *cyc.applied, over]
+        self.node.get_logger().info(f"cycle {cycle}, move {cyc.key}: cost {upd.cost:.4g} m/s^2, {upd.action}"
+                                    f" (iteration {upd.cycle}); correction used {cyc.applied[0]:.3g} rad")
+        return self.node.report(msg, window, names, values, residual=upd.cost)

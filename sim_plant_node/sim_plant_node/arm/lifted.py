@@ -1,0 +1,76 @@
+"""MRILC per move's lifted operator on the arm: the flange accelerometer's response to each B-spline coefficient
+of a joint profile correction, on the arm linearised at rest at the move's goal pose.
+
+:func:`lifted_operator` is what ``reproductions.arm_mrilc`` and the learner node's MRILC per move
+(``mode: mrilc_moves``, ``mrilc_moves.operator: sim_plant_node.arm.lifted:arm_operator``) use;
+:func:`arm_operator` is the node's entry: the simulator's arm model, built once per process.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: output samples the linearised response is delayed by: the controller emulation takes a new setpoint at its
+#: next update, one period (2 ms) after the linear model's hold starts (measured: the response to one B-spline
+#: on the offline arm peaks one sample later than the model's, with or without the shift the correlation is 0.995)
+DELAY = 1
+
+_MODEL: list[Any] = []
+
+
+def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, first: int = 0, spacing: float = 0.04,
+                    period: float = 2e-3, delay: int = DELAY) -> np.ndarray:
+    """G: the specific force's response ((samples x 3) rows, k-major; m/s^2 per rad) to each B-spline coefficient
+    (joint-major columns, ``count`` B-splines ``spacing`` s apart per joint), on the arm linearised at rest holding
+    ``pose`` (rad); the setpoint held ``period`` s as the controller does (2 ms), the response integrated exactly
+    every ``period`` / 2 s (the IMU's period) and sampled every ``period`` s; the first B-spline starts ``first``
+    output samples after the move's start, the response ``delay`` samples later."""
+    from scipy.linalg import expm
+
+    from shaper_nodes.core.learning.mrilc.moves import spline_basis
+
+    from .modal import state_matrix, tool_output
+
+    n = 6
+    a, minv = state_matrix(model, pose)
+    drive = np.zeros((2 * n, 2 * n))  # the loop's torque from (dr, dr'): (Kp + dg/dq(r)) dr + Kd dr'
+    drive[n:, :n] = np.diag(model.kp) + model.gravity_stiffness(np.asarray(pose, dtype=float))
+    drive[n:, n:] = np.diag(model.kd)
+    b = np.vstack([np.zeros((2 * n, 2 * n)), minv @ drive])
+    h = period / 2
+    big = expm(np.block([[a, b], [np.zeros((2 * n, 6 * n))]]) * h)
+    ad, bd = big[:4 * n, :4 * n], big[:4 * n, 4 * n:]
+    c = tool_output(model, pose, a)
+    shift = int(round(spacing / period))
+    periods = np.arange(samples) * period  # the controller's periods from the move's start
+    b0, b1, _ = spline_basis(periods, spacing, 1)
+    g = np.zeros((samples * 3, count * n))
+    for j in range(n):
+        z = np.zeros(4 * n)
+        resp = np.zeros((samples, 3))
+        u = np.zeros(2 * n)
+        for k in range(samples):
+            u[j], u[n + j] = b0[k, 0], b1[k, 0]
+            for _ in range(2):
+                z = ad @ z + bd @ u
+            resp[k] = c @ z
+        lag = delay + first
+        resp = (np.vstack([np.zeros((lag, 3)), resp[:samples - lag]]) if lag >= 0
+                else np.vstack([resp[-lag:], np.zeros((-lag, 3))]))
+        for i in range(count):
+            col = np.zeros((samples, 3))
+            col[i * shift:] = resp[:samples - i * shift]
+            g[:, j * count + i] = col.ravel()
+    return g
+
+
+def arm_operator(pose: np.ndarray, count: int, samples: int, first: int, spacing: float, period: float) -> np.ndarray:
+    """:func:`lifted_operator` on the simulator's arm (:class:`~.dynamics.ArmModel`, its default payload), the entry
+    the learner node's ``mrilc_moves.operator`` names (the model built at the first call)."""
+    if not _MODEL:
+        from .dynamics import ArmModel
+
+        _MODEL.append(ArmModel())
+    return lifted_operator(_MODEL[0], np.asarray(pose, dtype=float), count, samples, first, spacing, period)
