@@ -141,3 +141,32 @@ class Diagnosed:
     def find(self, node_name: str, words: str):
         """The first status of ``node_name`` whose message contains ``words`` (None if none yet)."""
         return next((s for s in self.statuses if s.name.startswith(f"{node_name}:") and words in s.message), None)
+
+
+def start_scheduled_arm(start_node, rule_base, rate: float, readers: list[str], **shaper) -> None:
+    """The arm in lockstep (waiting for ``readers``), the scheduler on ``rule_base`` (ZV, modes interpolated)
+    and the shaper node asking it, all on simulated time: the per-move learners' rig. ``shaper`` adds to the
+    shaper node's parameters (e.g. ``action.controller``)."""
+    from reproductions.scheduler_cases import scheduler_parameters
+    from sim_plant_node.arm.description import JOINT_NAMES
+    from sim_plant_node.arm.task import HOME
+
+    start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist(), "rate": rate,
+                                               "lockstep.readers": readers})
+    start_node("shaper_nodes", "scheduler", {**scheduler_parameters(rule_base), "interpolation": "modes",
+                                             "family": "zv", "use_sim_time": True})
+    start_node("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": rate,
+                                               "use_sim_time": True, "action.server_timeout": 30.0,
+                                               "action.scheduler": "/scheduler", **shaper})
+
+
+def restart_learner(start_node, learner, params: dict, conductor, inputs: tuple[str, ...]) -> None:
+    """``kill -9`` the learner (a NodeProcess) and start it again with ``params`` (the same state file); returns
+    once its subscriptions of ``inputs`` are on ``conductor``'s graph again."""
+    before = conductor.subscription_gids(inputs)
+    assert learner.proc is not None
+    learner.proc.kill()
+    learner.proc.wait(timeout=30)
+    start_node("shaper_nodes", "learner", params)
+    conductor.spin_until(lambda: conductor.new_subscriptions(inputs, before), 120.0,
+                         f"the restarted learner's subscriptions of {', '.join(inputs)}")

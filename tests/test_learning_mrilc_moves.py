@@ -16,8 +16,9 @@ from __future__ import annotations
 import json
 import math
 
+from conftest import restart_learner, start_scheduled_arm
+
 from reproductions.arm_learning import modal_calibration
-from reproductions.scheduler_cases import scheduler_parameters
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key
 from shaper_nodes.ros.conversions import sec_to_time
@@ -56,23 +57,16 @@ def run(client: ArmClient, cycle: int, index: int, move) -> dict[str, float]:
     return metrics(report(client, cycle))
 
 
-def learner_subscribed(conductor: Conductor, before: set[bytes]) -> bool:
-    return all(any(bytes(i.endpoint_gid) not in before for i in conductor.get_subscriptions_info_by_topic(topic))
-               for topic in ("/cycle_events", "/tip_imu"))
+#: the learner's inputs: their subscriptions on the graph again say a restarted learner is up
+INPUTS = ("/cycle_events", "/tip_imu")
 
 
 def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after_a_kill_9(start_node, ros_context,
                                                                                          tmp_path):
     cal = modal_calibration()
     state = tmp_path / "learner_state.json"
-    start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist(), "rate": RATE,
-                                               "lockstep.readers": ["/learner", "/conductor"]})
-    start_node("shaper_nodes", "scheduler", {**scheduler_parameters(cal["rule_base"]), "interpolation": "modes",
-                                             "family": "zv", "use_sim_time": True})
-    start_node("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": RATE,
-                                               "use_sim_time": True, "action.server_timeout": 30.0,
-                                               "action.scheduler": "/scheduler",
-                                               "action.controller": "/learner/follow_joint_trajectory"})
+    start_scheduled_arm(start_node, cal["rule_base"], RATE, ["/learner", "/conductor"],
+                        **{"action.controller": "/learner/follow_joint_trajectory"})
     learner_params = {"mode": "mrilc_moves", "use_sim_time": True, "state_file": str(state),
                       "topics.imu_reliable": True, "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator",
                       "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION],
@@ -123,14 +117,7 @@ def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after
         assert a != b
 
         # kill -9, and start again on the same state file: each move resumes from its saved state
-        before = {bytes(i.endpoint_gid) for t in ("/cycle_events", "/tip_imu")
-                  for i in conductor.get_subscriptions_info_by_topic(t)}
-        assert learner.proc is not None
-        learner.proc.kill()
-        learner.proc.wait(timeout=30)
-        start_node("shaper_nodes", "learner", learner_params)
-        conductor.spin_until(lambda: learner_subscribed(conductor, before), 120.0,
-                             "the restarted learner's subscriptions of /cycle_events and /tip_imu")
+        restart_learner(start_node, learner, learner_params, conductor, INPUTS)
         for i, move in enumerate(MOVES):
             m = run(client, cycle, i, move)
             cycle += 1

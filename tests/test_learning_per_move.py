@@ -19,9 +19,9 @@ import time
 
 import pytest
 import rclpy
+from conftest import restart_learner, start_scheduled_arm
 
 from reproductions.arm_learning import modal_calibration
-from reproductions.scheduler_cases import scheduler_parameters
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key, store_from_doc
 from shaper_nodes.ros.conversions import sec_to_time
@@ -78,16 +78,8 @@ def metrics(r) -> dict[str, float]:
     return dict(zip(r.metric_names, r.metric_values, strict=True))
 
 
-def subscriptions(conductor: Conductor) -> set[bytes]:
-    """The endpoint GIDs of the learner's inputs' subscriptions (/cycle_events and the accelerometer)."""
-    return {bytes(i.endpoint_gid) for topic in ("/cycle_events", "/tip_imu")
-            for i in conductor.get_subscriptions_info_by_topic(topic)}
-
-
-def new_subscriptions(conductor: Conductor, before: set[bytes]) -> bool:
-    """A /cycle_events and a /tip_imu subscription not among ``before`` (their endpoint GIDs) are on the graph."""
-    return all(any(bytes(i.endpoint_gid) not in before for i in conductor.get_subscriptions_info_by_topic(topic))
-               for topic in ("/cycle_events", "/tip_imu"))
+#: the learner's inputs: their subscriptions on the graph again say a restarted learner is up
+INPUTS = ("/cycle_events", "/tip_imu")
 
 
 def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, ros_context, tmp_path):
@@ -95,13 +87,7 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
     state = tmp_path / "learner_state.json"
     # the plant waits for its readers (the learner and this test's client take every sample, reliable), so a
     # starved learner loses no sample of a move
-    start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist(), "rate": RATE,
-                                               "lockstep.readers": ["/learner", "/conductor"]})
-    start_node("shaper_nodes", "scheduler", {**scheduler_parameters(cal["rule_base"]), "interpolation": "modes",
-                                             "family": "zv", "use_sim_time": True})
-    start_node("shaper_nodes", "shaper_node", {"joint_names": list(JOINT_NAMES), "command_rate": RATE,
-                                               "use_sim_time": True, "action.server_timeout": 30.0,
-                                               "action.scheduler": "/scheduler"})
+    start_scheduled_arm(start_node, cal["rule_base"], RATE, ["/learner", "/conductor"])
     learner_params = {"mode": "list", "use_sim_time": True, "shaper": "/scheduler", "list.structure": "zv2",
                       "list.per_move": True, "state_file": str(state), "topics.imu_reliable": True}
     learner = start_node("shaper_nodes", "learner", learner_params)
@@ -151,13 +137,7 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
             assert (entry.correction is None) == (entry.key in held), (entry.key, held, entry.correction)
 
         # kill -9 mid-run, and start again on the same state file
-        before = subscriptions(conductor)
-        assert learner.proc is not None
-        learner.proc.kill()
-        learner.proc.wait(timeout=30)
-        start_node("shaper_nodes", "learner", learner_params)
-        conductor.spin_until(lambda: new_subscriptions(conductor, before), 120.0,
-                             "the restarted learner's subscriptions of /cycle_events and /tip_imu")
+        restart_learner(start_node, learner, learner_params, conductor, INPUTS)
         mark = cell.cycle
         for _ in range(2):
             for i, move in enumerate(MOVES):

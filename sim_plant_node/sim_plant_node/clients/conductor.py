@@ -127,6 +127,16 @@ class Conductor(Node):
     def _has_subscribers(self, topic: str, n: int) -> bool:
         return self.count_subscribers(topic) >= n
 
+    def subscription_gids(self, topics: tuple[str, ...]) -> set[bytes]:
+        """The endpoint GIDs of every subscription of ``topics`` on the graph now."""
+        return {bytes(i.endpoint_gid) for topic in topics for i in self.get_subscriptions_info_by_topic(topic)}
+
+    def new_subscriptions(self, topics: tuple[str, ...], before: set[bytes]) -> bool:
+        """Whether each of ``topics`` has a subscription not among ``before`` (endpoint GIDs, from
+        :meth:`subscription_gids`): a restarted node's inputs are on the graph again."""
+        return all(any(bytes(i.endpoint_gid) not in before for i in self.get_subscriptions_info_by_topic(topic))
+                   for topic in topics)
+
     def set_shaper(self, family: str, omega: float = 1.0, zeta: float = 0.0, source: str = "user",
                    **extra) -> SetShaper.Response:
         req = SetShaper.Request()
