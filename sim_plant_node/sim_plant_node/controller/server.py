@@ -21,7 +21,6 @@ import numpy as np
 from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -42,11 +41,6 @@ from .jtc import (
 )
 
 ACTION_MONITOR_RATE = 20.0  # Hz, the controller's default
-#: the feedback publisher's history: 50 s of feedback at ACTION_MONITOR_RATE (rclpy's default, 10, is 0.5 simulated s:
-#: a lockstep plant that runs ahead of a client overwrote a goal's first feedback before the client took it, and
-#: calibrate, which takes a motion's start from it, then waited for samples past the trajectory's end;
-#: docs/results/benchmarks.md). A client that needs every feedback subscribes as deep.
-FEEDBACK_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 Result = FollowJointTrajectory.Result
 
 
@@ -90,8 +84,7 @@ class ControllerServer:
         self.refused: list[str] = []  # the reasons of refused trajectories, newest last
         self.server = ActionServer(node, FollowJointTrajectory, action, execute_callback=self._execute,
                                    goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
-                                   cancel_callback=self._on_cancel, feedback_pub_qos_profile=FEEDBACK_QOS,
-                                   **ACTION_QOS)
+                                   cancel_callback=self._on_cancel, **ACTION_QOS)
         node.create_subscription(JointTrajectory, topic, self._on_topic, 10)
 
     # ------------------------------------------------------------------ validation
