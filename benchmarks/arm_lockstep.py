@@ -19,8 +19,13 @@ Methods:
     subscriber on each; wall time from the goal's acceptance to its result.
 ``DDS writes alone``
     The ceiling of the node over DDS on this machine: a process that only publishes what the node
-    publishes per 2 ms period (one JointState and one Clock as CDR bytes, two Imu messages, the
-    node's QoS), as fast as it can, to the same subscriber, with no simulation at all.
+    publishes per 2 ms period (one JointState, one Clock and two Imu, all as CDR bytes as the node writes
+    them, the node's QoS), as fast as it can, to the same subscriber, with no simulation at all.
+``DDS writes alone, the demo's streams``
+    The same for the writes of the node in lockstep with the demo's readers: six a period (the reference, two
+    Imu, the joint state, the tip state, the clock; every per-step stream reliable and 10000 deep as in lockstep,
+    all as CDR bytes as the node writes them) to one raw subscriber of them all. With ``ArmPlant + controller``
+    it bounds the node with the demo's readers (``python -m benchmarks.arm_lockstep --bound`` prints only these).
 ``one Python reader's limit``
     The subscriber's CPU time per message taken (its process, DDS threads included, from its first
     message to its last) with the writer paced at 4x real time, which it follows, as the simulated
@@ -98,15 +103,18 @@ def core(seconds: float = 2.0) -> dict:
     return out
 
 
-def _counting_subscriber(ctx) -> tuple:
-    """A node counting /joint_states, /tip_imu and /clock, raw: counted, not decoded (it shares the 2 cores);
-    also its process's CPU time at the first and the last message."""
+def _counting_subscriber(ctx, demo: bool = False) -> tuple:
+    """A node counting /joint_states, /tip_imu and /clock (``demo``: also the tip state and the reference, every
+    per-step stream reliable, STREAM_QOS), raw: counted, not decoded (it shares the 2 cores); also its process's
+    CPU time at the first and the last message."""
     import rclpy
     from rclpy.qos import qos_profile_sensor_data
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
 
     n = rclpy.create_node("arm_bench", context=ctx)
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS
+
     counts = {"joint_states": 0, "imu": 0, "clock": 0}
     cpu = {"first": 0.0, "last": 0.0, "n": 0}  # the reader process's CPU time at its first and last message
 
@@ -118,9 +126,13 @@ def _counting_subscriber(ctx) -> tuple:
                 cpu["first"] = cpu["last"]
         return took
 
-    n.create_subscription(JointState, "/joint_states", count("joint_states"), 1000, raw=True)
-    n.create_subscription(Imu, "/tip_imu", count("imu"), qos_profile_sensor_data, raw=True)
+    n.create_subscription(JointState, "/joint_states", count("joint_states"), STREAM_QOS if demo else 1000, raw=True)
+    n.create_subscription(Imu, "/tip_imu", count("imu"), STREAM_QOS if demo else qos_profile_sensor_data, raw=True)
     n.create_subscription(Clock, "/clock", count("clock"), 1000, raw=True)
+    if demo:
+        for key, topic in (("tip_state", "/sim_plant/tip_state"), ("reference", "/sim_plant/reference")):
+            counts[key] = 0
+            n.create_subscription(JointState, topic, count(key), STREAM_QOS, raw=True)
     return n, counts, cpu
 
 
@@ -176,29 +188,37 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
     return {"sim plant node over DDS": seconds / wall, "received": counts}
 
 
-def _write(periods: int, pace: float = 0.0) -> None:
+def _write(periods: int, pace: float = 0.0, demo: bool = False) -> None:
     """The writer process of ``writes``: prints its wall time for ``periods`` periods as JSON (``pace``: simulated
-    s per wall s to keep to; 0: as fast as it can)."""
+    s per wall s to keep to; 0: as fast as it can). ``demo``: the writes of the node in lockstep with the demo's
+    readers (also the tip state and the reference; every per-step stream reliable and 10000 deep, STREAM_QOS)."""
     import rclpy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
 
-    from shaper_nodes.recordings.cdr import JointStateCdr, clock_cdr, stamp_parts
+    from shaper_nodes.recordings.cdr import ImuCdr, JointStateCdr, clock_cdr, stamp_parts
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS
     from sim_plant_node.arm.description import JOINT_NAMES
     from sim_plant_node.node.sim_plant import LOCKSTEP_IMU_QOS
 
     rclpy.init()
     n = rclpy.create_node("arm_bench_writer")
-    pubs = (n.create_publisher(JointState, "/joint_states", 10), n.create_publisher(Imu, "/tip_imu", LOCKSTEP_IMU_QOS),
-            n.create_publisher(Clock, "/clock", 10))
+    deep = STREAM_QOS if demo else 10
+    pubs = [n.create_publisher(JointState, "/joint_states", deep),
+            n.create_publisher(Imu, "/tip_imu", LOCKSTEP_IMU_QOS), n.create_publisher(Clock, "/clock", 10)]
+    if demo:
+        pubs += [n.create_publisher(JointState, "/sim_plant/tip_state", deep),
+                 n.create_publisher(JointState, "/sim_plant/reference", deep)]
     deadline = time.monotonic() + 60
     while any(p.get_subscription_count() == 0 for p in pubs):
         if time.monotonic() > deadline:
             raise SystemExit("no subscriber matched within 60 s")
         time.sleep(0.01)
     time.sleep(0.5)  # the matched subscriber's side of discovery
-    js_pub, imu_pub, clock_pub = pubs
-    js, imu = JointStateCdr(list(JOINT_NAMES), 6, 6, 6), Imu()
+    js_pub, imu_pub, clock_pub = pubs[:3]
+    names = list(JOINT_NAMES)
+    js, imu, tip, ref = JointStateCdr(names, 6, 6, 6), ImuCdr("tool0"), JointStateCdr(names, 6, 6, 0), \
+        JointStateCdr(names, 6, 0, 0)
     t0 = time.perf_counter()
     for k in range(periods):  # per period what the node writes: two IMU samples, the joint state, the clock
         if pace > 0:
@@ -206,13 +226,21 @@ def _write(periods: int, pace: float = 0.0) -> None:
             if left > 0:
                 time.sleep(left)
         sec, nsec = stamp_parts(k * 2e-3)
-        for _ in range(2):
-            imu.header.stamp.sec, imu.header.stamp.nanosec = sec, nsec
-            imu.linear_acceleration.x = float(k)
-            imu_pub.publish(imu)
+        if demo:  # the reference, stamped at the period's start
+            ref.set_stamp(sec, nsec)
+            ref.position[:] = k
+            pubs[4].publish(ref.data())
+        for _ in range(2):  # (as the node: serialized in place, sensors.Sensors.publish_imu)
+            imu.set_stamp(sec, nsec)
+            imu.linear_acceleration[0] = float(k)
+            imu_pub.publish(imu.data())
         js.set_stamp(sec, nsec)
         js.position[:] = k
         js_pub.publish(js.data())
+        if demo:
+            tip.set_stamp(sec, nsec)
+            tip.position[:] = k
+            pubs[3].publish(tip.data())
         clock_pub.publish(clock_cdr(sec, nsec))
     wall = time.perf_counter() - t0
     print(json.dumps({"wall": wall}), flush=True)
@@ -232,16 +260,25 @@ def writes(periods: int = 5000, pace: float = 4.0) -> dict:
             "one Python reader's limit": 1.0 / (2000 * per_message)}
 
 
-def _writes(periods: int, pace: float) -> dict:
+def demo_writes(periods: int = 5000) -> dict:
+    """Simulated s per wall s of the writes of the node in lockstep with the demo's readers alone (six a period:
+    the reference, two Imu, the joint state, the tip state, the clock; the per-step streams reliable, STREAM_QOS)
+    to one raw subscriber of them all, as fast as the writer can."""
+    fast = _writes(periods, 0.0, demo=True)
+    return {"DDS writes alone, the demo's streams": fast["rate"], "demo writes received": fast["received"]}
+
+
+def _writes(periods: int, pace: float, demo: bool = False) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx)
-    n, counts, cpu = _counting_subscriber(ctx)
+    n, counts, cpu = _counting_subscriber(ctx, demo)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(n)
-    env_cmd = [sys.executable, "-m", "benchmarks.arm_lockstep", "--write", str(periods), "--pace", str(pace)]
+    env_cmd = [sys.executable, "-m", "benchmarks.arm_lockstep", "--write", str(periods), "--pace", str(pace),
+               *(["--demo"] if demo else [])]
     proc = subprocess.Popen(env_cmd, stdout=subprocess.PIPE, text=True)
     try:
         while proc.poll() is None:
@@ -269,6 +306,7 @@ def run(*, progress: Callable[[str], None] = print) -> dict:
     out.update(node(progress=progress))
     progress("arm: the node's DDS writes alone")
     out.update(writes())
+    out.update(demo_writes())
     from .arm_readers import lockstep as readers_lockstep
 
     drained = readers_lockstep(10.0, 1, progress, ("raw_drain",))[0]
@@ -299,6 +337,11 @@ def print_table(fig: dict) -> None:
     if rec:
         print(f"(the writes alone: received {rec['joint_states']} joint states, {rec['imu']} IMU messages and"
               f" {rec['clock']} clock ticks)")
+    if "DDS writes alone, the demo's streams" in fig:
+        d = fig["DDS writes alone, the demo's streams"]
+        print(f"(the writes of the node with the demo's readers alone, six a period, reliable: {d:.1f} sim s per wall"
+              f" s; with ArmPlant + controller one process is bound to"
+              f" {1 / (1 / d + 1 / fig['ArmPlant + controller']):.1f} here)")
     if "readers: sim plant node with a drained reader" in fig:
         print(f"(the node in lockstep with a drained reader of the demo client's four streams:"
               f" {fig['readers: sim plant node with a drained reader']:.2f} sim s per wall s,"
@@ -314,9 +357,20 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--write", type=int, metavar="PERIODS", help="be the writer process of the writes-alone run")
     parser.add_argument("--pace", type=float, default=0.0, help="the writer's pace, sim s per wall s (0: flat out)")
+    parser.add_argument("--demo", action="store_true", help="the writer: the node's writes with the demo's readers")
+    parser.add_argument("--bound", action="store_true", help="only the rates of the one-process bound: ArmPlant +"
+                        " controller, the writes alone and the demo's streams' writes alone")
     args = parser.parse_args()
     if args.write:
-        _write(args.write, args.pace)
+        _write(args.write, args.pace, args.demo)
+    elif args.bound:
+        fig = {k: v for k, v in core().items() if k == "ArmPlant + controller"}
+        fig.update(writes())
+        fig.update(demo_writes())
+        sim, w, d = fig["ArmPlant + controller"], fig["DDS writes alone"], fig["DDS writes alone, the demo's streams"]
+        print(json.dumps({k: v for k, v in fig.items() if isinstance(v, float)}, indent=1))
+        print(f"one-process bound: {1 / (1 / sim + 1 / w):.1f} sim s per wall s (4 writes a period),"
+              f" {1 / (1 / sim + 1 / d):.1f} with the demo's streams (6 writes a period)")
     else:
         fig = run()
         print_table(fig)

@@ -3,8 +3,10 @@
 :class:`Sensors` applies the sensor parameters (``imu.*`` and ``joint_states.*``: encoder noise and
 quantum, accelerometer and gyro noise and bias, the IMU's frame) to what the model gives
 (:meth:`~sim_plant_node.models.base.Plant.joint_state`, :meth:`~sim_plant_node.models.base.Plant.imu`)
-and publishes it. :class:`StateBytes` writes the plant's other JointState outputs (the tip state, the reference)
-as serialized bytes in place, as /joint_states is.
+and publishes it, /joint_states and the Imu as serialized bytes written in place (``JointStateCdr``, ``ImuCdr`` of
+:mod:`shaper_nodes.recordings.cdr`; no message object per sample). :class:`StateBytes` writes the plant's other
+JointState outputs (the tip state, the reference) the same way. ``sim_plant_node/test/test_imu_bytes.py`` and
+``test_state_bytes.py`` hold the bytes equal to rclpy's ``serialize_message`` of the messages the node built before.
 """
 
 from __future__ import annotations
@@ -12,10 +14,10 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import JointState
 
 from shaper_nodes.core.cycles import CycleMonitor
-from shaper_nodes.recordings.cdr import JointStateCdr, stamp_parts
+from shaper_nodes.recordings.cdr import ImuCdr, JointStateCdr, stamp_parts
 
 from ..models.base import Plant
 from .parameters import ImuParams, JointStatesParams
@@ -63,7 +65,7 @@ class Sensors:
     joint_states : JointStatesParams
         The encoders' settings (``joint_states.*``).
     imu_pub : rclpy publisher
-        Where the Imu messages go.
+        Where the Imu messages go (as serialized bytes).
     monitor : CycleMonitor
         Takes every accelerometer sample (the per-cycle residual vibration).
     """
@@ -75,15 +77,12 @@ class Sensors:
         self._imu_pub = imu_pub
         self._monitor = monitor
         self.changed(imu, joint_states)
-        # /joint_states is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr):
-        # the same messages, without building message objects. The IMU stays a message object: published as
-        # bytes (shaper_nodes.recordings.cdr.ImuCdr, the same bytes on the wire) it failed tests/test_calibrate.py's
-        # killed-and-resumed run twice (no IMU sample past a point within 30 s), not yet understood
-        # (docs/benchmarks.md)
-        self._imu_msg = Imu()  # reused: publish() serialises it at once
-        self._imu_msg.orientation_covariance[0] = -1.0
-        self._imu_msg.header.frame_id = self._imu_frame  # (imu.frame_id is read-only)
+        # /joint_states and the IMU are published as serialized bytes, their numbers rewritten in place
+        # (shaper_nodes.recordings.cdr): the same messages, without building message objects
+        self._imu = ImuCdr(self._imu_frame)  # (imu.frame_id is read-only)
+        self._imu.orientation_covariance[0] = -1.0  # no orientation
         self._imu_gyro_sigma: float | None = None  # the gyro covariance written in it
+        self._acc_sigma_written: float | None = None  # the accelerometer's
         self._js_cdr: JointStateCdr | None = None  # made for the array lengths the plant reports
 
     def changed(self, imu: ImuParams, joint_states: JointStatesParams) -> None:
@@ -134,22 +133,23 @@ class Sensors:
         sigma = self._imu_sigma
         if sigma > 0:
             acc += self.rng.normal(0.0, sigma, 3)
-        imu = self._imu_msg
-        imu.header.stamp.sec, imu.header.stamp.nanosec = stamp_parts(t)
+        imu = self._imu
+        imu.set_stamp(*stamp_parts(t))
         if rate is None:
             imu.angular_velocity_covariance[0] = -1.0
         else:
             gyro_sigma = self._gyro_sigma
             rate = rate + self._gyro_bias
             if gyro_sigma > 0:
-                rate = rate + self.rng.normal(0.0, gyro_sigma, 3)
-            imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = rate.tolist()
+                rate += self.rng.normal(0.0, gyro_sigma, 3)
+            imu.angular_velocity[:] = rate
             if gyro_sigma != self._imu_gyro_sigma:
-                imu.angular_velocity_covariance = [gyro_sigma**2, 0.0, 0.0, 0.0, gyro_sigma**2, 0.0, 0.0, 0.0,
-                                                   gyro_sigma**2]
+                imu.angular_velocity_covariance[:] = 0.0
+                imu.angular_velocity_covariance[::4] = gyro_sigma**2
                 self._imu_gyro_sigma = gyro_sigma
-        imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = acc.tolist()
-        imu.linear_acceleration_covariance[0] = imu.linear_acceleration_covariance[4] = \
-            imu.linear_acceleration_covariance[8] = sigma**2
-        self._imu_pub.publish(imu)
+        imu.linear_acceleration[:] = acc
+        if sigma != self._acc_sigma_written:
+            imu.linear_acceleration_covariance[::4] = sigma**2
+            self._acc_sigma_written = sigma
+        self._imu_pub.publish(imu.data())
         self._monitor.add_accel(t, acc)
