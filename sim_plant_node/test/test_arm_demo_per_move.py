@@ -24,9 +24,9 @@ def test_the_per_move_table_gives_each_move_its_cycles_its_ratio_to_the_schedule
                 [(runs[0], measure(0.045, 1.25), report(move=0.0, held=1.0)),
                  (runs[1], measure(0.020, 1.35), report(move=1.0, M=0.02, iteration=2.0, a1_next=0.55, t2_next=0.0502,
                                                         held=0.0))]]
-    # the demo's rows name a move as its table does: its index and name ("1. home->pick")
-    rows = [{"case": "scheduled", "move": "1. home->pick", "residual_rms": 0.04, "move_and_settle_s": 1.2},
-            {"case": "scheduled", "move": "2. pick->home", "residual_rms": 0.10, "move_and_settle_s": 1.3}]
+    # the demo's rows name a move as its measure does (the move's name alone)
+    rows = [{"case": "scheduled", "move": "home->pick", "residual_rms": 0.04, "move_and_settle_s": 1.2},
+            {"case": "scheduled", "move": "pick->home", "residual_rms": 0.10, "move_and_settle_s": 1.3}]
     table = _per_move_table(per_move, rows, 0.01)
     assert "0.0173" in table[0]  # the noise floor in this RMS: sqrt(3) x 0.01
     assert table[2] == "| move | c1 | c2 | last % of scheduled | learner's last report |"

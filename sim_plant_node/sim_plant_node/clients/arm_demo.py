@@ -427,7 +427,7 @@ def _per_move_table(per_move: list[list[tuple[MoveRun, Any, Any]]], rows: list[d
         for i, (run, _, _) in enumerate(per_move[0]):
             name = f"{run.index + 1}. {run.name}"
             values = [float(getattr(c[i][1], key)) for c in per_move]
-            sched = next((r[key] for r in rows if r["case"] == "scheduled" and r["move"] == name), None)
+            sched = next((r[key] for r in rows if r["case"] == "scheduled" and r["move"] == run.name), None)
             ratio = f"{100 * values[-1] / sched:.1f}" if sched else "-"
             fmt = "{:.4f}" if key == "residual_rms" else "{:.3f}"
             out.append(f"| {name} {what} | " + " | ".join(fmt.format(v) for v in values)
