@@ -14,8 +14,9 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   the goal pose (asked of ``<shaper>/shaper_at``; ZV formulas) and stays on it: its T2 is bounded to
   :data:`T2_BAND` (+-10 %) of that mode's frequency unless ``list.t2_bounds`` is set
   (:func:`schedule_config`). Its residual window starts after the schedule's shaper there plus the
-  factor's longest T2 (unless ``list.window_delay`` is set). Without joint names in the event, or without an answer, the start is the mode identified
-  in the reference cycle, as the task-wide LIST does.
+  factor's longest T2 (unless ``list.window_delay`` is set). Without joint names in the event, or
+  without an answer, the start is the mode identified in the reference cycle, as the task-wide LIST
+  does.
 - **A factor is kept only when it pays** (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`): the
   reference cycle's M (the schedule alone) is the move's base; a trial that measures more stops the
   move's learning at the best measured: LIST holds at its best factor if one beat the base, otherwise
