@@ -24,6 +24,7 @@ from conftest import restart_learner, start_scheduled_arm
 from reproductions.arm_learning import modal_calibration
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key, store_from_doc
+from shaper_nodes.nodes.learner_moves import T2_BAND
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.arm.description import JOINT_NAMES
@@ -115,6 +116,11 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
             learned_ = [m for m in got if "iteration" in m]
             assert [m["iteration"] for m in learned_] == list(range(1, len(learned_) + 1))
             last[move.name], nxt[move.name] = got[-1], mine[-1].shaper_next
+            # the factor stays in its band: T2 within T2_BAND of the start's (the schedule's lowest mode at the goal)
+            t2 = [m[k] for m in learned_[1:] for k in ("t2_used", "t2_next") if m[k] == m[k]]
+            if t2:
+                lo, hi = t2[0] / (1.0 + T2_BAND), t2[0] / (1.0 - T2_BAND)
+                assert all(lo * (1 - 1e-12) <= x <= hi * (1 + 1e-12) for x in t2), (move.name, t2[0], t2)
             # a factor is kept only when it pays: after the first cycle (the schedule alone) at most one trial is
             # worse than it, and none after that one (1 %: the schedule alone again measured 0.14 % above its
             # first run, which started from rest at the task's start rather than where the previous move ended)

@@ -11,10 +11,12 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
 
 - **A new move** runs its first cycle with the schedule alone (the scheduler has no factor for it):
   that cycle is the LIST reference. The move's learner starts from the schedule's lowest mode at
-  the goal pose (asked of ``<shaper>/shaper_at``; ZV formulas), and its residual window starts
-  after the schedule's shaper there plus the factor's longest T2 (unless ``list.window_delay`` is
-  set). Without joint names in the event, or without an answer, the start is the mode identified
-  in the reference cycle, as the task-wide LIST does.
+  the goal pose (asked of ``<shaper>/shaper_at``; ZV formulas) and stays on it: its T2 is bounded to
+  :data:`T2_BAND` (+-10 %) of that mode's frequency unless ``list.t2_bounds`` is set
+  (:func:`schedule_config`). Its residual window starts after the schedule's shaper there plus the
+  factor's longest T2 (unless ``list.window_delay`` is set). Without joint names in the event, or
+  without an answer, the start is the mode identified in the reference cycle, as the task-wide LIST
+  does.
 - **A factor is kept only when it pays** (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`): the
   reference cycle's M (the schedule alone) is the move's base; a trial that measures more stops the
   move's learning at the best measured: LIST holds at its best factor if one beat the base, otherwise
@@ -76,6 +78,42 @@ HELD = "held at the schedule alone: no factor was measured better than it (~/hol
 _DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", "drift_warned", "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move was relearned (drift warning) while this cycle ran"
+
+
+#: a move's factor started from the schedule's lowest mode stays within this fraction of that mode's frequency
+#: (:meth:`~shaper_nodes.core.learning.list.ListParams.t2_band`; the reproduction's ``LIST_BAND``)
+T2_BAND = 0.1
+
+
+def schedule_config(config: ListConfig, initial: ListParams, shaper_end: float | None) -> ListConfig:
+    """The LIST configuration of a move whose learner starts from the schedule's lowest mode (``initial``).
+
+    Its T2 is bounded to ``initial.t2_band(T2_BAND)`` (unless ``config.t2_bounds`` is set), so the
+    factor's frequency stays within +-10 % of that mode's and cannot drift between two modes (or
+    to a longer, slower pair). With ``shaper_end`` (s, the schedule's shaper's last impulse at the
+    goal; None keeps ``config.window_delay``) the residual window starts after that shaper plus the
+    factor's longest duration (its T2 bound, twice for ``zvd3``).
+
+    Parameters
+    ----------
+    config : ListConfig
+        The node's LIST configuration.
+    initial : ListParams
+        The move's start (ZV formulas at the schedule's lowest mode at its goal).
+    shaper_end : float or None
+        The schedule's shaper duration at the goal, s, or None.
+
+    Returns
+    -------
+    ListConfig
+        ``config`` with ``t2_bounds`` (and ``window_delay``) set.
+    """
+    bounds = config.t2_bounds if config.t2_bounds is not None else initial.t2_band(T2_BAND)
+    out = dataclasses.replace(config, t2_bounds=bounds)
+    if shaper_end is not None:
+        longest = bounds[1] * (2.0 if config.structure == "zvd3" else 1.0)
+        out = dataclasses.replace(out, window_delay=shaper_end + longest)
+    return out
 
 
 def _sent(learner: ListLearner) -> ListParams | None:
@@ -240,14 +278,14 @@ class MovesMode:
                 try:
                     lowest = min((mode_from_msg(m) for m in resp.estimate.modes), key=lambda m: m.omega)
                     initial = ListParams.from_mode(Mode(lowest.omega, lowest.zeta))
-                    if not self.user_delay:
-                        t2_max = 2.0 * initial.t2 * (2.0 if self.structure == "zvd3" else 1.0)
-                        delay = (float(resp.shaper.times[-1]) if len(resp.shaper.times) else 0.0) + t2_max
-                        config = dataclasses.replace(self.config, window_delay=delay)
+                    end = float(resp.shaper.times[-1]) if len(resp.shaper.times) else 0.0
+                    config = schedule_config(self.config, initial, None if self.user_delay else end)
                     learner = ListLearner(config, initial)
                     entry.origin = "schedule"
+                    lo, hi = config.t2_bounds or (math.nan, math.nan)
                     self.node.get_logger().info(f"move {entry.key}: starts from the schedule's lowest mode"
-                                                f" {lowest.hz:.4g} Hz, zeta {lowest.zeta:.3g} at its goal")
+                                                f" {lowest.hz:.4g} Hz, zeta {lowest.zeta:.3g} at its goal;"
+                                                f" T2 within {lo * 1e3:.1f}-{hi * 1e3:.1f} ms")
                     return learner
                 except (ShaperError, ListError, ValueError) as err:
                     why = str(err)
