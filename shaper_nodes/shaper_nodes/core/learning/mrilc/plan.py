@@ -144,7 +144,8 @@ def plan_move(times: npt.ArrayLike, positions: npt.ArrayLike, velocities: npt.Ar
     end = motion_end(np.append(0.0, t), np.vstack([q0, q]))
     grid = np.asarray(s.output_period * np.arange(1, int(round((end + s.residual_window) / s.output_period)) + 1),
                       dtype=np.float64)
-    families, parts = [], []
+    families: list[Family] = []
+    parts: list[tuple[Array, Array, Array]] = []
     for spacing, tail in ((s.spacing, s.tail), (s.fine_spacing, s.fine_tail)):
         if tail <= 0 and families:
             continue
