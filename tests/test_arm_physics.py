@@ -117,12 +117,20 @@ def test_the_corrected_goal_is_judged_on_the_vibration_part():
     assert "[below the floor]" in noisy and "): met." in noisy
 
 
-def test_the_mrilc_summary_judges_the_vibration_part():
-    base = {"residual_rms_noise_free": 0.01, "residual_rms": 0.01, "move_settle_s": 1.0, "speed_factor": 1.0}
-    rows = [{**base, "case": arm_mrilc.CASES[0], "move": "a", "cycle": 1, "servo_rms": 0.008, "vibration_rms": 0.004}]
-    rows += [{**base, "case": arm_mrilc.CASES[1], "move": "a", "cycle": c, "servo_rms": 0.008, "vibration_rms": v,
-              "max_correction_rad": 1e-4, "max_correction_rad_s": 1e-3, "max_correction_rad_s2": 0.1,
-              "limit_excess": 0.0} for c, v in ((1, 0.004), (2, 0.0009))]
+def test_the_mrilc_summary_judges_the_residual_and_its_vibration_part():
+    base = {"residual_rms": 0.01, "move_settle_s": 1.0, "speed_factor": 1.0, "max_correction_rad": 1e-4,
+            "max_correction_rad_s": 1e-3, "max_correction_rad_s2": 0.1, "limit_excess": 0.0}
+    rows = [{**base, "case": arm_mrilc.CASES[0], "move": "a", "cycle": 1, "residual_rms_noise_free": 0.01,
+             "servo_rms": 0.008, "vibration_rms": 0.004}]
+    rows += [{**base, "case": arm_mrilc.CASES[1], "move": "a", "cycle": c, "residual_rms_noise_free": res,
+              "servo_rms": 0.008 * res / 0.01, "vibration_rms": v}
+             for c, res, v in ((1, 0.01, 0.004), (2, 0.002, 0.0009))]
     text = arm_mrilc.summary(rows)
     assert "| 0.225 (0.225) |" in text  # the vibration ratio at the last cycle (and its best)
-    assert "**Corrected goal**" in text and ": met (judged: a)" in text
+    assert "**Goal**" in text and "no move slower): met." in text
+    assert "**Its vibration part** at cycle 2 at most 25 % of the schedule's on every move: met." in text
+    # a residual above 25 % of the schedule's, or a limit not held exactly, is not met
+    rows[-1]["residual_rms_noise_free"] = 0.003
+    assert "not met (above 25 %: a 30 %)" in arm_mrilc.summary(rows)
+    rows[-1]["residual_rms_noise_free"], rows[-1]["limit_excess"] = 0.002, 1e-18
+    assert "no move slower): not met." in arm_mrilc.summary(rows)

@@ -95,7 +95,7 @@ def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after
             assert all(m["max_correction_rad"] > 0.0 for m in mine[1:]), mine
             # every limit held: the corrected profile inside the joint limits (what the learner projected and the
             # goal's check found)
-            assert all(m["limit_excess"] <= 1e-9 for m in mine), mine
+            assert all(m["limit_excess"] == 0.0 for m in mine), mine  # the points sent clipped into them
             # the residual window's vibration (the learner's cost) falls: a relative drop, not tuned digits
             costs = [m["cost"] for m in mine]
             assert min(costs[1:]) < 0.7 * costs[0], (move.name, costs)
@@ -123,7 +123,7 @@ def test_each_move_learns_its_own_correction_within_the_limits_and_resumes_after
             cycle += 1
             assert "skipped" not in m, m
             assert m["iteration"] == ROUNDS + 1  # not from scratch
-            assert m["max_correction_rad"] > 0.0 and m["limit_excess"] <= 1e-9
+            assert m["max_correction_rad"] > 0.0 and m["limit_excess"] == 0.0
             assert m["cost"] < got[move.name][0]["cost"]
             assert math.isfinite(m["cost"])
         print("learner cost per move and cycle, m/s^2:",

@@ -16,9 +16,11 @@ from shaper_nodes.core.learning.mrilc.moves import (
     JointLimits,
     MoveLearner,
     Profile,
+    clip_into,
     excess,
     moves_from_dict,
     moves_to_dict,
+    profile_excess,
     project,
     spline_basis,
 )
@@ -110,6 +112,34 @@ def test_limits_hold_and_a_profile_past_a_limit_is_not_taken_further():
     _, v2, _ = prof.corrected(c)
     assert np.all(np.abs(v2) <= np.maximum(0.49, np.abs(prof.velocities)) + 1e-12)
     assert excess(c, prof, tight) <= 1e-12
+
+
+def test_the_points_sent_hold_the_limits_exactly_where_the_correction_meets_them():
+    g, t = mimo_plant()
+    prof = profile(t)
+    limits = JointLimits(np.full(2, -6.0), np.full(2, 6.0), np.full(2, 0.5005), np.full(2, 100.0))
+    learner = MoveLearner(g, prof, limits, gain=1.0, regularisation=1e-6)
+    run(learner, g, g @ np.full(2 * COUNT, 0.05), 5)
+    raw = prof.corrected(learner.coefficients)
+    sent = learner.corrected()
+    base = (prof.positions, prof.velocities, prof.accelerations)
+    # the correction meets the velocity limit (to rounding) and the points sent hold every limit exactly
+    assert np.max(np.abs(raw[1])) == pytest.approx(0.5005, abs=1e-9)
+    assert profile_excess(*sent, limits, base) == 0.0
+    assert np.max(np.abs(sent[1])) <= 0.5005
+    for r, c in zip(raw, sent, strict=True):  # clipping moves the points by rounding only
+        assert np.max(np.abs(r - c)) <= 1e-12
+    # a point past a limit is clipped onto it; where the uncorrected profile is past it, onto the profile's value
+    v = prof.velocities.copy()
+    v[5, 0] = 0.6
+    q2, v2, a2 = clip_into(prof.positions, v, prof.accelerations, limits)
+    assert v2[5, 0] == 0.5005 and profile_excess(q2, v2, a2, limits) == 0.0
+    assert profile_excess(prof.positions, v, prof.accelerations, limits) == pytest.approx(0.0995)
+    past = (prof.positions, v, prof.accelerations)
+    v3 = v.copy()
+    v3[5, 0] = 0.7
+    _, v4, _ = clip_into(prof.positions, v3, prof.accelerations, limits, past)
+    assert v4[5, 0] == 0.6 and profile_excess(prof.positions, v4, prof.accelerations, limits, past) == 0.0
 
 
 def test_divergence_falls_back_to_the_best_profile_and_holds():

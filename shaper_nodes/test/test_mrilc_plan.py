@@ -10,7 +10,14 @@ import pytest
 
 from shaper_nodes.core.learning.mrilc.model import MrilcError
 from shaper_nodes.core.learning.mrilc.moves import JointLimits
-from shaper_nodes.core.learning.mrilc.plan import PlanSettings, limit_breach, motion_end, plan_move, residual_error
+from shaper_nodes.core.learning.mrilc.plan import (
+    PlanSettings,
+    limit_breach,
+    motion_end,
+    plan_move,
+    plan_operator,
+    residual_error,
+)
 
 PERIOD = 2e-3
 
@@ -31,18 +38,49 @@ def test_the_plan_places_the_basis_in_the_tail_of_the_motion():
     plan = plan_move(t, q, v, a, np.zeros(2))
     assert plan.motion_end == pytest.approx(0.8, abs=PERIOD)
     s = PlanSettings()
-    assert plan.grid[0] == pytest.approx(PERIOD) and plan.grid[-1] == pytest.approx(plan.motion_end + 1.0, abs=PERIOD)
-    assert plan.count == int(round(s.tail / s.spacing)) - 3
-    assert plan.first == int(round((plan.motion_end - s.tail) / PERIOD))
+    out = s.output_period
+    assert plan.grid[0] == pytest.approx(out) and plan.grid[-1] == pytest.approx(plan.motion_end + 1.0, abs=out)
+    coarse, fine = plan.families
+    assert coarse.count == int(round(s.tail / s.spacing)) - 3 and coarse.spacing == s.spacing
+    assert fine.count == int(round(s.fine_tail / s.fine_spacing)) - 3 and fine.spacing == s.fine_spacing
+    assert plan.count == coarse.count + fine.count and plan.profile.basis[0].shape[1] == plan.count
+    assert plan.first == coarse.first == int(round((plan.motion_end - s.tail) / out))
+    assert fine.first == int(round((plan.motion_end - s.fine_tail) / out))
     b0, b1, b2 = plan.profile.basis
     support = np.any(b0 != 0, axis=1)
     assert t[support].min() > plan.motion_end - s.tail - 1e-9 and t[support].max() < plan.motion_end + 1e-9
+    fine_support = np.any(b0[:, coarse.count:] != 0, axis=1)
+    assert t[fine_support].min() > plan.motion_end - s.fine_tail - 1e-9
+    assert len(plan_move(t, q, v, a, np.zeros(2), PlanSettings(fine_tail=0.0)).families) == 1
     # the correction and its first two derivatives vanish at the motion's end: the goal and timing stay
     end = np.searchsorted(t, plan.motion_end)
     assert np.all(b0[end:] == 0) and np.all(b1[end:] == 0) and np.all(b2[end:] == 0)
     w = plan.weights.reshape(-1, 3)
     assert np.all(w[plan.grid < plan.motion_end + s.skip] == 0) and np.all(w[plan.grid >= plan.motion_end + s.skip]
                                                                             == 1)
+
+
+def test_the_operator_is_assembled_per_family_in_the_learners_order():
+    t, q, v, a = profile()
+    plan = plan_move(t, q, v, a, np.zeros(2))
+    calls = []
+
+    def provider(goal, count, samples, first, spacing, period):
+        calls.append((count, samples, first, spacing, period))
+        # column j * count + i of the family holds the marker (family spacing, joint, index)
+        g = np.zeros((samples * 3, count * 2))
+        for j in range(2):
+            for i in range(count):
+                g[0, j * count + i] = 1000 * spacing + 10 * j + i / 100
+        return g
+
+    g = plan_operator(plan, provider, [1.0, 1.0], 2, plan.grid[0])
+    assert len(plan.families) == 2
+    assert calls == [(f.count, plan.grid.size, f.first, f.spacing, plan.grid[0]) for f in plan.families]
+    want = [1000 * f.spacing + 10 * j + i / 100 for j in range(2) for f in plan.families for i in range(f.count)]
+    np.testing.assert_allclose(g[0], want)
+    with pytest.raises(MrilcError, match="finite values expected"):
+        plan_operator(plan, lambda *args: np.zeros((3, 3)), [1.0, 1.0], 2, plan.grid[0])
 
 
 def test_the_error_is_the_residual_vibration_without_its_trend():
@@ -52,12 +90,18 @@ def test_the_error_is_the_residual_vibration_without_its_trend():
     rel = ts - plan.motion_end
     gravity_and_drift = np.column_stack([0.0 * ts + 9.81, 0.02 * rel, 0.01 * rel**2])
     ring = 0.05 * np.exp(-rel.clip(0) * 3) * np.sin(2 * np.pi * 8 * rel) * (rel > 0)
-    e = residual_error(plan, ts, gravity_and_drift + ring[:, None]).reshape(-1, 3)
+    e = residual_error(plan, ts, gravity_and_drift + ring[:, None], 2).reshape(-1, 3)
     rest = plan.weights[::3] > 0
     want = -np.interp(plan.grid, ts, ring)
-    # the constant and the quadratic drift are gone; the ring stays (less what a quadratic fit of it takes)
-    assert np.max(np.abs(residual_error(plan, ts, gravity_and_drift)[plan.weights > 0])) < 1e-9
-    assert np.corrcoef(e[rest, 0], want[rest])[0, 1] > 0.99
+    # with degree 2 the constant and the quadratic drift are gone; the ring stays (less what a quadratic fit over
+    # the window, which starts where the ring is largest, takes of it)
+    assert np.max(np.abs(residual_error(plan, ts, gravity_and_drift, 2)[plan.weights > 0])) < 1e-9
+    assert np.corrcoef(e[rest, 0], want[rest])[0, 1] > 0.97
+    # by default (degree 0) the error in the window is the residual as measured: the samples less their mean
+    y = gravity_and_drift + ring[:, None]
+    e0 = residual_error(plan, ts, y).reshape(-1, 3)
+    on_grid = np.column_stack([np.interp(plan.grid, ts, y[:, i]) for i in range(3)])[rest]
+    np.testing.assert_allclose(e0[rest], -(on_grid - on_grid.mean(axis=0)), atol=1e-12)
     with pytest.raises(MrilcError, match="do not cover"):
         residual_error(plan, ts[: ts.size // 2], gravity_and_drift[: ts.size // 2])
 

@@ -4,7 +4,8 @@
 
 The schedule here is a stand-in (a ZV on the linearised arm's lowest mode at the goal pose, no calibration
 run), which leaves a large residual on the move home->rotated (its second mode rings): the learned
-correction must take a large part of it away within a few cycles, inside the joint limits.
+correction must take it to 25 % of the schedule's within a few cycles, its servo part (the position loop's
+transient) too, with every limit held exactly.
 """
 
 from __future__ import annotations
@@ -38,8 +39,14 @@ def test_the_learned_correction_reduces_the_residual_inside_the_limits(rows):
     scheduled = rows[0]["residual_rms"]
     learned = [r["residual_rms"] for r in rows[1:]]
     assert learned[0] == pytest.approx(scheduled, rel=1e-9)  # cycle 1 runs without a correction: the schedule
-    assert learned[-1] < 0.6 * scheduled  # measured: 0.39 of it at cycle 4
-    assert all(r["limit_excess"] <= 1e-9 for r in rows[1:])  # rad, rad/s, rad/s^2: rounding at most
+    print("residual / the schedule's, per cycle:", [round(x / scheduled, 4) for x in learned],
+          "servo part:", [round(r["servo_rms"] / rows[0]["servo_rms"], 4) for r in rows[1:]])
+    # issue 31's goal, here within 4 cycles (measured 0.15), and the position loop's transient (the servo part)
+    # learned away with the vibration (measured 0.32 of the schedule's)
+    assert learned[-1] < 0.25 * scheduled
+    assert rows[-1]["servo_rms"] < 0.5 * rows[0]["servo_rms"]
+    # the points sent hold every limit exactly (clipped into them where the correction meets one)
+    assert all(r["limit_excess"] == 0.0 for r in rows[1:])
     assert 0 < max(r["max_correction_rad"] for r in rows[1:]) < 0.01
 
 

@@ -15,17 +15,21 @@ move goes on uncorrected (one line on the log). So each move's correction reache
 
 **What is learned.** Per move (the identity :func:`~shaper_nodes.core.learning.moves.move_key` of the START's
 start and goal), one :class:`~shaper_nodes.core.learning.mrilc.moves.MoveLearner`: B-spline coefficients per joint
-in the last ``mrilc_moves.tail`` s of the shaped motion (the goal and the timing do not change), learned at the
-move's END from the tool accelerometer's residual window (``topics.imu``; 1 s after the commanded motion ends, the
-trend taken out: :func:`~shaper_nodes.core.learning.mrilc.plan.residual_error`) with the lifted operator G that
-``mrilc_moves.operator`` gives (``"module:function"``, called as ``f(goal_pose, count, samples, first, spacing,
-period)``; the simulated arm's: ``sim_plant_node.arm.lifted:arm_operator``), computed once per move at its first
-goal. The learner's divergence guard falls back to its best coefficients (and holds after ``max_fallbacks``).
+in the last ``mrilc_moves.tail`` s of the shaped motion and, ``mrilc_moves.fine_spacing`` s apart, in its last
+``mrilc_moves.fine_tail`` s (the goal and the timing do not change), learned at the move's END from the tool
+accelerometer's residual window (``topics.imu``; 1 s after the commanded motion ends, its mean taken out:
+:func:`~shaper_nodes.core.learning.mrilc.plan.residual_error`) with the lifted operator G that
+``mrilc_moves.operator`` gives (``"module:function"``, called once per family of B-splines as ``f(goal_pose, count,
+samples, first, spacing, period)``; the simulated arm's: ``sim_plant_node.arm.lifted:arm_operator``), computed once
+per move at its first goal.
+The learner's divergence guard falls back to its best coefficients (and holds after ``max_fallbacks``).
 
 **Limits.** The learner projects every update inside the joint limits (``mrilc_moves.position_min``, ``position_max``,
 ``velocity``, ``acceleration``: one value per joint or one for all), and the goal's corrected profile is checked
 again before it is sent: a correction that would break a limit is refused, the goal is sent uncorrected, and one
-line names the joint and the limit. Where the goal itself is already past a limit (a shaped profile's points can
+line names the joint and the limit; the points sent are clipped into the limits (where the correction meets a limit
+with equality, rounding would leave it 1e-18 past: the report's ``limit_excess`` is exactly 0).
+Where the goal itself is already past a limit (a shaped profile's points can
 be: 7.05 rad/s^2 measured on the elbow of pick -> home against the moves' planned 6), the correction may not take
 it further there (as the learner's projection holds it).
 
@@ -61,8 +65,15 @@ from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.moves import MoveError, move_key
 from shaper_nodes.core.learning.mrilc.model import MrilcError
-from shaper_nodes.core.learning.mrilc.moves import JointLimits, MoveLearner, excess
-from shaper_nodes.core.learning.mrilc.plan import MovePlan, PlanSettings, limit_breach, plan_move, residual_error
+from shaper_nodes.core.learning.mrilc.moves import JointLimits, MoveLearner, clip_into, profile_excess
+from shaper_nodes.core.learning.mrilc.plan import (
+    MovePlan,
+    PlanSettings,
+    limit_breach,
+    plan_move,
+    plan_operator,
+    residual_error,
+)
 from shaper_nodes.ros.conversions import trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK
 from shaper_nodes.ros.parameters import Spec, declare, param, table
@@ -104,6 +115,10 @@ class MrilcMovesGroup:
     spacing: float = param(0.04, "s between the correction's B-spline knots.", (0.004, 1.0), read_only=True)
     tail: float = param(0.4, "The correction acts in the last tail s of the shaped motion.", (0.02, 10.0),
                         read_only=True)
+    fine_spacing: float = param(0.004, "s between the knots of the second family of B-splines (the position"
+                                " loop's transient).", (0.001, 1.0), read_only=True)
+    fine_tail: float = param(0.048, "The second family acts in the last fine_tail s of the shaped motion (0: no"
+                             " second family).", (0.0, 10.0), read_only=True)
     position_min: tuple[float, ...] = param([-2 * math.pi], "Lowest joint positions, rad (one per joint, or one"
                                             " for all).", read_only=True)
     position_max: tuple[float, ...] = param([2 * math.pi], "Highest joint positions, rad.", read_only=True)
@@ -157,6 +172,7 @@ class _Cycle:
     start: float  # the move's start (the START's stamp), s
     goal: np.ndarray
     applied: tuple[float, float, float] | None = None  # the correction the goal ran with (largest dq, dq', dq'')
+    excess: float = 0.0  # the largest excess of the corrected goal over the limits (0: all held)
     refused: str = ""  # why the goal went uncorrected (the cycle is not learned from)
 
 
@@ -168,7 +184,8 @@ class MrilcMovesMode:
         self.params = declare(node, MrilcMovesParams)
         v = self.params.value.mrilc_moves
         self.operator = load_operator(str(v.operator))
-        self.settings = PlanSettings(spacing=float(v.spacing), tail=float(v.tail))
+        self.settings = PlanSettings(spacing=float(v.spacing), tail=float(v.tail), fine_spacing=float(v.fine_spacing),
+                                     fine_tail=float(v.fine_tail))
         self.learner_settings = {"gain": float(v.gain), "regularisation": float(v.regularisation),
                                  "patience": int(v.patience), "growth": float(v.growth),
                                  "noise_floor": float(v.noise_floor), "max_fallbacks": int(v.max_fallbacks)}
@@ -292,13 +309,16 @@ class MrilcMovesMode:
             self.node.get_logger().error(f"move {move.key}: {cyc.refused}")
             return None
         dq, dv, da = lr.correction()
-        breach = limit_breach(q + dq, v + dv, a + da, self._limits(q.shape[1]), names, (q, v, a))
+        limits = self._limits(q.shape[1])
+        breach = limit_breach(q + dq, v + dv, a + da, limits, names, (q, v, a))
         if breach is not None:
             cyc.refused = f"correction refused, it would break a limit: {breach}; sent uncorrected"
             self.node.get_logger().error(f"move {move.key}: {cyc.refused}")
             return None
-        cyc.applied = (float(np.max(np.abs(dq))), float(np.max(np.abs(dv))), float(np.max(np.abs(da))))
-        out = {"positions": q + dq, "velocities": v + dv, "accelerations": a + da}
+        qc, vc, ac = clip_into(q + dq, v + dv, a + da, limits, (q, v, a))  # rounding at a limit: onto it
+        cyc.applied = (float(np.max(np.abs(qc - q))), float(np.max(np.abs(vc - v))), float(np.max(np.abs(ac - a))))
+        cyc.excess = profile_excess(qc, vc, ac, limits, (q, v, a))
+        out = {"positions": qc, "velocities": vc, "accelerations": ac}
         if "effort" in fields:
             out["effort"] = fields["effort"]
         return trajectory_msg(traj.header, names, [p.time_from_start for p in traj.points], out)
@@ -325,9 +345,7 @@ class MrilcMovesMode:
             return move.learner
         plan = plan_move(times, q, v, a, move.start, self.settings)
         limits = self._limits(q.shape[1])
-        s = self.settings
-        op = np.asarray(self.operator(np.asarray(move.goal), plan.count, plan.grid.size, plan.first, s.spacing,
-                                      s.output_period), dtype=float)
+        op = plan_operator(plan, self.operator, move.goal, q.shape[1], self.settings.output_period)
         state = move.learner.to_dict() if move.learner is not None else move.saved
         kw: dict[str, Any] = {**self.learner_settings, "weights": plan.weights}
         learner = None
@@ -372,16 +390,14 @@ class MrilcMovesMode:
         try:
             arr = np.asarray(samples, dtype=float).reshape(-1, 4)
             e = residual_error(plan, arr[:, 0] - cyc.start, arr[:, 1:], self.settings.trend_degree)
-            used = lr.coefficients.copy()
             upd = lr.update(e)
         except MrilcError as err:
             return self.node.skipped(msg, window, str(err))
         self.node.save()
         index = list(self.moves).index(cyc.key)
-        over = excess(used, plan.profile, lr.limits)
         names = ["move", "iteration", "cost", f"action.{upd.action}", "gain", "max_correction_rad",
                  "max_correction_rad_s", "max_correction_rad_s2", "limit_excess"]
-        values = [float(index), float(upd.cycle), upd.cost, 1.0, upd.gain, *cyc.applied, over]
+        values = [float(index), float(upd.cycle), upd.cost, 1.0, upd.gain, *cyc.applied, cyc.excess]
         self.node.get_logger().info(f"cycle {cycle}, move {cyc.key}: cost {upd.cost:.4g} m/s^2, {upd.action}"
                                     f" (iteration {upd.cycle}); correction used {cyc.applied[0]:.3g} rad")
         return self.node.report(msg, window, names, values, residual=upd.cost)

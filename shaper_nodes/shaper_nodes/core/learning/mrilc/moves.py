@@ -18,7 +18,10 @@ caller (e.g. the arm linearised at the move's end pose), and every cycle
 P the projection (in the norm of G^T W G + rho I, :func:`project`) onto the corrections that keep
 the corrected profile inside the joint limits
 (:class:`JointLimits`: position range, velocity and acceleration bounds; checked on the
-profile's sample times). The work per cycle is bounded: one product with the precomputed L and
+profile's sample times); the points sent are the corrected profile clipped into the limits
+(:meth:`MoveLearner.corrected`, :func:`clip_into`), so that a correction that meets a limit with
+equality holds it exactly (:func:`profile_excess` 0), not to rounding.
+The work per cycle is bounded: one product with the precomputed L and
 a projection of at most :data:`PROJECTION_ROUNDS` x 8 sweeps of Hildreth's method over the violated samples.
 
 Divergence guard: the learner keeps the coefficients that gave the smallest cost
@@ -165,6 +168,38 @@ def excess(coefficients: Array, profile: Profile, limits: JointLimits) -> float:
         a, slack, _ = _rows(profile, limits, j)
         worst = max(worst, float(np.max(a @ coefficients[:, j] - slack)))
     return worst
+
+
+def _bounds(limits: JointLimits, base: tuple[Array, Array, Array] | None, shape: tuple[int, ...]
+            ) -> tuple[Array, Array, Array, Array]:
+    """Per sample and joint: the lowest and highest position, the largest |velocity| and |acceleration| a corrected
+    profile may have; where the uncorrected ``base`` is already past a limit, its own value there."""
+    lo = np.broadcast_to(limits.position_min, shape)
+    hi = np.broadcast_to(limits.position_max, shape)
+    vm = np.broadcast_to(limits.velocity, shape)
+    am = np.broadcast_to(limits.acceleration, shape)
+    if base is not None:
+        lo, hi = np.minimum(lo, base[0]), np.maximum(hi, base[0])
+        vm, am = np.maximum(vm, np.abs(base[1])), np.maximum(am, np.abs(base[2]))
+    return lo, hi, vm, am
+
+
+def clip_into(q: Array, v: Array, a: Array, limits: JointLimits, base: tuple[Array, Array, Array] | None = None
+              ) -> tuple[Array, Array, Array]:
+    """A corrected (samples, joints) profile's points clipped into ``limits`` (rad, rad/s, rad/s^2), so that
+    :func:`profile_excess` is exactly 0; with ``base``, the uncorrected profile: where it is already past a limit,
+    into its own value there. After :func:`project` the points move by rounding only (1e-12 relative at most)."""
+    lo, hi, vm, am = _bounds(limits, base, np.shape(q))
+    return np.clip(q, lo, hi), np.clip(v, -vm, vm), np.clip(a, -am, am)
+
+
+def profile_excess(q: Array, v: Array, a: Array, limits: JointLimits,
+                   base: tuple[Array, Array, Array] | None = None) -> float:
+    """The largest excess of a corrected (samples, joints) profile over ``limits`` (0: all held), in the unit of
+    the limit broken; with ``base``, where the uncorrected profile is already past a limit, over its own value."""
+    lo, hi, vm, am = _bounds(limits, base, np.shape(q))
+    return float(max(np.max(lo - q, initial=0.0), np.max(q - hi, initial=0.0),
+                     np.max(np.abs(v) - vm, initial=0.0), np.max(np.abs(a) - am, initial=0.0)))
 
 
 def project(coefficients: Array, profile: Profile, limits: JointLimits, feasible: Array | None = None,
@@ -318,6 +353,12 @@ class MoveLearner:
     def correction(self) -> tuple[Array, Array, Array]:
         """The next cycle's dq, dq', dq'' at the profile's samples, (samples, joints) each."""
         return self.profile.correction(self.coefficients)
+
+    def corrected(self) -> tuple[Array, Array, Array]:
+        """The next cycle's profile, corrected and its points clipped into the limits (:func:`clip_into`: where the
+        correction meets a limit with equality it holds it exactly, not to rounding), (samples, joints) each."""
+        p = self.profile
+        return clip_into(*p.corrected(self.coefficients), self.limits, (p.positions, p.velocities, p.accelerations))
 
     def update(self, error: npt.ArrayLike) -> MoveUpdate:
         """One cycle: ``error`` = y_m - y (outputs,) measured with the present coefficients."""
