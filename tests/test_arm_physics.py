@@ -134,3 +134,25 @@ def test_the_mrilc_summary_judges_the_residual_and_its_vibration_part():
     assert "not met (above 25 %: a 30 %)" in arm_mrilc.summary(rows)
     rows[-1]["residual_rms_noise_free"], rows[-1]["limit_excess"] = 0.002, 1e-18
     assert "no move slower): not met." in arm_mrilc.summary(rows)
+
+
+def test_the_factor_over_the_schedule_is_judged_on_the_whole_residual_and_by_the_time_the_goal_allows():
+    rows = [_row("scheduled", m, 1, 0.01, 0.008, 0.004) for m in ("a", "b")]
+    # a: the servo part down to 10 %, the vibration part kept; b: the servo part only down to 50 %
+    rows += [_row("scheduled_list_factor", "a", 1, 0.01, 0.008, 0.004),
+             _row("scheduled_list_factor", "a", 2, 0.0045, 0.0008, 0.004),
+             _row("scheduled_list_factor", "b", 1, 0.01, 0.008, 0.004),
+             _row("scheduled_list_factor", "b", 2, 0.007, 0.004, 0.004)]
+    text = "\n".join(arm_learning.checks(rows, 0.0))
+    assert "whole residual" in text and "not met (above 25 %: a, b)" in text  # the 25 %: neither
+    assert "Servo part against the schedule's: a 10 %; b 50 %." in text
+    assert "by the time the goal allows" in text and "not met (servo part above 25 %: b)" in text
+    only_a = "\n".join(arm_learning.checks([r for r in rows if r["move"] == "a"], 0.0))
+    assert "by the time the goal allows" in only_a and "the tradeoff section): met." in only_a
+    # a cycle slower than the schedule by more than a sample fails it
+    slow = [r for r in rows if r["move"] == "a"] + [_row("scheduled_list_factor", "a", 3, 0.0045, 0.0008, 0.004,
+                                                         settle=1.01)]
+    assert "the tradeoff section): not met" in "\n".join(arm_learning.checks(slow, 0.0))
+    # with noise above the arm's own residual no move is judged
+    noisy = "\n".join(arm_learning.checks(rows, 0.01))
+    assert "no move above the noise floor" in noisy

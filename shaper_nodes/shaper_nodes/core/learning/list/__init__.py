@@ -14,6 +14,10 @@ trials
 learner
     :class:`ListLearner`, the state machine that updates A1 and T2 cycle by cycle (with
     rollback, patience and hold), and its state as a dictionary.
+payback
+    A factor over a move's base shaper chosen to pay before it is tried: the residual's components
+    (:func:`.payback.components`), the time cost predicted from the shaped command
+    (:func:`.payback.time_cost`), the least predicted residual within it (:func:`.payback.paying_factor`).
 session
     The bookkeeping the learner node and the offline replay share: which shaper a cycle ran
     with, the accelerometer buffer (bounded: the cycle duration limit), the sensor's range,
