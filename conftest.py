@@ -1,10 +1,14 @@
 """Hooks for every test directory (pytest.ini's testpaths): the ROS domains of parallel workers, the
-cyclic garbage collector."""
+cyclic garbage collector, and the CPU report (``SHAPER_CPU_LOG``, off unless set)."""
 
 from __future__ import annotations
 
 import gc
+import json
 import os
+import resource
+import subprocess
+import time
 
 import pytest
 
@@ -77,6 +81,45 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items[:] = [item for share in shares for item in share]
 
 
+#: environment variable naming the CPU log (shaper_nodes.ros.launching.CPU_LOG_ENV; read here without importing it)
+CPU_LOG_ENV = "SHAPER_CPU_LOG"
+
+
+def _cpu(who: int) -> tuple[float, float]:
+    usage = resource.getrusage(who)
+    return usage.ru_utime, usage.ru_stime
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """With ``SHAPER_CPU_LOG`` set, every process the tests start is reaped by ``os.wait4`` and logged.
+
+    ``subprocess.Popen`` becomes ``shaper_nodes.ros.launching.UsagePopen`` for the session, so the processes of
+    ``subprocess.run`` (the CLIs the walkthrough and the demo tests run) are logged like the nodes of
+    ``NodeProcess`` (which always uses it); processes started by those processes (the demo's nodes, a
+    conductor's) log themselves, as the variable is inherited. Off (nothing changed) when unset.
+    """
+    if os.environ.get(CPU_LOG_ENV):
+        from shaper_nodes.ros.launching import UsagePopen
+
+        subprocess.Popen = UsagePopen  # type: ignore[misc]
+
+
+def _log_test_cpu(item: pytest.Item, began: float, before: tuple[tuple[float, float], ...]) -> None:
+    """Append the test's line to the CPU log: the CPU (user, system, s) this pytest process spent in the test's
+    protocol (set-up, call, teardown: the test's own computing, its in-process nodes and their DDS threads) and
+    that of the processes it reaped meanwhile, with the wall time."""
+    after = _cpu(resource.RUSAGE_SELF), _cpu(resource.RUSAGE_CHILDREN)
+    (su, ss), (cu, cs) = ((a[0] - b[0], a[1] - b[1]) for a, b in zip(after, before, strict=True))
+    line = json.dumps({"kind": "test", "test": item.nodeid, "pid": os.getpid(),
+                       "wall": round(time.monotonic() - began, 3), "user": round(su, 4), "sys": round(ss, 4),
+                       "children_user": round(cu, 4), "children_sys": round(cs, 4)})
+    fd = os.open(os.environ[CPU_LOG_ENV], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, (line + "\n").encode())
+    finally:
+        os.close(fd)
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     """Collect a test's garbage once pytest is done with the test, then freeze what survives.
@@ -95,8 +138,16 @@ def pytest_runtest_protocol(item, nextitem):
     destroyed (a fixture that froze there leaked one per test and a quiet run had two failures).
     Module- and class-scoped fixtures are freed when the next test is in another module or class,
     so the frozen objects are given back to the collector (``gc.unfreeze``) before that collection.
+
+    With ``SHAPER_CPU_LOG`` set, the test's CPU (this process's and its reaped children's) is logged after the
+    protocol, before the collection (:func:`_log_test_cpu`).
     """
+    logging = bool(os.environ.get(CPU_LOG_ENV))
+    if logging:
+        began, before = time.monotonic(), (_cpu(resource.RUSAGE_SELF), _cpu(resource.RUSAGE_CHILDREN))
     yield
+    if logging:
+        _log_test_cpu(item, began, before)
     if nextitem is None or nextitem.parent is not item.parent:
         gc.unfreeze()
     gc.collect()

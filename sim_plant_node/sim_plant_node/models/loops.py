@@ -44,7 +44,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg import expm, null_space
 
 from shaper_nodes.core.closed_loop import ppusmd_gains, qft
 
@@ -108,6 +107,8 @@ def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     n, m = a.shape[0], b.shape[1]
     big = np.zeros((n + m, n + m))
     big[:n, :n], big[:n, n:] = a, b
+    from scipy.linalg import expm  # on first use: scipy.linalg is 0.2-0.5 s of CPU at a process's start
+
     e = expm(big * dt)
     return e[:n, :n], e[:n, n:]
 
@@ -142,6 +143,8 @@ class LoopPlant(_JointState, MckMode, PlantBase):
         a = np.zeros((n, 3, 3))
         a[:, 0, 1] = 1.0
         a[:, 1, 0], a[:, 1, 1], a[:, 1, 2] = -self.k / self.m, -self.c / self.m, self.k / self.m
+        from scipy.linalg import expm  # on first use: scipy.linalg is 0.2-0.5 s of CPU at a process's start
+
         self._phi = np.stack([expm(ai * self.h) for ai in a])
         self._rng = np.random.default_rng(int(p["loop.seed"]))
         self.state = np.zeros((n, 4))
@@ -305,6 +308,8 @@ class QftLoopPlant(LoopPlant):
         # rest: F at steady state with output p; G's integrator holding (1 - Gr) p
         self._xf_unit = -np.linalg.solve(af, bf[:, 0])
         self._xf_unit /= float(self._cf @ self._xf_unit + self._df)
+        from scipy.linalg import null_space  # on first use
+
         ns = null_space(ag)[:, 0]
         self._xg_unit = ns / float(self._cg @ ns)
         self._xf = np.zeros((self.joints, af.shape[0]))

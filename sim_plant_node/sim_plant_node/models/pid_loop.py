@@ -21,7 +21,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.linalg import expm
 
 from shaper_nodes.core.lazy import lazy_module
 from shaper_nodes.core.learning.mrilc import PAPER_CONTROLLER, MrilcError, controller
@@ -74,6 +73,8 @@ class PidLoopPlant(MckMode, PlantBase):
         self._cu, self._du = np.stack([lp[3] for lp in loops]), np.stack([lp[4] for lp in loops])  # u
         n = self._a.shape[1]
         phi, gam = [], []
+        from scipy.linalg import expm  # on first use: scipy.linalg is 0.2-0.5 s of CPU at a process's start
+
         for a, b in zip(self._a, self._b, strict=True):
             big = np.zeros((n + 2, n + 2))
             big[:n, :n], big[:n, n:] = a, b

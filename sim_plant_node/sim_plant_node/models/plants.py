@@ -50,7 +50,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
@@ -153,6 +152,8 @@ class MckPlant(_JointState, MckMode, PlantBase):
                 [0.0, 0.0, 0.0, 0.0],
             ]
         )
+        from scipy.linalg import expm  # on first use: scipy.linalg is 0.2-0.5 s of CPU at a process's start
+
         return expm(a * self.dt)
 
 

@@ -16,8 +16,6 @@ import numpy as np
 from shaper_nodes.ros.parameters import flat, read, unflat
 
 from ..arm.description import ArmSpec
-from ..arm.dynamics import ArmModel
-from ..arm.plant import ArmPlant
 from ..models.base import Plant
 from ..models.loops import LOOP_MODELS, make_loop_plant
 from ..models.pid_loop import PidLoopPlant
@@ -84,6 +82,10 @@ def _two_mass(model: str, v: PlantValues, joints: int) -> Plant:
 
 
 def _arm(model: str, v: PlantValues, joints: int) -> Plant:
+    # on first use: Pinocchio is 0.1-0.3 s of CPU at the start of a plant that is not the arm
+    from ..arm.dynamics import ArmModel
+    from ..arm.plant import ArmPlant
+
     arm = v.params.arm
     spec = ArmSpec(payload_mass=float(arm.payload_mass), payload_offset=float(arm.payload_offset))
     return ArmPlant(v.rate, int(arm.substeps), ArmModel(spec))

@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import t as student_t
 
 from shaper_nodes.core.identification import IdentificationError, ModeFit, combine_modes, identify
 from shaper_nodes.core.identification.recommend import worst_case_vibration
@@ -145,6 +144,8 @@ def _expanded(m: ModeFit, hits: Sequence[ModeFit]) -> ModeFit:
     k = len(hits)
     if k < 2:
         return m
+    from scipy.stats import t as student_t  # on first use: scipy.stats is 0.6 s of CPU at a node's start
+
     factor = float(student_t.ppf(0.975, k - 1) / student_t.ppf(0.975, 1e9))
     rms_w = math.sqrt(float(np.mean([h.omega_std**2 for h in hits])))
     rms_z = math.sqrt(float(np.mean([h.zeta_std**2 for h in hits])))

@@ -40,7 +40,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import expm
 
 
 class TimeDelayError(ValueError):
@@ -199,6 +198,8 @@ def _zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     n = a.shape[0]
     m = np.zeros((n + 1, n + 1))
     m[:n, :n], m[:n, n] = a, b
+    from scipy.linalg import expm  # on first use: 0.2-0.5 s of CPU at a start (the sim plant imports this module)
+
     e = expm(m * dt)
     return e[:n, :n], e[:n, n]
 
@@ -386,6 +387,8 @@ def _method_of_steps(omega_a: float, delay: float, omega_r: float, intervals: in
         x0 = np.zeros(dim)
         x0[4:4 * (n + 1)] = prev_end
         x0[one] = 1.0
+        from scipy.linalg import expm  # on first use
+
         step = expm(m * (taus[1] - taus[0]))
         xs = np.empty((taus.size, dim))
         xs[0] = x0
@@ -397,6 +400,8 @@ def _method_of_steps(omega_a: float, delay: float, omega_r: float, intervals: in
 
 def _advance(m: np.ndarray, x: np.ndarray, dtau: float) -> np.ndarray:
     """The state ``dtau`` later of x' = m x from ``x`` (matrix exponential)."""
+    from scipy.linalg import expm  # on first use
+
     out: np.ndarray = expm(m * dtau) @ x
     return out
 

@@ -14,7 +14,6 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from .types import DEFAULT_VIBRATION_TOLERANCE, FloatArray, Impulses, Mode, ShaperError, _check_tolerance
 from .vibration import percentage_vibration
@@ -168,6 +167,8 @@ def _hump_solve(humps: int, v: float, zeta: float, x0: FloatArray) -> FloatArray
     the last amplitude at high frequency), so when the solve from ``x0`` fails it is retried
     with that zero moved further out.
     """
+    from scipy.optimize import least_squares  # on first use: scipy.optimize is 0.3 s of CPU at a node's start
+
     n = humps + 2
     nx = x0.size
     lower = np.concatenate([np.full(n - 1, -1.0), np.zeros(n - 1), np.full(nx - 2 * n + 2, 1e-3)])

@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import linprog, minimize, minimize_scalar
 
 from .types import (
     DEFAULT_INSENSITIVITY,
@@ -70,6 +69,8 @@ def _vsq(x: FloatArray, k: int, w: FloatArray, zeta: float) -> tuple[FloatArray,
 
 def _si_worst(amps: FloatArray, times: FloatArray, bands: Sequence[Band]) -> tuple[float, list[tuple[float, float]]]:
     """Largest V over the bands (local maxima refined) and where V has its local maxima."""
+    from scipy.optimize import minimize_scalar  # on first use (a node's start need not pay for scipy.optimize)
+
     worst, peaks = 0.0, []
     span = max(float(times[-1]), 1e-9)
     for lo, hi, z in bands:
@@ -131,6 +132,8 @@ def _si_lp(duration: float, bands: Sequence[Band], v: float, dt: float) -> Impul
     cost = np.zeros(nt)
     cost[-1] = -1.0
     bound = v * math.cos(math.pi / _SI_DIRECTIONS) * (1.0 - 1e-6)  # vertices strictly inside
+    from scipy.optimize import linprog  # on first use
+
     res = linprog(cost, A_ub=a_ub, b_ub=np.full(a_ub.shape[0], bound),
                   A_eq=np.ones((1, nt)), b_eq=[1.0], bounds=(0.0, None), method="highs")
     if res.status != 0:
@@ -164,6 +167,8 @@ def _si_sqp(amps: FloatArray, times: FloatArray, samples: Sequence[tuple[float, 
 
     def obj_jac(x: FloatArray) -> FloatArray:
         return np.concatenate([2.0 * _SI_TIE_BREAK * x[:k], np.zeros(k - 2), [1.0]])
+
+    from scipy.optimize import minimize  # on first use
 
     res = minimize(
         obj, np.concatenate([amps, times[1:]]), jac=obj_jac, method="SLSQP",

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline
 
 from shaper_nodes.core.checks import InputError, finite_array, strictly_increasing
 
@@ -82,6 +81,8 @@ def resample(
     if t.size == 1:
         return grid, np.repeat(p[:1], n, axis=0)
     if velocities is not None:
+        from scipy.interpolate import CubicHermiteSpline  # on first use: scipy.interpolate is 0.3 s of CPU at start
+
         spline = CubicHermiteSpline(t, p, np.asarray(velocities, dtype=float), axis=0)
         out = spline(grid_in)
     else:

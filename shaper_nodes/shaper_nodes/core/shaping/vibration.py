@@ -22,7 +22,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 #: an insensitivity band is searched from 0 up to this multiple of the design frequency
 MAX_BAND_RATIO = 5.0
@@ -128,6 +127,8 @@ def insensitivity_width(
     step = min(1e-3 * w0, 0.01 / span) if span > 0.0 else 1e-3 * w0
 
     def edge(stop: float) -> float:
+        from scipy.optimize import brentq  # on first use (a node's start need not pay for scipy.optimize)
+
         n = int(math.ceil(abs(stop - w0) / step)) + 1
         grid = np.linspace(w0, stop, n)
         above = np.flatnonzero(excess(grid) > limit - level)
