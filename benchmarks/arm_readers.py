@@ -13,7 +13,7 @@ Two parts, each a ratio of one run:
     joint-state callbacks the same way.
 ``batch``
     Over DDS, in one process: a raw Imu reader's CPU per message taking a burst already in its queue, one
-    message per wake-up of rclpy's executor (``raw``) or all of them per wake-up (``raw_drain``,
+    message per wake-up of rclpy's executor (``raw``) or all of them at a poll (``raw_drain``,
     :func:`shaper_nodes.ros.lockstep_reader.subscribe_draining`).
 ``lockstep``
     The sim plant node (``plant.model: arm``, ``mode: lockstep``, ``lockstep.readers`` naming the reader)
@@ -21,8 +21,10 @@ Two parts, each a ratio of one run:
     reader process that takes the demo client's four per-step streams (/tip_imu at 1 kHz,
     /joint_states, /sim_plant/tip_state and /sim_plant/reference at 500 Hz; reliable, STREAM_QOS) and
     acknowledges them (LockstepReader), either as message objects (``objects``), raw (``raw``), raw with
-    every queued message taken per wake-up (``raw_drain``: ``subscribe_draining``) or raw on rclpy's
-    EventsExecutor (``raw_events``), in rounds that alternate them (``--modes`` picks some). Per run: the
+    every queued message taken on a 5 ms poll (``raw_drain``: ``subscribe_draining``, as the suite's readers) or
+    raw on rclpy's
+    EventsExecutor (``raw_events``), in rounds that alternate them (``--modes`` picks some), with ``--readers``
+    such reader processes (the demo's cases have three: its client, the identifier, the recorder). Per run: the
     plant's simulated s per wall s (from the goal's request
     to its result), the reader's CPU time per simulated s (its process, DDS threads included, from its
     first message to its last), and the samples it lost (gaps in the stamps; 0 expected: the plant
@@ -53,7 +55,7 @@ RATE, SUBSTEPS = 500.0, 2
 IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/reference", "/joint_states"
 READER = "arm_readers_reader"
 #: the reader's modes: message objects (the readers before issue 34), raw bytes, raw bytes with every queued message
-#: taken per wake-up (``subscribe_draining``, the readers now), raw bytes on rclpy's EventsExecutor
+#: taken on a poll (``subscribe_draining``, the readers now), raw bytes on rclpy's EventsExecutor
 MODES = ("objects", "raw", "raw_drain", "raw_events")
 #: the plant in lockstep with no reader (the ceiling of the runs with one)
 ALONE = "alone"
@@ -134,7 +136,7 @@ def batch(n: int = 2000, repeats: int = 3) -> dict[str, float]:
     """CPU per message, us, of a raw Imu reader over DDS (one process: a writer node and a reader node on one
     executor) taking a burst of ``n`` messages already queued (published reliable, acknowledged by the reader's
     DDS endpoint, none taken yet): one message per wake-up (rclpy's executor, ``raw``) or every queued message
-    per wake-up (``subscribe_draining``, ``raw_drain``). The least of ``repeats`` bursts each; the process's
+    at a poll (``subscribe_draining``, ``raw_drain``). The least of ``repeats`` bursts each; the process's
     CPU time (its DDS threads included) from the first spin to the last message taken."""
     import rclpy
     from rclpy.duration import Duration
