@@ -33,7 +33,7 @@ Methods:
     reading all these topics follows faster.
 ``readers: sim plant node with a drained reader``
     The sim plant node in lockstep (``lockstep.readers``) with one reader process of the demo client's
-    four per-step streams taken as the demo's readers take them (raw, every queued message per wake-up:
+    four per-step streams taken as the demo's readers take them (raw, every queued message on a 5 ms poll:
     :func:`shaper_nodes.ros.lockstep_reader.subscribe_draining`), a 10 s goal
     (:func:`benchmarks.arm_readers.lockstep`, mode ``raw_drain``); with the samples it lost (0 expected).
 """

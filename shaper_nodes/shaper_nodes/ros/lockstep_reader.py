@@ -14,9 +14,9 @@ reader to report beside the numbers they touch. The rules are :mod:`shaper_nodes
 The QoS a reader's per-step streams need: :data:`STREAM_QOS` (reliable, deep enough for the plant's lead).
 
 :func:`subscribe_draining` subscribes a reader to a per-step stream raw and hands its callback every message
-already queued at each wake-up, in order (rclpy's executor otherwise builds a wait set for every message, the
-most of what a Python reader pays per message): a reader that falls behind a plant running ahead pays the
-executor once per batch.
+queued, in order, on a wall-clock poll (:data:`POLL_PERIOD`; the subscription is out of the executor's wait set,
+:class:`OutOfWaitSet`): rclpy's executor otherwise builds a wait set for every message, the most of what a Python
+reader pays per message, and a reader that keeps up with a lockstep plant would pay it for every one.
 """
 
 from __future__ import annotations
@@ -24,9 +24,11 @@ from __future__ import annotations
 import functools
 import math
 import struct
+import weakref
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
 from rclpy.exceptions import InvalidHandle
@@ -37,8 +39,9 @@ from ..core.lockstep import ACK_PERIOD, ANNOUNCE, Acks, Gaps
 from .conversions import sec_to_time, time_to_sec
 from .qos import LATCHED
 
-__all__ = ["ACK_QOS", "ACK_SUFFIX", "BATCH", "FLUSH_PERIOD", "HEADER_FIRST", "IMU_RELIABLE_DOC", "STREAM_QOS",
-           "AckWatch", "LockstepReader", "ack_topic", "header_stamp", "subscribe_draining", "subscribes"]
+__all__ = ["ACK_QOS", "ACK_SUFFIX", "BATCH", "FLUSH_PERIOD", "HEADER_FIRST", "IMU_RELIABLE_DOC", "POLL_PERIOD",
+           "STREAM_QOS", "AckWatch", "LockstepReader", "OutOfWaitSet", "ack_topic", "header_stamp",
+           "subscribe_draining", "subscribes", "take_all"]
 
 #: the acknowledgement topic is the reader node's fully qualified name plus this
 ACK_SUFFIX = "/lockstep_ack"
@@ -65,11 +68,68 @@ HEADER_FIRST = frozenset({"sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState"})
 #: next turn, so a stream that never runs dry cannot starve the node's other callbacks); the plant's lead,
 #: ``lockstep.lead`` (0.25 s: 250 samples of a 1 kHz stream), fits in one batch
 BATCH = 1000
+#: wall s between two drains of a polled draining subscription (:func:`subscribe_draining`): 200 wake-ups a second
+#: for all of a node's polled streams; the plant's lead, 0.25 simulated s, is 12 ms of wall time even at 20x
+POLL_PERIOD = 0.005
+
+
+class OutOfWaitSet(CallbackGroup):
+    """A callback group whose entities the executor never waits on (rclpy's executors leave an entity out of the
+    wait set while its group's ``can_execute`` is false): their data is taken by the node itself, on a timer
+    (:func:`subscribe_draining` with ``poll``) or when it needs it (the sim plant's reader acknowledgements). With
+    ``waited`` true the entities are waited on as any other (the plant held by a reader wakes on its next
+    acknowledgement)."""
+
+    def __init__(self, waited: bool = False) -> None:
+        super().__init__()
+        self.waited = waited
+
+    def can_execute(self, entity: Any) -> bool:
+        return self.waited
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return self.waited
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
+
+
+class _Poller:
+    """A node's polled draining subscriptions, drained in turn on one wall-clock timer of ``period`` s."""
+
+    def __init__(self, node: Any, period: float) -> None:
+        self.period = period
+        self.drains: list[Callable[[], bool]] = []
+        self._timer = node.create_timer(period, self.poll, clock=RosClock(clock_type=ClockType.STEADY_TIME))
+
+    def poll(self) -> None:
+        self.drains = [drain for drain in self.drains if drain()]
+
+
+#: per node, its poller (one timer for all its polled subscriptions)
+_POLLERS: weakref.WeakKeyDictionary[Any, _Poller] = weakref.WeakKeyDictionary()
+
+
+def take_all(sub: Any, msg_type: Any, on_message: Callable[[Any], None], limit: int) -> bool:
+    """Take up to ``limit`` messages queued on subscription ``sub`` (raw, with their info), handing each to
+    ``on_message`` (a ``(bytes, info)`` pair) in order. Returns False once the subscription is destroyed (also by
+    ``on_message``), else True."""
+    handle = sub.handle
+    for _ in range(limit):
+        try:
+            with handle:
+                got = handle.take_message(msg_type, True)
+        except InvalidHandle:  # destroyed (by the callback, or the node)
+            return False
+        if got is None:
+            return True
+        on_message(got)
+    return True
 
 
 def subscribe_draining(node: Any, msg_type: Any, topic: str, callback: Callable[..., None], qos: Any, *,
-                       info: bool = False, batch: int = BATCH, **kwargs: Any) -> Any:
-    """Subscribe ``node`` to ``topic`` raw; each wake-up hands ``callback`` every message already queued.
+                       info: bool = False, batch: int = BATCH, poll: float = POLL_PERIOD, **kwargs: Any) -> Any:
+    """Subscribe ``node`` to ``topic`` raw and hand ``callback`` every message queued, a batch at a time.
 
     Parameters
     ----------
@@ -88,8 +148,14 @@ def subscribe_draining(node: Any, msg_type: Any, topic: str, callback: Callable[
         Pass the message info too (``received_timestamp``, ns, ...).
     batch : int
         At most this many messages per wake-up (:data:`BATCH`).
+    poll : float
+        Wall s between two drains of the queue (:data:`POLL_PERIOD`): the subscription is out of the executor's
+        wait set (:class:`OutOfWaitSet`) and one steady-clock timer of the node takes every queued message of
+        each of its polled subscriptions, so a stream wakes its reader ``1 / poll`` times a second whatever its
+        rate. 0: the subscription wakes the executor as any other, and each wake-up also takes the rest of
+        the queue.
     **kwargs
-        Passed to ``create_subscription`` (``callback_group``, ...).
+        Passed to ``create_subscription`` (``callback_group``, with ``poll`` 0 only, ...).
 
     Returns
     -------
@@ -98,28 +164,40 @@ def subscribe_draining(node: Any, msg_type: Any, topic: str, callback: Callable[
 
     Notes
     -----
-    rclpy's executor takes one message per wake-up and rebuilds its wait set before the next; here the
-    callback takes the rest of the queue itself (``take_message`` on the subscription's handle until it
-    returns None), so a lockstep reader's acknowledgements still follow the samples they cover.
+    rclpy's executor takes one message per wake-up and rebuilds its wait set before the next (about 100-170 us
+    of a Python reader's CPU per message, docs/results/benchmarks.md); a drain takes the queue itself
+    (``take_message`` on the subscription's handle until it returns None, a few us a message). A reader that
+    keeps up with a lockstep plant finds one or two messages at each wake-up, so only polling makes it pay the
+    executor once per batch; its acknowledgements still follow the samples they cover (a poll adds at most
+    ``poll`` s of wall time to them, well inside the plant's ``lockstep.lead`` at its rates). A node's polled
+    subscriptions share one timer; the first one made sets its period.
     """
     if batch < 1:
         raise ValueError(f"subscribe_draining: batch must be at least 1, got {batch}")
+    if not (math.isfinite(poll) and 0 <= poll <= 1.0):
+        raise ValueError(f"subscribe_draining: poll must be in [0, 1] s, got {poll!r}")
+    if poll > 0 and "callback_group" in kwargs:
+        raise ValueError("subscribe_draining: a polled subscription has a callback group of its own (poll=0 to"
+                         " give one)")
     subs: list[Any] = []
+    if info:
+        def hand(got: Any) -> None:
+            callback(got[0], got[1])
+    else:
+        def hand(got: Any) -> None:
+            callback(got[0])
+
+    if poll > 0:
+        sub = node.create_subscription(msg_type, topic, callback, qos, raw=True, callback_group=OutOfWaitSet(),
+                                       **kwargs)
+        poller = _POLLERS.get(node)
+        if poller is None:
+            poller = _POLLERS[node] = _Poller(node, poll)
+        poller.drains.append(functools.partial(take_all, sub, msg_type, hand, batch))
+        return sub
 
     def drain() -> None:
-        handle = subs[0].handle
-        for _ in range(batch - 1):
-            try:
-                with handle:
-                    got = handle.take_message(msg_type, True)
-            except InvalidHandle:  # the callback destroyed the subscription
-                return
-            if got is None:
-                return
-            if info:
-                callback(got[0], got[1])
-            else:
-                callback(got[0])
+        take_all(subs[0], msg_type, hand, batch - 1)
 
     if info:
         def on_message_info(raw: bytes, message_info: Any) -> None:

@@ -227,9 +227,8 @@ class ElasticArm:
         """At rest (static equilibrium) holding setpoint ``position``."""
         r = np.asarray(position, dtype=float).copy()
         q, theta = self.model.rest(r)
+        self._state = np.zeros(6 * self.n)  # (x, x', x''), the 12 coordinates each: what the step's map takes
         self.x = np.concatenate([q, theta])
-        self.xd = np.zeros(2 * self.n)
-        self.xdd = np.zeros(2 * self.n)
         self.setpoint = r
         self._setpoint_bytes = r.tobytes()
         self._g_r = self.model.gravity(r)
@@ -247,6 +246,33 @@ class ElasticArm:
         self._g_r = self.model.gravity(self.setpoint)
         self._drive = self.model.kp * self.setpoint + self._g_r
         self._torque = None
+
+    @property
+    def x(self) -> np.ndarray:
+        """Positions of the links and the motors (q, theta), rad: a view of the state, changed by each step."""
+        return self._state[:2 * self.n]
+
+    @x.setter
+    def x(self, value: np.ndarray) -> None:
+        self._state[:2 * self.n] = value
+
+    @property
+    def xd(self) -> np.ndarray:
+        """Their velocities, rad/s (a view of the state)."""
+        return self._state[2 * self.n:4 * self.n]
+
+    @xd.setter
+    def xd(self, value: np.ndarray) -> None:
+        self._state[2 * self.n:4 * self.n] = value
+
+    @property
+    def xdd(self) -> np.ndarray:
+        """Their accelerations, rad/s^2 (a view of the state)."""
+        return self._state[4 * self.n:]
+
+    @xdd.setter
+    def xdd(self, value: np.ndarray) -> None:
+        self._state[4 * self.n:] = value
 
     @property
     def q(self) -> np.ndarray:
@@ -288,12 +314,15 @@ class ElasticArm:
         else:
             self._velocity = rd = np.asarray(velocity, dtype=float)
             drive = self._drive + mdl.kd * rd
-        y = self._map @ np.concatenate([self.x, self.xd, self.xdd])  # (tau, b, x_pred, x'_pred) less the drive
-        link = pin.aba(self._pin_model, self._pin_data, self.x[:n], self.xd[:n], y[:n] + self._ratio * drive)
-        xdd = np.concatenate([link, self._inv_a22 * (y[n:2 * n] + drive) + self._ratio * link])
-        self.x = y[2 * n:4 * n] + self._hh4 * xdd
-        self.xd = y[4 * n:] + self._h2 * xdd
-        self.xdd = xdd
+        state = self._state
+        y = self._map @ state  # (tau, b, x_pred, x'_pred) less the drive
+        link = pin.aba(self._pin_model, self._pin_data, state[:n], state[2 * n:3 * n], y[:n] + self._ratio * drive)
+        xdd = state[4 * n:]  # (written in place: the state is one array)
+        xdd[:n] = link
+        xdd[n:] = self._inv_a22 * (y[n:2 * n] + drive) + self._ratio * link
+        state[:4 * n] = y[2 * n:]
+        state[:2 * n] += self._hh4 * xdd
+        state[2 * n:4 * n] += self._h2 * xdd
         self._torque = None
         self.time += h
 
@@ -316,7 +345,7 @@ class ElasticArm:
         frame = pin.updateFramePlacement(mdl.model, mdl.data, mdl.tool)
         acc = pin.getFrameClassicalAcceleration(mdl.model, mdl.data, mdl.tool, pin.ReferenceFrame.LOCAL).linear
         rate = pin.getFrameVelocity(mdl.model, mdl.data, mdl.tool, pin.ReferenceFrame.LOCAL).angular
-        specific = np.array(acc) + frame.rotation.T @ np.array([0.0, 0.0, GRAVITY])
+        specific = acc + GRAVITY * frame.rotation[2]  # R^T (0, 0, g): g times R's last row
         return specific, np.array(rate)
 
     def tool_position(self) -> np.ndarray:

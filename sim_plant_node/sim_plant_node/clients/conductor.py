@@ -8,6 +8,7 @@ what it receives, with the same core code (``CycleMonitor``) that the plant's re
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import functools
 import math
@@ -230,7 +231,7 @@ StartNode = Callable[..., Any]
 def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, rclpy.context.Context]]:
     """Yield ``(start, ctx)``: ``start(package, executable, params)`` starts a node process (log in
     ``logs/<prefix>-<executable>.log``), ``ctx`` a fresh rclpy context; at exit the context is
-    shut down and every process started is stopped (in reverse order).
+    shut down and every process started is stopped, all at once.
 
     Every way the session's process can end stops the nodes: an exception or Ctrl-C leaves the block;
     SIGTERM (in the main thread) is turned into the same ``KeyboardInterrupt`` for the session's time; and
@@ -255,8 +256,9 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
         yield start, ctx
     finally:
         ctx.try_shutdown()
-        for proc in reversed(procs):
-            proc.stop()
+        # all at once (each waits for its own process's shutdown: one after the other took seconds a process)
+        with concurrent.futures.ThreadPoolExecutor(max(len(procs), 1)) as pool:
+            list(pool.map(lambda proc: proc.stop(), reversed(procs)))
         for num, handler in previous.items():
             signal.signal(num, handler)
 

@@ -234,15 +234,16 @@ class JointTrajectoryController:
         if self.trajectory is None or self.holding:
             return None
         t = time - self.start_time
-        self.desired = self.trajectory.sample(t)
-        nxt = self.trajectory.sample(t + self.period)
-        self.error = self.desired[0] - np.asarray(position, dtype=float)
+        n = len(self.joints)
+        now, nxt = self.trajectory.sample_stacked(t), self.trajectory.sample_stacked(t + self.period)
+        self.desired = (now[:n], now[n:2 * n], now[2 * n:])
+        self.error = now[:n] - np.asarray(position, dtype=float)
         before_last = t + self.period < self.trajectory.end_time
         tol = self.tolerances
         if (before_last or first_sample) and _violates(self.error, tol.path):
             self.hold(position)
             return Outcome("aborted", PATH_TOLERANCE_VIOLATED, PATH_TEXT) if self.goal_active else None
-        self.command, self.command_velocity = nxt[0], nxt[1]
+        self.command, self.command_velocity = nxt[:n], nxt[n:2 * n]
         if before_last:
             return None
         late = t - self.trajectory.end_time
@@ -258,4 +259,8 @@ class JointTrajectoryController:
 
 
 def _violates(error: np.ndarray, tolerance: np.ndarray) -> bool:
+    """Whether a checked joint (tolerance > 0 rad; 0: unchecked) has an error beyond its tolerance (none set:
+    False at once)."""
+    if not tolerance.any():
+        return False
     return bool(((tolerance > 0) & (np.abs(error) > tolerance)).any())  # (the method: no dispatch wrapper)

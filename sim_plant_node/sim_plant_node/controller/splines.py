@@ -10,6 +10,7 @@ point's positions, velocities and accelerations.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,17 @@ _DV = np.arange(1.0, 6.0)
 _DA = np.array([2.0, 6.0, 12.0, 20.0])
 
 
+def _stacked(c: np.ndarray) -> np.ndarray:
+    """The segment's position, velocity and acceleration polynomials side by side, (6, 3 n), lowest power
+    first: one product with the powers of s samples all three."""
+    n = c.shape[1]
+    out = np.zeros((6, 3 * n))
+    out[:, :n] = c
+    out[:5, n:2 * n] = _DV[:, None] * c[1:]
+    out[:4, 2 * n:] = _DA[:, None] * c[2:]
+    return out
+
+
 def _evaluate(c: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     powers = s**_EXPONENTS
     return powers @ c, (_DV * powers[:5]) @ c[1:], (_DA * powers[:4]) @ c[2:]
@@ -78,7 +90,14 @@ class Trajectory:
         self.points = [start, *points]
         self._segments = [_coefficients(a, b, b.time - a.time)
                           for a, b in zip(self.points, self.points[1:], strict=False)]
+        self._stacks = [_stacked(c) for c in self._segments]
         self.times = np.array([p.time for p in self.points])
+        self._times = self.times.tolist()
+        self._t0 = self._times[0]
+        last = self.points[-1]
+        n = last.positions.size
+        self._hold = np.concatenate([last.positions, np.zeros(n) if last.velocities is None else last.velocities,
+                                     np.zeros(n) if last.accelerations is None else last.accelerations])
 
     @property
     def end_time(self) -> float:
@@ -96,3 +115,13 @@ class Trajectory:
         t = max(t, float(self.times[0]))
         k = max(int(self.times.searchsorted(t, side="right")) - 1, 0)
         return _evaluate(self._segments[k], t - self.times[k])
+
+    def sample_stacked(self, t: float) -> np.ndarray:
+        """Positions, velocities and accelerations at ``t`` s after the start side by side, (3 n,): one product
+        of the powers of the time into the segment with its three polynomials (:meth:`sample` to float rounding)."""
+        times = self._times
+        if t >= times[-1]:
+            return self._hold.copy()
+        t = max(t, self._t0)
+        k = max(bisect.bisect_right(times, t) - 1, 0)
+        return (t - times[k]) ** _EXPONENTS @ self._stacks[k]

@@ -9,6 +9,9 @@ whether the plant may step (:class:`shaper_nodes.core.lockstep.ReaderGate`).
 
 from __future__ import annotations
 
+import functools
+import math
+import struct
 import time
 from collections.abc import Callable
 from typing import Any
@@ -18,14 +21,23 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from shaper_nodes.core.lockstep import Asks, ReaderGate
-from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.lockstep_reader import ACK_QOS, ack_topic
+from shaper_nodes.ros.lockstep_reader import ACK_QOS, OutOfWaitSet, ack_topic, take_all
 
-__all__ = ["Exchange", "Readers"]
+__all__ = ["ACK_LOOK", "Exchange", "Readers"]
+
+
+#: wall s between two looks at the readers' acknowledgements while the plant steps unheld (:class:`Readers`)
+ACK_LOOK = 0.01
 
 
 class Readers:
     """The readers a lockstep run waits for (``lockstep.readers``), from their acknowledgements.
+
+    The acknowledgements are out of the executor's wait set while the plant steps (each would wake it, a
+    hundred us or more of its CPU, hundreds of times a second with the demo's readers): the plant takes them
+    from their queues itself before a step they might hold, and every :data:`ACK_LOOK` s of wall time (a
+    reader's first acknowledgement holds the plant from about the simulated time it arrives). Held, the plant
+    waits on them as on any subscription, and resumes on the one that releases it.
 
     Parameters
     ----------
@@ -38,7 +50,8 @@ class Readers:
     now : callable
         The plant's simulated time, s.
     on_ack : callable, optional
-        Called after each acknowledgement is counted (a plant held by a reader resumes on it, not on a poll).
+        Called after each acknowledgement taken while the plant is held (a plant held by a reader resumes on it,
+        not on a poll).
     """
 
     def __init__(self, node: Any, readers: Any, lead: float, timeout: float, now: Callable[[], float],
@@ -48,22 +61,51 @@ class Readers:
         self._log = node.get_logger()
         self._now = now
         self._on_ack_hook = on_ack
-        self._subs = {r: node.create_subscription(Clock, ack_topic(r), lambda m, r=r: self._on_ack(r, m), ACK_QOS)
-                      for r in names}
+        self._group = OutOfWaitSet()  # waited on only while the plant is held
+        self._subs = {r: node.create_subscription(Clock, ack_topic(r), lambda raw, r=r: self._on_ack(r, raw), ACK_QOS,
+                                                  raw=True, callback_group=self._group) for r in names}
+        self._looked = -math.inf  # wall time of the last look at the queues
+        #: acknowledgements taken (from the queues, or waking the plant while held)
+        self.taken = 0
 
-    def _on_ack(self, reader: str, msg: Clock) -> None:
-        t = -1.0 if msg.clock.sec < 0 else time_to_sec(msg.clock)
-        line = self.gate.ack(reader, t, self._now())
+    def _apply(self, reader: str, raw: bytes) -> None:
+        sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)  # rosgraph_msgs/Clock
+        self.taken += 1
+        line = self.gate.ack(reader, -1.0 if sec < 0 else sec + nanosec * 1e-9, self._now())
         if line:
             self._log.info(line)
+
+    def _on_ack(self, reader: str, raw: bytes) -> None:
+        self._apply(reader, raw)
+        self.take()
         if self._on_ack_hook is not None:
             self._on_ack_hook()
 
+    def take(self) -> None:
+        """Take every acknowledgement queued, in order per reader."""
+        self._looked = time.monotonic()
+        for reader, sub in self._subs.items():
+            take_all(sub, Clock, functools.partial(self._taken, reader), 1000)
+
+    def _taken(self, reader: str, got: tuple[bytes, Any]) -> None:
+        self._apply(reader, got[0])
+
+    @property
+    def waited(self) -> bool:
+        """Whether the executor waits on the acknowledgements (the plant is held)."""
+        return self._group.waited
+
     def may_step(self, t: float) -> bool:
         """Whether the plant may step to simulated time ``t`` s now (a reader that went away is dropped, and one
-        that holds the plant past ``lockstep.reader_timeout``, each with one line)."""
-        if not self._subs or not self.gate.holding(t):
+        that holds the plant past ``lockstep.reader_timeout``, each with one line). Held, the acknowledgements
+        wake the executor until a step is allowed again."""
+        if not self._subs:
+            return True
+        if self.gate.holding(t) or time.monotonic() - self._looked > ACK_LOOK:
+            self.take()
+        if not self.gate.holding(t):
             self.gate.may_step(t, 0.0)  # (not waiting any more)
+            self._group.waited = False
             return True
         for reader, sub in self._subs.items():  # (only while held: a graph query)
             if sub.get_publisher_count() == 0:
@@ -73,6 +115,7 @@ class Readers:
         ok, line = self.gate.may_step(t, time.monotonic())
         if line:
             self._log.error(line)
+        self._group.waited = not ok
         return ok
 
 

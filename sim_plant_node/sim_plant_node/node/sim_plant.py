@@ -28,7 +28,8 @@ lockstep
     until the loop through the shaper is matched on DDS. With ``lockstep.block`` N > 1 the raw setpoints
     of N steps go out as one block. Asks, blocks and late answers follow :mod:`shaper_nodes.core.lockstep`.
     With ``lockstep.readers`` it never steps more than ``lockstep.lead`` beyond the slowest of those readers'
-    acknowledgements (:class:`.lockstep.Readers`), and its per-step streams are reliable and 10000 deep.
+    acknowledgements (:class:`.lockstep.Readers`: taken from their queues when a step needs them, waited on only
+    while a reader holds the plant), and its per-step streams are reliable and 10000 deep.
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -169,9 +170,7 @@ class SimPlantNode(Node):
             self._last_js: JointState | bytes = self.sensors.joint_state_message(self.plant, sec_to_time(self._now()))
             self.create_timer(idle, self._idle_joint_states, clock=RclpyClock(clock_type=ClockType.STEADY_TIME))
         if self.mode == "lockstep":
-            self.create_timer(0.05, self._watchdog)
-            if p.lockstep.readers:
-                self.create_timer(0.002, self._resume)
+            self.create_timer(0.05, self._watchdog)  # (also looks again at readers that hold a task's next ask)
             self._publish_clock()
         else:
             self.create_timer(1.0 / self.rate, self._realtime_tick)
@@ -408,11 +407,13 @@ class SimPlantNode(Node):
             self._publish_clock()  # the commanded positions (what "at rest" means)
 
     def _reader_acked(self) -> None:
-        """A reader's acknowledgement: a trajectory it held steps on at once if none holds it any more."""
+        """A reader's acknowledgement while the plant is held: a trajectory or a task it held steps on at once if
+        none holds it any more."""
         if self._free_held and not self.readers.gate.holding(self.sim_time + 1.0 / self.rate):
             self._free_held = False
             self._free_timer.reset()
             self._free_run()
+        self._resume()
 
     # ----------------------------------------------------------------- the shaped setpoints
     def _on_command(self, msg: Float64MultiArray) -> None:
@@ -443,6 +444,7 @@ class SimPlantNode(Node):
             self._publish_next()
 
     def _watchdog(self) -> None:
+        self._resume()
         if self._free_held:  # (a reader that holds the trajectory is looked at again: gone, or past its timeout)
             self._free_held = False
             self._free_timer.reset()
