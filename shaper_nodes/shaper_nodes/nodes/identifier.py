@@ -34,7 +34,12 @@ at the mode, and the working band around the design mode where V stays under
 cycles in a row find the mode outside the band, a WARN ``identifier: drift`` on /diagnostics
 names the numbers (logged once, until the mode comes back); every check publishes the status
 (OK inside the band). A change of the active shaper starts the count again. The identity
-shaper is not watched.
+shaper is not watched. With ``watch.scheduler`` (a shaper node shaping each goal through that
+scheduler, whose active shaper does not change), each cycle is rated against the shaper its move
+ran with, asked of the scheduler at its START (:mod:`.identifier_moves`), and the active shaper is
+not followed (the scheduler's changes of it as the arm moves would restart the count at every move).
+Rated: the identified mode nearest each design mode, and the strongest (a mode a payload moved far
+below every design mode is nearer another one); the worst of them decides.
 
 Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
@@ -67,6 +72,8 @@ from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED, SERVICE_QOS
 from shaper_nodes.ros.shaper_client import ShaperClient
+
+from .identifier_moves import MoveShapers
 
 SOURCE = "identification"
 #: a gap between two accelerometer samples longer than this many median periods marks the
@@ -166,6 +173,10 @@ class WatchParams:
         0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
         " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
         " nothing to identify).", (1e-4, 1.0))
+    scheduler: str = param(
+        "", "Drift watch: fully qualified name of the scheduler whose ~/shaper_at gives the shaper each cycle's"
+        " move ran with (its START's joints, start and goal), for a shaper node that shapes each goal through it"
+        " (action.scheduler); each cycle is rated against that shaper. Empty: the active shaper.", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -241,7 +252,9 @@ class IdentifierNode(Node):
         self.watch = DriftWatch(int(p.watch.confirm))
         self._active: ShaperMsg | None = None
         self._warned = False
-        if bool(p.watch.enabled):
+        self.move_shapers = MoveShapers(self, str(p.watch.scheduler), lambda: float(
+            self.params.value.service_timeout), self.diagnostics) if p.watch.enabled and p.watch.scheduler else None
+        if bool(p.watch.enabled) and self.move_shapers is None:  # (with watch.scheduler: not the one rated)
             self.create_subscription(ShaperMsg, f"{str(p.shaper).rstrip('/')}/active_shaper",
                                      self._on_active, LATCHED)
         self.get_logger().info(
@@ -284,6 +297,8 @@ class IdentifierNode(Node):
             return
         if msg.event == CycleEvent.START:
             self._cycle_start = time_to_sec(msg.header.stamp)
+            if self.move_shapers is not None:
+                self.move_shapers.on_start(msg)
         if result is None:
             return
         lost = self.lockstep.describe_lost(self._cycle_start, result.residual.window_end)
@@ -317,6 +332,11 @@ class IdentifierNode(Node):
     def _watch_cycle(self, cycle: int, record: tuple[np.ndarray, np.ndarray]) -> None:
         """Rate this cycle's mode against the active shaper (see the module docstring)."""
         active = self._active
+        if self.move_shapers is not None:
+            active, why = self.move_shapers.shaper(cycle)
+            if active is None:
+                self.get_logger().info(f"cycle {cycle}: drift watch: not rated ({why})")
+                return
         if active is None or len(active.amplitudes) < 2 or active.family == "none":
             return
         p = self.params.value
@@ -365,16 +385,14 @@ class IdentifierNode(Node):
         self.diagnostics.publish("drift", OK, text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
 
     def _worst(self, active: ShaperMsg, modes: list[ModeFit]) -> ModeCheck | None:
-        """The check of the identified mode nearest each design mode (the strongest mode if the shaper
-        names none); of several, the one with the largest V."""
+        """The checks of the identified mode nearest each design mode and of the strongest mode (the one that
+        rings most, which a payload may have moved below every design mode); the one with the largest V."""
         if not modes:
             return None
         tol = float(self.params.value.watch.tolerance)
         design = [hz for hz in map(msg_hz, active.design_modes) if hz > 0]
-        if design:
-            chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
-        else:
-            chosen = {max(modes, key=lambda m: m.amplitude)}
+        chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
+        chosen.add(max(modes, key=lambda m: m.amplitude))
         checks = [check_mode(active.amplitudes, active.times, design, m, tol) for m in chosen]
         return max(checks, key=lambda c: c.vibration)
 
