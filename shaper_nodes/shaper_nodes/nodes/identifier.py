@@ -39,7 +39,8 @@ scheduler, whose active shaper does not change), each cycle is rated against the
 ran with, asked of the scheduler at its START (:mod:`.identifier_moves`), and the active shaper is
 not followed (the scheduler's changes of it as the arm moves would restart the count at every move).
 Rated: the identified mode nearest each design mode, and the strongest (a mode a payload moved far
-below every design mode is nearer another one); the worst of them decides.
+below every design mode is nearer another one); the worst of them decides. Each move has its own count,
+and the status is WARN while any move's watch warns.
 
 Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
@@ -253,7 +254,8 @@ class IdentifierNode(Node):
         self._active: ShaperMsg | None = None
         self._warned = False
         self.move_shapers = MoveShapers(self, str(p.watch.scheduler), lambda: float(
-            self.params.value.service_timeout), self.diagnostics) if p.watch.enabled and p.watch.scheduler else None
+            self.params.value.service_timeout), self.diagnostics, int(p.watch.confirm)) \
+            if p.watch.enabled and p.watch.scheduler else None
         if bool(p.watch.enabled) and self.move_shapers is None:  # (with watch.scheduler: not the one rated)
             self.create_subscription(ShaperMsg, f"{str(p.shaper).rstrip('/')}/active_shaper",
                                      self._on_active, LATCHED)
@@ -331,12 +333,13 @@ class IdentifierNode(Node):
 
     def _watch_cycle(self, cycle: int, record: tuple[np.ndarray, np.ndarray]) -> None:
         """Rate this cycle's mode against the active shaper (see the module docstring)."""
-        active = self._active
-        if self.move_shapers is not None:
-            active, why = self.move_shapers.shaper(cycle)
-            if active is None:
+        active, watch = self._active, self.watch
+        if self.move_shapers is not None:  # the move's shaper, and its own watch
+            active, why, move_watch = self.move_shapers.shaper(cycle)
+            if active is None or move_watch is None:
                 self.get_logger().info(f"cycle {cycle}: drift watch: not rated ({why})")
                 return
+            watch = move_watch
         if active is None or len(active.amplitudes) < 2 or active.family == "none":
             return
         p = self.params.value
@@ -345,27 +348,37 @@ class IdentifierNode(Node):
             modes = identify_records([record], method=str(p.method), max_modes=int(p.max_modes),
                                      band_hz=(lo, hi) if hi > 0.0 else None)
         except IdentificationError as err:
-            self._quiet(cycle, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is at the"
-                        " noise floor")
+            self._quiet(cycle, watch, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is"
+                        " at the noise floor")
             return
         sharp = [m for m in modes if m.omega > 0 and m.omega_std <= float(p.watch.max_uncertainty) * m.omega]
         check = self._worst(active, sharp)
         if check is None:
             found = ", ".join(f"{m.hz:.4g} Hz (+-{100 * m.omega_std / m.omega:.2g} %)" for m in modes if m.omega > 0)
-            self._quiet(cycle, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
+            self._quiet(cycle, watch, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
                         f" watch.max_uncertainty {100 * float(p.watch.max_uncertainty):.3g} %): the residual"
                         " is at the noise floor")
             return
-        warning = self.watch.update(check)
+        watch.update(check)
         text = f"cycle {cycle}: {check.describe()}"
         values = [("cycle", str(cycle)), ("mode_hz", f"{check.mode_hz:.6g}"), ("zeta", f"{check.zeta:.4g}"),
                   ("vibration", f"{check.vibration:.4g}"), ("tolerance", f"{check.tolerance:.4g}"),
                   ("band_low_hz", f"{check.band_hz[0]:.6g}" if check.band_hz else "none"),
                   ("band_high_hz", f"{check.band_hz[1]:.6g}" if check.band_hz else "none"),
-                  ("outside_in_a_row", str(self.watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
-        if warning:
-            text = (f"the mode has drifted out of the active shaper's working band ({self.watch.outside_in_a_row}"
+                  ("outside_in_a_row", str(watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
+        if watch.warning:
+            text = (f"the mode has drifted out of the active shaper's working band ({watch.outside_in_a_row}"
                     f" cycles in a row): {text}; retune the shaper (~/identify with apply)")
+        self._verdict(text, values)
+
+    def _verdict(self, text: str, values: list[tuple[str, str]]) -> None:
+        """The status ``drift``: WARN while the watch warns (with watch.scheduler: while any move's watch does)."""
+        drifted = self.move_shapers.drifted() if self.move_shapers is not None else (
+            ["the task"] if self.watch.warning else [])
+        if drifted and self.move_shapers is not None:
+            text = f"{len(drifted)} move(s) drifted out of their shaper's working band ({', '.join(drifted)}); {text}"
+            values = [*values, ("drifted_moves", str(len(drifted)))]
+        if drifted:
             if not self._warned:
                 self.get_logger().warning(text)
             self._warned = True
@@ -376,13 +389,10 @@ class IdentifierNode(Node):
             self._warned = False
             self.diagnostics.publish("drift", OK, text, values)
 
-    def _quiet(self, cycle: int, text: str) -> None:
+    def _quiet(self, cycle: int, watch: DriftWatch, text: str) -> None:
         """A cycle with nothing to rate: the shaper works (see DriftWatch.quiet)."""
-        self.watch.quiet()
-        if self._warned:
-            self.get_logger().info(f"the mode is back inside the working band: {text}")
-        self._warned = False
-        self.diagnostics.publish("drift", OK, text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
+        watch.quiet()
+        self._verdict(text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
 
     def _worst(self, active: ShaperMsg, modes: list[ModeFit]) -> ModeCheck | None:
         """The checks of the identified mode nearest each design mode and of the strongest mode (the one that

@@ -71,6 +71,15 @@ class Drift:
     mode_hz: float
 
 
+def _label(d: Drift) -> str:
+    """A drift status in a table cell: WARN (the status: some move's mode out of its band), else whether this
+    move's mode was inside or outside its shaper's band, or not rated (no sharp mode: the noise floor); the
+    rated mode, Hz."""
+    what = ("WARN" if d.level == WARN_LEVEL else "outside" if " is outside " in d.message
+            else "inside" if " is inside " in d.message else "no mode" if d.level == 0 else f"level {d.level}")
+    return what + (f" {d.mode_hz:.3f} Hz" if math.isfinite(d.mode_hz) else "")
+
+
 class PayloadWatch:
     """The client's side of the case (module docstring).
 
@@ -153,16 +162,15 @@ class PayloadWatch:
                 by_move.setdefault(at, []).append(d)
         out = ["", f"Payload {LIGHT:g} -> {self.mass:g} kg before cycle {self.at + 1} (accelerometer noise {noise:g}"
                f" m/s^2). Per cycle and move: residual RMS m/s^2 / peak mm / move + settle s; the drift watch's"
-               f" status of the move (WARN: its mode outside the working band of the shaper it ran with); within:"
-               f" peak within {tol_mm:g} mm.", "",
+               f" rating of the move (its mode outside or inside the working band of the shaper it ran with; WARN:"
+               f" the status, some move outside in watch.confirm cycles of its own in a row); within: peak within"
+               f" {tol_mm:g} mm.", "",
                "| cycle | payload kg | move | residual RMS m/s^2 | peak mm | move+settle s | drift | within |",
                "|---|---|---|---|---|---|---|---|"]
         for k, cycle in enumerate(per_move):
             kg = self.mass if k >= self.at else LIGHT
             for i, (run, m, _) in enumerate(cycle):
-                drift = "; ".join(("WARN" if d.level == WARN_LEVEL else "OK" if d.level == 0 else f"level {d.level}")
-                                  + (f" {d.mode_hz:.3f} Hz" if math.isfinite(d.mode_hz) else "")
-                                  for d in by_move.get((k, i), []))
+                drift = "; ".join(_label(d) for d in by_move.get((k, i), []))
                 within = "yes" if m.peak_mm <= tol_mm else "no"
                 out.append(f"| c{k + 1} | {kg:g} | {run.index + 1}. {run.name} | {m.residual_rms:.4f} |"
                            f" {m.peak_mm:.4f} | {m.move_and_settle_s:.3f} | {drift or '-'} | {within} |")
