@@ -52,6 +52,7 @@ class Rig:
         self.spin_until(lambda: self.imu.get_subscription_count() and self.events.get_subscription_count(),
                         "discovery")
         self.t = 0.0
+        self.move: tuple[list[str], list[float], list[float]] | None = None
 
     def spin_until(self, cond, what, timeout=20.0):
         end = time.monotonic() + timeout
@@ -61,6 +62,8 @@ class Rig:
 
     def event(self, kind: int, cycle: int) -> None:
         msg = CycleEvent(event=kind, cycle=cycle)
+        if self.move is not None:  # (joint names, start, goal) of the cycle's move
+            msg.joint_names, msg.start_positions, msg.goal_positions = self.move
         msg.header.stamp = stamp(self.t)
         self.events.publish(msg)
 
@@ -243,5 +246,68 @@ def test_the_drift_watch_warns_once_the_mode_leaves_the_shapers_working_band(ros
         rig.cycle(6, accel=decay_at(4.0))  # back inside (the payload is off again)
         rig.spin_until(lambda: len(drift_statuses()) >= 7, "the drift check of cycle 6")
         assert drift_statuses()[-1].level == DiagnosticStatus.OK
+    finally:
+        rig.close()
+
+
+def test_with_watch_scheduler_each_move_is_rated_against_the_shaper_the_scheduler_gives_for_it(ros_context):
+    """A shaper node that shapes each goal through the scheduler keeps its active shaper (none here: never
+    watched). With ``watch.scheduler`` the identifier asks the scheduler's ``~/shaper_at`` for each cycle's move
+    (the START's joints, start and goal) and rates the cycle against that shaper: two moves, ZV at 4 Hz for the
+    one ending at j1 = 0 and at 8 Hz for the one ending at j1 = 1 (a peer speaking ShaperAt); each at its own mode
+    is OK (against the other's shaper it would be far outside). Each move counts its own cycles outside the band
+    (watch.confirm 2): both drifted 15 % lower (a heavier payload), the WARN comes at the first move's second
+    cycle outside, and the other move at its own mode does not end it; OK once no move warns. A cycle whose START
+    names no joints is not rated."""
+    from shaper_msgs.srv import ShaperAt
+    from shaper_nodes.core.shaping.families import Mode, design
+    from shaper_nodes.ros.conversions import shaper_to_msg
+
+    asked: list[ShaperAt.Request] = []
+
+    def shaper_at(req: ShaperAt.Request, resp: ShaperAt.Response) -> ShaperAt.Response:
+        asked.append(req)
+        hz = 4.0 if req.pose.position[0] < 0.5 else 8.0
+        resp.shaper = shaper_to_msg(design("zv", (Mode(2 * math.pi * hz, ZETA),)), "scheduler", 0)
+        resp.success, resp.message = True, f"ZV at {hz} Hz"
+        return resp
+
+    scheduler = rclpy.create_node("scheduler", context=ros_context)
+    scheduler.create_service(ShaperAt, "~/shaper_at", shaper_at)
+    rig = Rig(ros_context, scheduler, **{"watch.scheduler": "/scheduler"})
+    moves = {4.0: (["j1", "j2"], [1.0, 0.0], [0.0, 0.0]), 8.0: (["j1", "j2"], [0.0, 0.0], [1.0, 0.0])}
+
+    def drift_statuses():
+        return [s for s in rig.diag.statuses if s.name == "identifier: drift"]
+
+    def run(cycle: int, design_hz: float, hz: float) -> int:
+        rig.move = moves[design_hz]
+        n = len(drift_statuses()) + 1
+        rig.cycle(cycle, accel=decay_at(hz))
+        rig.spin_until(lambda: len(drift_statuses()) >= n, f"the drift check of cycle {cycle}")
+        return drift_statuses()[-1].level
+
+    try:
+        rig.spin_until(rig.node.move_shapers.client.service_is_ready, "the scheduler's shaper_at")
+        assert [run(c, f, f) for c, f in enumerate((4.0, 8.0, 4.0, 8.0))] == [DiagnosticStatus.OK] * 4
+        assert [s.message for s in drift_statuses()][1].count("designed at 8 Hz") == 1
+        req = asked[1]
+        assert list(req.pose.name) == ["j1", "j2"] and list(req.pose.position) == [1.0, 0.0]
+        assert list(req.start.position) == [0.0, 0.0]
+        # each move counts its own cycles outside: the WARN at the move's second, the other's between them
+        levels = [run(c, f, 0.85 * f) for c, f in ((4, 4.0), (5, 8.0), (6, 4.0))]
+        assert levels == [DiagnosticStatus.OK, DiagnosticStatus.OK, DiagnosticStatus.WARN]
+        warn = drift_statuses()[-1]
+        assert "mode 3.4" in warn.message and "designed at 4 Hz" in warn.message, warn.message
+        assert "1 move(s) drifted" in warn.message
+        # a move whose mode is where its shaper works does not end the warning of another
+        assert run(7, 8.0, 8.0) == DiagnosticStatus.WARN
+
+        rig.move = None  # a START naming no joints: no move to ask about, not rated
+        rig.cycle(8, accel=decay_at(4.0))
+        # the drifted move back inside its band (its payload off again): no move warns
+        assert run(9, 4.0, 4.0) == DiagnosticStatus.OK  # (the statuses come in order from one publisher)
+        assert len(asked) == 9 and len(drift_statuses()) == 9
+        assert {kv.key: kv.value for kv in drift_statuses()[-1].values}["cycle"] == "9"
     finally:
         rig.close()

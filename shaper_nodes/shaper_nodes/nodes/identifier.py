@@ -34,7 +34,13 @@ at the mode, and the working band around the design mode where V stays under
 cycles in a row find the mode outside the band, a WARN ``identifier: drift`` on /diagnostics
 names the numbers (logged once, until the mode comes back); every check publishes the status
 (OK inside the band). A change of the active shaper starts the count again. The identity
-shaper is not watched.
+shaper is not watched. With ``watch.scheduler`` (a shaper node shaping each goal through that
+scheduler, whose active shaper does not change), each cycle is rated against the shaper its move
+ran with, asked of the scheduler at its START (:mod:`.identifier_moves`), and the active shaper is
+not followed (the scheduler's changes of it as the arm moves would restart the count at every move).
+Rated: the identified mode nearest each design mode, and the strongest (a mode a payload moved far
+below every design mode is nearer another one); the worst of them decides. Each move has its own count,
+and the status is WARN while any move's watch warns.
 
 Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
@@ -67,6 +73,8 @@ from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED, SERVICE_QOS
 from shaper_nodes.ros.shaper_client import ShaperClient
+
+from .identifier_moves import MoveShapers
 
 SOURCE = "identification"
 #: a gap between two accelerometer samples longer than this many median periods marks the
@@ -166,6 +174,10 @@ class WatchParams:
         0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
         " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
         " nothing to identify).", (1e-4, 1.0))
+    scheduler: str = param(
+        "", "Drift watch: fully qualified name of the scheduler whose ~/shaper_at gives the shaper each cycle's"
+        " move ran with (its START's joints, start and goal), for a shaper node that shapes each goal through it"
+        " (action.scheduler); each cycle is rated against that shaper. Empty: the active shaper.", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -241,7 +253,10 @@ class IdentifierNode(Node):
         self.watch = DriftWatch(int(p.watch.confirm))
         self._active: ShaperMsg | None = None
         self._warned = False
-        if bool(p.watch.enabled):
+        self.move_shapers = MoveShapers(self, str(p.watch.scheduler), lambda: float(
+            self.params.value.service_timeout), self.diagnostics, int(p.watch.confirm)) \
+            if p.watch.enabled and p.watch.scheduler else None
+        if bool(p.watch.enabled) and self.move_shapers is None:  # (with watch.scheduler: not the one rated)
             self.create_subscription(ShaperMsg, f"{str(p.shaper).rstrip('/')}/active_shaper",
                                      self._on_active, LATCHED)
         self.get_logger().info(
@@ -284,6 +299,8 @@ class IdentifierNode(Node):
             return
         if msg.event == CycleEvent.START:
             self._cycle_start = time_to_sec(msg.header.stamp)
+            if self.move_shapers is not None:
+                self.move_shapers.on_start(msg)
         if result is None:
             return
         lost = self.lockstep.describe_lost(self._cycle_start, result.residual.window_end)
@@ -316,7 +333,13 @@ class IdentifierNode(Node):
 
     def _watch_cycle(self, cycle: int, record: tuple[np.ndarray, np.ndarray]) -> None:
         """Rate this cycle's mode against the active shaper (see the module docstring)."""
-        active = self._active
+        active, watch = self._active, self.watch
+        if self.move_shapers is not None:  # the move's shaper, and its own watch
+            active, why, move_watch = self.move_shapers.shaper(cycle)
+            if active is None or move_watch is None:
+                self.get_logger().info(f"cycle {cycle}: drift watch: not rated ({why})")
+                return
+            watch = move_watch
         if active is None or len(active.amplitudes) < 2 or active.family == "none":
             return
         p = self.params.value
@@ -325,27 +348,37 @@ class IdentifierNode(Node):
             modes = identify_records([record], method=str(p.method), max_modes=int(p.max_modes),
                                      band_hz=(lo, hi) if hi > 0.0 else None)
         except IdentificationError as err:
-            self._quiet(cycle, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is at the"
-                        " noise floor")
+            self._quiet(cycle, watch, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is"
+                        " at the noise floor")
             return
         sharp = [m for m in modes if m.omega > 0 and m.omega_std <= float(p.watch.max_uncertainty) * m.omega]
         check = self._worst(active, sharp)
         if check is None:
             found = ", ".join(f"{m.hz:.4g} Hz (+-{100 * m.omega_std / m.omega:.2g} %)" for m in modes if m.omega > 0)
-            self._quiet(cycle, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
+            self._quiet(cycle, watch, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
                         f" watch.max_uncertainty {100 * float(p.watch.max_uncertainty):.3g} %): the residual"
                         " is at the noise floor")
             return
-        warning = self.watch.update(check)
+        watch.update(check)
         text = f"cycle {cycle}: {check.describe()}"
         values = [("cycle", str(cycle)), ("mode_hz", f"{check.mode_hz:.6g}"), ("zeta", f"{check.zeta:.4g}"),
                   ("vibration", f"{check.vibration:.4g}"), ("tolerance", f"{check.tolerance:.4g}"),
                   ("band_low_hz", f"{check.band_hz[0]:.6g}" if check.band_hz else "none"),
                   ("band_high_hz", f"{check.band_hz[1]:.6g}" if check.band_hz else "none"),
-                  ("outside_in_a_row", str(self.watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
-        if warning:
-            text = (f"the mode has drifted out of the active shaper's working band ({self.watch.outside_in_a_row}"
+                  ("outside_in_a_row", str(watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
+        if watch.warning:
+            text = (f"the mode has drifted out of the active shaper's working band ({watch.outside_in_a_row}"
                     f" cycles in a row): {text}; retune the shaper (~/identify with apply)")
+        self._verdict(text, values)
+
+    def _verdict(self, text: str, values: list[tuple[str, str]]) -> None:
+        """The status ``drift``: WARN while the watch warns (with watch.scheduler: while any move's watch does)."""
+        drifted = self.move_shapers.drifted() if self.move_shapers is not None else (
+            ["the task"] if self.watch.warning else [])
+        if drifted and self.move_shapers is not None:
+            text = f"{len(drifted)} move(s) drifted out of their shaper's working band ({', '.join(drifted)}); {text}"
+            values = [*values, ("drifted_moves", str(len(drifted)))]
+        if drifted:
             if not self._warned:
                 self.get_logger().warning(text)
             self._warned = True
@@ -356,25 +389,20 @@ class IdentifierNode(Node):
             self._warned = False
             self.diagnostics.publish("drift", OK, text, values)
 
-    def _quiet(self, cycle: int, text: str) -> None:
+    def _quiet(self, cycle: int, watch: DriftWatch, text: str) -> None:
         """A cycle with nothing to rate: the shaper works (see DriftWatch.quiet)."""
-        self.watch.quiet()
-        if self._warned:
-            self.get_logger().info(f"the mode is back inside the working band: {text}")
-        self._warned = False
-        self.diagnostics.publish("drift", OK, text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
+        watch.quiet()
+        self._verdict(text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
 
     def _worst(self, active: ShaperMsg, modes: list[ModeFit]) -> ModeCheck | None:
-        """The check of the identified mode nearest each design mode (the strongest mode if the shaper
-        names none); of several, the one with the largest V."""
+        """The checks of the identified mode nearest each design mode and of the strongest mode (the one that
+        rings most, which a payload may have moved below every design mode); the one with the largest V."""
         if not modes:
             return None
         tol = float(self.params.value.watch.tolerance)
         design = [hz for hz in map(msg_hz, active.design_modes) if hz > 0]
-        if design:
-            chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
-        else:
-            chosen = {max(modes, key=lambda m: m.amplitude)}
+        chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
+        chosen.add(max(modes, key=lambda m: m.amplitude))
         checks = [check_mode(active.amplitudes, active.times, design, m, tol) for m in chosen]
         return max(checks, key=lambda c: c.vibration)
 

@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from . import arm_payload
+
 RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/shaper/active_shaper", "/diagnostics",
             "/learner/reports"]
 RATE = 500.0
@@ -58,15 +60,15 @@ WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stop
 CALIBRATION_TIMEOUT = 3600.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
 CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list", "scheduled_list_moves",
-         "scheduled_mrilc_moves")
+         "scheduled_mrilc_moves", "payload")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
 DEFAULT_CASES = ("none", "fixed", "scheduled")
 #: cases that need a calibration
-CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves")
+CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload")
 #: cases whose shaper node asks the scheduler for each goal (the shaper node is restarted for them)
-SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves")
+SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload")
 #: cases that mark every move as its own cycle on /cycle_events (the learner per move)
-PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves")
+PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves", "payload")
 #: cases that learn (their cycles: --list-cycles)
 LEARNING = ("list", "scheduled_list", *PER_MOVE)
 
@@ -84,6 +86,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--calibration", type=pathlib.Path, default=None,
                    help="a calibration folder to use (scheduler.yaml, shaper.yaml) instead of calibrating first")
     p.add_argument("--noise", type=float, default=0.01, help="accelerometer noise, m/s^2 (default 0.01)")
+    arm_payload.add_arguments(p)
     return p.parse_args(argv)
 
 
@@ -717,6 +720,9 @@ def _main(argv: list[str] | None) -> int:
         print(f"demo arm: --cases may name one learning case (list, scheduled_list, {', '.join(PER_MOVE)}: each"
               f" runs its own learner); got {args.cases}", file=sys.stderr)
         return 2
+    if bad := arm_payload.check_args(args, cases):
+        print(f"demo arm: {bad}", file=sys.stderr)
+        return 2
     out = args.out or pathlib.Path("out") / datetime.datetime.now().strftime("demo-arm-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     moves = cycle_moves()
@@ -745,12 +751,14 @@ def _main(argv: list[str] | None) -> int:
             print(f"{len(report['poses'])} poses, {len(report['flagged_poses'])} flagged; scheduler over"
                   f" {', '.join(report['scheduler']['premises'])} ({time.monotonic() - t_wall:.0f} s)", flush=True)
         start("shaper_nodes", "identifier", {"use_sim_time": True, "buffer_cycles": 20, "settle_tolerance": 1e-4,
-                                             "max_modes": 3, "topics.imu_reliable": True})
+                                             "max_modes": 3, "topics.imu_reliable": True,
+                                             **arm_payload.identifier_params(cases)})
         start("shaper_nodes", "recorder", {"output": str(out / "recording"), "topics": RECORDED,
                                            "use_sim_time": True})
         conductor = Conductor(context=ctx)
         client = ArmClient(conductor)
         identifier_cli = conductor.create_client(Identify, "/identifier/identify")
+        payload = arm_payload.PayloadWatch(conductor, args, cases)
         try:
             conductor.wait_ready(60.0, {"/cycle_events": 2})
             client.wait_ready(3)  # this node, the identifier and the recorder
@@ -762,7 +770,8 @@ def _main(argv: list[str] | None) -> int:
                 learning = case in LEARNING
                 n = args.list_cycles if learning else args.cycles
                 print(f"{case:>10}: {installed}; {n} cycles ", end="", flush=True)
-                for _ in range(n):
+                for k in range(n):
+                    payload.before_cycle(case, k, cycle_index)
                     if case in PER_MOVE:  # every move a cycle of the learner's: cycle_index up to its last move's
                         runs = client.run_cycle_per_move(cycle_index, moves, lambda: print(".", end="", flush=True),
                                                          functools.partial(_learned, client))
@@ -807,6 +816,7 @@ def _main(argv: list[str] | None) -> int:
     table = [*_table(rows), "", *_sums(rows, cases, args.noise)]
     if per_move:
         table += ["", *_per_move_table(per_move, rows, args.noise)]
+    table += payload.table(per_move, args.noise)
     from ..arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
 
     note = (f"Residual vibration: the flange IMU's specific force minus its mean, over {RESIDUAL_WINDOW:g} s after"
