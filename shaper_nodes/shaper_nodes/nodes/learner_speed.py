@@ -207,7 +207,8 @@ class SpeedMovesMode:
         return True
 
     async def start(self) -> bool:
-        moves = [(e.key, f"factor {e.speed().factor:.3f}" if e.speed_state else "afresh") for e in self.store]
+        moves = [(e.key, f"factor {float(e.speed_state['factor']):.3f}" if e.speed_state else "afresh")
+                 for e in self.store]
         text = f"speed-up per move: {self._resumed} moves resumed from the state file"
         self.node.get_logger().info(text + "".join(f"; {k}: {d}" for k, d in moves))
         self.node.diagnostics.publish("moves", OK, text, moves)
@@ -297,6 +298,7 @@ class SpeedMovesMode:
         entry.speed_state = sp.to_dict()
         factor = max(1.0, min(sp.factor, ceiling))
         st, sv, sa = time_scale(times, q, v, a, factor)
+        assert sv is not None and sa is not None  # (given: they are)
         breach = limit_breach(st, sv, sa, vmax, amax, names)
         if breach is not None:
             cyc.refused = f"the scaled goal would break a joint limit ({breach}); sent as planned"
@@ -376,14 +378,14 @@ class SpeedMovesMode:
         tol = acceleration_tolerance(float(v.tolerance), cyc.frequency)
         ok = res.peak <= tol
         reason = "" if ok else f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"
-        entry = self.store.get(cyc.key)
-        assert entry is not None
-        sp = entry.speed()
+        moved = self.store.get(cyc.key)
+        assert moved is not None
+        sp = moved.speed()
         assert sp is not None
         sp.factor = cyc.factor
         nxt = sp.factor if self.holding else sp.update(ok, reason)
-        entry.speed_state = sp.to_dict()
-        entry.cycles += 1
+        moved.speed_state = sp.to_dict()
+        moved.cycles += 1
         self.node.save()
         index = [e.key for e in self.store].index(cyc.key)
         mm = 1e3 * res.peak / (2.0 * math.pi * cyc.frequency) ** 2

@@ -139,8 +139,10 @@ def motion_end_index(positions: np.ndarray, tolerance: float = 1e-9) -> int:
         Largest change (rad) that still counts as holding.
     """
     q = np.asarray(positions, dtype=float)
-    moving = np.flatnonzero(np.any(np.abs(np.diff(q, axis=0)) > tolerance, axis=1)) if q.shape[0] > 1 else []
-    return int(moving[-1] + 1) if len(moving) else 0
+    if q.shape[0] < 2:
+        return 0
+    moving = np.flatnonzero(np.any(np.abs(np.diff(q, axis=0)) > tolerance, axis=1))
+    return int(moving[-1] + 1) if moving.size else 0
 
 
 def time_scale(times: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None,
