@@ -343,7 +343,7 @@ class ArmClient:
         return runs
 
     def run_cycle_per_move(self, first: int, moves: list[Any], progress: Callable[[], None],
-                           learned: Callable[[int], None]) -> list[MoveRun]:
+                           learned: Callable[[int], Any]) -> list[MoveRun]:
         """One pick-and-place cycle with every move marked as its own cycle on ``/cycle_events`` (cycles ``first``
         to ``first + len(moves) - 1``, each START naming the joints and the move's start and goal), for the learner
         per move; ``learned(cycle)`` waits for what the learner does with a move's cycle before the next move."""
@@ -356,7 +356,10 @@ class ArmClient:
             run = self.run_move(i, move, mark)
             self._event(self._CycleEvent.MOTION_END, cycle, run.start + run.planned, q0, q1)
             self._event(self._CycleEvent.END, cycle, run.end, q0, q1)
-            learned(cycle)
+            report = learned(cycle)
+            if self.ends_at_rest:  # the move's planned (time-scaled) duration, as the learner that scaled it says
+                m = dict(zip(report.metric_names, report.metric_values, strict=True))
+                run.planned = m.get("motion_s", run.planned)
             runs.append(run)
             progress()
         for run, nxt in itertools.pairwise(runs):
