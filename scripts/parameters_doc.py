@@ -22,6 +22,7 @@ from shaper_nodes.nodes import (
     learner_list,
     learner_moves_mrilc,
     learner_mrilc,
+    learner_speed,
     recorder,
     scheduler,
     shaper,
@@ -42,7 +43,8 @@ def sections() -> list[tuple[str, str, Sequence[tuple[str, Iterable[Spec]]]]]:
         ("learner", "The learner (`shaper_nodes.nodes.learner`): the parameters of every mode, then those of the"
          " mode chosen by `mode`.", [("every mode", learner.PARAMETERS), ("mode list", learner_list.PARAMETERS),
                                     ("mode mrilc", learner_mrilc.PARAMETERS),
-                                    ("mode mrilc_moves", learner_moves_mrilc.PARAMETERS)]),
+                                    ("mode mrilc_moves", learner_moves_mrilc.PARAMETERS),
+                                    ("mode speed_moves", learner_speed.PARAMETERS)]),
         ("scheduler", "Gain scheduling (`shaper_nodes.nodes.scheduler`); each name of `rule_names` adds"
          " `rules.<name>.*` (below, with `<name>` for the rule).",
          [("", scheduler.PARAMETERS), ("each rule", scheduler.rule_table("<name>"))]),

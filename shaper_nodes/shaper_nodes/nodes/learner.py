@@ -15,6 +15,10 @@ mrilc_moves (:mod:`.learner_moves_mrilc`)
     MRILC per move on a robot arm: per move, a correction of the joints' commanded profile learned from
     the move's residual window of the tool accelerometer, added to that move's goals by the learner's
     own FollowJointTrajectory proxy between the shaper node and the controller.
+speed_moves (:mod:`.learner_speed`)
+    Learning to move faster, per move: a time-scaling factor per move, raised while the move's settled residual
+    (tool accelerometer) stays within a tolerance and the joint limits hold, applied by the learner's own
+    FollowJointTrajectory proxy in front of the shaper node's (scaling before shaping).
 
 What both share lives here, once:
 
@@ -78,6 +82,10 @@ class LearnerNode(LearnerBase):
             from .learner_moves_mrilc import MrilcMovesMode
 
             self.mode = MrilcMovesMode(self)
+        elif mode == "speed_moves":
+            from .learner_speed import SpeedMovesMode
+
+            self.mode = SpeedMovesMode(self)
         else:
             from .learner_list import ListMode, declare_list
 
@@ -131,11 +139,11 @@ class LearnerNode(LearnerBase):
 
 
 def main(args: list[str] | None = None) -> int:
-    from . import learner_list, learner_moves_mrilc, learner_mrilc
+    from . import learner_list, learner_moves_mrilc, learner_mrilc, learner_speed
 
     return run_node(LearnerNode, "learner", args, tables={
         "every mode": PARAMETERS, "mode list": learner_list.PARAMETERS, "mode mrilc": learner_mrilc.PARAMETERS,
-        "mode mrilc_moves": learner_moves_mrilc.PARAMETERS},
+        "mode mrilc_moves": learner_moves_mrilc.PARAMETERS, "mode speed_moves": learner_speed.PARAMETERS},
         examples=(
         with_config("shaper_nodes", "learner", "learner.yaml"),
         with_config("shaper_nodes", "learner", "mrilc.yaml")))

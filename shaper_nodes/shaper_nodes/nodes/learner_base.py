@@ -31,7 +31,7 @@ SENSOR_FAULTS = ("sensor", "saturated")
 
 SOURCE = "learner"
 STATE_VERSION = 1
-MODES = ("list", "mrilc", "mrilc_moves")
+MODES = ("list", "mrilc", "mrilc_moves", "speed_moves")
 T = TypeVar("T")
 
 @dataclass(frozen=True)
@@ -39,8 +39,9 @@ class LearnerParams:
     """The parameters every mode has (the adapters add theirs)."""
 
     mode: str = param("list", "Learning mode: 'list' (Learning Input Shaping Technique, seed 003; per move with"
-                      " list.per_move), 'mrilc' (Model-Reference Iterative Learning Control, seed 000) or 'mrilc_moves'"
-                      " (MRILC per move: a joint profile correction per move, nodes/learner_moves_mrilc.py).",
+                      " list.per_move), 'mrilc' (Model-Reference Iterative Learning Control, seed 000), 'mrilc_moves'"
+                      " (MRILC per move: a joint profile correction per move, nodes/learner_moves_mrilc.py) or"
+                      " 'speed_moves' (a time-scaling factor learned per move, nodes/learner_speed.py).",
                       choices=MODES, read_only=True)
     shaper: str = param("/shaper", "Fully qualified name of the shaper node.", read_only=True)
     state_file: str = param("", "Where the learner's state is saved and reloaded ('' = not saved).", read_only=True)

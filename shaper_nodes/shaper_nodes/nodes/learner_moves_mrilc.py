@@ -51,7 +51,6 @@ from __future__ import annotations
 import collections
 import importlib
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -80,10 +79,10 @@ from shaper_nodes.ros.parameters import Spec, declare, param, table
 
 from .learner_base import LearnerBase
 from .learner_list import TopicParams, subscribe_imu
+from .move_goals import MATCH as MATCH  # (re-exported: the tolerance of the match, rad)
+from .move_goals import await_match, goal_matches
 from .trajectory_action import TrajectoryActionProxy
 
-#: rad: how far a goal's last point may be from a START's goal for the goal to be that move's
-MATCH = 1e-3
 #: most accelerometer samples kept (a bound whatever the cycle events do)
 MAX_SAMPLES = 400_000
 _ENTRY = {"start", "goal", "joint_names", "learner"}
@@ -285,16 +284,16 @@ class MrilcMovesMode:
         names = list(traj.joint_names)
         times, fields = trajectory_arrays(traj, names, True)
         q = fields["positions"]
-        deadline = time.monotonic() + self.match_timeout
-        while True:
+        def pending() -> _Cycle | None:
             cyc = self._last
-            if cyc is not None and cyc.applied is None and not cyc.refused and self._matches(cyc, q[-1]):
-                break
-            if time.monotonic() >= deadline:
-                self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
-                                               " sent uncorrected")
-                return None
-            await self.node.sleep(0.01)
+            free = cyc is not None and cyc.applied is None and not cyc.refused
+            return cyc if free and goal_matches(cyc.goal, q[-1]) else None  # type: ignore[union-attr]
+
+        cyc = await await_match(self.node, pending, self.match_timeout)
+        if cyc is None:
+            self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
+                                           " sent uncorrected")
+            return None
         move = self.moves[cyc.key]
         v = fields.get("velocities")
         a = fields.get("accelerations")
@@ -322,11 +321,6 @@ class MrilcMovesMode:
         if "effort" in fields:
             out["effort"] = fields["effort"]
         return trajectory_msg(traj.header, names, [p.time_from_start for p in traj.points], out)
-
-    @staticmethod
-    def _matches(cyc: _Cycle, last: np.ndarray) -> bool:
-        """Whether a goal whose last point is ``last`` (rad) is the move of ``cyc`` (its START's goal)."""
-        return cyc.goal.shape == last.shape and bool(np.allclose(cyc.goal, last, atol=MATCH, rtol=0))
 
     def _limits(self, joints: int) -> JointLimits:
         vals = []

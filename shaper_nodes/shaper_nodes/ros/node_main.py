@@ -208,7 +208,8 @@ def node_help(module: Any, executable: str, tables: Mapping[str, Iterable[Any]],
     first = next(iter(next(iter(tables.values()), ())), None)
     doc = (module.__doc__ or "").strip().replace("``", "")
     specs = [s for table in tables.values() for s in table]
-    topics = [s for s in specs if s.name.startswith("topics.") or s.name == "topics"]
+    # once each (modes may share a group of topics)
+    topics = list({s.name: s for s in specs if s.name.startswith("topics.") or s.name == "topics"}.values())
     lines = [f"usage: ros2 run {package} {executable} [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE]...",
              "                                [-r FROM:=TO]... [-r __node:=NAME] [-r __ns:=NAMESPACE]]", "",
              doc, ""]

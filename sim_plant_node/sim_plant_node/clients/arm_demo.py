@@ -17,7 +17,9 @@ LIST per move on top of the schedule (the learner's ``list.per_move``: every mov
 cycle, each learning its own factor, which the scheduler applies to that move's goals; opt-in, with a
 per-move, per-cycle table of its own); ``scheduled_mrilc_moves``, MRILC per move on top of the schedule (the
 learner's ``mode: mrilc_moves``: the shaper node's proxy sends each shaped goal to the learner's, which adds the
-move's learned joint profile correction and sends it to the controller; opt-in, the same per-move table).
+move's learned joint profile correction and sends it to the controller; opt-in, the same per-move table);
+``scheduled_speedup``, the schedule with a time-scaling factor learned per move (the learner's ``mode: speed_moves``
+in front of the shaper node's proxy: :mod:`.arm_speed`; opt-in, the same per-move table).
 For every move and case it measures (:mod:`sim_plant_node.arm.metrics`) the residual vibration
 at the tool, the settling time, the move time plus settling time, the shaper's delay and the
 tool-path deviation the shaping causes, and writes them as CSV, Markdown and a PNG plot.
@@ -60,15 +62,17 @@ WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stop
 CALIBRATION_TIMEOUT = 3600.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
 CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list", "scheduled_list_moves",
-         "scheduled_mrilc_moves", "payload")
+         "scheduled_mrilc_moves", "payload", "scheduled_speedup")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
 DEFAULT_CASES = ("none", "fixed", "scheduled")
 #: cases that need a calibration
-CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload")
+CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload",
+              "scheduled_speedup")
 #: cases whose shaper node asks the scheduler for each goal (the shaper node is restarted for them)
-SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload")
+SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload",
+             "scheduled_speedup")
 #: cases that mark every move as its own cycle on /cycle_events (the learner per move)
-PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves", "payload")
+PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves", "payload", "scheduled_speedup")
 #: cases that learn (their cycles: --list-cycles)
 LEARNING = ("list", "scheduled_list", *PER_MOVE)
 
@@ -223,6 +227,8 @@ class ArmClient:
         self._Goal = FollowJointTrajectory.Goal
         self._CycleEvent = CycleEvent
         self._last_start: float | None = None  # the last move's start, simulated s
+        #: a move ends where the arm rests after it (its goal may run shorter than planned: time-scaled)
+        self.ends_at_rest = False
 
     # ------------------------------------------------------------------ driving
     def wait_listeners(self, n: int, timeout: float = 60.0) -> None:
@@ -315,9 +321,9 @@ class ArmClient:
         res = result.result()
         if res.result.error_code != 0:
             raise RuntimeError(f"{move.name}: {res.result.error_code} {res.result.error_string}")
-        end = start + move.duration + DWELL
+        end = self.rest_after(start, f"after {move.name}") if self.ends_at_rest else start + move.duration + DWELL
         self.wait_samples(end, move.name)
-        return MoveRun(index, move.name, start, move.duration, end)
+        return MoveRun(index, move.name, start, end - start - DWELL if self.ends_at_rest else move.duration, end)
 
     def run_cycle(self, cycle: int, moves: list[Any], progress: Callable[[], None]) -> list[MoveRun]:
         """One pick-and-place cycle. Its last move (the reach back home) is what ``/cycle_events`` marks as the
@@ -341,7 +347,7 @@ class ArmClient:
         return runs
 
     def run_cycle_per_move(self, first: int, moves: list[Any], progress: Callable[[], None],
-                           learned: Callable[[int], None]) -> list[MoveRun]:
+                           learned: Callable[[int], Any]) -> list[MoveRun]:
         """One pick-and-place cycle with every move marked as its own cycle on ``/cycle_events`` (cycles ``first``
         to ``first + len(moves) - 1``, each START naming the joints and the move's start and goal), for the learner
         per move; ``learned(cycle)`` waits for what the learner does with a move's cycle before the next move."""
@@ -354,7 +360,10 @@ class ArmClient:
             run = self.run_move(i, move, mark)
             self._event(self._CycleEvent.MOTION_END, cycle, run.start + run.planned, q0, q1)
             self._event(self._CycleEvent.END, cycle, run.end, q0, q1)
-            learned(cycle)
+            report = learned(cycle)
+            if self.ends_at_rest:  # the move's planned (time-scaled) duration, as the learner that scaled it says
+                m = dict(zip(report.metric_names, report.metric_values, strict=True))
+                run.planned = m.get("motion_s", run.planned)
             runs.append(run)
             progress()
         for run, nxt in itertools.pairwise(runs):
@@ -410,6 +419,10 @@ def _per_move_table(per_move: list[list[tuple[MoveRun, Any, Any]]], rows: list[d
         m = dict(zip(report.metric_names, report.metric_values, strict=True))
         if m.get("skipped"):
             return "skipped"
+        if "speed_factor" in m:  # speed-up per move
+            from .arm_speed import status as speed_status
+
+            return speed_status(m)
         if "cost" in m:  # MRILC per move
             action = next((k.split(".", 1)[1] for k in m if k.startswith("action.")), "?")
             return (f"cost {m['cost']:.4g} m/s^2, {action}; correction used {m['max_correction_rad']:.2e} rad,"
@@ -641,6 +654,10 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
             return "calibrated schedule: each goal shaped for the modes at its final pose"
         if case == "scheduled_mrilc_moves":
             return _mrilc_moves(session, client)
+        if case == "scheduled_speedup":
+            from . import arm_speed
+
+            return arm_speed.start(session, client)
         if case in PER_MOVE:
             from shaper_nodes.ros.lockstep_reader import AckWatch
 
@@ -816,6 +833,10 @@ def _main(argv: list[str] | None) -> int:
     table = [*_table(rows), "", *_sums(rows, cases, args.noise)]
     if per_move:
         table += ["", *_per_move_table(per_move, rows, args.noise)]
+        if "scheduled_speedup" in cases:
+            from .arm_speed import summary
+
+            table += summary(per_move, rows)
     table += payload.table(per_move, args.noise)
     from ..arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
 

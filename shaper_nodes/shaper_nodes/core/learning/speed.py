@@ -16,6 +16,16 @@ over repetitions while the vibration stays within an allowed bound):
 
 It is deterministic and its state is a JSON-ready dictionary (:meth:`SpeedLearner.to_dict`,
 :meth:`SpeedLearner.from_dict`, every entry checked).
+
+What a node needs around it, measurable on a robot (the learner node's ``speed_moves`` mode):
+
+- :func:`time_scale`: a planned trajectory's points run ``s`` times faster (times / s up to the motion's
+  last point, velocities x s, accelerations x s^2; the hold after the motion keeps its length);
+- :func:`limit_breach`: the first point of a profile past a joint velocity or acceleration limit, named;
+- :func:`acceleration_tolerance`: the accelerometer level that corresponds to a displacement tolerance at
+  the flange, ``x (2 pi f)^2`` at the mode ``f`` (a sinusoid of amplitude x at f has the acceleration
+  amplitude x (2 pi f)^2; at the move's lowest mode the same acceleration means the largest displacement,
+  so the conversion is conservative for the higher modes and for the position loop's faster transient).
 """
 
 from __future__ import annotations
@@ -27,7 +37,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SPEED_VERSION", "SpeedError", "SpeedLearner", "SpeedSettings", "limit_ceiling", "limits_held"]
+__all__ = ["SPEED_VERSION", "SpeedError", "SpeedLearner", "SpeedSettings", "acceleration_tolerance", "limit_breach",
+           "limit_ceiling", "limits_held", "motion_end_index", "time_scale"]
 
 #: version of :meth:`SpeedLearner.to_dict`'s dictionaries
 SPEED_VERSION = 1
@@ -114,6 +125,106 @@ def limits_held(peaks: np.ndarray, limits: Sequence[float] | np.ndarray) -> list
     if p.shape != lim.shape:
         raise SpeedError(f"{p.size} peaks against {lim.size} limits")
     return [int(i) for i in np.flatnonzero(~(p <= lim))]
+
+
+def motion_end_index(positions: np.ndarray, tolerance: float = 1e-9) -> int:
+    """Index of a trajectory's last point whose positions differ from the point before it (0 if none does):
+    the points after it hold the final pose.
+
+    Parameters
+    ----------
+    positions : (N, J) array
+        The points' joint positions, rad.
+    tolerance : float
+        Largest change (rad) that still counts as holding.
+    """
+    q = np.asarray(positions, dtype=float)
+    if q.shape[0] < 2:
+        return 0
+    moving = np.flatnonzero(np.any(np.abs(np.diff(q, axis=0)) > tolerance, axis=1))
+    return int(moving[-1] + 1) if moving.size else 0
+
+
+def time_scale(times: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None,
+               accelerations: np.ndarray | None, factor: float
+               ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """A planned trajectory's points run ``factor`` times faster on the same path.
+
+    The motion (up to :func:`motion_end_index`) is q(s t): its points' times / s, velocities x s,
+    accelerations x s^2. The points after it hold the final pose; they keep their spacing (a dwell at the
+    goal stays as long as planned), shifted to the scaled motion's end.
+
+    Parameters
+    ----------
+    times : (N,) array
+        The points' times from the start, s (increasing).
+    positions : (N, J) array
+        Joint positions, rad (unchanged: the same path).
+    velocities, accelerations : (N, J) array or None
+        rad/s and rad/s^2 (None: not given; stays None).
+    factor : float
+        s > 0 (1: as planned).
+
+    Returns
+    -------
+    times, velocities, accelerations
+        The scaled points' times (s), velocities and accelerations.
+    """
+    s = _positive("factor", factor)
+    t = np.asarray(times, dtype=float)
+    m = motion_end_index(positions)
+    out = t / s
+    out[m + 1:] = t[m] / s + (t[m + 1:] - t[m])
+    v = None if velocities is None else np.asarray(velocities, dtype=float) * s
+    a = None if accelerations is None else np.asarray(accelerations, dtype=float) * s * s
+    return out, v, a
+
+
+def limit_breach(times: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray,
+                 max_velocity: Sequence[float] | np.ndarray, max_acceleration: Sequence[float] | np.ndarray,
+                 names: Sequence[str]) -> str | None:
+    """The first joint limit a profile breaks, in one line (None: every point within every limit).
+
+    Parameters
+    ----------
+    times : (N,) array
+        The points' times, s.
+    velocities, accelerations : (N, J) array
+        rad/s and rad/s^2.
+    max_velocity, max_acceleration : (J,) array_like
+        The joints' limits, rad/s and rad/s^2.
+    names : sequence of str
+        The joints' names.
+    """
+    for what, unit, values, limits in (("velocity", "rad/s", velocities, max_velocity),
+                                       ("acceleration", "rad/s^2", accelerations, max_acceleration)):
+        x = np.abs(np.asarray(values, dtype=float))
+        lim = np.asarray(limits, dtype=float)
+        over = x > lim[None, :]
+        if np.any(over):
+            i, j = (int(k) for k in np.argwhere(over)[0])
+            return (f"joint {names[j]}: {what} {x[i, j]:.4g} {unit} above its limit {lim[j]:.4g} {unit} at the point"
+                    f" of t = {float(times[i]):.3f} s")
+    return None
+
+
+def acceleration_tolerance(displacement: float, frequency_hz: float) -> float:
+    """The accelerometer level, m/s^2, that a displacement tolerance at the flange corresponds to at a mode.
+
+    Parameters
+    ----------
+    displacement : float
+        Tolerance of the settled flange, m (0.05 mm: 5e-5).
+    frequency_hz : float
+        The mode's frequency, Hz (the move's lowest: the conversion is then conservative, module docstring).
+
+    Returns
+    -------
+    float
+        ``displacement * (2 pi frequency_hz)^2``.
+    """
+    x, f = _positive("displacement", displacement), _positive("frequency_hz", frequency_hz)
+    return x * (2.0 * math.pi * f) ** 2
 
 
 class SpeedLearner:

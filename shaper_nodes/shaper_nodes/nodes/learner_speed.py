@@ -1,0 +1,403 @@
+"""The learner node's speed-up per move (``mode: speed_moves``): each move learns to run faster while it settles.
+
+Issue 31's item 4 over DDS, on the ROS-free :class:`~shaper_nodes.core.learning.speed.SpeedLearner` (the one the
+reproduction ``reproductions.arm_learning``'s ``speedup`` case runs).
+
+**Where the factor is applied: before shaping.** The learner serves ``~/follow_joint_trajectory``
+(control_msgs/FollowJointTrajectory, :class:`~.trajectory_action.TrajectoryActionProxy`) in front of the shaper
+node's proxy: the motion source sends its goals to ``/learner/follow_joint_trajectory``, the learner time-scales each
+and sends it on to ``speed.controller`` (the shaper node's ``/shaper/follow_joint_trajectory``), which shapes it for
+its final pose and sends it to the controller. A shaper's impulses are tuned to the mode; scaling a shaped
+trajectory would shift them off it, so the scaling comes first. Each goal is matched to the move whose cycle START
+came last (``/cycle_events``: its goal pose equal to the goal's last point, :mod:`.move_goals`; a goal that came
+first waits up to ``speed.match_timeout`` s); its points run ``s`` times faster
+(:func:`~shaper_nodes.core.learning.speed.time_scale`: times / s up to the motion's last point, velocities x s,
+accelerations x s^2; a hold at the goal keeps its length). A goal matched to no move goes on as planned.
+
+**Limits.** Every goal's planned points are checked against ``speed.velocity`` and ``speed.acceleration`` (one
+value per joint or one for all) at its request: a goal past a limit is rejected, and one line names the joint, the
+limit and the point. A move's factor never exceeds ``speed.max_factor`` nor the largest factor its planned profile
+allows within the limits (:func:`~shaper_nodes.core.learning.speed.limit_ceiling`), and the scaled points are
+checked again before they are sent. Torque is not computed here (the node has no dynamic model of the robot): set
+the acceleration limits from the joints' torque limits at the heaviest payload, as a robot's planner does.
+
+**What is good.** At the move's END, the settled residual is the peak of the tool accelerometer's deviation from
+its mean (``topics.imu``; the three axes' magnitude) in the window of ``speed.window`` s after the commanded motion
+ends, less the position loop's transient (``speed.transient`` s). The motion ends at the scaled plan's end plus the
+schedule's shaper at the goal (its duration from ``<speed.scheduler>/shaper_at``; ``speed.shaper_delay`` when there
+is no scheduler). The tolerance ``speed.tolerance`` (m at the flange) is converted to the accelerometer level at
+the goal's lowest mode f (the schedule's, or ``speed.frequency_hz``): tolerance x (2 pi f)^2
+(:func:`~shaper_nodes.core.learning.speed.acceleration_tolerance`; 0.05 mm at 10 Hz: 0.197 m/s^2). A cycle is good
+when the peak is within it (its plan held the limits: it was checked). After a good cycle the move's factor is
+raised, after a bad one lowered at once to the largest good one
+(:class:`~shaper_nodes.core.learning.speed.SpeedLearner`).
+
+**State.** Every move's speed learner in ``state_file`` (:class:`~shaper_nodes.core.learning.moves.MoveStore`, the
+entry's ``speed``), with its joint names, saved atomically after each update and loaded entry by entry (a broken
+entry is left out and reported; its move starts afresh); after a restart each move resumes at its saved factor.
+
+Reports (``~/reports``): per move's END, the metrics ``move`` (index in the state's order), ``speed_factor`` (the
+factor the goal ran with), ``factor_next``, ``ceiling``, ``peak`` and ``tolerance`` (m/s^2), ``peak_mm`` (the peak
+converted to the flange, mm), ``frequency_hz``, ``motion_s`` (the scaled plan's motion, s), ``velocity_ratio`` and
+``acceleration_ratio`` (the scaled plan's largest against its limit), ``ok`` and ``holding``; residual_rms: the
+window's RMS.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.srv import ShaperAt
+from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.cycles import END, START
+from shaper_nodes.core.learning.moves import MoveError, MoveStore, store_from_doc
+from shaper_nodes.core.learning.speed import (
+    SpeedError,
+    SpeedLearner,
+    SpeedSettings,
+    acceleration_tolerance,
+    limit_breach,
+    limit_ceiling,
+    motion_end_index,
+    time_scale,
+)
+from shaper_nodes.core.shaping.vibration import residual_vibration
+from shaper_nodes.ros.conversions import mode_from_msg, trajectory_arrays, trajectory_msg
+from shaper_nodes.ros.diagnostics import ERROR, OK
+from shaper_nodes.ros.parameters import Spec, declare, param, table
+from shaper_nodes.ros.shaper_client import ServiceClient
+
+from .learner_base import LearnerBase
+from .learner_list import TopicParams, subscribe_imu
+from .move_goals import await_match, goal_matches
+from .trajectory_action import TrajectoryActionProxy
+
+#: most accelerometer samples kept (a bound whatever the cycle events do)
+MAX_SAMPLES = 400_000
+_DOC_KEYS = {"version", "per_move", "moves", "joint_names", "saved_at"}
+
+
+@dataclass(frozen=True)
+class SpeedGroup:
+    """speed.*: where the scaled goals go, the tolerance, the limits and the learner's steps."""
+
+    controller: str = param("/shaper/follow_joint_trajectory", "The FollowJointTrajectory action the time-scaled"
+                            " goals go to (the shaper node's proxy: scaling comes before shaping).", read_only=True)
+    scheduler: str = param("/scheduler", "The scheduler asked (<scheduler>/shaper_at) for the shaper and the lowest"
+                           " mode at each goal's final pose ('' = none: speed.shaper_delay and speed.frequency_hz).",
+                           read_only=True)
+    action_timeout: float = param(30.0, "How long a goal waits for the next action server and its answer, s.",
+                                  (0.1, 600.0), read_only=True)
+    match_timeout: float = param(2.0, "How long a goal waits for the START of its move on the cycle events, s.",
+                                 (0.0, 60.0), read_only=True)
+    tolerance: float = param(5e-5, "Tolerance of the settled flange, m (0.05 mm), converted to the accelerometer"
+                             " level tolerance x (2 pi f)^2 at the goal's lowest mode f.", (1e-7, 0.1))
+    frequency_hz: float = param(0.0, "The mode f of the conversion, Hz (0 = the schedule's lowest mode at the"
+                                " goal).", (0.0, 1000.0))
+    window: float = param(1.0, "Length of the residual window after the commanded motion's end, s.", (0.05, 10.0),
+                          read_only=True)
+    transient: float = param(0.1, "The position loop's transient left out at the window's start, s.", (0.0, 5.0),
+                             read_only=True)
+    shaper_delay: float = param(0.0, "The shaper's duration assumed when no scheduler answers, s.", (0.0, 10.0),
+                                read_only=True)
+    step: float = param(0.1, "Raise of a move's factor after a good cycle (before any bad one).", (1e-3, 10.0),
+                        read_only=True)
+    resolution: float = param(0.02, "The factor holds once the good and the bad factor are closer than this.",
+                              (1e-4, 1.0), read_only=True)
+    max_factor: float = param(2.0, "Largest time-scaling factor (1 = the planned speed).", (1.0, 10.0),
+                              read_only=True)
+    velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s (one per joint, or one for all).",
+                                        read_only=True)
+    acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2 (one per joint, or one"
+                                            " for all; set them from the torque limits).", read_only=True)
+
+
+@dataclass(frozen=True)
+class SpeedMovesParams:
+    """The speed-per-move mode's parameters."""
+
+    speed: SpeedGroup = field(default_factory=SpeedGroup)
+    topics: TopicParams = field(default_factory=TopicParams)
+
+
+#: the speed-per-move mode's parameters (derived from SpeedMovesParams)
+PARAMETERS: tuple[Spec, ...] = table(SpeedMovesParams)
+
+
+@dataclass
+class _Cycle:
+    key: str
+    start: float  # the move's start (the START's stamp), s
+    goal: np.ndarray
+    factor: float | None = None  # the factor its goal ran with (None: no goal scaled yet)
+    ceiling: float = math.nan
+    motion: float = math.nan  # the scaled plan's motion, s from the start
+    delay: float = 0.0  # the schedule's shaper at the goal, s
+    frequency: float | None = None  # the conversion's mode, Hz
+    ratios: tuple[float, float] = (math.nan, math.nan)  # the scaled plan's largest velocity, acceleration / limit
+    refused: str = ""  # why the goal went as planned (the cycle is not learned from)
+
+
+class SpeedMovesMode:
+    """The speed-per-move adapter of the learner node (see the module docstring)."""
+
+    def __init__(self, node: LearnerBase) -> None:
+        self.node = node
+        self.params = declare(node, SpeedMovesParams)
+        v = self.params.value.speed
+        for name in ("velocity", "acceleration"):
+            values = list(getattr(v, name))
+            if not values or not all(math.isfinite(x) and x > 0 for x in values):
+                raise ValueError(f"speed.{name} must be one or more finite numbers > 0, got {values}")
+        self.settings = SpeedSettings(step=float(v.step), floor=1.0, ceiling=float(v.max_factor),
+                                      resolution=float(v.resolution))
+        restored = node.restore(self._build, {"per_move": "speed"})
+        self.store, self.names = restored if restored is not None else (MoveStore(), {})
+        self._resumed = len(self.store)
+        self.holding = False
+        self._cycles: dict[int, _Cycle] = {}
+        self._last: _Cycle | None = None
+        self._samples: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=MAX_SAMPLES)
+        self.latest_imu = -math.inf
+        topics = self.params.value.topics
+        self.events_topic, self.imu_topic = topics.cycle_events, topics.imu
+        subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
+        scheduler = str(v.scheduler).strip().rstrip("/")
+        self.shaper_at = (ServiceClient(node, ShaperAt, f"{scheduler}/shaper_at", node.service_timeout,
+                                        node.diagnostics) if scheduler else None)
+        self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
+                                           self._refused, lambda: None, float(v.action_timeout), self._scale)
+
+    # ----------------------------------------------------------------- state
+    def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]]]:
+        if set(doc) - _DOC_KEYS or not isinstance(doc.get("moves"), dict):
+            raise MoveError(f"per-move speed state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
+        store, problems = store_from_doc(doc["moves"])
+        names = doc.get("joint_names") or {}
+        if not isinstance(names, dict) or not all(isinstance(n, list) and all(isinstance(x, str) for x in n)
+                                                  for n in names.values()):
+            raise MoveError("joint_names must map each move to a list of joint names")
+        if problems:
+            text = "; ".join(f"move {k}: {why}" for k, why in problems.items())
+            self.node.state_problem = f"{len(problems)} move entr{'y' if len(problems) == 1 else 'ies'} left out" \
+                                      f" (they start afresh): {text}"
+            self.node.diagnostics.report("state_file", ERROR, self.node.state_problem)
+        return store, {k: list(n) for k, n in names.items() if k in store}
+
+    def state(self) -> dict[str, Any]:
+        return {"per_move": "speed", "moves": self.store.to_doc(), "joint_names": self.names}
+
+    def describe(self) -> str:
+        return (f"speed-up per move on {self.imu_topic}, time-scaled goals of ~/follow_joint_trajectory sent to"
+                f" {self.proxy.controller_name}; {len(self.store)} moves saved")
+
+    def latest(self) -> float:
+        return self.latest_imu
+
+    def ready(self) -> bool:
+        return True
+
+    async def start(self) -> bool:
+        moves = [(e.key, f"factor {float(e.speed_state['factor']):.3f}" if e.speed_state else "afresh")
+                 for e in self.store]
+        text = f"speed-up per move: {self._resumed} moves resumed from the state file"
+        self.node.get_logger().info(text + "".join(f"; {k}: {d}" for k, d in moves))
+        self.node.diagnostics.publish("moves", OK, text, moves)
+        return True
+
+    async def hold(self, on: bool) -> tuple[bool, str]:
+        self.holding = on
+        if on:  # every move at its largest good factor
+            for entry in self.store:
+                sp = entry.speed()
+                if sp is not None:
+                    sp.factor = sp.good if sp.good is not None else sp.settings.floor
+                    entry.speed_state = sp.to_dict()
+        return True, ("holding every move at its largest good factor" if on else "learning resumed on every move")
+
+    # ----------------------------------------------------------------- goals
+    def _on_imu(self, t: float, a: tuple[float, float, float]) -> None:
+        self._samples.append((t, a[0], a[1], a[2]))
+        self.latest_imu = max(self.latest_imu, t)
+        keep = self.latest_imu - self.node.max_cycle_duration
+        while self._samples and self._samples[0][0] < keep:
+            self._samples.popleft()
+
+    def _limits(self, joints: int) -> tuple[np.ndarray, np.ndarray]:
+        v = self.params.value.speed
+        out = []
+        for name, values in (("velocity", v.velocity), ("acceleration", v.acceleration)):
+            if len(values) not in (1, joints):
+                raise InputError("wrong_size", f"speed.{name} has {len(values)} values for {joints} joints")
+            out.append(np.resize(np.asarray(values, dtype=float), joints))
+        return out[0], out[1]
+
+    @staticmethod
+    def _profile(traj: JointTrajectory) -> tuple[list[str], np.ndarray, dict[str, np.ndarray], np.ndarray,
+                                                 np.ndarray]:
+        """The goal's arrays and its velocities and accelerations (differentiated where not given)."""
+        names = list(traj.joint_names)
+        times, fields = trajectory_arrays(traj, names, True)
+        q = fields["positions"]
+        v = fields.get("velocities")
+        a = fields.get("accelerations")
+        if v is None:
+            v = np.gradient(q, times, axis=0) if len(times) > 1 else np.zeros_like(q)
+        if a is None:
+            a = np.gradient(v, times, axis=0) if len(times) > 1 else np.zeros_like(q)
+        return names, times, fields, v, a
+
+    def _check(self, traj: JointTrajectory) -> JointTrajectory:
+        """The goal request's check: its arrays read, and its planned points within the joint limits."""
+        names, times, _, v, a = self._profile(traj)
+        vmax, amax = self._limits(len(names))
+        breach = limit_breach(times, v, a, vmax, amax, names)
+        if breach is not None:
+            raise InputError("beyond_limits", f"the planned trajectory breaks a joint limit: {breach}")
+        return traj
+
+    def _refused(self, err: InputError) -> None:
+        self.node.get_logger().error(f"goal refused: {err}")
+        self.node.diagnostics.report("goal", ERROR, f"goal refused: {err}")
+
+    async def _scale(self, traj: JointTrajectory) -> JointTrajectory | None:
+        """The goal time-scaled by its move's factor (None: as planned; module docstring)."""
+        names, times, fields, v, a = self._profile(traj)
+        q = fields["positions"]
+
+        def pending() -> _Cycle | None:
+            cyc = self._last
+            free = cyc is not None and cyc.factor is None and not cyc.refused
+            return cyc if free and goal_matches(cyc.goal, q[-1]) else None  # type: ignore[union-attr]
+
+        cyc = await await_match(self.node, pending, float(self.params.value.speed.match_timeout))
+        if cyc is None:
+            self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
+                                           " sent as planned")
+            return None
+        entry = self.store.get(cyc.key)
+        assert entry is not None
+        vmax, amax = self._limits(len(names))
+        ceiling = min(self.settings.ceiling, limit_ceiling(v, a, vmax, amax))
+        try:
+            sp = entry.speed() or SpeedLearner(SpeedSettings(self.settings.step, 1.0, max(ceiling, 1.0),
+                                                             self.settings.resolution))
+        except SpeedError as err:  # (checked when loaded: not expected)
+            cyc.refused = f"its speed state cannot be read ({err}); sent as planned"
+            self.node.get_logger().error(f"move {cyc.key}: {cyc.refused}")
+            return None
+        entry.speed_state = sp.to_dict()
+        factor = max(1.0, min(sp.factor, ceiling))
+        st, sv, sa = time_scale(times, q, v, a, factor)
+        assert sv is not None and sa is not None  # (given: they are)
+        breach = limit_breach(st, sv, sa, vmax, amax, names)
+        if breach is not None:
+            cyc.refused = f"the scaled goal would break a joint limit ({breach}); sent as planned"
+            self.node.get_logger().error(f"move {cyc.key}: {cyc.refused}")
+            return None
+        cyc.delay, cyc.frequency = await self._schedule_at(names, q[0], q[-1])
+        cyc.factor, cyc.ceiling = factor, ceiling
+        cyc.motion = float(st[motion_end_index(q)])
+        cyc.ratios = (float(np.max(np.abs(sv) / vmax)), float(np.max(np.abs(sa) / amax)))
+        if factor == 1.0:
+            return None  # as planned
+        out: dict[str, np.ndarray] = {"positions": q}
+        _, gv, ga = time_scale(times, q, fields.get("velocities"), fields.get("accelerations"), factor)
+        if gv is not None:
+            out["velocities"] = gv
+        if ga is not None:
+            out["accelerations"] = ga
+        if "effort" in fields:
+            out["effort"] = fields["effort"]
+        return trajectory_msg(traj.header, names, st, out)
+
+    async def _schedule_at(self, names: list[str], start: np.ndarray, goal: np.ndarray) -> tuple[float, float | None]:
+        """The schedule's shaper duration (s) and lowest mode (Hz) at the goal; the parameters' where not asked or
+        not answered (frequency None: none known)."""
+        v = self.params.value.speed
+        delay, freq = float(v.shaper_delay), (float(v.frequency_hz) or None)
+        if self.shaper_at is None:
+            return delay, freq
+        req = ShaperAt.Request(pose=JointState(name=names, position=goal.tolist()),
+                               start=JointState(name=names, position=start.tolist()))
+        answer = await self.shaper_at.call(req)
+        resp = answer.response
+        if resp is None or not resp.success:
+            why = answer.error if resp is None else resp.message
+            self.node.get_logger().warning(f"no schedule at the goal ({why}): speed.shaper_delay {delay:g} s"
+                                           + ("" if freq else "; no mode for the tolerance: not learned from"))
+            return delay, freq
+        if len(resp.shaper.times):
+            delay = float(resp.shaper.times[-1])
+        if freq is None and len(resp.estimate.modes):
+            freq = min(mode_from_msg(m).hz for m in resp.estimate.modes)
+        return delay, freq
+
+    # ----------------------------------------------------------------- cycles
+    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+        cycle = int(msg.cycle)
+        if msg.event == START:
+            try:
+                entry, new = self.store.entry(msg.start_positions, msg.goal_positions)
+            except MoveError as err:
+                self.node.get_logger().error(f"cycle {cycle}: the move cannot be identified: {err}")
+                return None
+            if new:
+                self.names[entry.key] = list(msg.joint_names)
+            self._last = self._cycles[cycle] = _Cycle(entry.key, stamp, np.asarray(msg.goal_positions, dtype=float))
+            while len(self._cycles) > 64:  # ENDs that never came
+                self._cycles.pop(next(iter(self._cycles)))
+            return None
+        if msg.event != END:
+            return None
+        cyc = self._cycles.pop(cycle, None)
+        if cyc is None:
+            return self.node.skipped(msg, (math.nan, stamp), "END without its START")
+        if cyc.factor is None:
+            return self.node.skipped(msg, (cyc.start, stamp), cyc.refused or "no goal of the move came through the"
+                                     " learner")
+        if cyc.frequency is None:
+            return self.node.skipped(msg, (cyc.start, stamp), "no mode to convert the tolerance (no schedule at the"
+                                     " goal and speed.frequency_hz 0)")
+        v = self.params.value.speed
+        end = cyc.start + cyc.motion + cyc.delay
+        window = (end + float(v.transient), min(end + float(v.window), stamp))
+        arr = np.asarray([s for s in self._samples if window[0] <= s[0] < window[1]], dtype=float).reshape(-1, 4)
+        if arr.shape[0] < 3:
+            return self.node.skipped(msg, window, f"{arr.shape[0]} accelerometer samples in the residual window")
+        res = residual_vibration(arr[:, 0], arr[:, 1:], window[0], window[1], remove_mean=True)
+        tol = acceleration_tolerance(float(v.tolerance), cyc.frequency)
+        ok = res.peak <= tol
+        reason = "" if ok else f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"
+        moved = self.store.get(cyc.key)
+        assert moved is not None
+        sp = moved.speed()
+        assert sp is not None
+        sp.factor = cyc.factor
+        nxt = sp.factor if self.holding else sp.update(ok, reason)
+        moved.speed_state = sp.to_dict()
+        moved.cycles += 1
+        self.node.save()
+        index = [e.key for e in self.store].index(cyc.key)
+        mm = 1e3 * res.peak / (2.0 * math.pi * cyc.frequency) ** 2
+        names = ["move", "speed_factor", "factor_next", "ceiling", "peak", "tolerance", "peak_mm", "frequency_hz",
+                 "motion_s", "velocity_ratio", "acceleration_ratio", "ok", "holding"]
+        values = [float(index), cyc.factor, nxt, cyc.ceiling, res.peak, tol, mm, cyc.frequency, cyc.motion,
+                  *cyc.ratios, 1.0 if ok else 0.0, 1.0 if self.holding or sp.holding else 0.0]
+        text = (f"cycle {cycle}, move {cyc.key}: factor {cyc.factor:.3f}, settled peak {res.peak:.4g} m/s^2 in"
+                f" {window[0]:.3f}-{window[1]:.3f} s ({mm:.4f} mm at {cyc.frequency:.3g} Hz; tolerance {tol:.4g}"
+                f" m/s^2): {'good' if ok else 'bad'} -> {nxt:.3f}")
+        if ok:  # (one severity per call site: rclpy refuses a call site that changes it)
+            self.node.get_logger().info(text)
+        else:
+            self.node.get_logger().warning(text)
+        return self.node.report(msg, window, names, values, residual=res.rms)
