@@ -293,10 +293,14 @@ class ListMode:
         report = self.node.report(msg, window, names, values_, residual=update.m)
         report.shaper_used = self._shaper_msg(update.used)
         report.shaper_next = self._shaper_msg(update.next)
-        log = self.node.get_logger().info if applied else self.node.get_logger().error
-        log(f"cycle {msg.cycle}: M {update.m:.4g}, phi {math.degrees(update.phi):.1f} deg, {update.action}"
+        text = (f"cycle {msg.cycle}: M {update.m:.4g}, phi {math.degrees(update.phi):.1f} deg, {update.action}"
             f" ({update.parameter}): {_describe(update.used)} -> {_describe(update.next)}"
             + ("" if applied else f"; shaper node refused: {why}"))
+        # one call site per severity: rclpy refuses a call site whose severity changes between calls
+        if applied:
+            self.node.get_logger().info(text)
+        else:
+            self.node.get_logger().error(text)
         return report
 
     def _shaper_msg(self, params: ListParams | None) -> ShaperMsg:

@@ -385,9 +385,13 @@ class MovesMode:
         report = self.node.report(msg, window, names, values, residual=update.m)
         report.shaper_used = self._shaper_msg(update.used)
         report.shaper_next = self._shaper_msg(nxt)
-        log = self.node.get_logger().info if applied else self.node.get_logger().error
-        log(f"cycle {msg.cycle}, move {key}: M {update.m:.4g}, {update.action} ({update.parameter}):"
+        text = (f"cycle {msg.cycle}, move {key}: M {update.m:.4g}, {update.action} ({update.parameter}):"
             f" {_describe(update.used)} -> {_describe(nxt)}" + kept + ("" if applied else "; not acknowledged"))
+        # one call site per severity: rclpy refuses a call site whose severity changes between calls
+        if applied:
+            self.node.get_logger().info(text)
+        else:
+            self.node.get_logger().error(text)
         return report
 
     def _keep_when_it_pays(self, entry: MoveEntry, learner: ListLearner, update: Any) -> str:

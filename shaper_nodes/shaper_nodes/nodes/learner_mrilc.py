@@ -228,10 +228,14 @@ class MrilcMode:
         names = ["iteration", "rms_e", "rms_u1", "rms_u2", "residual", "applied", f"action.{update.action}"]
         values_ = [float(update.iteration), update.rms_e, update.rms_u1, update.rms_u2, update.residual,
                    1.0 if ok else 0.0, 1.0]
-        log = self.node.get_logger().info if ok else self.node.get_logger().error
-        log(f"cycle {msg.cycle} (iteration {update.iteration}): RMS e {update.rms_e:.4g}, u1 {update.rms_u1:.4g},"
+        text = (f"cycle {msg.cycle} (iteration {update.iteration}): RMS e {update.rms_e:.4g}, u1 {update.rms_u1:.4g},"
             f" u2 {update.rms_u2:.4g}, residual {update.residual:.4g}; {update.action}"
             + ("" if ok else f"; injection point refused: {why}"))
+        # one call site per severity: rclpy refuses a call site whose severity changes between calls
+        if ok:
+            self.node.get_logger().info(text)
+        else:
+            self.node.get_logger().error(text)
         return self.node.report(msg, window, names, values_, residual=update.rms_e)
 
     async def _first_start(self, msg: CycleEvent) -> None:
