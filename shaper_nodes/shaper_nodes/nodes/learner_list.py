@@ -163,7 +163,9 @@ def subscribe_imu(node: Any, topics: TopicParams, on_sample: Callable[[float, tu
         on_sample(t, a)
         if reader is not None:
             reader.took(name, t)
-    sub = subscribe_draining(node, Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS,
+    # poll=0: the samples stay in the caller's callback group (a polled subscription is taken on the node's
+    # timer, in a group of its own), so they are handled in order with the cycle events of that group
+    sub = subscribe_draining(node, Imu, name, on_imu, STREAM_QOS if topics.imu_reliable else IMU_QOS, poll=0,
                              callback_group=group)
     # announced to a lockstep plant once the accelerometer's publisher matched: no sample is lost before
     reader = LockstepReader(node, {name: None}, ready=lambda: sub.get_publisher_count() > 0)
