@@ -170,3 +170,29 @@ def restart_learner(start_node, learner, params: dict, conductor, inputs: tuple[
     start_node("shaper_nodes", "learner", params)
     conductor.spin_until(lambda: conductor.new_subscriptions(inputs, before), 120.0,
                          f"the restarted learner's subscriptions of {', '.join(inputs)}")
+
+
+def run_move_cycle(client, cycle: int, index: int, move, wait: float):
+    """One move of a per-move learner's run as its own cycle: the move through ``client`` (an ArmClient) with
+    START, MOTION_END (at the planned end) and END on /cycle_events, each naming the move by its start and goal;
+    returns the move's result and the metrics (name -> value) of the learner's report of ``cycle``, waited for up
+    to ``wait`` s."""
+    from shaper_msgs.msg import CycleEvent
+    from shaper_nodes.ros.conversions import sec_to_time
+    from sim_plant_node.arm.description import JOINT_NAMES
+
+    def event(kind: int, t: float) -> None:
+        msg = CycleEvent(event=kind, cycle=cycle, task="per_move", joint_names=list(JOINT_NAMES),
+                         start_positions=move.positions[0].tolist(), goal_positions=move.positions[-1].tolist())
+        msg.header.stamp = sec_to_time(t)
+        client.events.publish(msg)
+
+    def report():
+        return next((r for r in reversed(client.reports) if r.cycle == cycle), None)
+
+    r = client.run_move(index, move, lambda t: event(CycleEvent.START, t))
+    event(CycleEvent.MOTION_END, r.start + r.planned)
+    event(CycleEvent.END, r.end)
+    client.c.spin_until(lambda: report() is not None, wait, f"the learner's report of cycle {cycle}")
+    got = report()
+    return r, dict(zip(got.metric_names, got.metric_values, strict=True))

@@ -16,12 +16,10 @@ from __future__ import annotations
 import json
 import math
 
-from conftest import restart_learner, start_scheduled_arm
+from conftest import restart_learner, run_move_cycle, start_scheduled_arm
 
 from reproductions.arm_learning import modal_calibration
-from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key
-from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.task import HOME, MAX_ACCELERATION, MAX_VELOCITY, PICK, trapezoid_move
@@ -34,27 +32,9 @@ MOVES = (trapezoid_move("home->pick", HOME, PICK), trapezoid_move("pick->home", 
 ROUNDS = 4  # cycles per move before the restart
 
 
-def report(client: ArmClient, cycle: int):
-    return next((r for r in reversed(client.reports) if r.cycle == cycle), None)
-
-
-def metrics(r) -> dict[str, float]:
-    return dict(zip(r.metric_names, r.metric_values, strict=True))
-
-
 def run(client: ArmClient, cycle: int, index: int, move) -> dict[str, float]:
     """One move as one cycle; the learner's report of it."""
-    def event(kind: int, t: float) -> None:
-        msg = CycleEvent(event=kind, cycle=cycle, task="per_move", joint_names=list(JOINT_NAMES),
-                         start_positions=move.positions[0].tolist(), goal_positions=move.positions[-1].tolist())
-        msg.header.stamp = sec_to_time(t)
-        client.events.publish(msg)
-
-    r = client.run_move(index, move, lambda t: event(CycleEvent.START, t))
-    event(CycleEvent.MOTION_END, r.start + r.planned)
-    event(CycleEvent.END, r.end)
-    client.c.spin_until(lambda: report(client, cycle) is not None, WAIT, f"the learner's report of cycle {cycle}")
-    return metrics(report(client, cycle))
+    return run_move_cycle(client, cycle, index, move, WAIT)[1]
 
 
 #: the learner's inputs: their subscriptions on the graph again say a restarted learner is up

@@ -17,14 +17,12 @@ from __future__ import annotations
 import itertools
 import json
 
-from conftest import Diagnosed, restart_learner, start_scheduled_arm
+from conftest import Diagnosed, restart_learner, run_move_cycle, start_scheduled_arm
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
 from reproductions.arm_learning import modal_calibration
-from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key
-from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
@@ -42,27 +40,9 @@ STEP = 0.2
 INPUTS = ("/cycle_events", "/tip_imu")
 
 
-def report(client: ArmClient, cycle: int):
-    return next((r for r in reversed(client.reports) if r.cycle == cycle), None)
-
-
-def metrics(r) -> dict[str, float]:
-    return dict(zip(r.metric_names, r.metric_values, strict=True))
-
-
 def run(client: ArmClient, cycle: int, index: int, move) -> dict[str, float]:
     """One move as one cycle; the learner's report of it, with the flange's true peak (mm) beside its estimate."""
-    def event(kind: int, t: float) -> None:
-        msg = CycleEvent(event=kind, cycle=cycle, task="per_move", joint_names=list(JOINT_NAMES),
-                         start_positions=move.positions[0].tolist(), goal_positions=move.positions[-1].tolist())
-        msg.header.stamp = sec_to_time(t)
-        client.events.publish(msg)
-
-    r = client.run_move(index, move, lambda t: event(CycleEvent.START, t))
-    event(CycleEvent.MOTION_END, r.start + r.planned)
-    event(CycleEvent.END, r.end)
-    client.c.spin_until(lambda: report(client, cycle) is not None, WAIT, f"the learner's report of cycle {cycle}")
-    out = metrics(report(client, cycle))
+    r, out = run_move_cycle(client, cycle, index, move, WAIT)
     measured = client.measure(r, None)[0]
     out["flange_peak_mm"], out["move_settle_s"] = measured.peak_mm, measured.move_and_settle_s
     return out

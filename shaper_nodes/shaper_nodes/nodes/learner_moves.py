@@ -63,15 +63,16 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetMoveShaper, ShaperAt
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession
-from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, keep_when_it_pays, store_from_doc
+from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, keep_when_it_pays
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg
-from shaper_nodes.ros.diagnostics import ERROR, OK
+from shaper_nodes.ros.diagnostics import OK
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
 from .learner_drift import DriftWarnings
 from .learner_list import subscribe_imu
+from .move_goals import load_moves
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
 HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
@@ -172,23 +173,14 @@ class MovesMode:
     def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], set[str], bool]:
         if set(doc) - _DOC_KEYS or "moves" not in doc:
             raise MoveError(f"per-move state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
-        store, problems = store_from_doc(doc["moves"])
-        names = doc.get("joint_names") or {}
-        if not isinstance(names, dict) or not all(isinstance(n, list) and all(isinstance(x, str) for x in n)
-                                                  for n in names.values()):
-            raise MoveError("joint_names must map each move to a list of joint names")
-        if problems:
-            text = "; ".join(f"move {k}: {why}" for k, why in problems.items())
-            self.node.state_problem = f"{len(problems)} move entr{'y' if len(problems) == 1 else 'ies'} left out" \
-                                      f" (they start afresh): {text}"
-            self.node.diagnostics.report("state_file", ERROR, self.node.state_problem)
+        store, names = load_moves(self.node, doc)
         held = doc.get("at_schedule") or []
         if not isinstance(held, list) or not all(isinstance(k, str) for k in held):
             raise MoveError("at_schedule must be a list of move keys")
         warned = doc.get("drift_warned", False)
         if not isinstance(warned, bool):
             raise MoveError(f"drift_warned must be true or false, got {warned!r}")
-        return store, {k: list(n) for k, n in names.items() if k in store}, {k for k in held if k in store}, warned
+        return store, names, {k for k in held if k in store}, warned
 
     def state(self) -> dict[str, Any]:
         for key, learner in self.learners.items():

@@ -59,7 +59,7 @@ from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.cycles import END, START
-from shaper_nodes.core.learning.moves import MoveError, MoveStore, store_from_doc
+from shaper_nodes.core.learning.moves import MoveError, MoveStore
 from shaper_nodes.core.learning.speed import (
     SpeedError,
     SpeedLearner,
@@ -78,7 +78,7 @@ from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
 from .learner_list import TopicParams, subscribe_imu
-from .move_goals import await_match, goal_matches
+from .move_goals import await_match, goal_matches, load_moves
 from .trajectory_action import TrajectoryActionProxy
 
 #: most accelerometer samples kept (a bound whatever the cycle events do)
@@ -181,17 +181,7 @@ class SpeedMovesMode:
     def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]]]:
         if set(doc) - _DOC_KEYS or not isinstance(doc.get("moves"), dict):
             raise MoveError(f"per-move speed state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
-        store, problems = store_from_doc(doc["moves"])
-        names = doc.get("joint_names") or {}
-        if not isinstance(names, dict) or not all(isinstance(n, list) and all(isinstance(x, str) for x in n)
-                                                  for n in names.values()):
-            raise MoveError("joint_names must map each move to a list of joint names")
-        if problems:
-            text = "; ".join(f"move {k}: {why}" for k, why in problems.items())
-            self.node.state_problem = f"{len(problems)} move entr{'y' if len(problems) == 1 else 'ies'} left out" \
-                                      f" (they start afresh): {text}"
-            self.node.diagnostics.report("state_file", ERROR, self.node.state_problem)
-        return store, {k: list(n) for k, n in names.items() if k in store}
+        return load_moves(self.node, doc)
 
     def state(self) -> dict[str, Any]:
         return {"per_move": "speed", "moves": self.store.to_doc(), "joint_names": self.names}

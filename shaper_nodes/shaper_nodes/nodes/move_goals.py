@@ -40,3 +40,25 @@ async def await_match(node: Any, pending: Callable[[], T | None], timeout: float
         if found is not None or time.monotonic() >= deadline:
             return found
         await node.sleep(POLL)
+
+
+def load_moves(node: Any, doc: dict[str, Any]) -> tuple[Any, dict[str, list[str]]]:
+    """A per-move learner's saved moves (``doc["moves"]``) and their joint names (``doc["joint_names"]``), entry by
+    entry: a broken entry is left out (its move starts afresh) and reported on ``node`` (``state_problem``, the
+    ``state_file`` status at ERROR). Returns the :class:`~shaper_nodes.core.learning.moves.MoveStore` and the joint
+    names of the moves kept; raises :class:`~shaper_nodes.core.learning.moves.MoveError` for joint names that are
+    not lists of names."""
+    from shaper_nodes.core.learning.moves import MoveError, store_from_doc
+    from shaper_nodes.ros.diagnostics import ERROR
+
+    store, problems = store_from_doc(doc["moves"])
+    names = doc.get("joint_names") or {}
+    if not isinstance(names, dict) or not all(isinstance(n, list) and all(isinstance(x, str) for x in n)
+                                              for n in names.values()):
+        raise MoveError("joint_names must map each move to a list of joint names")
+    if problems:
+        text = "; ".join(f"move {k}: {why}" for k, why in problems.items())
+        node.state_problem = f"{len(problems)} move entr{'y' if len(problems) == 1 else 'ies'} left out" \
+                             f" (they start afresh): {text}"
+        node.diagnostics.report("state_file", ERROR, node.state_problem)
+    return store, {k: list(n) for k, n in names.items() if k in store}
