@@ -217,3 +217,28 @@ def test_a_shaper_stopped_right_after_its_first_log_line_exits_cleanly(start_nod
         text = shaper.log_path.read_text()
         assert code == 0, text
         assert not problems(text), text
+
+
+def test_a_wait_of_a_session_ends_at_once_naming_a_node_that_died(domain_id, tmp_path, monkeypatch):
+    """The demo waits on its nodes (a server, a listener) for minutes on a busy machine; a node of its session
+    that died at start (here a learner with a mode it does not know) ends the wait at once with one line naming
+    the node, its exit code and its log's last line, instead of a time-out minutes later. A node the session
+    stopped itself is no death."""
+    from sim_plant_node.clients import conductor
+    from sim_plant_node.clients.conductor import node_session, spin_until
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+    with node_session(tmp_path, "dead") as (start, ctx):
+        ex = SingleThreadedExecutor(context=ctx)
+        stopped = start("shaper_nodes", "shaper_node", SHAPER)
+        stopped.stop()
+        learner = start("shaper_nodes", "learner", {"mode": "no_such_mode"})
+        learner.proc.wait(timeout=DOWN)  # it refuses the mode and exits (however long its start takes)
+        with pytest.raises(RuntimeError) as err:
+            spin_until(ex, lambda: False, 600.0, "a listener that never comes")
+        text = str(err.value)
+        assert "while waiting for a listener that never comes: learner exited with code" in text, text
+        assert "parameter mode must be one of" in text and "no_such_mode" in text, text  # its log's last line
+        assert "shaper_node" not in text
+        ex.shutdown()
+    assert not conductor._SESSION  # the session's processes are forgotten with it

@@ -142,6 +142,7 @@ class ChildProcess:
         self.cwd = cwd
         self.proc: UsagePopen | None = None
         self._log: IO[str] | None = None
+        self.stopped = False  # stop() was called: an exit after it is not a death
 
     def start(self) -> ChildProcess:
         self._log = open(self.log_path, "w") if self.log_path else None  # noqa: SIM115
@@ -162,6 +163,7 @@ class ChildProcess:
 
     def stop(self, timeout: float = 10.0) -> int | None:
         """SIGINT, wait up to ``timeout`` s, then SIGKILL; returns the exit code."""
+        self.stopped = True
         if self.proc is None:
             return None
         if self.proc.poll() is None:

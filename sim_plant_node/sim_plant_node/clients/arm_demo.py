@@ -56,7 +56,9 @@ IMU, LINK, CMD, JOINTS = "/tip_imu", "/sim_plant/tip_state", "/sim_plant/referen
 #: identifier and the recorder
 RECORDER = "/recorder"
 READERS = ["/calibrate", "/conductor", "/identifier", RECORDER]
-WAIT = 60.0  # s of wall time a wait for the nodes may take before the demo stops with one line
+#: s of wall time a wait for the nodes may take before the demo stops with one line (a node starting at load 20
+#: took over 60 s to be heard; a node that dies ends the wait at once through its process)
+WAIT = 300.0
 #: s of wall time the calibration may take (a guard against a hang: on a loaded machine, load average 30 and two
 #: CPU hogs, its identification alone took over 6 min of a 15 min run)
 CALIBRATION_TIMEOUT = 3600.0
@@ -231,12 +233,12 @@ class ArmClient:
         self.ends_at_rest = False
 
     # ------------------------------------------------------------------ driving
-    def wait_listeners(self, n: int, timeout: float = 60.0) -> None:
+    def wait_listeners(self, n: int, timeout: float = WAIT) -> None:
         """Wait until the cycle events reach ``n`` matched subscriptions (this node's own among them)."""
         self.c.spin_until(lambda: self.events.get_subscription_count() >= n, timeout,
                           f"{n} matched subscriptions of /cycle_events")
 
-    def wait_ready(self, listeners: int, timeout: float = 60.0) -> None:
+    def wait_ready(self, listeners: int, timeout: float = WAIT) -> None:
         """Wait for the shaper's action server, ``listeners`` matched subscriptions of the cycle events (this
         node's own among them) and the sim plant's reference and tip state publishers."""
         self.c.spin_until(self.action.server_is_ready, timeout, "the shaper's FollowJointTrajectory server")
@@ -244,7 +246,7 @@ class ArmClient:
         for topic in ("/sim_plant/reference", "/sim_plant/tip_state"):  # published only to subscribers
             self.c.spin_until(lambda t=topic: self.c.count_publishers(t) > 0, timeout, f"the sim plant's {topic}")
 
-    def wait_recorder(self, topics: list[str], timeout: float = 60.0) -> None:
+    def wait_recorder(self, topics: list[str], timeout: float = WAIT) -> None:
         """Wait until the recorder subscribes to ``topics`` (it subscribes to a topic once it sees it on the graph;
         the plant, which steps only once a goal comes, would otherwise run the first samples past it)."""
         self.recorder.wait_subscribed(self.c.spin_until, topics, timeout)

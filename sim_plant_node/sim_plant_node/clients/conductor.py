@@ -43,12 +43,39 @@ def _past(t: float) -> bool:
     return time.monotonic() > t
 
 
+#: the node processes of the running :func:`node_session` (a wait ends when one of them dies)
+_SESSION: list[Any] = []
+#: s of wall time between two looks at the session's processes during a wait
+LOOK = 1.0
+
+
+def _dead(procs: list[Any]) -> str | None:
+    """One line naming a process of ``procs`` that ended in an error without being stopped, with its log's last
+    line (a process that ran to its end, as calibrate does, exits with 0)."""
+    for proc in procs:
+        if not proc.stopped and not proc.running() and proc.proc.returncode != 0:
+            last = ""
+            if proc.log_path is not None and proc.log_path.exists():
+                lines = proc.log_path.read_text(errors="replace").strip().splitlines()
+                last = f": {lines[-1]}" if lines else ""
+            return f"{pathlib.Path(proc.cmd[0]).name} exited with code {proc.proc.returncode} ({proc.log_path}){last}"
+    return None
+
+
 def spin_until(executor: Executor, done: Callable[[], bool], timeout: float, what: str) -> None:
-    """Spin ``executor`` until ``done()``; ``TimeoutError`` (naming ``what``) after ``timeout`` s."""
-    deadline = time.monotonic() + timeout
+    """Spin ``executor`` until ``done()``; ``TimeoutError`` (naming ``what``) after ``timeout`` s, and
+    ``RuntimeError`` (naming the process and its log's last line) as soon as a node process of the running
+    :func:`node_session` has died: waiting for it is pointless."""
+    now = time.monotonic()
+    deadline, look = now + timeout, now + LOOK
     while not done():
-        if time.monotonic() > deadline:
+        now = time.monotonic()
+        if now > deadline:
             raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+        if now > look:
+            look = now + LOOK
+            if _SESSION and (dead := _dead(_SESSION)):
+                raise RuntimeError(f"while waiting for {what}: {dead}")
         executor.spin_once(timeout_sec=0.05)
 
 
@@ -239,7 +266,8 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
     """
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
-    procs: list[ChildProcess] = []
+    _SESSION.clear()
+    procs: list[ChildProcess] = _SESSION  # the session's waits look at its processes (spin_until)
     previous: dict[signal.Signals, Any] = {}
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -261,6 +289,7 @@ def node_session(logs: pathlib.Path, prefix: str) -> Iterator[tuple[StartNode, r
             list(pool.map(lambda proc: proc.stop(), reversed(procs)))
         for num, handler in previous.items():
             signal.signal(num, handler)
+        _SESSION.clear()
 
 
 #: the stop signals a session received (its caller reports an interruption, whatever the exception it ended in:
