@@ -659,7 +659,7 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
         if case == "scheduled_speedup":
             from . import arm_speed
 
-            return arm_speed.start(session, client)
+            return arm_speed.start(session, client, IMU, WAIT)
         if case in PER_MOVE:
             from shaper_nodes.ros.lockstep_reader import AckWatch
 

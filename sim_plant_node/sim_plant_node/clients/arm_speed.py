@@ -53,16 +53,15 @@ def use_learner_proxy(client: Any) -> None:
     client.ends_at_rest = True
 
 
-def start(session: Any, client: Any) -> str:
-    """Start the speed learner and point the client at it; returns what was installed (for the log)."""
+def start(session: Any, client: Any, imu: str, wait: float) -> str:
+    """Start the speed learner and point the client at it (the learner's accelerometer topic ``imu``, its
+    subscription waited for up to ``wait`` s); returns what was installed (for the log)."""
     from shaper_nodes.ros.lockstep_reader import AckWatch
-
-    from .arm_demo import IMU, WAIT
 
     session.start("shaper_nodes", "learner", learner_parameters())
     use_learner_proxy(client)
     client.wait_ready(4)  # the learner's action server, and its subscription of the cycle events
-    AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
+    AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [imu], wait)
     return (f"calibrated schedule with the speed-up per move on top (each goal time-scaled by its move's factor"
             f" before it is shaped; limits {VELOCITY:.4g} rad/s, {ACCELERATION:g} rad/s^2, factor up to"
             f" {MAX_FACTOR:g})")
