@@ -78,6 +78,7 @@ from .calibrate_stops import (
     Stopped,
     WriteFailed,
     params_file_too_large,
+    stop_in,
     stop_on_signals,
 )
 
@@ -185,7 +186,13 @@ class Calibrator:
         while not done():
             if time.monotonic() > deadline:
                 raise Aborted(f"no {what} within {timeout:g} s")
-            self.executor.spin_once(timeout_sec=POLL)
+            try:
+                self.executor.spin_once(timeout_sec=POLL)
+            except Exception as err:  # a stop signal that landed inside rclpy's C++ comes out as another error
+                stop = stop_in(err)
+                if stop is None:
+                    raise
+                raise stop from None
 
     def wait_pose(self) -> np.ndarray:
         self.spin_until(lambda: self.position is not None, float(self.p.timeouts.data),

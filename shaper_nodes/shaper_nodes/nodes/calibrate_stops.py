@@ -69,6 +69,20 @@ class Stopped(KeyboardInterrupt):
         return 128 + self.signum
 
 
+def stop_in(err: BaseException) -> Stopped | None:
+    """The :class:`Stopped` that ``err`` carries as its cause or context, if any: a signal that lands while rclpy's C++
+    calls back into Python (a message built while taking it) comes out of pybind11 as a ``TypeError`` ("Unable to
+    convert function return value") whose cause is the :class:`Stopped`."""
+    seen: set[int] = set()
+    cur: BaseException | None = err
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, Stopped):
+            return cur
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return None
+
+
 def stop_on_signals() -> None:
     """SIGINT and SIGTERM raise :class:`Stopped` in the main thread, once: the stop that follows (cancelling the
     goal, removing the partial pose) is not interrupted by a second signal."""
