@@ -35,8 +35,8 @@ raised, after a bad one lowered at once to the largest good one
 **A drift warning starts every move again at the planned speed** (a payload change: a heavier payload lowers
 the modes and rings more at the same speed, so the factors learned no longer hold). At the first WARN of the status
 ``speed.drift_status`` (default the identifier's ``identifier: drift``) on ``/diagnostics`` (:mod:`.learner_drift`:
-once per warning episode, an OK ends it), every move's speed learner starts again from 1 (the planned speed, the
-speed the schedule was calibrated at; :meth:`~shaper_nodes.core.learning.speed.SpeedLearner.relearn`): its good and
+once per warning episode, an OK ends it), every move's speed learner starts again from 1 (the planned speed;
+:meth:`~shaper_nodes.core.learning.speed.SpeedLearner.relearn`): its good and
 failed factors are forgotten, one line on the log names the moves, and the state is saved (atomically, with the
 episode flag ``drift_warned``). A cycle under way at the warning is not learned from (its goal ran with the old
 factor on the changed arm). Why 1 and not the last good factor lowered: nothing learned on the old payload bounds
