@@ -9,7 +9,9 @@ level at the goal's lowest mode); every scaled plan holds the joint velocity and
 planned points break a limit is rejected with one line naming the joint; a bad cycle (the tolerance tightened at
 run time through the parameter service, so that the measured residual is above it) lowers the factor at once to the
 largest good one; the state file holds a speed learner per move; after the learner is killed (SIGKILL) and started
-again on the same state file, each move resumes at its saved factor.
+again on the same state file, each move resumes at its saved factor. Then the payload changes (2 -> 4.5 kg through the
+plant's parameter service) and the drift watch warns (the identifier's status ``identifier: drift`` at WARN on
+``/diagnostics``, published by the test's peer): every move's next goal runs at its planned speed again (factor 1).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import itertools
 import json
 
 from conftest import Diagnosed, restart_learner, run_move_cycle, start_scheduled_arm
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
@@ -143,6 +146,30 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
             assert m["speed_factor"] == got[move.name][-1]["factor_next"], (move.name, m)
             got[move.name].append(m)
             learned_rightly(got[move.name])
+        # a payload change and the drift watch's WARN: every move starts again at its planned speed
+        conductor.set_plant(arm__payload_mass=4.5)
+        warn = conductor.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        status = DiagnosticStatus(level=DiagnosticStatus.WARN, name="identifier: drift",
+                                  message="the mode has drifted out of the active shaper's working band")
+
+        def relearned() -> bool:
+            warn.publish(DiagnosticArray(status=[status]))  # (again until read: one episode, acted on once)
+            doc = json.loads(state.read_text())
+            return doc.get("drift_warned") is True and all(
+                e["speed"]["factor"] == 1.0 and e["speed"]["good"] is None for e in doc["moves"]["moves"].values())
+
+        conductor.spin_until(relearned, 120.0, "the relearn of every move's factor on the drift WARN")
+        after: dict[str, list[dict[str, float]]] = {m.name: [] for m in MOVES}
+        for i in (1, 0):
+            move = MOVES[i]
+            m = run(client, cycle, i, move)
+            cycle += 1
+            assert m["speed_factor"] == 1.0, (move.name, m)
+            after[move.name].append(m)
+            learned_rightly(after[move.name])
+        print("after the payload change (4.5 kg) and the relearn, factor / learner's peak mm / flange peak mm / ok:",
+              json.dumps({k: [(m["speed_factor"], round(m["peak_mm"], 4), round(m["flange_peak_mm"], 4), m["ok"])
+                              for m in v] for k, v in after.items()}))
         print("factor, settled peak (learner's estimate mm / flange mm), move + settle s per move and cycle:",
               json.dumps({k: [(round(m["speed_factor"], 3), round(m["peak_mm"], 4), round(m["flange_peak_mm"], 4),
                                round(m["move_settle_s"], 3)) for m in v] for k, v in got.items()}))

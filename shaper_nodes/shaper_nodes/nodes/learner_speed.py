@@ -32,6 +32,17 @@ when the peak is within it (its plan held the limits: it was checked). After a g
 raised, after a bad one lowered at once to the largest good one
 (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`).
 
+**A drift warning starts every move again at the planned speed** (a payload change: a heavier payload lowers
+the modes and rings more at the same speed, so the factors learned no longer hold). At the first WARN of the status
+``speed.drift_status`` (default the identifier's ``identifier: drift``) on ``/diagnostics`` (:mod:`.learner_drift`:
+once per warning episode, an OK ends it), every move's speed learner starts again from 1 (the planned speed;
+:meth:`~shaper_nodes.core.learning.speed.SpeedLearner.relearn`): its good and
+failed factors are forgotten, one line on the log names the moves, and the state is saved (atomically, with the
+episode flag ``drift_warned``). A cycle under way at the warning is not learned from (its goal ran with the old
+factor on the changed arm). Why 1 and not the last good factor lowered: nothing learned on the old payload bounds
+the new one's good factor (the modes moved, and the schedule's shaper with them); at 1 the move runs as planned and
+as scheduled, and climbs again by ``speed.step`` per good cycle.
+
 **State.** Every move's speed learner in ``state_file`` (:class:`~shaper_nodes.core.learning.moves.MoveStore`, the
 entry's ``speed``), with its joint names, saved atomically after each update and loaded entry by entry (a broken
 entry is left out and reported; its move starts afresh); after a restart each move resumes at its saved factor.
@@ -72,18 +83,21 @@ from shaper_nodes.core.learning.speed import (
 )
 from shaper_nodes.core.shaping.vibration import residual_vibration
 from shaper_nodes.ros.conversions import mode_from_msg, trajectory_arrays, trajectory_msg
-from shaper_nodes.ros.diagnostics import ERROR, OK
+from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
 from shaper_nodes.ros.parameters import Spec, declare, param, table
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
+from .learner_drift import DriftWarnings
 from .learner_list import TopicParams, subscribe_imu
 from .move_goals import await_match, goal_matches, load_moves
 from .trajectory_action import TrajectoryActionProxy
 
 #: most accelerometer samples kept (a bound whatever the cycle events do)
 MAX_SAMPLES = 400_000
-_DOC_KEYS = {"version", "per_move", "moves", "joint_names", "saved_at"}
+_DOC_KEYS = {"version", "per_move", "moves", "joint_names", "drift_warned", "saved_at"}
+#: why a cycle under way when the moves were relearned is not learned from
+RESET = "every move's factor was relearned (drift warning) while this cycle ran"
 
 
 @dataclass(frozen=True)
@@ -119,6 +133,8 @@ class SpeedGroup:
                                         read_only=True)
     acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2 (one per joint, or one"
                                             " for all; set them from the torque limits).", read_only=True)
+    drift_status: str = param("identifier: drift", "The /diagnostics status whose WARN (a drift warning: a payload"
+                              " change) starts every move's factor again from 1 ('' = none).", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -144,7 +160,8 @@ class _Cycle:
     delay: float = 0.0  # the schedule's shaper at the goal, s
     frequency: float | None = None  # the conversion's mode, Hz
     ratios: tuple[float, float] = (math.nan, math.nan)  # the scaled plan's largest velocity, acceleration / limit
-    refused: str = ""  # why the goal went as planned (the cycle is not learned from)
+    refused: str = ""  # why the goal went as planned, or the moves were relearned meanwhile (not learned from)
+    taken: bool = False  # a goal was matched to it (its factor read)
 
 
 class SpeedMovesMode:
@@ -161,7 +178,7 @@ class SpeedMovesMode:
         self.settings = SpeedSettings(step=float(v.step), floor=1.0, ceiling=float(v.max_factor),
                                       resolution=float(v.resolution))
         restored = node.restore(self._build, {"per_move": "speed"})
-        self.store, self.names = restored if restored is not None else (MoveStore(), {})
+        self.store, self.names, warned = restored if restored is not None else (MoveStore(), {}, False)
         self._resumed = len(self.store)
         self.holding = False
         self._cycles: dict[int, _Cycle] = {}
@@ -176,15 +193,33 @@ class SpeedMovesMode:
                                         node.diagnostics) if scheduler else None)
         self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
                                            self._refused, lambda: None, float(v.action_timeout), self._scale)
+        self.drift = DriftWarnings(node, str(v.drift_status).strip(), self.relearn, warned)
 
     # ----------------------------------------------------------------- state
-    def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]]]:
+    def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], bool]:
         if set(doc) - _DOC_KEYS or not isinstance(doc.get("moves"), dict):
             raise MoveError(f"per-move speed state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
-        return load_moves(self.node, doc)
+        warned = doc.get("drift_warned", False)
+        if not isinstance(warned, bool):
+            raise MoveError(f"drift_warned must be true or false, got {warned!r}")
+        return (*load_moves(self.node, doc), warned)
 
     def state(self) -> dict[str, Any]:
-        return {"per_move": "speed", "moves": self.store.to_doc(), "joint_names": self.names}
+        return {"per_move": "speed", "moves": self.store.to_doc(), "joint_names": self.names,
+                "drift_warned": self.drift.warned}
+
+    async def relearn(self, warning: str) -> None:
+        """A drift warning: every move's factor starts again from 1 (module docstring)."""
+        keys = self.store.relearn("schedule")
+        for cyc in self._cycles.values():  # under way: its goal ran (or is being scaled) with the old factor
+            if cyc.taken:
+                cyc.refused = cyc.refused or RESET
+        self.node.save()
+        text = (f"drift warning ({self.drift.status}): relearning the speed of {len(keys)} move"
+                f"{'' if len(keys) == 1 else 's'} from the planned speed (factor 1): {', '.join(keys) or 'none yet'}"
+                f" (the warning: {warning})")
+        self.node.get_logger().warning(text)
+        self.node.diagnostics.publish("moves", WARN, text)
 
     def describe(self) -> str:
         return (f"speed-up per move on {self.imu_topic}, time-scaled goals of ~/follow_joint_trajectory sent to"
@@ -266,7 +301,7 @@ class SpeedMovesMode:
 
         def pending() -> _Cycle | None:
             cyc = self._last
-            free = cyc is not None and cyc.factor is None and not cyc.refused
+            free = cyc is not None and not cyc.taken and not cyc.refused
             return cyc if free and goal_matches(cyc.goal, q[-1]) else None  # type: ignore[union-attr]
 
         cyc = await await_match(self.node, pending, float(self.params.value.speed.match_timeout))
@@ -274,6 +309,7 @@ class SpeedMovesMode:
             self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
                                            " sent as planned")
             return None
+        cyc.taken = True
         entry = self.store.get(cyc.key)
         assert entry is not None
         vmax, amax = self._limits(len(names))
@@ -352,7 +388,7 @@ class SpeedMovesMode:
         cyc = self._cycles.pop(cycle, None)
         if cyc is None:
             return self.node.skipped(msg, (math.nan, stamp), "END without its START")
-        if cyc.factor is None:
+        if cyc.refused or cyc.factor is None:
             return self.node.skipped(msg, (cyc.start, stamp), cyc.refused or "no goal of the move came through the"
                                      " learner")
         if cyc.frequency is None:

@@ -14,6 +14,12 @@ does) and is a client of the controller's. For each goal:
   rclpy itself converts the whole request into Python objects before any of this runs: that part of a
   huge goal's cost (about 2 s and 70 MiB per 10^5 points of 6 joints) is beyond the node's reach
   (docs/guide/shaper_node.md, "Goal size").
+- a goal id already accepted (a client's request sent again after no answer came, as
+  ``ResilientActionClient`` does): rclpy's action server refuses it as a duplicate before the goal
+  callback (rcl_action checks the id again as it accepts), so the goal runs once and nothing is
+  preempted; the client goes on with the goal it accepted (its first answer, or the status topic
+  naming the goal). ``tests/test_action_proxy_resend.py`` shows it through the learner's and the shaper
+  node's proxies: one execution at the controller, no cancel.
 - accepted: a goal still running is preempted (its controller goal is cancelled), as
   joint_trajectory_controller does; one goal is active at a time.
 - execution: with a ``reshape`` coroutine (the node's ``action.scheduler``: the trajectory shaped

@@ -241,7 +241,10 @@ class ResilientActionClient(ActionClient):
             if send.future.done():
                 del self._sends[key]
             elif send.rejected is not None:
-                if now - send.rejected_at > period:
+                if key in self._statuses:  # the refused resend's goal is there after all: accepted before
+                    del self._sends[key]
+                    done.append((send.future, self._handle_from_status(key)))
+                elif now - send.rejected_at > period:
                     del self._sends[key]
                     done.append((send.future, send.rejected))
             elif now - send.sent_at <= period:

@@ -1,0 +1,242 @@
+"""A drift warning (a payload change) starts every move's speed-up again at the planned speed, over DDS.
+
+The learner in ``mode: speed_moves`` (its FollowJointTrajectory proxy in front of a test controller that serves
+the real control_msgs interface and records each goal it receives), and a peer named ``identifier`` that publishes
+the drift watch's status on ``/diagnostics`` through the identifier's own reporter (``identifier: drift``, as
+nodes/identifier.py does), all real nodes in one process. The learner starts from a state file of two moves that
+learned to run 1.4 times faster (between a good 1.2 and a failed 1.6). Shown: a goal of a move runs at its saved
+factor (the controller receives the motion 1.4 times shorter); at the first WARN every move's factor starts again
+from 1 (state file: factor 1, nothing good or failed, ``drift_warned``), once per episode; the cycle under way (its
+goal ran at 1.4) is not learned from; the next goal of a move runs as planned (factor 1); a restarted learner reads
+the episode flag back, and a state file whose flag is not a boolean is refused with one line naming it.
+
+The payload change on the lockstep arm itself, with the identifier's real warning, is the demo's ``payload`` case
+(tests/test_demo_payload.py runs it with the LIST learner); this test drives the speed learner's side of it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+from control_msgs.action import FollowJointTrajectory
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Log
+from rclpy.action import ActionClient, ActionServer
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_nodes.core.learning.moves import MoveStore, move_key, store_from_doc
+from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings
+from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration, sec_to_time
+from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
+
+pytestmark = pytest.mark.integration
+
+WAIT = 120.0  # s of wall time for a state to come (two busy cores)
+NAMES = ["j1", "j2"]
+MOVES = (([0.0, 0.0], [1.0, 0.5]), ([1.0, 0.5], [0.0, 0.0]))
+CONTROLLER = "/speed_test_controller/follow_joint_trajectory"
+MOTION = 1.0  # s, the planned motion (a cosine ramp: 1.57 rad/s, 4.9 rad/s^2 at most; ceiling 1.75)
+SAVED = 1.4  # the moves' saved factor
+
+
+def plan(move: int) -> JointTrajectory:
+    """The move's planned trajectory: a cosine ramp over MOTION s, then a hold point 0.5 s later."""
+    start, goal = (np.asarray(p) for p in MOVES[move])
+    t = np.linspace(0.0, MOTION, 21)
+    q = start + np.outer(0.5 * (1.0 - np.cos(math.pi * t / MOTION)), goal - start)
+    points = [JointTrajectoryPoint(positions=row.tolist(), time_from_start=sec_to_duration(float(ti)))
+              for ti, row in zip(t, q, strict=True)]
+    points.append(JointTrajectoryPoint(positions=goal.tolist(), time_from_start=sec_to_duration(MOTION + 0.5)))
+    return JointTrajectory(joint_names=NAMES, points=points)
+
+
+def motion_end(traj: JointTrajectory) -> float:
+    """The time of the trajectory's last moving point (the one before the hold), s."""
+    return duration_to_sec(traj.points[-2].time_from_start)
+
+
+def state_doc() -> dict:
+    """The learner's state file: both moves at factor 1.4, good at 1.2, failed at 1.6."""
+    store = MoveStore()
+    for start, goal in MOVES:
+        entry, _ = store.entry(start, goal)
+        sp = SpeedLearner(SpeedSettings(step=0.2, ceiling=2.0))
+        sp.factor, sp.good, sp.failed = SAVED, 1.2, 1.6
+        entry.speed_state, entry.cycles = sp.to_dict(), 4
+    return {"version": 1, "per_move": "speed", "moves": store.to_doc(),
+            "joint_names": {move_key(s, g): NAMES for s, g in MOVES}}
+
+
+def learner_params(path) -> list[Parameter]:
+    values = {"mode": "speed_moves", "state_file": str(path), "end_wait": 0.0, "speed.controller": CONTROLLER,
+              "speed.scheduler": "", "speed.frequency_hz": 10.0, "speed.match_timeout": 30.0}
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+class Peer:
+    """The test's side: the identifier's /diagnostics (its own reporter), the cycle events, the test controller,
+    an action client of the learner's proxy, and the learner's reports and log lines."""
+
+    def __init__(self, ctx, ex: SingleThreadedExecutor) -> None:
+        self.ex = ex
+        self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
+        self.identifier = Diagnostics(self.node)
+        self.events = self.node.create_publisher(CycleEvent, "/cycle_events", 10)
+        self.reports: list[CycleReport] = []
+        self.logs: list[str] = []
+        self.goals: list[JointTrajectory] = []  # what reached the controller
+        self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
+                                      else None, 100)
+        self.statuses: list = []
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
+        self.server = ActionServer(self.node, FollowJointTrajectory, CONTROLLER, execute_callback=self._execute)
+        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
+        ex.add_node(self.node)
+
+    async def _execute(self, handle) -> FollowJointTrajectory.Result:
+        self.goals.append(handle.request.trajectory)
+        handle.succeed()
+        return FollowJointTrajectory.Result()
+
+    def spin_until(self, done, what: str, timeout: float = WAIT) -> None:
+        deadline = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < deadline, f"timed out after {timeout:g} s waiting for {what}"
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def event(self, kind: int, cycle: int, t: float, move: int) -> None:
+        start, goal = MOVES[move]
+        msg = CycleEvent(event=kind, cycle=cycle, task="speed", joint_names=NAMES, start_positions=start,
+                         goal_positions=goal)
+        msg.header.stamp = sec_to_time(t)
+        self.events.publish(msg)
+
+    def run_goal(self, move: int) -> JointTrajectory:
+        """The move's planned goal through the learner's proxy; what the controller received."""
+        before = len(self.goals)
+        sent = self.client.send_goal_async(FollowJointTrajectory.Goal(trajectory=plan(move)))
+        self.spin_until(sent.done, "the learner's answer to the goal")
+        assert sent.result().accepted
+        result = sent.result().get_result_async()
+        self.spin_until(result.done, "the goal's result")
+        assert len(self.goals) == before + 1
+        return self.goals[-1]
+
+    def destroy(self) -> None:
+        self.server.destroy()
+        self.client.destroy()
+        self.node.destroy_node()
+
+
+def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros_context, tmp_path):
+    from shaper_nodes.nodes.learner import LearnerNode
+
+    path = tmp_path / "learner_state.json"
+    path.write_text(json.dumps(state_doc()))
+    learner = LearnerNode(context=ros_context, parameter_overrides=learner_params(path))
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(learner)
+    peer = Peer(ros_context, ex)
+    mode = learner.mode
+    keys = [move_key(s, g) for s, g in MOVES]
+    try:
+        peer.spin_until(lambda: peer.node.count_subscribers("/diagnostics") >= 2
+                        and peer.events.get_subscription_count() >= 1 and peer.client.server_is_ready()
+                        and mode.proxy._client.server_is_ready(),
+                        "the learner's subscriptions, its action server, and the controller's seen by it")
+        assert [e.speed().factor for e in mode.store] == [SAVED, SAVED] and not mode.drift.warned
+
+        # a cycle under way: its goal runs at the saved factor (the motion 1.4 times shorter at the controller)
+        peer.event(CycleEvent.START, 1, 10.0, 0)
+        peer.spin_until(lambda: 1 in mode._cycles, "the learner's START of cycle 1")
+        scaled = peer.run_goal(0)
+        assert motion_end(scaled) == pytest.approx(MOTION / SAVED, abs=1e-6)
+
+        # the identifier's WARN: every move starts again at factor 1, once
+        peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"
+                                " (3 cycles in a row)", [("cycle", "7"), ("mode_hz", "9.7")])
+        peer.spin_until(lambda: any("relearning the speed of 2 moves" in m for m in peer.logs),
+                        "the learner's log line")
+        line = next(m for m in peer.logs if "relearning the speed of 2 moves" in m)
+        assert all(k in line for k in keys) and "identifier: drift" in line and "\n" not in line, line
+        peer.spin_until(lambda: any(st.name == "learner: moves" and st.message == line for st in peer.statuses),
+                        "the relearn's status on /diagnostics")
+        doc = json.loads(path.read_text())
+        assert doc["drift_warned"] is True
+        store, problems = store_from_doc(doc["moves"])
+        assert problems == {} and len(store) == 2
+        for e in store:
+            sp = e.speed()
+            assert sp is not None and (sp.factor, sp.good, sp.failed, e.cycles) == (1.0, None, None, 0), e
+
+        # the WARN repeated: nothing more; the cycle under way (its goal ran at 1.4) is not learned from
+        peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"
+                                " (4 cycles in a row)", [("cycle", "8"), ("mode_hz", "9.7")])
+        peer.event(CycleEvent.END, 1, 12.0, 0)
+        peer.spin_until(lambda: any(r.cycle == 1 for r in peer.reports), "the report of cycle 1")
+        got = next(r for r in peer.reports if r.cycle == 1)
+        assert dict(zip(got.metric_names, got.metric_values, strict=True)) == {"skipped": 1.0}
+        assert mode.drift.resets == 1 and sum("relearning" in m for m in peer.logs) == 1
+
+        # the next goal of each move runs as planned (factor 1)
+        for cycle, move in ((2, 1), (3, 0)):
+            peer.event(CycleEvent.START, cycle, 20.0 + 10 * cycle, move)
+            peer.spin_until(lambda c=cycle: c in mode._cycles, f"the learner's START of cycle {cycle}")
+            sent = peer.run_goal(move)
+            assert motion_end(sent) == pytest.approx(MOTION, abs=1e-6)
+            assert [duration_to_sec(p.time_from_start) for p in sent.points] == \
+                [duration_to_sec(p.time_from_start) for p in plan(move).points]
+
+        # an OK ends the episode (saved), so that a restarted learner acts on the next WARN
+        peer.identifier.publish("drift", OK, "cycle 10: the mode is inside the working band")
+        peer.spin_until(lambda: not mode.drift.warned, "the OK read")
+        assert json.loads(path.read_text())["drift_warned"] is False
+    finally:
+        ex.shutdown()
+        peer.destroy()
+        learner.destroy_node()
+
+
+def test_the_state_files_episode_flag_is_read_back_and_checked(ros_context, tmp_path):
+    """A restarted learner takes the saved episode flag (it does not act twice on one warning); a flag that is not
+    true or false is refused with one line naming it (in-process)."""
+    from shaper_nodes.nodes.learner import LearnerNode
+
+    path = tmp_path / "learner_state.json"
+    doc = {**state_doc(), "drift_warned": True}
+    path.write_text(json.dumps(doc))
+    node = LearnerNode(context=ros_context, parameter_overrides=learner_params(path))
+    try:
+        assert node.state_problem == "" and node.mode.drift.warned is True
+        assert [e.speed().factor for e in node.mode.store] == [SAVED, SAVED]
+    finally:
+        node.destroy_node()
+    path.write_text(json.dumps({**doc, "drift_warned": "yes"}))
+    node = LearnerNode(context=ros_context, parameter_overrides=learner_params(path))
+    try:
+        assert "drift_warned must be true or false, got 'yes'" in node.state_problem
+        assert "\n" not in node.state_problem and len(node.mode.store) == 0
+    finally:
+        node.destroy_node()
+
+
+def test_an_empty_drift_status_watches_nothing(ros_context, tmp_path):
+    """``speed.drift_status: ''`` leaves /diagnostics unwatched (in-process)."""
+    from shaper_nodes.nodes.learner import LearnerNode
+
+    node = LearnerNode(context=ros_context, parameter_overrides=[
+        *learner_params(tmp_path / "state.json"), Parameter("speed.drift_status", value="")])
+    try:
+        assert node.mode.drift.status == ""
+        assert all(sub.topic_name != "/diagnostics" for sub in node.subscriptions)
+    finally:
+        node.destroy_node()
