@@ -67,6 +67,7 @@ import numpy as np
 
 from .types import Shaper
 
+
 @functools.cache
 def blas_daxpy() -> Callable[..., Any]:
     """BLAS ``daxpy`` (y += a x in place), from scipy.linalg.blas, imported on the first call.
