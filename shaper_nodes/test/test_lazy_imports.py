@@ -3,7 +3,8 @@
 Each started process pays for its imports: scipy.signal and scipy.stats were 0.6 s of CPU, scipy.optimize and
 scipy.interpolate 0.3 s, Pinocchio 0.1 s, at every start of a node, a CLI or its ``--help``
 (docs/results/testing.md, "Where the CPU goes"). They are imported where they are used, except where the first use
-is inside a callback that someone waits for (the FIR's BLAS path, scipy.linalg, in the shaper's stream; the
+is inside a callback that someone waits for (the FIR's BLAS path, scipy.linalg, in the shaper's stream: loaded
+when the shaper node makes its filters, at its start, no longer at the import of every node (session 8); the
 identification's numerics in the identifier's ``~/identify``; the LIST learner's filter at a cycle's END): those stay
 at the start. This checks, in a fresh interpreter, that importing the executables' modules (what ``--help`` and a
 node's start do before the node is made) loads none of them, so a module-level import added later is caught here.
@@ -16,8 +17,8 @@ import subprocess
 import sys
 
 #: modules these executables' start must not load (imported where they are used)
-HEAVY = ("scipy.optimize", "scipy.signal", "scipy.stats", "scipy.interpolate", "scipy.special", "control",
-         "matplotlib", "dask", "pinocchio")
+HEAVY = ("scipy.optimize", "scipy.signal", "scipy.stats", "scipy.interpolate", "scipy.special", "scipy.linalg",
+         "control", "matplotlib", "dask", "pinocchio")
 
 #: the modules of the executables that need none of them at start, and the conductor the reproductions start
 #: nodes with (identifier, calibrate, list_replay, analyze_bag and analyze_fleet identify modes: they import
@@ -57,3 +58,17 @@ def test_the_lazy_imports_still_import_when_used():
         shaper = design(family, [Mode(12.0, 0.05)])
         assert abs(float(sum(shaper.amplitudes)) - 1.0) < 1e-12
         assert insensitivity_width(shaper.amplitudes, shaper.times, 12.0, 0.05) > 0.0
+
+
+def test_the_filters_load_blas_when_they_are_made():
+    """The shaper node makes its stream's filters at its start: they load the FIR's BLAS (scipy.linalg) there, so a
+    first block's callback never pays that import."""
+    probe = ("import sys\n"
+             "from shaper_nodes.core.shaping import StreamingShaper, design, discretize\n"
+             "fir = discretize(design('none'), 500.0)\n"
+             "before = 'scipy.linalg' in sys.modules\n"
+             "StreamingShaper(fir, 3)\n"
+             "print(before, 'scipy.linalg.blas' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "True"]

@@ -133,17 +133,23 @@ def zoh_step_overshoot(wa, t_delay, wr, per_delay, horizon):
                                     np.eye(2), np.zeros((2, 1))), dt, method="zoh")
         return ad, bd[:, 0]
 
+    # the recursion on Python floats (numpy's calls on 2-vectors cost more than the arithmetic)
     (ap, bp), (am, bm) = disc(wr), disc(wa)
+    p00, p01, p10, p11 = (float(c) for c in ap.ravel())
+    m00, m01, m10, m11 = (float(c) for c in am.ravel())
+    bp0, bp1, bm0, bm1 = float(bp[0]), float(bp[1]), float(bm[0]), float(bm[1])
     steps = int(round(horizon / dt))
-    v = np.zeros(steps + 1)
-    x, z = np.zeros(2), np.zeros(2)
+    v = [0.0] * (steps + 1)
+    x0 = x1 = z0 = z1 = 0.0
     peak = 0.0
+    n, n2 = per_delay, 2 * per_delay
     for k in range(steps + 1):
-        peak = max(peak, x[0])
-        v[k] = 1.0 - x[0] + z[0]
-        u = a0 * v[k] + (a1 * v[k - per_delay] if k >= per_delay else 0.0) + \
-            (a0 * v[k - 2 * per_delay] if k >= 2 * per_delay else 0.0)
-        x, z = ap @ x + bp * u, am @ z + bm * u
+        if x0 > peak:
+            peak = x0
+        vk = v[k] = 1.0 - x0 + z0
+        u = a0 * vk + (a1 * v[k - n] if k >= n else 0.0) + (a0 * v[k - n2] if k >= n2 else 0.0)
+        x0, x1 = p00 * x0 + p01 * x1 + bp0 * u, p10 * x0 + p11 * x1 + bp1 * u
+        z0, z1 = m00 * z0 + m01 * z1 + bm0 * u, m10 * z0 + m11 * z1 + bm1 * u
     return peak - 1.0
 
 

@@ -64,9 +64,23 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.linalg.blas import daxpy
 
 from .types import Shaper
+
+
+@functools.cache
+def blas_daxpy() -> Callable[..., Any]:
+    """BLAS ``daxpy`` (y += a x in place), from scipy.linalg.blas, imported on the first call.
+
+    scipy.linalg costs about 0.3 s of CPU to import (beyond numpy), which every process importing this package
+    paid at start; only the block path of a streaming filter uses it. The filters call this when they are made
+    (the shaper node's start), so the import never lands in the callback of a first block.
+    """
+    from scipy.linalg.blas import daxpy
+
+    fn: Callable[..., Any] = daxpy
+    return fn
+
 
 #: most filters alive at once (the active one plus those whose tails are still running)
 MAX_STAGES = 16
@@ -427,6 +441,7 @@ class _Stage:
         start = (at - delays[0]) * c
         np.multiply(gains[0], flat[start : start + nc], out=acc)
         # the other taps added in place, one pass each (BLAS daxpy: out += g x) on the flat rows
+        daxpy = blas_daxpy()
         for d, g in zip(delays[1:], self._gain_list[1:], strict=True):
             start = (at - d) * c
             daxpy(flat[start : start + nc], acc, a=g)
@@ -463,6 +478,7 @@ class _ChannelShaper:
     def __init__(self, fir: SparseFir, channels: int) -> None:
         if channels < 1:
             raise ValueError("channels must be >= 1")
+        blas_daxpy()  # loaded with the filter (the shaper node's start), not in its first block's callback
         self.channels = int(channels)
         self._fir = fir
         self._last: np.ndarray | list[float] | None = None
