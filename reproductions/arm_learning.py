@@ -950,7 +950,10 @@ def _servo_beyond_time(rows: list[Row], move: str) -> bool:
 def _payback_goal(rows: list[Row], base: dict[str, Row | None], n: int, floor: float, worse: list[str]) -> list[str]:
     """``scheduled_list_factor``'s corrected goal: what the time the goal allows can take (the tradeoff section and
     the servo_cost section)."""
-    servo, beyond, vib, said = [], [], [], []
+    servo: list[str] = []
+    beyond: list[str] = []
+    vib: list[str] = []
+    said: list[str] = []
     for m, b in base.items():
         r = _get(rows, "scheduled_list_factor", m, n)
         if r is None or b is None or "servo_rms" not in r or not _above(b, floor):
