@@ -33,8 +33,8 @@ from shaper_nodes.core.shaping.families import convolve
 
 from .params import ListError, ListParams
 
-__all__ = ["SERVO_SKIP", "Component", "PaybackChoice", "component_energy", "components", "paying_factor",
-           "predicted_residual", "time_cost"]
+__all__ = ["EXTRA_DAMPED", "SERVO_SKIP", "Component", "PaybackChoice", "component_energy", "components",
+           "paying_factor", "predicted_residual", "settle_crossing", "time_cost"]
 
 #: A1 grid of the candidates, from the zero-vibration value up to this (A2 = 0.02: nearly no factor)
 A1_MAX = 0.98
@@ -43,6 +43,10 @@ GRID = 9
 #: the modes that ring are identified from this long after the commanded end, s (the position loop's transient,
 #: 50 Hz at damping 0.5-0.7 on the arm, has decayed by then); the loop's poles from the commanded end itself
 SERVO_SKIP = 0.1
+#: :func:`components`' ``extra_damped`` for a move over a schedule: fits from the commanded end with up to this many
+#: more modes than the modes that ring fill (on the arm's pick->home three ring, and the loop's transient, 58 Hz at
+#: damping 0.49, is found only in a fit of four; docs/results/arm_learning.md)
+EXTRA_DAMPED = 2
 
 
 @dataclass(frozen=True)
@@ -74,14 +78,19 @@ class Component:
 
 
 def components(times: np.ndarray, signal: np.ndarray, commanded_end: float, servo_zeta: float,
-               max_modes: int = 3, min_hz: float = 2.0) -> list[Component]:
+               max_modes: int = 3, min_hz: float = 2.0, extra_damped: int = 0) -> list[Component]:
     """The damped exponentials of a residual (the modes that ring and the loop's damped poles), amplitudes at
     ``commanded_end`` (m/s^2).
 
     The modes that ring (damping below ``servo_zeta``) are identified
     (:func:`~shaper_nodes.core.identification.identify`) from :data:`SERVO_SKIP` after the commanded end, their
     amplitudes carried back to it by their decay; the others of a fit from the commanded end itself (the loop's
-    damped poles) are added where no mode that rings is within 5 % of them. An empty list when nothing is found.
+    damped poles) are added where no component found is within 5 % of them. An empty list when nothing is found.
+
+    With ``extra_damped`` > 0 the fit from the commanded end is also made with up to that many more modes than
+    ``max_modes`` (each adding only the damped ones, damping >= ``servo_zeta``): where the modes that ring fill a
+    fit of ``max_modes`` (on the arm's pick->home, three of them), the loop's transient, a few ms long, is found
+    only beside them.
 
     Parameters
     ----------
@@ -99,18 +108,23 @@ def components(times: np.ndarray, signal: np.ndarray, commanded_end: float, serv
     t = np.asarray(times, dtype=float)
     y = np.asarray(signal, dtype=float)
 
-    def found(skip: float) -> list:  # type: ignore[type-arg]
+    if not (isinstance(extra_damped, int) and 0 <= extra_damped <= 8 - max_modes):
+        raise ListError(f"extra_damped must be an integer from 0 to {8 - max_modes} (8 modes at most in a fit),"
+                        f" got {extra_damped!r}")
+
+    def found(skip: float, n: int = max_modes) -> list:  # type: ignore[type-arg]
         sel = t > commanded_end + skip
         try:
-            return [f for f in identify(t[sel], y[sel], max_modes=max_modes) if f.hz > min_hz]
+            return [f for f in identify(t[sel], y[sel], max_modes=n) if f.hz > min_hz]
         except IdentificationError:
             return []
 
     out = [Component(f.omega, f.zeta, f.amplitude * math.exp(f.zeta * f.omega * SERVO_SKIP))
            for f in found(SERVO_SKIP) if f.zeta < servo_zeta]
-    for f in found(0.0):
-        if all(abs(f.omega / c.omega - 1.0) > 0.05 for c in out):
-            out.append(Component(f.omega, min(f.zeta, 0.95), f.amplitude))
+    for k in range(extra_damped + 1):
+        for f in found(0.0, max_modes + k):
+            if (k == 0 or f.zeta >= servo_zeta) and all(abs(f.omega / c.omega - 1.0) > 0.05 for c in out):
+                out.append(Component(f.omega, min(f.zeta, 0.95), f.amplitude))
     return out
 
 
@@ -141,11 +155,47 @@ def predicted_residual(components: Sequence[Component], params: ListParams | Non
     return math.sqrt(total)
 
 
+def settle_crossing(times: np.ndarray, positions: np.ndarray, after: float, tolerance: float) -> float:
+    """When every joint enters, for good, the band of ``tolerance`` about its last value, s (not before ``after``):
+    :func:`~shaper_nodes.core.shaping.vibration.settle_time` between samples, the last crossing interpolated
+    linearly (the sampled settling time is the next sample at or after it).
+
+    Parameters
+    ----------
+    times : (N,) array
+        Sample times, s, increasing.
+    positions : (N, J) array
+        Joint positions (rad).
+    after : float
+        Earliest time to return, s.
+    tolerance : float
+        The band, rad.
+    """
+    t = np.asarray(times, dtype=float)
+    p = np.asarray(positions, dtype=float).reshape(t.size, -1)
+    err = np.abs(p - p[-1])
+    idx = np.flatnonzero(np.any(err > tolerance, axis=1))
+    if idx.size == 0:
+        return float(after)
+    k = int(idx[-1])
+    if k + 1 >= t.size:
+        return float(max(t[-1], after))
+    out = err[k] > tolerance
+    drop = err[k, out] - err[k + 1, out]
+    frac = np.where(drop > 0, (err[k, out] - tolerance) / np.where(drop > 0, drop, 1.0), 1.0)
+    return float(max(t[k] + float(np.max(np.clip(frac, 0.0, 1.0))) * (t[k + 1] - t[k]), after))
+
+
 def time_cost(times: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None, base: Shaper | None,
-              factor: ListParams | Shaper, rate: float, tolerance: float) -> float:
+              factor: ListParams | Shaper, rate: float, tolerance: float, interpolate: bool = False) -> float:
     """How much later (s) the shaped command settles with ``factor`` convolved into ``base`` than with ``base``
     alone: the first time after the planned end from which every joint stays within ``tolerance`` (rad) of its
     goal (:func:`~shaper_nodes.core.shaping.vibration.settle_time` on the command shaped at ``rate`` Hz).
+
+    With ``interpolate`` the two settling times are taken between samples (:func:`settle_crossing`), so the cost
+    is not rounded to the command's samples: a cost of at most one sample so predicted moves the flange's sampled
+    settling by at most one sample, where a sampled cost of one sample may be up to two (measured on the arm:
+    home->pick, a pair predicted at +2 ms on the samples measured +4 ms; docs/results/arm_learning.md).
 
     Parameters
     ----------
@@ -171,6 +221,8 @@ def time_cost(times: np.ndarray, positions: np.ndarray, velocities: np.ndarray |
 
     def settled(shaper: Shaper) -> float:
         out = shape_trajectory(t, positions, discretize(shaper, rate), rate, velocities)
+        if interpolate:
+            return settle_crossing(out.times, out.positions, end, tolerance)
         return settle_time(out.times, out.positions, end, tolerance)
 
     pair = factor.shaper() if isinstance(factor, ListParams) else factor
