@@ -359,13 +359,14 @@ def test_payback_chooses_each_moves_factor_from_its_reference_and_resumes_after_
         restart_learner(start_node, learner, learner_params, conductor, INPUTS)
         conductor.spin_until(client.action.server_is_ready, 120.0, "the restarted learner's action server")
         mark = cell.cycle
-        for i, move in enumerate(MOVES):
-            cell.run(i, move)
+        for _ in range(2):  # a move whose START came before the restarted learner sent its factor is not learned from
+            for i, move in enumerate(MOVES):
+                cell.run(i, move)
         for move in MOVES:
             saved = last[move.name]
             after = [metrics(report(client, k)) for k in cell.cycles[move.name] if k >= mark]
-            assert len(after) == 1 and "skipped" not in after[0], after
-            m = after[0]
+            assert "skipped" not in after[-1], after
+            m = after[-1]
             if saved["held"] == 1.0:
                 assert m["phase.held"] == 1.0 and m["a1_used"] != m["a1_used"], m
             else:  # the kept factor, sent again at the restart

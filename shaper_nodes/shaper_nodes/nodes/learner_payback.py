@@ -57,7 +57,7 @@ from shaper_nodes.core.learning.list.trials import ListUpdate
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
 from shaper_nodes.core.shaping import Shaper, ShaperError
 from shaper_nodes.core.shaping.vibration import residual_vibration
-from shaper_nodes.ros.conversions import shaper_from_msg, trajectory_arrays
+from shaper_nodes.ros.conversions import trajectory_arrays
 from shaper_nodes.ros.diagnostics import ERROR
 from shaper_nodes.ros.parameters import Spec, param, table
 
@@ -273,8 +273,9 @@ class PaybackMoves:
             resp = answer.response
             why = answer.error if resp is None else resp.message
             if resp is not None and resp.success:
-                try:
-                    return shaper_from_msg(resp.shaper)
+                try:  # the impulses as the scheduler designed them (its family's name, or "custom")
+                    return Shaper(np.asarray(resp.shaper.amplitudes, dtype=float),
+                                  np.asarray(resp.shaper.times, dtype=float), "custom")
                 except (ShaperError, ValueError) as err:
                     why = str(err)
         self.node.get_logger().warning(f"move {entry.key}: no schedule at its goal ({why}): factors predicted"
