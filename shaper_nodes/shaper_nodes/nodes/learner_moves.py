@@ -45,6 +45,11 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   a cycle under way at the warning is not learned from; a withdrawal the scheduler did not acknowledge is
   sent again at the move's next START (and that cycle is not learned from).
 
+- **Each factor chosen to pay** (``payback.enabled``, :mod:`.learner_payback`): instead of the iterative LIST
+  learner, each move's factor is picked after its reference cycle from the components of its residual and the
+  time cost predicted from its goal (recorded by the learner's own ``~/follow_joint_trajectory``, in front of the
+  shaper node's), tried once and kept only if it pays: the rule of the reproduction's ``scheduled_list_factor``.
+
 Reports (``~/reports``): one per cycle as in the task-wide mode, the metric ``move`` being the
 move's index in the state file's order (stable across restarts).
 """

@@ -55,6 +55,7 @@ from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
 from shaper_nodes.core.learning.list.payback import PaybackChoice, components, paying_factor, time_cost
 from shaper_nodes.core.learning.list.trials import ListUpdate
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
+from shaper_nodes.core.learning.speed import motion_end_index
 from shaper_nodes.core.shaping import Shaper, ShaperError
 from shaper_nodes.core.shaping.vibration import residual_vibration
 from shaper_nodes.ros.conversions import trajectory_arrays
@@ -132,19 +133,28 @@ class GoalRecorder:
         times, fields = trajectory_arrays(traj, names, True)
         if len(times) < 2:
             raise InputError("empty", "a goal needs at least two points to be a move")
-        self._goals.append((names, times - times[0], fields))
+        self._goals.append((names, times, fields))
         return traj
 
     def lookup(self, names: list[str], start: np.ndarray, goal: np.ndarray) -> Planned | None:
-        """The latest goal from ``start`` to ``goal`` (rad, in the order of ``names``), None if none was seen."""
+        """The latest goal from ``start`` to ``goal`` (rad, in the order of ``names``), None if none was seen: its
+        motion only (the points that hold the final pose after it left out: the settling is the motion's), from the
+        start pose at 0 s (a goal's first point comes after it, as for joint_trajectory_controller)."""
+        q0 = np.asarray(start, dtype=float)
         for got, times, fields in reversed(self._goals):
             if sorted(got) != sorted(names):
                 continue
             order = [got.index(n) for n in names]
             q = fields["positions"][:, order]
-            if goal_matches(np.asarray(start), q[0]) and goal_matches(np.asarray(goal), q[-1]):
-                v = fields.get("velocities")
-                return Planned(times, q, None if v is None else v[:, order])
+            if not (goal_matches(q0, q[0]) and goal_matches(np.asarray(goal), q[-1])):
+                continue
+            v = fields.get("velocities")
+            v = np.zeros_like(q) if v is None else v[:, order]
+            n = max(motion_end_index(q), 1) + 1
+            t, q, v = times[:n], q[:n], v[:n]
+            if t[0] > 0.0:
+                t, q, v = np.r_[0.0, t], np.vstack([q0, q]), np.vstack([np.zeros_like(q0), v])
+            return Planned(t, q, v)
         return None
 
 
