@@ -309,7 +309,11 @@ def test_payback_chooses_each_moves_factor_from_its_reference_and_resumes_after_
     start_scheduled_arm(start_node, cal["rule_base"], RATE, ["/learner", "/conductor"])
     learner_params = {"mode": "list", "use_sim_time": True, "shaper": "/scheduler", "list.structure": "zv2",
                       "list.per_move": True, "state_file": str(state), "topics.imu_reliable": True,
-                      "payback.enabled": True, "payback.controller": "/shaper/follow_joint_trajectory"}
+                      "payback.enabled": True, "payback.controller": "/shaper/follow_joint_trajectory",
+                      # a settling band wide enough (0.05 rad) that the predicted time does not bind: a factor is
+                      # chosen and tried (at 0.05 mm / 1 m no factor fits in 2 ms on these two moves, as the
+                      # reproduction found for pick->home), so the trial and the keep rule run over DDS
+                      "payback.joint_tolerance": 0.05}
     learner = start_node("shaper_nodes", "learner", learner_params)
     conductor = Conductor(context=ros_context)
     client = ArmClient(conductor)
