@@ -22,6 +22,7 @@ from shaper_nodes.nodes import (
     learner_list,
     learner_moves_mrilc,
     learner_mrilc,
+    learner_payback,
     learner_speed,
     recorder,
     scheduler,
@@ -42,6 +43,7 @@ def sections() -> list[tuple[str, str, Sequence[tuple[str, Iterable[Spec]]]]]:
         ("identifier", "Mode identification (`shaper_nodes.nodes.identifier`).", [("", identifier.PARAMETERS)]),
         ("learner", "The learner (`shaper_nodes.nodes.learner`): the parameters of every mode, then those of the"
          " mode chosen by `mode`.", [("every mode", learner.PARAMETERS), ("mode list", learner_list.PARAMETERS),
+                                    ("mode list with list.per_move", learner_payback.PARAMETERS),
                                     ("mode mrilc", learner_mrilc.PARAMETERS),
                                     ("mode mrilc_moves", learner_moves_mrilc.PARAMETERS),
                                     ("mode speed_moves", learner_speed.PARAMETERS)]),

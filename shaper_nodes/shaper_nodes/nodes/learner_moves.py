@@ -45,6 +45,11 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   a cycle under way at the warning is not learned from; a withdrawal the scheduler did not acknowledge is
   sent again at the move's next START (and that cycle is not learned from).
 
+- **Each factor chosen to pay** (``payback.enabled``, :mod:`.learner_payback`): instead of the iterative LIST
+  learner, each move's factor is picked after its reference cycle from the components of its residual and the
+  time cost predicted from its goal (recorded by the learner's own ``~/follow_joint_trajectory``, in front of the
+  shaper node's), tried once and kept only if it pays: the rule of the reproduction's ``scheduled_list_factor``.
+
 Reports (``~/reports``): one per cycle as in the task-wide mode, the metric ``move`` being the
 move's index in the state file's order (stable across restarts).
 """
@@ -67,11 +72,13 @@ from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, ke
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import OK
+from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
 from .learner_drift import DriftWarnings
 from .learner_list import subscribe_imu
+from .learner_payback import PaybackMoves, PaybackParams, factor_of
 from .move_goals import load_moves
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
@@ -163,9 +170,15 @@ class MovesMode:
         subscribe_imu(node, v.topics, lambda t, a: node.notice(self.session.on_imu(t, a)),
                       MutuallyExclusiveCallbackGroup())
         self.drift = DriftWarnings(node, str(v.list.drift_status).strip(), self.relearn, warned)
+        group = declare(node, PaybackParams).value.payback
+        #: the payback rule (``payback.enabled``; :mod:`.learner_payback`), None: the iterative LIST per move
+        self.payback = PaybackMoves(self, group) if group.enabled else None
 
     def _wanted(self, key: str) -> ListParams | None:
         """What the move's goals run with next (None: the schedule alone)."""
+        if self.payback is not None:
+            entry = self.store.get(key)
+            return None if entry is None or key in self.held else factor_of(entry)
         learner = self.learners.get(key)
         return None if learner is None or key in self.held else _sent(learner)
 
@@ -191,6 +204,8 @@ class MovesMode:
                 "joint_names": self.names, "at_schedule": sorted(self.held), "drift_warned": self.drift.warned}
 
     def describe(self) -> str:
+        if self.payback is not None:
+            return self.payback.describe()
         return (f"LIST per move ({self.structure}, rule {self.config.rule}) on {self.imu_topic}, factors kept by"
                 f" {self.set_move.srv_name}; {len(self.store)} moves saved")
 
@@ -204,12 +219,13 @@ class MovesMode:
     async def start(self) -> bool:
         """Every saved move's factor to the scheduler (the moves resume from their saved state)."""
         answered = True
+        resumes = self.learners if self.payback is None else self.store  # (payback: every entry has its phase)
         for key in self._restored:
             entry = self.store.get(key)
-            if entry is not None and key in self.learners and key not in self.applied:  # (a START may have sent it)
+            if entry is not None and key in resumes and key not in self.applied:  # (a START may have sent it)
                 answered = await self._send(entry, self._wanted(key)) is not None and answered
         if answered:  # the moves' state, once, on the log and /diagnostics ("learner: moves")
-            moves = [(k, _describe(self._wanted(k)) if k in self.learners else "afresh") for k in self._restored]
+            moves = [(k, _describe(self._wanted(k)) if k in resumes else "afresh") for k in self._restored]
             text = f"learning per move: {len(moves)} moves resumed from the state file"
             self.node.get_logger().info(text + "".join(f"; {k}: {d}" for k, d in moves))
             self.node.diagnostics.publish("moves", OK, text, moves)
@@ -288,15 +304,17 @@ class MovesMode:
 
     # ----------------------------------------------------------------- inputs
     async def hold(self, on: bool) -> tuple[bool, str]:
+        if self.payback is not None:
+            self.payback.hold(on)
         ok = True
         for entry in list(self.store):
             learner = self.learners.get(entry.key)
-            if learner is None:
+            if learner is None and self.payback is None:
                 continue
-            if not on:
+            if learner is not None and not on:
                 learner.resume()
                 self.held.discard(entry.key)
-            elif learner.reference is not None and entry.key not in self.held:
+            elif learner is not None and learner.reference is not None and entry.key not in self.held:
                 learner.hold()
             wanted = self._wanted(entry.key)
             if entry.key not in self.applied or self.applied[entry.key] != wanted:
@@ -322,6 +340,8 @@ class MovesMode:
             window = (math.nan, stamp) if result is None else (result.start, result.end)
             why = skip or (result.skipped if result is not None else "") or "END without its START"
             return self.node.skipped(msg, window, why, result.refusal if result is not None else "")
+        if self.payback is not None:
+            return await self.payback.on_end(msg, key, result)
         return await self._on_end(msg, key, result)
 
     async def _on_start(self, msg: CycleEvent, stamp: float) -> None:
@@ -335,6 +355,9 @@ class MovesMode:
         self._cycle_move[cycle] = entry.key
         if new:
             self.names[entry.key] = list(msg.joint_names)
+        if self.payback is not None:
+            await self.payback.on_start(msg, stamp, entry, new)
+            return
         learner = self.learners.get(entry.key)
         if learner is None:
             learner = self.learners[entry.key] = await self._learner_for(entry, list(msg.joint_names))

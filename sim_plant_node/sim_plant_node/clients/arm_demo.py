@@ -665,12 +665,19 @@ def _apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | Non
 
             # every sample of a move, reliable (the plant rests between goals, and the next goal waits for the
             # learner's report of the move: its queue of 10 s holds a move)
+            payback = case == "scheduled_list_moves"  # each factor chosen to pay: the goals through the learner
             session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2",
                                                        "shaper": "/scheduler", "list.per_move": True,
-                                                       "topics.imu_reliable": True})
-            client.wait_listeners(4)  # and the learner
+                                                       "topics.imu_reliable": True, "payback.enabled": payback})
+            if payback:
+                from . import arm_speed
+
+                arm_speed.use_learner_proxy(client, ends_at_rest=False)
+                client.wait_ready(4)  # the learner's action server, and its subscription of the cycle events
+            else:
+                client.wait_listeners(4)  # and the learner
             AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
-            return "calibrated schedule with LIST (zv2) per move on top"
+            return "calibrated schedule with LIST (zv2) per move on top" + (", chosen to pay" if payback else "")
         session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2",
                                                    "shaper": "/scheduler"})
         client.wait_listeners(4)  # and the learner

@@ -40,8 +40,9 @@ def learner_parameters() -> dict[str, Any]:
             "speed.step": STEP}
 
 
-def use_learner_proxy(client: Any) -> None:
-    """Send the client's goals to the learner's proxy, and take each move's end where the arm rests."""
+def use_learner_proxy(client: Any, ends_at_rest: bool = True) -> None:
+    """Send the client's goals to the learner's proxy, and (``ends_at_rest``) take each move's end where the arm
+    rests."""
     from control_msgs.action import FollowJointTrajectory
 
     from shaper_nodes.ros.action_client import ResilientActionClient
@@ -52,7 +53,7 @@ def use_learner_proxy(client: Any) -> None:
     # preempting the other, seen at load 33 with 2 s (commit 3be4e0b) is not reproduced by a resend: cause unknown
     client.action = ResilientActionClient(client.c, FollowJointTrajectory, "/learner/follow_joint_trajectory",
                                           resend_period=RESEND)
-    client.ends_at_rest = True
+    client.ends_at_rest = ends_at_rest
 
 
 def start(session: Any, client: Any, imu: str, wait: float) -> str:

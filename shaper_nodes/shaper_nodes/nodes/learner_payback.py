@@ -1,0 +1,387 @@
+"""LIST per move over the schedule, each move's factor chosen to pay before it is tried (``payback.enabled``).
+
+The learner node's per-move LIST (:mod:`.learner_moves`, ``list.per_move: true``) with the rule of the ROS-free
+reproduction's ``scheduled_list_factor`` case (``reproductions.arm_learning``) instead of the iterative
+:class:`~shaper_nodes.core.learning.list.ListLearner`:
+
+- **the move's planned goal**: the learner serves ``~/follow_joint_trajectory``
+  (:class:`~.trajectory_action.TrajectoryActionProxy`) in front of the shaper node's proxy (``payback.controller``,
+  ``/shaper/follow_joint_trajectory``): the motion source sends its goals to ``/learner/follow_joint_trajectory``,
+  the learner records each goal's waypoints (:class:`GoalRecorder`) and sends the goal on unchanged; the shaper
+  node shapes it for its final pose as before. The waypoints are the planned command the factor's time cost is
+  predicted from: the goal the shaper node receives, not a copy of it sent by the client.
+- **reference cycle** (a new move, or one relearned after a drift warning): the schedule alone. At its END the
+  cycle's residual M (m/s^2: RMS of the accelerometer's deviation from its mean, 1 s from the shaped command's end,
+  :func:`residual_m`) is the move's base (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`); the
+  components of the residual are identified from the same window
+  (:func:`~shaper_nodes.core.learning.list.payback.components`: the modes that ring and the position loop's damped
+  poles), and :func:`~shaper_nodes.core.learning.list.payback.paying_factor` picks the two-impulse factor with the
+  least predicted residual among those whose time cost, predicted from the move's planned goal shaped by the
+  schedule at its goal (``<shaper>/shaper_at``) with and without the factor
+  (:func:`~shaper_nodes.core.learning.list.payback.time_cost`: every joint within ``payback.joint_tolerance`` rad of
+  its goal, commands at ``payback.rate_hz``), is within one 2 ms sample
+  (:data:`~shaper_nodes.core.learning.moves.TIME_TOLERANCE_S`). The factor goes to the scheduler
+  (``set_move_shaper``). No factor predicted to pay (or no goal recorded for the move): the move is held at the
+  schedule alone.
+- **trial cycle**: the factor over the schedule. It is kept when its M is below the base's
+  (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`; the node measures no flange position, so the
+  measured time is not weighed: the time was predicted before the trial); otherwise it is withdrawn and the move
+  is held at the schedule alone.
+- **after**: a kept factor (or the schedule alone) stays; each cycle is still measured and reported. One factor
+  per move: the scheduler takes a two-impulse factor per move (the reproduction stacks a second one after a
+  reference with the first; docs/results/arm_demo.md says what that changes).
+
+State: the move's entry (:class:`~shaper_nodes.core.learning.moves.MoveEntry`): ``base`` (the reference's M),
+``correction`` (the factor on trial or kept), ``best`` (the kept trial's M: a factor whose ``best`` differs from its
+``base`` paid); moves held at the schedule alone are the document's ``at_schedule``. Saved atomically after every
+cycle; after a restart (a kill -9) every move resumes in its phase, its factor sent to the scheduler again.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.srv import ShaperAt
+from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
+from shaper_nodes.core.learning.list.payback import PaybackChoice, components, paying_factor, time_cost
+from shaper_nodes.core.learning.list.trials import ListUpdate
+from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
+from shaper_nodes.core.learning.speed import motion_end_index
+from shaper_nodes.core.shaping import Shaper, ShaperError
+from shaper_nodes.core.shaping.vibration import residual_vibration
+from shaper_nodes.ros.conversions import trajectory_arrays
+from shaper_nodes.ros.diagnostics import ERROR
+from shaper_nodes.ros.parameters import Spec, param, table
+
+from .move_goals import goal_matches
+from .trajectory_action import TrajectoryActionProxy
+
+if TYPE_CHECKING:
+    from .learner_moves import MovesMode
+
+__all__ = ["PARAMETERS", "RESIDUAL_WINDOW", "CycleCapture", "GoalRecorder", "PaybackGroup", "PaybackMoves",
+           "PaybackParams", "Planned", "choose", "factor_of", "phase", "residual_m"]
+
+#: length of the window M is measured over, from the shaped command's end, s (the demo's residual window)
+RESIDUAL_WINDOW = 1.0
+#: the factor's T2 stays within this fraction of a component's frequency (the reproduction's ``LIST_BAND``)
+BAND = 0.1
+#: goals kept (the latest of each move is the one used)
+KEPT_GOALS = 32
+
+
+@dataclass(frozen=True)
+class PaybackGroup:
+    """payback.*: LIST per move with each factor chosen to pay before it is tried (nodes/learner_payback.py)."""
+
+    enabled: bool = param(False, "With list.per_move: choose each move's factor from its reference cycle's"
+                          " components and its predicted time cost (the reproduction's scheduled_list_factor)"
+                          " instead of the iterative LIST learner; needs payback.controller.", read_only=True)
+    controller: str = param("/shaper/follow_joint_trajectory", "The FollowJointTrajectory action the learner's"
+                            " ~/follow_joint_trajectory sends each goal on to, unchanged (the shaper node's proxy);"
+                            " the goals' waypoints predict the factors' time cost.", read_only=True)
+    action_timeout: float = param(30.0, "How long a goal waits for the next action server and its answer, s.",
+                                  (0.1, 600.0), read_only=True)
+    rate_hz: float = param(500.0, "The shaper node's command rate, Hz (the predicted shaped command's).",
+                           (1.0, 10000.0), read_only=True)
+    joint_tolerance: float = param(5e-5, "The settling band of the predicted command, rad (0.05 mm at 1 m of"
+                                   " reach).", (1e-9, 1.0), read_only=True)
+    servo_zeta: float = param(0.12, "Damping ratio from which an identified eigenvalue is the position loop's,"
+                              " not a mode's.", (0.01, 0.99), read_only=True)
+
+
+@dataclass(frozen=True)
+class PaybackParams:
+    """The payback rule's parameters (declared by the per-move LIST mode)."""
+
+    payback: PaybackGroup = field(default_factory=PaybackGroup)
+
+
+#: the payback rule's parameters (derived from PaybackParams)
+PARAMETERS: tuple[Spec, ...] = table(PaybackParams)
+
+
+@dataclass(frozen=True)
+class Planned:
+    """A goal's planned waypoints in the order of the cycle event's joints: times (N,) s from its start,
+    positions (N, J) rad, velocities (N, J) rad/s or None."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None
+
+
+class GoalRecorder:
+    """The goals seen by the learner's proxy (its ``shape`` callable: checked, recorded, sent on unchanged)."""
+
+    def __init__(self) -> None:
+        self._goals: collections.deque[tuple[list[str], np.ndarray, dict[str, np.ndarray]]] = \
+            collections.deque(maxlen=KEPT_GOALS)
+
+    def record(self, traj: JointTrajectory) -> JointTrajectory:
+        """The goal request's check (its arrays readable, :class:`InputError` if not) and its record."""
+        names = list(traj.joint_names)
+        times, fields = trajectory_arrays(traj, names, True)
+        if len(times) < 2:
+            raise InputError("empty", "a goal needs at least two points to be a move")
+        self._goals.append((names, times, fields))
+        return traj
+
+    def lookup(self, names: list[str], start: np.ndarray, goal: np.ndarray) -> Planned | None:
+        """The latest goal from ``start`` to ``goal`` (rad, in the order of ``names``), None if none was seen: its
+        motion only (the points that hold the final pose after it left out: the settling is the motion's), from the
+        start pose at 0 s (a goal's first point comes after it, as for joint_trajectory_controller)."""
+        q0 = np.asarray(start, dtype=float)
+        for got, times, fields in reversed(self._goals):
+            if sorted(got) != sorted(names):
+                continue
+            order = [got.index(n) for n in names]
+            q = fields["positions"][:, order]
+            if not (goal_matches(q0, q[0]) and goal_matches(np.asarray(goal), q[-1])):
+                continue
+            v = fields.get("velocities")
+            v = np.zeros_like(q) if v is None else v[:, order]
+            n = max(motion_end_index(q), 1) + 1
+            t, q, v = times[:n], q[:n], v[:n]
+            if t[0] > 0.0:
+                t, q, v = np.r_[0.0, t], np.vstack([q0, q]), np.vstack([np.zeros_like(q0), v])
+            return Planned(t, q, v)
+        return None
+
+
+@dataclass
+class Captured:
+    """One cycle's samples as :class:`~shaper_nodes.core.learning.list.ListSession` hands them over."""
+
+    times: np.ndarray
+    accel: np.ndarray
+    motion_end: float
+    end: float
+    used: ListParams | None
+
+
+class CycleCapture(ListLearner):
+    """A learner for :class:`~shaper_nodes.core.learning.list.ListSession` that learns nothing: it keeps the cycle's
+    checked samples (:attr:`captured`) for the payback rule, so the session's bookkeeping (the cycle's samples,
+    saturation, stale sensor, the shaper it ran with) is the one the iterative LIST uses."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.captured: Captured | None = None
+
+    def update(self, times: Any, accel: Any, motion_end: float, end: float, used: ListParams | None,
+               direction: float = 1.0) -> ListUpdate:
+        a = np.asarray(accel, dtype=float)
+        t = np.asarray(times, dtype=float)
+        self.captured = Captured(t, a.reshape(t.size, -1), float(motion_end), float(end), used)
+        return ListUpdate(0, math.nan, math.nan, used, used, "none", "reference" if used is None else "hold",
+                          "captured for the payback rule")
+
+
+def factor_of(entry: MoveEntry) -> ListParams | None:
+    """The two-impulse factor a move's entry holds (on trial or kept), None if none."""
+    if entry.correction is None:
+        return None
+    a, t = entry.correction
+    return ListParams(float(a[0]), float(t[-1])) if len(a) == 2 else None
+
+
+def phase(entry: MoveEntry, held: bool) -> str:
+    """The move's phase: ``held`` (the schedule alone: nothing paid), ``reference`` (its next cycle is the
+    schedule alone, measured as the base), ``trial`` (the chosen factor, to be judged) or ``kept`` (it paid)."""
+    if held:
+        return "held"
+    if entry.base is None or factor_of(entry) is None:
+        return "reference"
+    return "kept" if entry.best is not None and entry.best != entry.base else "trial"
+
+
+def residual_m(cap: Captured, shaper_end: float) -> tuple[float, float]:
+    """The cycle's M (m/s^2: RMS of the accelerometer's deviation from its mean over :data:`RESIDUAL_WINDOW` s from
+    the shaped command's end, MOTION_END + ``shaper_end`` s, cut at END) and that end (s from START)."""
+    start = cap.motion_end + shaper_end
+    res = residual_vibration(cap.times, cap.accel, start, min(start + RESIDUAL_WINDOW, cap.end), remove_mean=True)
+    return float(res.rms), start
+
+
+def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | None, group: PaybackGroup
+           ) -> PaybackChoice | None:
+    """The factor predicted to pay for a move (module docstring), from its reference cycle ``cap`` (shaped
+    command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``)."""
+    comps = components(cap.times, cap.accel, command_end, float(group.servo_zeta))
+
+    def cost(p: ListParams) -> float:
+        return time_cost(planned.times, planned.positions, planned.velocities, base, p, float(group.rate_hz),
+                         float(group.joint_tolerance))
+
+    return paying_factor(comps, cost, TIME_TOLERANCE_S, band=BAND)
+
+
+def _pair(params: ListParams | None) -> tuple[list[float], list[float]] | None:
+    if params is None:
+        return None
+    sh = params.shaper("zv2")
+    return sh.amplitudes.tolist(), sh.times.tolist()
+
+
+class PaybackMoves:
+    """The payback rule inside the per-move LIST mode (:class:`~.learner_moves.MovesMode`; module docstring)."""
+
+    def __init__(self, mode: MovesMode, group: PaybackGroup) -> None:
+        if mode.structure != "zv2":
+            raise ValueError(f"payback.enabled needs list.structure zv2 (a two-impulse factor), got {mode.structure!r}")
+        controller = str(group.controller).strip()
+        if not controller:
+            raise ValueError("payback.enabled needs payback.controller: the action its goals are sent on to")
+        self.mode, self.group, self.node = mode, group, mode.node
+        self.goals = GoalRecorder()
+        self.capture = CycleCapture()
+        #: per move, the schedule's shaper at its goal (None: no schedule: unshaped), asked at its first START
+        self.schedule: dict[str, Shaper | None] = {}
+        self._phase: dict[int, str] = {}  # cycle -> the move's phase at its START
+        self.proxy = TrajectoryActionProxy(self.node, "~/follow_joint_trajectory", controller, self.goals.record,
+                                           self._refused, lambda: None, float(group.action_timeout))
+
+    def describe(self) -> str:
+        return (f"LIST per move, each factor chosen to pay (payback) on {self.mode.imu_topic}; goals of"
+                f" ~/follow_joint_trajectory sent on to {self.proxy.controller_name}, factors kept by"
+                f" {self.mode.set_move.srv_name}; {len(self.mode.store)} moves saved")
+
+    def _refused(self, err: InputError) -> None:
+        self.node.get_logger().error(f"goal refused: {err}")
+        self.node.diagnostics.report("goal", ERROR, f"goal refused: {err}")
+
+    def hold(self, on: bool) -> None:
+        """``~/hold`` true: no more trials (a factor on trial is withdrawn, a kept one stays); false: every move
+        not kept learns again from a new reference."""
+        mode = self.mode
+        for entry in mode.store:
+            ph = phase(entry, entry.key in mode.held)
+            if on and ph in ("reference", "trial"):
+                entry.correction = None
+                mode.held.add(entry.key)
+            elif not on and ph == "held":
+                mode.held.discard(entry.key)
+                entry.base = entry.best = None
+        self.node.save()
+
+    async def _schedule_at(self, entry: MoveEntry, names: list[str]) -> Shaper | None:
+        """The schedule alone at the move's goal (``<shaper>/shaper_at`` without a move), None if none."""
+        why = "no joint names in the cycle event"
+        if names:
+            answer = await self.mode.shaper_at.call(ShaperAt.Request(pose=JointState(name=names,
+                                                                                     position=entry.goal)))
+            resp = answer.response
+            why = answer.error if resp is None else resp.message
+            if resp is not None and resp.success:
+                try:  # the impulses as the scheduler designed them (its family's name, or "custom")
+                    return Shaper(np.asarray(resp.shaper.amplitudes, dtype=float),
+                                  np.asarray(resp.shaper.times, dtype=float), "custom")
+                except (ShaperError, ValueError) as err:
+                    why = str(err)
+        self.node.get_logger().warning(f"move {entry.key}: no schedule at its goal ({why}): factors predicted"
+                                       " against the unshaped command")
+        return None
+
+    async def on_start(self, msg: CycleEvent, stamp: float, entry: MoveEntry, new: bool) -> None:
+        mode, cycle, key = self.mode, int(msg.cycle), entry.key
+        if key not in self.schedule:
+            self.schedule[key] = await self._schedule_at(entry, mode.names.get(key, list(msg.joint_names)))
+        if new and key not in mode.unreset:  # the scheduler has no factor for a new move
+            mode.applied[key] = None
+        wanted = mode._wanted(key)
+        if key not in mode.applied or mode.applied[key] != wanted:
+            await mode._send(entry, wanted)  # (again): the cycle may have run with either
+            mode._skip[cycle] = "the move's factor was not acknowledged by the scheduler before its start"
+            return
+        self._phase[cycle] = phase(entry, key in mode.held)
+        mode.session.switch(self.capture, wanted)
+        mode.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
+
+    async def on_end(self, msg: CycleEvent, key: str, result: Any) -> CycleReport:
+        mode, cycle = self.mode, int(msg.cycle)
+        ph = self._phase.pop(cycle, "")
+        cap, self.capture.captured = self.capture.captured, None
+        entry = mode.store.get(key)
+        window = (result.start, result.end)
+        if cap is None or entry is None or not ph:
+            return self.node.skipped(msg, window, result.skipped or "the cycle's samples were not captured",
+                                     result.refusal)
+        sched = self.schedule.get(key)
+        used = cap.used
+        shaper_end = (float(sched.times[-1]) if sched is not None else 0.0) + (used.t2 if used is not None else 0.0)
+        m, command_end = residual_m(cap, shaper_end)
+        if not math.isfinite(m):
+            return self.node.skipped(msg, window, f"no accelerometer sample within {RESIDUAL_WINDOW:g} s of the"
+                                     f" shaped command's end ({command_end:.3f} s after the START)", "sensor")
+        choice, note = None, ""
+        if ph == "reference":
+            keep_when_it_pays(entry, m, False)
+            choice, note = self._choose(entry, cap, command_end, sched)
+            entry.correction = None if choice is None else _pair(choice.params)
+            if choice is None:
+                mode.held.add(key)
+        elif ph == "trial":
+            decision = keep_when_it_pays(entry, m, True)
+            base = entry.base["residual_rms"] if entry.base is not None else math.nan
+            if decision == "learn":
+                note = f"; M below the schedule's ({base:.4g}): the factor is kept"
+            else:
+                entry.correction = None
+                mode.held.add(key)
+                note = f"; M not below the schedule's ({base:.4g}): withdrawn, the schedule alone, held"
+        nxt = mode._wanted(key)
+        applied = True
+        if nxt != mode.applied.get(key):
+            applied = bool(await mode._send(entry, nxt))
+        entry.cycles += 1
+        self.node.save()
+        index = [e.key for e in mode.store].index(key)
+        u = used or ListParams(math.nan, math.nan)
+        after = nxt or ListParams(math.nan, math.nan)
+        pred = (choice.predicted, choice.without, choice.cost_s) if choice is not None else (math.nan,) * 3
+        names = ["move", "M", "a1_used", "t2_used", "a1_next", "t2_next", "predicted", "without", "cost_s",
+                 "applied", "held", f"phase.{ph}"]
+        values = [float(index), m, u.a1, u.t2, after.a1, after.t2, *pred, 1.0 if applied else 0.0,
+                  1.0 if key in mode.held else 0.0, 1.0]
+        report = self.node.report(msg, (result.start + command_end, result.start + command_end + RESIDUAL_WINDOW),
+                                  names, values, residual=m)
+        report.shaper_used = mode._shaper_msg(used)
+        report.shaper_next = mode._shaper_msg(nxt)
+        text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2 with"
+                f" {'the schedule alone' if used is None else f'factor A1 {used.a1:.4f}, T2 {used.t2 * 1e3:.2f} ms'}"
+                + note + ("" if applied else "; not acknowledged by the scheduler"))
+        if applied:
+            self.node.get_logger().info(text)
+        else:
+            self.node.get_logger().error(text)
+        return report
+
+    def _choose(self, entry: MoveEntry, cap: Captured, command_end: float, sched: Shaper | None
+                ) -> tuple[PaybackChoice | None, str]:
+        """The factor predicted to pay for the move after its reference cycle, and what was decided (for the log)."""
+        names = self.mode.names.get(entry.key, [])
+        planned = self.goals.lookup(names, np.asarray(entry.start), np.asarray(entry.goal)) if names else None
+        if planned is None:
+            return None, ("; no goal of the move came through ~/follow_joint_trajectory (its waypoints predict a"
+                          " factor's time cost): the schedule alone, held")
+        try:
+            pick = choose(cap, command_end, planned, sched, self.group)
+        except (ListError, ShaperError, ValueError) as err:
+            return None, f"; no factor chosen ({err}): the schedule alone, held"
+        if pick is None:
+            return None, (f"; no factor predicted to pay (within {TIME_TOLERANCE_S * 1e3:.1f} ms of the schedule's"
+                          " move + settle): the schedule alone, held")
+        c = pick.component
+        return pick, (f"; next: factor on {c.hz:.2f} Hz, zeta {c.zeta:.3f}: A1 {pick.params.a1:.4f}, T2"
+                      f" {pick.params.t2 * 1e3:.2f} ms{'' if pick.full else ' (partial)'}, predicted M"
+                      f" {pick.predicted:.4g} against {pick.without:.4g} m/s^2, time cost {pick.cost_s * 1e3:+.1f} ms")
