@@ -52,7 +52,7 @@ from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
-from shaper_nodes.core.learning.list.payback import PaybackChoice, components, paying_factor, time_cost
+from shaper_nodes.core.learning.list.payback import EXTRA_DAMPED, PaybackChoice, components, paying_factor, time_cost
 from shaper_nodes.core.learning.list.trials import ListUpdate
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
 from shaper_nodes.core.learning.speed import motion_end_index
@@ -217,11 +217,11 @@ def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | N
            ) -> PaybackChoice | None:
     """The factor predicted to pay for a move (module docstring), from its reference cycle ``cap`` (shaped
     command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``)."""
-    comps = components(cap.times, cap.accel, command_end, float(group.servo_zeta))
+    comps = components(cap.times, cap.accel, command_end, float(group.servo_zeta), extra_damped=EXTRA_DAMPED)
 
     def cost(p: ListParams) -> float:
         return time_cost(planned.times, planned.positions, planned.velocities, base, p, float(group.rate_hz),
-                         float(group.joint_tolerance))
+                         float(group.joint_tolerance), interpolate=True)
 
     return paying_factor(comps, cost, TIME_TOLERANCE_S, band=BAND)
 
