@@ -51,5 +51,5 @@ lazy
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "closed_pipe", "cycle_records", "cycles", "files", "identification", "lazy", "learning",
-           "lockstep", "rate", "scheduling", "security", "shaping", "stamps"]
+__all__ = ["checks", "closed_loop", "closed_pipe", "cycle_records", "cycles", "files", "identification", "lazy",
+           "learning", "lockstep", "rate", "scheduling", "security", "shaping", "stamps"]
