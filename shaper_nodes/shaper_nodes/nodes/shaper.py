@@ -52,8 +52,8 @@ trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) ar
 same names, by a side node ``<name>_trajectories`` on a thread of its own
 (ros/side_node.py), so that the stream never waits for a long trajectory. Shaping a whole
 trajectory only reads the active filter, never the streaming filters' state. The interpreter's
-thread switch interval is shortened (:data:`~.shaper_interpreter.SWITCH_INTERVAL`) so that a thread doing Python work
-on a long trajectory yields within a fraction of a command period.
+thread switch interval is shortened (:data:`SWITCH_INTERVAL` in nodes/shaper_interpreter.py) so that a thread
+doing Python work on a long trajectory yields within a fraction of a command period.
 
 Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its source;
 ``allowed_sources`` lists the sources that may change the shaper (parameters count as source
