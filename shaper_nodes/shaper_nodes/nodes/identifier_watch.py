@@ -78,23 +78,27 @@ class DriftRating:
                        " is at the noise floor")
             return
         watch.update(check)
-        text = f"cycle {cycle}: {check.describe()}"
+        text = f"cycle {cycle}: {check.describe(self.rated())}"
         values = [("cycle", str(cycle)), ("mode_hz", f"{check.mode_hz:.6g}"), ("zeta", f"{check.zeta:.4g}"),
                   ("vibration", f"{check.vibration:.4g}"), ("tolerance", f"{check.tolerance:.4g}"),
                   ("band_low_hz", f"{check.band_hz[0]:.6g}" if check.band_hz else "none"),
                   ("band_high_hz", f"{check.band_hz[1]:.6g}" if check.band_hz else "none"),
                   ("outside_in_a_row", str(watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
         if watch.warning:
-            text = (f"the mode has drifted out of {self.rated()} ({watch.outside_in_a_row} cycles in a row): {text};"
+            text = (f"the mode has drifted out of {self.band()} ({watch.outside_in_a_row} cycles in a row): {text};"
                     " retune the shaper (~/identify with apply)")
         self.verdict(text, values)
 
     def rated(self) -> str:
-        """Whose working band the watch rates against, in words: the active shaper's, or with watch.scheduler the
-        shaper the scheduler gave the cycle's move."""
+        """The shaper the watch rates against, in words: the active shaper, or with watch.scheduler the shaper the
+        scheduler gave the cycle's move."""
+        return "the active shaper" if self.move_shapers is None else "the shaper the scheduler gave this move"
+
+    def band(self) -> str:
+        """Whose working band the watch rates against, in words (what the warning says)."""
         if self.move_shapers is None:
             return "the active shaper's working band"
-        return f"the working band of the shaper the scheduler gave this move ({self.move_shapers.client.srv_name})"
+        return f"the working band of {self.rated()} ({self.move_shapers.client.srv_name})"
 
     def verdict(self, text: str, values: list[tuple[str, str]]) -> None:
         """The status ``drift``: WARN while the watch warns (with watch.scheduler: while any move's watch does)."""
