@@ -300,6 +300,9 @@ def test_with_watch_scheduler_each_move_is_rated_against_the_shaper_the_schedule
         warn = drift_statuses()[-1]
         assert "mode 3.4" in warn.message and "designed at 4 Hz" in warn.message, warn.message
         assert "1 move(s) drifted" in warn.message
+        # it names the shaper it rated: the scheduler's for the move, not the (unwatched) active one
+        assert "the working band of the shaper the scheduler gave this move (/scheduler/shaper_at)" in warn.message
+        assert "active shaper" not in warn.message, warn.message
         # a move whose mode is where its shaper works does not end the warning of another
         assert run(7, 8.0, 8.0) == DiagnosticStatus.WARN
 

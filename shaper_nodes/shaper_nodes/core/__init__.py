@@ -25,6 +25,9 @@ closed_loop
 cycles
     Per-cycle buffering and the residual-vibration window every component measures alike; the
     cycle event codes (those of shaper_msgs/CycleEvent).
+cycle_records
+    A finished cycle's residual-vibration record checked before it is identified from (gaps, too few
+    samples, a failed or saturated sensor).
 checks
     The one home of the number and array checks, with errors that name the problem.
 memory
@@ -48,5 +51,5 @@ lazy
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "closed_pipe", "cycles", "files", "identification", "lazy", "learning",
-           "lockstep", "rate", "scheduling", "security", "shaping", "stamps"]
+__all__ = ["checks", "closed_loop", "closed_pipe", "cycle_records", "cycles", "files", "identification", "lazy",
+           "learning", "lockstep", "rate", "scheduling", "security", "shaping", "stamps"]

@@ -47,11 +47,8 @@ Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections import deque
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from rclpy.node import Node
@@ -60,166 +57,28 @@ from sensor_msgs.msg import Imu, JointState
 from shaper_msgs.msg import CycleEvent, ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import Identify
+from shaper_nodes.core.cycle_records import MAX_GAP_PERIODS, SaturatedRecord, SensorFault, check_record
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
-from shaper_nodes.core.identification import METHODS, IdentificationError, ModeFit, identify_records, recommend_shaper
-from shaper_nodes.core.identification.drift import DriftWatch, ModeCheck, check_mode
-from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sensor_fault
+from shaper_nodes.core.identification import IdentificationError, identify_records, recommend_shaper
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
-from shaper_nodes.ros.conversions import estimate_msg, msg_hz, shaper_to_msg, time_to_sec
-from shaper_nodes.ros.diagnostics import ERROR, OK, WARN, Diagnostics
-from shaper_nodes.ros.lockstep_reader import IMU_RELIABLE_DOC, STREAM_QOS, LockstepReader, subscribe_draining
+from shaper_nodes.ros.conversions import estimate_msg, shaper_to_msg, time_to_sec
+from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
+from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader, subscribe_draining
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import Spec, declare, param, table, topic
+from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.qos import IMU_QOS, LATCHED, SERVICE_QOS
 from shaper_nodes.ros.shaper_client import ShaperClient
 
 from .identifier_moves import MoveShapers
+from .identifier_parameters import PARAMETERS, IdentifierParams, validate_method
+from .identifier_watch import DriftRating
+
+# the names the tests and the docs import from here (check_record and its faults live in the core)
+__all__ = ["MAX_GAP_PERIODS", "PARAMETERS", "IdentifierNode", "IdentifierParams", "SaturatedRecord", "SensorFault",
+           "check_record", "main"]
 
 SOURCE = "identification"
-#: a gap between two accelerometer samples longer than this many median periods marks the
-#: cycle's data as incomplete
-MAX_GAP_PERIODS = 5.0
-
-
-def _distance(hz: float, mode: ModeFit) -> float:
-    """How far ``mode`` is from ``hz``, Hz."""
-    return abs(mode.hz - hz)
-
-
-def _validate_method(method: str) -> str:
-    if method not in METHODS:
-        raise ValueError(f"unknown identification method {method!r}; known: {sorted(METHODS)}")
-    return method
-
-
-class SensorFault(IdentificationError):
-    """A cycle whose accelerometer data cannot come from a working sensor (silent, stuck, non-finite)."""
-
-
-class SaturatedRecord(SensorFault):
-    """A cycle with accelerometer samples at or beyond the sensor's range; ``count`` of them."""
-
-    def __init__(self, message: str, count: int) -> None:
-        super().__init__(message)
-        self.count = count
-
-
-def check_record(result: CycleResult, min_samples: int, max_abs_accel: float = MAX_ABS_ACCEL
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """The residual-vibration record of a finished cycle: (times (N,), accel (N, k)).
-
-    Raises
-    ------
-    IdentificationError
-        Too few samples in the window, or a gap in the samples; :class:`SensorFault` when the cycle's
-        samples cannot come from a working sensor (none, non-finite, or every axis one value through
-        the cycle: :func:`~shaper_nodes.core.learning.samples.sensor_fault`), and its subclass
-        :class:`SaturatedRecord` if any sample of the cycle is at or beyond ``max_abs_accel`` (m/s^2,
-        the sensor's range).
-    """
-    t, a = result.accel_times, result.accel
-    fault = sensor_fault(a)  # over the whole cycle, motion included
-    if fault is not None:
-        raise SensorFault(f"cycle {result.cycle}: sensor fault: {fault}")
-    sel = (t >= result.residual.window_start) & (t < result.residual.window_end)
-    t, a = t[sel], a[sel]
-    if t.size < min_samples:
-        raise IdentificationError(
-            f"cycle {result.cycle}: {t.size} accelerometer samples in the residual window"
-            f" [{result.residual.window_start:.3f}, {result.residual.window_end:.3f}) s, need {min_samples}")
-    if not np.all(np.isfinite(a)):
-        raise IdentificationError(f"cycle {result.cycle}: non-finite accelerometer samples")
-    saturated = out_of_range(result.accel, max_abs_accel)
-    if saturated is not None:
-        raise SaturatedRecord(f"cycle {result.cycle}: saturated accelerometer: "
-                              + saturated.describe("accelerometer", "m/s^2", "sensor.max_abs_accel"), saturated.count)
-    dt = np.diff(t)
-    if np.any(dt <= 0.0):
-        raise IdentificationError(f"cycle {result.cycle}: accelerometer stamps not strictly increasing")
-    gap, period = float(dt.max()), float(np.median(dt))
-    if gap > MAX_GAP_PERIODS * period:
-        raise IdentificationError(
-            f"cycle {result.cycle}: a {gap * 1e3:.1f} ms gap in the accelerometer data"
-            f" (median period {period * 1e3:.2f} ms): data incomplete or stale")
-    return t, a
-
-
-def _check_band(value: Any) -> None:
-    lo, hi = (float(x) for x in value)
-    if hi > 0.0 and not 0.0 <= lo < hi:
-        raise ValueError(f"parameter band_hz must be [low, high] with 0 <= low < high, got {[lo, hi]}")
-
-
-_PROBE = ModeFit(2 * math.pi * 10.0, 0.02, 0.5, 0.002, 1.0, "fit")  # to hold one value against the core
-
-@dataclass(frozen=True)
-class SensorParams:
-    """sensor.*: the accelerometer's range."""
-
-    max_abs_accel: float = param(MAX_ABS_ACCEL, "Accelerometer range, m/s^2: a cycle with a sample at or beyond"
-                                 " it is refused as saturated (default 16 g).", (1e-3, 1e6))
-
-
-@dataclass(frozen=True)
-class WatchParams:
-    """watch.*: the drift watch."""
-
-    enabled: bool = param(True, "Drift watch: rate every buffered cycle's mode against the active shaper's working"
-                          " band and warn on /diagnostics when it leaves it.", read_only=True)
-    tolerance: float = param(0.05, "Drift watch: the working band is where the active shaper keeps V under this,"
-                             " fraction.", (0.001, 0.5))
-    confirm: int = param(2, "Drift watch: cycles in a row outside the band before the warning.", (1, 1000))
-    max_uncertainty: float = param(
-        0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
-        " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
-        " nothing to identify).", (1e-4, 1.0))
-    scheduler: str = param(
-        "", "Drift watch: fully qualified name of the scheduler whose ~/shaper_at gives the shaper each cycle's"
-        " move ran with (its START's joints, start and goal), for a shaper node that shapes each goal through it"
-        " (action.scheduler); each cycle is rated against that shaper. Empty: the active shaper.", read_only=True)
-
-
-@dataclass(frozen=True)
-class TopicParams:
-    """topics.*: the inputs."""
-
-    imu: str = topic("/tip_imu", "imu")
-    joint_states: str = topic("/joint_states", "joint_states")
-    cycle_events: str = topic("/cycle_events", "cycle_events")
-    imu_reliable: bool = param(False, IMU_RELIABLE_DOC, read_only=True)
-
-
-@dataclass(frozen=True)
-class IdentifierParams:
-    """The identifier node's parameters (see config/identifier.yaml)."""
-
-    shaper: str = param("/shaper", "Fully qualified name of the shaper node to apply shapers to.", read_only=True)
-    buffer_cycles: int = param(5, "Finished cycles kept for identification.", (1, 1000), read_only=True)
-    method: str = param("fit", "Default identification method: " + ", ".join(f"{k} ({v})" for k, v in METHODS.items()),
-                        check=lambda v: _validate_method(v))
-    max_modes: int = param(2, "Default largest number of modes to identify.", (1, 8))
-    target_vibration: float = param(
-        0.05, "Default worst-case percentage vibration the recommended shaper must meet,"
-        " fraction.", (0.001, 0.5), check=lambda v: recommend_shaper([_PROBE], v, families=("zv",)))
-    uncertainty_sigmas: float = param(
-        2.0, "Half-width of the uncertainty band the worst case is taken over, in standard"
-        " deviations.", (0.0, 10.0), check=lambda v: recommend_shaper([_PROBE], 0.05, sigmas=v, families=("zv",)))
-    band_hz: tuple[float, ...] = param([0.0, 0.0], "Frequency band searched, Hz ([0, 0]: up to Nyquist).",
-                                       check=_check_band)
-    min_samples: int = param(100, "Fewest accelerometer samples in a cycle's residual window.", (10, 10**7))
-    sensor: SensorParams = field(default_factory=SensorParams)
-    settle_tolerance: float = param(1e-6, "Band within which the joints count as at rest after a move, rad or m.",
-                                    (0.0, 1e3))
-    service_timeout: float = param(5.0, "Time to wait for the shaper node's set_shaper service, and then for its"
-                                   " answer, s.", (0.1, 600.0))
-    watch: WatchParams = field(default_factory=WatchParams)
-    topics: TopicParams = field(default_factory=TopicParams)
-
-
-#: the identifier node's parameters (derived from IdentifierParams)
-PARAMETERS: tuple[Spec, ...] = table(IdentifierParams)
-
 
 class IdentifierNode(Node):
     """See the module docstring. Extra arguments go to ``Node``."""
@@ -228,7 +87,7 @@ class IdentifierNode(Node):
         super().__init__("identifier", *args, **kwargs)
         self.params = declare(self, IdentifierParams)
         p = self.params.value
-        _validate_method(p.method)
+        validate_method(p.method)
 
         self.monitor = CycleMonitor(float(p.settle_tolerance))
         self.cycles: deque[tuple[CycleResult, tuple[np.ndarray, np.ndarray]]] = deque(
@@ -250,18 +109,21 @@ class IdentifierNode(Node):
         self.shaper = ShaperClient(self, str(p.shaper), SOURCE, lambda: float(self.params.value.service_timeout),
                                    self.diagnostics)
         self.create_service(Identify, "~/identify", self._on_identify, qos_profile=SERVICE_QOS)
-        self.watch = DriftWatch(int(p.watch.confirm))
-        self._active: ShaperMsg | None = None
-        self._warned = False
         self.move_shapers = MoveShapers(self, str(p.watch.scheduler), lambda: float(
             self.params.value.service_timeout), self.diagnostics, int(p.watch.confirm)) \
             if p.watch.enabled and p.watch.scheduler else None
+        self.drift = DriftRating(self, self.move_shapers)  # nodes/identifier_watch.py
         if bool(p.watch.enabled) and self.move_shapers is None:  # (with watch.scheduler: not the one rated)
             self.create_subscription(ShaperMsg, f"{str(p.shaper).rstrip('/')}/active_shaper",
-                                     self._on_active, LATCHED)
+                                     self.drift.on_active, LATCHED)
         self.get_logger().info(
             f"identifying from {p.topics.imu}, keeping {self.cycles.maxlen} cycles;"
             f" applies to {self.shaper.srv_name}")
+
+    @property
+    def _active(self) -> ShaperMsg | None:
+        """The active shaper the drift watch rates against (None before it came, and with watch.scheduler)."""
+        return self.drift.active
 
     # ----------------------------------------------------------------- data
     def _on_imu(self, raw: bytes) -> None:
@@ -323,89 +185,9 @@ class IdentifierNode(Node):
         self.get_logger().info(
             f"cycle {result.cycle}: residual RMS {result.residual.rms:.4g} m/s^2 over"
             f" {result.residual.window_end - result.residual.window_start:.3g} s buffered ({len(self.cycles)})")
-        self._watch_cycle(result.cycle, record)
+        self.drift.rate(result.cycle, record)
 
-    # ----------------------------------------------------------------- drift watch
-    def _on_active(self, msg: ShaperMsg) -> None:
-        if self._active is None or msg.revision != self._active.revision:
-            self.watch.reset()
-        self._active = msg
-
-    def _watch_cycle(self, cycle: int, record: tuple[np.ndarray, np.ndarray]) -> None:
-        """Rate this cycle's mode against the active shaper (see the module docstring)."""
-        active, watch = self._active, self.watch
-        if self.move_shapers is not None:  # the move's shaper, and its own watch
-            active, why, move_watch = self.move_shapers.shaper(cycle)
-            if active is None or move_watch is None:
-                self.get_logger().info(f"cycle {cycle}: drift watch: not rated ({why})")
-                return
-            watch = move_watch
-        if active is None or len(active.amplitudes) < 2 or active.family == "none":
-            return
-        p = self.params.value
-        lo, hi = (float(x) for x in p.band_hz)
-        try:
-            modes = identify_records([record], method=str(p.method), max_modes=int(p.max_modes),
-                                     band_hz=(lo, hi) if hi > 0.0 else None)
-        except IdentificationError as err:
-            self._quiet(cycle, watch, f"cycle {cycle}: no mode identified in the residual ({err}): the residual is"
-                        " at the noise floor")
-            return
-        sharp = [m for m in modes if m.omega > 0 and m.omega_std <= float(p.watch.max_uncertainty) * m.omega]
-        check = self._worst(active, sharp)
-        if check is None:
-            found = ", ".join(f"{m.hz:.4g} Hz (+-{100 * m.omega_std / m.omega:.2g} %)" for m in modes if m.omega > 0)
-            self._quiet(cycle, watch, f"cycle {cycle}: no mode identified sharply enough to rate ({found or 'none'};"
-                        f" watch.max_uncertainty {100 * float(p.watch.max_uncertainty):.3g} %): the residual"
-                        " is at the noise floor")
-            return
-        watch.update(check)
-        text = f"cycle {cycle}: {check.describe()}"
-        values = [("cycle", str(cycle)), ("mode_hz", f"{check.mode_hz:.6g}"), ("zeta", f"{check.zeta:.4g}"),
-                  ("vibration", f"{check.vibration:.4g}"), ("tolerance", f"{check.tolerance:.4g}"),
-                  ("band_low_hz", f"{check.band_hz[0]:.6g}" if check.band_hz else "none"),
-                  ("band_high_hz", f"{check.band_hz[1]:.6g}" if check.band_hz else "none"),
-                  ("outside_in_a_row", str(watch.outside_in_a_row)), ("shaper_revision", str(active.revision))]
-        if watch.warning:
-            text = (f"the mode has drifted out of the active shaper's working band ({watch.outside_in_a_row}"
-                    f" cycles in a row): {text}; retune the shaper (~/identify with apply)")
-        self._verdict(text, values)
-
-    def _verdict(self, text: str, values: list[tuple[str, str]]) -> None:
-        """The status ``drift``: WARN while the watch warns (with watch.scheduler: while any move's watch does)."""
-        drifted = self.move_shapers.drifted() if self.move_shapers is not None else (
-            ["the task"] if self.watch.warning else [])
-        if drifted and self.move_shapers is not None:
-            text = f"{len(drifted)} move(s) drifted out of their shaper's working band ({', '.join(drifted)}); {text}"
-            values = [*values, ("drifted_moves", str(len(drifted)))]
-        if drifted:
-            if not self._warned:
-                self.get_logger().warning(text)
-            self._warned = True
-            self.diagnostics.publish("drift", WARN, text, values)
-        else:
-            if self._warned:
-                self.get_logger().info(f"the mode is back inside the working band: {text}")
-            self._warned = False
-            self.diagnostics.publish("drift", OK, text, values)
-
-    def _quiet(self, cycle: int, watch: DriftWatch, text: str) -> None:
-        """A cycle with nothing to rate: the shaper works (see DriftWatch.quiet)."""
-        watch.quiet()
-        self._verdict(text, [("cycle", str(cycle)), ("outside_in_a_row", "0")])
-
-    def _worst(self, active: ShaperMsg, modes: list[ModeFit]) -> ModeCheck | None:
-        """The checks of the identified mode nearest each design mode and of the strongest mode (the one that
-        rings most, which a payload may have moved below every design mode); the one with the largest V."""
-        if not modes:
-            return None
-        tol = float(self.params.value.watch.tolerance)
-        design = [hz for hz in map(msg_hz, active.design_modes) if hz > 0]
-        chosen = {min(modes, key=functools.partial(_distance, hz)) for hz in design}
-        chosen.add(max(modes, key=lambda m: m.amplitude))
-        checks = [check_mode(active.amplitudes, active.times, design, m, tol) for m in chosen]
-        return max(checks, key=lambda c: c.vibration)
-
+    # ----------------------------------------------------------------- refused cycles
     def _sensor_fault(self, cycle: int, why: str, kind: str) -> None:
         """A cycle the sensor failed: skipped, an ERROR ``identifier: sensor``, and the drift watch says it
         cannot rate (never OK on a dead sensor; the run of cycles outside the band is left as it was)."""
@@ -427,7 +209,7 @@ class IdentifierNode(Node):
     async def _on_identify(self, req: Identify.Request, resp: Identify.Response) -> Identify.Response:
         p = self.params.value
         try:
-            method = _validate_method(req.method.strip() or str(p.method))
+            method = validate_method(req.method.strip() or str(p.method))
             max_modes = int(req.max_modes) or int(p.max_modes)
             target = float(req.target_vibration) or float(p.target_vibration)
             if not (math.isfinite(target) and 0.0 < target < 1.0):

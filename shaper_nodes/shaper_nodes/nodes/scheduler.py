@@ -73,14 +73,12 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from dataclasses import dataclass, replace
 from typing import Any
 
 from builtin_interfaces.msg import Time
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from shaper_msgs.msg import ModeEstimate
@@ -88,115 +86,36 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.scheduling import (
-    MOVE_TOLERANCE,
     FuzzyError,
     Interpolation,
     RateLimit,
     Scheduler,
     rule_base_from_dict,
 )
-from shaper_nodes.core.shaping import FAMILIES, ShaperError, none_shaper
+from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.ros.conversions import estimate_msg, shaper_from_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import Spec, declare, declare_all, flat, param, read, table
+from shaper_nodes.ros.parameters import declare, declare_all, flat, read
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 from shaper_nodes.ros.raw_stream import RawJointStates
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
 from .scheduler_moves import MoveService
+from .scheduler_parameters import PARAMETERS, RuleParams, SchedulerParams, rule_table
+
+__all__ = ["PARAMETERS", "RuleParams", "SchedulerNode", "SchedulerParams", "main", "rule_table"]
 
 SOURCE = "scheduler"
 #: wall time between discovering the shaper's set_shaper service and the first request, s
 DISCOVERY_SETTLE = 0.5
-_SHAPED = tuple(k for k in FAMILIES if k not in ("none", "custom"))
 #: depth of the /joint_states subscription (reliable, volatile: rclpy's default profile)
 JOINT_STATES_DEPTH = 50
 #: refused joint states kept for the report (the count is exact; the diagnostics throttle anyway)
 _REFUSALS_KEPT = 100
-
-
-def _one_rule_base(family: str = "zv", **extra: Any) -> Scheduler:
-    """A one-rule scheduler (to hold one parameter value against the core)."""
-    rule = {"membership": ["triangular"], "membership_params": [0.0, 0.5, 1.0],
-            "natural_frequency": [10.0], "damping_ratio": [0.05]}
-    return Scheduler(rule_base_from_dict({"premises": ["joint_1"], "rules": {"r": rule}, **extra}), "modes", family)
-
 #: s that joint-state publishers may stay unmatched (discovery under way) before the scheduler warns
 UNMATCHED_WARN = 3.0
-
-@dataclass(frozen=True)
-class SchedulerParams:
-    """The scheduler node's parameters (see config/scheduler.yaml); each rule adds rules.<name>.* (RuleParams)."""
-
-    premises: tuple[str, ...] = param(
-        None, "Joints whose positions (from joint_states, rad or m) are the premise variables, in the"
-        " order of each rule's membership functions.", read_only=True, type=Parameter.Type.STRING_ARRAY)
-    range: tuple[float, ...] = param(
-        None, "Valid range per premise [lo1, hi1, lo2, hi2, ...] (rad or m); outside it premises are"
-        " clamped. Default: from the lowest to the highest membership peak.", read_only=True,
-        type=Parameter.Type.DOUBLE_ARRAY)
-    rule_names: tuple[str, ...] = param(
-        None, "Names of the rules (operating points); each has rules.<name>.membership (one kind per"
-        " premise: triangular, trapezoidal, gaussian), .membership_params (their parameters, concatenated), and"
-        " .a_matrix (n*n, row-major) with .b_matrix (n*m), and/or .frequency_hz (Hz) with"
-        " .damping_ratio, one per mode.", read_only=True, type=Parameter.Type.STRING_ARRAY)
-    interpolation: str = param(
-        "model", "'model': interpolate the linear models and take the modes of the result (seed"
-        " 004); 'modes': interpolate the mode parameters directly.", choices=("model", "modes"), read_only=True)
-    max_damping: float = param(0.3, "Modes with a damping ratio at or above this are not shaped for.", (0.01, 0.95),
-                               read_only=True, check=lambda v: _one_rule_base(max_damping=v))
-    family: str = param("zv", "Shaper family designed on the interpolated modes: " + ", ".join(_SHAPED) + ".",
-                        read_only=True, check=lambda v: _one_rule_base(family=v))
-    shaper: str = param("/shaper", "Fully qualified name of the shaper node.", read_only=True)
-    joint_states: str = param("/joint_states", "Joint state topic.", read_only=True)
-    feed: str = param("take", "Who takes joint_states on the lean node <name>_joint_states: 'take' (a take loop,"
-                      " ros/take_loop.py) or 'thread' (rclpy's SingleThreadedExecutor).", choices=("take", "thread"),
-                      read_only=True)
-    period: float = param(0.05, "How often the rule base is evaluated, s (node clock).", (0.001, 60.0),
-                          read_only=True)
-    min_interval: float = param(0.1, "Least time between two shapers sent, s.", (0.0, 3600.0),
-                                check=lambda v: RateLimit(min_interval=v))
-    service_timeout: float = param(
-        2.0, "A set_shaper call unanswered this long (wall time) is given up and sent again, s.", (0.01, 600.0))
-    relative_change: float = param(
-        0.01, "Least change that sends a new shaper: |d omega| / omega or |d zeta| / max(zeta,"
-        " 0.01), fraction.", (0.0, 10.0), check=lambda v: RateLimit(relative_change=v))
-    stale_timeout: float = param(1.0, "Joint states older than this stop the updates, s.", (0.001, 3600.0))
-    error_throttle: float = param(1.0, "Least time between two reports of the same problem, s.", (0.0, 3600.0))
-    move_tolerance: float = param(
-        MOVE_TOLERANCE, "A ~/shaper_at request is a move the learner corrected (~/set_move_shaper) when every"
-        " joint of its start and pose is within this of the move's start and goal, rad or m.", (1e-6, 1.0),
-        read_only=True)
-
-
-@dataclass(frozen=True)
-class RuleParams:
-    """The parameters rules.<name>.* of one rule (declared for each name of rule_names)."""
-
-    membership: tuple[str, ...] = param(None, "Rule <name>: membership.", read_only=True,
-                                        type=Parameter.Type.STRING_ARRAY)
-    membership_params: tuple[float, ...] = param(None, "Rule <name>: membership_params.", read_only=True,
-                                                 type=Parameter.Type.DOUBLE_ARRAY)
-    a_matrix: tuple[float, ...] = param(None, "Rule <name>: a_matrix.", read_only=True,
-                                        type=Parameter.Type.DOUBLE_ARRAY)
-    b_matrix: tuple[float, ...] = param(None, "Rule <name>: b_matrix.", read_only=True,
-                                        type=Parameter.Type.DOUBLE_ARRAY)
-    frequency_hz: tuple[float, ...] = param(None, "Rule <name>: natural frequency of each mode, Hz.",
-                                            read_only=True, type=Parameter.Type.DOUBLE_ARRAY)
-    damping_ratio: tuple[float, ...] = param(None, "Rule <name>: damping_ratio.", read_only=True,
-                                             type=Parameter.Type.DOUBLE_ARRAY)
-
-
-#: the scheduler node's parameters (derived from SchedulerParams)
-PARAMETERS: tuple[Spec, ...] = table(SchedulerParams)
-
-
-def rule_table(name: str) -> tuple[Spec, ...]:
-    """The parameters rules.<name>.* of rule ``name``."""
-    return tuple(replace(s, description=s.description.replace("<name>", name))
-                 for s in table(RuleParams, f"rules.{name}."))
 
 
 class SchedulerNode(Node):

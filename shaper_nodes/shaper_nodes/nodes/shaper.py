@@ -52,8 +52,8 @@ trajectories (topic, ``~/shape_trajectory``, the FollowJointTrajectory proxy) ar
 same names, by a side node ``<name>_trajectories`` on a thread of its own
 (ros/side_node.py), so that the stream never waits for a long trajectory. Shaping a whole
 trajectory only reads the active filter, never the streaming filters' state. The interpreter's
-thread switch interval is shortened (:data:`SWITCH_INTERVAL`) so that a thread doing Python work
-on a long trajectory yields within a fraction of a command period.
+thread switch interval is shortened (:data:`SWITCH_INTERVAL` in nodes/shaper_interpreter.py) so that a thread
+doing Python work on a long trajectory yields within a fraction of a command period.
 
 Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its source;
 ``allowed_sources`` lists the sources that may change the shaper (parameters count as source
@@ -70,9 +70,6 @@ limits); the node reads them typed, ``self.params.value`` (kept up to date on ev
 
 from __future__ import annotations
 
-import gc
-import sys
-import time
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
@@ -100,6 +97,8 @@ from shaper_nodes.ros.side_node import SideNode
 from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
 
+from .shaper_interpreter import background_pause
+from .shaper_interpreter import tune_interpreter as _tune_interpreter  # (benchmarks call it from here)
 from .shaper_parameters import (  # the table and its constants, importable from here as before
     DEFAULT_MAX_SAMPLES,
     DESIGN_PARAMS,
@@ -119,15 +118,6 @@ from .trajectory_action import TrajectoryActionProxy
 __all__ = ["DEFAULT_MAX_SAMPLES", "DESIGN_PARAMS", "DISCRETIZATIONS", "PARAMETERS", "STREAM_EXECUTORS", "TOPICS",
            "ShaperNode", "ShaperParams", "main"]
 
-#: s, the interpreter's thread switch interval in this node (Python's default is 5 ms, ten command
-#: periods at 2 kHz): a thread shaping a long trajectory gives the streaming thread the interpreter
-#: within this time
-SWITCH_INTERVAL = 2e-4
-#: s, how long the side thread sleeps after each 100 points of a whole trajectory's message it builds
-#: (about 1 ms of work): whole trajectories are background work, the stream comes first
-BACKGROUND_PAUSE = 1e-3
-#: the collector's thresholds in this node (Python's default is (700, 10, 10)); see _tune_interpreter
-GC_THRESHOLDS = (700, 10, 1000)
 #: s, the longest a whole trajectory may take in the worker process (300,000 samples take about 10 s)
 WORKER_TIMEOUT = 120.0
 
@@ -389,7 +379,7 @@ class ShaperNode(Node):
         active one is; the active shaper is not changed), and check it against the output invariants.
         Raises InputError on bad input or output, and ShaperError or ValueError if ``shaper`` cannot
         be discretised."""
-        return self.whole_shaping(shaper).shape(msg, pause=_background_pause)
+        return self.whole_shaping(shaper).shape(msg, pause=background_pause)
 
     def _on_trajectory(self, data: bytes) -> None:
         """The trajectory topic: the serialized message shaped in the worker process, published as bytes."""
@@ -430,22 +420,6 @@ class ShaperNode(Node):
             self._reject("~/shape_trajectory", err)
             resp.success, resp.message = False, str(err)
         return resp
-
-
-def _background_pause() -> None:
-    """Whole-trajectory work yields the interpreter to the stream for a while (see BACKGROUND_PAUSE)."""
-    time.sleep(BACKGROUND_PAUSE)
-
-
-def _tune_interpreter() -> None:
-    """Thread switches within :data:`SWITCH_INTERVAL`; no full garbage collection while a long
-    trajectory's messages are alive (each would scan them all, holding the interpreter for tens of ms):
-    the objects made at start-up are frozen out of the collector and the oldest generation is
-    collected only after :data:`GC_THRESHOLDS` [2] collections of the middle one. Messages hold no
-    reference cycles, so they are freed by reference counting as before."""
-    sys.setswitchinterval(SWITCH_INTERVAL)
-    gc.freeze()
-    gc.set_threshold(*GC_THRESHOLDS)
 
 
 def main(args: list[str] | None = None) -> int:

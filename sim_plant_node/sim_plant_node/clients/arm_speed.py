@@ -5,7 +5,7 @@ proxy in front of the shaper node's: the demo's client sends each move's goal to
 the learner time-scales it by the move's learned factor and sends it on to ``/shaper/follow_joint_trajectory``,
 which shapes it for its final pose (the schedule) and sends it to the controller. Every move is its own cycle on
 ``/cycle_events`` (the per-move cases' marking). A scaled goal ends earlier than planned: the client takes each
-move's end where the arm comes to rest after it (:attr:`~.arm_demo.ArmClient.ends_at_rest`), and its planned
+move's end where the arm comes to rest after it (:attr:`~.arm_client.ArmClient.ends_at_rest`), and its planned
 duration as that less the dwell (the learner keeps the dwell's length), so that the measures' move + settle time is
 the faster move's.
 

@@ -74,13 +74,13 @@ class ModeCheck:
         return self.band_hz is not None and self.band_hz[0] <= self.mode_hz <= self.band_hz[1] \
             and self.vibration <= self.tolerance
 
-    def describe(self) -> str:
-        """The numbers in one line (what a warning says)."""
+    def describe(self, shaper: str = "the active shaper") -> str:
+        """The numbers in one line (what a warning says); ``shaper`` names the shaper rated against, in words."""
         band = (f"the band {self.band_hz[0]:.4g}-{self.band_hz[1]:.4g} Hz" if self.band_hz is not None
                 else f"no band (V > {100 * self.tolerance:.3g} % already at {self.reference_hz:.4g} Hz)")
         where = "inside" if self.inside else "outside"
         return (f"mode {self.mode_hz:.4g} Hz (+-{self.mode_std_hz:.2g}) zeta {self.zeta:.3g} is {where} {band}"
-                f" where the active shaper keeps V under {100 * self.tolerance:.3g} % (designed at"
+                f" where {shaper} keeps V under {100 * self.tolerance:.3g} % (designed at"
                 f" {self.reference_hz:.4g} Hz); V at the mode {100 * self.vibration:.3g} %")
 
 
