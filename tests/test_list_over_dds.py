@@ -72,13 +72,11 @@ def test_corrupt_save_file_is_reported_and_ignored(start_node, ros_context, tmp_
     assert "not loaded" in logs
 
 
-def test_replaying_the_recorded_bag_gives_the_live_updates(start_node, ros_context, tmp_path):
-    bag = tmp_path / "bag"
-    recorder = start_node("shaper_nodes", "recorder", {
-        "output": str(bag), "use_sim_time": True, "topics": ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]})
-    rows = run_case(CASES["case2"], 5, start_node, ros_context, tmp_path / "state.json", listeners=3)
-    time.sleep(0.5)  # the recorder drains its queue
-    assert recorder.stop() == 0  # finalises the bag
+def test_replaying_the_recorded_bag_gives_the_live_updates(list_case2_recording):
+    """The offline replay of a recorded live run (case 2, five cycles; the session's shared run, tests/conftest.py's
+    ``list_case2_recording``, which test_bag_analysis_over_dds.py plays into a learner) gives the live updates."""
+    bag, rows, recorder_code = list_case2_recording
+    assert recorder_code == 0  # the recorder finalised the bag
     results = replay(bag, LEARNER)
     learned = [r for r in results if r.update is not None]
     assert len(learned) == len(rows)
