@@ -177,44 +177,71 @@ def small_calibration(tmp_path_factory) -> tuple[pathlib.Path, dict]:
 LIST_RECORDED = ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]
 
 
-@pytest.fixture(scope="session")
-def list_case2_recording(tmp_path_factory) -> tuple[pathlib.Path, list, int | None]:
-    """A live LIST run of seed 003's case 2 (reproductions.list_cases.run_case: sim plant, shaper and learner as
-    processes over DDS, five cycles), recorded by the recorder (:data:`LIST_RECORDED`), once for the session: the
-    recording's folder, the run's Iterations (in order) and the recorder's exit status when stopped after the
-    run. test_list_over_dds.py replays it offline, test_bag_analysis_over_dds.py plays it into a fresh learner."""
-    from reproductions.list_cases import CASES, Iteration, run_case
+def list_run(folder: pathlib.Path, case: str, cycles: int, recorded: list[str] | None = None) -> None:
+    """Run ``cycles`` cycles of seed 003's ``case`` (reproductions.list_cases.run_case: sim plant, shaper and
+    learner as processes over DDS, on a domain of its own, the learner's state in ``folder/state.json``), with a
+    recorder of ``recorded`` (into ``folder/bag``) if given, and keep the run's Iterations and the recorder's exit
+    status (stopped after the run) in ``folder/run.json`` (read back by :func:`list_record`)."""
+    from reproductions.list_cases import CASES, run_case
 
-    def produce(folder: pathlib.Path) -> None:
-        domain = new_domain()
-        env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-        procs: list[NodeProcess] = []
+    domain = new_domain()
+    env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    procs: list[NodeProcess] = []
 
-        def start(package: str, executable: str, params: dict) -> NodeProcess:
-            proc = NodeProcess(package, executable, params, log_path=folder / f"{executable}-{len(procs)}.log", env=env)
-            procs.append(proc)
-            proc.start()
-            return proc
+    def start(package: str, executable: str, params: dict) -> NodeProcess:
+        proc = NodeProcess(package, executable, params, log_path=folder / f"{executable}-{len(procs)}.log", env=env)
+        procs.append(proc)
+        proc.start()
+        return proc
 
-        ctx = rclpy.context.Context()
-        rclpy.init(context=ctx, domain_id=domain)
-        try:
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    code = None
+    try:
+        recorder = None
+        if recorded:
             recorder = start("shaper_nodes", "recorder", {"output": str(folder / "bag"), "use_sim_time": True,
-                                                          "topics": LIST_RECORDED})
-            rows = run_case(CASES["case2"], 5, start, ctx, folder / "state.json", listeners=3)
+                                                          "topics": recorded})
+        rows = run_case(CASES[case], cycles, start, ctx, folder / "state.json", listeners=3 if recorded else 2)
+        if recorder is not None:
             time.sleep(0.5)  # the recorder drains its queue
             code = recorder.stop()  # finalises the bag
-        finally:
-            for proc in reversed(procs):
-                proc.stop()
-            gc.collect()
-            ctx.try_shutdown()
-        (folder / "run.json").write_text(json.dumps({"rows": [dataclasses.asdict(r) for r in rows],
-                                                     "recorder_code": code}))
+    finally:
+        for proc in reversed(procs):
+            proc.stop()
+        gc.collect()
+        ctx.try_shutdown()
+    (folder / "run.json").write_text(json.dumps({"rows": [dataclasses.asdict(r) for r in rows],
+                                                 "recorder_code": code}))
 
-    folder = shared_once(tmp_path_factory, "list_case2_recording", produce)
+
+def list_record(folder: pathlib.Path) -> tuple[list, int | None]:
+    """The Iterations (in order) and the recorder's exit status that :func:`list_run` kept in ``folder``."""
+    from reproductions.list_cases import Iteration
+
     record = json.loads((folder / "run.json").read_text())
-    return folder / "bag", [Iteration(**r) for r in record["rows"]], record["recorder_code"]
+    return [Iteration(**r) for r in record["rows"]], record["recorder_code"]
+
+
+@pytest.fixture(scope="session")
+def list_case2_recording(tmp_path_factory) -> tuple[pathlib.Path, list, int | None]:
+    """A live LIST run of seed 003's case 2 (five cycles, :func:`list_run`), recorded by the recorder
+    (:data:`LIST_RECORDED`), once for the session: the recording's folder, the run's Iterations (in order) and the
+    recorder's exit status when stopped after the run. test_list_over_dds.py replays it offline,
+    test_bag_analysis_over_dds.py plays it into a fresh learner."""
+    folder = shared_once(tmp_path_factory, "list_case2_recording",
+                         lambda f: list_run(f, "case2", 5, LIST_RECORDED))
+    return (folder / "bag", *list_record(folder))
+
+
+@pytest.fixture(scope="session")
+def list_case1_run(tmp_path_factory) -> tuple[pathlib.Path, list]:
+    """A live LIST run of seed 003's case 1 from a fresh state, eleven cycles (:func:`list_run`; the first
+    unshaped), once for the session: the learner's state file after it (a test that resumes from it copies it
+    first) and the run's Iterations. test_list_over_dds.py checks the tenfold reduction on it and restarts from its
+    state file."""
+    folder = shared_once(tmp_path_factory, "list_case1_run", lambda f: list_run(f, "case1", 11))
+    return folder / "state.json", list_record(folder)[0]
 
 
 def executables_doc():
