@@ -239,10 +239,23 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
     dots = threading.Semaphore(0)
 
     def read() -> None:
+        """Releases ``dots`` once per progress dot: a dot after the case's "... cycles " and before the "(" of its
+        time, outside the nodes' log lines (from "[WARN]" etc. to the line's end: under load the conductor warns
+        in the middle of the progress line, and its time stamp has a dot)."""
         assert proc.stdout is not None
+        progress = log = False
         while ch := proc.stdout.read(1):
             chunks.append(ch)
-            if ch == "." and "cycles " in "".join(chunks[-200:]):
+            tail = "".join(chunks[-7:])
+            if ch == "\n":
+                log = False
+            elif tail.endswith(("[DEBUG]", "[INFO]", "[WARN]", "[ERROR]", "[FATAL]")):
+                log = True
+            elif tail == "cycles " and not log:
+                progress = True
+            elif progress and not log and ch == "(":
+                progress = False
+            elif progress and not log and ch == ".":
                 dots.release()
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
