@@ -7,10 +7,18 @@ subprocesses on that domain and stops them at teardown.
 
 from __future__ import annotations
 
+import dataclasses
+import fcntl
 import gc
 import itertools
+import json
 import os
+import pathlib
+import shutil
+import subprocess
+import sys
 import time
+from collections.abc import Callable
 
 import pytest
 import rclpy
@@ -37,6 +45,243 @@ def new_domain() -> int:
     base = int(os.environ.get("ROS_DOMAIN_ID", "30"))
     stride = int(os.environ.get("SHAPER_DOMAIN_STRIDE", "1"))
     return 1 + (base + stride * next(_counter)) % DOMAINS
+
+
+def shared_once(tmp_path_factory: pytest.TempPathFactory, name: str,
+                produce: Callable[[pathlib.Path], None]) -> pathlib.Path:
+    """The folder ``produce`` filled once for the whole test session, every xdist worker's tests included.
+
+    Several tests compare against the same expensive reference run (the demo, the uninterrupted calibration),
+    made by the real nodes over DDS; the first test that asks runs ``produce(folder)``, the others read its
+    files. A session fixture alone would run once per xdist worker, so the folder sits beside the workers'
+    own temporary folders (``--basetemp``'s parent under xdist, the session's own without), and an exclusive
+    ``flock`` on ``NAME.lock`` there makes the other workers wait for the first one. A run that raised leaves
+    no ``.done`` mark: the next test that asks runs it again (and fails the same way, with its own message).
+
+    Parameters
+    ----------
+    tmp_path_factory : pytest.TempPathFactory
+        pytest's session fixture.
+    name : str
+        The reference's folder name, unique in the session.
+    produce : callable
+        Fills the (fresh, empty) folder it is given.
+
+    Returns
+    -------
+    pathlib.Path
+        The filled folder (read only: a test that changes a file copies it first).
+    """
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # basetemp/popen-gwN: the session's folder is the parent
+        root = root.parent
+    cache = root / "shared"
+    cache.mkdir(exist_ok=True)
+    folder = cache / name
+    with open(cache / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes (or the process ends)
+        if not (folder / ".done").exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            produce(folder)
+            (folder / ".done").write_text("")
+    return folder
+
+
+def run_logged(folder: pathlib.Path, cmd: list[str], domain: int, timeout: float = 600.0) -> dict:
+    """Run ``cmd`` on ROS domain ``domain`` (localhost discovery) and keep its status and output in
+    ``folder/run.json``; returns that record (``returncode``, ``stdout``, ``stderr``)."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+    record = {"returncode": done.returncode, "stdout": done.stdout, "stderr": done.stderr}
+    (folder / "run.json").write_text(json.dumps(record))
+    return record
+
+
+#: the shared run of the single-joint demo (:func:`joint_demo`): one plant at +30 % of the nominal mode, three
+#: shapers, one cycle each
+JOINT_DEMO = ["joint", "--offsets", "0.3", "--shapers", "none,zv,zvd", "--cycles", "1"]
+
+
+@pytest.fixture(scope="session")
+def joint_demo(tmp_path_factory) -> tuple[pathlib.Path, dict]:
+    """``python -m sim_plant_node.demo`` with :data:`JOINT_DEMO` (sim plant, shaper and recorder as processes over
+    DDS), run once for the session: its output folder and its record (``returncode``, ``stdout``, ``stderr``).
+    test_demo_recording.py decodes its recording, test_bag_analysis_over_dds.py analyses it."""
+    def produce(folder: pathlib.Path) -> None:
+        run_logged(folder, [sys.executable, "-m", "sim_plant_node.demo", *JOINT_DEMO, "--out", str(folder / "demo")],
+                   new_domain())
+
+    folder = shared_once(tmp_path_factory, "joint_demo", produce)
+    return folder / "demo", json.loads((folder / "run.json").read_text())
+
+
+#: a small calibration plan: the elbow at three values (home's among them), two excitations each
+SMALL_PLAN = {"grid.joints": ["elbow_joint"], "grid.lower": [1.0], "grid.upper": [2.0], "grid.counts": [2],
+              "follow.gains": [-1.0], "excitation.repeats": 2, "excitation.decay": 1.0, "approach.settle": 0.5}
+#: the simulated arm's rate for calibration, Hz
+ARM_RATE = 500.0
+
+
+def arm_parameters(noise: float = 0.01, **extra) -> dict:
+    """The sim plant's parameters for the arm in lockstep at :data:`ARM_RATE`, at home, with ``noise``
+    (accelerometer, m/s^2) and ``extra``: what calibrate runs against in the tests."""
+    from sim_plant_node.arm.task import HOME
+
+    return {"plant.model": "arm", "mode": "lockstep", "rate": ARM_RATE, "task.start": HOME.tolist(),
+            "imu.noise_stddev": noise, "lockstep_timeout": 60.0, **extra}
+
+
+def calibrate_config() -> pathlib.Path:
+    """The installed config/calibrate.yaml."""
+    from ament_index_python.packages import get_package_share_directory
+
+    return pathlib.Path(get_package_share_directory("shaper_nodes")) / "config" / "calibrate.yaml"
+
+
+#: the plant of the shared uninterrupted calibration (:func:`small_calibration`): noise-free (so deterministic) and
+#: waiting for calibrate (``lockstep.readers``)
+SMALL_CALIBRATION_PLANT = arm_parameters(0.0, **{"lockstep.readers": ["/calibrate"]})
+
+
+@pytest.fixture(scope="session")
+def small_calibration(tmp_path_factory) -> tuple[pathlib.Path, dict]:
+    """``calibrate --execute`` of :data:`SMALL_PLAN` (installed config) against a fresh sim plant with
+    :data:`SMALL_CALIBRATION_PLANT`, both as processes over DDS, uninterrupted, once for the session: the output
+    folder (report.json, recording/) and the record (``returncode``, calibrate's ``log``, the plant's
+    ``plant_log``). The reference of test_calibrate.py's kill and resume and of test_lockstep_readers.py's pause."""
+    def produce(folder: pathlib.Path) -> None:
+        env = {"ROS_DOMAIN_ID": str(new_domain()), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        plant = NodeProcess("sim_plant_node", "sim_plant", SMALL_CALIBRATION_PLANT, log_path=folder / "sim_plant.log",
+                            env=env).start()
+        try:
+            cal = NodeProcess("shaper_nodes", "calibrate", SMALL_PLAN, params_file=calibrate_config(),
+                              args=["--execute", "--out", str(folder / "cal")], log_path=folder / "calibrate.log",
+                              env=env).start()
+            try:
+                assert cal.proc is not None
+                code = cal.proc.wait(timeout=600)
+            finally:
+                cal.stop()
+        finally:
+            plant.stop()
+        record = {"returncode": code, "log": (folder / "calibrate.log").read_text(),
+                  "plant_log": (folder / "sim_plant.log").read_text()}
+        (folder / "run.json").write_text(json.dumps(record))
+
+    folder = shared_once(tmp_path_factory, "small_calibration", produce)
+    return folder / "cal", json.loads((folder / "run.json").read_text())
+
+
+#: the topics the shared LIST run records (:func:`list_case2_recording`)
+LIST_RECORDED = ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]
+
+
+def list_run(folder: pathlib.Path, case: str, cycles: int, recorded: list[str] | None = None) -> None:
+    """Run ``cycles`` cycles of seed 003's ``case`` (reproductions.list_cases.run_case: sim plant, shaper and
+    learner as processes over DDS, on a domain of its own, the learner's state in ``folder/state.json``), with a
+    recorder of ``recorded`` (into ``folder/bag``) if given, and keep the run's Iterations and the recorder's exit
+    status (stopped after the run) in ``folder/run.json`` (read back by :func:`list_record`)."""
+    from reproductions.list_cases import CASES, run_case
+
+    domain = new_domain()
+    env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    procs: list[NodeProcess] = []
+
+    def start(package: str, executable: str, params: dict) -> NodeProcess:
+        proc = NodeProcess(package, executable, params, log_path=folder / f"{executable}-{len(procs)}.log", env=env)
+        procs.append(proc)
+        proc.start()
+        return proc
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    code = None
+    try:
+        recorder = None
+        if recorded:
+            recorder = start("shaper_nodes", "recorder", {"output": str(folder / "bag"), "use_sim_time": True,
+                                                          "topics": recorded})
+        rows = run_case(CASES[case], cycles, start, ctx, folder / "state.json", listeners=3 if recorded else 2)
+        if recorder is not None:
+            time.sleep(0.5)  # the recorder drains its queue
+            code = recorder.stop()  # finalises the bag
+    finally:
+        for proc in reversed(procs):
+            proc.stop()
+        gc.collect()
+        ctx.try_shutdown()
+    (folder / "run.json").write_text(json.dumps({"rows": [dataclasses.asdict(r) for r in rows],
+                                                 "recorder_code": code}))
+
+
+def list_record(folder: pathlib.Path) -> tuple[list, int | None]:
+    """The Iterations (in order) and the recorder's exit status that :func:`list_run` kept in ``folder``."""
+    from reproductions.list_cases import Iteration
+
+    record = json.loads((folder / "run.json").read_text())
+    return [Iteration(**r) for r in record["rows"]], record["recorder_code"]
+
+
+@pytest.fixture(scope="session")
+def list_case2_recording(tmp_path_factory) -> tuple[pathlib.Path, list, int | None]:
+    """A live LIST run of seed 003's case 2 (five cycles, :func:`list_run`), recorded by the recorder
+    (:data:`LIST_RECORDED`), once for the session: the recording's folder, the run's Iterations (in order) and the
+    recorder's exit status when stopped after the run. test_list_over_dds.py replays it offline,
+    test_bag_analysis_over_dds.py plays it into a fresh learner."""
+    folder = shared_once(tmp_path_factory, "list_case2_recording",
+                         lambda f: list_run(f, "case2", 5, LIST_RECORDED))
+    return (folder / "bag", *list_record(folder))
+
+
+@pytest.fixture(scope="session")
+def list_case1_run(tmp_path_factory) -> tuple[pathlib.Path, list]:
+    """A live LIST run of seed 003's case 1 from a fresh state, eleven cycles (:func:`list_run`; the first
+    unshaped), once for the session: the learner's state file after it (a test that resumes from it copies it
+    first) and the run's Iterations. test_list_over_dds.py checks the tenfold reduction on it and restarts from its
+    state file."""
+    folder = shared_once(tmp_path_factory, "list_case1_run", lambda f: list_run(f, "case1", 11))
+    return folder / "state.json", list_record(folder)[0]
+
+
+def executables_doc():
+    """scripts/executables_doc.py as a module (it writes docs/reference/executables.md from the executables' --help)."""
+    import importlib.util
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "scripts" / "executables_doc.py"
+    spec = importlib.util.spec_from_file_location("executables_doc", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
+def help_texts(tmp_path_factory) -> dict[str, dict]:
+    """Every installed executable's ``--help``, and each subcommand's (scripts/executables_doc.py's lists), as a
+    shell runs it (``COLUMNS=100``, as the script; on a domain of the tests' own), once for the session, each in an
+    empty working folder of its own: keyed ``"name"`` or ``"name sub"``, the ``returncode``, ``stdout``, ``stderr``
+    and the files it ``wrote`` there. test_docs.py builds docs/reference/executables.md from them, test_ros2cli.py
+    checks them."""
+    from shaper_nodes.ros.launching import executable
+
+    doc = executables_doc()
+
+    def produce(folder: pathlib.Path) -> None:
+        env = {**os.environ, "COLUMNS": "100", "ROS_DOMAIN_ID": str(new_domain()),
+               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        out = {}
+        for name, package, _kind in doc.EXES:
+            for words in [[name]] + [[name, sub] for sub in doc.SUBCOMMANDS.get(name, [])]:
+                cwd = folder / "-".join(words)
+                cwd.mkdir()
+                done = subprocess.run([str(executable(package, name)), *words[1:], "--help"], cwd=cwd, env=env,
+                                      capture_output=True, text=True, timeout=300)
+                out[" ".join(words)] = {"returncode": done.returncode, "stdout": done.stdout, "stderr": done.stderr,
+                                        "wrote": sorted(p.name for p in cwd.iterdir())}
+        (folder / "help.json").write_text(json.dumps(out))
+
+    return json.loads((shared_once(tmp_path_factory, "help_texts", produce) / "help.json").read_text())
 
 
 @pytest.fixture

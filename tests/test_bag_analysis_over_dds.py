@@ -1,7 +1,8 @@
 """Bag analysis of real recordings, and bag_play feeding a running learner.
 
-- The demo (sim plant, shaper and recorder as processes) records a bag; the analysis of that bag
-  gives the per-cycle residual vibration the demo printed, and the sim plant's mode.
+- The demo (sim plant, shaper and recorder as processes; the session's shared run, tests/conftest.py's
+  ``joint_demo``) records a bag; the analysis of that bag gives the per-cycle residual vibration the demo
+  printed, and the sim plant's mode.
 - The same recording cut mid-chunk (a killed recorder) is analysed up to the cut.
 - A live LIST run is recorded; bag_play then plays the recording into a fresh learner, which
   makes the same per-cycle updates as the live learner did.
@@ -15,13 +16,12 @@ import os
 import re
 import struct
 import subprocess
-import sys
 import time
 
 import pytest
 
 from reproductions.common import metric as _metric
-from reproductions.list_cases import CASES, LEARNER, run_case
+from reproductions.list_cases import CASES, LEARNER
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.streams import read_recording
 from shaper_nodes.recordings import Bag, mcap_chunks
@@ -29,21 +29,17 @@ from shaper_nodes.recordings import Bag, mcap_chunks
 pytestmark = pytest.mark.integration
 
 
-def test_demo_recording_analysis_matches_the_demo_and_the_plant(tmp_path, domain_id):
-    out = tmp_path / "demo"
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    proc = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "joint", "--out", str(out), "--offsets", "0.3",
-                           "--shapers", "none,zv", "--cycles", "1"], env=env, capture_output=True, text=True,
-                          timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    printed = [float(x) for x in re.findall(r"residual RMS ([0-9.eE+-]+) m/s\^2", proc.stdout)]
+def test_demo_recording_analysis_matches_the_demo_and_the_plant(joint_demo, tmp_path):
+    out, proc = joint_demo  # the session's demo run (tests/conftest.py), decoded in test_demo_recording.py too
+    assert proc["returncode"] == 0, proc["stdout"] + proc["stderr"]
+    printed = [float(x) for x in re.findall(r"residual RMS ([0-9.eE+-]+) m/s\^2", proc["stdout"])]
     with open(out / "results.csv") as f:
         per_cycle = [float(v) for row in csv.DictReader(f) for v in row["per_cycle_rms_m_s2"].split()]
-    assert len(printed) == len(per_cycle) == 2  # one cycle unshaped, one with ZV
+    assert len(printed) == len(per_cycle) == 3  # one cycle unshaped, one with ZV, one with ZVD
 
     an = analyze(read_recording(out / "recording"), Options(learners=()))
     assert an.segmentation == "cycle events (/cycle_events)"
-    assert [r.shaper.split()[0] for r in an.cycles] == ["none", "zv"]
+    assert [r.shaper.split()[0] for r in an.cycles] == ["none", "zv", "zvd"]
     # the sim plant's own per-cycle reports (measured in the plant's process, recorded on /cycle_reports)
     with Bag(out / "recording") as bag:
         decode = bag.deserializer("shaper_msgs/msg/CycleReport")
@@ -102,28 +98,17 @@ class _ShaperStandIn:
         self.node.create_service(SetShaper, "/shaper/set_shaper", accept)
 
 
-def test_bag_play_into_a_running_learner_gives_the_live_updates(start_node, ros_context, tmp_path, domain_id):
+def test_bag_play_into_a_running_learner_gives_the_live_updates(list_case2_recording, start_node, ros_context,
+                                                                tmp_path, domain_id):
     from rclpy.executors import SingleThreadedExecutor
 
     from shaper_msgs.msg import CycleReport
     from shaper_nodes.ros.launching import NodeProcess
 
-    # 1. a live LIST run, recorded
-    bag = tmp_path / "bag"
-    procs = []
-
-    def start(package, executable, params):
-        proc = start_node(package, executable, params)
-        procs.append(proc)
-        return proc
-
-    recorder = start("shaper_nodes", "recorder", {
-        "output": str(bag), "use_sim_time": True, "topics": ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]})
-    live = run_case(CASES["case2"], 4, start, ros_context, tmp_path / "live.json", listeners=3)
-    time.sleep(0.5)  # the recorder drains its queue
-    assert recorder.stop() == 0
-    for proc in procs:
-        proc.stop()
+    # 1. a live LIST run (case 2, five cycles), recorded: the session's shared run (tests/conftest.py's
+    # list_case2_recording, which test_list_over_dds.py replays offline)
+    bag, live, recorder_code = list_case2_recording
+    assert recorder_code == 0
     # a live cycle whose accelerometer samples were lost on the way to the learner (best effort, a busy
     # machine) is skipped live but complete in the recording: compare the cycles up to the first such one
     clean = next((k for k, r in enumerate(live) if r.skipped), len(live))

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import json
 import math
-import pathlib
 import time
 
 import numpy as np
 import pytest
 import rclpy
 import yaml
-from ament_index_python.packages import get_package_share_directory
+from conftest import ARM_RATE, SMALL_PLAN, arm_parameters, calibrate_config
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
@@ -28,17 +27,14 @@ from sim_plant_node.arm.dynamics import ArmModel
 from sim_plant_node.arm.modal import modes, simulated_modes
 from sim_plant_node.arm.task import HOME
 
-CONFIG = pathlib.Path(get_package_share_directory("shaper_nodes")) / "config" / "calibrate.yaml"
-RATE = 500.0
-#: a small plan: the elbow at three values (home's among them), two excitations each
-SMALL = {"grid.joints": ["elbow_joint"], "grid.lower": [1.0], "grid.upper": [2.0], "grid.counts": [2],
-         "follow.gains": [-1.0], "excitation.repeats": 2, "excitation.decay": 1.0, "approach.settle": 0.5}
+CONFIG = calibrate_config()
+RATE = ARM_RATE
+#: a small plan: the elbow at three values (home's among them), two excitations each (tests/conftest.py)
+SMALL = SMALL_PLAN
 
 
 def sim(start_node, noise: float = 0.01, **extra):
-    return start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
-                                               "task.start": HOME.tolist(), "imu.noise_stddev": noise,
-                                               "lockstep_timeout": 60.0, **extra})
+    return start_node("sim_plant_node", "sim_plant", arm_parameters(noise, **extra))
 
 
 def calibrate(start_node, args: list[str], params: dict | None = None, timeout: float = 600.0
@@ -104,16 +100,15 @@ def test_calibration_meets_modal_analysis(start_node, tmp_path, ros_context):
         node.destroy_node()
 
 
-def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_node, tmp_path):
+def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_node, tmp_path, small_calibration):
     """Each run starts with a fresh simulator (noise-free, lockstep: deterministic), so the poses measured before
     the kill are the uninterrupted run's to the last bit; the poses measured after the resume start from wherever
     the killed run left the arm, and agree within their reported uncertainty. The uninterrupted run's recording
-    alone (``--from-bag``, offline) gives its report to the last byte."""
-    plant = sim(start_node, noise=0.0)
-    whole = tmp_path / "whole"
-    code, log = calibrate(start_node, ["--execute", "--out", str(whole)], SMALL)
-    assert code == 0, log
-    plant.stop()
+    alone (``--from-bag``, offline) gives its report to the last byte. The uninterrupted run is the session's
+    shared one (tests/conftest.py's ``small_calibration``: the same plan, a plant as this test's, which also waits
+    for calibrate; test_lockstep_readers.py pauses calibrate against it)."""
+    whole, run = small_calibration
+    assert run["returncode"] == 0, run["log"]
     again = tmp_path / "again"  # offline, from the recording alone: the same report
     code, log = calibrate(start_node, ["--from-bag", str(whole / "recording"), "--out", str(again)])
     assert code == 0, log

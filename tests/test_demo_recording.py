@@ -1,8 +1,9 @@
-"""The demo runs end to end, and its recording decodes with independent readers."""
+"""The demo runs end to end, and its recording decodes with independent readers.
 
-import os
-import subprocess
-import sys
+The demo's run is the session's shared one (tests/conftest.py's ``joint_demo``: one plant, the shapers none, zv
+and zvd, one cycle each), which test_bag_analysis_over_dds.py analyses too.
+"""
+
 from collections import Counter
 
 import pytest
@@ -13,15 +14,10 @@ from rosbags.rosbag2 import Reader
 pytestmark = pytest.mark.integration
 
 
-def test_demo_prints_table_and_writes_a_decodable_recording(tmp_path, domain_id):
-    out = tmp_path / "demo"
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    proc = subprocess.run([sys.executable, "-m", "sim_plant_node.demo", "joint", "--out", str(out),
-                           "--offsets", "0,0.3",
-                           "--shapers", "none,zvd", "--cycles", "1"], env=env, capture_output=True, text=True,
-                          timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "Residual vibration" in proc.stdout and "zvd" in proc.stdout
+def test_demo_prints_table_and_writes_a_decodable_recording(joint_demo):
+    out, proc = joint_demo
+    assert proc["returncode"] == 0, proc["stdout"] + proc["stderr"]
+    assert "Residual vibration" in proc["stdout"] and "zvd" in proc["stdout"]
     assert (out / "accelerometer.png").stat().st_size > 10_000
     assert (out / "recording" / "metadata.yaml").exists()
 
@@ -36,7 +32,7 @@ def test_demo_prints_table_and_writes_a_decodable_recording(tmp_path, domain_id)
     for t in ("sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray",
               "shaper_msgs/msg/CycleEvent", "shaper_msgs/msg/CycleReport", "shaper_msgs/msg/Shaper"):
         assert types[t] > 0, (t, types)
-    assert types["shaper_msgs/msg/CycleEvent"] == 4 * 3  # 4 cases x 1 cycle x START, MOTION_END, END
+    assert types["shaper_msgs/msg/CycleEvent"] == 3 * 3  # 3 cases x 1 cycle x START, MOTION_END, END
     # rosbags reads the folder (metadata.yaml) and agrees on the counts
     with Reader(out / "recording") as bag:
         counts = Counter(c.msgtype for c, _, _ in bag.messages())

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 
 import pytest
@@ -28,8 +29,12 @@ def shaped(rows):
 
 
 @pytest.mark.parametrize("name", ["case1", "case2", "case3"])
-def test_list_reduces_residual_vibration_tenfold(name, start_node, ros_context, tmp_path):
-    rows = run_case(CASES[name], CYCLES, start_node, ros_context, tmp_path / "state.json")
+def test_list_reduces_residual_vibration_tenfold(name, request, tmp_path):
+    if name == "case1":  # the session's shared run (tests/conftest.py), which test_restart_... resumes from
+        _, rows = request.getfixturevalue("list_case1_run")
+    else:
+        rows = run_case(CASES[name], CYCLES, request.getfixturevalue("start_node"),
+                        request.getfixturevalue("ros_context"), tmp_path / "state.json")
     assert not any(r.skipped for r in rows), rows
     assert math.isnan(rows[0].a1)  # the reference cycle ran unshaped
     m1, m10 = rows[1].m, rows[10].m
@@ -47,16 +52,17 @@ def test_list_with_saturation_never_ends_above_its_best(start_node, ros_context,
     assert ms[-1] < 0.25 * rows[1].m  # and learning did help (the paper: M fell, then rose at the 7th)
 
 
-def test_restart_resumes_from_the_saved_shaper(starter, ros_context, tmp_path):
+def test_restart_resumes_from_the_saved_shaper(list_case1_run, start_node, ros_context, tmp_path):
+    # the first run: the session's shared run of case 1 from a fresh state (tests/conftest.py's list_case1_run,
+    # eleven cycles, its plant, shaper and learner stopped after it); its state file copied, as the learner writes it
+    saved_state, first = list_case1_run
     state = tmp_path / "state.json"
-    start = starter
-    first = run_case(CASES["case1"], 4, start, ros_context, state)
+    shutil.copyfile(saved_state, state)
     saved = json.loads(state.read_text())
     assert saved["version"] == 1
-    start.stop_all()
     # a new learner process (and plant and shaper) with the same state file resumes: its first
     # cycle runs with the parameters the last update chose, not unshaped
-    again = run_case(CASES["case1"], 2, start, ros_context, state)
+    again = run_case(CASES["case1"], 2, start_node, ros_context, state)
     assert again[0].a1 == pytest.approx(first[-1].a1_next, abs=1e-12)
     assert again[0].t2 == pytest.approx(first[-1].t2_next, abs=1e-12)
     assert again[0].m < first[1].m
@@ -72,13 +78,11 @@ def test_corrupt_save_file_is_reported_and_ignored(start_node, ros_context, tmp_
     assert "not loaded" in logs
 
 
-def test_replaying_the_recorded_bag_gives_the_live_updates(start_node, ros_context, tmp_path):
-    bag = tmp_path / "bag"
-    recorder = start_node("shaper_nodes", "recorder", {
-        "output": str(bag), "use_sim_time": True, "topics": ["/tip_imu", "/cycle_events", "/shaper/active_shaper"]})
-    rows = run_case(CASES["case2"], 5, start_node, ros_context, tmp_path / "state.json", listeners=3)
-    time.sleep(0.5)  # the recorder drains its queue
-    assert recorder.stop() == 0  # finalises the bag
+def test_replaying_the_recorded_bag_gives_the_live_updates(list_case2_recording):
+    """The offline replay of a recorded live run (case 2, five cycles; the session's shared run, tests/conftest.py's
+    ``list_case2_recording``, which test_bag_analysis_over_dds.py plays into a learner) gives the live updates."""
+    bag, rows, recorder_code = list_case2_recording
+    assert recorder_code == 0  # the recorder finalised the bag
     results = replay(bag, LEARNER)
     learned = [r for r in results if r.update is not None]
     assert len(learned) == len(rows)

@@ -230,16 +230,25 @@ def test_a_param_dump_loads_back_with_params_file(case, ros_context, domain_id, 
         ctx.try_shutdown()
 
 
-@pytest.mark.parametrize(("content", "words"), [
+#: --params-file contents that cannot be used, and the words of each one's line
+BAD_PARAMS_FILES = [
     (None, "no such file"),
     ("/**:\n  ros__parameters:\n    joint_names: [a\n", "not valid YAML at line"),
     ("joint_names: [a]\n", "has no 'ros__parameters'"),
     ("- 1\n", "not a params file"),
-])
-@pytest.mark.parametrize("command", ["shaper_node", "scheduler", "identifier", "learner", "recorder", "bag_play",
-                                     "sim_plant", "calibrate"])
+]
+NODE_COMMANDS = ["shaper_node", "scheduler", "identifier", "learner", "recorder", "bag_play", "sim_plant", "calibrate"]
+
+
+@pytest.mark.parametrize(("command", "content", "words"),
+                         [(c, *BAD_PARAMS_FILES[i % len(BAD_PARAMS_FILES)]) for i, c in enumerate(NODE_COMMANDS)],
+                         ids=NODE_COMMANDS)
 def test_a_params_file_that_cannot_be_used_says_why_in_one_line(command, content, words, domain_id, tmp_path):
-    """A missing or unparsable --params-file: one line naming the file and the problem, rc != 0, for every node."""
+    """A missing or unparsable --params-file: one line naming the file and the problem, rc != 0, for every node.
+
+    Every node's main asks the one check (shaper_nodes.ros.node_main.params_file_problem, unit-tested on each kind
+    of bad file) before rcl reads the file: each installed node is started once, with one kind of bad file in turn,
+    so that each kind goes through two nodes' processes (a process per node and kind was 32 starts of Python)."""
     path = tmp_path / "params.yaml"
     if content is not None:
         path.write_text(content)
@@ -369,18 +378,25 @@ NODES = {"shaper_node": shaper, "identifier": identifier, "scheduler": scheduler
 
 
 @pytest.mark.parametrize(("package", "name"), EXECUTABLES, ids=[n for _, n in EXECUTABLES])
-def test_every_executable_answers_help_without_starting(package, name, domain_id, tmp_path):
+def test_every_executable_answers_help_without_starting(package, name, help_texts, domain_id, tmp_path):
+    """``--help`` and ``-h`` print the usage, exit 0 and write nothing. ``--help`` is the session's run
+    (tests/conftest.py's ``help_texts``, from which test_docs.py builds docs/reference/executables.md too)."""
     assert len(EXECUTABLES) >= 13
-    for flag in ("--help", "-h"):
-        done = _run([str(executable(package, name)), flag], tmp_path, domain_id)
-        assert done.returncode == 0, done.stderr
-        assert done.stdout.startswith("usage:"), done.stdout[:200]
-        assert "Traceback" not in done.stderr
-        assert not list(tmp_path.iterdir()), f"{name} {flag} wrote {list(tmp_path.iterdir())}"
-    if name in NODES:  # a node's usage: every parameter, and how to start it
-        for spec in NODES[name].PARAMETERS:
-            assert f"  {spec.name} (" in done.stdout, spec.name
-        assert f"ros2 run {package} {name}" in done.stdout
+    assert name in help_texts, f"{name} is not in scripts/executables_doc.py's list"
+    shown = help_texts[name]
+    done = _run([str(executable(package, name)), "-h"], tmp_path, domain_id)
+    for flag, out, err, code, wrote in (("--help", shown["stdout"], shown["stderr"], shown["returncode"],
+                                         shown["wrote"]),
+                                        ("-h", done.stdout, done.stderr, done.returncode,
+                                         sorted(p.name for p in tmp_path.iterdir()))):
+        assert code == 0, err
+        assert out.startswith("usage:"), out[:200]
+        assert "Traceback" not in err
+        assert not wrote, f"{name} {flag} wrote {wrote}"
+    for out in (shown["stdout"], done.stdout) if name in NODES else ():  # a node's usage: every parameter, and how
+        for spec in NODES[name].PARAMETERS:  # to start it
+            assert f"  {spec.name} (" in out, spec.name
+        assert f"ros2 run {package} {name}" in out
 
 
 def test_help_before_ros_args_only():
