@@ -174,6 +174,17 @@ class MovesMode:
         #: the payback rule (``payback.enabled``; :mod:`.learner_payback`), None: the iterative LIST per move
         self.payback = PaybackMoves(self, group) if group.enabled else None
 
+    async def close_cycle(self, entry: MoveEntry) -> tuple[ListParams | None, bool, int]:
+        """After a move's cycle was learned from: send what its goals run with next if it changed, count the
+        cycle and save the state. Returns what is wanted next, whether the scheduler took it, the move's index."""
+        nxt = self._wanted(entry.key)
+        applied = True
+        if nxt != self.applied.get(entry.key):
+            applied = bool(await self._send(entry, nxt))
+        entry.cycles += 1
+        self.node.save()
+        return nxt, applied, [e.key for e in self.store].index(entry.key)
+
     def _wanted(self, key: str) -> ListParams | None:
         """What the move's goals run with next (None: the schedule alone)."""
         if self.payback is not None:
@@ -384,13 +395,7 @@ class MovesMode:
                                      result.refusal)
         learner = self.learners[key]
         kept = self._keep_when_it_pays(entry, learner, update)
-        nxt = self._wanted(key)
-        applied = True
-        if nxt != self.applied.get(key):
-            applied = bool(await self._send(entry, nxt))
-        entry.cycles += 1
-        self.node.save()
-        index = [e.key for e in self.store].index(key)
+        nxt, applied, index = await self.close_cycle(entry)
         used = update.used or ListParams(math.nan, math.nan)
         after = nxt or ListParams(math.nan, math.nan)
         names = ["move", "M", "phi", "iteration", "a1_used", "t2_used", "a1_next", "t2_next", "applied", "held",

@@ -42,7 +42,7 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -64,9 +64,6 @@ from shaper_nodes.ros.parameters import Spec, param, table
 
 from .move_goals import goal_matches
 from .trajectory_action import TrajectoryActionProxy
-
-if TYPE_CHECKING:
-    from .learner_moves import MovesMode
 
 __all__ = ["PARAMETERS", "RESIDUAL_WINDOW", "CycleCapture", "GoalRecorder", "PaybackGroup", "PaybackMoves",
            "PaybackParams", "Planned", "choose", "factor_of", "phase", "residual_m"]
@@ -236,7 +233,7 @@ def _pair(params: ListParams | None) -> tuple[list[float], list[float]] | None:
 class PaybackMoves:
     """The payback rule inside the per-move LIST mode (:class:`~.learner_moves.MovesMode`; module docstring)."""
 
-    def __init__(self, mode: MovesMode, group: PaybackGroup) -> None:
+    def __init__(self, mode: Any, group: PaybackGroup) -> None:  # a MovesMode: learner_moves imports this module
         if mode.structure != "zv2":
             raise ValueError(f"payback.enabled needs list.structure zv2 (a two-impulse factor), got {mode.structure!r}")
         controller = str(group.controller).strip()
@@ -339,13 +336,7 @@ class PaybackMoves:
                 entry.correction = None
                 mode.held.add(key)
                 note = f"; M not below the schedule's ({base:.4g}): withdrawn, the schedule alone, held"
-        nxt = mode._wanted(key)
-        applied = True
-        if nxt != mode.applied.get(key):
-            applied = bool(await mode._send(entry, nxt))
-        entry.cycles += 1
-        self.node.save()
-        index = [e.key for e in mode.store].index(key)
+        nxt, applied, index = await mode.close_cycle(entry)
         u = used or ListParams(math.nan, math.nan)
         after = nxt or ListParams(math.nan, math.nan)
         pred = (choice.predicted, choice.without, choice.cost_s) if choice is not None else (math.nan,) * 3
