@@ -7,9 +7,9 @@ is at the noise floor, ERROR when a sensor fault leaves it unable to rate. :clas
 subscribes to ``/diagnostics`` and calls its ``on_warning`` coroutine at the first WARN of the status
 it watches (its name is the learner's ``list.drift_status``, ``mrilc_moves.drift_status`` or
 ``speed.drift_status``), not at the WARNs that repeat it; an OK ends the episode, so the next WARN is a
-new one. An ERROR (cannot rate) neither starts nor ends an episode. The flag is saved in the learner's state file at both ends of an episode, so that a
-restarted learner neither acts twice on one episode nor misses the next. Statuses of other names are
-ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus``
+new one. An ERROR (cannot rate) neither starts nor ends an episode. The flag is saved in the learner's
+state file at both ends of an episode, so that a restarted learner neither acts twice on one episode nor
+misses the next. Statuses of other names are ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus``
 level (OK, WARN, ERROR, STALE) is ignored and reported (log and ``/diagnostics``, throttled, kind
 ``drift_status``).
 
