@@ -1,17 +1,16 @@
 """The learner's watch of the drift warning: one status on ``/diagnostics``, acted on once per warning episode.
 
 The identifier's drift watch (:mod:`.identifier`) publishes the status ``identifier: drift`` on
-``/diagnostics`` after every cycle it rates: WARN while the mode stays out of the active shaper's
-working band (``watch.confirm`` cycles in a row and after), OK when it is back inside or the residual
-is at the noise floor, ERROR when a sensor fault leaves it unable to rate. :class:`DriftWarnings`
-subscribes to ``/diagnostics`` and calls its ``on_warning`` coroutine at the first WARN of the status
-it watches (its name is the learner's ``list.drift_status``, ``mrilc_moves.drift_status`` or
-``speed.drift_status``), not at the WARNs that repeat it; an OK ends the episode, so the next WARN is a
-new one. An ERROR (cannot rate) neither starts nor ends an episode. The flag is saved in the learner's
-state file at both ends of an episode, so that a restarted learner neither acts twice on one episode nor
-misses the next. Statuses of other names are ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus``
-level (OK, WARN, ERROR, STALE) is ignored and reported (log and ``/diagnostics``, throttled, kind
-``drift_status``).
+``/diagnostics`` after every cycle it rates: WARN while the mode stays out of the active shaper's working band
+(``watch.confirm`` cycles in a row and after), OK when it is back inside or the residual is at the noise
+floor, ERROR when a sensor fault leaves it unable to rate. :class:`DriftWarnings` subscribes to
+``/diagnostics`` and calls its ``on_warning`` coroutine at the first WARN of the status it watches (its name
+is the learner's ``list.drift_status``, ``mrilc_moves.drift_status`` or ``speed.drift_status``), not at the
+WARNs that repeat it; an OK ends the episode, so the next WARN is a new one. An ERROR (cannot rate) neither
+starts nor ends an episode. The flag is saved in the learner's state file at both ends of an episode, so that
+a restarted learner neither acts twice on one episode nor misses the next. Statuses of other names are
+ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus`` level
+(OK, WARN, ERROR, STALE) is ignored and reported (log and ``/diagnostics``, throttled, kind ``drift_status``).
 
 The per-move modes (LIST per move, MRILC per move, speed per move) share the rest of the glue here: the state
 file's flag (:data:`FLAG`, read back by :func:`saved_flag`) and the log line that names the moves relearned
