@@ -24,7 +24,9 @@ The IMU noise (``--noise``, m/s^2 per axis) is added to what the learner sees an
 noise-free, so the vibration learned away is seen apart from the sensor's noise).
 Rows follow issue 31's schema: case, move, cycle, residual_rms
 (m/s^2), peak_mm, settle_s, move_settle_s (0.05 mm band), speed_factor (1.0), and for the MRILC case
-the largest correction per move (rad, rad/s, rad/s^2) and the learner's action.
+the largest correction per move (rad, rad/s, rad/s^2) and the learner's action. The page (docs/results/
+arm_mrilc.md, arm_mrilc_noise.md with noise) has the goals, a per-cycle table and the residual per cycle
+(img/arm_mrilc_residual[_noise].png); ``--render`` writes it from the rows of an earlier ``--json`` run.
 """
 
 from __future__ import annotations
@@ -69,6 +71,8 @@ SKIP = 0.0
 #: (so the learner's cost is the residual as measured, its servo part included)
 TREND_DEGREE = 0
 CASES = ("scheduled", "scheduled + MRILC per move")
+#: the cycles the per-cycle table shows (and the last one run)
+TABLE_CYCLES = (1, 2, 3, 4, 6, 8, 12, 16, 20)
 
 
 @dataclass
@@ -335,6 +339,50 @@ def summary(rows: list[dict[str, Any]], noise: float = 0.0) -> str:
     return "\n".join(lines)
 
 
+def per_cycle(rows: list[dict[str, Any]]) -> str:
+    """Per move, the MRILC case's residual (noise-free) at the cycles of :data:`TABLE_CYCLES` as a percentage of
+    the schedule's."""
+    sched = {r["move"]: r["residual_rms_noise_free"] for r in rows if r["case"] == CASES[0]}
+    learned = [r for r in rows if r["case"] == CASES[1]]
+    cycles = sorted({r["cycle"] for r in learned})
+    shown = [c for c in cycles if c in TABLE_CYCLES or c == cycles[-1]]
+    lines = ["| move | scheduled m/s^2 | " + " | ".join(f"cycle {c}" for c in shown) + " |",
+             "|---|---|" + "---|" * len(shown)]
+    for name, base in sched.items():
+        by = {r["cycle"]: r["residual_rms_noise_free"] for r in learned if r["move"] == name}
+        lines.append(f"| {name} | {base:.5f} | " + " | ".join(f"{100 * by[c] / base:.1f} %" for c in shown) + " |")
+    return "\n".join(lines)
+
+
+def figure(rows: list[dict[str, Any]], docs: pathlib.Path, tag: str) -> str:
+    """The residual (noise-free) of each move against the cycle, the schedule's dashed; the image's name under
+    ``docs/img``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sched = {r["move"]: r["residual_rms_noise_free"] for r in rows if r["case"] == CASES[0]}
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i, (name, base) in enumerate(sched.items()):
+        mine = [r for r in rows if r["case"] == CASES[1] and r["move"] == name]
+        color = f"C{i}"
+        ax.plot([r["cycle"] for r in mine], [r["residual_rms_noise_free"] for r in mine], marker="o", ms=3,
+                color=color, label=name)
+        ax.axhline(base, color=color, ls="--", lw=0.8)
+    ax.set_xlabel("cycle (dashed: the schedule alone)")
+    ax.set_ylabel("residual RMS, noise-free, m/s^2")
+    ax.set_yscale("log")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    name = f"arm_mrilc_residual{tag}.png"
+    (docs / "img").mkdir(parents=True, exist_ok=True)
+    fig.savefig(docs / "img" / name, dpi=90)
+    plt.close(fig)
+    return name
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m reproductions.arm_mrilc", description=__doc__.split("\n\n")[0])
     p.add_argument("--cycles", type=int, default=20, help="cycles of the MRILC case (default 20)")
@@ -372,7 +420,9 @@ def main(argv: list[str] | None = None) -> int:
             " controller's last changing command, hence its higher scheduled residuals), noise-free (what the arm"
             " does; in brackets as measured with the noise), and its servo and vibration parts (noise-free;"
             " [arm_residual_parts.md](arm_residual_parts.md)).\n\n"
-            + text + "\n")
+            + text + "\n\n## Per cycle\n\nThe residual (noise-free) of the MRILC case as a percentage of the"
+            " schedule's, per move and cycle:\n\n" + per_cycle(rows)
+            + f"\n\n![residual per cycle](img/{figure(rows, args.docs, tag)})\n")
     return 0
 
 
