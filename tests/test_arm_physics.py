@@ -156,3 +156,42 @@ def test_the_factor_over_the_schedule_is_judged_on_the_whole_residual_and_by_the
     # with noise above the arm's own residual no move is judged
     noisy = "\n".join(arm_learning.checks(rows, 0.01))
     assert "no move above the noise floor" in noisy
+
+
+def test_the_noisy_mrilc_summary_judges_only_the_moves_above_the_noise_floor():
+    """The one rule of docs/guide/learning.md: above the floor when the schedule's measured residual exceeds
+    sqrt(3) x the noise by more than twice the scatter of the noise's RMS over one window (0.01777 m/s^2 at 0.01)."""
+    base = {"move_settle_s": 1.0, "speed_factor": 1.0, "max_correction_rad": 1e-4, "max_correction_rad_s": 1e-3,
+            "max_correction_rad_s2": 0.1, "limit_excess": 0.0, "servo_rms": 0.001, "vibration_rms": 0.001}
+    rows = []
+    for move, measured, own, learned in (("quiet", 0.01733, 0.0013, 0.0008), ("loud", 0.01782, 0.0051, 0.0007)):
+        rows.append({**base, "case": arm_mrilc.CASES[0], "move": move, "cycle": 1, "residual_rms": measured,
+                     "residual_rms_noise_free": own})
+        rows.append({**base, "case": arm_mrilc.CASES[1], "move": move, "cycle": 2, "residual_rms": 0.0171,
+                     "residual_rms_noise_free": learned})
+    text = arm_mrilc.summary(rows, 0.01)
+    assert "above 0.01777 m/s^2" in text and "on: loud (" in text and "at the floor: quiet." in text
+    assert "**Goal on every move above the noise floor**" in text and "no move slower): met;" in text
+    rows[-1]["residual_rms_noise_free"] = 0.0014  # 27 % on the move above the floor
+    assert "no move slower): not met (above 25 %: loud 27 %)" in arm_mrilc.summary(rows, 0.01)
+
+
+def test_the_mrilc_page_has_a_per_cycle_table_and_figure_rendered_from_the_rows(tmp_path):
+    """``--render`` of saved rows writes the page with the per-cycle percentages and the residual figure."""
+    import json
+
+    base = {"move_settle_s": 1.0, "speed_factor": 1.0, "max_correction_rad": 1e-4, "max_correction_rad_s": 1e-3,
+            "max_correction_rad_s2": 0.1, "limit_excess": 0.0, "servo_rms": 0.001, "vibration_rms": 0.001,
+            "residual_rms": 0.01}
+    rows = [{**base, "case": arm_mrilc.CASES[0], "move": m, "cycle": 1, "residual_rms_noise_free": 0.01}
+            for m in ("a", "b")]
+    rows += [{**base, "case": arm_mrilc.CASES[1], "move": m, "cycle": c, "residual_rms_noise_free": 0.01 / 2 ** c}
+             for c in range(1, 6) for m in ("a", "b")]
+    saved = tmp_path / "rows.json"
+    saved.write_text(json.dumps(rows))
+    assert arm_mrilc.main(["--render", str(saved), "--cycles", "5", "--docs", str(tmp_path)]) == 0
+    page = (tmp_path / "arm_mrilc.md").read_text()
+    assert "| move | scheduled m/s^2 | cycle 1 | cycle 2 | cycle 3 | cycle 4 | cycle 5 |" in page
+    assert "| a | 0.01000 | 50.0 % | 25.0 % | 12.5 % | 6.2 % | 3.1 % |" in page
+    assert "![residual per cycle](img/arm_mrilc_residual.png)" in page
+    assert (tmp_path / "img" / "arm_mrilc_residual.png").stat().st_size > 1000

@@ -1,17 +1,20 @@
 """The learner's watch of the drift warning: one status on ``/diagnostics``, acted on once per warning episode.
 
 The identifier's drift watch (:mod:`.identifier`) publishes the status ``identifier: drift`` on
-``/diagnostics`` after every cycle it rates: WARN while the mode stays out of the active shaper's
-working band (``watch.confirm`` cycles in a row and after), OK when it is back inside or the residual
-is at the noise floor, ERROR when a sensor fault leaves it unable to rate. :class:`DriftWarnings`
-subscribes to ``/diagnostics`` and calls its ``on_warning`` coroutine at the first WARN of the status
-it watches (its name is the learner's ``list.drift_status``), not at the WARNs that repeat it; an OK
-ends the episode, so the next WARN is a new one. An ERROR (cannot rate) neither starts nor ends an
-episode. The flag is saved in the learner's state file at both ends of an episode, so that a
-restarted learner neither acts twice on one episode nor misses the next. Statuses of other names are
-ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus``
-level (OK, WARN, ERROR, STALE) is ignored and reported (log and ``/diagnostics``, throttled, kind
-``drift_status``).
+``/diagnostics`` after every cycle it rates: WARN while the mode stays out of the active shaper's working band
+(``watch.confirm`` cycles in a row and after), OK when it is back inside or the residual is at the noise
+floor, ERROR when a sensor fault leaves it unable to rate. :class:`DriftWarnings` subscribes to
+``/diagnostics`` and calls its ``on_warning`` coroutine at the first WARN of the status it watches (its name
+is the learner's ``list.drift_status``, ``mrilc_moves.drift_status`` or ``speed.drift_status``), not at the
+WARNs that repeat it; an OK ends the episode, so the next WARN is a new one. An ERROR (cannot rate) neither
+starts nor ends an episode. The flag is saved in the learner's state file at both ends of an episode, so that
+a restarted learner neither acts twice on one episode nor misses the next. Statuses of other names are
+ignored; a status of the watched name with a level that is not a ``diagnostic_msgs/DiagnosticStatus`` level
+(OK, WARN, ERROR, STALE) is ignored and reported (log and ``/diagnostics``, throttled, kind ``drift_status``).
+
+The per-move modes (LIST per move, MRILC per move, speed per move) share the rest of the glue here: the state
+file's flag (:data:`FLAG`, read back by :func:`saved_flag`) and the log line that names the moves relearned
+(:meth:`DriftWarnings.relearn_line`).
 """
 
 from __future__ import annotations
@@ -21,12 +24,24 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 
+from shaper_nodes.core.learning.moves import MoveError
 from shaper_nodes.ros.diagnostics import WARN, Diagnostics
 
 from .learner_base import LearnerBase
 
 #: diagnostic_msgs/DiagnosticStatus levels, as integers
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR, LEVEL_STALE = 0, 1, 2, 3
+#: the state file's key of the episode flag (:attr:`DriftWarnings.warned`)
+FLAG = "drift_warned"
+
+
+def saved_flag(doc: dict[str, Any], error: type[Exception] = MoveError) -> bool:
+    """The episode flag of a saved state document (False when it has none). Raises ``error`` naming a flag that
+    is not true or false."""
+    warned = doc.get(FLAG, False)
+    if not isinstance(warned, bool):
+        raise error(f"{FLAG} must be true or false, got {warned!r}")
+    return warned
 
 
 def level_of(value: Any) -> int | None:
@@ -69,6 +84,13 @@ class DriftWarnings:
             # the node's default group, as the cycle events': an episode's action never interleaves with a
             # cycle event's handling (a coroutine holds its group until it returns)
             node.create_subscription(DiagnosticArray, "/diagnostics", self._on_array, 100)  # type: ignore[arg-type]
+
+    def relearn_line(self, keys: list[str], warning: str, what: str = "", origin: str = "from the current schedule"
+                     ) -> str:
+        """The one log line of a relearn: ``what`` (e.g. "the speed of ") of how many moves, from ``origin``, the
+        moves' keys and the warning's message."""
+        return (f"drift warning ({self.status}): relearning {what}{len(keys)} move{'' if len(keys) == 1 else 's'}"
+                f" {origin}: {', '.join(keys) or 'none yet'} (the warning: {warning})")
 
     async def _on_array(self, msg: DiagnosticArray) -> None:
         for status in msg.status:

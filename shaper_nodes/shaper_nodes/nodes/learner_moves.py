@@ -76,14 +76,14 @@ from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
-from .learner_drift import DriftWarnings
+from .learner_drift import FLAG, DriftWarnings, saved_flag
 from .learner_list import subscribe_imu
 from .learner_payback import PaybackMoves, PaybackParams, factor_of
 from .move_goals import load_moves
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
 HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
-_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", "drift_warned", "saved_at"}
+_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", FLAG, "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move was relearned (drift warning) while this cycle ran"
 
@@ -201,10 +201,7 @@ class MovesMode:
         held = doc.get("at_schedule") or []
         if not isinstance(held, list) or not all(isinstance(k, str) for k in held):
             raise MoveError("at_schedule must be a list of move keys")
-        warned = doc.get("drift_warned", False)
-        if not isinstance(warned, bool):
-            raise MoveError(f"drift_warned must be true or false, got {warned!r}")
-        return store, names, {k for k in held if k in store}, warned
+        return store, names, {k for k in held if k in store}, saved_flag(doc)
 
     def state(self) -> dict[str, Any]:
         for key, learner in self.learners.items():
@@ -212,7 +209,7 @@ class MovesMode:
             if entry is not None:
                 entry.list_state = learner.to_dict()
         return {"structure": self.structure, "per_move": True, "moves": self.store.to_doc(),
-                "joint_names": self.names, "at_schedule": sorted(self.held), "drift_warned": self.drift.warned}
+                "joint_names": self.names, "at_schedule": sorted(self.held), FLAG: self.drift.warned}
 
     def describe(self) -> str:
         if self.payback is not None:
@@ -272,9 +269,7 @@ class MovesMode:
         for cycle in self._cycle_move:  # under way: it ran with the factor withdrawn now
             self._skip.setdefault(cycle, RESET)
         self.node.save()
-        self.node.get_logger().warning(
-            f"drift warning ({self.drift.status}): relearning {len(keys)} move{'' if len(keys) == 1 else 's'} from"
-            f" the current schedule: {', '.join(keys) or 'none yet'} (the warning: {warning})")
+        self.node.get_logger().warning(self.drift.relearn_line(keys, warning))
         for key in keys:
             entry = self.store.get(key)
             if entry is not None and not await self._send(entry, None):

@@ -40,6 +40,15 @@ against them entry by entry; a state that does not fit is reported and the move 
 document is broken (an entry missing, a key that does not match its poses) is reported and set aside, and the
 learner starts afresh (:meth:`~.learner_base.LearnerBase.restore`).
 
+**A drift warning relearns every move** (a payload change: the corrections learned no longer fit the arm). At the
+first WARN of the status ``mrilc_moves.drift_status`` (default the identifier's ``identifier: drift``) on
+``/diagnostics`` (:mod:`.learner_drift`: once per warning episode, an OK ends it), every move's learner is dropped
+with its correction, so each move's next goal runs as the current schedule shaped it (no correction) and its
+learner starts again from zero at that goal (its plan and operator rebuilt from it; a hold ends with it); one line
+on the log and ``/diagnostics`` (``learner: moves``, WARN) names the moves, and the state is saved (atomically,
+with the episode flag ``drift_warned``: a move with no learner is not in it). A cycle whose goal ran with the old
+correction is not learned from.
+
 Reports (``~/reports``): per move's END, the metrics ``move`` (index in the state's order), ``iteration`` (the
 learner's cycle), ``cost`` (weighted RMS of the error, m/s^2), ``action.<learn|fallback|hold>``,
 ``max_correction_rad``, ``max_correction_rad_s``, ``max_correction_rad_s2`` (the correction the cycle ran with) and
@@ -74,10 +83,11 @@ from shaper_nodes.core.learning.mrilc.plan import (
     residual_error,
 )
 from shaper_nodes.ros.conversions import trajectory_arrays, trajectory_msg
-from shaper_nodes.ros.diagnostics import ERROR, OK
+from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
 from shaper_nodes.ros.parameters import Spec, declare, param, table
 
 from .learner_base import LearnerBase
+from .learner_drift import FLAG, DriftWarnings, saved_flag
 from .learner_list import TopicParams, subscribe_imu
 from .move_goals import MATCH as MATCH  # (re-exported: the tolerance of the match, rad)
 from .move_goals import await_match, goal_matches
@@ -86,6 +96,8 @@ from .trajectory_action import TrajectoryActionProxy
 #: most accelerometer samples kept (a bound whatever the cycle events do)
 MAX_SAMPLES = 400_000
 _ENTRY = {"start", "goal", "joint_names", "learner"}
+#: why a cycle whose goal ran with a correction dropped meanwhile is not learned from
+RESET = "every move's correction was dropped (drift warning) after this cycle's goal ran with it"
 
 
 @dataclass(frozen=True)
@@ -123,6 +135,9 @@ class MrilcMovesGroup:
     position_max: tuple[float, ...] = param([2 * math.pi], "Highest joint positions, rad.", read_only=True)
     velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s.", read_only=True)
     acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2.", read_only=True)
+    drift_status: str = param("identifier: drift", "The /diagnostics status whose WARN (a drift warning: a payload"
+                              " change) drops every move's correction and restarts its learner ('' = none).",
+                              read_only=True)
 
 
 @dataclass(frozen=True)
@@ -194,7 +209,8 @@ class MrilcMovesMode:
             if not values or not all(math.isfinite(x) for x in values):
                 raise ValueError(f"mrilc_moves.{name} must be one or more finite numbers, got {values}")
         self.match_timeout = float(v.match_timeout)
-        self.moves: dict[str, _Move] = node.restore(self._build, {"per_move": "mrilc"}) or {}
+        restored = node.restore(self._build, {"per_move": "mrilc"})
+        self.moves, warned = restored if restored is not None else ({}, False)
         self._resumed = len(self.moves)
         self._cycles: dict[int, _Cycle] = {}
         self._last: _Cycle | None = None
@@ -205,10 +221,11 @@ class MrilcMovesMode:
         subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
         self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
                                            self._refused, lambda: None, float(v.action_timeout), self._correct)
+        self.drift = DriftWarnings(node, str(v.drift_status).strip(), self.relearn, warned)
 
     # ----------------------------------------------------------------- state
-    def _build(self, doc: dict[str, Any]) -> dict[str, _Move]:
-        if set(doc) - {"version", "per_move", "moves", "saved_at"} or not isinstance(doc.get("moves"), dict):
+    def _build(self, doc: dict[str, Any]) -> tuple[dict[str, _Move], bool]:
+        if set(doc) - {"version", "per_move", "moves", FLAG, "saved_at"} or not isinstance(doc.get("moves"), dict):
             raise MrilcError(f"per-move MRILC state entries differ: got {sorted(doc)}")
         out = {}
         for key, entry in doc["moves"].items():
@@ -224,7 +241,7 @@ class MrilcMovesMode:
                 raise MrilcError(f"move {key}: joint_names must be a list of names")
             out[key] = _Move(key, [float(x) for x in entry["start"]], [float(x) for x in entry["goal"]], names,
                              saved=entry["learner"])
-        return out
+        return out, saved_flag(doc, MrilcError)
 
     def state(self) -> dict[str, Any]:
         moves = {}
@@ -232,7 +249,21 @@ class MrilcMovesMode:
             learner = m.learner.to_dict() if m.learner is not None else m.saved
             if learner is not None:
                 moves[key] = {"start": m.start, "goal": m.goal, "joint_names": m.names, "learner": learner}
-        return {"per_move": "mrilc", "moves": moves}
+        return {"per_move": "mrilc", "moves": moves, FLAG: self.drift.warned}
+
+    async def relearn(self, warning: str) -> None:
+        """A drift warning: every move's correction dropped, its learner restarted at its next goal (module
+        docstring)."""
+        keys = [k for k, m in self.moves.items() if m.learner is not None or m.saved is not None]
+        for m in self.moves.values():
+            m.learner = m.saved = m.plan = m.times = None
+        for cyc in self._cycles.values():  # under way: its goal ran with the correction dropped now
+            if cyc.applied is not None:
+                cyc.refused = cyc.refused or RESET
+        self.node.save()
+        text = self.drift.relearn_line(keys, warning, "the correction of ", "from the current schedule (none)")
+        self.node.get_logger().warning(text)
+        self.node.diagnostics.publish("moves", WARN, text)
 
     def describe(self) -> str:
         return (f"MRILC per move on {self.imu_topic}, corrections added to the goals of ~/follow_joint_trajectory"
@@ -376,7 +407,7 @@ class MrilcMovesMode:
             return self.node.skipped(msg, (math.nan, stamp), "END without its START")
         move = self.moves[cyc.key]
         lr, plan = move.learner, move.plan
-        if cyc.applied is None or lr is None or plan is None:
+        if cyc.refused or cyc.applied is None or lr is None or plan is None:
             why = cyc.refused or "no goal of the move came through the learner"
             return self.node.skipped(msg, (cyc.start, stamp), why)
         window = (cyc.start + plan.motion_end, cyc.start + float(plan.grid[-1]))

@@ -88,14 +88,14 @@ from shaper_nodes.ros.parameters import Spec, declare, param, table
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
-from .learner_drift import DriftWarnings
+from .learner_drift import FLAG, DriftWarnings, saved_flag
 from .learner_list import TopicParams, subscribe_imu
 from .move_goals import await_match, goal_matches, load_moves
 from .trajectory_action import TrajectoryActionProxy
 
 #: most accelerometer samples kept (a bound whatever the cycle events do)
 MAX_SAMPLES = 400_000
-_DOC_KEYS = {"version", "per_move", "moves", "joint_names", "drift_warned", "saved_at"}
+_DOC_KEYS = {"version", "per_move", "moves", "joint_names", FLAG, "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move's factor was relearned (drift warning) while this cycle ran"
 
@@ -199,14 +199,11 @@ class SpeedMovesMode:
     def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], bool]:
         if set(doc) - _DOC_KEYS or not isinstance(doc.get("moves"), dict):
             raise MoveError(f"per-move speed state entries differ: expected {sorted(_DOC_KEYS)}, got {sorted(doc)}")
-        warned = doc.get("drift_warned", False)
-        if not isinstance(warned, bool):
-            raise MoveError(f"drift_warned must be true or false, got {warned!r}")
-        return (*load_moves(self.node, doc), warned)
+        return (*load_moves(self.node, doc), saved_flag(doc))
 
     def state(self) -> dict[str, Any]:
         return {"per_move": "speed", "moves": self.store.to_doc(), "joint_names": self.names,
-                "drift_warned": self.drift.warned}
+                FLAG: self.drift.warned}
 
     async def relearn(self, warning: str) -> None:
         """A drift warning: every move's factor starts again from 1 (module docstring)."""
@@ -215,9 +212,7 @@ class SpeedMovesMode:
             if cyc.taken:
                 cyc.refused = cyc.refused or RESET
         self.node.save()
-        text = (f"drift warning ({self.drift.status}): relearning the speed of {len(keys)} move"
-                f"{'' if len(keys) == 1 else 's'} from the planned speed (factor 1): {', '.join(keys) or 'none yet'}"
-                f" (the warning: {warning})")
+        text = self.drift.relearn_line(keys, warning, "the speed of ", "from the planned speed (factor 1)")
         self.node.get_logger().warning(text)
         self.node.diagnostics.publish("moves", WARN, text)
 
