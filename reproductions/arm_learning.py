@@ -45,6 +45,10 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
 - ``speedup``: the schedule with a time-scaling factor per move
   (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`),
   raised while the flange settles within 0.05 mm and the joint velocity and torque limits hold;
+- ``scheduled_list_speedup`` (opt-in, :data:`OPTIONAL_CASES`: only with ``--cases``): ``scheduled_list_factor``'s
+  factors per move, then, once every move's LIST stopped, the speed-up over the schedule and the kept factors, in
+  turn as the two learner nodes run; with ``--noise`` judged by the node's accelerometer estimate
+  (:func:`node_speed_estimate`); its page: :mod:`reproductions.arm_speed_list`;
 - ``payload``: the schedule, the payload changed from 2 to 4.5 kg after the third cycle; a drift
   watch per move (:class:`~shaper_nodes.core.identification.drift.DriftWatch`) on the modes
   identified in each move's residual; on its warning the moves are re-learned from the drift's
