@@ -45,6 +45,10 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
 - ``speedup``: the schedule with a time-scaling factor per move
   (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`),
   raised while the flange settles within 0.05 mm and the joint velocity and torque limits hold;
+- ``scheduled_list_speedup`` (opt-in, :data:`OPTIONAL_CASES`: only with ``--cases``): ``scheduled_list_factor``'s
+  factors per move, then, once every move's LIST stopped, the speed-up over the schedule and the kept factors, in
+  turn as the two learner nodes run; with ``--noise`` judged by the node's accelerometer estimate
+  (:func:`node_speed_estimate`); its page: :mod:`reproductions.arm_speed_list`;
 - ``payload``: the schedule, the payload changed from 2 to 4.5 kg after the third cycle; a drift
   watch per move (:class:`~shaper_nodes.core.identification.drift.DriftWatch`) on the modes
   identified in each move's residual; on its warning the moves are re-learned from the drift's
@@ -414,6 +418,101 @@ def _components(run: Run, extra_damped: int = 0) -> list[Any]:
                       extra_damped=extra_damped)
 
 
+class PayingFactors:
+    """LIST's paying factors per move over the schedule, one move's cycle at a time (the rule of
+    ``scheduled_list_factor``, whose docstring says it; rows and notes under ``case``)."""
+
+    def __init__(self, ctx: Context, case: str) -> None:
+        from shaper_nodes.core.learning.moves import MoveStore
+
+        self.ctx, self.case, self.sched, self.store = ctx, case, ctx.schedule(), MoveStore()
+        self.kept: dict[str, tuple[Any, Any] | None] = {}  # the kept factors' product per move
+        self.trial: dict[str, Any] = {}  # the factor the move's next cycle tries (a PaybackChoice)
+        self.budget: dict[str, float] = {}  # the schedule's move + settle time, s: no kept state is slower
+        self.stopped: set[str] = set()
+
+    def shaper(self, mv: Any) -> Any:
+        """The move's shaper without a trial: the schedule at its goal and the factors kept."""
+        base = self.sched(mv.positions[-1])
+        fixed = self.kept.get(self.store.entry(mv.positions[0], mv.positions[-1], origin="schedule")[0].key)
+        return base if fixed is None else _shaper(_times((base.amplitudes, base.times), fixed))
+
+    def step(self, cell: Cell, mv: Any, c: int) -> Row:
+        """Run the move's cycle ``c`` (a reference or a trial) and learn from it; returns its row."""
+        from shaper_nodes.core.learning.list.payback import paying_factor, time_cost
+        from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, keep_when_it_pays
+        from shaper_nodes.core.shaping import Shaper
+
+        ctx, case, kept, trial, budget, stopped = self.ctx, self.case, self.kept, self.trial, self.budget, self.stopped
+        entry, _ = self.store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
+        base = self.sched(mv.positions[-1])
+        fixed = kept.get(entry.key)
+        current = base if fixed is None else _shaper(_times((base.amplitudes, base.times), fixed))
+        choice, decision, used = trial.pop(entry.key, None), "", None
+        if choice is None:  # a reference cycle (or a stopped move): the schedule and the kept factors
+            run = cell.run(mv, current)
+            ms = run.measures.move_and_settle_s
+            action = "stopped" if entry.key in stopped else "reference"
+            if entry.key not in stopped:
+                budget.setdefault(entry.key, ms)
+                keep_when_it_pays(entry, run.measures.residual_rms, False, move_settle_s=budget[entry.key])
+                allowed = TIME_TOLERANCE_S
+
+                def cost(p: Any, mv: Any = mv, base: Any = base, fixed: Any = fixed) -> float:
+                    """The time cost of the kept factors and ``p`` together, against the schedule alone."""
+                    pair = p.shaper()
+                    both = _times(fixed, (pair.amplitudes, pair.times))
+                    assert both is not None
+                    return time_cost(mv.times, mv.positions, mv.velocities, base,
+                                     Shaper(both[0], both[1], "custom"), RATE, JOINT_TOLERANCE, interpolate=True)
+
+                pick = paying_factor(_components(run, SERVO_EXTRA), cost, allowed, band=LIST_BAND)
+                if pick is None:
+                    stopped.add(entry.key)
+                    ctx.note(case, f"{mv.name}, cycle {c}: no factor predicted to pay"
+                                   f" (within {1e3 * allowed:.1f} ms of the schedule's move +"
+                                   " settle):"
+                                   " the schedule" + (" and the factors kept" if fixed else "")
+                                   + " from here on")
+                else:
+                    trial[entry.key] = pick
+                    comp = pick.component
+                    ctx.note(case, f"{mv.name}, cycle {c}: factor on {comp.hz:.2f} Hz,"
+                                   f" zeta {comp.zeta:.3f} ("
+                                   + ("the loop's transient" if comp.zeta >= SERVO_ZETA else
+                                      "a mode that rings") + "): A1 "
+                                   f"{pick.params.a1:.3f}, T2 {1e3 * pick.params.t2:.1f} ms"
+                                   + ("" if pick.full else " (partial: what the time allows)")
+                                   + f"; predicted residual {pick.predicted:.4f} against"
+                                   f" {pick.without:.4f} m/s^2, time cost"
+                                   f" {1e3 * pick.cost_s:+.1f} ms (the factors kept"
+                                   " included, against the schedule)")
+        else:  # a trial: the chosen factor over the schedule and the kept factors
+            used = choice.params
+            pair = used.shaper()
+            run = cell.run(mv, _shaper(_times((current.amplitudes, current.times), (pair.amplitudes, pair.times))))
+            m, ms = run.measures.residual_rms, run.measures.move_and_settle_s
+            decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
+            action = "trial"
+            if decision == "learn":  # paid: kept; the next cycle is the new reference
+                kept[entry.key] = _times(fixed, (pair.amplitudes, pair.times))
+            else:
+                stopped.add(entry.key)
+                b = entry.base or {}
+                ctx.note(case, f"{mv.name}, cycle {c}: the trial did not pay (residual"
+                               f" {m:.4f} m/s^2, move + settle {ms:.3f} s against"
+                               f" {b.get('residual_rms', math.nan):.4f},"
+                               f" {b.get('move_settle_s', math.nan):.3f} s): "
+                               + ("the schedule alone" if fixed is None else
+                                  "the factors kept before it"))
+        f = kept.get(entry.key)
+        entry.correction = None if f is None else (np.asarray(f[0]).tolist(), np.asarray(f[1]).tolist())
+        entry.cycles += 1
+        return row(case, c, run, a1=None if used is None else used.a1,
+                   t2=None if used is None else used.t2, action=action, keep=decision,
+                   factors=0 if f is None else _factor_count(f))
+
+
 @register("scheduled_list_factor")
 def scheduled_list_factor(ctx: Context, cycles: int) -> list[Row]:
     """Per move, factors convolved with the scheduled shaper, each chosen to pay before it is tried and kept only
@@ -425,86 +524,13 @@ def scheduled_list_factor(ctx: Context, cycles: int) -> list[Row]:
     it, and :func:`~shaper_nodes.core.learning.moves.keep_when_it_pays` keeps it only if the measured cycle pays
     (a lower residual than the reference AND a move + settle time no longer than the schedule's). A move stops
     at the first trial that does not pay, or when no factor is predicted to pay."""
-    from shaper_nodes.core.learning.list.payback import paying_factor, time_cost
-    from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveStore, keep_when_it_pays
-    from shaper_nodes.core.shaping import Shaper
     from sim_plant_node.arm.task import cycle_moves
 
-    sched, cell, store, rows = ctx.schedule(), Cell(ctx), MoveStore(), []
-    kept: dict[str, tuple[Any, Any] | None] = {}  # the kept factors' product per move
-    trial: dict[str, Any] = {}  # the factor the move's next cycle tries (a PaybackChoice)
-    budget: dict[str, float] = {}  # the schedule's move + settle time, s: no kept state is slower
-    stopped: set[str] = set()
+    pay = PayingFactors(ctx, "scheduled_list_factor")
+    cell, rows = Cell(ctx), []
     for c in range(1, cycles + 1):
-        for mv in cycle_moves():
-            entry, _ = store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
-            base = sched(mv.positions[-1])
-            fixed = kept.get(entry.key)
-            current = base if fixed is None else _shaper(_times((base.amplitudes, base.times), fixed))
-            choice, decision, used = trial.pop(entry.key, None), "", None
-            if choice is None:  # a reference cycle (or a stopped move): the schedule and the kept factors
-                run = cell.run(mv, current)
-                ms = run.measures.move_and_settle_s
-                action = "stopped" if entry.key in stopped else "reference"
-                if entry.key not in stopped:
-                    budget.setdefault(entry.key, ms)
-                    keep_when_it_pays(entry, run.measures.residual_rms, False, move_settle_s=budget[entry.key])
-                    allowed = TIME_TOLERANCE_S
-
-                    def cost(p: Any, mv: Any = mv, base: Any = base, fixed: Any = fixed) -> float:
-                        """The time cost of the kept factors and ``p`` together, against the schedule alone."""
-                        pair = p.shaper()
-                        both = _times(fixed, (pair.amplitudes, pair.times))
-                        assert both is not None
-                        return time_cost(mv.times, mv.positions, mv.velocities, base,
-                                         Shaper(both[0], both[1], "custom"), RATE, JOINT_TOLERANCE, interpolate=True)
-
-                    pick = paying_factor(_components(run, SERVO_EXTRA), cost, allowed, band=LIST_BAND)
-                    if pick is None:
-                        stopped.add(entry.key)
-                        ctx.note("scheduled_list_factor", f"{mv.name}, cycle {c}: no factor predicted to pay"
-                                                          f" (within {1e3 * allowed:.1f} ms of the schedule's move +"
-                                                          " settle):"
-                                                          " the schedule" + (" and the factors kept" if fixed else "")
-                                                          + " from here on")
-                    else:
-                        trial[entry.key] = pick
-                        comp = pick.component
-                        ctx.note("scheduled_list_factor", f"{mv.name}, cycle {c}: factor on {comp.hz:.2f} Hz,"
-                                                          f" zeta {comp.zeta:.3f} ("
-                                                          + ("the loop's transient" if comp.zeta >= SERVO_ZETA else
-                                                             "a mode that rings") + "): A1 "
-                                                          f"{pick.params.a1:.3f}, T2 {1e3 * pick.params.t2:.1f} ms"
-                                                          + ("" if pick.full else " (partial: what the time allows)")
-                                                          + f"; predicted residual {pick.predicted:.4f} against"
-                                                          f" {pick.without:.4f} m/s^2, time cost"
-                                                          f" {1e3 * pick.cost_s:+.1f} ms (the factors kept"
-                                                          " included, against the schedule)")
-            else:  # a trial: the chosen factor over the schedule and the kept factors
-                used = choice.params
-                pair = used.shaper()
-                run = cell.run(mv, _shaper(_times((current.amplitudes, current.times), (pair.amplitudes, pair.times))))
-                m, ms = run.measures.residual_rms, run.measures.move_and_settle_s
-                decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
-                action = "trial"
-                if decision == "learn":  # paid: kept; the next cycle is the new reference
-                    kept[entry.key] = _times(fixed, (pair.amplitudes, pair.times))
-                else:
-                    stopped.add(entry.key)
-                    b = entry.base or {}
-                    ctx.note("scheduled_list_factor", f"{mv.name}, cycle {c}: the trial did not pay (residual"
-                                                      f" {m:.4f} m/s^2, move + settle {ms:.3f} s against"
-                                                      f" {b.get('residual_rms', math.nan):.4f},"
-                                                      f" {b.get('move_settle_s', math.nan):.3f} s): "
-                                                      + ("the schedule alone" if fixed is None else
-                                                         "the factors kept before it"))
-            f = kept.get(entry.key)
-            entry.correction = None if f is None else (np.asarray(f[0]).tolist(), np.asarray(f[1]).tolist())
-            entry.cycles += 1
-            rows.append(row("scheduled_list_factor", c, run, a1=None if used is None else used.a1,
-                            t2=None if used is None else used.t2, action=action, keep=decision,
-                            factors=0 if f is None else _factor_count(f)))
-    _save(ctx, "scheduled_list_factor", store)
+        rows += [pay.step(cell, mv, c) for mv in cycle_moves()]
+    _save(ctx, "scheduled_list_factor", pay.store)
     return rows
 
 
@@ -781,6 +807,81 @@ def speedup(ctx: Context, cycles: int) -> list[Row]:
             entry.speed_state, entry.cycles = sp.to_dict(), entry.cycles + 1
             rows.append(row("speedup", c, run, factor, violation="; ".join(why)))
     _save(ctx, "speedup", store)
+    return rows
+
+
+#: cases run only when named with ``--cases`` (not in the default list: docs/results/arm_learning.md stays as it was)
+OPTIONAL_CASES = ("scheduled_list_speedup",)
+
+
+def node_speed_estimate(run: Run, shaper: Any, lowest: Any) -> tuple[float, float, float]:
+    """What the learner node's ``speed_moves`` mode judges a move by (nodes/learner_speed.py): the peak of the tool
+    IMU's deviation from its mean from the commanded motion's end (the scaled plan's end plus the shaper's
+    duration) + 0.1 s to 1 s after it, m/s^2; the same converted to the flange at the schedule's lowest mode
+    ``lowest`` (x = a / (2 pi f)^2), mm; and the tolerance 0.05 mm converted there, m/s^2."""
+    from shaper_nodes.core.learning.speed import acceleration_tolerance
+    from shaper_nodes.core.shaping.vibration import residual_vibration
+    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, SERVO_TRANSIENT, SETTLE_TOLERANCE
+
+    end = run.planned_end + float(shaper.times[-1])
+    peak = residual_vibration(run.times, run.imu, end + SERVO_TRANSIENT, end + RESIDUAL_WINDOW, remove_mean=True).peak
+    f = lowest.omega / (2.0 * math.pi)
+    return peak, 1e3 * peak / (2.0 * math.pi * f) ** 2, acceleration_tolerance(SETTLE_TOLERANCE, f)
+
+
+@register("scheduled_list_speedup")
+def scheduled_list_speedup(ctx: Context, cycles: int) -> list[Row]:
+    """Scheduled + LIST per move + speed-up, learned in turn as the learner nodes do it when both run
+    (docs/guide/learning.md, tests/test_learning_speed_list.py): first LIST's paying factors per move over the
+    schedule (:class:`PayingFactors`, the rule of ``scheduled_list_factor``) at the planned speed, the speed
+    learner held; once every move's LIST has stopped (its factors kept, nothing more predicted or measured to
+    pay: LIST held), from the next cycle on each move's time-scaling factor is learned over the schedule and
+    its kept factors (the ``speedup`` case's :class:`~shaper_nodes.core.learning.speed.SpeedLearner`, step
+    0.1, the ceiling from the UR5e's 180 deg/s). A cycle is good when the torque and velocity limits hold and
+    the settled residual is within 0.05 mm: noise-free by the flange's true peak (as ``speedup``); with
+    ``--noise`` by the node's accelerometer estimate (:func:`node_speed_estimate`, the robot's measure).
+    Extra row fields: phase (list, speed), imu_peak and tolerance (m/s^2), estimate_mm, judged_by, violation."""
+    from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings, limit_ceiling
+    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
+    from sim_plant_node.arm.task import cycle_moves
+
+    name = "scheduled_list_speedup"
+    pay = PayingFactors(ctx, name)
+    cell, rows, speeding = Cell(ctx), [], False
+    moves = cycle_moves()
+    for c in range(1, cycles + 1):
+        if not speeding and len(pay.stopped) == len(moves) and not pay.trial:
+            speeding = True
+            ctx.note(name, f"cycle {c}: every move's LIST has stopped: LIST held, the speed-up learns from here on")
+        for mv in moves:
+            if not speeding:
+                rows.append({**pay.step(cell, mv, c), "phase": "list"})
+                continue
+            entry, _ = pay.store.entry(mv.positions[0], mv.positions[-1], origin="schedule")
+            sp = entry.speed()
+            if sp is None:
+                ceiling = limit_ceiling(mv.velocities, mv.accelerations, [UR5E_MAX_VELOCITY] * 6, [np.inf] * 6)
+                sp = SpeedLearner(SpeedSettings(step=0.1, ceiling=ceiling))
+            factor, shaper = sp.factor, pay.shaper(mv)
+            run = cell.run(mv, shaper, factor)
+            lowest = min(pay.sched(mv.positions[-1]).modes, key=lambda m: m.omega)
+            peak, estimate, tol = node_speed_estimate(run, shaper, lowest)
+            judged = "estimate" if ctx.noise > 0 else "flange"
+            why = []
+            if judged == "flange" and run.measures.peak_mm > 1e3 * SETTLE_TOLERANCE:
+                why.append(f"residual {run.measures.peak_mm:.4f} mm > {1e3 * SETTLE_TOLERANCE:g} mm")
+            if judged == "estimate" and peak > tol:
+                why.append(f"IMU peak {peak:.4f} m/s^2 > {tol:.4f} m/s^2 ({estimate:.4f} mm estimated)")
+            if run.torque_ratio > 1.0:
+                why.append(f"torque {100 * run.torque_ratio:.0f} % of the limit")
+            if run.velocity_ratio > 1.0:
+                why.append(f"velocity {100 * run.velocity_ratio:.0f} % of 180 deg/s")
+            sp.update(not why, "; ".join(why))
+            entry.speed_state, entry.cycles = sp.to_dict(), entry.cycles + 1
+            f = pay.kept.get(entry.key)
+            rows.append(row(name, c, run, factor, phase="speed", imu_peak=peak, tolerance=tol, estimate_mm=estimate,
+                            judged_by=judged, violation="; ".join(why), factors=0 if f is None else _factor_count(f)))
+    _save(ctx, name, pay.store)
     return rows
 
 
@@ -1305,7 +1406,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cycles", type=int, default=10, help="cycles per case (default 10)")
     p.add_argument("--noise", type=float, default=0.0, help="IMU noise, m/s^2 per axis (default 0)")
     p.add_argument("--json", type=pathlib.Path, default=None, help="write every row here as JSON")
-    p.add_argument("--cases", default=",".join(CASES), help=f"comma-separated cases (default all: {','.join(CASES)})")
+    default = [c for c in CASES if c not in OPTIONAL_CASES]
+    p.add_argument("--cases", default=",".join(default),
+                   help=f"comma-separated cases (default: {','.join(default)}; also {','.join(OPTIONAL_CASES)})")
     p.add_argument("--no-docs", action="store_true", help="do not write the docs page and figures")
     p.add_argument("--schedule", choices=("calibration", "modal"), default="calibration",
                    help="the schedule: the offline calibration (default, cached in out/arm_learning) or the"

@@ -152,3 +152,45 @@ def test_a_pair_on_the_loops_transient_takes_the_servo_part_and_its_time_cost_is
             assert within["a1"] >= zv["a1"] - 1e-9  # no more of the late impulse than the full pair
     assert found  # the loop's transient is identified on some move
     assert arm_learning.SERVO_EXTRA == EXTRA_DAMPED  # the reproduction identifies as the core recommends
+
+
+def test_the_default_cases_leave_the_opt_in_ones_out():
+    import argparse
+
+    seen = {}
+
+    def parse(self, argv=None, namespace=None):  # the parser's defaults, nothing run
+        seen["cases"] = self.get_default("cases")
+        raise SystemExit(0)
+
+    real = argparse.ArgumentParser.parse_args
+    argparse.ArgumentParser.parse_args = parse  # type: ignore[method-assign]
+    try:
+        with pytest.raises(SystemExit):
+            arm_learning.main([])
+    finally:
+        argparse.ArgumentParser.parse_args = real  # type: ignore[method-assign]
+    default = seen["cases"].split(",")
+    assert "scheduled_list_speedup" in arm_learning.CASES and "scheduled_list_speedup" not in default
+    assert default == [c for c in arm_learning.CASES if c not in arm_learning.OPTIONAL_CASES]
+
+
+def test_list_then_speed_up_in_turn_over_the_schedule(tmp_path):
+    rows = _rows(tmp_path, "scheduled_list_speedup", 5)
+    moves = [mv.name for mv in cycle_moves()]
+    by = {(r["move"], r["cycle"]): r for r in rows}
+    assert all(set(r) >= SCHEMA for r in rows)
+    phases = [{by[(m, c)]["phase"] for m in moves} for c in range(1, 6)]
+    # LIST first, every move at the planned speed; the speed-up from the cycle after every move's LIST stopped
+    switch = next(c for c in range(1, 6) if phases[c - 1] == {"speed"})
+    assert all(p == {"list"} for p in phases[:switch - 1]) and all(p == {"speed"} for p in phases[switch - 1:])
+    for m in moves:
+        assert all(by[(m, c)]["speed_factor"] == 1.0 for c in range(1, switch + 1))
+        assert by[(m, switch - 1)]["action"] in ("reference", "stopped")  # its LIST stopped there (or before)
+        for c in range(switch, 5):  # good cycles (within 0.05 mm, the limits held): one step up each
+            r, nxt = by[(m, c)], by[(m, c + 1)]
+            assert r["violation"] == "" and r["peak_mm"] <= 1e3 * SETTLE_TOLERANCE, r
+            assert nxt["speed_factor"] == pytest.approx(r["speed_factor"] + 0.1)
+            assert nxt["move_settle_s"] < r["move_settle_s"]
+            assert nxt["factors"] == by[(m, switch - 1)]["factors"]  # over the LIST factors kept
+        assert by[(m, 5)]["judged_by"] == "flange"  # noise-free: the true peak

@@ -119,6 +119,10 @@ class ListGroup:
     per_move: bool = param(False, "Learn one LIST factor per move (start and goal of each cycle's START event),"
                            " kept by the scheduler named by 'shaper' and applied over its schedule to that move's"
                            " goals (nodes/learner_moves.py); false: one shaper for the task.", read_only=True)
+    start: str = param("schedule", "With per_move: where a new move's factor starts: 'schedule' (the schedule's"
+                       " lowest mode at its goal, asked of <shaper>/shaper_at) or 'identified' (the mode identified in"
+                       " its reference cycle: LIST per move with no calibration, the scheduler's family 'none').",
+                       choices=("schedule", "identified"), read_only=True)
     drift_status: str = param("identifier: drift", "With per_move: the /diagnostics status whose WARN (a drift"
                               " warning: the plant changed) restarts every move's learning from the current schedule,"
                               " once per warning episode (an OK ends it); '' = not watched.", read_only=True)

@@ -15,8 +15,9 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   :data:`T2_BAND` (+-10 %) of that mode's frequency unless ``list.t2_bounds`` is set
   (:func:`schedule_config`). Its residual window starts after the schedule's shaper there plus the
   factor's longest T2 (unless ``list.window_delay`` is set). Without joint names in the event, or
-  without an answer, the start is the mode identified in the reference cycle, as the task-wide LIST
-  does.
+  without an answer, or with ``list.start: identified`` (LIST per move with no calibration: a scheduler of
+  family ``none`` only carries the factors to the shaper node's proxy; the demo's ``list_moves``), the start
+  is the mode identified in the reference cycle, as the task-wide LIST does.
 - **A factor is kept only when it pays** (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`): the
   reference cycle's M (the schedule alone) is the move's base; a trial that measures more stops the
   move's learning at the best measured: LIST holds at its best factor if one beat the base, otherwise
@@ -282,6 +283,11 @@ class MovesMode:
     async def _learner_for(self, entry: MoveEntry, names: list[str]) -> ListLearner:
         """A new move's learner: from the schedule's lowest mode at the goal (module docstring)."""
         config, initial, why = self.config, None, "no joint names in the cycle event"
+        if str(self.params.value.list.start) == "identified":  # no calibration: nothing to ask
+            entry.origin = "identified"
+            self.node.get_logger().info(f"move {entry.key}: starts from the mode identified in its reference cycle"
+                                        " (list.start identified)")
+            return ListLearner(self.config)
         if names:
             req = ShaperAt.Request(pose=JointState(name=names, position=entry.goal),
                                    start=JointState(name=names, position=entry.start))

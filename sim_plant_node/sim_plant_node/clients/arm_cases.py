@@ -14,7 +14,7 @@ from typing import Any
 from .arm_client import IMU, WAIT, ArmClient
 
 CASES = ("none", "zv", "zvd", "identified", "list", "fixed", "scheduled", "scheduled_list", "scheduled_list_moves",
-         "scheduled_mrilc_moves", "payload", "scheduled_speedup")
+         "scheduled_mrilc_moves", "payload", "scheduled_speedup", "list_moves")
 #: the story ``./run demo`` tells: calibrate, then unshaped, the calibrated fixed shaper, the calibrated schedule
 DEFAULT_CASES = ("none", "fixed", "scheduled")
 #: cases that need a calibration
@@ -24,7 +24,12 @@ CALIBRATED = ("fixed", "scheduled", "scheduled_list", "scheduled_list_moves", "s
 SCHEDULED = ("scheduled", "scheduled_list", "scheduled_list_moves", "scheduled_mrilc_moves", "payload",
              "scheduled_speedup")
 #: cases that mark every move as its own cycle on /cycle_events (the learner per move)
-PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves", "payload", "scheduled_speedup")
+PER_MOVE = ("scheduled_list_moves", "scheduled_mrilc_moves", "payload", "scheduled_speedup", "list_moves")
+#: cases that start a scheduler of their own and the shaper node again on it (they run after the SCHEDULED ones)
+OWN_SCHEDULER = ("list_moves",)
+#: the scheduler of ``list_moves``: family ``none`` (no calibration: no mode shaped), it only carries each move's
+#: learned factor to the shaper node's proxy (``~/set_move_shaper``, ``~/shaper_at``)
+NO_SCHEDULE = "/no_schedule"
 #: cases that learn (their cycles: --list-cycles)
 LEARNING = ("list", "scheduled_list", *PER_MOVE)
 #: s of wall time the calibration may take (a guard against a hang: on a loaded machine, load average 30 and two
@@ -160,6 +165,8 @@ def apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | None
 
         return (f"calibrated fallback: {req.shaper.family} on the home pose's modes "
                 + ", ".join(f"{msg_hz(m):.3f} Hz" for m in req.shaper.design_modes))
+    if case == "list_moves":
+        return _list_moves(session, client)
     if case in SCHEDULED:
         _schedule(session, client)
         if case == "scheduled":
@@ -220,3 +227,37 @@ def _mrilc_moves(session: Session, client: ArmClient) -> str:
     AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
     return ("calibrated schedule with MRILC per move on top (each move's joint profile correction added by the"
             " learner's proxy)")
+
+
+def _list_moves(session: Session, client: ArmClient) -> str:
+    """LIST per move with no calibration (issue 31's "LIST per move alone"): a scheduler of family ``none`` (no mode
+    shaped; its one rule's mode is never used) at :data:`NO_SCHEDULE`, only to keep each move's factor and give it
+    to the shaper node's proxy for that move's goals; the shaper node again on it; the learner's LIST per move with
+    ``list.start: identified``: each move's first cycle is its unshaped reference, its factor starts from the mode
+    identified there, and a factor is kept only when it pays against that reference (a lower residual, a move +
+    settle time no longer than the unshaped one's)."""
+    import math
+
+    from shaper_nodes.ros.lockstep_reader import AckWatch
+
+    from ..arm.description import JOINT_NAMES
+
+    listeners = client.events.get_subscription_count()  # of the cycle events before the learner (the demo: 3)
+    session.shaper.stop()
+    reach = 2.0 * math.pi
+    session.start("shaper_nodes", "scheduler", {
+        "use_sim_time": True, "family": "none", "interpolation": "modes", "premises": [JOINT_NAMES[1]],
+        "range": [-reach, reach], "rule_names": ["any"], "rules.any.membership": ["triangular"],
+        "rules.any.membership_params": [-reach - 1.0, 0.0, reach + 1.0], "rules.any.frequency_hz": [1.0],
+        "rules.any.damping_ratio": [0.05]}, remaps={"__node": NO_SCHEDULE.lstrip("/")})
+    session.shaper = session.start("shaper_nodes", "shaper_node", {**session.shaper_params,
+                                                                    "action.scheduler": NO_SCHEDULE})
+    session.scheduled = False  # (the shaper node follows this scheduler now)
+    client.c.wait_ready(60.0, {})
+    client.wait_ready(listeners)
+    session.start("shaper_nodes", "learner", {"mode": "list", "use_sim_time": True, "list.structure": "zv2",
+                                               "shaper": NO_SCHEDULE, "list.per_move": True,
+                                               "list.start": "identified", "topics.imu_reliable": True})
+    client.wait_listeners(listeners + 1)  # and the learner
+    AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
+    return "LIST (zv2) per move with no calibration: each move from the mode identified in its unshaped first cycle"

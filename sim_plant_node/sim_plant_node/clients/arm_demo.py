@@ -20,6 +20,9 @@ learner's ``mode: mrilc_moves``: the shaper node's proxy sends each shaped goal 
 move's learned joint profile correction and sends it to the controller; opt-in, the same per-move table);
 ``scheduled_speedup``, the schedule with a time-scaling factor learned per move (the learner's ``mode: speed_moves``
 in front of the shaper node's proxy: :mod:`.arm_speed`; opt-in, the same per-move table).
+``list_moves``, LIST per move with no calibration (the learner's ``list.per_move`` with ``list.start: identified``,
+each move from the mode identified in its unshaped first cycle; a scheduler of family ``none`` only carries the
+factors to the shaper node's proxy; opt-in, the same per-move table).
 For every move and case it measures (:mod:`sim_plant_node.arm.metrics`) the residual vibration
 at the tool, the settling time, the move time plus settling time, the shaper's delay and the
 tool-path deviation the shaping causes, and writes them as CSV, Markdown and a PNG plot.
@@ -44,6 +47,7 @@ from .arm_cases import (
     CASES,
     DEFAULT_CASES,
     LEARNING,
+    OWN_SCHEDULER,
     PER_MOVE,
     SCHEDULED,
     Session,
@@ -100,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
 def _cases(args: argparse.Namespace) -> list[str] | None:
     """The cases to run, those with a schedule last (one shaper restart); None after a one-line error."""
     cases = [c.strip() for c in args.cases.split(",")]
-    cases = [c for c in cases if c not in SCHEDULED] + [c for c in cases if c in SCHEDULED]  # one shaper restart
+    own = [c for c in cases if c in OWN_SCHEDULER]  # last: the shaper node follows their scheduler from then on
+    cases = [c for c in cases if c not in SCHEDULED and c not in own] + [c for c in cases if c in SCHEDULED] + own
     unknown = sorted(set(cases) - set(CASES))
     if unknown or "none" not in cases:
         print(f"demo arm: --cases must include none and be among {', '.join(CASES)}; got {args.cases}", file=sys.stderr)
