@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from conftest import SMALL_CALIBRATION_PLANT, SMALL_PLAN, calibrate_config
+from conftest import ONE_WORKER, SMALL_CALIBRATION_PLANT, SMALL_PLAN, calibrate_config
 from control_msgs.action import FollowJointTrajectory
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
@@ -340,7 +340,7 @@ def test_calibrate_paused_gives_the_unpaused_report(start_node, tmp_path, domain
     plant = start_node("sim_plant_node", "sim_plant", SMALL_CALIBRATION_PLANT)
     out = tmp_path / "paused"
     proc = start_node("shaper_nodes", "calibrate", SMALL_PLAN, params_file=calibrate_config(),
-                      args=["--execute", "--out", str(out)])
+                      args=["--execute", "--out", str(out), *ONE_WORKER])
     watch = ClockWatch(domain_id)  # in the middle of the first pose's approach: 0.3 s of simulated time after
     try:  # its recording began
         deadline = time.monotonic() + 300.0
