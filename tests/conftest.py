@@ -121,6 +121,11 @@ SMALL_PLAN = {"grid.joints": ["elbow_joint"], "grid.lower": [1.0], "grid.upper":
               "follow.gains": [-1.0], "excitation.repeats": 2, "excitation.decay": 1.0, "approach.settle": 0.5}
 #: the simulated arm's rate for calibration, Hz
 ARM_RATE = 500.0
+#: calibrate's option to identify the poses in its own process: the result does not depend on the pool
+#: (analysis/calibration.py ``compute``; shaper_nodes/test/test_calibration_faults.py runs both), and its two spawned
+#: workers would each import the identification again (4.5 s of calibrate's CPU on the full grid, side by side);
+#: test_calibrate_stops.py runs the pool (its workers killed with calibrate), as does the walkthrough
+ONE_WORKER = ["--workers", "1"]
 
 
 def arm_parameters(noise: float = 0.01, **extra) -> dict:
@@ -156,7 +161,8 @@ def small_calibration(tmp_path_factory) -> tuple[pathlib.Path, dict]:
                             env=env).start()
         try:
             cal = NodeProcess("shaper_nodes", "calibrate", SMALL_PLAN, params_file=calibrate_config(),
-                              args=["--execute", "--out", str(folder / "cal")], log_path=folder / "calibrate.log",
+                              args=["--execute", "--out", str(folder / "cal"), *ONE_WORKER],
+                              log_path=folder / "calibrate.log",
                               env=env).start()
             try:
                 assert cal.proc is not None

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
-from conftest import ARM_RATE, SMALL_PLAN, arm_parameters, calibrate_config
+from conftest import ARM_RATE, ONE_WORKER, SMALL_PLAN, arm_parameters, calibrate_config
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
@@ -54,7 +54,7 @@ def test_calibration_meets_modal_analysis(start_node, tmp_path, ros_context):
     code on any plan: it is checked on the small plan's uninterrupted run below, 3 poses instead of 9.)"""
     sim(start_node)
     out = tmp_path / "cal"
-    code, log = calibrate(start_node, ["--execute", "--out", str(out)], {"compression": "zstd"})
+    code, log = calibrate(start_node, ["--execute", "--out", str(out), *ONE_WORKER], {"compression": "zstd"})
     assert code == 0, log
     for bag in sorted((out / "recording").glob("pose_*/*.mcap")):  # compression: zstd, as the recorder's
         with open(bag, "rb") as f:
@@ -110,7 +110,7 @@ def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_
     whole, run = small_calibration
     assert run["returncode"] == 0, run["log"]
     again = tmp_path / "again"  # offline, from the recording alone: the same report
-    code, log = calibrate(start_node, ["--from-bag", str(whole / "recording"), "--out", str(again)])
+    code, log = calibrate(start_node, ["--from-bag", str(whole / "recording"), "--out", str(again), *ONE_WORKER])
     assert code == 0, log
     assert (again / "report.json").read_text() == (whole / "report.json").read_text()
     sim(start_node, noise=0.0)
@@ -125,7 +125,7 @@ def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_
     proc.proc.wait()
     kept = {p.name: p.read_bytes() for p in first.iterdir()}
     assert not (cut / "report.json").exists()
-    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(cut)], SMALL)
+    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(cut), *ONE_WORKER], SMALL)
     assert code == 0, log
     assert "resuming" in log
     assert {p.name: p.read_bytes() for p in first.iterdir()} == kept  # what was measured is not lost
@@ -214,6 +214,6 @@ def test_a_controller_killed_mid_goal_ends_calibrate_with_one_line_and_resume_co
     assert len(last) == 1 and ("no feedback from the controller" in last[0] or "left the graph" in last[0]), log
     print(f"calibrate ended {ended:.1f} s after the controller was killed: {last[0]}")
     sim(start_node, noise=0.0)
-    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out)], SMALL)
+    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out), *ONE_WORKER], SMALL)
     assert code == 0, log
     assert "resuming" in log and (out / "report.json").exists()

@@ -28,7 +28,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, JointState
-from test_calibrate import SMALL, calibrate, sim
+from test_calibrate import ONE_WORKER, SMALL, calibrate, sim
 
 from shaper_nodes.nodes.calibrate_stops import EXIT_REFUSED, EXIT_TERMINATED, EXIT_WRITE_FAILED
 from shaper_nodes.ros.conversions import sec_to_time
@@ -179,7 +179,7 @@ def test_a_full_disk_cancels_the_goal_ends_with_one_line_and_resume_completes(ro
         proc.stop()
         peer.close()
     sim(start_node, noise=0.0)
-    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out)], SMALL)
+    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out), *ONE_WORKER], SMALL)
     assert code == 0, log
     assert "resuming" in log and (out / "report.json").exists()
 

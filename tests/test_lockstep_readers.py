@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from conftest import SMALL_CALIBRATION_PLANT, SMALL_PLAN, calibrate_config
+from conftest import ONE_WORKER, SMALL_CALIBRATION_PLANT, SMALL_PLAN, calibrate_config
 from control_msgs.action import FollowJointTrajectory
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
@@ -35,7 +35,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.lockstep_reader import LockstepReader, header_stamp
+from shaper_nodes.ros.lockstep_reader import LockstepReader, header_stamp, subscribe_draining
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.task import HOME
 
@@ -190,21 +190,26 @@ def _pause(pid: int) -> None:
 
 
 class ClockWatch:
-    """The latest /clock on a domain, followed by a node spun in a thread."""
+    """The latest /clock on a domain, followed by a node spun in a thread.
+
+    Only the latest stamp counts: /clock (one message per step, 500 a simulated second) is taken serialized, its
+    stamp read from the bytes, and drained every 20 ms of wall time (``subscribe_draining``) rather than waking the
+    thread at every step; the pause then lands 0.3 s of simulated time after the dot, give or take those 20 ms
+    (a move lasts over 2 s with its rest)."""
 
     def __init__(self, domain_id: int) -> None:
         self.ctx = rclpy.context.Context()
         rclpy.init(context=self.ctx, domain_id=domain_id)
-        self.node = rclpy.create_node("clock_watch", context=self.ctx)
+        self.node = rclpy.create_node("clock_watch", context=self.ctx, start_parameter_services=False)
         self.clock = 0.0
-        self.node.create_subscription(Clock, "/clock", self._on_clock, 100)
+        subscribe_draining(self.node, Clock, "/clock", self._on_clock, 100, poll=0.02)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
 
-    def _on_clock(self, msg: Clock) -> None:
-        self.clock = max(self.clock, time_to_sec(msg.clock))
+    def _on_clock(self, raw: bytes) -> None:
+        self.clock = max(self.clock, header_stamp(raw))
 
     def _spin(self) -> None:
         while self.ctx.ok():
@@ -230,7 +235,7 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
     """``demo --cases none`` into ``out``; after the k-th move's progress dot, once the arm has moved 0.3 s of
     simulated time further (in the middle of the next move: each lasts over 2 s with its rest), the k-th process of
     ``pauses`` ('client': the demo itself, else a node executable's name) is paused for 3 s. Returns its stdout."""
-    watch = ClockWatch(domain_id)
+    watch = ClockWatch(domain_id) if pauses else None  # (the unpaused run waits for no simulated time)
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     proc = subprocess.Popen([sys.executable, "-m", "sim_plant_node.demo", "--cases", "none", "--out", str(out)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=0)
@@ -261,7 +266,7 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
     reader.start()
     try:
         for who in pauses:
-            assert dots.acquire(timeout=300), "".join(chunks)
+            assert watch is not None and dots.acquire(timeout=300), "".join(chunks)
             watch.wait_past(watch.clock + 0.3)
             if who == "client":
                 _pause(proc.pid)
@@ -274,7 +279,8 @@ def _run_demo(out: pathlib.Path, domain_id: int, pauses: list[str]) -> str:
             proc.kill()
         reader.join(10)
         proc.stdout.close()
-        watch.close()
+        if watch is not None:
+            watch.close()
     text = "".join(chunks)
     assert code == 0, text
     return text
@@ -334,7 +340,7 @@ def test_calibrate_paused_gives_the_unpaused_report(start_node, tmp_path, domain
     plant = start_node("sim_plant_node", "sim_plant", SMALL_CALIBRATION_PLANT)
     out = tmp_path / "paused"
     proc = start_node("shaper_nodes", "calibrate", SMALL_PLAN, params_file=calibrate_config(),
-                      args=["--execute", "--out", str(out)])
+                      args=["--execute", "--out", str(out), *ONE_WORKER])
     watch = ClockWatch(domain_id)  # in the middle of the first pose's approach: 0.3 s of simulated time after
     try:  # its recording began
         deadline = time.monotonic() + 300.0
