@@ -153,9 +153,7 @@ def residuals(t: np.ndarray, x0: np.ndarray, x1: np.ndarray, step_times: np.ndar
 
 class _Recorder:
     """What a case's run publishes, as it arrives (times in s of simulated time); the shaped commands only
-    with ``commands`` (the plot of the docs shows them; without, ``Run.v_shaped`` is empty). The joint and tip
-    states are taken serialized, all queued per wake-up, their stamp and first position read (rclpy's executor
-    and conversion per message were most of this driver's CPU)."""
+    with ``commands`` (the plot of the docs shows them; without, ``Run.v_shaped`` is empty)."""
 
     def __init__(self, node: Any, commands: bool = True) -> None:
         from sensor_msgs.msg import JointState
@@ -163,34 +161,29 @@ class _Recorder:
 
         from shaper_msgs.msg import CycleEvent, ModeEstimate
         from shaper_msgs.msg import Shaper as ShaperMsg
-        from shaper_nodes.recordings.cdr import JointStateDecoder
         from shaper_nodes.ros.conversions import time_to_sec
-        from shaper_nodes.ros.lockstep_reader import subscribe_draining
         from shaper_nodes.ros.qos import LATCHED
 
         self._sec = time_to_sec
-        self._js_decoder, self._tip_decoder = JointStateDecoder(), JointStateDecoder()
         self.js: list[tuple[float, float]] = []       # time, x0
         self.tip: list[tuple[float, float]] = []      # time, x1
         self.cmd: list[float] = []                    # shaped commands v_s, in order
         self.modes: list[tuple[float, float, float]] = []  # time, rad/s, -
         self.events: list[tuple[int, int, float]] = []     # kind, cycle, time
         self.active: list[tuple[float, str, str]] = []     # time, source, family
-        subscribe_draining(node, JointState, "/joint_states", self._on_js, 1000, poll=0)
-        subscribe_draining(node, JointState, "/sim_plant/tip_state", self._on_tip, 1000, poll=0)
+        node.create_subscription(JointState, "/joint_states", self._on_js, 1000)
+        node.create_subscription(JointState, "/sim_plant/tip_state", self._on_tip, 1000)
         if commands:
             node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self._on_cmd, 1000)
         node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, LATCHED)
         node.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         node.create_subscription(ShaperMsg, "/shaper/active_shaper", self._on_shaper, LATCHED)
 
-    def _on_js(self, raw: bytes) -> None:
-        t, _, position = self._js_decoder(raw)
-        self.js.append((t, position[0]))
+    def _on_js(self, m: Any) -> None:
+        self.js.append((self._sec(m.header.stamp), m.position[0]))
 
-    def _on_tip(self, raw: bytes) -> None:
-        t, _, position = self._tip_decoder(raw)
-        self.tip.append((t, position[0]))
+    def _on_tip(self, m: Any) -> None:
+        self.tip.append((self._sec(m.header.stamp), m.position[0]))
 
     def _on_cmd(self, m: Any) -> None:
         self.cmd.append(m.data[0])
