@@ -81,17 +81,22 @@ class Iteration:
     a1_next: float
     t2_next: float
     action: str
-    residual_rms: float  # the driver's own measure (CycleMonitor), m/s^2
+    residual_rms: float  # the driver's own measure (CycleMonitor), m/s^2; nan when the driver did not measure
 
 
 def run_case(case: Case, cycles: int, start: StartNode, ctx,
              state_file: pathlib.Path, noise: float = 0.0, progress: Callable[[Iteration], None] | None = None,
-             listeners: int = 2, hold_after: int | None = None) -> list[Iteration]:
+             listeners: int = 2, hold_after: int | None = None, measure: bool = True) -> list[Iteration]:
     """Run ``cycles`` cycles (the first unshaped, unless the learner resumes a saved state) of
     ``case``; ``start(package, executable, params)`` starts a node process; ``listeners``
     subscribers of the accelerometer and events are awaited first (driver and learner, plus a
     recorder if one runs). With ``hold_after``, the learner is told to hold at its best
-    parameters (``~/hold``) after that many cycles. Returns one Iteration per cycle, in order."""
+    parameters (``~/hold``) after that many cycles. Returns one Iteration per cycle, in order.
+
+    ``measure`` False: the driver takes neither the accelerometer nor the joint states (it does not measure
+    ``residual_rms``, nan then; :class:`~reproductions.common.LearnerDriver`) and starts the next cycle once
+    the learner's report is in, for a caller that reads only the learner's reports (every figure of the docs'
+    tables is the learner's)."""
     from std_srvs.srv import SetBool
 
     joint = ["joint_1"]
@@ -103,22 +108,27 @@ def run_case(case: Case, cycles: int, start: StartNode, ctx,
     start("shaper_nodes", "shaper_node", {"joint_names": joint, "command_rate": RATE, "use_sim_time": True})
     start("shaper_nodes", "learner", {"state_file": str(state_file), **LEARNER,
                                       "use_sim_time": True, **case.learner})
-    driver = LearnerDriver(ctx)
+    driver = LearnerDriver(ctx, measure=measure)
     out: list[Iteration] = []
-    try:
+    try:  # (a driver that does not measure is no accelerometer subscriber; it follows the events all the same)
         driver.wait_ready({"/shaper/commands": 1, "/forward_position_controller/commands": 1,
-                           "/tip_imu": listeners, "/cycle_events": listeners}, "the learner's first shaper")
+                           "/tip_imu": listeners - (0 if measure else 1), "/cycle_events": listeners},
+                          "the learner's first shaper")
         hold = driver.conductor.create_client(SetBool, "/learner/hold")
         for k in range(cycles):
             if k == hold_after:
                 answer = driver.conductor.call(hold, SetBool.Request(data=True), timeout=30.0)
                 if not answer.success:
                     raise RuntimeError(f"the learner did not hold: {answer.message}")
-            result, r = driver.cycle(k)
+            if measure:
+                result, r = driver.cycle(k)
+                residual = result.residual.rms
+            else:
+                r, residual = driver.report_of_cycle(k), math.nan
             skipped = "skipped" in r.metric_names
             it = Iteration(k, skipped, metric(r, "M"), metric(r, "phi"), metric(r, "a1_used"),
                            metric(r, "t2_used"), metric(r, "a1_next"), metric(r, "t2_next"), action(r),
-                           result.residual.rms)
+                           residual)
             out.append(it)
             if progress:
                 progress(it)

@@ -22,6 +22,8 @@ from shaper_nodes.analysis.replay import replay
 
 pytestmark = pytest.mark.integration
 CYCLES = 11  # cycle 0 unshaped (reference), cycles 1..10 learning
+# every run here reads only the learner's reports (run_case's measure=False: the driver takes no accelerometer or joint
+# state sample; the shared runs of tests/conftest.py too, but for the recorded one)
 
 
 def shaped(rows):
@@ -34,7 +36,7 @@ def test_list_reduces_residual_vibration_tenfold(name, request, tmp_path):
         _, rows = request.getfixturevalue("list_case1_run")
     else:
         rows = run_case(CASES[name], CYCLES, request.getfixturevalue("start_node"),
-                        request.getfixturevalue("ros_context"), tmp_path / "state.json")
+                        request.getfixturevalue("ros_context"), tmp_path / "state.json", measure=False)
     assert not any(r.skipped for r in rows), rows
     assert math.isnan(rows[0].a1)  # the reference cycle ran unshaped
     m1, m10 = rows[1].m, rows[10].m
@@ -44,7 +46,8 @@ def test_list_reduces_residual_vibration_tenfold(name, request, tmp_path):
 def test_list_with_saturation_never_ends_above_its_best(start_node, ros_context, tmp_path):
     # ten learning cycles, then the learner is told to hold (~/hold): the last cycle runs with the
     # best parameters found, whatever the last trial was
-    rows = run_case(CASES["case4"], CYCLES + 1, start_node, ros_context, tmp_path / "state.json", hold_after=CYCLES)
+    rows = run_case(CASES["case4"], CYCLES + 1, start_node, ros_context, tmp_path / "state.json", hold_after=CYCLES,
+                    measure=False)
     ms = [r.m for r in shaped(rows)]
     assert len(ms) >= CYCLES - 1, rows
     assert rows[-1].action == "hold"
@@ -62,7 +65,7 @@ def test_restart_resumes_from_the_saved_shaper(list_case1_run, start_node, ros_c
     assert saved["version"] == 1
     # a new learner process (and plant and shaper) with the same state file resumes: its first
     # cycle runs with the parameters the last update chose, not unshaped
-    again = run_case(CASES["case1"], 2, start_node, ros_context, state)
+    again = run_case(CASES["case1"], 2, start_node, ros_context, state, measure=False)
     assert again[0].a1 == pytest.approx(first[-1].a1_next, abs=1e-12)
     assert again[0].t2 == pytest.approx(first[-1].t2_next, abs=1e-12)
     assert again[0].m < first[1].m
@@ -71,7 +74,7 @@ def test_restart_resumes_from_the_saved_shaper(list_case1_run, start_node, ros_c
 def test_corrupt_save_file_is_reported_and_ignored(start_node, ros_context, tmp_path):
     state = tmp_path / "state.json"
     state.write_text('{"version": 1, "structure": "zv2", "learner": {"params": [0.5')
-    rows = run_case(CASES["case1"], 2, start_node, ros_context, state)
+    rows = run_case(CASES["case1"], 2, start_node, ros_context, state, measure=False)
     assert math.isnan(rows[0].a1)  # started afresh: reference cycle first
     assert (tmp_path / "state.json.corrupt").exists()
     logs = "".join(p.read_text() for p in tmp_path.glob("learner-*.log"))

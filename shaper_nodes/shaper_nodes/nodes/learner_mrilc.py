@@ -35,6 +35,7 @@ Bounded memory and implausible samples: see :class:`~shaper_nodes.core.learning.
 
 from __future__ import annotations
 
+import struct
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,9 @@ from shaper_nodes.core.learning.mrilc import (
     model_from_params,
 )
 from shaper_nodes.core.shaping import ShaperError, design
-from shaper_nodes.ros.conversions import shaper_to_msg, time_to_sec
+from shaper_nodes.recordings.cdr import JointStateDecoder, joint_state_efforts, little_endian
+from shaper_nodes.ros.conversions import shaper_to_msg
+from shaper_nodes.ros.lockstep_reader import subscribe_draining
 from shaper_nodes.ros.parameters import Spec, declare_all, values
 from shaper_nodes.ros.shaper_client import ServiceClient
 
@@ -93,11 +96,15 @@ class MrilcMode:
         self.session: MrilcSession | None = node.restore(self._session_from, {"mode": "mrilc"})
         if self.session is None and self.joint_names:
             self.session = self._new_session(len(self.joint_names))
+        # both streams taken serialized, every queued message per wake-up (poll 0: in this group, woken by the
+        # messages): the plant publishes a block of samples at a time, and rclpy's executor per message and the
+        # conversion to a JointState object were most of the learner's CPU in a run (docs/results/testing.md)
         inputs = MutuallyExclusiveCallbackGroup()
-        node.create_subscription(JointState, settings.topics["joint_states"], self._on_joint_state, 1000,
-                                 callback_group=inputs)
-        node.create_subscription(JointState, settings.topics["reference"], self._on_reference, 1000,
-                                 callback_group=inputs)
+        self._decoders = {"joint_states": JointStateDecoder(), "reference": JointStateDecoder()}
+        subscribe_draining(node, JointState, settings.topics["joint_states"], self._on_joint_state, 1000, poll=0,
+                           callback_group=inputs)
+        subscribe_draining(node, JointState, settings.topics["reference"], self._on_reference, 1000, poll=0,
+                           callback_group=inputs)
         self.feedforward = ServiceClient(node, SetFeedforward, f"{settings.injection_target.rstrip('/')}"
                                          "/set_feedforward", node.service_timeout, node.diagnostics)
 
@@ -174,32 +181,43 @@ class MrilcMode:
         return bool(answer.response.success), str(answer.response.message), answer.response
 
     # ------------------------------------------------------------------ inputs
-    def _select(self, msg: JointState, field: str) -> list[float] | None:
-        vals = getattr(msg, field)
-        if len(vals) != len(msg.name):
-            return None
-        index = {n: i for i, n in enumerate(msg.name)}
+    def _decode(self, raw: bytes, stream: str, efforts: bool) -> tuple[float, list[float], list[float] | None] | None:
+        """(stamp, positions, efforts or None) of a serialized JointState in the configured joint order; None (and
+        a throttled error) for bytes that are not one, a message whose positions do not match its names, or one
+        that lacks a configured joint. Efforts (only with ``efforts``) are None unless one per name."""
+        decoder = self._decoders[stream]
         try:
-            return [vals[index[n]] for n in self.joint_names]
+            if not little_endian(raw):
+                raise ValueError("not little-endian CDR")
+            t, names, pos = decoder(raw)
+            eff = joint_state_efforts(raw, decoder.positions_end) if efforts else ()
+        except (ValueError, struct.error) as err:  # (UnicodeDecodeError is a ValueError)
+            self.node.get_logger().error(f"{stream}: a message dropped: {err}", throttle_duration_sec=5.0)
+            return None
+        if len(pos) != len(names):
+            return None
+        index = {n: i for i, n in enumerate(names)}
+        try:
+            order = [index[n] for n in self.joint_names]
         except KeyError:
             self.node.get_logger().error(f"joint states lack joints {sorted(set(self.joint_names) - set(index))}",
                                          throttle_duration_sec=5.0)
             return None
+        return t, [pos[i] for i in order], [eff[i] for i in order] if len(eff) == len(names) else None
 
-    def _on_joint_state(self, msg: JointState) -> None:
+    def _on_joint_state(self, raw: bytes) -> None:
         if self.session is None:
             return
-        pos = self._select(msg, "position")
-        if pos is not None:
-            self.node.notice(self.session.on_joint_state(time_to_sec(msg.header.stamp), pos,
-                                                         self._select(msg, "effort")))
+        got = self._decode(raw, "joint_states", True)
+        if got is not None:
+            self.node.notice(self.session.on_joint_state(*got))
 
-    def _on_reference(self, msg: JointState) -> None:
+    def _on_reference(self, raw: bytes) -> None:
         if self.session is None:
             return
-        pos = self._select(msg, "position")
-        if pos is not None:
-            self.node.notice(self.session.on_reference(time_to_sec(msg.header.stamp), pos))
+        got = self._decode(raw, "reference", False)
+        if got is not None:
+            self.node.notice(self.session.on_reference(got[0], got[1]))
 
     async def hold(self, on: bool) -> tuple[bool, str]:
         if self.session is None:

@@ -33,7 +33,10 @@ from shaper_msgs.msg import CycleEvent
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper
 from shaper_nodes.core.cycles import CycleResult, StampedCycleMonitor
+from shaper_nodes.recordings.cdr_arrays import CdrError
+from shaper_nodes.recordings.cdr_sensors import JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import mode_msg, time_to_sec
+from shaper_nodes.ros.lockstep_reader import subscribe_draining
 
 from ..models.plants import mck_from_mode
 from ..node.parameters import WAITING
@@ -97,11 +100,15 @@ class Conductor(Node):
         # machine drops samples here and the measured residual depends on the load
         imu_qos = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
         # measure False: no accelerometer or joint state subscription (a driver that does not use the residuals
-        # this conductor measures: they were most of its CPU, a message taken per sample); run_cycles needs them
+        # this conductor measures: they were most of its CPU, a message taken per sample); run_cycles needs them.
+        # Both are taken serialized, every queued message per wake-up (poll 0: woken by the messages, in the
+        # node's default group as before), and only the stamp and the values the monitor uses are read: the same
+        # floats as the message objects', without rclpy's executor turn and conversion per sample
         self.measure = measure
         if measure:
-            self.create_subscription(Imu, imu_topic, self._on_imu, imu_qos)
-            self.create_subscription(JointState, "/joint_states", self._on_js, 100)
+            self._js_reader = JointStateReader()
+            subscribe_draining(self, Imu, imu_topic, self._on_imu, imu_qos, poll=0)
+            subscribe_draining(self, JointState, "/joint_states", self._on_js, 100, poll=0)
         self.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         self.set_shaper_cli = self.create_client(SetShaper, f"{shaper}/set_shaper")
         self.plant_params_cli = self.create_client(SetParameters, f"{plant}/set_parameters")
@@ -110,13 +117,22 @@ class Conductor(Node):
         self.executor_.add_node(self)
 
     # ----------------------------------------------------------------- data
-    def _on_imu(self, msg: Imu) -> None:
-        a = msg.linear_acceleration
-        self.monitor.add_accel(time_to_sec(msg.header.stamp), (a.x, a.y, a.z))
+    def _on_imu(self, raw: bytes) -> None:
+        try:
+            t, accel = decode_imu(raw)
+        except CdrError as err:  # (not from a typed publisher) dropped: a lost sample
+            self.get_logger().error(f"accelerometer: a message dropped: {err}", throttle_duration_sec=5.0)
+            return
+        self.monitor.add_accel(t, accel)
         self.results.extend(self.monitor.poll())
 
-    def _on_js(self, msg: JointState) -> None:
-        self.monitor.add_positions(time_to_sec(msg.header.stamp), msg.position)
+    def _on_js(self, raw: bytes) -> None:
+        try:
+            t, _, positions = self._js_reader(raw)
+        except CdrError as err:
+            self.get_logger().error(f"joint states: a message dropped: {err}", throttle_duration_sec=5.0)
+            return
+        self.monitor.add_positions(t, positions)
         self.results.extend(self.monitor.poll())
 
     def _on_event(self, msg: CycleEvent) -> None:
