@@ -86,7 +86,8 @@ class Iteration:
 
 def run_case(case: Case, cycles: int, start: StartNode, ctx,
              state_file: pathlib.Path, noise: float = 0.0, progress: Callable[[Iteration], None] | None = None,
-             listeners: int = 2, hold_after: int | None = None, measure: bool = True) -> list[Iteration]:
+             listeners: int = 2, hold_after: int | None = None, measure: bool = True,
+             readers: tuple[str, ...] = ("/learner",)) -> list[Iteration]:
     """Run ``cycles`` cycles (the first unshaped, unless the learner resumes a saved state) of
     ``case``; ``start(package, executable, params)`` starts a node process; ``listeners``
     subscribers of the accelerometer and events are awaited first (driver and learner, plus a
@@ -96,7 +97,11 @@ def run_case(case: Case, cycles: int, start: StartNode, ctx,
     ``measure`` False: the driver takes neither the accelerometer nor the joint states (it does not measure
     ``residual_rms``, nan then; :class:`~reproductions.common.LearnerDriver`) and starts the next cycle once
     the learner's report is in, for a caller that reads only the learner's reports (every figure of the docs'
-    tables is the learner's)."""
+    tables is the learner's).
+
+    The plant waits for ``readers`` in lockstep (``lockstep.readers``; its per-step streams reliable and deep,
+    the learner's accelerometer reliable): a reader starved by a loaded machine holds the plant instead of losing
+    samples, so no cycle is skipped for want of them (pacing changes no number: the run is in simulated time)."""
     from std_srvs.srv import SetBool
 
     joint = ["joint_1"]
@@ -104,9 +109,9 @@ def run_case(case: Case, cycles: int, start: StartNode, ctx,
         "joint_names": joint, "rate": RATE, "mode": "lockstep", "lockstep.block": lockstep_block(RATE),
         "lockstep_timeout": LOCKSTEP_TIMEOUT,
         "imu.axes": [0, -1, -1],
-        "imu.noise_stddev": noise, **PLANT, **TASK, **case.plant})
+        "imu.noise_stddev": noise, "lockstep.readers": list(readers), **PLANT, **TASK, **case.plant})
     start("shaper_nodes", "shaper_node", {"joint_names": joint, "command_rate": RATE, "use_sim_time": True})
-    start("shaper_nodes", "learner", {"state_file": str(state_file), **LEARNER,
+    start("shaper_nodes", "learner", {"state_file": str(state_file), **LEARNER, "topics.imu_reliable": True,
                                       "use_sim_time": True, **case.learner})
     driver = LearnerDriver(ctx, measure=measure)
     out: list[Iteration] = []

@@ -208,10 +208,10 @@ def list_run(folder: pathlib.Path, case: str, cycles: int, recorded: list[str] |
         if recorded:
             recorder = start("shaper_nodes", "recorder", {"output": str(folder / "bag"), "use_sim_time": True,
                                                           "topics": recorded})
-        # the tests read only the learner's reports: the driver measures (takes every sample) only beside a recorder,
-        # which is no lockstep reader and keeps the pace it had
+        # the tests read only the learner's reports: the driver measures (takes every sample) only beside a recorder;
+        # the plant waits for the learner and the recorder (lockstep readers: nothing lost on a loaded machine)
         rows = run_case(CASES[case], cycles, start, ctx, folder / "state.json", listeners=3 if recorded else 2,
-                        measure=bool(recorded))
+                        measure=bool(recorded), readers=("/learner", "/recorder") if recorded else ("/learner",))
         if recorder is not None:
             time.sleep(0.5)  # the recorder drains its queue
             code = recorder.stop()  # finalises the bag
