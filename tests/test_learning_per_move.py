@@ -276,9 +276,13 @@ def test_the_scheduler_applies_a_moves_factor_to_that_move_only(ros_context):
                 (SetMoveShaper.Request(start=pose(start), goal=pose([1.5, float("nan")]),
                                        shaper=shaper_to_msg(factor, "learner", 0)), "non-empty and finite"),
                 (SetMoveShaper.Request(start=pose(start), goal=pose([0.2, 0.2]),
-                                       shaper=ShaperMsg(family="custom", amplitudes=[0.25, 0.5, 0.25],
-                                                        times=[0.0, 0.05, 0.1], source="learner")),
-                 "two-impulse factor, got 3")):
+                                       shaper=ShaperMsg(family="custom", amplitudes=[1.0 / 17] * 17,
+                                                        times=[0.01 * k for k in range(17)], source="learner")),
+                 "2 to 16 impulses, got 17"),
+                (SetMoveShaper.Request(start=pose(start), goal=pose([0.2, 0.2]),
+                                       shaper=ShaperMsg(family="custom", amplitudes=[0.5, 0.5], times=[0.0, 1.5],
+                                                        source="learner")),
+                 "at most 1 s long, got 1.5 s")):
             resp = call(set_move, req)
             assert not resp.success and words in resp.message, (words, resp.message)
         assert len(scheduler.moves.moves) == 1

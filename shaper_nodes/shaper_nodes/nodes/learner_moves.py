@@ -49,7 +49,9 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
 - **Each factor chosen to pay** (``payback.enabled``, :mod:`.learner_payback`): instead of the iterative LIST
   learner, each move's factor is picked after its reference cycle from the components of its residual and the
   time cost predicted from its goal (recorded by the learner's own ``~/follow_joint_trajectory``, in front of the
-  shaper node's), tried once and kept only if it pays: the rule of the reproduction's ``scheduled_list_factor``.
+  shaper node's), tried once and kept only if it pays: the rule of the reproduction's ``scheduled_list_factor``;
+  with ``payback.max_factors`` > 1 the move takes a new reference with its kept factors and may stack the next one
+  (sent convolved, one impulse sequence).
 
 Reports (``~/reports``): one per cycle as in the task-wide mode, the metric ``move`` being the
 move's index in the state file's order (stable across restarts).
@@ -69,6 +71,8 @@ from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetMoveShaper, ShaperAt
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession
+from shaper_nodes.core.learning.list.stack import Wanted, stack_shaper
+from shaper_nodes.core.learning.list.stack import factors_of as _factors
 from shaper_nodes.core.learning.moves import MoveEntry, MoveError, MoveStore, keep_when_it_pays
 from shaper_nodes.core.shaping import Mode, ShaperError, none_shaper
 from shaper_nodes.ros.conversions import mode_from_msg, shaper_to_msg
@@ -79,12 +83,12 @@ from shaper_nodes.ros.shaper_client import ServiceClient
 from .learner_base import LearnerBase
 from .learner_drift import FLAG, DriftWarnings, saved_flag
 from .learner_list import subscribe_imu
-from .learner_payback import PaybackMoves, PaybackParams, factor_of
+from .learner_payback import PaybackMoves, PaybackParams
 from .move_goals import load_moves
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
 HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
-_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", FLAG, "saved_at"}
+_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", FLAG, "stacks", "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move was relearned (drift warning) while this cycle ran"
 
@@ -130,8 +134,9 @@ def _sent(learner: ListLearner) -> ListParams | None:
     return learner.params if learner.reference is not None else None
 
 
-def _describe(params: ListParams | None) -> str:
-    return "schedule alone" if params is None else f"factor A1 {params.a1:.5f}, T2 {params.t2:.5f} s"
+def _describe(params: Wanted) -> str:
+    return "schedule alone" if params is None else "; ".join(f"factor A1 {p.a1:.5f}, T2 {p.t2:.5f} s"
+                                                             for p in _factors(params))
 
 
 class MovesMode:
@@ -143,6 +148,7 @@ class MovesMode:
         v = self.params.value
         self.structure = self.config.structure
         self.user_delay = float(v.list.window_delay) > 0.0
+        self.saved_stacks: Any = None  # the payback rule's stacked factors per move, as saved ("stacks")
         restored = node.restore(self._build, {"structure": self.structure, "per_move": True})
         #: the moves, their joint names, and those held at the schedule alone (no factor measured better)
         self.store, self.names, self.held, warned = restored if restored is not None else (MoveStore(), {}, set(),
@@ -154,7 +160,7 @@ class MovesMode:
             if learner is not None:
                 self.learners[entry.key] = learner
         #: per move, the factor the scheduler acknowledged (absent: not acknowledged since start)
-        self.applied: dict[str, ListParams | None] = {}
+        self.applied: dict[str, Wanted] = {}
         #: the moves whose withdrawal after a relearn the scheduler did not acknowledge (sent again at START)
         self.unreset: set[str] = set()
         self.session = ListSession(ListLearner(self.config), self.structure, float(node.params.value.stale_after),
@@ -175,7 +181,7 @@ class MovesMode:
         #: the payback rule (``payback.enabled``; :mod:`.learner_payback`), None: the iterative LIST per move
         self.payback = PaybackMoves(self, group) if group.enabled else None
 
-    async def close_cycle(self, entry: MoveEntry) -> tuple[ListParams | None, bool, int]:
+    async def close_cycle(self, entry: MoveEntry) -> tuple[Wanted, bool, int]:
         """After a move's cycle was learned from: send what its goals run with next if it changed, count the
         cycle and save the state. Returns what is wanted next, whether the scheduler took it, the move's index."""
         nxt = self._wanted(entry.key)
@@ -186,11 +192,10 @@ class MovesMode:
         self.node.save()
         return nxt, applied, [e.key for e in self.store].index(entry.key)
 
-    def _wanted(self, key: str) -> ListParams | None:
+    def _wanted(self, key: str) -> Wanted:
         """What the move's goals run with next (None: the schedule alone)."""
         if self.payback is not None:
-            entry = self.store.get(key)
-            return None if entry is None or key in self.held else factor_of(entry)
+            return None if key not in self.store or key in self.held else self.payback.wanted(key)
         learner = self.learners.get(key)
         return None if learner is None or key in self.held else _sent(learner)
 
@@ -202,6 +207,7 @@ class MovesMode:
         held = doc.get("at_schedule") or []
         if not isinstance(held, list) or not all(isinstance(k, str) for k in held):
             raise MoveError("at_schedule must be a list of move keys")
+        self.saved_stacks = doc.get("stacks")
         return store, names, {k for k in held if k in store}, saved_flag(doc)
 
     def state(self) -> dict[str, Any]:
@@ -209,8 +215,11 @@ class MovesMode:
             entry = self.store.get(key)
             if entry is not None:
                 entry.list_state = learner.to_dict()
-        return {"structure": self.structure, "per_move": True, "moves": self.store.to_doc(),
-                "joint_names": self.names, "at_schedule": sorted(self.held), FLAG: self.drift.warned}
+        doc = {"structure": self.structure, "per_move": True, "moves": self.store.to_doc(),
+               "joint_names": self.names, "at_schedule": sorted(self.held), FLAG: self.drift.warned}
+        if self.payback is not None:
+            doc["stacks"] = self.payback.stacks_doc()
+        return doc
 
     def describe(self) -> str:
         if self.payback is not None:
@@ -240,11 +249,12 @@ class MovesMode:
             self.node.diagnostics.publish("moves", OK, text, moves)
         return answered
 
-    async def _send(self, entry: MoveEntry, params: ListParams | None) -> bool | None:
-        """The move's factor to the scheduler; True if acknowledged, False if refused, None if unanswered."""
+    async def _send(self, entry: MoveEntry, params: Wanted) -> bool | None:
+        """The move's factor(s) to the scheduler; True if acknowledged, False if refused, None if unanswered."""
         names = self.names.get(entry.key, [])
-        msg = ShaperMsg(family="none", source=self.node.shaper.source) if params is None else \
-            shaper_to_msg(params.shaper(self.structure), self.node.shaper.source, 0)
+        sh = stack_shaper(_factors(params), self.structure)
+        msg = ShaperMsg(family="none", source=self.node.shaper.source) if sh is None else \
+            shaper_to_msg(sh, self.node.shaper.source, 0)
         req = SetMoveShaper.Request(start=JointState(name=names, position=entry.start),
                                     goal=JointState(name=names, position=entry.goal), shaper=msg)
         answer = await self.set_move.call(req)
@@ -258,7 +268,6 @@ class MovesMode:
         self.applied[entry.key] = params
         if params is None:
             self.unreset.discard(entry.key)
-        sh = None if params is None else params.shaper(self.structure)
         entry.correction = None if sh is None else (sh.amplitudes.tolist(), sh.times.tolist())
         return True
 
@@ -267,6 +276,8 @@ class MovesMode:
         keys = self.store.relearn("schedule")
         self.learners.clear()
         self.held.clear()
+        if self.payback is not None:
+            self.payback.stacks.clear()
         for cycle in self._cycle_move:  # under way: it ran with the factor withdrawn now
             self._skip.setdefault(cycle, RESET)
         self.node.save()
@@ -383,7 +394,7 @@ class MovesMode:
             self._skip[cycle] = HELD  # not learned from either way
         if cycle in self._skip:
             return
-        self.session.switch(learner, wanted)
+        self.session.switch(learner, (*_factors(wanted), None)[0])  # (the iterative LIST: one factor at most)
         self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
 
     async def _on_end(self, msg: CycleEvent, key: str, result: Any) -> CycleReport:
@@ -398,7 +409,7 @@ class MovesMode:
         kept = self._keep_when_it_pays(entry, learner, update)
         nxt, applied, index = await self.close_cycle(entry)
         used = update.used or ListParams(math.nan, math.nan)
-        after = nxt or ListParams(math.nan, math.nan)
+        after = (*_factors(nxt), ListParams(math.nan, math.nan))[0]
         names = ["move", "M", "phi", "iteration", "a1_used", "t2_used", "a1_next", "t2_next", "applied", "held",
                  f"action.{update.action}", f"parameter.{update.parameter}"]
         values = [float(index), update.m, update.phi, float(update.iteration), used.a1, used.t2, after.a1, after.t2,
@@ -429,6 +440,6 @@ class MovesMode:
             return f"; M above the schedule's ({base:.4g}) and no factor better: the schedule alone, held"
         return ""
 
-    def _shaper_msg(self, params: ListParams | None) -> ShaperMsg:
-        shaper = none_shaper() if params is None else params.shaper(self.structure)
+    def _shaper_msg(self, params: Wanted) -> ShaperMsg:
+        shaper = stack_shaper(_factors(params), self.structure) or none_shaper()
         return shaper_to_msg(shaper, self.node.shaper.source, 0)

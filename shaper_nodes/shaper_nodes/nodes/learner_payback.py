@@ -27,14 +27,23 @@ reproduction's ``scheduled_list_factor`` case (``reproductions.arm_learning``) i
   (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`; the node measures no flange position, so the
   measured time is not weighed: the time was predicted before the trial); otherwise it is withdrawn and the move
   is held at the schedule alone.
-- **after**: a kept factor (or the schedule alone) stays; each cycle is still measured and reported. One factor
-  per move: the scheduler takes a two-impulse factor per move (the reproduction stacks a second one after a
-  reference with the first; docs/results/arm_demo.md says what that changes).
+- **stacked factors** (``payback.max_factors`` > 1, the reproduction's stacking): after a factor is kept, the
+  move's next cycle is a new reference with the kept factor(s) in place: its M is the new base, the next factor is
+  chosen from its components (their strongest remaining, by the predicted residual) with the time cost of the kept
+  factors and the new one together against the schedule alone, tried over the kept factors and kept only if its
+  M is below that reference's. The move's factors reach the scheduler convolved, one impulse sequence
+  (:func:`~shaper_nodes.core.learning.list.stack.stack_shaper`; the scheduler takes at most 16 impulses, 1 s:
+  :data:`~shaper_nodes.core.scheduling.moves.MAX_FACTOR_DURATION`; a factor that would make the sequence longer
+  is not tried). A trial that does not pay is withdrawn and the move stays with the factors kept before it.
+- **after**: the kept factors (or the schedule alone) stay; each cycle is still measured and reported. The default
+  ``payback.max_factors`` 1 is one factor per move.
 
-State: the move's entry (:class:`~shaper_nodes.core.learning.moves.MoveEntry`): ``base`` (the reference's M),
-``correction`` (the factor on trial or kept), ``best`` (the kept trial's M: a factor whose ``best`` differs from its
-``base`` paid); moves held at the schedule alone are the document's ``at_schedule``. Saved atomically after every
-cycle; after a restart (a kill -9) every move resumes in its phase, its factor sent to the scheduler again.
+State: the move's entry (:class:`~shaper_nodes.core.learning.moves.MoveEntry`): ``base`` (the latest reference's
+M), ``correction`` (the factors kept and on trial, convolved), ``best`` (the kept trial's M); the move's
+:class:`~shaper_nodes.core.learning.list.stack.FactorStack` (the factors kept, the trial, whether more are looked
+for) in the document's ``stacks``; moves held at the schedule alone are the document's ``at_schedule``. Saved
+atomically after every cycle; after a restart (a kill -9) every move resumes in its phase, its factors sent to the
+scheduler again.
 """
 
 from __future__ import annotations
@@ -53,9 +62,11 @@ from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
 from shaper_nodes.core.learning.list.payback import EXTRA_DAMPED, PaybackChoice, components, paying_factor, time_cost
+from shaper_nodes.core.learning.list.stack import MAX_FACTORS, FactorStack, stack_duration, stack_shaper, wanted
 from shaper_nodes.core.learning.list.trials import ListUpdate
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
 from shaper_nodes.core.learning.speed import motion_end_index
+from shaper_nodes.core.scheduling.moves import MAX_FACTOR_DURATION
 from shaper_nodes.core.shaping import Shaper, ShaperError
 from shaper_nodes.core.shaping.vibration import residual_vibration
 from shaper_nodes.ros.conversions import trajectory_arrays
@@ -94,6 +105,9 @@ class PaybackGroup:
                                    " reach).", (1e-9, 1.0), read_only=True)
     servo_zeta: float = param(0.12, "Damping ratio from which an identified eigenvalue is the position loop's,"
                               " not a mode's.", (0.01, 0.99), read_only=True)
+    max_factors: int = param(1, "Most factors stacked per move: after a factor is kept, a new reference with it in"
+                             " place chooses the next on what still rings (1: one factor per move).",
+                             (1, MAX_FACTORS), read_only=True)
 
 
 @dataclass(frozen=True)
@@ -202,6 +216,14 @@ def phase(entry: MoveEntry, held: bool) -> str:
     return "kept" if entry.best is not None and entry.best != entry.base else "trial"
 
 
+def _legacy_stack(entry: MoveEntry, held: bool) -> FactorStack:
+    """The factors of a move saved before stacks were (one factor per move: :func:`phase` of its entry)."""
+    ph, f = phase(entry, held), factor_of(entry)
+    if ph == "trial":
+        return FactorStack([], f)
+    return FactorStack([f], None, True) if ph == "kept" and f is not None else FactorStack()
+
+
 def residual_m(cap: Captured, shaper_end: float) -> tuple[float, float]:
     """The cycle's M (m/s^2: RMS of the accelerometer's deviation from its mean over :data:`RESIDUAL_WINDOW` s from
     the shaped command's end, MOTION_END + ``shaper_end`` s, cut at END) and that end (s from START)."""
@@ -210,24 +232,25 @@ def residual_m(cap: Captured, shaper_end: float) -> tuple[float, float]:
     return float(res.rms), start
 
 
-def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | None, group: PaybackGroup
-           ) -> PaybackChoice | None:
+def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | None, group: PaybackGroup,
+           kept: tuple[ListParams, ...] = ()) -> PaybackChoice | None:
     """The factor predicted to pay for a move (module docstring), from its reference cycle ``cap`` (shaped
-    command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``)."""
+    command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``); with
+    ``kept`` factors, the time cost is theirs and the new one's together, against the schedule alone."""
     comps = components(cap.times, cap.accel, command_end, float(group.servo_zeta), extra_damped=EXTRA_DAMPED)
 
     def cost(p: ListParams) -> float:
-        return time_cost(planned.times, planned.positions, planned.velocities, base, p, float(group.rate_hz),
+        factor = stack_shaper((*kept, p)) if kept else p
+        assert factor is not None
+        return time_cost(planned.times, planned.positions, planned.velocities, base, factor, float(group.rate_hz),
                          float(group.joint_tolerance), interpolate=True)
 
     return paying_factor(comps, cost, TIME_TOLERANCE_S, band=BAND)
 
 
-def _pair(params: ListParams | None) -> tuple[list[float], list[float]] | None:
-    if params is None:
-        return None
-    sh = params.shaper("zv2")
-    return sh.amplitudes.tolist(), sh.times.tolist()
+def _pair(factors: tuple[ListParams, ...]) -> tuple[list[float], list[float]] | None:
+    sh = stack_shaper(factors)
+    return None if sh is None else (sh.amplitudes.tolist(), sh.times.tolist())
 
 
 class PaybackMoves:
@@ -245,8 +268,33 @@ class PaybackMoves:
         #: per move, the schedule's shaper at its goal (None: no schedule: unshaped), asked at its first START
         self.schedule: dict[str, Shaper | None] = {}
         self._phase: dict[int, str] = {}  # cycle -> the move's phase at its START
+        self._ran: dict[int, tuple[ListParams, ...]] = {}  # cycle -> the factors it ran with
+        self.max_factors = int(group.max_factors)
+        #: per move, its factors (kept, on trial); a state saved before ``stacks`` is read from its entry's phase
+        self.stacks: dict[str, FactorStack] = {}
+        saved = mode.saved_stacks if isinstance(mode.saved_stacks, dict) else {}
+        for entry in mode.store:
+            try:
+                self.stacks[entry.key] = FactorStack.from_dict(saved[entry.key]) if entry.key in saved else \
+                    _legacy_stack(entry, entry.key in mode.held)
+            except ListError as err:  # the move keeps its other state; its factors start afresh
+                self.node.get_logger().error(f"move {entry.key}: saved factors left out ({err})")
+                self.stacks[entry.key] = FactorStack()
         self.proxy = TrajectoryActionProxy(self.node, "~/follow_joint_trajectory", controller, self.goals.record,
                                            self._refused, lambda: None, float(group.action_timeout))
+
+    def stack(self, key: str) -> FactorStack:
+        return self.stacks.setdefault(key, FactorStack())
+
+    def stacks_doc(self) -> dict[str, Any]:
+        return {k: s.to_dict() for k, s in self.stacks.items()}
+
+    def wanted(self, key: str) -> ListParams | tuple[ListParams, ...] | None:
+        """What the move's goals run with (the kept factors and the trial), None: the schedule alone."""
+        return wanted(self.stack(key).factors())
+
+    def phase(self, key: str) -> str:
+        return self.stack(key).phase(key in self.mode.held, self.max_factors)
 
     def describe(self) -> str:
         return (f"LIST per move, each factor chosen to pay (payback) on {self.mode.imu_topic}; goals of"
@@ -262,13 +310,16 @@ class PaybackMoves:
         not kept learns again from a new reference."""
         mode = self.mode
         for entry in mode.store:
-            ph = phase(entry, entry.key in mode.held)
+            ph, st = self.phase(entry.key), self.stack(entry.key)
             if on and ph in ("reference", "trial"):
-                entry.correction = None
-                mode.held.add(entry.key)
+                st.trial, st.done = None, True
+                if not st.kept:
+                    mode.held.add(entry.key)
+                entry.correction = _pair(st.factors())
             elif not on and ph == "held":
                 mode.held.discard(entry.key)
                 entry.base = entry.best = None
+                self.stacks[entry.key] = FactorStack()
         self.node.save()
 
     async def _schedule_at(self, entry: MoveEntry, names: list[str]) -> Shaper | None:
@@ -300,8 +351,9 @@ class PaybackMoves:
             await mode._send(entry, wanted)  # (again): the cycle may have run with either
             mode._skip[cycle] = "the move's factor was not acknowledged by the scheduler before its start"
             return
-        self._phase[cycle] = phase(entry, key in mode.held)
-        mode.session.switch(self.capture, wanted)
+        self._phase[cycle] = self.phase(key)
+        ran = self._ran[cycle] = self.stack(key).factors()
+        mode.session.switch(self.capture, ran[-1] if ran else None)  # (the cycle's own record: _ran)
         mode.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
 
     async def on_end(self, msg: CycleEvent, key: str, result: Any) -> CycleReport:
@@ -314,42 +366,53 @@ class PaybackMoves:
             return self.node.skipped(msg, window, result.skipped or "the cycle's samples were not captured",
                                      result.refusal)
         sched = self.schedule.get(key)
-        used = cap.used
-        shaper_end = (float(sched.times[-1]) if sched is not None else 0.0) + (used.t2 if used is not None else 0.0)
+        ran = self._ran.pop(cycle, ())
+        used = ran[-1] if ran else None
+        shaper_end = (float(sched.times[-1]) if sched is not None else 0.0) + stack_duration(ran)
         m, command_end = residual_m(cap, shaper_end)
         if not math.isfinite(m):
             return self.node.skipped(msg, window, f"no accelerometer sample within {RESIDUAL_WINDOW:g} s of the"
                                      f" shaped command's end ({command_end:.3f} s after the START)", "sensor")
-        choice, note = None, ""
+        choice, note, st = None, "", self.stack(key)
         if ph == "reference":
             keep_when_it_pays(entry, m, False)
-            choice, note = self._choose(entry, cap, command_end, sched)
-            entry.correction = None if choice is None else _pair(choice.params)
-            if choice is None:
+            choice, note = self._choose(entry, cap, command_end, sched, st.kept)
+            st.trial = None if choice is None else choice.params
+            st.done = choice is None
+            if choice is None and not st.kept:
                 mode.held.add(key)
         elif ph == "trial":
             decision = keep_when_it_pays(entry, m, True)
             base = entry.base["residual_rms"] if entry.base is not None else math.nan
-            if decision == "learn":
-                note = f"; M below the schedule's ({base:.4g}): the factor is kept"
+            if decision == "learn" and st.trial is not None:
+                st.kept.append(st.trial)
+                more = len(st.kept) < self.max_factors
+                note = (f"; M below the {'reference' if len(st.kept) > 1 else 'schedule'}'s ({base:.4g}): the factor"
+                        f" is kept ({len(st.kept)} kept" + ("; the next cycle is a new reference with them)"
+                                                            if more else ")"))
             else:
-                entry.correction = None
-                mode.held.add(key)
-                note = f"; M not below the schedule's ({base:.4g}): withdrawn, the schedule alone, held"
+                st.done = True
+                if not st.kept:
+                    mode.held.add(key)
+                note = (f"; M not below the reference's ({base:.4g}): withdrawn, "
+                        + ("the schedule alone, held" if not st.kept else f"the {len(st.kept)} factor(s) kept stay"))
+            st.trial = None
+        entry.correction = _pair(st.factors())
         nxt, applied, index = await mode.close_cycle(entry)
         u = used or ListParams(math.nan, math.nan)
-        after = nxt or ListParams(math.nan, math.nan)
-        pred = (choice.predicted, choice.without, choice.cost_s) if choice is not None else (math.nan,) * 3
+        after = st.factors()[-1] if st.factors() else ListParams(math.nan, math.nan)  # the trial or the last kept
+        pred = (choice.predicted, choice.without, choice.cost_s, choice.component.hz) if choice is not None else \
+            (math.nan,) * 4
         names = ["move", "M", "a1_used", "t2_used", "a1_next", "t2_next", "predicted", "without", "cost_s",
-                 "applied", "held", f"phase.{ph}"]
+                 "component_hz", "applied", "held", "factors_used", "factors_kept", f"phase.{ph}"]
         values = [float(index), m, u.a1, u.t2, after.a1, after.t2, *pred, 1.0 if applied else 0.0,
-                  1.0 if key in mode.held else 0.0, 1.0]
+                  1.0 if key in mode.held else 0.0, float(len(ran)), float(len(st.kept)), 1.0]
         report = self.node.report(msg, (result.start + command_end, result.start + command_end + RESIDUAL_WINDOW),
                                   names, values, residual=m)
         report.shaper_used = mode._shaper_msg(used)
         report.shaper_next = mode._shaper_msg(nxt)
-        text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2 with"
-                f" {'the schedule alone' if used is None else f'factor A1 {used.a1:.4f}, T2 {used.t2 * 1e3:.2f} ms'}"
+        with_ = "; ".join(f"factor A1 {p.a1:.4f}, T2 {p.t2 * 1e3:.2f} ms" for p in ran) or "the schedule alone"
+        text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2 with {with_}"
                 + note + ("" if applied else "; not acknowledged by the scheduler"))
         if applied:
             self.node.get_logger().info(text)
@@ -357,21 +420,25 @@ class PaybackMoves:
             self.node.get_logger().error(text)
         return report
 
-    def _choose(self, entry: MoveEntry, cap: Captured, command_end: float, sched: Shaper | None
-                ) -> tuple[PaybackChoice | None, str]:
+    def _choose(self, entry: MoveEntry, cap: Captured, command_end: float, sched: Shaper | None,
+                kept: list[ListParams]) -> tuple[PaybackChoice | None, str]:
         """The factor predicted to pay for the move after its reference cycle, and what was decided (for the log)."""
+        stays = f"the {len(kept)} factor(s) kept stay" if kept else "the schedule alone, held"
         names = self.mode.names.get(entry.key, [])
         planned = self.goals.lookup(names, np.asarray(entry.start), np.asarray(entry.goal)) if names else None
         if planned is None:
             return None, ("; no goal of the move came through ~/follow_joint_trajectory (its waypoints predict a"
-                          " factor's time cost): the schedule alone, held")
+                          " factor's time cost): " + stays)
         try:
-            pick = choose(cap, command_end, planned, sched, self.group)
+            pick = choose(cap, command_end, planned, sched, self.group, tuple(kept))
         except (ListError, ShaperError, ValueError) as err:
-            return None, f"; no factor chosen ({err}): the schedule alone, held"
+            return None, f"; no factor chosen ({err}): " + stays
         if pick is None:
             return None, (f"; no factor predicted to pay (within {TIME_TOLERANCE_S * 1e3:.1f} ms of the schedule's"
-                          " move + settle): the schedule alone, held")
+                          " move + settle): " + stays)
+        if stack_duration((*kept, pick.params)) > MAX_FACTOR_DURATION:
+            return None, (f"; the factors with the next ({stack_duration((*kept, pick.params)):.3f} s) would be longer"
+                          f" than a move's correction may be ({MAX_FACTOR_DURATION:g} s): not tried; " + stays)
         c = pick.component
         return pick, (f"; next: factor on {c.hz:.2f} Hz, zeta {c.zeta:.3f}: A1 {pick.params.a1:.4f}, T2"
                       f" {pick.params.t2 * 1e3:.2f} ms{'' if pick.full else ' (partial)'}, predicted M"

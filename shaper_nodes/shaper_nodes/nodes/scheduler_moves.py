@@ -1,9 +1,9 @@
 """The scheduler node's per-move corrections: ``~/set_move_shaper`` and the move of a ``~/shaper_at`` request.
 
 With per-move learning (the learner's ``list.per_move``), the learner sends each move's learned
-two-impulse factor with the move's start and goal poses (shaper_msgs/SetMoveShaper); the
-scheduler keeps it (:class:`shaper_nodes.core.scheduling.MoveCorrections`, ROS-free) and
-applies it whenever a ``~/shaper_at`` request names that move (its ``start`` and ``pose`` within
+two-impulse factor (or its stacked factors, convolved) with the move's start and goal poses
+(shaper_msgs/SetMoveShaper); the scheduler keeps it (:class:`shaper_nodes.core.scheduling.MoveCorrections`,
+ROS-free) and applies it whenever a ``~/shaper_at`` request names that move (its ``start`` and ``pose`` within
 ``move_tolerance`` of the move's): the schedule's shaper at the goal pose convolved with the
 factor. A request without ``start``, or of a move with no factor, gets what it got before (the
 schedule, times the region's correction). Nothing is sent to the shaper node: the factor applies
@@ -51,7 +51,8 @@ class MoveService:
             resp.success, resp.message = False, f"refused: {err}"
             return resp
         if factor is not None:
-            what += f": factor T2 = {factor.times[1]:.4f} s, A1 = {factor.amplitudes[0]:.4f}"
+            what += (f": factor T2 = {factor.times[1]:.4f} s, A1 = {factor.amplitudes[0]:.4f}" if len(factor) == 2 else
+                     f": factors convolved, {len(factor)} impulses over {factor.times[-1]:.4f} s")
         self.node.get_logger().info(f"learner, move to [{', '.join(f'{x:.3f}' for x in req.goal.position)}]: {what}")
         resp.success, resp.message = True, what
         return resp
@@ -69,5 +70,6 @@ class MoveService:
         if found is None:
             return base, "; a move with no learned correction: the schedule alone"
         f = found.factor
-        return (MoveCorrections.apply(scheduled(), f),
-                f"; the move's learned factor (T2 {f.times[1]:.4f} s, A1 {f.amplitudes[0]:.4f}) over the schedule")
+        what = (f"factor (T2 {f.times[1]:.4f} s, A1 {f.amplitudes[0]:.4f})" if len(f) == 2 else
+                f"factors ({len(f)} impulses over {f.times[-1]:.4f} s)")
+        return MoveCorrections.apply(scheduled(), f), f"; the move's learned {what} over the schedule"

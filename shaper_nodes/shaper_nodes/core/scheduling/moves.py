@@ -1,9 +1,10 @@
 """The learner's corrections kept per move, over the schedule. Free of ROS (the scheduler node wraps it).
 
 A move is a point-to-point motion from a start pose to a goal pose (a FollowJointTrajectory goal
-through the shaper node's proxy). With per-move learning, the learner learns one two-impulse
-factor per move from that move's own residual window and sends it with the move's start and
-goal; :class:`MoveCorrections` keeps it, and the shaper for a goal of that move is the
+through the shaper node's proxy). With per-move learning, the learner learns two-impulse
+factors per move from that move's own residual window and sends them, convolved (one factor, or
+several stacked: at most :data:`MAX_FACTOR_IMPULSES` impulses, :data:`MAX_FACTOR_DURATION` s),
+with the move's start and goal; :class:`MoveCorrections` keeps it, and the shaper for a goal of that move is the
 schedule's shaper at the goal pose convolved with the factor (:meth:`MoveCorrections.apply`).
 The schedule still follows the pose underneath: only the factor is the move's. A move with no
 factor gets the schedule alone.
@@ -31,10 +32,15 @@ import numpy as np
 from shaper_nodes.core.shaping.families import convolve
 from shaper_nodes.core.shaping.types import Shaper, ShaperError
 
-__all__ = ["MAX_MOVES", "MOVE_TOLERANCE", "MoveCorrection", "MoveCorrections"]
+__all__ = ["MAX_FACTOR_DURATION", "MAX_FACTOR_IMPULSES", "MAX_MOVES", "MOVE_TOLERANCE", "MoveCorrection",
+           "MoveCorrections"]
 
 #: most moves a scheduler keeps a correction for (a request for another is refused)
 MAX_MOVES = 1000
+#: most impulses of a move's correction: up to four two-impulse factors convolved (the learner's stacked factors)
+MAX_FACTOR_IMPULSES = 16
+#: longest move's correction, s (its delay adds to the schedule's on every goal of the move)
+MAX_FACTOR_DURATION = 1.0
 #: default largest joint difference between a request's poses and a move's for them to match, rad or m
 #: (the proxy's first point is one sample into the move: 0.3 mrad on the demo's moves)
 MOVE_TOLERANCE = 0.01
@@ -89,14 +95,19 @@ class MoveCorrections:
         ------
         ShaperError
             Poses empty, non-finite, of different sizes or not matching ``names``; a factor that is
-            not two impulses; a new move beyond ``max_moves``.
+            not 2 to :data:`MAX_FACTOR_IMPULSES` impulses or longer than :data:`MAX_FACTOR_DURATION`; a new
+            move beyond ``max_moves``.
         """
         names = tuple(str(n) for n in names)
         q0, q1 = _pose("start", start, names), _pose("goal", goal, names)
         if q0.size != q1.size:
             raise ShaperError(f"the move's start has {q0.size} positions and its goal {q1.size}")
-        if factor is not None and (len(factor) != 2 or not factor.times[1] > 0):
-            raise ShaperError(f"a move's correction is a two-impulse factor, got {len(factor)} impulses")
+        if factor is not None and not 2 <= len(factor) <= MAX_FACTOR_IMPULSES:
+            raise ShaperError(f"a move's correction is two-impulse factors convolved, 2 to {MAX_FACTOR_IMPULSES}"
+                              f" impulses, got {len(factor)}")
+        if factor is not None and factor.times[-1] > MAX_FACTOR_DURATION:
+            raise ShaperError(f"a move's correction is at most {MAX_FACTOR_DURATION:g} s long, got"
+                              f" {factor.times[-1]:.4g} s")
         i = self._find(names, q0, q1)
         if factor is None:
             if i is None:

@@ -18,6 +18,9 @@ payback
     A factor over a move's base shaper chosen to pay before it is tried: the residual's components
     (:func:`.payback.components`), the time cost predicted from the shaped command
     (:func:`.payback.time_cost`), the least predicted residual within it (:func:`.payback.paying_factor`).
+stack
+    A move's stacked factors (:class:`.stack.FactorStack`: those kept, each because it paid, and the one on
+    trial) and their convolution, the one impulse sequence the move's goals run with (:func:`.stack.stack_shaper`).
 session
     The bookkeeping the learner node and the offline replay share: which shaper a cycle ran
     with, the accelerometer buffer (bounded: the cycle duration limit), the sensor's range,
