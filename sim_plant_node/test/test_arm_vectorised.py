@@ -63,7 +63,7 @@ def test_a_period_of_the_arm_plant_is_the_steps_before_bit_for_bit():
         for j in range(2):
             x, xd, xdd = _reference_step(arm, x, xd, xdd, drive)
             f, w = _reference_imu(arm, x[:n], xd[:n], xdd[:n])
-            t, f_got, w_got = plant.imu_samples[j]
+            _, f_got, w_got = plant.imu_samples[j]
             assert np.array_equal(f_got, f) and np.array_equal(w_got, w), (k, j)
         assert np.array_equal(arm.x, x) and np.array_equal(arm.xd, xd) and np.array_equal(arm.xdd, xdd), k
         torque = model.kp * (r - x[n:]) + model.kd * ((0.0 if rd is None else rd) - xd[n:]) + model.gravity(r)

@@ -340,7 +340,8 @@ class ElasticArm:
         """One step with the loop's ``drive`` and its link side's part ``link_drive`` (:meth:`hold`): the map's product,
         the articulated-body solve, the motor accelerations and the trapezoidal update, in place."""
         y = np.matmul(self._map, self._state, out=self._y)  # (tau, b, x_pred, x'_pred) less the drive
-        link = pin.aba(self._pin_model, self._pin_data, self._q, self._v, np.add(self._y_tau, link_drive, out=self._tau))
+        tau = np.add(self._y_tau, link_drive, out=self._tau)
+        link = pin.aba(self._pin_model, self._pin_data, self._q, self._v, tau)
         self._acc_link[:] = link
         motor = np.add(self._y_b, drive, out=self._motor)
         np.multiply(self._inv_a22, motor, out=motor)
