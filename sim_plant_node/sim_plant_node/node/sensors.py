@@ -30,8 +30,9 @@ def writer(publisher: Any) -> Callable[[bytes], None]:
     """The write of serialized bytes to ``publisher`` (an rclpy publisher), a per-step stream's: its handle's own,
     without what rclpy's ``Publisher.publish`` does at every call besides (its handle taken as a context, the
     argument told from a message object): about half of a write's Python time. The node's thread is the only one
-    that writes and destroys the publisher."""
-    return publisher.handle.publish_raw
+    that writes and destroys the publisher. A stand-in without a handle is written with its ``publish``."""
+    handle = getattr(publisher, "handle", None)
+    return publisher.publish if handle is None else handle.publish_raw
 
 
 class StateBytes:
