@@ -5,8 +5,8 @@ Run on its own (not by ``./run bench``): ``python -m benchmarks.plant_step [--mo
 
 The sim plant node (``plant.model`` M, default ``list_time_varying``: seed 003's case 2; ``mode: lockstep``, 250 Hz,
 ``lockstep.block`` 25 as ``reproductions.list_cases`` runs it) is made in this process with a long task, and its
-lockstep path runs as the shaper's answers drive it (``_step_asked`` with each block's raw setpoints as the shaped
-ones: an identity shaper, no DDS round trip, no executor); its per-step writes go to DDS as in the node. Printed: the
+lockstep path runs as the shaper's answers drive it (``_step_asked`` with each block's last raw setpoint in every
+row: no shaper, no DDS round trip, no executor); its per-step writes go to DDS as in the node. Printed: the
 CPU time per step (least of ``--rounds``) and the CPU s per simulated s that gives. With ``--profile``, one more run
 under cProfile and its functions with the most own time (cProfile inflates small calls: read the shares).
 :mod:`benchmarks.arm_step` is the same for the arm.
@@ -43,7 +43,7 @@ def _node(model: str) -> tuple[Any, Any]:
     rclpy.init(context=ctx)
     params = {**PARAMS, "plant.model": model}
     node = SimPlantNode(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
-    node.exchange.unmatched = lambda answers: ""  # (no shaper: the answers are given here)
+    node.exchange.unmatched = lambda answers: ""  # type: ignore[method-assign]  # (no shaper: answers given here)
     ok, why = node._start_task()
     if not ok:
         raise RuntimeError(why)
@@ -51,7 +51,8 @@ def _node(model: str) -> tuple[Any, Any]:
 
 
 def run_once(node: Any, steps: int, profile: cProfile.Profile | None = None) -> dict[str, float]:
-    """``steps`` (rounded up to whole blocks) of ``node``'s lockstep path, each block answered with its raw setpoints."""
+    """``steps`` (rounded up to whole blocks) of ``node``'s lockstep path, each block answered (every row: its last raw
+    setpoint, the node's ``_raw``)."""
     done = 0
     if profile is not None:
         profile.enable()
