@@ -8,6 +8,7 @@ import pinocchio as pin
 import pytest
 
 from sim_plant_node.arm.dynamics import ArmModel, ElasticArm
+from sim_plant_node.arm.plant import ArmPlant
 from sim_plant_node.controller.jtc import JointTrajectoryController, RawPoint, Tolerances
 from sim_plant_node.controller.splines import Point, Trajectory
 
@@ -35,6 +36,38 @@ def test_the_step_on_one_state_array_is_the_step_before_bit_for_bit():
         drive = model.kp * r + model.gravity(r) + model.kd * rd
         x, xd, xdd = _reference_step(arm, x, xd, xdd, drive)
         assert np.array_equal(arm.x, x) and np.array_equal(arm.xd, xd) and np.array_equal(arm.xdd, xdd), k
+
+
+def _reference_imu(arm: ElasticArm, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The flange IMU as it was written before the step kept its views and scratch arrays."""
+    mdl = arm.model
+    pin.forwardKinematics(mdl.model, mdl.data, q, v, a)
+    frame = pin.updateFramePlacement(mdl.model, mdl.data, mdl.tool)
+    acc = pin.getFrameClassicalAcceleration(mdl.model, mdl.data, mdl.tool, pin.ReferenceFrame.LOCAL).linear
+    rate = pin.getFrameVelocity(mdl.model, mdl.data, mdl.tool, pin.ReferenceFrame.LOCAL).angular
+    return acc + 9.81 * frame.rotation[2], np.array(rate)
+
+
+def test_a_period_of_the_arm_plant_is_the_steps_before_bit_for_bit():
+    # ArmPlant takes the period's setpoint once (ElasticArm.hold) and advances its physics steps on views and scratch
+    # arrays: states, IMU samples and torques are those of the step written out per physics step, to the last bit
+    plant = ArmPlant(500.0, substeps=2)
+    plant.reset(HOME)
+    arm, model, n = plant.arm, plant.arm.model, plant.n
+    x, xd, xdd = arm.x.copy(), arm.xd.copy(), arm.xdd.copy()
+    for k in range(300):
+        r = HOME + 0.2 * np.sin(0.01 * min(k, 200))  # (from 200 on the setpoint holds: gravity at it is kept)
+        rd = None if k % 7 == 3 or k >= 200 else np.full(6, 0.2 * 0.01 * np.cos(0.01 * k) / 2e-3)
+        plant.step(r, velocity=None if rd is None else rd.copy())
+        drive = model.kp * r + model.gravity(r) + (0.0 if rd is None else model.kd * rd)
+        for j in range(2):
+            x, xd, xdd = _reference_step(arm, x, xd, xdd, drive)
+            f, w = _reference_imu(arm, x[:n], xd[:n], xdd[:n])
+            _, f_got, w_got = plant.imu_samples[j]
+            assert np.array_equal(f_got, f) and np.array_equal(w_got, w), (k, j)
+        assert np.array_equal(arm.x, x) and np.array_equal(arm.xd, xd) and np.array_equal(arm.xdd, xdd), k
+        torque = model.kp * (r - x[n:]) + model.kd * ((0.0 if rd is None else rd) - xd[n:]) + model.gravity(r)
+        assert np.array_equal(plant.effort, torque), k
 
 
 def test_the_state_views_write_through_and_read_back():

@@ -407,3 +407,28 @@ def test_node_refuses_bad_plant_parameters_and_switches_models_live(ros_context)
         assert isinstance(node.plant, MckPlant)
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize("model", ["linear", "time_varying", "hardening", "saturation"])
+@pytest.mark.parametrize("shaped", [False, True])
+def test_one_joint_in_floats_is_the_array_code_bit_for_bit(model, shaped):
+    # ListPlant steps one joint in Python floats (models/list_scalar.py); the array code, with which several joints
+    # step, must give the very same bits: corners (the force limit, the end of the mass ramp) and the cube included
+    rate = 250.0
+    raw = default_task(rate, dwell=1.0)
+    commands = np.concatenate([zv_shaped(raw, rate) if shaped else raw, raw[::-1], np.full(40, 0.3)])
+    fast = ListPlant(model, M, B, K, rate)
+    slow = ListPlant(model, M, B, K, rate)
+    assert fast._one is not None
+    slow._one = None  # the array code
+    for plant in (fast, slow):
+        plant.reset([0.0])
+    for i, u in enumerate(commands):
+        cycle_time = None if i < 5 else (i - 5) / rate - 0.3 * (i > 300)
+        fast.step([u], cycle_time)
+        slow.step([u], cycle_time)
+        assert fast.state.tobytes() == slow.state.tobytes(), (i, fast.state, slow.state)
+        assert fast.cycle_time == slow.cycle_time
+        assert fast.tip_acceleration.tobytes() == slow.tip_acceleration.tobytes()
+    two = ListPlant(model, [M, M], [B, B], [K, K], rate)
+    assert two._one is None  # several joints: the array code

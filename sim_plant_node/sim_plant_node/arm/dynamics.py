@@ -47,6 +47,7 @@ import pinocchio as pin
 from .description import TOOL_FRAME, ArmSpec, check_payload, payload_inertia, urdf
 
 GRAVITY = 9.81  # m/s^2, the model's gravity (along -z of the base)
+_LOCAL = pin.ReferenceFrame.LOCAL
 
 
 @dataclass(frozen=True)
@@ -228,6 +229,7 @@ class ElasticArm:
         r = np.asarray(position, dtype=float).copy()
         q, theta = self.model.rest(r)
         self._state = np.zeros(6 * self.n)  # (x, x', x''), the 12 coordinates each: what the step's map takes
+        self._views()
         self.x = np.concatenate([q, theta])
         self.setpoint = r
         self._setpoint_bytes = r.tobytes()
@@ -236,6 +238,17 @@ class ElasticArm:
         self._velocity: np.ndarray | None = None     # the last step's velocity feedforward, rad/s
         self._torque: np.ndarray | None = self._g_r.copy()
         self.time = 0.0
+
+    def _views(self) -> None:
+        """The views of the state and of the map's product that each step reads and writes, and its scratch arrays
+        (made once per state array: a step then calls NumPy about half as often, with the same operations)."""
+        n, st = self.n, self._state
+        self._q, self._v, self._a = st[:n], st[2 * n:3 * n], st[4 * n:5 * n]
+        self._pos, self._vel, self._pos_vel, self._acc = st[:2 * n], st[2 * n:4 * n], st[:4 * n], st[4 * n:]
+        self._acc_link, self._acc_motor = st[4 * n:5 * n], st[5 * n:]
+        self._y = np.zeros(6 * n)  # (tau, b, x_pred, x'_pred) less the drive
+        self._y_tau, self._y_b, self._y_pred = self._y[:n], self._y[n:2 * n], self._y[2 * n:]
+        self._tau, self._motor, self._coupling, self._inc = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(2 * n)
 
     def model_changed(self) -> None:
         """The model's inertial parameters changed (:meth:`ArmModel.set_payload`): recompute what is kept from
@@ -300,7 +313,14 @@ class ElasticArm:
 
     def step(self, setpoint: np.ndarray, velocity: np.ndarray | None = None) -> None:
         """Advance one step holding the loop's setpoint (rad) and velocity feedforward (rad/s)."""
-        n, h, mdl = self.n, self.h, self.model
+        self.advance(*self.hold(setpoint, velocity))
+
+    def hold(self, setpoint: np.ndarray, velocity: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Take the loop's setpoint (rad) and velocity feedforward (rad/s) for the next steps; returns the loop's drive
+        (its torque but the theta and velocity terms, N m) and the part of it the link side takes, what
+        :meth:`advance` steps with: :meth:`step` is ``advance(*hold(setpoint, velocity))``, and steps of one command
+        period (the same setpoint) may take them once."""
+        mdl = self.model
         r = np.asarray(setpoint, dtype=float)
         key = r.tobytes()  # the setpoint changes at most once per command period: gravity at it is kept
         if key != self._setpoint_bytes:
@@ -314,17 +334,23 @@ class ElasticArm:
         else:
             self._velocity = rd = np.asarray(velocity, dtype=float)
             drive = self._drive + mdl.kd * rd
-        state = self._state
-        y = self._map @ state  # (tau, b, x_pred, x'_pred) less the drive
-        link = pin.aba(self._pin_model, self._pin_data, state[:n], state[2 * n:3 * n], y[:n] + self._ratio * drive)
-        xdd = state[4 * n:]  # (written in place: the state is one array)
-        xdd[:n] = link
-        xdd[n:] = self._inv_a22 * (y[n:2 * n] + drive) + self._ratio * link
-        state[:4 * n] = y[2 * n:]
-        state[:2 * n] += self._hh4 * xdd
-        state[2 * n:4 * n] += self._h2 * xdd
+        return drive, self._ratio * drive
+
+    def advance(self, drive: np.ndarray, link_drive: np.ndarray) -> None:
+        """One step with the loop's ``drive`` and its link side's part ``link_drive`` (:meth:`hold`): the map's product,
+        the articulated-body solve, the motor accelerations and the trapezoidal update, in place."""
+        y = np.matmul(self._map, self._state, out=self._y)  # (tau, b, x_pred, x'_pred) less the drive
+        tau = np.add(self._y_tau, link_drive, out=self._tau)
+        link = pin.aba(self._pin_model, self._pin_data, self._q, self._v, tau)
+        self._acc_link[:] = link
+        motor = np.add(self._y_b, drive, out=self._motor)
+        np.multiply(self._inv_a22, motor, out=motor)
+        np.add(motor, np.multiply(self._ratio, link, out=self._coupling), out=self._acc_motor)
+        self._pos_vel[:] = y[2 * self.n:]
+        self._pos += np.multiply(self._hh4, self._acc, out=self._inc)
+        self._vel += np.multiply(self._h2, self._acc, out=self._inc)
         self._torque = None
-        self.time += h
+        self.time += self.h
 
     @property
     def torque(self) -> np.ndarray:
@@ -341,10 +367,11 @@ class ElasticArm:
         Both in the flange frame: f = R^T (a - g_vec) with a the flange origin's acceleration.
         """
         mdl = self.model
-        pin.forwardKinematics(mdl.model, mdl.data, self.q, self.v, self.a)
-        frame = pin.updateFramePlacement(mdl.model, mdl.data, mdl.tool)
-        acc = pin.getFrameClassicalAcceleration(mdl.model, mdl.data, mdl.tool, pin.ReferenceFrame.LOCAL).linear
-        rate = pin.getFrameVelocity(mdl.model, mdl.data, mdl.tool, pin.ReferenceFrame.LOCAL).angular
+        model, data, tool = mdl.model, mdl.data, mdl.tool
+        pin.forwardKinematics(model, data, self._q, self._v, self._a)
+        frame = pin.updateFramePlacement(model, data, tool)
+        acc = pin.getFrameClassicalAcceleration(model, data, tool, _LOCAL).linear
+        rate = pin.getFrameVelocity(model, data, tool, _LOCAL).angular
         specific = acc + GRAVITY * frame.rotation[2]  # R^T (0, 0, g): g times R's last row
         return specific, np.array(rate)
 

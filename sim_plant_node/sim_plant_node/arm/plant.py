@@ -75,13 +75,14 @@ class ArmPlant(PlantBase):
 
     def step(self, command, cycle_time: float | None = None, velocity=None) -> None:
         """One command period holding the position setpoint ``command`` (rad), velocity ``velocity`` (rad/s)."""
-        r = np.asarray(command, dtype=float)
-        rd = None if velocity is None else np.asarray(velocity, dtype=float)
-        self.imu_samples = []
+        arm = self.arm
+        drive = arm.hold(command, velocity)  # (one setpoint for the period's physics steps: taken once)
+        samples = []
         for _ in range(self.substeps):
-            self.arm.step(r, rd)
-            f, w = self.arm.imu()
-            self.imu_samples.append((self.arm.time, f, w))
+            arm.advance(*drive)
+            f, w = arm.imu()
+            samples.append((arm.time, f, w))
+        self.imu_samples = samples
 
     def prepare(self, values: Mapping[str, Any]) -> Callable[[], str]:
         """Check the payload ``values`` (``arm.payload_mass`` kg, ``arm.payload_offset`` m; ValueError if out of

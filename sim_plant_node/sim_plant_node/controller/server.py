@@ -67,12 +67,15 @@ class ControllerServer:
         Why the controller cannot take a trajectory now (a task drives the joints), or None.
     action, topic : str
         Names of the action and the trajectory topic.
+    on_trajectory : callable, optional
+        Called after the controller took a trajectory (from the action or the topic): the node steps from then on.
     """
 
     def __init__(self, node: Node, controller: JointTrajectoryController, now: Callable[[], float],
                  measured: Callable[[], tuple[np.ndarray, np.ndarray]], busy: Callable[[], str | None],
-                 action: str, topic: str) -> None:
+                 action: str, topic: str, on_trajectory: Callable[[], None] | None = None) -> None:
         self.node = node
+        self._on_trajectory = on_trajectory
         self.controller = controller
         self._now = now
         self._measured = measured
@@ -119,6 +122,11 @@ class ControllerServer:
             self._refuse(reason)
             return
         self.controller.accept(list(msg.joint_names), raw_points(msg), stamp_to_sec(msg.header.stamp))
+        self._took()
+
+    def _took(self) -> None:
+        if self._on_trajectory is not None:
+            self._on_trajectory()
 
     def _on_accepted(self, handle: Any) -> None:
         if self._active is not None:  # preemption
@@ -138,6 +146,7 @@ class ControllerServer:
         self._futures[bytes(handle.goal_id.uuid)] = self._active[1]
         self._next_feedback = self._now()
         handle.execute()
+        self._took()
 
     def _on_cancel(self, handle: Any) -> CancelResponse:
         self._log.info("Got request to cancel goal")

@@ -54,6 +54,7 @@ import numpy as np
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
 from .base import PlantBase
+from .list_scalar import OneJoint
 
 
 def check_rate(rate: float) -> float:
@@ -292,6 +293,8 @@ class ListPlant(_JointState, PlantBase):
         self.substeps = int(substeps)
         self.state = np.zeros((self.joints, 4))
         self.cycle_time: float | None = None
+        # one joint: the same period in Python floats, bit for bit (NumPy's calls on one-element arrays cost more)
+        self._one = OneJoint(self, MASS_RAMP_TIME, _CORNER_REFINE) if n == 1 else None
 
     # ----------------------------------------------------------------- model
     def mass_at(self, cycle_time: float | None) -> np.ndarray:
@@ -341,6 +344,9 @@ class ListPlant(_JointState, PlantBase):
             Time since the current cycle's START at the beginning of the period, s (the
             time-varying mass depends on it); None when no cycle has started.
         """
+        if self._one is not None:
+            self._one.step(command, cycle_time)
+            return
         u1 = np.asarray(command, dtype=float).reshape(self.joints)
         u0 = self.state[:, 2].copy()
         r = (u1 - u0) / self.dt

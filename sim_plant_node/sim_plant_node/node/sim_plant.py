@@ -72,7 +72,7 @@ from .feedforward import Feedforward
 from .lockstep import Exchange, Readers
 from .models import START_ONLY, PlantValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
-from .sensors import Sensors, StateBytes
+from .sensors import Sensors, StateBytes, writer
 
 __all__ = ["IDLE_STATE_PERIOD", "LOCKSTEP_IMU_QOS", "MODELS", "PARAMETERS", "WAITING", "SimPlantNode", "main"]
 
@@ -128,6 +128,12 @@ class SimPlantNode(Node):
         # /clock is published as serialized bytes, its numbers rewritten in place (shaper_nodes.recordings.cdr)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
         self._ref_pub = self.create_publisher(JointState, t.reference, deep)
+        # the per-step streams' writes and the optional ones' subscriber counts, without rclpy's per-call wrapper
+        self._js_write, self._tip_write, self._ref_write = (writer(pub) for pub in (self._js_pub, self._tip_pub,
+                                                                                 self._ref_pub))
+        self._tip_count = self._tip_pub.handle.get_subscription_count
+        self._ref_count = self._ref_pub.handle.get_subscription_count
+        self._clock_write = None if self._clock_pub is None else writer(self._clock_pub)
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward, qos_profile=SERVICE_QOS)
         self._ff = Feedforward()
         self._cmd_sub = self.create_subscription(Float64MultiArray, t.command_in, self._on_command, 10)
@@ -150,6 +156,9 @@ class SimPlantNode(Node):
         # step (or the watchdog's next look, for lockstep.reader_timeout)
         self._free_held = False
         self._free_timer: Any = None
+        # lockstep, the controller idle: its timer is off until a trajectory comes (a 2 ms timer woke the executor 500
+        # times a wall second for nothing: a tenth of a core per idle arm)
+        self._free_idle = False
         self.refused = 0
         self.plant.reset(self._values(p).vector("task.start", p.task.start))
         self._applied = self.plant.setpoint_at_rest
@@ -160,7 +169,7 @@ class SimPlantNode(Node):
                                        list(p.jtc.goal_tolerance), float(p.jtc.goal_time))
             self.jtc = ControllerServer(self, JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate,
                                         defaults, self._applied), self._now, lambda: self.plant.joint_state()[:2],
-                                        self._jtc_busy, t.jtc_action, t.jtc_topic)
+                                        self._jtc_busy, t.jtc_action, t.jtc_topic, self._trajectory_taken)
             if self.mode == "lockstep":
                 self._free_timer = self.create_timer(0.002, self._free_run)
         idle = float(p.joint_states.idle_period)
@@ -290,8 +299,8 @@ class SimPlantNode(Node):
 
     # ----------------------------------------------------------------- stepping
     def _publish_clock(self) -> None:
-        if self._clock_pub is not None:
-            self._clock_pub.publish(clock_cdr(*stamp_parts(self.sim_time)))
+        if self._clock_write is not None:
+            self._clock_write(clock_cdr(*stamp_parts(self.sim_time)))
 
     def _now(self) -> float:
         if self.mode == "lockstep":
@@ -351,8 +360,8 @@ class SimPlantNode(Node):
             self.jtc.controller.hold(command)  # the forward command's setpoint is held when it stops
         t_start = self._now()
         self._applied = command
-        if self._ref_pub.get_subscription_count() > 0:  # (a learner's input; serialized in place)
-            self._ref_pub.publish(self._ref_bytes(t_start, command))  # stamped at the period's start
+        if self._ref_count() > 0:  # (a learner's input; serialized in place)
+            self._ref_write(self._ref_bytes(t_start, command))  # stamped at the period's start
         ff = self._ff.sample(None if self._cycle_start_step is None else self.step_index - self._cycle_start_step)
         if ff is not None and ff[0] == "command":
             command = command + ff[1]
@@ -361,10 +370,10 @@ class SimPlantNode(Node):
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
         t = self._now()
-        self._last_js = self.sensors.joint_state(self.plant, t)  # (also the idle republisher's)
-        self._js_pub.publish(self._last_js)
-        if self._tip_pub.get_subscription_count() > 0:
-            self._tip_pub.publish(self._tip_bytes(t, *self.plant.tip_state()))
+        js = self._last_js = self.sensors.joint_state(self.plant, t)  # (also the idle republisher's)
+        self._js_write(js)
+        if self._tip_count() > 0:
+            self._tip_write(self._tip_bytes(t, *self.plant.tip_state()))
         signals = self.plant.loop_state()
         if signals is not None:  # per joint and signal (e.g. output, measured, control, reference)
             loop = JointState(name=[f"{j}/{s}" for s in self.plant.loop_signals for j in self.joint_names],
@@ -395,7 +404,13 @@ class SimPlantNode(Node):
 
     def _free_run(self) -> None:
         """Lockstep: step while the controller executes a trajectory (no task runs), ~20 ms of wall time a call."""
-        if self.jtc is None or self.task is not None or self.exchange.waiting_since is not None:
+        if self.jtc is None:
+            return
+        if not self.jtc.running:  # nothing to step: off until a trajectory comes (_trajectory_taken)
+            self._free_idle = True
+            self._free_timer.cancel()
+            return
+        if self.task is not None or self.exchange.waiting_since is not None:
             return
         deadline = time.monotonic() + 0.02
         while self.jtc.running and time.monotonic() < deadline:
@@ -405,6 +420,12 @@ class SimPlantNode(Node):
                 return
             self._jtc_step()
             self._publish_clock()  # the commanded positions (what "at rest" means)
+
+    def _trajectory_taken(self) -> None:
+        """The controller took a trajectory: its idle timer runs again (lockstep)."""
+        if self._free_idle:
+            self._free_idle = False
+            self._free_timer.reset()
 
     def _reader_acked(self) -> None:
         """A reader's acknowledgement while the plant is held: a trajectory or a task it held steps on at once if
