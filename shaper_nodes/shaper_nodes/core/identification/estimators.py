@@ -33,6 +33,31 @@ from .record import MAX_NYQUIST_FRACTION, FloatArray, Record, spectral_peaks, sp
 NUISANCE_MODES = 4
 
 
+#: the least squares of a basis Phi: its column norms, the unit-normalised columns, and the eigenvectors and
+#: pseudo-inverted eigenvalues of their Gram matrix (see :meth:`PoleModel.solve`)
+_Gram = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+#: what :meth:`PoleModel.solve` computed on the way that the Jacobian uses again: the Gram decomposition, and
+#: the basis' envelopes, cosines and sines (N, M) each
+_Parts = tuple[_Gram, tuple[FloatArray, FloatArray, FloatArray]]
+
+
+def _gram(phi: FloatArray) -> _Gram:
+    """The Gram decomposition of the basis ``phi`` that :func:`_gram_solve` solves on."""
+    norm = np.sqrt(np.sum(phi * phi, axis=0))
+    norm[norm == 0.0] = 1.0
+    a = phi / norm
+    vals, vecs = np.linalg.eigh(a.T @ a)
+    inv = np.where(vals > 1e-13 * vals[-1], 1.0 / np.where(vals > 0, vals, 1.0), 0.0)
+    return norm, a, vecs, inv
+
+
+def _gram_solve(gram: _Gram, rhs: FloatArray) -> FloatArray:
+    """The least-squares coefficients of ``rhs`` on the basis whose :func:`_gram` this is."""
+    norm, a, vecs, inv = gram
+    coef: FloatArray = (vecs @ (inv[:, None] * (vecs.T @ (a.T @ rhs)))) / norm[:, None]
+    return coef
+
+
 class PoleModel:
     """Offset + drift + damped sinusoids, linear coefficients solved for given poles."""
 
@@ -41,12 +66,31 @@ class PoleModel:
         self.y = rec.y
         self.k: int = rec.y.shape[1]
         self.base = np.column_stack([np.ones_like(rec.t), rec.t / rec.t[-1]])
-        self._cache: tuple[bytes, tuple[FloatArray, FloatArray, FloatArray]] | None = None
+        self._cache: tuple[bytes, tuple[FloatArray, FloatArray, FloatArray], _Parts] | None = None
 
     def basis(self, s: FloatArray, w: FloatArray) -> FloatArray:
+        return self._basis(s, w)[0]
+
+    def _basis(self, s: FloatArray, w: FloatArray) -> tuple[FloatArray, tuple[FloatArray, FloatArray, FloatArray]]:
+        """:meth:`basis`, and its envelopes exp(-s t) and the cos(w t) and sin(w t), (N, M) each."""
         e = np.exp(-np.outer(self.t, s))
         ph = np.outer(self.t, w)
-        return np.hstack([self.base, e * np.cos(ph), e * np.sin(ph)])
+        c, sn = np.cos(ph), np.sin(ph)
+        return np.hstack([self.base, e * c, e * sn]), (e, c, sn)
+
+    def _solved(self, theta: FloatArray) -> tuple[tuple[FloatArray, FloatArray, FloatArray], _Parts]:
+        """:meth:`solve`'s result and the basis' Gram decomposition, for the last poles asked (the
+        least-squares solver asks for the residual, then the Jacobian, at the same poles)."""
+        key = theta.tobytes()
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1], self._cache[2]
+        phi, trig = self._basis(theta[0::2], theta[1::2])
+        gram = _gram(phi)
+        coef = _gram_solve(gram, self.y)
+        resid = self.y - phi @ coef
+        out = (phi, coef, resid)
+        self._cache = (key, out, (gram, trig))
+        return out, (gram, trig)
 
     def solve(self, theta: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Basis Phi (N, 2 + 2M), coefficients (2 + 2M, k) and residual (N, k) for the poles.
@@ -55,25 +99,7 @@ class PoleModel:
         conditioned for distinct poles), pseudo-inverted by eigen-decomposition; tall QR or
         SVD would cost far more for these few columns.
         """
-        key = theta.tobytes()
-        if self._cache is not None and self._cache[0] == key:
-            return self._cache[1]
-        phi = self.basis(theta[0::2], theta[1::2])
-        coef = self._lstsq(phi, self.y)
-        resid = self.y - phi @ coef
-        out = (phi, coef, resid)
-        self._cache = (key, out)
-        return out
-
-    @staticmethod
-    def _lstsq(phi: FloatArray, rhs: FloatArray) -> FloatArray:
-        norm = np.sqrt(np.sum(phi * phi, axis=0))
-        norm[norm == 0.0] = 1.0
-        a = phi / norm
-        vals, vecs = np.linalg.eigh(a.T @ a)
-        inv = np.where(vals > 1e-13 * vals[-1], 1.0 / np.where(vals > 0, vals, 1.0), 0.0)
-        coef: FloatArray = (vecs @ (inv[:, None] * (vecs.T @ (a.T @ rhs)))) / norm[:, None]
-        return coef
+        return self._solved(theta)[0]
 
     def residual(self, theta: FloatArray) -> FloatArray:
         return self.solve(theta)[2].ravel()
@@ -84,19 +110,18 @@ class PoleModel:
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian -P_perp dPhi/dtheta c, (N k, 2M)."""
-        phi, coef, _ = self.solve(theta)
-        s, w = theta[0::2], theta[1::2]
-        m = s.size
+        (phi, coef, _), (gram, (env, cos, sin)) = self._solved(theta)
+        m = theta.size // 2
         t = self.t[:, None]
         ds = []
         for i in range(m):
-            e = np.exp(-s[i] * t)
-            c, sn = np.cos(w[i] * t), np.sin(w[i] * t)
+            # the basis' own exp(-s_i t), cos(w_i t), sin(w_i t): the same numbers as computing them again
+            e, c, sn = env[:, i : i + 1], cos[:, i : i + 1], sin[:, i : i + 1]
             a, b = coef[2 + i], coef[2 + m + i]
             ds.append(-t * e * (c * a + sn * b))  # d model / d s_i, (N, k)
             ds.append(t * e * (c * b - sn * a))  # d model / d w_i
         d = np.hstack(ds)
-        proj = d - phi @ self._lstsq(phi, d)
+        proj = d - phi @ _gram_solve(gram, d)  # the decomposition of solve's, reused: the same numbers
         return -proj.reshape(self.t.size, 2 * m, self.k).transpose(0, 2, 1).reshape(-1, 2 * m)
 
     def rss_null(self) -> float:
