@@ -67,21 +67,6 @@ import numpy as np
 
 from .types import Shaper
 
-
-@functools.cache
-def blas_daxpy() -> Callable[..., Any]:
-    """BLAS ``daxpy`` (y += a x in place), from scipy.linalg.blas, imported on the first call.
-
-    scipy.linalg costs about 0.3 s of CPU to import (beyond numpy), which every process importing this package
-    paid at start; only the block path of a streaming filter uses it. The filters call this when they are made
-    (the shaper node's start), so the import never lands in the callback of a first block.
-    """
-    from scipy.linalg.blas import daxpy
-
-    fn: Callable[..., Any] = daxpy
-    return fn
-
-
 #: most filters alive at once (the active one plus those whose tails are still running)
 MAX_STAGES = 16
 
@@ -323,14 +308,15 @@ class _Stage:
     - the same ring as Python lists (``_rows``): one sample of a few channels on Python floats;
     - a linear buffer (``_ext``): the block path writes a block's deviations right after the
       ``length - 1`` inputs before it, and each tap is then one strided pass over that buffer
-      (``out += g x[k - d]`` as BLAS ``daxpy`` on the flat rows). The buffer is kept from block to
-      block (grown only for a larger block), so a block allocates nothing but its output; the next
+      (``out += g x[k - d]`` as two numpy passes on the flat rows: every output's arithmetic the same wherever
+      the block boundaries fall, so any partition into blocks gives the same output bit for bit). The buffer is
+      kept from block to block (grown only for a larger block), so a block allocates nothing but its output; the next
       block goes after it while there is room (:data:`LINEAR_ROWS`), else the history (``length - 1``
       rows) is moved to the front first.
     """
 
     __slots__ = ("_buf", "_buf_ok", "_delays", "_ext", "_ext_end", "_gain_list", "_gains", "_idx", "_origin_flat",
-                 "_origin_list", "_pos", "_rows", "_rows_ok", "_size", "_step", "_taps", "fir", "held",
+                 "_origin_list", "_pos", "_rows", "_rows_ok", "_scratch", "_size", "_step", "_taps", "fir", "held",
                  "held_samples", "origin")
 
     def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
@@ -354,6 +340,7 @@ class _Stage:
         self._ext = np.zeros((0, origin.size))
         self._ext_end = -1
         self._origin_flat = np.tile(-self.origin, 1)  # -origin repeated row after row (grown as blocks need)
+        self._scratch = np.empty(0)  # g x of one tap, for the block path (grown as blocks need)
         self._taps = [ix.tolist() for ix in self._idx]
         self._gain_list: list[float] = self._gains.tolist()
         self._origin_list: list[float] = self.origin.tolist()
@@ -440,11 +427,17 @@ class _Stage:
         acc = out.reshape(-1)
         start = (at - delays[0]) * c
         np.multiply(gains[0], flat[start : start + nc], out=acc)
-        # the other taps added in place, one pass each (BLAS daxpy: out += g x) on the flat rows
-        daxpy = blas_daxpy()
+        # the other taps added in place: g x into a scratch row, then added (two numpy passes; BLAS daxpy fuses the
+        # multiply and the add in its vector body and not in its tail on some CPUs, so an output's last bit would
+        # depend on where the block boundaries fall)
+        tmp = self._scratch
+        if tmp.size < nc:
+            tmp = self._scratch = np.empty(max(nc, LINEAR_ROWS * c))
+        tmp = tmp[:nc]
         for d, g in zip(delays[1:], self._gain_list[1:], strict=True):
             start = (at - d) * c
-            daxpy(flat[start : start + nc], acc, a=g)
+            np.multiply(flat[start : start + nc], g, out=tmp)
+            np.add(acc, tmp, out=acc)
         self._ext_end = at + n
         self._buf_ok = self._rows_ok = False
         return out
@@ -478,7 +471,6 @@ class _ChannelShaper:
     def __init__(self, fir: SparseFir, channels: int) -> None:
         if channels < 1:
             raise ValueError("channels must be >= 1")
-        blas_daxpy()  # loaded with the filter (the shaper node's start), not in its first block's callback
         self.channels = int(channels)
         self._fir = fir
         self._last: np.ndarray | list[float] | None = None
