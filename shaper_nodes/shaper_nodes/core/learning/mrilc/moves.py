@@ -25,9 +25,9 @@ The work per cycle is bounded: one product with the precomputed L and
 a projection of at most :data:`PROJECTION_ROUNDS` x 8 sweeps of Hildreth's method over the violated samples.
 
 Divergence guard: the learner keeps the coefficients that gave the smallest cost
-(the weighted RMS(e)); when the cost exceeds ``growth`` times the best (and the noise floor) for ``patience``
-cycles in a row, it falls back to the best coefficients and halves gamma; after
-``max_fallbacks`` fallbacks it holds the best. The state round-trips through
+(the weighted RMS(e)); when the cost exceeds ``growth`` times the best (and the noise floor, and :data:`ROUNDING`
+times the largest cost seen: rounding) for ``patience`` cycles in a row, it falls back to the best coefficients
+and halves gamma; after ``max_fallbacks`` fallbacks it holds the best. The state round-trips through
 :meth:`MoveLearner.to_dict` / :meth:`MoveLearner.from_dict` (JSON-compatible, with
 :data:`STATE_VERSION`), checked entry by entry before any of it is used; :func:`moves_to_dict`
 and :func:`moves_from_dict` do the same for one learner per move.
@@ -57,6 +57,12 @@ HISTORY = 200
 ACTIONS = ("learn", "fallback", "hold")
 _KEYS = {"version", "basis", "joints", "outputs", "gain", "cycle", "coefficients", "best_cost", "best_coefficients",
          "grew", "fallbacks", "holding", "history"}
+#: entries a state may lack (written by a learner before them): ``peak_cost`` (then the history's largest cost)
+_OPTIONAL = {"peak_cost"}
+#: the divergence guard's floor relative to the largest cost seen: below it a cost is rounding, never growth (as
+#: the seed learner's, :class:`~shaper_nodes.core.learning.mrilc.learner.MrilcLearner`); a learner converged to the
+#: rounding of float64 otherwise reads rounding's scatter as growth and falls back
+ROUNDING = 1e-9
 
 Array = npt.NDArray[np.float64]
 
@@ -313,9 +319,9 @@ class MoveLearner:
         W >= 0 per output sample: L = (G^T W G + rho I)^-1 G^T W and the cost is the weighted RMS(e)
         (default 1).
     patience, growth, noise_floor, max_fallbacks
-        The divergence guard: cost > growth x best and > noise_floor (output unit) for ``patience``
-        cycles in a row -> fall back to the best coefficients, halve gamma; after ``max_fallbacks``
-        falls back: hold.
+        The divergence guard: cost > growth x best and > noise_floor (output unit) and > ROUNDING x the largest
+        cost seen for ``patience`` cycles in a row -> fall back to the best coefficients, halve gamma; after
+        ``max_fallbacks`` falls back: hold.
     """
 
     def __init__(self, operator: npt.ArrayLike, profile: Profile, limits: JointLimits, gain: float = 0.5,
@@ -349,6 +355,7 @@ class MoveLearner:
         self.fallbacks = 0
         self.holding = False
         self.history: list[tuple[int, float, str]] = []
+        self.peak = 0.0  # the largest cost seen
 
     def correction(self) -> tuple[Array, Array, Array]:
         """The next cycle's dq, dq', dq'' at the profile's samples, (samples, joints) each."""
@@ -367,10 +374,11 @@ class MoveLearner:
             raise MrilcError(f"the error must be {self.outputs} finite samples, got {e.size}"
                              + ("" if e.size != self.outputs else " with a non-finite value"))
         cost = float(np.sqrt(np.sum(self.weights * e**2) / np.sum(self.weights)))
+        self.peak = max(self.peak, cost)
         if self.best is None or cost < self.best[0]:
             self.best = (cost, self.coefficients.copy())
             self.grew = 0
-        elif cost > self.growth * self.best[0] and cost > self.noise_floor:
+        elif cost > self.growth * self.best[0] and cost > max(self.noise_floor, ROUNDING * self.peak):
             self.grew += 1
         else:
             self.grew = 0
@@ -401,7 +409,7 @@ class MoveLearner:
                 "best_cost": None if self.best is None else self.best[0],
                 "best_coefficients": None if self.best is None else self.best[1].tolist(),
                 "grew": self.grew, "fallbacks": self.fallbacks, "holding": self.holding,
-                "history": [list(h) for h in self.history]}
+                "history": [list(h) for h in self.history], "peak_cost": self.peak}
 
     @classmethod
     def from_dict(cls, doc: Any, operator: npt.ArrayLike, profile: Profile, limits: JointLimits,
@@ -422,7 +430,7 @@ class MoveLearner:
                    settings: dict[str, Any]) -> MoveLearner:
         if not isinstance(doc, dict):
             raise MrilcError(f"the state must be a dictionary, got {type(doc).__name__}")
-        missing, unknown = _KEYS - set(doc), set(doc) - _KEYS
+        missing, unknown = _KEYS - set(doc), set(doc) - _KEYS - _OPTIONAL
         if missing or unknown:
             raise MrilcError(f"entries missing {sorted(missing)}, unknown {sorted(unknown)}")
         if doc["version"] != STATE_VERSION:
@@ -457,6 +465,11 @@ class MoveLearner:
         learner.history = [(int(h[0]), _number(f"history cost of cycle {h[0]}", h[1]), str(h[2])) for h in hist]
         if hist and [h[0] for h in hist] != list(range(learner.cycle - len(hist), learner.cycle)):
             raise MrilcError(f"history cycles must run consecutively up to {learner.cycle - 1}")
+        peak = _number("peak_cost", doc["peak_cost"]) if "peak_cost" in doc else max(
+            [h[1] for h in learner.history] + [learner.best[0] if learner.best else 0.0])
+        if peak < 0:
+            raise MrilcError(f"peak_cost must be >= 0, got {peak}")
+        learner.peak = peak
         return learner
 
 
