@@ -11,7 +11,7 @@ from shaper_nodes.core.learning.list.learner import ListLearner
 from shaper_nodes.core.learning.list.params import ListConfig, ListParams
 from shaper_nodes.core.learning.list.session import ListSession
 from shaper_nodes.core.scheduling import MoveCorrections
-from shaper_nodes.core.shaping import Mode, ShaperError, design
+from shaper_nodes.core.shaping import Mode, Shaper, ShaperError, design
 
 A0, A1 = [0.0, -1.57, 1.57], [1.2, -1.57, 1.57]
 B1 = [0.0, -1.0, 0.5]
@@ -64,10 +64,15 @@ def test_bad_moves_are_refused_with_the_problem_named(args, words):
         MoveCorrections().set(*args, pair(0.05))
 
 
-def test_a_factor_must_be_two_impulses_and_the_number_of_moves_is_bounded():
+def test_a_factor_is_two_to_sixteen_impulses_within_a_second_and_the_number_of_moves_is_bounded():
     moves = MoveCorrections(max_moves=2)
-    with pytest.raises(ShaperError, match="two-impulse factor, got 3"):
-        moves.set(NAMES, A0, A1, design("zvd", [Mode.from_hz(10.0, 0.0)]))
+    # stacked two-impulse factors convolved (the learner's payback.max_factors): more than two impulses are taken
+    moves.set(NAMES, A0, A1, design("zvd", [Mode.from_hz(10.0, 0.0)]))
+    many = Shaper(np.full(17, 1.0 / 17), np.arange(17) * 0.01, "custom", (), {})
+    with pytest.raises(ShaperError, match="2 to 16 impulses, got 17"):
+        moves.set(NAMES, A0, A1, many)
+    with pytest.raises(ShaperError, match="at most 1 s long, got 1.5"):
+        moves.set(NAMES, A0, A1, pair(1.5))
     moves.set(NAMES, A0, A1, pair(0.05))
     moves.set(NAMES, A0, B1, pair(0.05))
     with pytest.raises(ShaperError, match="already 2 moves"):
