@@ -71,7 +71,7 @@ def test_a_factor_is_two_to_sixteen_impulses_within_a_second_and_the_number_of_m
     many = Shaper(np.full(17, 1.0 / 17), np.arange(17) * 0.01, "custom", (), {})
     with pytest.raises(ShaperError, match="2 to 16 impulses, got 17"):
         moves.set(NAMES, A0, A1, many)
-    with pytest.raises(ShaperError, match="at most 1 s long, got 1.5"):
+    with pytest.raises(ShaperError, match=r"at most 1 s long, got 1\.5"):
         moves.set(NAMES, A0, A1, pair(1.5))
     moves.set(NAMES, A0, A1, pair(0.05))
     moves.set(NAMES, A0, B1, pair(0.05))
