@@ -777,12 +777,26 @@ def _factor_count(impulses: tuple[np.ndarray, np.ndarray]) -> int:
 
 
 # ------------------------------------------------------------------------------------------ speed-up
+def speed_violations(run: Any, flange: bool = True, first: list[str] | None = None) -> list[str]:
+    """What a speed-up trial broke, in the learner's words: the flange's residual peak beyond the tolerance (when
+    judged at the flange), after ``first`` (an estimate's judgement), then the torque and the velocity limits."""
+    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
+
+    why = list(first or [])
+    if flange and run.measures.peak_mm > 1e3 * SETTLE_TOLERANCE:
+        why.insert(0, f"residual {run.measures.peak_mm:.4f} mm > {1e3 * SETTLE_TOLERANCE:g} mm")
+    if run.torque_ratio > 1.0:
+        why.append(f"torque {100 * run.torque_ratio:.0f} % of the limit")
+    if run.velocity_ratio > 1.0:
+        why.append(f"velocity {100 * run.velocity_ratio:.0f} % of 180 deg/s")
+    return why
+
+
 @register("speedup")
 def speedup(ctx: Context, cycles: int) -> list[Row]:
     """The schedule with a time-scaling factor learned per move (module docstring)."""
     from shaper_nodes.core.learning.moves import MoveStore
     from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings, limit_ceiling
-    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
     from sim_plant_node.arm.task import cycle_moves
 
     sched, cell, store, rows = ctx.schedule(), Cell(ctx), MoveStore(), []
@@ -796,13 +810,7 @@ def speedup(ctx: Context, cycles: int) -> list[Row]:
                 sp = entry.speed() or SpeedLearner()
             factor = sp.factor
             run = cell.run(mv, sched(mv.positions[-1]), factor)
-            why = []
-            if run.measures.peak_mm > 1e3 * SETTLE_TOLERANCE:
-                why.append(f"residual {run.measures.peak_mm:.4f} mm > {1e3 * SETTLE_TOLERANCE:g} mm")
-            if run.torque_ratio > 1.0:
-                why.append(f"torque {100 * run.torque_ratio:.0f} % of the limit")
-            if run.velocity_ratio > 1.0:
-                why.append(f"velocity {100 * run.velocity_ratio:.0f} % of 180 deg/s")
+            why = speed_violations(run)
             sp.update(not why, "; ".join(why))
             entry.speed_state, entry.cycles = sp.to_dict(), entry.cycles + 1
             rows.append(row("speedup", c, run, factor, violation="; ".join(why)))
@@ -842,7 +850,6 @@ def scheduled_list_speedup(ctx: Context, cycles: int) -> list[Row]:
     ``--noise`` by the node's accelerometer estimate (:func:`node_speed_estimate`, the robot's measure).
     Extra row fields: phase (list, speed), imu_peak and tolerance (m/s^2), estimate_mm, judged_by, violation."""
     from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings, limit_ceiling
-    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
     from sim_plant_node.arm.task import cycle_moves
 
     name = "scheduled_list_speedup"
@@ -867,15 +874,9 @@ def scheduled_list_speedup(ctx: Context, cycles: int) -> list[Row]:
             lowest = min(pay.sched(mv.positions[-1]).modes, key=lambda m: m.omega)
             peak, estimate, tol = node_speed_estimate(run, shaper, lowest)
             judged = "estimate" if ctx.noise > 0 else "flange"
-            why = []
-            if judged == "flange" and run.measures.peak_mm > 1e3 * SETTLE_TOLERANCE:
-                why.append(f"residual {run.measures.peak_mm:.4f} mm > {1e3 * SETTLE_TOLERANCE:g} mm")
-            if judged == "estimate" and peak > tol:
-                why.append(f"IMU peak {peak:.4f} m/s^2 > {tol:.4f} m/s^2 ({estimate:.4f} mm estimated)")
-            if run.torque_ratio > 1.0:
-                why.append(f"torque {100 * run.torque_ratio:.0f} % of the limit")
-            if run.velocity_ratio > 1.0:
-                why.append(f"velocity {100 * run.velocity_ratio:.0f} % of 180 deg/s")
+            why = [f"IMU peak {peak:.4f} m/s^2 > {tol:.4f} m/s^2 ({estimate:.4f} mm estimated)"] if (
+                judged == "estimate" and peak > tol) else []
+            why = speed_violations(run, flange=judged == "flange", first=why)
             sp.update(not why, "; ".join(why))
             entry.speed_state, entry.cycles = sp.to_dict(), entry.cycles + 1
             f = pay.kept.get(entry.key)

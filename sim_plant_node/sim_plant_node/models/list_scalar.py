@@ -12,7 +12,8 @@ the states equal the array code's to the last bit (``sim_plant_node/test/test_li
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +34,26 @@ def _clip(f: float, low: float, high: float) -> float:
 def _sign(d: float) -> float:
     """``np.sign`` of a float64 (NaN for NaN)."""
     return 1.0 if d > 0 else -1.0 if d < 0 else 0.0 if d == 0 else math.nan
+
+
+def rk4_step(f: Callable[..., Any], x: Any, v: Any, u0: Any, r: Any, s: float, h: float,
+             cycle_time: float | None) -> tuple[Any, Any]:
+    """One classical Runge-Kutta step of length h from s (s into the period) of x'' = f(x, v, u, t), the setpoint u
+    ramping from u0 at rate r: on floats (:class:`OneJoint`) or arrays (:class:`.plants.ListPlant`) alike, the same
+    operations in the same order, so the two give the same numbers bit for bit."""
+    t0 = None if cycle_time is None else cycle_time + s
+    tm = None if cycle_time is None else cycle_time + s + 0.5 * h
+    t1 = None if cycle_time is None else cycle_time + s + h
+    ua, um, ub = u0 + r * s, u0 + r * (s + 0.5 * h), u0 + r * (s + h)
+    a1 = f(x, v, ua, t0)
+    v2 = v + 0.5 * h * a1
+    a2 = f(x + 0.5 * h * v, v2, um, tm)
+    v3 = v + 0.5 * h * a2
+    a3 = f(x + 0.5 * h * v2, v3, um, tm)
+    v4 = v + h * a3
+    a4 = f(x + h * v3, v4, ub, t1)
+    return (x + (h / 6.0) * (v + 2.0 * v2 + 2.0 * v3 + v4),
+            v + (h / 6.0) * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
 
 
 class OneJoint:
@@ -71,21 +92,8 @@ class OneJoint:
 
     def rk4(self, x: float, v: float, u0: float, r: float, s: float, h: float,
             cycle_time: float | None) -> tuple[float, float]:
-        """:meth:`.plants.ListPlant._rk4` in floats."""
-        f = self.accel
-        t0 = None if cycle_time is None else cycle_time + s
-        tm = None if cycle_time is None else cycle_time + s + 0.5 * h
-        t1 = None if cycle_time is None else cycle_time + s + h
-        ua, um, ub = u0 + r * s, u0 + r * (s + 0.5 * h), u0 + r * (s + h)
-        a1 = f(x, v, ua, t0)
-        v2 = v + 0.5 * h * a1
-        a2 = f(x + 0.5 * h * v, v2, um, tm)
-        v3 = v + 0.5 * h * a2
-        a3 = f(x + 0.5 * h * v2, v3, um, tm)
-        v4 = v + h * a3
-        a4 = f(x + h * v3, v4, ub, t1)
-        return (x + (h / 6.0) * (v + 2.0 * v2 + 2.0 * v3 + v4),
-                v + (h / 6.0) * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
+        """:meth:`.plants.ListPlant._rk4` in floats (the same :func:`rk4_step`)."""
+        return rk4_step(self.accel, x, v, u0, r, s, h, cycle_time)
 
     def _side(self, x: float, u: float) -> float:
         f = self.kp * (u - x)

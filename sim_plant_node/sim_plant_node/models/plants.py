@@ -54,7 +54,7 @@ import numpy as np
 from shaper_nodes.core.cycles import END, MOTION_END, START
 
 from .base import PlantBase
-from .list_scalar import OneJoint
+from .list_scalar import OneJoint, rk4_step
 
 
 def check_rate(rate: float) -> float:
@@ -367,21 +367,8 @@ class ListPlant(_JointState, PlantBase):
 
     def _rk4(self, x: np.ndarray, v: np.ndarray, u0: np.ndarray, r: np.ndarray, s: float, h: float,
              cycle_time: float | None) -> tuple[np.ndarray, np.ndarray]:
-        """One classical Runge-Kutta step of length h from s (s into the period)."""
-        f = self._accel
-        t0 = None if cycle_time is None else cycle_time + s
-        tm = None if cycle_time is None else cycle_time + s + 0.5 * h
-        t1 = None if cycle_time is None else cycle_time + s + h
-        ua, um, ub = u0 + r * s, u0 + r * (s + 0.5 * h), u0 + r * (s + h)
-        a1 = f(x, v, ua, t0)
-        v2 = v + 0.5 * h * a1
-        a2 = f(x + 0.5 * h * v, v2, um, tm)
-        v3 = v + 0.5 * h * a2
-        a3 = f(x + 0.5 * h * v2, v3, um, tm)
-        v4 = v + h * a3
-        a4 = f(x + h * v3, v4, ub, t1)
-        return (x + (h / 6.0) * (v + 2.0 * v2 + 2.0 * v3 + v4),
-                v + (h / 6.0) * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
+        """One classical Runge-Kutta step of length h from s (s into the period): :func:`.list_scalar.rk4_step`."""
+        return rk4_step(self._accel, x, v, u0, r, s, h, cycle_time)
 
     def _corner(self, x0: np.ndarray, x1: np.ndarray, u0: np.ndarray, u1: np.ndarray, cycle_time: float | None,
                 s: float, h: float) -> bool:
