@@ -13,14 +13,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .plants import ListPlant
-
-__all__ = ["OneJoint"]
+__all__ = ["OneJoint", "rk4_step"]
 
 
 def _clip(f: float, low: float, high: float) -> float:
@@ -60,7 +57,7 @@ class OneJoint:
     """The period of a one-joint :class:`~.plants.ListPlant` (``plant``'s parameters read once: they do not
     change after it is made)."""
 
-    def __init__(self, plant: ListPlant, ramp_time: float, refine: int) -> None:
+    def __init__(self, plant: Any, ramp_time: float, refine: int) -> None:
         self.plant = plant
         self.model = plant.model
         self.m, self.c, self.k = float(plant.m[0]), float(plant.c[0]), float(plant.k[0])
