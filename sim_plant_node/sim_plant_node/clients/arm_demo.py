@@ -159,7 +159,7 @@ def _main(argv: list[str] | None) -> int:
             session.calibration = calibrate_step(out, t_wall)
         start("shaper_nodes", "identifier", {"use_sim_time": True, "buffer_cycles": 20, "settle_tolerance": 1e-4,
                                              "max_modes": 3, "topics.imu_reliable": True,
-                                             **arm_payload.identifier_params(cases)})
+                                             **arm_payload.identifier_params(cases, PER_MOVE)})
         start("shaper_nodes", "recorder", {"output": str(out / "recording"), "topics": RECORDED,
                                            "use_sim_time": True})
         conductor = Conductor(context=ctx)

@@ -55,10 +55,12 @@ def check_args(args: argparse.Namespace, cases: list[str]) -> str:
     return ""
 
 
-def identifier_params(cases: list[str]) -> dict[str, Any]:
-    """The identifier's parameters the case needs: its drift watch rates each move against the scheduler's
-    shaper for it."""
-    return {"watch.scheduler": "/scheduler"} if CASE in cases else {}
+def identifier_params(cases: list[str], per_move: tuple[str, ...] = (CASE,)) -> dict[str, Any]:
+    """The identifier's parameters when any of ``per_move`` runs (the cases whose learners relearn at a drift
+    warning): its drift watch rates each move against the scheduler's shaper for it. Without it the watch rates
+    against the shaper node's active shaper, which the schedule does not change: it may warn of what the schedule
+    shapes (a noise-free run warned of the position loop at 31.6 Hz), and a learner would relearn at it."""
+    return {"watch.scheduler": "/scheduler"} if any(c in per_move for c in cases) else {}
 
 
 @dataclass
