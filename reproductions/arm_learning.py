@@ -76,7 +76,7 @@ from typing import Any
 
 import numpy as np
 
-from reproductions.common import docs_option
+from reproductions.common import docs_option, save_figure
 from reproductions.residual_split import SERVO_ZETA  # more damped than this: the position loop's transient
 
 RATE = 500.0
@@ -966,12 +966,7 @@ def figures(rows: list[Row], docs: pathlib.Path, tag: str) -> list[str]:
             ax.set_yscale("log")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        name = f"arm_learning_{fname}{tag}.png"
-        (docs / "img").mkdir(parents=True, exist_ok=True)
-        fig.savefig(docs / "img" / name, dpi=90)
-        plt.close(fig)
-        names.append(name)
+        names.append(save_figure(fig, docs, f"arm_learning_{fname}{tag}.png"))
     return names
 
 

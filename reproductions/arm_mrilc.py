@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from reproductions.common import docs_option
+from reproductions.common import docs_option, save_figure
 
 RATE = 500.0          # Hz, the controller's update rate (the IMU samples at twice it)
 DWELL = 1.5           # s at rest after each move, as in the demo
@@ -375,12 +375,7 @@ def figure(rows: list[dict[str, Any]], docs: pathlib.Path, tag: str) -> str:
     ax.set_yscale("log")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    name = f"arm_mrilc_residual{tag}.png"
-    (docs / "img").mkdir(parents=True, exist_ok=True)
-    fig.savefig(docs / "img" / name, dpi=90)
-    plt.close(fig)
-    return name
+    return save_figure(fig, docs, f"arm_mrilc_residual{tag}.png")
 
 
 def main(argv: list[str] | None = None) -> int:

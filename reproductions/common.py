@@ -46,6 +46,17 @@ LOCKSTEP_TIMEOUT = 60.0
 LOCKSTEP_LEARNER = {"end_wait": 10.0}
 
 
+def save_figure(fig: Any, docs: pathlib.Path, name: str) -> str:
+    """Save ``fig`` (laid out tight) as ``docs/img/name`` at the arm pages' resolution, close it; returns ``name``."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    (docs / "img").mkdir(parents=True, exist_ok=True)
+    fig.savefig(docs / "img" / name, dpi=90)
+    plt.close(fig)
+    return name
+
+
 def metric(report: Any, name: str) -> float:
     """The value of metric ``name`` of a shaper_msgs/CycleReport (nan if it has none)."""
     try:
