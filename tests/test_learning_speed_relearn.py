@@ -1,14 +1,14 @@
 """A drift warning (a payload change) starts every move's speed-up again at the planned speed, over DDS.
 
-The learner in ``mode: speed_moves`` (its FollowJointTrajectory proxy in front of a test controller that serves
-the real control_msgs interface and records each goal it receives), and a peer named ``identifier`` that publishes
-the drift watch's status on ``/diagnostics`` through the identifier's own reporter (``identifier: drift``, as
-nodes/identifier.py does), all real nodes in one process. The learner starts from a state file of two moves that
-learned to run 1.4 times faster (between a good 1.2 and a failed 1.6). Shown: a goal of a move runs at its saved
-factor (the controller receives the motion 1.4 times shorter); at the first WARN every move's factor starts again
-from 1 (state file: factor 1, nothing good or failed, ``drift_warned``), once per episode; the cycle under way (its
-goal ran at 1.4) is not learned from; the next goal of a move runs as planned (factor 1); a restarted learner reads
-the episode flag back, and a state file whose flag is not a boolean is refused with one line naming it.
+The learner in ``mode: speed_moves`` (its FollowJointTrajectory proxy in front of a test controller that serves the real
+control_msgs interface and records each goal it receives), and a peer named ``identifier`` that publishes the drift
+watch's status on ``/diagnostics`` through the identifier's own reporter (``identifier: drift``, as nodes/identifier.py
+does; tests/relearn_peer.py, the MRILC relearn test's too), all real nodes in one process. The learner starts from a
+state file of two moves that learned to run 1.4 times faster (between a good 1.2 and a failed 1.6). Shown: a goal of a
+move runs at its saved factor (the controller receives the motion 1.4 times shorter); at the first WARN every move's
+factor starts again from 1 (state file: factor 1, nothing good or failed, ``drift_warned``), once per episode; the cycle
+under way (its goal ran at 1.4) is not learned from; the next goal of a move runs as planned (factor 1); a restarted
+learner reads the episode flag back, and a state file whose flag is not a boolean is refused with one line naming it.
 
 The payload change on the lockstep arm itself, with the identifier's real warning, is the demo's ``payload`` case
 (tests/test_demo_payload.py runs it with the LIST learner); this test drives the speed learner's side of it.
@@ -18,28 +18,22 @@ from __future__ import annotations
 
 import json
 import math
-import time
 
 import numpy as np
 import pytest
-from control_msgs.action import FollowJointTrajectory
-from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import Log
-from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
+from relearn_peer import Peer
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import MoveStore, move_key, store_from_doc
 from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings
-from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration, sec_to_time
-from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
+from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration
+from shaper_nodes.ros.diagnostics import OK, WARN
 
 pytestmark = pytest.mark.integration
 
-WAIT = 120.0  # s of wall time for a state to come (two busy cores)
 NAMES = ["j1", "j2"]
 MOVES = (([0.0, 0.0], [1.0, 0.5]), ([1.0, 0.5], [0.0, 0.0]))
 CONTROLLER = "/speed_test_controller/follow_joint_trajectory"
@@ -81,60 +75,9 @@ def learner_params(path) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-class Peer:
-    """The test's side: the identifier's /diagnostics (its own reporter), the cycle events, the test controller,
-    an action client of the learner's proxy, and the learner's reports and log lines."""
-
-    def __init__(self, ctx, ex: SingleThreadedExecutor) -> None:
-        self.ex = ex
-        self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
-        self.identifier = Diagnostics(self.node)
-        self.events = self.node.create_publisher(CycleEvent, "/cycle_events", 10)
-        self.reports: list[CycleReport] = []
-        self.logs: list[str] = []
-        self.goals: list[JointTrajectory] = []  # what reached the controller
-        self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
-        self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
-                                      else None, 100)
-        self.statuses: list = []
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
-        self.server = ActionServer(self.node, FollowJointTrajectory, CONTROLLER, execute_callback=self._execute)
-        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
-        ex.add_node(self.node)
-
-    async def _execute(self, handle) -> FollowJointTrajectory.Result:
-        self.goals.append(handle.request.trajectory)
-        handle.succeed()
-        return FollowJointTrajectory.Result()
-
-    def spin_until(self, done, what: str, timeout: float = WAIT) -> None:
-        deadline = time.monotonic() + timeout
-        while not done():
-            assert time.monotonic() < deadline, f"timed out after {timeout:g} s waiting for {what}"
-            self.ex.spin_once(timeout_sec=0.05)
-
-    def event(self, kind: int, cycle: int, t: float, move: int) -> None:
-        start, goal = MOVES[move]
-        msg = CycleEvent(event=kind, cycle=cycle, task="speed", joint_names=NAMES, start_positions=start,
-                         goal_positions=goal)
-        msg.header.stamp = sec_to_time(t)
-        self.events.publish(msg)
-
-    def run_goal(self, move: int) -> JointTrajectory:
-        """The move's planned goal through the learner's proxy; what the controller received."""
-        before = len(self.goals)
-        sent = self.client.send_goal_async(FollowJointTrajectory.Goal(trajectory=plan(move)))
-        self.spin_until(sent.done, "the learner's answer to the goal")
-        assert sent.result().accepted
-        result = sent.result().get_result_async()
-        self.spin_until(result.done, "the goal's result")
-        assert len(self.goals) == before + 1
-        return self.goals[-1]
-
-    def destroy(self) -> None:
-        self.server.destroy()
-        self.client.destroy()
-        self.node.destroy_node()
+def event(peer: Peer, kind: int, cycle: int, t: float, move: int) -> None:
+    """A cycle event of the move."""
+    peer.event(kind, cycle, t, NAMES, *MOVES[move], task="speed")
 
 
 def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros_context, tmp_path):
@@ -145,7 +88,7 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
     learner = LearnerNode(context=ros_context, parameter_overrides=learner_params(path))
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(learner)
-    peer = Peer(ros_context, ex)
+    peer = Peer(ros_context, CONTROLLER, ex)
     mode = learner.mode
     keys = [move_key(s, g) for s, g in MOVES]
     try:
@@ -156,9 +99,9 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
         assert [e.speed().factor for e in mode.store] == [SAVED, SAVED] and not mode.drift.warned
 
         # a cycle under way: its goal runs at the saved factor (the motion 1.4 times shorter at the controller)
-        peer.event(CycleEvent.START, 1, 10.0, 0)
+        event(peer, CycleEvent.START, 1, 10.0, 0)
         peer.spin_until(lambda: 1 in mode._cycles, "the learner's START of cycle 1")
-        scaled = peer.run_goal(0)
+        scaled = peer.run_goal(plan(0))
         assert motion_end(scaled) == pytest.approx(MOTION / SAVED, abs=1e-6)
 
         # the identifier's WARN: every move starts again at factor 1, once
@@ -181,17 +124,15 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
         # the WARN repeated: nothing more; the cycle under way (its goal ran at 1.4) is not learned from
         peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"
                                 " (4 cycles in a row)", [("cycle", "8"), ("mode_hz", "9.7")])
-        peer.event(CycleEvent.END, 1, 12.0, 0)
-        peer.spin_until(lambda: any(r.cycle == 1 for r in peer.reports), "the report of cycle 1")
-        got = next(r for r in peer.reports if r.cycle == 1)
-        assert dict(zip(got.metric_names, got.metric_values, strict=True)) == {"skipped": 1.0}
+        event(peer, CycleEvent.END, 1, 12.0, 0)
+        assert peer.report(1) == {"skipped": 1.0}
         assert mode.drift.resets == 1 and sum("relearning" in m for m in peer.logs) == 1
 
         # the next goal of each move runs as planned (factor 1)
         for cycle, move in ((2, 1), (3, 0)):
-            peer.event(CycleEvent.START, cycle, 20.0 + 10 * cycle, move)
+            event(peer, CycleEvent.START, cycle, 20.0 + 10 * cycle, move)
             peer.spin_until(lambda c=cycle: c in mode._cycles, f"the learner's START of cycle {cycle}")
-            sent = peer.run_goal(move)
+            sent = peer.run_goal(plan(move))
             assert motion_end(sent) == pytest.approx(MOTION, abs=1e-6)
             assert [duration_to_sec(p.time_from_start) for p in sent.points] == \
                 [duration_to_sec(p.time_from_start) for p in plan(move).points]
