@@ -24,12 +24,13 @@ import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from relearn_peer import Peer
+from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import MoveStore, move_key, store_from_doc
 from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings
-from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration
+from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration, sec_to_time
 from shaper_nodes.ros.diagnostics import OK, WARN
 
 pytestmark = pytest.mark.integration
@@ -181,3 +182,88 @@ def test_an_empty_drift_status_watches_nothing(ros_context, tmp_path):
         assert all(sub.topic_name != "/diagnostics" for sub in node.subscriptions)
     finally:
         node.destroy_node()
+
+
+def imu_window(peer: Peer, t0: float, motion: float, upto: float) -> float:
+    """The accelerometer up to ``upto`` s after a move's start ``t0``, at 250 Hz: gravity, and after the ``motion`` s
+    a decaying 8 Hz ring of 0.05 m/s^2 (well within 0.05 mm at 10 Hz: 0.197 m/s^2); the last sample's stamp, s."""
+    for k in range(int(upto * 250) + 1):
+        t = k / 250
+        msg = Imu()
+        msg.header.stamp = sec_to_time(t0 + t)
+        ring = 0.05 * math.exp(-(t - motion) / 0.3) * math.sin(2 * math.pi * 8.0 * (t - motion)) if t > motion else 0.0
+        msg.linear_acceleration.x, msg.linear_acceleration.z = ring, 9.81
+        peer.imu.publish(msg)
+    return t0 + t
+
+
+def test_a_kill_9_during_a_move_resumes_every_move_from_its_saved_state(start_node, ros_context, tmp_path):
+    """The learner (its own process) is killed with SIGKILL during a move: after its goal was accepted and reached
+    the controller, which is still running it, and before the move's residual window ended. Started again on the same
+    state file, every move resumes at its saved factor. The interrupted cycle is not learned from, which is right:
+    the factor its goal ran with, its START and half its accelerometer window were in the killed process; the state
+    saved at the last END is the state before the cycle, as if it had not run. Its END, arriving at the restarted
+    learner, is reported skipped (END without its START), and the move's next cycle runs at the saved factor."""
+    state = tmp_path / "learner_state.json"
+    params = {"mode": "speed_moves", "state_file": str(state), "end_wait": 10.0, "topics.imu_reliable": True,
+              "speed.controller": CONTROLLER, "speed.scheduler": "", "speed.frequency_hz": 10.0,
+              "speed.match_timeout": 30.0, "speed.action_timeout": 60.0, "speed.step": 0.2}
+    inputs = ("/cycle_events", "/tip_imu")
+    learner = start_node("shaper_nodes", "learner", params)
+    peer = Peer(ros_context, CONTROLLER, imu=True)
+
+    def cycle(number: int, move: int, factor: float) -> dict[str, float]:
+        """One move as one cycle at ``factor`` (checked at the controller); the learner's report."""
+        t0 = 100.0 + 10.0 * number
+        event(peer, CycleEvent.START, number, t0, move)
+        motion = motion_end(peer.run_goal(plan(move), f"the goal of cycle {number}"))
+        assert motion == pytest.approx(MOTION / factor, abs=1e-6), (number, motion)
+        end = imu_window(peer, t0, motion, motion + 1.2)
+        event(peer, CycleEvent.END, number, end, move)  # (the END's wait: the samples up to it came)
+        got = peer.report(number)
+        assert got["speed_factor"] == pytest.approx(factor) and got["ok"] == 1.0, got
+        return got
+
+    def moves() -> dict:
+        return json.loads(state.read_text())["moves"]["moves"]
+
+    keys = [move_key(s, g) for s, g in MOVES]
+    try:
+        peer.spin_until(lambda: peer.learner_up(inputs, set()), "the learner's subscriptions and action server")
+        for number, move, factor in ((0, 0, 1.0), (1, 1, 1.0), (2, 0, 1.2)):
+            cycle(number, move, factor)
+        saved = moves()
+        assert [saved[k]["speed"]["factor"] for k in keys] == pytest.approx([1.4, 1.2])
+        assert [saved[k]["cycles"] for k in keys] == [2, 1]
+
+        # cycle 3, pick -> home at 1.2: accepted, at the controller, which runs it; half its window measured
+        peer.hold()
+        t0 = 130.0
+        event(peer, CycleEvent.START, 3, t0, 1)
+        peer.send(plan(1), "the goal of cycle 3")
+        motion = motion_end(peer.goals[-1])
+        assert motion == pytest.approx(MOTION / 1.2, abs=1e-6) and peer.running == 1
+        imu_window(peer, t0, motion, motion + 0.5)  # the window runs to motion + 1.0 s
+        before = peer.learner_subscriptions(inputs)
+        assert learner.proc is not None
+        learner.proc.kill()
+        assert learner.proc.wait(timeout=30) == -9
+        assert peer.running == 1  # killed during the move
+        peer.release()  # the controller finishes the move (a robot's controller does not need the learner)
+        peer.spin_until(lambda: peer.running == 0, "the end of the move at the controller")
+        assert moves() == saved  # the state file: as at the last END
+
+        start_node("shaper_nodes", "learner", params)
+        peer.spin_until(lambda: peer.learner_up(inputs, before), "the restarted learner's subscriptions and server")
+        event(peer, CycleEvent.END, 3, t0 + motion + 1.2, 1)  # the interrupted cycle's END: not learned from
+        assert peer.report(3) == {"skipped": 1.0}
+        # every move resumes from its saved state: home -> pick at 1.4, pick -> home at 1.2 (its interrupted cycle
+        # neither raised nor lowered it)
+        assert cycle(4, 0, 1.4)["factor_next"] == pytest.approx(1.6)
+        assert cycle(5, 1, 1.2)["factor_next"] == pytest.approx(1.4)
+        after = moves()
+        assert [after[k]["speed"]["factor"] for k in keys] == pytest.approx([1.6, 1.4])
+        assert [after[k]["cycles"] for k in keys] == [3, 2]
+        assert [h["factor"] for h in after[keys[1]]["speed"]["history"]] == pytest.approx([1.0, 1.2])
+    finally:
+        peer.destroy()
