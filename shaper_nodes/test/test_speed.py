@@ -82,15 +82,16 @@ def test_the_limit_ceiling_is_the_tightest_of_velocity_and_acceleration():
 def test_a_measured_effort_past_its_joints_limit_is_a_violation_that_lowers_the_factor_at_once():
     names = ["shoulder_pan_joint", "shoulder_lift_joint", "wrist_1_joint"]
     limits = [150.0, 150.0, 28.0]
-    ratio, breach = effort_check([30.0, -75.0, 14.0], limits, names)
-    assert ratio == pytest.approx(0.5) and breach is None  # within: the largest |effort| / limit reported
-    ratio, breach = effort_check([30.0, -75.0, -29.4], limits, names)
-    assert ratio == pytest.approx(1.05)
+    ratio, joint, breach = effort_check([30.0, -75.0, 13.0], limits, names)
+    assert ratio == pytest.approx(0.5) and joint == 1 and breach is None  # within: the largest |effort| / limit
+    ratio, joint, breach = effort_check([30.0, -75.0, -29.4], limits, names)
+    assert ratio == pytest.approx(1.05) and joint == 2
     assert breach == "joint wrist_1_joint: measured |effort| 29.4 N m above its limit 28 N m"
     # at the limit is within; no limit (inf) counts 0; a nan effort is a violation
-    assert effort_check([150.0, 0.0, 28.0], limits, names) == (1.0, None)
-    assert effort_check([1e6, 1.0, 1.0], [np.inf, 2.0, 2.0], names) == (0.5, None)
-    assert effort_check([np.nan, 1.0, 1.0], limits, names)[1] is not None
+    assert effort_check([150.0, 0.0, 28.0], limits, names) == (1.0, 0, None)
+    assert effort_check([1e6, 1.0, 1.0], [np.inf, 2.0, 2.0], names) == (0.5, 1, None)
+    assert effort_check([np.nan, 1.0, 1.0], limits, names)[1:] == (0, "joint shoulder_pan_joint: measured |effort|"
+                                                                    " nan N m above its limit 150 N m")
     with pytest.raises(SpeedError, match="2 efforts against 3 limits"):
         effort_check([1.0, 2.0], limits, names)
     # the learner's rule: a breach is a bad cycle, as a residual above the tolerance is

@@ -57,8 +57,9 @@ Reports (``~/reports``): per move's END, the metrics ``move`` (index in the stat
 factor the goal ran with), ``factor_next``, ``ceiling``, ``peak`` and ``tolerance`` (m/s^2), ``peak_mm`` (the peak
 converted to the flange, mm), ``frequency_hz``, ``motion_s`` (the scaled plan's motion, s), ``velocity_ratio`` and
 ``acceleration_ratio`` (the scaled plan's largest against its limit), ``effort_ratio`` (the largest measured
-|effort| against its limit; nan: not watched) and ``effort_ok``, ``ok`` and ``holding``; residual_rms: the window's
-RMS. A bad cycle's reason (residual, effort: the joint named) is on the log line and in the move's saved history.
+|effort| against its limit; nan: not watched), ``effort_joint`` (that joint's index; -1: none) and ``effort_ok``,
+``ok`` and ``holding``; residual_rms: the window's RMS. A bad cycle's reason (residual, effort: the joint named) is
+on the log line and in the move's saved history.
 """
 
 from __future__ import annotations
@@ -369,14 +370,15 @@ class SpeedMovesMode:
         res = residual_vibration(arr[:, 0], arr[:, 1:], window[0], window[1], remove_mean=True)
         tol = acceleration_tolerance(float(v.tolerance), cyc.frequency)
         joints = self.names.get(cyc.key, [])
-        effort_ratio, breach = math.nan, None
+        effort_ratio, effort_joint, breach = math.nan, -1, None
         if self._watching():
             peaks = None if self.efforts is None else self.efforts.peaks(joints, cyc.start, window[1])
             if peaks is None:
                 return self.node.skipped(msg, window, f"no joint efforts measured during the move on"
                                          f" '{v.joint_states}': speed.max_effort cannot be checked")
             try:
-                effort_ratio, breach = effort_check(peaks, self._per_joint("max_effort", len(joints)), joints)
+                limits = self._per_joint("max_effort", len(joints))
+                effort_ratio, effort_joint, breach = effort_check(peaks, limits, joints)
             except InputError as err:
                 return self.node.skipped(msg, window, f"the efforts cannot be checked: {err}")
         reasons = [f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"] if res.peak > tol else []
@@ -394,13 +396,15 @@ class SpeedMovesMode:
         index = [e.key for e in self.store].index(cyc.key)
         mm = 1e3 * res.peak / (2.0 * math.pi * cyc.frequency) ** 2
         names = ["move", "speed_factor", "factor_next", "ceiling", "peak", "tolerance", "peak_mm", "frequency_hz",
-                 "motion_s", "velocity_ratio", "acceleration_ratio", "effort_ratio", "effort_ok", "ok", "holding"]
+                 "motion_s", "velocity_ratio", "acceleration_ratio", "effort_ratio", "effort_joint", "effort_ok", "ok",
+                 "holding"]
         values = [float(index), cyc.factor, nxt, cyc.ceiling, res.peak, tol, mm, cyc.frequency, cyc.motion,
-                  *cyc.ratios, effort_ratio, 0.0 if breach else 1.0, 1.0 if ok else 0.0,
+                  *cyc.ratios, effort_ratio, float(effort_joint), 0.0 if breach else 1.0, 1.0 if ok else 0.0,
                   1.0 if self.holding or sp.holding else 0.0]
         text = (f"cycle {cycle}, move {cyc.key}: factor {cyc.factor:.3f}, settled peak {res.peak:.4g} m/s^2 in"
                 f" {window[0]:.3f}-{window[1]:.3f} s ({mm:.4f} mm at {cyc.frequency:.3g} Hz; tolerance {tol:.4g}"
-                f" m/s^2), largest effort {effort_ratio:.3g} of its limit: {'good' if ok else 'bad: ' + reason}"
+                f" m/s^2), largest effort {effort_ratio:.3g} of its limit"
+                f"{f' ({joints[effort_joint]})' if effort_joint >= 0 else ''}: {'good' if ok else 'bad: ' + reason}"
                 f" -> {nxt:.3f}")
         if ok:  # (one severity per call site: rclpy refuses a call site that changes it)
             self.node.get_logger().info(text)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..arm.description import TORQUE_LIMITS
+from ..arm.description import JOINT_NAMES, TORQUE_LIMITS
 
 #: rad/s: the UR5e's published joint speed limit, every joint (ur_description's joint_limits.yaml: 3.14159)
 VELOCITY = math.pi
@@ -96,15 +96,16 @@ def summary(per_move: list[list[tuple[Any, Any, Any]]], rows: list[dict[str, Any
         base = sum(float(r["move_and_settle_s"]) for r in sched)
         out.append(f"against the schedule's {base:.3f} s at planned speed: last cycle"
                    f" {100 * (1 - totals[-1] / base):.1f} % shorter")
-    effort: dict[str, list[float]] = {}  # the measured |torque| / limit per move and cycle (nan: not watched)
+    largest: dict[str, tuple[float, str]] = {}  # the largest measured |torque| / limit per move, and its joint
     for c in per_move:
         for run, _, report in c:
             m = dict(zip(report.metric_names, report.metric_values, strict=True))
-            effort.setdefault(run.name, []).append(m.get("effort_ratio", math.nan))
-    largest = {k: max((x for x in v if not math.isnan(x)), default=math.nan) for k, v in effort.items()}
-    if any(not math.isnan(x) for x in largest.values()):
+            ratio, joint = m.get("effort_ratio", math.nan), int(m.get("effort_joint", -1))
+            if not math.isnan(ratio) and ratio >= largest.get(run.name, (-1.0, ""))[0]:
+                largest[run.name] = (ratio, JOINT_NAMES[joint] if 0 <= joint < len(JOINT_NAMES) else "?")
+    if largest:
         out.append("largest measured joint torque per move over all cycles, of its joint's limit: "
-                   + ", ".join(f"{k} {100 * v:.0f} %" for k, v in largest.items()))
+                   + ", ".join(f"{k} {100 * r:.0f} % ({j})" for k, (r, j) in largest.items()))
     last = per_move[-1]
     factors = []
     for run, _, report in last:

@@ -212,7 +212,7 @@ def limit_breach(times: np.ndarray, velocities: np.ndarray, accelerations: np.nd
 
 
 def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | np.ndarray,
-                 names: Sequence[str]) -> tuple[float, str | None]:
+                 names: Sequence[str]) -> tuple[float, int, str | None]:
     """The efforts measured during a move against the joints' limits.
 
     Parameters
@@ -228,6 +228,8 @@ def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | 
     -------
     ratio : float
         The largest |effort| / limit over the joints (0 for a joint without a limit; nan if a limit is nan).
+    joint : int
+        The index of the joint of that ratio (-1: no joint).
     breach : str or None
         The first joint whose |effort| exceeded its limit, in one line (None: every joint within its limit; a
         nan effort or limit counts as exceeded).
@@ -238,12 +240,13 @@ def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | 
         raise SpeedError(f"{p.size} efforts against {lim.size} limits and {len(names)} names")
     with np.errstate(divide="ignore", invalid="ignore"):
         ratios = np.where(np.isinf(lim), 0.0, p / lim)
-    ratio = float(np.max(ratios)) if ratios.size else 0.0
+    joint = int(np.argmax(np.nan_to_num(ratios, nan=np.inf))) if ratios.size else -1
+    ratio = float(ratios[joint]) if ratios.size else 0.0
     over = limits_held(p, lim)
     if not over:
-        return ratio, None
+        return ratio, joint, None
     j = over[0]
-    return ratio, f"joint {names[j]}: measured |effort| {p[j]:.4g} N m above its limit {lim[j]:.4g} N m"
+    return ratio, joint, f"joint {names[j]}: measured |effort| {p[j]:.4g} N m above its limit {lim[j]:.4g} N m"
 
 
 def acceleration_tolerance(displacement: float, frequency_hz: float) -> float:
