@@ -92,6 +92,9 @@ def test_a_measured_effort_past_its_joints_limit_is_a_violation_that_lowers_the_
     assert effort_check([1e6, 1.0, 1.0], [np.inf, 2.0, 2.0], names) == (0.5, 1, None)
     assert effort_check([np.nan, 1.0, 1.0], limits, names)[1:] == (0, "joint shoulder_pan_joint: measured |effort|"
                                                                     " nan N m above its limit 150 N m")
+    # two joints past their limits: the one furthest past is named
+    assert effort_check([160.0, 0.0, 56.0], limits, names)[1:] == (2, "joint wrist_1_joint: measured |effort| 56 N m"
+                                                                    " above its limit 28 N m")
     with pytest.raises(SpeedError, match="2 efforts against 3 limits"):
         effort_check([1.0, 2.0], limits, names)
     # the learner's rule: a breach is a bad cycle, as a residual above the tolerance is

@@ -231,8 +231,8 @@ def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | 
     joint : int
         The index of the joint of that ratio (-1: no joint).
     breach : str or None
-        The first joint whose |effort| exceeded its limit, in one line (None: every joint within its limit; a
-        nan effort or limit counts as exceeded).
+        The joint furthest past its limit, in one line (None: every joint within its limit; a nan effort or limit
+        counts as exceeded).
     """
     p = np.abs(np.asarray(peaks, dtype=float)).reshape(-1)
     lim = np.asarray(limits, dtype=float).reshape(-1)
@@ -245,7 +245,7 @@ def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | 
     over = limits_held(p, lim)
     if not over:
         return ratio, joint, None
-    j = over[0]
+    j = joint if joint in over else over[0]  # the joint furthest past its limit
     return ratio, joint, f"joint {names[j]}: measured |effort| {p[j]:.4g} N m above its limit {lim[j]:.4g} N m"
 
 
