@@ -381,7 +381,7 @@ class SpeedMovesMode:
                 effort_ratio, effort_joint, breach = effort_check(peaks, limits, joints)
             except InputError as err:
                 return self.node.skipped(msg, window, f"the efforts cannot be checked: {err}")
-        reasons = [f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"] if res.peak > tol else []
+        reasons = [] if res.peak <= tol else [f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"]
         reasons += [breach] if breach else []
         ok, reason = not reasons, "; ".join(reasons)
         moved = self.store.get(cyc.key)
@@ -403,9 +403,8 @@ class SpeedMovesMode:
                   1.0 if self.holding or sp.holding else 0.0]
         text = (f"cycle {cycle}, move {cyc.key}: factor {cyc.factor:.3f}, settled peak {res.peak:.4g} m/s^2 in"
                 f" {window[0]:.3f}-{window[1]:.3f} s ({mm:.4f} mm at {cyc.frequency:.3g} Hz; tolerance {tol:.4g}"
-                f" m/s^2), largest effort {effort_ratio:.3g} of its limit"
-                f"{f' ({joints[effort_joint]})' if effort_joint >= 0 else ''}: {'good' if ok else 'bad: ' + reason}"
-                f" -> {nxt:.3f}")
+                f" m/s^2)" + (f", largest effort {effort_ratio:.3g} of its limit ({joints[effort_joint]})"
+                              if effort_joint >= 0 else "") + f": {'good' if ok else 'bad: ' + reason} -> {nxt:.3f}")
         if ok:  # (one severity per call site: rclpy refuses a call site that changes it)
             self.node.get_logger().info(text)
         else:
