@@ -23,7 +23,7 @@ from shaper_nodes.nodes import (
     learner_moves_mrilc,
     learner_mrilc,
     learner_payback,
-    learner_speed,
+    learner_speed_parameters,
     recorder,
     scheduler,
     shaper,
@@ -46,7 +46,7 @@ def sections() -> list[tuple[str, str, Sequence[tuple[str, Iterable[Spec]]]]]:
                                     ("mode list with list.per_move", learner_payback.PARAMETERS),
                                     ("mode mrilc", learner_mrilc.PARAMETERS),
                                     ("mode mrilc_moves", learner_moves_mrilc.PARAMETERS),
-                                    ("mode speed_moves", learner_speed.PARAMETERS)]),
+                                    ("mode speed_moves", learner_speed_parameters.PARAMETERS)]),
         ("scheduler", "Gain scheduling (`shaper_nodes.nodes.scheduler`); each name of `rule_names` adds"
          " `rules.<name>.*` (below, with `<name>` for the rule).",
          [("", scheduler.PARAMETERS), ("each rule", scheduler.rule_table("<name>"))]),

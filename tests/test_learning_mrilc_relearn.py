@@ -1,12 +1,12 @@
 """A drift warning (a payload change) drops every move's MRILC correction and restarts its learner, over DDS.
 
-The learner in ``mode: mrilc_moves`` runs as its own process (so that it can be killed with SIGKILL), with the
-simulated arm's lifted operator (``sim_plant_node.arm.lifted:arm_operator``, built from each goal as on the arm).
-The test's peer, one real node named ``identifier``, publishes the drift watch's status on ``/diagnostics`` through
-the identifier's own reporter (``identifier: drift``, as nodes/identifier.py does), the cycle events, the tool
-accelerometer's samples of each move's window (a decaying 8 Hz ring after the motion), serves the controller's
-FollowJointTrajectory action (recording each goal it receives) and sends the moves' planned goals to the learner's
-proxy. Two moves of the arm, home -> pick and pick -> home, learn a cycle or two each.
+The learner in ``mode: mrilc_moves`` runs as its own process (so that it can be killed with SIGKILL), with the simulated
+arm's lifted operator (``sim_plant_node.arm.lifted:arm_operator``, built from each goal as on the arm). The test's peer
+(tests/relearn_peer.py, the speed relearn test's too), one real node named ``identifier``, publishes the drift watch's
+status on ``/diagnostics`` through the identifier's own reporter (``identifier: drift``, as nodes/identifier.py does),
+the cycle events, the tool accelerometer's samples of each move's window (a decaying 8 Hz ring after the motion), serves
+the controller's FollowJointTrajectory action (recording each goal it receives) and sends the moves' planned goals to
+the learner's proxy. Two moves of the arm, home -> pick and pick -> home, learn a cycle or two each.
 
 Shown: after the moves learned (the controller receives corrected goals), the first WARN drops every move's
 correction (one line on /diagnostics names both moves; the state file: no move, ``drift_warned``), once per
@@ -24,31 +24,22 @@ from __future__ import annotations
 
 import json
 import math
-import time
 
 import numpy as np
 import pytest
-from control_msgs.action import FollowJointTrajectory
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rcl_interfaces.msg import Log
-from rclpy.action import ActionClient, ActionServer
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
+from relearn_peer import Peer
 from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import move_key
-from shaper_nodes.nodes.learner_drift import level_of
 from shaper_nodes.ros.conversions import sec_to_duration, sec_to_time
-from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
-from shaper_nodes.ros.lockstep_reader import STREAM_QOS
+from shaper_nodes.ros.diagnostics import OK, WARN
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.task import HOME, MAX_ACCELERATION, MAX_VELOCITY, PICK, trapezoid_move
 
 pytestmark = pytest.mark.integration
 
-WAIT = 120.0  # s of wall time for a state to come (two busy cores)
 CONTROLLER = "/mrilc_test_controller/follow_joint_trajectory"
 MOVES = (trapezoid_move("home->pick", HOME, PICK), trapezoid_move("pick->home", PICK, HOME))
 KEYS = [move_key(m.positions[0], m.positions[-1]) for m in MOVES]
@@ -76,89 +67,31 @@ def correction(sent: JointTrajectory, index: int) -> float:
     return float(np.max(np.abs(got - planned)))
 
 
-class Peer:
-    """The test's side (module docstring)."""
+def run_cycle(peer: Peer, cycle: int, index: int, before_end=None) -> tuple[dict[str, float], float]:
+    """One move as one cycle (START, its goal through the learner's proxy, the accelerometer's window, END); the
+    learner's report (name -> value) and how far the goal the controller received is from the plan (rad).
+    ``before_end`` runs after the goal, before the END."""
+    m = MOVES[index]
+    t0 = 100.0 + 10.0 * cycle
 
-    def __init__(self, ctx) -> None:
-        self.ex = SingleThreadedExecutor(context=ctx)
-        self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
-        self.identifier = Diagnostics(self.node)  # one publisher: its statuses arrive in order
-        self.events = self.node.create_publisher(CycleEvent, "/cycle_events", 100)
-        self.imu = self.node.create_publisher(Imu, "/tip_imu", STREAM_QOS)
-        self.reports: list[CycleReport] = []
-        self.logs: list[str] = []
-        self.statuses: list[DiagnosticStatus] = []
-        self.goals: list[JointTrajectory] = []  # what reached the controller
-        self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
-        self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
-                                      else None, 100)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
-        self.server = ActionServer(self.node, FollowJointTrajectory, CONTROLLER, execute_callback=self._execute)
-        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
-        self.ex.add_node(self.node)
+    def event(kind: int, t: float) -> None:
+        peer.event(kind, cycle, t, JOINT_NAMES, m.positions[0], m.positions[-1])
 
-    async def _execute(self, handle) -> FollowJointTrajectory.Result:
-        self.goals.append(handle.request.trajectory)
-        handle.succeed()
-        return FollowJointTrajectory.Result()
-
-    def spin_until(self, done, what: str, timeout: float = WAIT) -> None:
-        deadline = time.monotonic() + timeout
-        while not done():
-            assert time.monotonic() < deadline, f"timed out after {timeout:g} s waiting for {what}"
-            self.ex.spin_once(timeout_sec=0.05)
-
-    def learner_subscriptions(self) -> set[bytes]:
-        """The endpoint GIDs of the learner's subscriptions of its inputs on the graph now."""
-        return {bytes(i.endpoint_gid) for topic in INPUTS for i in self.node.get_subscriptions_info_by_topic(topic)
-                if i.node_name == "learner"}
-
-    def status(self, name: str, level: int, words: str) -> DiagnosticStatus | None:
-        return next((s for s in self.statuses if s.name == name and level_of(s.level) == level
-                     and words in s.message), None)
-
-    def event(self, kind: int, cycle: int, t: float, index: int) -> None:
-        m = MOVES[index]
-        msg = CycleEvent(event=kind, cycle=cycle, task="per_move", joint_names=list(JOINT_NAMES),
-                         start_positions=m.positions[0].tolist(), goal_positions=m.positions[-1].tolist())
-        msg.header.stamp = sec_to_time(t)
-        self.events.publish(msg)
-
-    def cycle(self, cycle: int, index: int, before_end=None) -> tuple[dict[str, float], float]:
-        """One move as one cycle (START, its goal through the learner's proxy, the accelerometer's window, END);
-        the learner's report (name -> value) and how far the goal the controller received is from the plan (rad).
-        ``before_end`` runs after the goal, before the END."""
-        t0 = 100.0 + 10.0 * cycle
-        self.event(CycleEvent.START, cycle, t0, index)
-        before = len(self.goals)
-        sent = self.client.send_goal_async(FollowJointTrajectory.Goal(trajectory=goal(index)))
-        self.spin_until(sent.done, f"the learner's answer to the goal of cycle {cycle}")
-        assert sent.result().accepted
-        result = sent.result().get_result_async()
-        self.spin_until(result.done, f"the result of the goal of cycle {cycle}")
-        assert len(self.goals) == before + 1
-        moved = correction(self.goals[-1], index)
-        if before_end is not None:
-            before_end()
-        end = float(MOVES[index].duration)
-        for k in range(int(round(WINDOW / 1e-3)) + 1):  # every ms, as the learner's grid
-            t = 1e-3 * k
-            msg = Imu()
-            msg.header.stamp = sec_to_time(t0 + t)
-            ring = 0.05 * math.exp(-(t - end) / 0.4) * math.sin(2 * math.pi * 8.0 * (t - end)) if t > end else 0.0
-            msg.linear_acceleration.x, msg.linear_acceleration.z = ring, 9.81 + 0.5 * ring
-            self.imu.publish(msg)
-        self.event(CycleEvent.MOTION_END, cycle, t0 + end, index)
-        self.event(CycleEvent.END, cycle, t0 + WINDOW, index)
-        self.spin_until(lambda: any(r.cycle == cycle for r in self.reports), f"the learner's report of cycle {cycle}")
-        got = next(r for r in self.reports if r.cycle == cycle)
-        return dict(zip(got.metric_names, got.metric_values, strict=True)), moved
-
-    def destroy(self) -> None:
-        self.ex.shutdown()
-        self.server.destroy()
-        self.client.destroy()
-        self.node.destroy_node()
+    event(CycleEvent.START, t0)
+    moved = correction(peer.run_goal(goal(index), f"the goal of cycle {cycle}"), index)
+    if before_end is not None:
+        before_end()
+    end = float(m.duration)
+    for k in range(int(round(WINDOW / 1e-3)) + 1):  # every ms, as the learner's grid
+        t = 1e-3 * k
+        msg = Imu()
+        msg.header.stamp = sec_to_time(t0 + t)
+        ring = 0.05 * math.exp(-(t - end) / 0.4) * math.sin(2 * math.pi * 8.0 * (t - end)) if t > end else 0.0
+        msg.linear_acceleration.x, msg.linear_acceleration.z = ring, 9.81 + 0.5 * ring
+        peer.imu.publish(msg)
+    event(CycleEvent.MOTION_END, t0 + end)
+    event(CycleEvent.END, t0 + WINDOW)
+    return peer.report(cycle), moved
 
 
 def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_relearned_state(
@@ -169,14 +102,10 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
               "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION],
               "mrilc_moves.match_timeout": 30.0, "mrilc_moves.action_timeout": 60.0}
     learner = start_node("shaper_nodes", "learner", params)
-    peer = Peer(ros_context)
+    peer = Peer(ros_context, CONTROLLER, imu=True)
 
     def up(before: set[bytes]) -> bool:
-        """The learner's subscriptions of each input (new ones, after a restart) on the graph, and its action
-        server."""
-        return all(any(i.node_name == "learner" and bytes(i.endpoint_gid) not in before
-                       for i in peer.node.get_subscriptions_info_by_topic(topic))
-                   for topic in INPUTS) and peer.client.server_is_ready()
+        return peer.learner_up(INPUTS, before)
 
     def saved() -> dict:
         return json.loads(state.read_text())
@@ -185,9 +114,9 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
         peer.spin_until(lambda: up(set()), "the learner's subscriptions and action server")
 
         # each move learns: its first goal goes as planned, its second with its correction
-        first = [peer.cycle(0, 0), peer.cycle(1, 1)]
+        first = [run_cycle(peer, 0, 0), run_cycle(peer, 1, 1)]
         assert [(m["iteration"], m["max_correction_rad"], moved) for m, moved in first] == [(1.0, 0.0, 0.0)] * 2
-        m, moved = peer.cycle(2, 0)
+        m, moved = run_cycle(peer, 2, 0)
         assert m["iteration"] == 2.0 and m["max_correction_rad"] > 0.0 and moved > 0.0 and m["limit_excess"] == 0.0
         assert sorted(saved()["moves"]) == sorted(KEYS) and saved()["drift_warned"] is False
 
@@ -200,7 +129,7 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
             peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"
                                     " (4 cycles in a row)", [("cycle", "8"), ("mode_hz", "7.1")])
 
-        m, moved = peer.cycle(3, 1, warn)
+        m, moved = run_cycle(peer, 3, 1, warn)
         assert moved > 0.0  # its goal ran with the correction dropped at the WARN: not learned from
         assert m == {"skipped": 1.0}, m
         relearned = peer.status("learner: moves", 1, "relearning the correction of 2 moves")
@@ -211,7 +140,7 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
         assert doc["moves"] == {} and doc["drift_warned"] is True  # every move's learner dropped, saved with it
 
         # home -> pick's next goal goes as planned, its learner from scratch; the repeated WARN changed nothing
-        m, moved = peer.cycle(4, 0)
+        m, moved = run_cycle(peer, 4, 0)
         assert (m["iteration"], m["max_correction_rad"], moved) == (1.0, 0.0, 0.0), (m, moved)
         assert sum("relearning" in s.message for s in peer.statuses if s.name == "learner: moves") == 1
         doc = saved()
@@ -219,7 +148,7 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
         assert doc["drift_warned"] is True
 
         # kill -9, and start again on the same state file
-        before = peer.learner_subscriptions()
+        before = peer.learner_subscriptions(INPUTS)
         assert learner.proc is not None
         learner.proc.kill()
         learner.proc.wait(timeout=30)
@@ -234,9 +163,9 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
         assert list(saved()["moves"]) == [KEYS[0]]
 
         # home -> pick resumes its relearned state (iteration 2, corrected); pick -> home starts from scratch
-        m, moved = peer.cycle(5, 0)
+        m, moved = run_cycle(peer, 5, 0)
         assert m["iteration"] == 2.0 and m["max_correction_rad"] > 0.0 and moved > 0.0, (m, moved)
-        m, moved = peer.cycle(6, 1)
+        m, moved = run_cycle(peer, 6, 1)
         assert (m["iteration"], m["max_correction_rad"], moved) == (1.0, 0.0, 0.0), (m, moved)
         assert not any(s.name == "learner: moves" and "relearning" in s.message for s in peer.statuses)
         peer.spin_until(lambda: any(f"move {KEYS[0]}: resumes at cycle 2 from its saved state" in line

@@ -122,8 +122,8 @@ def test_speed_up_and_list_per_move_learn_together_and_a_killed_list_learner_res
 
     try:
         client.wait_ready(listeners=3, timeout=300.0)  # this client's and both learners' /cycle_events
-        for reader in ("/learner", f"/{LIST_NODE}"):
-            AckWatch(conductor, reader).wait_subscribed(conductor.spin_until, ["/tip_imu"], 120.0)
+        for reader, inputs in (("/learner", ["/tip_imu", "/joint_states"]), (f"/{LIST_NODE}", ["/tip_imu"])):
+            AckWatch(conductor, reader).wait_subscribed(conductor.spin_until, inputs, 120.0)
 
         # LIST learns, the speed learner held at the planned speed
         hold("learner", True)

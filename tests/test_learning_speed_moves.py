@@ -8,7 +8,10 @@ factor rises after its good cycles (settled residual within 0.05 mm at the flang
 level at the goal's lowest mode); every scaled plan holds the joint velocity and acceleration limits; a goal whose
 planned points break a limit is rejected with one line naming the joint; a bad cycle (the tolerance tightened at
 run time through the parameter service, so that the measured residual is above it) lowers the factor at once to the
-largest good one; the state file holds a speed learner per move; after the learner is killed (SIGKILL) and started
+largest good one; the joint torques the arm measures (its /joint_states efforts) stay within the UR5e's published
+limits on every good cycle, and a move whose measured torque exceeds ``speed.max_effort`` (lowered to 10 N m at run
+time; a limit <= 0 is refused) is a bad cycle, its factor lowered at once, the joint named in its saved history; the
+state file holds a speed learner per move; after the learner is killed (SIGKILL) and started
 again on the same state file, each move resumes at its saved factor. Then the payload changes (2 -> 4.5 kg through the
 plant's parameter service) and the drift watch warns (the identifier's status ``identifier: drift`` at WARN on
 ``/diagnostics``, published by the test's peer): every move's next goal runs at its planned speed again (factor 1).
@@ -31,7 +34,7 @@ from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
 from sim_plant_node.arm.task import HOME, PICK, time_scaled, trapezoid_move
 from sim_plant_node.clients.arm_demo import ArmClient
-from sim_plant_node.clients.arm_speed import learner_parameters, use_learner_proxy
+from sim_plant_node.clients.arm_speed import EFFORT, learner_parameters, use_learner_proxy
 from sim_plant_node.clients.conductor import Conductor
 
 RATE = 500.0
@@ -40,7 +43,7 @@ MOVES = (trapezoid_move("home->pick", HOME, PICK), trapezoid_move("pick->home", 
 ROUNDS = 3  # cycles per move before the bad cycle
 STEP = 0.2
 #: the learner's inputs: their subscriptions on the graph again say a restarted learner is up
-INPUTS = ("/cycle_events", "/tip_imu")
+INPUTS = ("/cycle_events", "/tip_imu", "/joint_states")
 
 
 def run(client: ArmClient, cycle: int, index: int, move) -> dict[str, float]:
@@ -51,13 +54,18 @@ def run(client: ArmClient, cycle: int, index: int, move) -> dict[str, float]:
     return out
 
 
-def set_tolerance(conductor: Conductor, value: float) -> None:
-    """speed.tolerance of the running learner, through its parameter service."""
+def set_param(conductor: Conductor, name: str, value, accepted: bool = True) -> None:
+    """A parameter of the running learner, through its parameter service (accepted, or refused)."""
     params = AsyncParameterClient(conductor, "/learner")
     conductor.spin_until(lambda: params.services_are_ready(), 60.0, "the learner's parameter services")
-    future = params.set_parameters([Parameter("speed.tolerance", value=value)])
-    conductor.spin_until(future.done, 60.0, "the answer to setting speed.tolerance")
-    assert all(r.successful for r in future.result().results), future.result()
+    future = params.set_parameters([Parameter(name, value=value)])
+    conductor.spin_until(future.done, 60.0, f"the answer to setting {name}")
+    assert all(r.successful == accepted for r in future.result().results), future.result()
+
+
+def set_tolerance(conductor: Conductor, value: float) -> None:
+    """speed.tolerance of the running learner, through its parameter service."""
+    set_param(conductor, "speed.tolerance", value)
 
 
 def learned_rightly(mine: list[dict[str, float]]) -> None:
@@ -66,6 +74,7 @@ def learned_rightly(mine: list[dict[str, float]]) -> None:
         assert "skipped" not in m, m
         assert m["speed_factor"] <= m["ceiling"] + 1e-9 and m["speed_factor"] >= 1.0
         assert m["velocity_ratio"] <= 1.0 + 1e-9 and m["acceleration_ratio"] <= 1.0 + 1e-9, m
+        assert m["effort_ratio"] > 0.0 and m["effort_ok"] == float(m["effort_ratio"] <= 1.0), m  # torques measured
         if m["ok"]:  # raised, unless at the ceiling or holding (the good and the bad factor within the resolution)
             assert m["factor_next"] > m["speed_factor"] or m["speed_factor"] >= m["ceiling"] - 1e-9 or m["holding"], m
         else:  # lowered at once (at the planned speed it cannot go lower)
@@ -90,7 +99,7 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
     cycle = 0
     try:
         client.wait_ready(listeners=2, timeout=300.0)  # the sim arm builds its model first (slow on a busy machine)
-        AckWatch(conductor, "/learner").wait_subscribed(conductor.spin_until, ["/tip_imu"], 120.0)
+        AckWatch(conductor, "/learner").wait_subscribed(conductor.spin_until, ["/tip_imu", "/joint_states"], 120.0)
         for _ in range(ROUNDS):
             for i, move in enumerate(MOVES):
                 got[move.name].append(run(client, cycle, i, move))
@@ -105,6 +114,7 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
             # the tolerance: 0.05 mm at the goal's lowest mode, as the accelerometer level
             assert all(abs(m["tolerance"] - SETTLE_TOLERANCE * (6.283185307 * m["frequency_hz"]) ** 2) < 1e-6
                        for m in mine)
+            assert all(m["effort_ok"] == 1.0 and m["effort_ratio"] <= 1.0 for m in mine)  # within the UR5e's limits
         assert got[MOVES[0].name][0]["move"] != got[MOVES[1].name][0]["move"]
 
         # a goal whose planned points break a joint limit is rejected, one line naming the joint and the limit
@@ -128,6 +138,23 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
         got[MOVES[0].name].append(bad)
         set_tolerance(conductor, SETTLE_TOLERANCE)
 
+        # a measured torque past its limit: speed.max_effort lowered to 10 N m (the shoulder holds more against
+        # gravity alone); pick -> home is a bad cycle for its torque, its factor lowered at once, the joint named
+        set_param(conductor, "speed.max_effort", [0.0], accepted=False)  # a limit must be > 0
+        set_param(conductor, "speed.max_effort", [10.0])
+        before = got[MOVES[1].name][-1]
+        heavy = run(client, cycle, 1, MOVES[1])
+        cycle += 1
+        assert heavy["speed_factor"] == before["factor_next"] and not heavy["ok"], heavy
+        assert heavy["effort_ok"] == 0.0 and heavy["effort_ratio"] > 1.0, heavy
+        good = [m["speed_factor"] for m in got[MOVES[1].name] if m["ok"]]
+        assert heavy["factor_next"] < heavy["speed_factor"] and heavy["factor_next"] == max(good)
+        got[MOVES[1].name].append(heavy)
+        set_param(conductor, "speed.max_effort", list(EFFORT))
+        key = move_key(MOVES[1].positions[0], MOVES[1].positions[-1])
+        why = json.loads(state.read_text())["moves"]["moves"][key]["speed"]["history"][-1]["reason"]
+        assert why.startswith("joint ") and "measured |effort|" in why and "above its limit 10 N m" in why, why
+
         # the state file: a speed learner per move, at the factor learned
         doc = json.loads(state.read_text())
         assert doc["per_move"] == "speed" and len(doc["moves"]["moves"]) == 2
@@ -137,9 +164,9 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
             assert entry["cycles"] == len(got[move.name])
 
         # kill -9, and start again on the same state file: each move resumes at its saved factor (the arm is at
-        # the pick after the bad cycle: pick -> home first)
+        # home after the torque's bad cycle: home -> pick first)
         restart_learner(start_node, learner, learner_params, conductor, INPUTS)
-        for i in (1, 0):
+        for i in (0, 1):
             move = MOVES[i]
             m = run(client, cycle, i, move)
             cycle += 1
@@ -160,7 +187,7 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
 
         conductor.spin_until(relearned, 120.0, "the relearn of every move's factor on the drift WARN")
         after: dict[str, list[dict[str, float]]] = {m.name: [] for m in MOVES}
-        for i in (1, 0):
+        for i in (0, 1):
             move = MOVES[i]
             m = run(client, cycle, i, move)
             cycle += 1
@@ -170,9 +197,11 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
         print("after the payload change (4.5 kg) and the relearn, factor / learner's peak mm / flange peak mm / ok:",
               json.dumps({k: [(m["speed_factor"], round(m["peak_mm"], 4), round(m["flange_peak_mm"], 4), m["ok"])
                               for m in v] for k, v in after.items()}))
-        print("factor, settled peak (learner's estimate mm / flange mm), move + settle s per move and cycle:",
+        print("factor, settled peak (learner's estimate mm / flange mm), move + settle s, largest torque / limit per"
+              " move and cycle:",
               json.dumps({k: [(round(m["speed_factor"], 3), round(m["peak_mm"], 4), round(m["flange_peak_mm"], 4),
-                               round(m["move_settle_s"], 3)) for m in v] for k, v in got.items()}))
+                               round(m["move_settle_s"], 3), round(m["effort_ratio"], 3)) for m in v]
+                          for k, v in got.items()}))
     finally:
         conductor.close()
 

@@ -1,14 +1,14 @@
 """A drift warning (a payload change) starts every move's speed-up again at the planned speed, over DDS.
 
-The learner in ``mode: speed_moves`` (its FollowJointTrajectory proxy in front of a test controller that serves
-the real control_msgs interface and records each goal it receives), and a peer named ``identifier`` that publishes
-the drift watch's status on ``/diagnostics`` through the identifier's own reporter (``identifier: drift``, as
-nodes/identifier.py does), all real nodes in one process. The learner starts from a state file of two moves that
-learned to run 1.4 times faster (between a good 1.2 and a failed 1.6). Shown: a goal of a move runs at its saved
-factor (the controller receives the motion 1.4 times shorter); at the first WARN every move's factor starts again
-from 1 (state file: factor 1, nothing good or failed, ``drift_warned``), once per episode; the cycle under way (its
-goal ran at 1.4) is not learned from; the next goal of a move runs as planned (factor 1); a restarted learner reads
-the episode flag back, and a state file whose flag is not a boolean is refused with one line naming it.
+The learner in ``mode: speed_moves`` (its FollowJointTrajectory proxy in front of a test controller that serves the real
+control_msgs interface and records each goal it receives), and a peer named ``identifier`` that publishes the drift
+watch's status on ``/diagnostics`` through the identifier's own reporter (``identifier: drift``, as nodes/identifier.py
+does; tests/relearn_peer.py, the MRILC relearn test's too), all real nodes in one process. The learner starts from a
+state file of two moves that learned to run 1.4 times faster (between a good 1.2 and a failed 1.6). Shown: a goal of a
+move runs at its saved factor (the controller receives the motion 1.4 times shorter); at the first WARN every move's
+factor starts again from 1 (state file: factor 1, nothing good or failed, ``drift_warned``), once per episode; the cycle
+under way (its goal ran at 1.4) is not learned from; the next goal of a move runs as planned (factor 1); a restarted
+learner reads the episode flag back, and a state file whose flag is not a boolean is refused with one line naming it.
 
 The payload change on the lockstep arm itself, with the identifier's real warning, is the demo's ``payload`` case
 (tests/test_demo_payload.py runs it with the LIST learner); this test drives the speed learner's side of it.
@@ -18,28 +18,23 @@ from __future__ import annotations
 
 import json
 import math
-import time
 
 import numpy as np
 import pytest
-from control_msgs.action import FollowJointTrajectory
-from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import Log
-from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
+from relearn_peer import Peer
+from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import CycleEvent
 from shaper_nodes.core.learning.moves import MoveStore, move_key, store_from_doc
 from shaper_nodes.core.learning.speed import SpeedLearner, SpeedSettings
 from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration, sec_to_time
-from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
+from shaper_nodes.ros.diagnostics import OK, WARN
 
 pytestmark = pytest.mark.integration
 
-WAIT = 120.0  # s of wall time for a state to come (two busy cores)
 NAMES = ["j1", "j2"]
 MOVES = (([0.0, 0.0], [1.0, 0.5]), ([1.0, 0.5], [0.0, 0.0]))
 CONTROLLER = "/speed_test_controller/follow_joint_trajectory"
@@ -81,60 +76,9 @@ def learner_params(path) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-class Peer:
-    """The test's side: the identifier's /diagnostics (its own reporter), the cycle events, the test controller,
-    an action client of the learner's proxy, and the learner's reports and log lines."""
-
-    def __init__(self, ctx, ex: SingleThreadedExecutor) -> None:
-        self.ex = ex
-        self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
-        self.identifier = Diagnostics(self.node)
-        self.events = self.node.create_publisher(CycleEvent, "/cycle_events", 10)
-        self.reports: list[CycleReport] = []
-        self.logs: list[str] = []
-        self.goals: list[JointTrajectory] = []  # what reached the controller
-        self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
-        self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
-                                      else None, 100)
-        self.statuses: list = []
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
-        self.server = ActionServer(self.node, FollowJointTrajectory, CONTROLLER, execute_callback=self._execute)
-        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
-        ex.add_node(self.node)
-
-    async def _execute(self, handle) -> FollowJointTrajectory.Result:
-        self.goals.append(handle.request.trajectory)
-        handle.succeed()
-        return FollowJointTrajectory.Result()
-
-    def spin_until(self, done, what: str, timeout: float = WAIT) -> None:
-        deadline = time.monotonic() + timeout
-        while not done():
-            assert time.monotonic() < deadline, f"timed out after {timeout:g} s waiting for {what}"
-            self.ex.spin_once(timeout_sec=0.05)
-
-    def event(self, kind: int, cycle: int, t: float, move: int) -> None:
-        start, goal = MOVES[move]
-        msg = CycleEvent(event=kind, cycle=cycle, task="speed", joint_names=NAMES, start_positions=start,
-                         goal_positions=goal)
-        msg.header.stamp = sec_to_time(t)
-        self.events.publish(msg)
-
-    def run_goal(self, move: int) -> JointTrajectory:
-        """The move's planned goal through the learner's proxy; what the controller received."""
-        before = len(self.goals)
-        sent = self.client.send_goal_async(FollowJointTrajectory.Goal(trajectory=plan(move)))
-        self.spin_until(sent.done, "the learner's answer to the goal")
-        assert sent.result().accepted
-        result = sent.result().get_result_async()
-        self.spin_until(result.done, "the goal's result")
-        assert len(self.goals) == before + 1
-        return self.goals[-1]
-
-    def destroy(self) -> None:
-        self.server.destroy()
-        self.client.destroy()
-        self.node.destroy_node()
+def event(peer: Peer, kind: int, cycle: int, t: float, move: int) -> None:
+    """A cycle event of the move."""
+    peer.event(kind, cycle, t, NAMES, *MOVES[move], task="speed")
 
 
 def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros_context, tmp_path):
@@ -145,7 +89,7 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
     learner = LearnerNode(context=ros_context, parameter_overrides=learner_params(path))
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(learner)
-    peer = Peer(ros_context, ex)
+    peer = Peer(ros_context, CONTROLLER, ex)
     mode = learner.mode
     keys = [move_key(s, g) for s, g in MOVES]
     try:
@@ -156,9 +100,9 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
         assert [e.speed().factor for e in mode.store] == [SAVED, SAVED] and not mode.drift.warned
 
         # a cycle under way: its goal runs at the saved factor (the motion 1.4 times shorter at the controller)
-        peer.event(CycleEvent.START, 1, 10.0, 0)
+        event(peer, CycleEvent.START, 1, 10.0, 0)
         peer.spin_until(lambda: 1 in mode._cycles, "the learner's START of cycle 1")
-        scaled = peer.run_goal(0)
+        scaled = peer.run_goal(plan(0))
         assert motion_end(scaled) == pytest.approx(MOTION / SAVED, abs=1e-6)
 
         # the identifier's WARN: every move starts again at factor 1, once
@@ -181,17 +125,15 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
         # the WARN repeated: nothing more; the cycle under way (its goal ran at 1.4) is not learned from
         peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"
                                 " (4 cycles in a row)", [("cycle", "8"), ("mode_hz", "9.7")])
-        peer.event(CycleEvent.END, 1, 12.0, 0)
-        peer.spin_until(lambda: any(r.cycle == 1 for r in peer.reports), "the report of cycle 1")
-        got = next(r for r in peer.reports if r.cycle == 1)
-        assert dict(zip(got.metric_names, got.metric_values, strict=True)) == {"skipped": 1.0}
+        event(peer, CycleEvent.END, 1, 12.0, 0)
+        assert peer.report(1) == {"skipped": 1.0}
         assert mode.drift.resets == 1 and sum("relearning" in m for m in peer.logs) == 1
 
         # the next goal of each move runs as planned (factor 1)
         for cycle, move in ((2, 1), (3, 0)):
-            peer.event(CycleEvent.START, cycle, 20.0 + 10 * cycle, move)
+            event(peer, CycleEvent.START, cycle, 20.0 + 10 * cycle, move)
             peer.spin_until(lambda c=cycle: c in mode._cycles, f"the learner's START of cycle {cycle}")
-            sent = peer.run_goal(move)
+            sent = peer.run_goal(plan(move))
             assert motion_end(sent) == pytest.approx(MOTION, abs=1e-6)
             assert [duration_to_sec(p.time_from_start) for p in sent.points] == \
                 [duration_to_sec(p.time_from_start) for p in plan(move).points]
@@ -240,3 +182,88 @@ def test_an_empty_drift_status_watches_nothing(ros_context, tmp_path):
         assert all(sub.topic_name != "/diagnostics" for sub in node.subscriptions)
     finally:
         node.destroy_node()
+
+
+def imu_window(peer: Peer, t0: float, motion: float, upto: float) -> float:
+    """The accelerometer up to ``upto`` s after a move's start ``t0``, at 250 Hz: gravity, and after the ``motion`` s
+    a decaying 8 Hz ring of 0.05 m/s^2 (well within 0.05 mm at 10 Hz: 0.197 m/s^2); the last sample's stamp, s."""
+    for k in range(int(upto * 250) + 1):
+        t = k / 250
+        msg = Imu()
+        msg.header.stamp = sec_to_time(t0 + t)
+        ring = 0.05 * math.exp(-(t - motion) / 0.3) * math.sin(2 * math.pi * 8.0 * (t - motion)) if t > motion else 0.0
+        msg.linear_acceleration.x, msg.linear_acceleration.z = ring, 9.81
+        peer.imu.publish(msg)
+    return t0 + t
+
+
+def test_a_kill_9_during_a_move_resumes_every_move_from_its_saved_state(start_node, ros_context, tmp_path):
+    """The learner (its own process) is killed with SIGKILL during a move: after its goal was accepted and reached
+    the controller, which is still running it, and before the move's residual window ended. Started again on the same
+    state file, every move resumes at its saved factor. The interrupted cycle is not learned from, which is right:
+    the factor its goal ran with, its START and half its accelerometer window were in the killed process; the state
+    saved at the last END is the state before the cycle, as if it had not run. Its END, arriving at the restarted
+    learner, is reported skipped (END without its START), and the move's next cycle runs at the saved factor."""
+    state = tmp_path / "learner_state.json"
+    params = {"mode": "speed_moves", "state_file": str(state), "end_wait": 10.0, "topics.imu_reliable": True,
+              "speed.controller": CONTROLLER, "speed.scheduler": "", "speed.frequency_hz": 10.0,
+              "speed.match_timeout": 30.0, "speed.action_timeout": 60.0, "speed.step": 0.2}
+    inputs = ("/cycle_events", "/tip_imu")
+    learner = start_node("shaper_nodes", "learner", params)
+    peer = Peer(ros_context, CONTROLLER, imu=True)
+
+    def cycle(number: int, move: int, factor: float) -> dict[str, float]:
+        """One move as one cycle at ``factor`` (checked at the controller); the learner's report."""
+        t0 = 100.0 + 10.0 * number
+        event(peer, CycleEvent.START, number, t0, move)
+        motion = motion_end(peer.run_goal(plan(move), f"the goal of cycle {number}"))
+        assert motion == pytest.approx(MOTION / factor, abs=1e-6), (number, motion)
+        end = imu_window(peer, t0, motion, motion + 1.2)
+        event(peer, CycleEvent.END, number, end, move)  # (the END's wait: the samples up to it came)
+        got = peer.report(number)
+        assert got["speed_factor"] == pytest.approx(factor) and got["ok"] == 1.0, got
+        return got
+
+    def moves() -> dict:
+        return json.loads(state.read_text())["moves"]["moves"]
+
+    keys = [move_key(s, g) for s, g in MOVES]
+    try:
+        peer.spin_until(lambda: peer.learner_up(inputs, set()), "the learner's subscriptions and action server")
+        for number, move, factor in ((0, 0, 1.0), (1, 1, 1.0), (2, 0, 1.2)):
+            cycle(number, move, factor)
+        saved = moves()
+        assert [saved[k]["speed"]["factor"] for k in keys] == pytest.approx([1.4, 1.2])
+        assert [saved[k]["cycles"] for k in keys] == [2, 1]
+
+        # cycle 3, pick -> home at 1.2: accepted, at the controller, which runs it; half its window measured
+        peer.hold()
+        t0 = 130.0
+        event(peer, CycleEvent.START, 3, t0, 1)
+        peer.send(plan(1), "the goal of cycle 3")
+        motion = motion_end(peer.goals[-1])
+        assert motion == pytest.approx(MOTION / 1.2, abs=1e-6) and peer.running == 1
+        imu_window(peer, t0, motion, motion + 0.5)  # the window runs to motion + 1.0 s
+        before = peer.learner_subscriptions(inputs)
+        assert learner.proc is not None
+        learner.proc.kill()
+        assert learner.proc.wait(timeout=30) == -9
+        assert peer.running == 1  # killed during the move
+        peer.release()  # the controller finishes the move (a robot's controller does not need the learner)
+        peer.spin_until(lambda: peer.running == 0, "the end of the move at the controller")
+        assert moves() == saved  # the state file: as at the last END
+
+        start_node("shaper_nodes", "learner", params)
+        peer.spin_until(lambda: peer.learner_up(inputs, before), "the restarted learner's subscriptions and server")
+        event(peer, CycleEvent.END, 3, t0 + motion + 1.2, 1)  # the interrupted cycle's END: not learned from
+        assert peer.report(3) == {"skipped": 1.0}
+        # every move resumes from its saved state: home -> pick at 1.4, pick -> home at 1.2 (its interrupted cycle
+        # neither raised nor lowered it)
+        assert cycle(4, 0, 1.4)["factor_next"] == pytest.approx(1.6)
+        assert cycle(5, 1, 1.2)["factor_next"] == pytest.approx(1.4)
+        after = moves()
+        assert [after[k]["speed"]["factor"] for k in keys] == pytest.approx([1.6, 1.4])
+        assert [after[k]["cycles"] for k in keys] == [3, 2]
+        assert [h["factor"] for h in after[keys[1]]["speed"]["history"]] == pytest.approx([1.0, 1.2])
+    finally:
+        peer.destroy()

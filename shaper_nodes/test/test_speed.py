@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shaper_nodes.core.learning.speed import SpeedError, SpeedLearner, SpeedSettings, limit_ceiling, limits_held
+from shaper_nodes.core.learning.speed import (
+    SpeedError,
+    SpeedLearner,
+    SpeedSettings,
+    effort_check,
+    limit_ceiling,
+    limits_held,
+)
 
 
 def test_the_factor_rises_by_the_step_while_cycles_are_good_and_stops_at_the_ceiling():
@@ -70,3 +77,29 @@ def test_the_limit_ceiling_is_the_tightest_of_velocity_and_acceleration():
     with pytest.raises(SpeedError, match="> 0"):
         limit_ceiling(v, a, [0.0] * 3, [1.0] * 3)
     assert limit_ceiling(v, a, [np.pi] * 3, [np.inf] * 3) == pytest.approx(np.pi / 1.5)
+
+
+def test_a_measured_effort_past_its_joints_limit_is_a_violation_that_lowers_the_factor_at_once():
+    names = ["shoulder_pan_joint", "shoulder_lift_joint", "wrist_1_joint"]
+    limits = [150.0, 150.0, 28.0]
+    ratio, joint, breach = effort_check([30.0, -75.0, 13.0], limits, names)
+    assert ratio == pytest.approx(0.5) and joint == 1 and breach is None  # within: the largest |effort| / limit
+    ratio, joint, breach = effort_check([30.0, -75.0, -29.4], limits, names)
+    assert ratio == pytest.approx(1.05) and joint == 2
+    assert breach == "joint wrist_1_joint: measured |effort| 29.4 N m above its limit 28 N m"
+    # at the limit is within; no limit (inf) counts 0; a nan effort is a violation
+    assert effort_check([150.0, 0.0, 28.0], limits, names) == (1.0, 0, None)
+    assert effort_check([1e6, 1.0, 1.0], [np.inf, 2.0, 2.0], names) == (0.5, 1, None)
+    assert effort_check([np.nan, 1.0, 1.0], limits, names)[1:] == (0, "joint shoulder_pan_joint: measured |effort|"
+                                                                    " nan N m above its limit 150 N m")
+    # two joints past their limits: the one furthest past is named
+    assert effort_check([160.0, 0.0, 56.0], limits, names)[1:] == (2, "joint wrist_1_joint: measured |effort| 56 N m"
+                                                                    " above its limit 28 N m")
+    with pytest.raises(SpeedError, match="2 efforts against 3 limits"):
+        effort_check([1.0, 2.0], limits, names)
+    # the learner's rule: a breach is a bad cycle, as a residual above the tolerance is
+    sp = SpeedLearner(SpeedSettings(step=0.2, ceiling=2.0))
+    sp.update(True)
+    sp.update(True)
+    assert sp.update(False, breach) == pytest.approx(1.2)
+    assert sp.failed == pytest.approx(1.4) and sp.history[-1]["reason"] == breach

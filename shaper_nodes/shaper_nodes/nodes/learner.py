@@ -139,11 +139,12 @@ class LearnerNode(LearnerBase):
 
 
 def main(args: list[str] | None = None) -> int:
-    from . import learner_list, learner_moves_mrilc, learner_mrilc, learner_speed
+    from . import learner_list, learner_moves_mrilc, learner_mrilc, learner_speed_parameters
 
     return run_node(LearnerNode, "learner", args, tables={
         "every mode": PARAMETERS, "mode list": learner_list.PARAMETERS, "mode mrilc": learner_mrilc.PARAMETERS,
-        "mode mrilc_moves": learner_moves_mrilc.PARAMETERS, "mode speed_moves": learner_speed.PARAMETERS},
+        "mode mrilc_moves": learner_moves_mrilc.PARAMETERS,
+        "mode speed_moves": learner_speed_parameters.PARAMETERS},
         examples=(
         with_config("shaper_nodes", "learner", "learner.yaml"),
         with_config("shaper_nodes", "learner", "mrilc.yaml")))

@@ -18,8 +18,13 @@ accelerations x s^2; a hold at the goal keeps its length). A goal matched to no 
 value per joint or one for all) at its request: a goal past a limit is rejected, and one line names the joint, the
 limit and the point. A move's factor never exceeds ``speed.max_factor`` nor the largest factor its planned profile
 allows within the limits (:func:`~shaper_nodes.core.learning.speed.limit_ceiling`), and the scaled points are
-checked again before they are sent. Torque is not computed here (the node has no dynamic model of the robot): set
-the acceleration limits from the joints' torque limits at the heaviest payload, as a robot's planner does.
+checked again before they are sent. Torque cannot be checked before the move (the node has no dynamic model of the
+robot): it is measured during it. The joint efforts the robot reports on ``speed.joint_states`` (a UR: joint torques,
+N m; the simulated arm: its motor torques) are watched from the move's START to its residual window's end
+(:mod:`.learner_efforts`), and a move whose largest |effort| exceeded ``speed.max_effort`` on a joint (one value per
+joint or one for all; inf: not watched) is a bad cycle, its factor lowered at once as for the residual
+(:func:`~shaper_nodes.core.learning.speed.effort_check`). With a finite limit, a move without efforts measured is
+not learned from.
 
 **What is good.** At the move's END, the settled residual is the peak of the tool accelerometer's deviation from
 its mean (``topics.imu``; the three axes' magnitude) in the window of ``speed.window`` s after the commanded motion
@@ -28,7 +33,8 @@ schedule's shaper at the goal (its duration from ``<speed.scheduler>/shaper_at``
 is no scheduler). The tolerance ``speed.tolerance`` (m at the flange) is converted to the accelerometer level at
 the goal's lowest mode f (the schedule's, or ``speed.frequency_hz``): tolerance x (2 pi f)^2
 (:func:`~shaper_nodes.core.learning.speed.acceleration_tolerance`; 0.05 mm at 10 Hz: 0.197 m/s^2). A cycle is good
-when the peak is within it (its plan held the limits: it was checked). After a good cycle the move's factor is
+when the peak is within it and the measured efforts within their limits (its plan held the velocity and
+acceleration limits: it was checked). After a good cycle the move's factor is
 raised, after a bad one lowered at once to the largest good one
 (:class:`~shaper_nodes.core.learning.speed.SpeedLearner`).
 
@@ -50,15 +56,17 @@ entry is left out and reported; its move starts afresh); after a restart each mo
 Reports (``~/reports``): per move's END, the metrics ``move`` (index in the state's order), ``speed_factor`` (the
 factor the goal ran with), ``factor_next``, ``ceiling``, ``peak`` and ``tolerance`` (m/s^2), ``peak_mm`` (the peak
 converted to the flange, mm), ``frequency_hz``, ``motion_s`` (the scaled plan's motion, s), ``velocity_ratio`` and
-``acceleration_ratio`` (the scaled plan's largest against its limit), ``ok`` and ``holding``; residual_rms: the
-window's RMS.
+``acceleration_ratio`` (the scaled plan's largest against its limit), ``effort_ratio`` (the largest measured
+|effort| against its limit; nan: not watched), ``effort_joint`` (that joint's index; -1: none) and ``effort_ok``,
+``ok`` and ``holding``; residual_rms: the window's RMS. A bad cycle's reason (residual, effort: the joint named) is
+on the log line and in the move's saved history.
 """
 
 from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -76,6 +84,7 @@ from shaper_nodes.core.learning.speed import (
     SpeedLearner,
     SpeedSettings,
     acceleration_tolerance,
+    effort_check,
     limit_breach,
     limit_ceiling,
     motion_end_index,
@@ -84,12 +93,14 @@ from shaper_nodes.core.learning.speed import (
 from shaper_nodes.core.shaping.vibration import residual_vibration
 from shaper_nodes.ros.conversions import mode_from_msg, trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
-from shaper_nodes.ros.parameters import Spec, declare, param, table
+from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.shaper_client import ServiceClient
 
 from .learner_base import LearnerBase
 from .learner_drift import FLAG, DriftWarnings, saved_flag
-from .learner_list import TopicParams, subscribe_imu
+from .learner_efforts import EffortWatch
+from .learner_list import subscribe_imu
+from .learner_speed_parameters import SpeedMovesParams, on_set, refusal
 from .move_goals import await_match, goal_matches, load_moves
 from .trajectory_action import TrajectoryActionProxy
 
@@ -98,55 +109,6 @@ MAX_SAMPLES = 400_000
 _DOC_KEYS = {"version", "per_move", "moves", "joint_names", FLAG, "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move's factor was relearned (drift warning) while this cycle ran"
-
-
-@dataclass(frozen=True)
-class SpeedGroup:
-    """speed.*: where the scaled goals go, the tolerance, the limits and the learner's steps."""
-
-    controller: str = param("/shaper/follow_joint_trajectory", "The FollowJointTrajectory action the time-scaled"
-                            " goals go to (the shaper node's proxy: scaling comes before shaping).", read_only=True)
-    scheduler: str = param("/scheduler", "The scheduler asked (<scheduler>/shaper_at) for the shaper and the lowest"
-                           " mode at each goal's final pose ('' = none: speed.shaper_delay and speed.frequency_hz).",
-                           read_only=True)
-    action_timeout: float = param(30.0, "How long a goal waits for the next action server and its answer, s.",
-                                  (0.1, 600.0), read_only=True)
-    match_timeout: float = param(2.0, "How long a goal waits for the START of its move on the cycle events, s.",
-                                 (0.0, 60.0), read_only=True)
-    tolerance: float = param(5e-5, "Tolerance of the settled flange, m (0.05 mm), converted to the accelerometer"
-                             " level tolerance x (2 pi f)^2 at the goal's lowest mode f.", (1e-7, 0.1))
-    frequency_hz: float = param(0.0, "The mode f of the conversion, Hz (0 = the schedule's lowest mode at the"
-                                " goal).", (0.0, 1000.0))
-    window: float = param(1.0, "Length of the residual window after the commanded motion's end, s.", (0.05, 10.0),
-                          read_only=True)
-    transient: float = param(0.1, "The position loop's transient left out at the window's start, s.", (0.0, 5.0),
-                             read_only=True)
-    shaper_delay: float = param(0.0, "The shaper's duration assumed when no scheduler answers, s.", (0.0, 10.0),
-                                read_only=True)
-    step: float = param(0.1, "Raise of a move's factor after a good cycle (before any bad one).", (1e-3, 10.0),
-                        read_only=True)
-    resolution: float = param(0.02, "The factor holds once the good and the bad factor are closer than this.",
-                              (1e-4, 1.0), read_only=True)
-    max_factor: float = param(2.0, "Largest time-scaling factor (1 = the planned speed).", (1.0, 10.0),
-                              read_only=True)
-    velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s (one per joint, or one for all).",
-                                        read_only=True)
-    acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2 (one per joint, or one"
-                                            " for all; set them from the torque limits).", read_only=True)
-    drift_status: str = param("identifier: drift", "The /diagnostics status whose WARN (a drift warning: a payload"
-                              " change) starts every move's factor again from 1 ('' = none).", read_only=True)
-
-
-@dataclass(frozen=True)
-class SpeedMovesParams:
-    """The speed-per-move mode's parameters."""
-
-    speed: SpeedGroup = field(default_factory=SpeedGroup)
-    topics: TopicParams = field(default_factory=TopicParams)
-
-
-#: the speed-per-move mode's parameters (derived from SpeedMovesParams)
-PARAMETERS: tuple[Spec, ...] = table(SpeedMovesParams)
 
 
 @dataclass
@@ -171,10 +133,11 @@ class SpeedMovesMode:
         self.node = node
         self.params = declare(node, SpeedMovesParams)
         v = self.params.value.speed
-        for name in ("velocity", "acceleration"):
-            values = list(getattr(v, name))
-            if not values or not all(math.isfinite(x) and x > 0 for x in values):
-                raise ValueError(f"speed.{name} must be one or more finite numbers > 0, got {values}")
+        for name in ("velocity", "acceleration", "max_effort"):
+            why = refusal(name, getattr(v, name))
+            if why:
+                raise ValueError(why)
+        node.add_on_set_parameters_callback(on_set)
         self.settings = SpeedSettings(step=float(v.step), floor=1.0, ceiling=float(v.max_factor),
                                       resolution=float(v.resolution))
         restored = node.restore(self._build, {"per_move": "speed"})
@@ -194,6 +157,8 @@ class SpeedMovesMode:
         self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
                                            self._refused, lambda: None, float(v.action_timeout), self._scale)
         self.drift = DriftWarnings(node, str(v.drift_status).strip(), self.relearn, warned)
+        topic = str(v.joint_states).strip()
+        self.efforts = EffortWatch(node, topic, node.max_cycle_duration) if topic else None
 
     # ----------------------------------------------------------------- state
     def _build(self, doc: dict[str, Any]) -> tuple[MoveStore, dict[str, list[str]], bool]:
@@ -221,7 +186,14 @@ class SpeedMovesMode:
                 f" {self.proxy.controller_name}; {len(self.store)} moves saved")
 
     def latest(self) -> float:
-        return self.latest_imu
+        efforts = self.efforts
+        if efforts is None or efforts.latest == -math.inf or not self._watching():
+            return self.latest_imu
+        return min(self.latest_imu, efforts.latest)  # (the END waits for both)
+
+    def _watching(self) -> bool:
+        """Whether the efforts are checked (a finite speed.max_effort)."""
+        return any(math.isfinite(x) for x in self.params.value.speed.max_effort)
 
     def ready(self) -> bool:
         return True
@@ -252,14 +224,14 @@ class SpeedMovesMode:
         while self._samples and self._samples[0][0] < keep:
             self._samples.popleft()
 
+    def _per_joint(self, name: str, joints: int) -> np.ndarray:
+        values = getattr(self.params.value.speed, name)
+        if len(values) not in (1, joints):
+            raise InputError("wrong_size", f"speed.{name} has {len(values)} values for {joints} joints")
+        return np.resize(np.asarray(values, dtype=float), joints)
+
     def _limits(self, joints: int) -> tuple[np.ndarray, np.ndarray]:
-        v = self.params.value.speed
-        out = []
-        for name, values in (("velocity", v.velocity), ("acceleration", v.acceleration)):
-            if len(values) not in (1, joints):
-                raise InputError("wrong_size", f"speed.{name} has {len(values)} values for {joints} joints")
-            out.append(np.resize(np.asarray(values, dtype=float), joints))
-        return out[0], out[1]
+        return self._per_joint("velocity", joints), self._per_joint("acceleration", joints)
 
     @staticmethod
     def _profile(traj: JointTrajectory) -> tuple[list[str], np.ndarray, dict[str, np.ndarray], np.ndarray,
@@ -397,8 +369,21 @@ class SpeedMovesMode:
             return self.node.skipped(msg, window, f"{arr.shape[0]} accelerometer samples in the residual window")
         res = residual_vibration(arr[:, 0], arr[:, 1:], window[0], window[1], remove_mean=True)
         tol = acceleration_tolerance(float(v.tolerance), cyc.frequency)
-        ok = res.peak <= tol
-        reason = "" if ok else f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"
+        joints = self.names.get(cyc.key, [])
+        effort_ratio, effort_joint, breach = math.nan, -1, None
+        if self._watching():
+            peaks = None if self.efforts is None else self.efforts.peaks(joints, cyc.start, window[1])
+            if peaks is None:
+                return self.node.skipped(msg, window, f"no joint efforts measured during the move on"
+                                         f" '{v.joint_states}': speed.max_effort cannot be checked")
+            try:
+                limits = self._per_joint("max_effort", len(joints))
+                effort_ratio, effort_joint, breach = effort_check(peaks, limits, joints)
+            except InputError as err:
+                return self.node.skipped(msg, window, f"the efforts cannot be checked: {err}")
+        reasons = [] if res.peak <= tol else [f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"]
+        reasons += [breach] if breach else []
+        ok, reason = not reasons, "; ".join(reasons)
         moved = self.store.get(cyc.key)
         assert moved is not None
         sp = moved.speed()
@@ -411,12 +396,15 @@ class SpeedMovesMode:
         index = [e.key for e in self.store].index(cyc.key)
         mm = 1e3 * res.peak / (2.0 * math.pi * cyc.frequency) ** 2
         names = ["move", "speed_factor", "factor_next", "ceiling", "peak", "tolerance", "peak_mm", "frequency_hz",
-                 "motion_s", "velocity_ratio", "acceleration_ratio", "ok", "holding"]
+                 "motion_s", "velocity_ratio", "acceleration_ratio", "effort_ratio", "effort_joint", "effort_ok", "ok",
+                 "holding"]
         values = [float(index), cyc.factor, nxt, cyc.ceiling, res.peak, tol, mm, cyc.frequency, cyc.motion,
-                  *cyc.ratios, 1.0 if ok else 0.0, 1.0 if self.holding or sp.holding else 0.0]
+                  *cyc.ratios, effort_ratio, float(effort_joint), 0.0 if breach else 1.0, 1.0 if ok else 0.0,
+                  1.0 if self.holding or sp.holding else 0.0]
         text = (f"cycle {cycle}, move {cyc.key}: factor {cyc.factor:.3f}, settled peak {res.peak:.4g} m/s^2 in"
                 f" {window[0]:.3f}-{window[1]:.3f} s ({mm:.4f} mm at {cyc.frequency:.3g} Hz; tolerance {tol:.4g}"
-                f" m/s^2): {'good' if ok else 'bad'} -> {nxt:.3f}")
+                f" m/s^2)" + (f", largest effort {effort_ratio:.3g} of its limit ({joints[effort_joint]})"
+                              if effort_joint >= 0 else "") + f": {'good' if ok else 'bad: ' + reason} -> {nxt:.3f}")
         if ok:  # (one severity per call site: rclpy refuses a call site that changes it)
             self.node.get_logger().info(text)
         else:

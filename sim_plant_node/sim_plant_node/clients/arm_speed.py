@@ -12,7 +12,8 @@ the faster move's.
 The limits: the UR5e's published joint speed, 180 deg/s, for every joint; joint accelerations up to
 :data:`ACCELERATION` rad/s^2 (four times the moves' planned 6 rad/s^2: a factor up to 2; the ROS-free reproduction,
 ``reproductions.arm_learning``'s ``speedup``, computed the torques of factors up to 1.9 and found at most 43 % of the
-joints' torque limits).
+joints' torque limits); and the torques measured during each move (the arm's ``/joint_states`` efforts: its motor
+torques) against the UR5e's published joint torque limits, :data:`EFFORT` (a move past one is a bad cycle).
 """
 
 from __future__ import annotations
@@ -20,10 +21,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..arm.description import JOINT_NAMES, TORQUE_LIMITS
+
 #: rad/s: the UR5e's published joint speed limit, every joint (ur_description's joint_limits.yaml: 3.14159)
 VELOCITY = math.pi
 #: rad/s^2: the joint acceleration limit the demo gives the learner (module docstring)
 ACCELERATION = 24.0
+#: N m: the UR5e's published joint torque limits, base to wrist 3 (sim_plant_node.arm.description.TORQUE_LIMITS)
+EFFORT = TORQUE_LIMITS
 #: the largest factor the learner may reach
 MAX_FACTOR = 2.0
 #: the learner's raise per good cycle
@@ -36,8 +41,8 @@ def learner_parameters() -> dict[str, Any]:
     """The learner's parameters in the demo (and the integration test's defaults)."""
     return {"mode": "speed_moves", "use_sim_time": True, "topics.imu_reliable": True,
             "speed.controller": "/shaper/follow_joint_trajectory", "speed.scheduler": "/scheduler",
-            "speed.velocity": [VELOCITY], "speed.acceleration": [ACCELERATION], "speed.max_factor": MAX_FACTOR,
-            "speed.step": STEP}
+            "speed.velocity": [VELOCITY], "speed.acceleration": [ACCELERATION], "speed.max_effort": list(EFFORT),
+            "speed.max_factor": MAX_FACTOR, "speed.step": STEP}
 
 
 def use_learner_proxy(client: Any, ends_at_rest: bool = True) -> None:
@@ -58,22 +63,25 @@ def use_learner_proxy(client: Any, ends_at_rest: bool = True) -> None:
 
 def start(session: Any, client: Any, imu: str, wait: float) -> str:
     """Start the speed learner and point the client at it (the learner's accelerometer topic ``imu``, its
-    subscription waited for up to ``wait`` s); returns what was installed (for the log)."""
+    subscriptions of it and of /joint_states waited for up to ``wait`` s); returns what was installed (for the log)."""
     from shaper_nodes.ros.lockstep_reader import AckWatch
 
     session.start("shaper_nodes", "learner", learner_parameters())
     use_learner_proxy(client)
     client.wait_ready(4)  # the learner's action server, and its subscription of the cycle events
-    AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [imu], wait)
+    # its efforts' subscription too: a move's torques unseen would leave it unlearned
+    AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [imu, "/joint_states"], wait)
     return (f"calibrated schedule with the speed-up per move on top (each goal time-scaled by its move's factor"
-            f" before it is shaped; limits {VELOCITY:.4g} rad/s, {ACCELERATION:g} rad/s^2, factor up to"
-            f" {MAX_FACTOR:g})")
+            f" before it is shaped; limits {VELOCITY:.4g} rad/s, {ACCELERATION:g} rad/s^2, measured torques"
+            f" {'/'.join(f'{e:g}' for e in EFFORT)} N m, factor up to {MAX_FACTOR:g})")
 
 
 def status(m: dict[str, float]) -> str:
     """The learner's last report of a move, in words (the per-move table's last column)."""
+    effort = m.get("effort_ratio", math.nan)
+    torque = "" if math.isnan(effort) else f"; torque {100 * effort:.0f} % of its limit"
     return (f"factor {m['speed_factor']:.2f} ({'good' if m['ok'] else 'bad'}: peak {m['peak']:.3g} m/s^2,"
-            f" {m['peak_mm']:.4f} mm at {m['frequency_hz']:.3g} Hz) -> {m['factor_next']:.2f}")
+            f" {m['peak_mm']:.4f} mm at {m['frequency_hz']:.3g} Hz{torque}) -> {m['factor_next']:.2f}")
 
 
 def summary(per_move: list[list[tuple[Any, Any, Any]]], rows: list[dict[str, Any]]) -> list[str]:
@@ -88,6 +96,16 @@ def summary(per_move: list[list[tuple[Any, Any, Any]]], rows: list[dict[str, Any
         base = sum(float(r["move_and_settle_s"]) for r in sched)
         out.append(f"against the schedule's {base:.3f} s at planned speed: last cycle"
                    f" {100 * (1 - totals[-1] / base):.1f} % shorter")
+    largest: dict[str, tuple[float, str]] = {}  # the largest measured |torque| / limit per move, and its joint
+    for c in per_move:
+        for run, _, report in c:
+            m = dict(zip(report.metric_names, report.metric_values, strict=True))
+            ratio, joint = m.get("effort_ratio", math.nan), int(m.get("effort_joint", -1))
+            if not math.isnan(ratio) and ratio >= largest.get(run.name, (-1.0, ""))[0]:
+                largest[run.name] = (ratio, JOINT_NAMES[joint] if 0 <= joint < len(JOINT_NAMES) else "?")
+    if largest:
+        out.append("largest measured joint torque per move over all cycles, of its joint's limit: "
+                   + ", ".join(f"{k} {100 * r:.0f} % ({j})" for k, (r, j) in largest.items()))
     last = per_move[-1]
     factors = []
     for run, _, report in last:

@@ -22,6 +22,9 @@ What a node needs around it, measurable on a robot (the learner node's ``speed_m
 - :func:`time_scale`: a planned trajectory's points run ``s`` times faster (times / s up to the motion's
   last point, velocities x s, accelerations x s^2; the hold after the motion keeps its length);
 - :func:`limit_breach`: the first point of a profile past a joint velocity or acceleration limit, named;
+- :func:`effort_check`: the efforts measured during a move (a robot's /joint_states effort: joint torques, N m)
+  against the joints' torque limits: the largest ratio, and the first joint past its limit, named (the plan's
+  velocities and accelerations are checked before the move; the torque it took is known only after);
 - :func:`acceleration_tolerance`: the accelerometer level that corresponds to a displacement tolerance at
   the flange, ``x (2 pi f)^2`` at the mode ``f`` (a sinusoid of amplitude x at f has the acceleration
   amplitude x (2 pi f)^2; at the move's lowest mode the same acceleration means the largest displacement,
@@ -37,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SPEED_VERSION", "SpeedError", "SpeedLearner", "SpeedSettings", "acceleration_tolerance", "limit_breach",
-           "limit_ceiling", "limits_held", "motion_end_index", "time_scale"]
+__all__ = ["SPEED_VERSION", "SpeedError", "SpeedLearner", "SpeedSettings", "acceleration_tolerance", "effort_check",
+           "limit_breach", "limit_ceiling", "limits_held", "motion_end_index", "time_scale"]
 
 #: version of :meth:`SpeedLearner.to_dict`'s dictionaries
 SPEED_VERSION = 1
@@ -206,6 +209,44 @@ def limit_breach(times: np.ndarray, velocities: np.ndarray, accelerations: np.nd
             return (f"joint {names[j]}: {what} {x[i, j]:.4g} {unit} above its limit {lim[j]:.4g} {unit} at the point"
                     f" of t = {float(times[i]):.3f} s")
     return None
+
+
+def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | np.ndarray,
+                 names: Sequence[str]) -> tuple[float, int, str | None]:
+    """The efforts measured during a move against the joints' limits.
+
+    Parameters
+    ----------
+    peaks : (J,) array_like
+        The largest |effort| each joint measured during the move, N m (or N for a prismatic joint).
+    limits : (J,) array_like
+        The joints' effort limits, N m (> 0; inf: no limit).
+    names : sequence of str
+        The joints' names.
+
+    Returns
+    -------
+    ratio : float
+        The largest |effort| / limit over the joints (0 for a joint without a limit; nan if a limit is nan).
+    joint : int
+        The index of the joint of that ratio (-1: no joint).
+    breach : str or None
+        The joint furthest past its limit, in one line (None: every joint within its limit; a nan effort or limit
+        counts as exceeded).
+    """
+    p = np.abs(np.asarray(peaks, dtype=float)).reshape(-1)
+    lim = np.asarray(limits, dtype=float).reshape(-1)
+    if p.shape != lim.shape or len(names) != p.size:
+        raise SpeedError(f"{p.size} efforts against {lim.size} limits and {len(names)} names")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = np.where(np.isinf(lim), 0.0, p / lim)
+    joint = int(np.argmax(np.nan_to_num(ratios, nan=np.inf))) if ratios.size else -1
+    ratio = float(ratios[joint]) if ratios.size else 0.0
+    over = limits_held(p, lim)
+    if not over:
+        return ratio, joint, None
+    j = joint if joint in over else over[0]  # the joint furthest past its limit
+    return ratio, joint, f"joint {names[j]}: measured |effort| {p[j]:.4g} N m above its limit {lim[j]:.4g} N m"
 
 
 def acceleration_tolerance(displacement: float, frequency_hz: float) -> float:

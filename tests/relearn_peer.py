@@ -1,0 +1,151 @@
+"""The test's side of the per-move learners' tests that drive a learner without the arm: one real node named
+``identifier`` (tests/test_learning_speed_relearn.py, test_learning_mrilc_relearn.py, test_learning_speed_kill.py).
+
+:class:`Peer` publishes the drift watch's status on ``/diagnostics`` through the identifier's own reporter (statuses
+named ``identifier: ...``, as nodes/identifier.py does), the cycle events and (``imu``) the tool accelerometer,
+serves the controller's FollowJointTrajectory action (recording each goal it receives; ``hold``: a goal runs until
+the test releases it), sends goals to the learner's proxy, and keeps the learner's reports, log lines and
+statuses.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+from control_msgs.action import FollowJointTrajectory
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Log
+from rclpy.action import ActionClient, ActionServer
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import Imu
+from trajectory_msgs.msg import JointTrajectory
+
+from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_nodes.nodes.learner_drift import level_of
+from shaper_nodes.ros.conversions import sec_to_time
+from shaper_nodes.ros.diagnostics import Diagnostics
+from shaper_nodes.ros.lockstep_reader import STREAM_QOS
+
+WAIT = 120.0  # s of wall time for a state to come (two busy cores)
+
+
+class Peer:
+    """The test's side (module docstring).
+
+    Parameters
+    ----------
+    ctx : rclpy Context
+        The test's context.
+    controller : str
+        The FollowJointTrajectory action the peer serves as the controller.
+    ex : SingleThreadedExecutor, optional
+        The executor to spin in (an in-process learner's too); default one of its own, shut down by
+        :meth:`destroy`.
+    imu : bool
+        Publish the accelerometer on ``/tip_imu`` (RELIABLE, deep: the learner's ``topics.imu_reliable``).
+    """
+
+    def __init__(self, ctx, controller: str, ex: SingleThreadedExecutor | None = None, imu: bool = False) -> None:
+        self._own_ex = ex is None
+        self.ex = SingleThreadedExecutor(context=ctx) if ex is None else ex
+        self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
+        self.identifier = Diagnostics(self.node)  # one publisher: its statuses arrive in order
+        self.events = self.node.create_publisher(CycleEvent, "/cycle_events", 100)
+        self.imu = self.node.create_publisher(Imu, "/tip_imu", STREAM_QOS) if imu else None
+        self.reports: list[CycleReport] = []
+        self.logs: list[str] = []
+        self.statuses: list[DiagnosticStatus] = []
+        self.goals: list[JointTrajectory] = []  # what reached the controller
+        self.running = 0  # goals the controller is executing now
+        self._held: Future | None = None  # while set, the controller's goals run until it is done
+        self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
+                                      else None, 100)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
+        self.server = ActionServer(self.node, FollowJointTrajectory, controller, execute_callback=self._execute)
+        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
+        self.ex.add_node(self.node)
+
+    def hold(self) -> None:
+        """Keep the controller's next goals running (as a robot's moving) until :meth:`release`."""
+        self._held = Future()
+
+    def release(self) -> None:
+        """End the goals held."""
+        held, self._held = self._held, None
+        if held is not None and not held.done():
+            held.set_result(True)
+
+    async def _execute(self, handle) -> FollowJointTrajectory.Result:
+        self.goals.append(handle.request.trajectory)
+        self.running += 1
+        if self._held is not None:  # (the executor goes on with the other callbacks meanwhile)
+            await self._held
+        self.running -= 1
+        handle.succeed()
+        return FollowJointTrajectory.Result()
+
+    def spin_until(self, done: Callable[[], bool], what: str, timeout: float = WAIT) -> None:
+        deadline = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < deadline, f"timed out after {timeout:g} s waiting for {what}"
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def event(self, kind: int, cycle: int, t: float, names: Sequence[str], start: Sequence[float],
+              goal: Sequence[float], task: str = "per_move") -> None:
+        """A cycle event stamped ``t`` s naming the move by its start and goal."""
+        msg = CycleEvent(event=kind, cycle=cycle, task=task, joint_names=list(names),
+                         start_positions=[float(x) for x in start], goal_positions=[float(x) for x in goal])
+        msg.header.stamp = sec_to_time(t)
+        self.events.publish(msg)
+
+    def send(self, trajectory: JointTrajectory, what: str = "the goal"):
+        """Send ``trajectory`` to the learner's proxy and wait until the learner accepted it and the controller
+        received what the learner sent on; returns the goal's handle (its result not waited for)."""
+        before = len(self.goals)
+        sent = self.client.send_goal_async(FollowJointTrajectory.Goal(trajectory=trajectory))
+        self.spin_until(sent.done, f"the learner's answer to {what}")
+        assert sent.result().accepted
+        self.spin_until(lambda: len(self.goals) > before, f"{what} at the controller")
+        assert len(self.goals) == before + 1
+        return sent.result()
+
+    def run_goal(self, trajectory: JointTrajectory, what: str = "the goal") -> JointTrajectory:
+        """:meth:`send`, then the goal's result; what the controller received."""
+        result = self.send(trajectory, what).get_result_async()
+        self.spin_until(result.done, f"the result of {what}")
+        return self.goals[-1]
+
+    def report(self, cycle: int) -> dict[str, float]:
+        """The learner's report of ``cycle`` (name -> value), waited for."""
+        self.spin_until(lambda: any(r.cycle == cycle for r in self.reports), f"the learner's report of cycle {cycle}")
+        got = next(r for r in self.reports if r.cycle == cycle)
+        return dict(zip(got.metric_names, got.metric_values, strict=True))
+
+    def status(self, name: str, level: int, words: str) -> DiagnosticStatus | None:
+        """The first status seen of ``name`` at ``level`` whose message holds ``words``."""
+        return next((s for s in self.statuses if s.name == name and level_of(s.level) == level
+                     and words in s.message), None)
+
+    def learner_subscriptions(self, inputs: Sequence[str]) -> set[bytes]:
+        """The endpoint GIDs of the learner's subscriptions of ``inputs`` on the graph now."""
+        return {bytes(i.endpoint_gid) for topic in inputs for i in self.node.get_subscriptions_info_by_topic(topic)
+                if i.node_name == "learner"}
+
+    def learner_up(self, inputs: Sequence[str], before: set[bytes]) -> bool:
+        """The learner's subscriptions of each of ``inputs`` (new ones, not among ``before``) on the graph, and its
+        action server (a restarted learner is up)."""
+        return all(any(i.node_name == "learner" and bytes(i.endpoint_gid) not in before
+                       for i in self.node.get_subscriptions_info_by_topic(topic))
+                   for topic in inputs) and self.client.server_is_ready()
+
+    def destroy(self) -> None:
+        self.release()
+        if self._own_ex:
+            self.ex.shutdown()
+        self.server.destroy()
+        self.client.destroy()
+        self.node.destroy_node()
