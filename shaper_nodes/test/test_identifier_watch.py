@@ -21,7 +21,7 @@ def outside_check():
 
 def rating(move_shapers) -> DriftRating:
     node = SimpleNamespace(params=SimpleNamespace(value=SimpleNamespace(watch=SimpleNamespace(confirm=2))),
-                           _new_watch=lambda: DriftWatch(2, baseline=Baseline(2, 0.03)))
+                           new_watch=lambda: DriftWatch(2, baseline=Baseline(2, 0.03)))
     return DriftRating(node, move_shapers)
 
 

@@ -117,7 +117,7 @@ class IdentifierNode(Node):
                                    self.diagnostics)
         self.create_service(Identify, "~/identify", self._on_identify, qos_profile=SERVICE_QOS)
         self.move_shapers = MoveShapers(self, str(p.watch.scheduler), lambda: float(
-            self.params.value.service_timeout), self.diagnostics, self._new_watch) \
+            self.params.value.service_timeout), self.diagnostics, self.new_watch) \
             if p.watch.enabled and p.watch.scheduler else None
         self.drift = DriftRating(self, self.move_shapers)  # nodes/identifier_watch.py
         if bool(p.watch.enabled) and self.move_shapers is None:  # (with watch.scheduler: not the one rated)
@@ -127,7 +127,7 @@ class IdentifierNode(Node):
             f"identifying from {p.topics.imu}, keeping {self.cycles.maxlen} cycles;"
             f" applies to {self.shaper.srv_name}")
 
-    def _new_watch(self) -> DriftWatch:
+    def new_watch(self) -> DriftWatch:
         """A drift watch with the node's ``watch.confirm`` and baseline (``watch.baseline_*``)."""
         w = self.params.value.watch
         return DriftWatch(int(w.confirm), baseline=Baseline(int(w.baseline_cycles), float(w.baseline_margin)),

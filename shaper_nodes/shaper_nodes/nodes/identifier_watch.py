@@ -34,7 +34,7 @@ class DriftRating:
     def __init__(self, node: Any, move_shapers: MoveShapers | None) -> None:
         self.node = node
         self.move_shapers = move_shapers
-        self.watch: DriftWatch = node._new_watch()
+        self.watch: DriftWatch = node.new_watch()
         self.active: ShaperMsg | None = None
         self._warned = False
 
