@@ -42,3 +42,30 @@ def test_one_learning_case_a_run(capsys):
     assert main(["--cases", "none,scheduled_list,scheduled_list_moves"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "one learning case" in err[0] and "scheduled_list_moves" in err[0]
+
+
+def test_the_payload_table_labels_a_mode_set_aside_by_its_reason():
+    """The drift column of the payload case: a mode outside its band but present since the move's first cycles is
+    ``baseline``, one far above every design mode ``above`` (the core's own wording), a rated one outside
+    ``outside``."""
+    import math as m
+
+    from shaper_nodes.core.identification import ModeFit
+    from shaper_nodes.core.identification.drift import Baseline, rate_modes
+    from shaper_nodes.core.shaping.families import Mode, design
+    from sim_plant_node.clients.arm_payload import Drift, _label
+
+    zv = design("zv", (Mode(2 * m.pi * 4.0, 0.02),))
+
+    def fit(hz: float, zeta: float) -> ModeFit:
+        return ModeFit(2 * m.pi * hz, zeta, 0.01, 0.001, 1.0, "fit")
+
+    baseline = Baseline(1)
+    baseline.take([fit(4.6, 0.3)])
+    labels = []
+    for mode, shift in ((fit(4.6, 0.3), None), (fit(9.0, 0.3), 0.3), (fit(4.6, 0.02), None)):
+        rating = rate_modes(zv.amplitudes, zv.times, [4.0], [mode], 0.05, baseline, shift)
+        assert rating is not None
+        text = "cycle 3: " + rating.describe("the shaper the scheduler gave this move", "the move's first cycles")
+        labels.append(_label(Drift(3, 0, text, rating.check.mode_hz)))
+    assert labels == ["baseline 4.600 Hz", "above 9.000 Hz", "outside 4.600 Hz"]

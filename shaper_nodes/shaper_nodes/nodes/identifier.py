@@ -40,7 +40,13 @@ ran with, asked of the scheduler at its START (:mod:`.identifier_moves`), and th
 not followed (the scheduler's changes of it as the arm moves would restart the count at every move).
 Rated: the identified mode nearest each design mode, and the strongest (a mode a payload moved far
 below every design mode is nearer another one); the worst of them decides. Each move has its own count,
-and the status is WARN while any move's watch warns.
+and the status is WARN while any move's watch warns. Drift is a change: each watch keeps a baseline, the
+modes of its first ``watch.baseline_cycles`` watched cycles (a move's for the node's life; the active
+shaper's from its latest change), and a mode outside the band that is the same as a baseline mode outside
+the band (``watch.baseline_margin``; the rule in :mod:`shaper_nodes.core.identification.drift`) is set
+aside: it does not count, and the status says so ("present since ...: not drift"). The position loop's
+damped pole, outside every band from the first cycle on, is such a mode. So is a mode more than
+``watch.max_shift`` above the shaper's highest design mode (farther than a payload moves a mode).
 
 Parameters: :data:`PARAMETERS` (config/identifier.yaml).
 """
@@ -60,6 +66,7 @@ from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycle_records import MAX_GAP_PERIODS, SaturatedRecord, SensorFault, check_record
 from shaper_nodes.core.cycles import CycleMonitor, CycleResult
 from shaper_nodes.core.identification import IdentificationError, identify_records, recommend_shaper
+from shaper_nodes.core.identification.drift import Baseline, DriftWatch
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import estimate_msg, shaper_to_msg, time_to_sec
@@ -110,7 +117,7 @@ class IdentifierNode(Node):
                                    self.diagnostics)
         self.create_service(Identify, "~/identify", self._on_identify, qos_profile=SERVICE_QOS)
         self.move_shapers = MoveShapers(self, str(p.watch.scheduler), lambda: float(
-            self.params.value.service_timeout), self.diagnostics, int(p.watch.confirm)) \
+            self.params.value.service_timeout), self.diagnostics, self.new_watch) \
             if p.watch.enabled and p.watch.scheduler else None
         self.drift = DriftRating(self, self.move_shapers)  # nodes/identifier_watch.py
         if bool(p.watch.enabled) and self.move_shapers is None:  # (with watch.scheduler: not the one rated)
@@ -119,6 +126,12 @@ class IdentifierNode(Node):
         self.get_logger().info(
             f"identifying from {p.topics.imu}, keeping {self.cycles.maxlen} cycles;"
             f" applies to {self.shaper.srv_name}")
+
+    def new_watch(self) -> DriftWatch:
+        """A drift watch with the node's ``watch.confirm`` and baseline (``watch.baseline_*``)."""
+        w = self.params.value.watch
+        return DriftWatch(int(w.confirm), baseline=Baseline(int(w.baseline_cycles), float(w.baseline_margin)),
+                          max_shift=float(w.max_shift))
 
     @property
     def _active(self) -> ShaperMsg | None:

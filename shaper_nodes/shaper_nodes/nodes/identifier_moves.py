@@ -15,7 +15,9 @@ Each move has its own :class:`~shaper_nodes.core.identification.drift.DriftWatch
 and goal, :func:`~shaper_nodes.core.learning.moves.move_key`), so the count of cycles in a row outside the band
 is the move's own: a cycle of another move whose mode did not drift (a payload moves some modes far more
 than others) neither ends the count nor, once a move warns, the warning. The status ``identifier: drift`` is
-WARN while any move's watch warns (:meth:`MoveShapers.drifted`), OK when none does.
+WARN while any move's watch warns (:meth:`MoveShapers.drifted`), OK when none does. Each move's watch keeps
+its own baseline (the modes of the move's first ``watch.baseline_cycles`` watched cycles), for the node's
+life: a mode outside the band present since then is not drift (:mod:`shaper_nodes.core.identification.drift`).
 """
 
 from __future__ import annotations
@@ -51,15 +53,15 @@ class MoveShapers:
         Longest wait for the scheduler's answer, s of wall time.
     diagnostics : Diagnostics
         Where a call that times out is reported.
-    confirm : int
-        Each move's watch: its cycles in a row outside the band before it warns.
+    new_watch : callable returning DriftWatch
+        A move's watch (its ``confirm`` and baseline), made at the move's first rated cycle.
     """
 
     def __init__(self, node: Node, scheduler: str, timeout: Callable[[], float], diagnostics: Diagnostics,
-                 confirm: int) -> None:
+                 new_watch: Callable[[], DriftWatch]) -> None:
         self.client = ServiceClient(node, ShaperAt, f"{scheduler.rstrip('/')}/shaper_at", timeout, diagnostics)
         self._asked: OrderedDict[int, tuple[PendingCall | str, str]] = OrderedDict()
-        self.confirm = int(confirm)
+        self.new_watch = new_watch
         #: per move key, its drift watch
         self.watches: dict[str, DriftWatch] = {}
 
@@ -101,7 +103,9 @@ class MoveShapers:
             return None, answer.error, None
         if not answer.response.success:
             return None, f"{self.client.srv_name} gave no shaper for its move: {answer.response.message}", None
-        return answer.response.shaper, "", self.watches.setdefault(key, DriftWatch(self.confirm))
+        if key not in self.watches:
+            self.watches[key] = self.new_watch()
+        return answer.response.shaper, "", self.watches[key]
 
     def drifted(self) -> list[str]:
         """The moves whose watch warns (their keys)."""

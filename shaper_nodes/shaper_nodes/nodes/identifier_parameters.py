@@ -51,6 +51,23 @@ class WatchParams:
         0.02, "Drift watch: a mode whose one-sigma frequency uncertainty exceeds this"
         " fraction of its frequency is not rated (a fit to a residual at the noise floor, where the shaper leaves"
         " nothing to identify).", (1e-4, 1.0))
+    baseline_cycles: int = param(
+        1, "Drift watch: the first watched cycles (of each move with watch.scheduler; since the active shaper's"
+        " latest change without) whose identified modes, all of them, make the watch's baseline: a mode outside"
+        " the band that is the same as a baseline mode outside the band (present from the start, as the position"
+        " loop's damped pole) is not drift and does not count toward watch.confirm. A cycle where nothing was"
+        " identified counts too; a payload changed within these cycles is in the baseline. 0: no baseline, every"
+        " mode outside the band counts.", (0, 100), read_only=True)
+    baseline_margin: float = param(
+        0.03, "Drift watch: the same mode as a baseline mode if its frequency is within 3 combined one-sigma"
+        " uncertainties plus the larger of this fraction and the baseline mode's damping ratio (its resonance's"
+        " half-power half-width) of the baseline mode's frequency, and its damping ratio within a factor 2;"
+        " fraction (a payload moves the arm's modes 5-30 %).", (0.0, 0.5), read_only=True)
+    max_shift: float = param(
+        0.3, "Drift watch: the most a payload change moves a mode, fraction: a mode outside the band more than"
+        " this above the shaper's highest design mode is none of the modes the shaper was designed for, moved,"
+        " and does not count toward watch.confirm (a higher mode a learner uncovers). Modes below are all rated.",
+        (0.0, 100.0), read_only=True)
     scheduler: str = param(
         "", "Drift watch: fully qualified name of the scheduler whose ~/shaper_at gives the shaper each cycle's"
         " move ran with (its START's joints, start and goal), for a shaper node that shapes each goal through it"

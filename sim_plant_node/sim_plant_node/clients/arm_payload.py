@@ -75,9 +75,12 @@ class Drift:
 
 def _label(d: Drift) -> str:
     """A drift status in a table cell: WARN (the status: some move's mode out of its band), else whether this
-    move's mode was inside or outside its shaper's band, or not rated (no sharp mode: the noise floor); the
+    move's mode was inside or outside its shaper's band, outside but not drift (baseline: present since the
+    move's first cycles; above: far above every design mode), or not rated (no sharp mode: the noise floor); the
     rated mode, Hz."""
-    what = ("WARN" if d.level == WARN_LEVEL else "outside" if " is outside " in d.message
+    aside = d.message.endswith(": not drift")
+    what = ("WARN" if d.level == WARN_LEVEL else "baseline" if aside and "first cycles" in d.message
+            else "above" if aside else "outside" if " is outside " in d.message
             else "inside" if " is inside " in d.message else "no mode" if d.level == 0 else f"level {d.level}")
     return what + (f" {d.mode_hz:.3f} Hz" if math.isfinite(d.mode_hz) else "")
 
