@@ -23,8 +23,10 @@ from shaper_nodes.core.lifetime import die_with_parent
 #: identification 10.8 s with them, 4.3 s without)
 SINGLE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: the nice value added to :class:`PosePipeline`'s workers: while poses are recorded the recording is the
-#: calibration's critical path (the arm in lockstep with calibrate), and the workers take the CPU it leaves
-NICENESS = 10
+#: calibration's critical path (the arm in lockstep with calibrate), and the workers take the CPU it leaves first.
+#: Moderate: on a loaded machine a worker at +10 got so little CPU beside the other processes that the poses' results
+#: came 2x later than without the pipeline (121 s against 64 s after the last pose, load 23-33)
+NICENESS = 5
 
 
 def _worker_start(parent: int, niceness: int = 0) -> None:
