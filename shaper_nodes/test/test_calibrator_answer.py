@@ -37,7 +37,7 @@ class World:
         self.last_read = self.t
         if self.t < self.out_from:
             return True
-        return self.t >= self.back_at and again or self.t > self.back_at + 0.1
+        return (self.t >= self.back_at and again) or self.t > self.back_at + 0.1
 
     def done(self) -> bool:
         return self.answer_at is not None and self.t >= self.answer_at
