@@ -72,8 +72,22 @@ class StuckController:
                                    cancel_callback=self._cancel, callback_group=group)
         self.ex = MultiThreadedExecutor(num_threads=4, context=ctx)
         self.ex.add_node(self.node)
-        self.thread = threading.Thread(target=self.ex.spin, daemon=True)
+        self.died: BaseException | None = None  # what ended its executor's spin, if anything did before close()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
+
+    def _spin(self) -> None:
+        """The executor's spin; an error out of a callback (it ends the spin: the controller then answers nothing,
+        publishes nothing) is kept for the test's messages instead of vanishing with the thread."""
+        try:
+            self.ex.spin()
+        except BaseException as err:
+            self.died = err
+
+    def describe(self) -> str:
+        """The controller's state for a failed assertion: goals, cancels, and whether its executor died."""
+        return (f"test controller: {self.goals} goal(s), {self.cancels} cancel(s), executor "
+                + (f"died: {self.died!r}" if self.died is not None else "alive" if self.thread.is_alive() else "ended"))
 
     def now(self):
         return sec_to_time(time.monotonic() - self.t0)
@@ -166,7 +180,7 @@ def test_a_full_disk_cancels_the_goal_ends_with_one_line_and_resume_completes(ro
     try:
         code = proc.proc.wait(timeout=300.0)
         log = proc.log_path.read_text()
-        assert code == EXIT_WRITE_FAILED, log
+        assert code == EXIT_WRITE_FAILED, f"{peer.describe()}\n{log}"
         assert "Traceback" not in log, log
         wait_for(lambda: peer.cancels >= 1, "the cancel at the controller", proc=proc)
         assert peer.goals >= 1 and peer.cancels == 1, log

@@ -20,9 +20,10 @@ HEAVY = ("scipy.optimize", "scipy.signal", "scipy.stats", "scipy.interpolate", "
          "control", "matplotlib", "dask", "pinocchio")
 
 #: the modules of the executables that need none of them at start, and the conductor the reproductions start
-#: nodes with (identifier, calibrate, list_replay, analyze_bag and analyze_fleet identify modes: they import
-#: the identification's numerics at start)
+#: nodes with (identifier, list_replay, analyze_bag and analyze_fleet identify modes: they import the
+#: identification's numerics at start; calibrate identifies in its workers, or after its last pose)
 MODULES = ["shaper_nodes.nodes.shaper", "shaper_nodes.nodes.recorder", "shaper_nodes.nodes.learner",
+           "shaper_nodes.nodes.calibrate",
            "shaper_nodes.nodes.scheduler", "shaper_nodes.nodes.bag_play", "shaper_nodes.cli.shaper_design",
            "shaper_nodes.cli.loop_design", "shaper_nodes.cli.keystore", "shaper_nodes.cli.send_goal",
            "sim_plant_node.node.sim_plant", "sim_plant_node.clients.demo", "sim_plant_node.clients.conductor"]

@@ -19,13 +19,10 @@ each written to a temporary name and renamed, so a folder never holds half a fil
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import os
 import pathlib
-import signal
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,6 +33,7 @@ from shaper_nodes.core.calibration import (
     IdentifySettings,
     Plan,
     PoseResult,
+    PoseStep,
     fallback,
     identify_pose,
     make_plan,
@@ -45,10 +43,11 @@ from shaper_nodes.core.calibration import (
 )
 from shaper_nodes.core.calibration.plan import PlanError, config_from_dict, config_to_dict, plan_to_dict
 from shaper_nodes.core.learning.samples import MAX_ABS_ACCEL, out_of_range, sensor_fault
-from shaper_nodes.core.lifetime import die_with_parent
 from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import Shaper
 from shaper_nodes.core.stamps import stamp_to_sec
+
+from .calibration_pool import worker_pool
 
 SETUP_TOPIC = "/calibrate/setup"
 EVENTS_TOPIC = "/calibrate/events"
@@ -61,10 +60,6 @@ DIGITS = 6
 #: made before it was recorded takes these, the simulated arm's and a ros2_control robot's names)
 WIRING = {"action": "/joint_trajectory_controller/follow_joint_trajectory", "joint_states": "/joint_states",
           "shaper_node": "/shaper", "scheduler_node": "/scheduler"}
-#: one BLAS thread per identifying process: the fits' matrices are small, and several BLAS threads in each
-#: of several processes on few cores spin against each other (on 2 cores: the default calibration's
-#: identification 10.8 s with them, 4.3 s without)
-SINGLE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: the flag of a pose whose accelerometer failed (flat, stuck, saturated, silent): no mode of it is used
 SENSOR_FAULT = "sensor_fault"
 
@@ -146,46 +141,6 @@ def decays_of(index: int, data: PoseData) -> list[Decay]:
     return out
 
 
-def _worker_start(parent: int) -> None:
-    """A pool worker's start: it ends with the process that started it (``kill -9`` of calibrate leaves no
-    worker behind), and leaves Ctrl-C (sent to the whole process group) to that process, which stops it."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    die_with_parent(signal.SIGTERM, parent)
-
-
-@contextlib.contextmanager
-def worker_pool(workers: int) -> Iterator[Any]:
-    """A pool of ``workers`` identifying processes (spawned, one BLAS thread each) that do not outlive the
-    process that started them: each asks for SIGTERM when its parent ends (:func:`.core.lifetime.die_with_parent`).
-
-    prctl's parent-death signal follows the *thread* that started the worker: use the pool (submit, map) from
-    the main thread (calibrate and ``--from-bag`` do), whose life is the process's. Leaving the ``with`` block by
-    an exception (Ctrl-C, SIGTERM) ends the workers at once instead of waiting for their poses.
-    """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    saved = {k: os.environ.get(k) for k in SINGLE_THREAD}
-    os.environ.update(SINGLE_THREAD)  # read by each worker as it starts (spawn copies the environment)
-    try:
-        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_start, initargs=(os.getpid(),))
-        try:
-            yield pool
-        except BaseException:
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                proc.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown(wait=True)
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
 def pose_sensor_fault(data: PoseData, max_abs: float = MAX_ABS_ACCEL) -> str | None:
     """Why a pose's accelerometer cannot be trusted, or None: per excitation (START to END, the motion and its
     decay) no sample (silent), non-finite samples, every axis on one value (stuck or dead: a working sensor's
@@ -217,21 +172,36 @@ def compute(setup: dict[str, Any], poses: Sequence[PoseData], workers: int = 1) 
     processes (:func:`worker_pool`); the result does not depend on it."""
     plan, settings, family, threshold = plan_from_setup(setup)
     by_index = {p.index: p for p in poses}
-    faults = {i: pose_sensor_fault(p) for i, p in by_index.items()}
     steps = [step for step in plan.steps if step.index in by_index]
-    jobs = [(step.index, step.name, step.pose, step.grid_index, decays_of(step.index, by_index[step.index]), settings)
-            for step in steps if faults[step.index] is None]
+    jobs = [(step, by_index[step.index], settings) for step in steps]
     if workers > 1 and len(jobs) > 1:
         with worker_pool(min(workers, len(jobs))) as pool:
-            identified = list(pool.map(identify_pose, *zip(*jobs, strict=True)))
+            results = list(pool.map(identify_recorded, *zip(*jobs, strict=True)))
     else:
-        identified = [identify_pose(*job) for job in jobs]
-    found = iter(identified)
-    results = [next(found) if faults[step.index] is None else
-               PoseResult(step.index, step.name, np.asarray(step.pose, float), step.grid_index, [], [],
-                          [f"{SENSOR_FAULT}: {faults[step.index]}"])
-               for step in steps]
+        results = [identify_recorded(*job) for job in jobs]
     return assemble(plan, settings, family, threshold, results, wiring_of(setup))
+
+
+def identify_recorded(step: PoseStep, data: PoseData, settings: IdentifySettings) -> PoseResult:
+    """One pose's result from its recorded samples: its modes (:func:`.core.calibration.identify_pose` on its
+    free decays), or, when its accelerometer failed (:func:`pose_sensor_fault`), none and the flag
+    ``sensor_fault: ...``."""
+    fault = pose_sensor_fault(data)
+    if fault is not None:
+        return PoseResult(step.index, step.name, np.asarray(step.pose, float), step.grid_index, [], [],
+                          [f"{SENSOR_FAULT}: {fault}"])
+    return identify_pose(step.index, step.name, step.pose, step.grid_index, decays_of(step.index, data), settings)
+
+
+def identify_folder(folder: pathlib.Path, setup: dict[str, Any]) -> tuple[dict[str, Any], PoseResult]:
+    """One completed pose's bag read and identified (:func:`identify_recorded`) on the plan and settings of the
+    setup it was recorded with (``setup`` if it holds none), as :func:`compute` does on the whole recording;
+    returns that setup and the result (:class:`.calibration_pool.PosePipeline` runs it in a worker)."""
+    recorded, data = read_pose(folder)
+    setup = setup if recorded is None else recorded
+    plan, settings, _, _ = plan_from_setup(setup)
+    (step,) = [s for s in plan.steps if s.index == data.index]
+    return setup, identify_recorded(step, data, settings)
 
 
 def assemble(plan: Plan, settings: IdentifySettings, family: str, threshold: float, results: list[PoseResult],
@@ -296,8 +266,6 @@ def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[
     PlanError
         No completed pose, no setup, or poses recorded under different setups.
     """
-    from shaper_nodes.recordings import Bag
-
     path = pathlib.Path(recording)
     folders = pose_folders(path)
     if not folders:
@@ -305,31 +273,45 @@ def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[
     setup: dict[str, Any] | None = None
     poses = []
     for folder in folders:
-        data = PoseData(int(folder.name.split("_")[1]))
-        with Bag(folder) as bag:
-            imus = [t for t, i in bag.topics.items() if i.msgtype == "sensor_msgs/msg/Imu"]
-            if len(imus) != 1:
-                raise PlanError(f"{folder.name}: expected one sensor_msgs/Imu topic, found {imus}")
-            imu_topic = imus[0]
-            decode = {t: bag.deserializer(i.msgtype) for t, i in bag.topics.items()
-                      if t in (SETUP_TOPIC, EVENTS_TOPIC, imu_topic)}
-            for topic, _, _, raw in bag.messages([SETUP_TOPIC, EVENTS_TOPIC, imu_topic]):
-                msg = decode[topic](raw)
-                if topic == SETUP_TOPIC:
-                    this = json.loads(msg.data)
-                    if setup is not None and this != setup:
-                        raise PlanError(f"{folder.name} was recorded with another setup than the poses before it")
-                    setup = this
-                elif topic == EVENTS_TOPIC:
-                    data.events.append((int(msg.event), int(msg.cycle), stamp_to_sec(msg.header.stamp)))
-                else:
-                    a = msg.linear_acceleration
-                    data.imu_t.append(stamp_to_sec(msg.header.stamp))
-                    data.imu.append((a.x, a.y, a.z))
+        this, data = read_pose(folder)
+        if this is not None:
+            if setup is not None and this != setup:
+                raise PlanError(f"{folder.name} was recorded with another setup than the poses before it")
+            setup = this
         poses.append(data)
     if setup is None:
         raise PlanError(f"{path}: no {SETUP_TOPIC} message: not a calibration recording")
     return setup, poses
+
+
+def read_pose(folder: pathlib.Path) -> tuple[dict[str, Any] | None, PoseData]:
+    """One completed pose's bag (``pose_NNN``): the setup it was recorded with (None if it has none; the last
+    if several) and its samples."""
+    from shaper_nodes.recordings import Bag
+
+    data = PoseData(int(folder.name.split("_")[1]))
+    setup: dict[str, Any] | None = None
+    with Bag(folder) as bag:
+        imus = [t for t, i in bag.topics.items() if i.msgtype == "sensor_msgs/msg/Imu"]
+        if len(imus) != 1:
+            raise PlanError(f"{folder.name}: expected one sensor_msgs/Imu topic, found {imus}")
+        imu_topic = imus[0]
+        decode = {t: bag.deserializer(i.msgtype) for t, i in bag.topics.items()
+                  if t in (SETUP_TOPIC, EVENTS_TOPIC, imu_topic)}
+        for topic, _, _, raw in bag.messages([SETUP_TOPIC, EVENTS_TOPIC, imu_topic]):
+            msg = decode[topic](raw)
+            if topic == SETUP_TOPIC:
+                this = json.loads(msg.data)
+                if setup is not None and this != setup:
+                    raise PlanError(f"{folder.name} was recorded with another setup than the poses before it")
+                setup = this
+            elif topic == EVENTS_TOPIC:
+                data.events.append((int(msg.event), int(msg.cycle), stamp_to_sec(msg.header.stamp)))
+            else:
+                a = msg.linear_acceleration
+                data.imu_t.append(stamp_to_sec(msg.header.stamp))
+                data.imu.append((a.x, a.y, a.z))
+    return setup, data
 
 
 # --------------------------------------------------------------------------- outputs
@@ -346,9 +328,11 @@ def _sensor_fault(r: PoseResult) -> str | None:
     return next((f[len(SENSOR_FAULT) + 2:] for f in r.flags if f.startswith(SENSOR_FAULT + ": ")), None)
 
 
-def sensor_faults(cal: Calibration) -> list[tuple[int, str, str]]:
-    """The poses whose accelerometer failed: (index, name, why) each, in pose order."""
-    return [(r.index, r.name, why) for r in cal.results if (why := _sensor_fault(r)) is not None]
+def sensor_faults(cal: Calibration | Sequence[PoseResult]) -> list[tuple[int, str, str]]:
+    """The poses whose accelerometer failed: (index, name, why) each, in pose order (of a calibration or of
+    its poses' results)."""
+    results = cal.results if isinstance(cal, Calibration) else cal
+    return [(r.index, r.name, why) for r in results if (why := _sensor_fault(r)) is not None]
 
 
 def report_dict(cal: Calibration) -> dict[str, Any]:

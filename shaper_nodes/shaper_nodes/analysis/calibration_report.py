@@ -26,7 +26,7 @@ import numpy as np
 
 from shaper_nodes.core.files import write_atomic
 
-from .calibration import Calibration, report_dict, scheduler_yaml, shaper_yaml
+from .calibration import Calibration, assemble, plan_from_setup, report_dict, scheduler_yaml, shaper_yaml, wiring_of
 from .text import plus_minus_fixed
 
 #: the residual figure's series: (report key, label); nominal and worst case side by side, like with like
@@ -228,3 +228,13 @@ def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recordi
     write_atomic(out / "report.md", markdown(cal, report, [f.name for f in figs], recording))
     write_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
     return [*written, out / "report.md", out / "report.json"]
+
+
+def assemble_and_write(out: pathlib.Path, setup: dict[str, Any], results: list[Any],
+                       recording: str = "recording") -> tuple[Calibration, list[pathlib.Path]]:
+    """The calibration from its poses' results on the setup they were recorded with (as
+    :func:`.calibration.compute` assembles it), and :func:`write_outputs`'s files; both returned (``calibrate``
+    runs it in a worker of its pool: the recording process imports neither the fits nor matplotlib)."""
+    plan, settings, family, threshold = plan_from_setup(setup)
+    cal = assemble(plan, settings, family, threshold, results, wiring_of(setup))
+    return cal, write_outputs(out, cal, recording)

@@ -38,6 +38,7 @@ import pathlib
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,7 @@ from shaper_nodes.analysis.calibration import (
     sensor_faults,
     setup_dict,
 )
+from shaper_nodes.analysis.calibration_pool import NICENESS, PosePipeline, worker_pool
 from shaper_nodes.analysis.calibration_report import write_outputs
 from shaper_nodes.core.calibration import Plan, PlanError, Waypoint
 from shaper_nodes.core.calibration.plan import approach as plan_approach
@@ -257,35 +259,63 @@ def publish_sensor_faults(diagnostics: Diagnostics, faults: list[tuple[int, str,
 
 
 def _execute(cal: Calibrator, plan: Plan, setup: dict[str, Any], out: pathlib.Path, workers: int) -> int:
+    """Record every pose not done yet, back home, then the outputs. With ``workers`` > 1 each pose is identified
+    in a worker as soon as its recording is complete, while the next one is recorded (:class:`PosePipeline`), and
+    a worker assembles the results and writes the outputs: the same as :func:`compute` and :func:`write_outputs`
+    on the whole recording after the last pose (as with one worker), byte for byte."""
     recording = out / "recording"
     for partial in recording.glob("*.partial"):
         shutil.rmtree(partial)
-    done = {int(p.name.split("_")[1]) for p in pose_folders(recording)}
-    c = plan.config
     t_wall = time.monotonic()
+    if workers <= 1:
+        _record(cal, plan, setup, recording, t_wall, lambda _index, _folder: None)
+        print("calibrate: identifying the modes at every pose ...", flush=True)
+        setup_read, poses = read_recording(recording)
+        result = compute(setup_read, poses, workers=workers)
+        publish_sensor_faults(cal.diagnostics, sensor_faults(result))
+        try:
+            written = write_outputs(out, result, "recording")
+        except OSError as err:
+            raise WriteFailed(err, err.filename or out) from None
+    else:
+        n = min(workers, len(plan.steps))
+        with worker_pool(n, NICENESS) as pool:
+            pipeline = PosePipeline(pool, setup, n)
+            _record(cal, plan, setup, recording, t_wall, pipeline.submit)
+            print("calibrate: identifying the modes at every pose ...", flush=True)
+            setup_read, results = pipeline.results()
+            publish_sensor_faults(cal.diagnostics, sensor_faults(results))
+            try:
+                result, written = pipeline.finish(out, setup_read, results)
+            except OSError as err:
+                raise WriteFailed(err, err.filename or out) from None
+    summary(result)
+    print(f"calibrate: done in {time.monotonic() - t_wall:.0f} s; written: " + ", ".join(p.name for p in written))
+    return 0
+
+
+def _record(cal: Calibrator, plan: Plan, setup: dict[str, Any], recording: pathlib.Path, t_wall: float,
+            completed: Callable[[int, pathlib.Path], None]) -> None:
+    """Record the poses not done yet, then move back home; ``completed(index, folder)`` is called for every
+    completed pose (those done before first), as soon as its folder is complete."""
+    folders = {int(p.name.split("_")[1]): p for p in pose_folders(recording)}
+    for index, folder in sorted(folders.items()):
+        completed(index, folder)
+    c = plan.config
     for step in plan.steps:
-        if step.index in done:
+        if step.index in folders:
             continue
         here = cal.wait_pose()
         approach = plan_approach(step.pose, quintic_time(step.pose - here, c.approach_velocity,
                                                          c.approach_acceleration), c.settle)
-        lost = cal.run_pose(step, setup, recording / f"pose_{step.index:03d}", approach)
+        folder = recording / f"pose_{step.index:03d}"
+        lost = cal.run_pose(step, setup, folder, approach)
+        completed(step.index, folder)
         print(f"calibrate: pose {step.index + 1}/{len(plan.steps)} ({step.name}) recorded"
               f" ({time.monotonic() - t_wall:.0f} s)" + (f"; {lost} (gaps in the stamps)" if lost else ""), flush=True)
     here = cal.wait_pose()
     cal.move((Waypoint(quintic_time(c.home_pose - here, c.approach_velocity, c.approach_acceleration),
                        c.home_pose),), "the move back home")
-    print("calibrate: identifying the modes at every pose ...", flush=True)
-    setup_read, poses = read_recording(recording)
-    result = compute(setup_read, poses, workers=workers)
-    publish_sensor_faults(cal.diagnostics, sensor_faults(result))
-    try:
-        written = write_outputs(out, result, "recording")
-    except OSError as err:
-        raise WriteFailed(err, err.filename or out) from None
-    summary(result)
-    print(f"calibrate: done in {time.monotonic() - t_wall:.0f} s; written: " + ", ".join(p.name for p in written))
-    return 0
 
 
 if __name__ == "__main__":

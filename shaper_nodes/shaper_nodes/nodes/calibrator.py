@@ -167,14 +167,21 @@ class Calibrator:
         action server gone from the graph, is a dead or stalled controller (a kill between two goals)."""
         bound, name = min((float(self.p.timeouts.peer), "timeouts.peer"), (float(self.p.timeouts.server),
                                                                            "timeouts.server"))
-        with contextlib.suppress(Aborted):
-            self.spin_until(lambda: sent.done() or self._server_gone(), bound, "")
-        if sent.done():
-            return
+        deadline = time.monotonic() + bound
+        while True:
+            with contextlib.suppress(Aborted):
+                self.spin_until(lambda: sent.done() or self._server_gone(), max(deadline - time.monotonic(), 0.0), "")
+            if sent.done():
+                return
+            if self._server_gone():  # still out of the graph: gone
+                self.peer_lost = True
+                raise Aborted(f"the controller's action server {self.p.action} left the graph before it answered"
+                              f" the goal of {what} (the controller stopped?); rerun with --resume once it is back")
+            if time.monotonic() >= deadline:
+                break
+            # out of the graph for SERVER_GONE s and back in it: a live controller whose graph entry lagged (under
+            # load); its answer is awaited on (before, this ended the run as 'no answer ... for <bound> s' early)
         self.peer_lost = True
-        if self._server_gone():
-            raise Aborted(f"the controller's action server {self.p.action} left the graph before it answered the"
-                          f" goal of {what} (the controller stopped?); rerun with --resume once it is back")
         raise Aborted(f"no answer and no feedback from the controller for {bound:g} s after the goal of {what}"
                       f" was sent ({name}): it died or stalled; rerun with --resume once it is back")
 

@@ -32,17 +32,17 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from shaper_nodes.core.identification import IdentificationError, ModeFit, combine_modes, identify
-from shaper_nodes.core.identification.recommend import worst_case_vibration
-from shaper_nodes.core.identification.record import spectrum
 from shaper_nodes.core.shaping import Mode, Shaper, design
 from shaper_nodes.core.shaping.vibration import percentage_vibration
 
 from .plan import Plan, PlanError, grid_axis
+
+if TYPE_CHECKING:  # the identification (scipy) is imported where it runs: the recording process needs none of it
+    from shaper_nodes.core.identification import ModeFit
 
 #: analysis variants of a decay: (record start after the commanded motion ends, s; modes fitted
 #: beyond max_modes). The first is the estimate; all give its model-error spread.
@@ -98,6 +98,8 @@ def _variant_spread(times: np.ndarray, signal: np.ndarray, primary: list[ModeFit
 
     The Jacobian covariance only knows the noise; a mode that unmodelled content (a heavily
     damped mode, the start of the record) pulls shows it by moving between variants."""
+    from shaper_nodes.core.identification import IdentificationError, ModeFit, identify
+
     estimates: list[list[ModeFit]] = [[m] for m in primary]
     for start, extra in VARIANTS[1:]:
         keep = times >= start
@@ -125,6 +127,8 @@ def _variant_spread(times: np.ndarray, signal: np.ndarray, primary: list[ModeFit
 def identify_decay(d: Decay, settings: IdentifySettings) -> list[ModeFit]:
     """The lightly damped modes of one decay (damping below settings.max_damping), their
     uncertainties including the spread over analysis variants; raises IdentificationError."""
+    from shaper_nodes.core.identification import IdentificationError, identify
+
     start, extra = VARIANTS[0]
     keep = d.times >= start
     primary = identify(d.times[keep], d.signal[keep], method=settings.method,
@@ -146,6 +150,8 @@ def _expanded(m: ModeFit, hits: Sequence[ModeFit]) -> ModeFit:
         return m
     from scipy.stats import t as student_t  # on first use: scipy.stats is 0.6 s of CPU at a node's start
 
+    from shaper_nodes.core.identification import ModeFit
+
     factor = float(student_t.ppf(0.975, k - 1) / student_t.ppf(0.975, 1e9))
     rms_w = math.sqrt(float(np.mean([h.omega_std**2 for h in hits])))
     rms_z = math.sqrt(float(np.mean([h.zeta_std**2 for h in hits])))
@@ -157,6 +163,9 @@ def _expanded(m: ModeFit, hits: Sequence[ModeFit]) -> ModeFit:
 def identify_pose(index: int, name: str, positions: np.ndarray, grid_index: tuple[int, ...] | None,
                   decays: Sequence[Decay], settings: IdentifySettings) -> PoseResult:
     """Identify every decay of a pose, combine them and flag what does not agree."""
+    from shaper_nodes.core.identification import IdentificationError, combine_modes
+    from shaper_nodes.core.identification.record import spectrum
+
     per: list[list[ModeFit]] = []
     flags: list[str] = []
     for d in decays:
@@ -316,4 +325,6 @@ def predicted_residual(shaper: Shaper, modes: Sequence[ModeFit]) -> float:
 
 def worst_residual(shaper: Shaper, modes: Sequence[ModeFit], sigmas: float = 2.0) -> float:
     """The largest percentage vibration over the modes' +-sigmas uncertainty box (fraction)."""
+    from shaper_nodes.core.identification.recommend import worst_case_vibration
+
     return worst_case_vibration(shaper, modes, sigmas)[1] if modes else math.nan

@@ -1,0 +1,80 @@
+"""calibrate's wait for the controller's answer to a goal (``Calibrator._await_answer``), on a simulated clock.
+
+Under load the graph can read a live controller's action server out of the graph for ``SERVER_GONE`` s and then in it
+again (``test_calibrate_stops.py``'s full-disk test hit it at load 30-40: the run ended early, saying "no answer ...
+for 120 s"). The wait must go on when the server is back, and end as gone when it stays out; no real time passes here.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from shaper_nodes.nodes import calibrator as calibrator_module
+from shaper_nodes.nodes.calibrate_stops import Aborted
+from shaper_nodes.nodes.calibrator import SERVER_GONE, Calibrator
+
+
+class World:
+    """A clock that the executor's spin advances, a server out of the graph over [out_from, back_at), and the
+    controller's answer at answer_at (None: never)."""
+
+    def __init__(self, out_from: float, back_at: float, answer_at: float | None) -> None:
+        self.t = 0.0
+        self.out_from, self.back_at, self.answer_at = out_from, back_at, answer_at
+        self.last_read = -1.0
+
+    def monotonic(self) -> float:
+        return self.t
+
+    def spin_once(self, timeout_sec: float) -> None:
+        self.t += timeout_sec
+
+    def server_is_ready(self) -> bool:
+        # back in the graph between two reads at the same instant once back_at is reached: the race of the failure
+        again = self.t == self.last_read
+        self.last_read = self.t
+        if self.t < self.out_from:
+            return True
+        return (self.t >= self.back_at and again) or self.t > self.back_at + 0.1
+
+    def done(self) -> bool:
+        return self.answer_at is not None and self.t >= self.answer_at
+
+
+def calibrator(world: World, monkeypatch) -> Calibrator:
+    monkeypatch.setattr(calibrator_module.time, "monotonic", world.monotonic)
+    cal = Calibrator.__new__(Calibrator)
+    cal.p = SimpleNamespace(timeouts=SimpleNamespace(peer=120.0, server=120.0), action="/controller/follow")
+    cal.executor = SimpleNamespace(spin_once=world.spin_once)
+    cal.action = SimpleNamespace(server_is_ready=world.server_is_ready)
+    cal._absent_since = None
+    cal.peer_lost = False
+    return cal
+
+
+def test_a_server_back_in_the_graph_is_waited_for():
+    with pytest.MonkeyPatch.context() as mp:
+        world = World(out_from=0.5, back_at=0.5 + SERVER_GONE, answer_at=5.0)
+        cal = calibrator(world, mp)
+        cal._await_answer(SimpleNamespace(done=world.done), "the approach to pose 0 (home)")
+        assert world.t >= 5.0 and not cal.peer_lost
+
+
+def test_a_server_that_stays_out_of_the_graph_is_gone():
+    with pytest.MonkeyPatch.context() as mp:
+        world = World(out_from=0.5, back_at=1e9, answer_at=None)
+        cal = calibrator(world, mp)
+        with pytest.raises(Aborted, match="left the graph before it answered"):
+            cal._await_answer(SimpleNamespace(done=world.done), "the approach to pose 0 (home)")
+        assert world.t < 0.5 + SERVER_GONE + 1.0 and cal.peer_lost
+
+
+def test_no_answer_from_a_server_in_the_graph_ends_at_the_bound():
+    with pytest.MonkeyPatch.context() as mp:
+        world = World(out_from=1e9, back_at=1e9, answer_at=None)
+        cal = calibrator(world, mp)
+        with pytest.raises(Aborted, match="no answer and no feedback from the controller for 120 s"):
+            cal._await_answer(SimpleNamespace(done=world.done), "the approach to pose 0 (home)")
+        assert world.t >= 120.0 and cal.peer_lost
