@@ -1,4 +1,4 @@
-"""The sim plant's writer profile (node/writer_profile): the installed file's times, and when the executable names it."""
+"""The sim plant's writer profile (node/writer_profile): the installed file's times; when the executable names it."""
 
 from __future__ import annotations
 
