@@ -6,9 +6,9 @@ fires that reader proxy's NACK-suppression event at once (``nackSupressionDurati
 thread woke for nearly every write (up to 6700 times per simulated s) beside the writing thread, and the plant's
 process spent 0.073-0.100 CPU s per simulated s with one reader against 0.038-0.050 with none; with the profile
 0.053-0.061 (docs/results/benchmarks.md, issue 34, session 10). The profile (``config/fastdds_writers.xml`` in the
-package's share) sets the suppression to 10 ms and the periodic heartbeat to 100 ms; the QoS (reliability, history, depth, durability) stays the node's, which
-rmw_fastrtps applies over a default profile. Nothing on the wire changes but when heartbeats go and when a
-NACK is answered; reliability and the lockstep contract are untouched.
+package's share) sets the suppression to 10 ms and the periodic heartbeat to 100 ms; the QoS (reliability, history,
+depth, durability) stays the node's, which rmw_fastrtps applies over a default profile. Nothing on the wire changes
+but when heartbeats go and when a NACK is answered; reliability and the lockstep contract are untouched.
 
 :func:`use_writer_profile` names the file in ``FASTRTPS_DEFAULT_PROFILES_FILE`` before ``rclpy.init`` unless the
 environment already names one (a deployment's own profile wins) or asks rmw_fastrtps to take the QoS from XML
