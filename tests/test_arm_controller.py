@@ -24,6 +24,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.conversions import sec_to_time
+from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 from sim_plant_node.arm.description import JOINT_NAMES
 
 ACTION = "/joint_trajectory_controller/follow_joint_trajectory"
@@ -60,7 +61,9 @@ class Client:
         self.topic = self.node.create_publisher(JointTrajectory, TOPIC, 10)
         self.states: list[JointState] = []
         self.imu: list[Imu] = []
-        self.node.create_subscription(JointState, "/joint_states", self.states.append, 100)
+        # as deep as the lockstep plant's writer (a client 100 behind it dropped the move's joint states and kept the
+        # idle ones, every 0.1 s of wall time at rest with the same stamp)
+        self.node.create_subscription(JointState, "/joint_states", self.states.append, STREAM_QOS)
         self.node.create_subscription(Imu, "/tip_imu", self.imu.append, qos_profile_sensor_data)
         self.ex = SingleThreadedExecutor(context=ctx)
         self.ex.add_node(self.node)
