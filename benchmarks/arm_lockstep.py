@@ -200,7 +200,9 @@ def _write(periods: int, pace: float = 0.0, demo: bool = False) -> None:
     from shaper_nodes.ros.lockstep_reader import STREAM_QOS
     from sim_plant_node.arm.description import JOINT_NAMES
     from sim_plant_node.node.sim_plant import LOCKSTEP_IMU_QOS
+    from sim_plant_node.node.writer_profile import use_writer_profile
 
+    use_writer_profile()  # the node's writer times (as the sim_plant executable)
     rclpy.init()
     n = rclpy.create_node("arm_bench_writer")
     deep = STREAM_QOS if demo else 10

@@ -14,8 +14,10 @@ sensors
 lockstep
     The node's side of the lockstep exchange with the shaper (its asks on the wire, late answers, timeouts;
     the rules are :mod:`shaper_nodes.core.lockstep`'s).
+writer_profile
+    The Fast DDS times of the plant's writers (a profiles file named before ``rclpy.init``).
 feedforward
     The ``~/set_feedforward`` profile: its checks, installed at a cycle's START. Free of ROS.
 """
 
-__all__ = ["feedforward", "lockstep", "models", "parameters", "sensors", "sim_plant"]
+__all__ = ["feedforward", "lockstep", "models", "parameters", "sensors", "sim_plant", "writer_profile"]

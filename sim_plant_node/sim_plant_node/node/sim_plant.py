@@ -73,6 +73,7 @@ from .lockstep import Exchange, Readers
 from .models import START_ONLY, PlantValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
 from .sensors import Sensors, StateBytes, writer
+from .writer_profile import use_writer_profile
 
 __all__ = ["IDLE_STATE_PERIOD", "LOCKSTEP_IMU_QOS", "MODELS", "PARAMETERS", "WAITING", "SimPlantNode", "main"]
 
@@ -493,6 +494,7 @@ class SimPlantNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    use_writer_profile()  # (before rclpy.init: Fast DDS reads it at its first participant)
     return run_node(SimPlantNode, "sim_plant", args, examples=(
         with_config("sim_plant_node", "sim_plant", "sim_plant.yaml"),
         "ros2 run sim_plant_node sim_plant --ros-args -p plant.model:=arm -p mode:=realtime",))
