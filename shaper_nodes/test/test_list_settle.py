@@ -38,8 +38,8 @@ def _ringing(amplitude: float, hz: float, zeta: float, after: float = 1.0, end: 
 
 
 def test_the_default_band_is_the_flanges_005_mm_at_10_hz():
-    assert DEFAULT_BAND == pytest.approx(acceleration_tolerance(5e-5, 10.0))
-    assert DEFAULT_BAND == pytest.approx(0.1974, abs=1e-4)
+    assert pytest.approx(acceleration_tolerance(5e-5, 10.0)) == DEFAULT_BAND
+    assert pytest.approx(0.1974, abs=1e-4) == DEFAULT_BAND
 
 
 def test_the_accelerometer_settles_when_its_envelope_enters_the_band_for_good():
@@ -89,8 +89,11 @@ def test_a_factor_that_cancels_what_rings_longest_costs_negative_time_and_one_on
         return float(sum(p.t2 for p in factors))
 
     cost = unshaped_time_cost([slow, weak], DEFAULT_BAND, (), command)
-    assert cost(ListParams.from_mode(Mode(slow.omega, slow.zeta))) < -0.5
-    assert cost(ListParams.from_mode(Mode(weak.omega, weak.zeta))) == pytest.approx(0.0, abs=1e-3)
+    on_slow = cost(ListParams.from_mode(Mode(slow.omega, slow.zeta)))
+    on_weak = cost(ListParams.from_mode(Mode(weak.omega, weak.zeta)))
+    # the pair on the slow mode ends its ringing; the one on the weak mode only takes 13 % off the slow one (a
+    # 30 Hz pair at 10 Hz: |cos(pi 10 T2)| = 0.87), which then crosses the band ln(1/0.87) / 1.88 s = 74 ms sooner
+    assert on_slow < -0.5 and on_weak == pytest.approx(-math.log(1 / 0.866) / (slow.zeta * slow.omega), abs=0.01)
     # the kept factors' delay: the reference's commanded end is their T2 after the planned end
     kept = (ListParams(0.6, 0.04),)
     later = unshaped_time_cost([weak], DEFAULT_BAND, kept, command)
@@ -108,7 +111,7 @@ def test_the_next_factor_goes_on_the_lowest_mode_still_ringing_not_the_strongest
         return 0.0
 
     pick = lowest_paying([strong, high, low], free, 0.0021, 0.12)
-    assert pick is not None and pick.component == low and pick.full
+    assert pick is not None and pick.component == low and pick.predicted < 0.5 * pick.without
     assert paying_factor([strong, high, low], free, 0.0021).component != low  # the strongest otherwise
     # where the lowest has no factor predicted to pay (too slow), the next one up
     def costly_on_low(p: ListParams) -> float:
