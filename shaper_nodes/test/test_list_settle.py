@@ -57,6 +57,11 @@ def test_the_accelerometer_settles_when_its_envelope_enters_the_band_for_good():
     assert imu_settle(*_ringing(0.1, hz, zeta), 1.0, 3.0, DEFAULT_BAND) == 1.0
     # one that rings to the cycle's end settles there
     assert imu_settle(t, a, 1.0, 1.5, DEFAULT_BAND) == pytest.approx(1.5, abs=1.0 / RATE)
+    # a stacked command's decelerating tail after the planned end (2 m/s^2 for 0.2 s) does not bias the settled
+    # value: the move settles after the tail and the ringing, not at the cycle's end
+    tail = t, a.copy()
+    tail[1][(t >= 1.0) & (t < 1.2), 0] -= 2.0
+    assert 1.2 < imu_settle(*tail, 1.0, 3.0, DEFAULT_BAND) < 2.5
     with pytest.raises(ListError, match="band"):
         imu_settle(t, a, 1.0, 3.0, 0.0)
     with pytest.raises(ListError, match="no accelerometer sample"):

@@ -359,7 +359,7 @@ class PaybackMoves:
             decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
             base = entry.base["residual_rms"] if entry.base is not None else math.nan
             t_base = entry.base.get("move_settle_s", math.nan) if entry.base is not None else math.nan
-            timed = "" if ms is None else f", move + settle {ms:.3f} s against {t_base:.3f} s"
+            timed = "" if ms is None else f"; move + settle {ms:.3f} s against the unshaped {t_base:.3f} s"
             if decision == "learn" and st.trial is not None:
                 st.kept.append(st.trial)
                 more = len(st.kept) < self.max_factors
@@ -389,7 +389,8 @@ class PaybackMoves:
                                   names, values, residual=m)
         report.shaper_used = mode._shaper_msg(used)
         report.shaper_next = mode._shaper_msg(nxt)
-        with_ = "; ".join(f"factor A1 {p.a1:.4f}, T2 {p.t2 * 1e3:.2f} ms" for p in ran) or "the schedule alone"
+        with_ = "; ".join(f"factor A1 {p.a1:.4f}, T2 {p.t2 * 1e3:.2f} ms" for p in ran) or \
+            ("the schedule alone" if ms is None else "no factor (unshaped)")
         text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2"
                 + ("" if ms is None else f", move + settle {ms:.3f} s (accelerometer)") + f" with {with_}"
                 + note + ("" if applied else "; not acknowledged by the scheduler"))

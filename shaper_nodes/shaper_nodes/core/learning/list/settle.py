@@ -28,13 +28,16 @@ import numpy as np
 from .params import ListError, ListParams
 from .payback import Component, PaybackChoice, lowest_first, paying_factor
 
-__all__ = ["DEFAULT_BAND", "HORIZON", "SMOOTH", "envelope_settle", "imu_settle", "lowest_paying", "unshaped_time_cost"]
+__all__ = ["DEFAULT_BAND", "HORIZON", "SETTLED", "SMOOTH", "envelope_settle", "imu_settle", "lowest_paying",
+           "unshaped_time_cost"]
 
 #: the accelerometer's settled band, m/s^2: the flange's 0.05 mm at 10 Hz (x = a / (2 pi f)^2, the arm's lowest
 #: mode at home; :func:`~shaper_nodes.core.learning.speed.acceleration_tolerance`)
 DEFAULT_BAND = 5e-5 * (2.0 * math.pi * 10.0) ** 2
 #: the window of :func:`imu_settle`'s RMS envelope, s (a period of the arm's 10 Hz mode)
 SMOOTH = 0.1
+#: :func:`imu_settle`'s settled value is the accelerometer's mean over this last part of its span, s
+SETTLED = 0.5
 #: longest settling an envelope is followed for, s after the commanded end
 HORIZON = 10.0
 
@@ -43,8 +46,9 @@ def imu_settle(times: np.ndarray, accel: np.ndarray, after: float, end: float, b
                smooth: float = SMOOTH) -> float:
     """When the accelerometer settles for good, s (same clock as ``times``; not before ``after``): the sample after
     the last one in [``after``, ``end``] whose envelope exceeds ``band`` (m/s^2); ``after`` if none does. The
-    envelope: sqrt(2) times the RMS, over ``smooth`` s centred on the sample, of the deviation from the mean over
-    the span (the axes' magnitude): a sinusoid's amplitude, where the sample's own deviation would let the noise's
+    envelope: sqrt(2) times the RMS, over ``smooth`` s centred on the sample, of the deviation from the settled
+    value (the axes' magnitude; the mean over the span's last :data:`SETTLED` s, not the whole span's, which a
+    stacked command's decelerating tail, 0.2 s of it, would bias by more than the band): a sinusoid's amplitude, where the sample's own deviation would let the noise's
     peaks set the time (a mode decaying at 2/s, 10 Hz at damping 0.033, crosses the band 0.15 s later for a noise
     peak of 0.05 m/s^2; noise in quadrature under the RMS moves it by a few ms). A move that rings to ``end``
     settles at ``end`` (at most).
@@ -67,7 +71,9 @@ def imu_settle(times: np.ndarray, accel: np.ndarray, after: float, end: float, b
     sel = (t >= after) & (t <= end)
     if not np.any(sel):
         raise ListError(f"no accelerometer sample from {after:.3f} s to {end:.3f} s")
-    ts, sq = t[sel], np.sum((a[sel] - a[sel].mean(axis=0)) ** 2, axis=1)
+    ts, As = t[sel], a[sel]
+    rest = As[ts >= ts[-1] - SETTLED]
+    sq = np.sum((As - rest.mean(axis=0)) ** 2, axis=1)
     csum = np.concatenate([[0.0], np.cumsum(sq)])
     lo = np.searchsorted(ts, ts - 0.5 * smooth, side="left")
     hi = np.searchsorted(ts, ts + 0.5 * smooth, side="right")
