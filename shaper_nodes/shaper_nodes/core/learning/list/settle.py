@@ -48,10 +48,10 @@ def imu_settle(times: np.ndarray, accel: np.ndarray, after: float, end: float, b
     the last one in [``after``, ``end``] whose envelope exceeds ``band`` (m/s^2); ``after`` if none does. The
     envelope: sqrt(2) times the RMS, over ``smooth`` s centred on the sample, of the deviation from the settled
     value (the axes' magnitude; the mean over the span's last :data:`SETTLED` s, not the whole span's, which a
-    stacked command's decelerating tail, 0.2 s of it, would bias by more than the band): a sinusoid's amplitude, where the sample's own deviation would let the noise's
-    peaks set the time (a mode decaying at 2/s, 10 Hz at damping 0.033, crosses the band 0.15 s later for a noise
-    peak of 0.05 m/s^2; noise in quadrature under the RMS moves it by a few ms). A move that rings to ``end``
-    settles at ``end`` (at most).
+    stacked command's decelerating tail, 0.2 s of it, would bias by more than the band): a sinusoid's amplitude,
+    where the sample's own deviation would let the noise's peaks set the time (a mode decaying at 2/s, 10 Hz at
+    damping 0.033, crosses the band 0.15 s later for a noise peak of 0.05 m/s^2; noise in quadrature under the RMS
+    moves it by a few ms). A move that rings to ``end`` settles at ``end`` (at most).
 
     Parameters
     ----------
