@@ -53,6 +53,11 @@ def test_a_stack_convolves_its_factors_and_is_saved_and_checked():
     assert st.phase(False, 2) == "reference" and st.phase(False, 1) == "kept"
     st.done = True
     assert st.phase(False, 2) == "kept"
+    banded = FactorStack([a], None, False, 0.123)  # with no schedule: the move's settled band, m/s^2
+    assert FactorStack.from_dict(banded.to_dict()) == banded and "band" not in FactorStack().to_dict()
+    for bad_band in (0.0, -1.0, float("nan"), True, "0.1"):
+        with pytest.raises(ListError, match="band"):
+            FactorStack.from_dict({**banded.to_dict(), "band": bad_band})
     for bad in ({"kept": [[0.5]], "trial": None, "done": False}, {"kept": [], "trial": None},
                 {"kept": [], "trial": [0.6, -0.01], "done": False}, {"kept": [], "trial": None, "done": 1}):
         with pytest.raises(ListError):

@@ -59,11 +59,20 @@ from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
-from shaper_nodes.core.learning.list.payback import EXTRA_DAMPED, PaybackChoice, components, paying_factor, time_cost
-from shaper_nodes.core.learning.list.settle import DEFAULT_BAND, imu_settle, lowest_paying, unshaped_time_cost
+from shaper_nodes.core.learning.list.payback import (
+    EXTRA_DAMPED,
+    Component,
+    PaybackChoice,
+    components,
+    lowest_first,
+    paying_factor,
+    time_cost,
+)
+from shaper_nodes.core.learning.list.settle import DEFAULT_HZ, imu_settle, lowest_paying, unshaped_time_cost
 from shaper_nodes.core.learning.list.stack import MAX_FACTORS, FactorStack, stack_duration, stack_shaper, wanted
 from shaper_nodes.core.learning.list.trials import ListUpdate
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
+from shaper_nodes.core.learning.speed import acceleration_tolerance
 from shaper_nodes.core.scheduling.moves import MAX_FACTOR_DURATION
 from shaper_nodes.core.shaping import Shaper, ShaperError
 from shaper_nodes.core.shaping.vibration import residual_vibration
@@ -100,10 +109,10 @@ class PaybackGroup:
                                    " reach).", (1e-9, 1.0), read_only=True)
     servo_zeta: float = param(0.12, "Damping ratio from which an identified eigenvalue is the position loop's,"
                               " not a mode's.", (0.01, 0.99), read_only=True)
-    settle_band: float = param(round(DEFAULT_BAND, 4), "With no schedule at a move's goal: the accelerometer's"
-                               " deviation from its settled mean (m/s^2, the axes' magnitude) within which the move"
-                               " counts as settled (its measured move + settle time); 0.1974: 0.05 mm at 10 Hz.",
-                               (1e-6, 100.0), read_only=True)
+    settle_tolerance: float = param(5e-5, "With no schedule at a move's goal: the settled flange's band, m, that"
+                                    " the move's measured move + settle time is taken to (on the accelerometer, at"
+                                    " a x (2 pi f)^2, f the lowest mode identified in its first reference, 10 Hz if"
+                                    " none).", (1e-7, 0.01), read_only=True)
     max_factors: int = param(1, "Most factors stacked per move: after a factor is kept, a new reference with it in"
                              " place chooses the next on what still rings (1: one factor per move).",
                              (1, MAX_FACTORS), read_only=True)
@@ -188,8 +197,16 @@ def unshaped(base: Shaper | None) -> bool:
     return base is None or len(base) == 1
 
 
+def settle_band(comps: list[Component], group: PaybackGroup) -> float:
+    """A move's settled band on the accelerometer, m/s^2: ``payback.settle_tolerance`` at its lowest mode that rings
+    (of ``comps``; the lowest component if none rings, :data:`~shaper_nodes.core.learning.list.settle.DEFAULT_HZ`
+    if none)."""
+    order = lowest_first(comps, float(group.servo_zeta))
+    return acceleration_tolerance(float(group.settle_tolerance), order[0].hz if order else DEFAULT_HZ)
+
+
 def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | None, group: PaybackGroup,
-           kept: tuple[ListParams, ...] = (), slack: float = 0.0) -> PaybackChoice | None:
+           kept: tuple[ListParams, ...] = (), slack: float = 0.0, band: float | None = None) -> PaybackChoice | None:
     """The factor predicted to pay for a move (module docstring), from its reference cycle ``cap`` (shaped
     command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``); with
     ``kept`` factors, the time cost is theirs and the new one's together, against the schedule alone. With no
@@ -204,7 +221,8 @@ def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | N
                                                     float(group.rate_hz), float(group.joint_tolerance),
                                                     interpolate=True)
 
-        return lowest_paying(comps, unshaped_time_cost(comps, float(group.settle_band), kept, command),
+        band = settle_band(comps, group) if band is None else band
+        return lowest_paying(comps, unshaped_time_cost(comps, band, kept, command),
                              TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND)
 
     def cost(p: ListParams) -> float:
@@ -342,15 +360,19 @@ class PaybackMoves:
             return self.node.skipped(msg, window, f"no accelerometer sample within {RESIDUAL_WINDOW:g} s of the"
                                      f" shaped command's end ({command_end:.3f} s after the START)", "sensor")
         # with no schedule the vibration sets the move + settle time: measured on the accelerometer, and weighed
-        ms = imu_settle(cap.times, cap.accel, cap.motion_end, cap.end, float(self.group.settle_band)) \
-            if unshaped(sched) else None
         choice, note, st = None, "", self.stack(key)
+        ms = None
+        if unshaped(sched):
+            if st.band is None:  # the move's first cycle, its unshaped reference (or a state saved before bands)
+                st.band = settle_band(components(cap.times, cap.accel, command_end, float(self.group.servo_zeta),
+                                                 extra_damped=EXTRA_DAMPED), self.group)
+            ms = imu_settle(cap.times, cap.accel, cap.motion_end, cap.end, st.band)
         if ph == "reference":
             # the time budget: the move's first (unshaped) reference's, carried over by every later reference
             budget = entry.base.get("move_settle_s") if ms is not None and entry.base is not None else None
             keep_when_it_pays(entry, m, False, move_settle_s=ms if budget is None else budget)
             slack = 0.0 if ms is None or budget is None else max(budget - ms, 0.0)
-            choice, note = self._choose(entry, cap, command_end, sched, st.kept, slack)
+            choice, note = self._choose(entry, cap, command_end, sched, st.kept, slack, st.band)
             st.trial = None if choice is None else choice.params
             st.done = choice is None
             if choice is None and not st.kept:
@@ -392,7 +414,8 @@ class PaybackMoves:
         with_ = "; ".join(f"factor A1 {p.a1:.4f}, T2 {p.t2 * 1e3:.2f} ms" for p in ran) or \
             ("the schedule alone" if ms is None else "no factor (unshaped)")
         text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2"
-                + ("" if ms is None else f", move + settle {ms:.3f} s (accelerometer)") + f" with {with_}"
+                + ("" if ms is None else f", move + settle {ms:.3f} s (accelerometer, band {st.band:.4g} m/s^2)")
+                + f" with {with_}"
                 + note + ("" if applied else "; not acknowledged by the scheduler"))
         if applied:
             self.node.get_logger().info(text)
@@ -401,7 +424,8 @@ class PaybackMoves:
         return report
 
     def _choose(self, entry: MoveEntry, cap: Captured, command_end: float, sched: Shaper | None,
-                kept: list[ListParams], slack: float = 0.0) -> tuple[PaybackChoice | None, str]:
+                kept: list[ListParams], slack: float = 0.0,
+                band: float | None = None) -> tuple[PaybackChoice | None, str]:
         """The factor predicted to pay for the move after its reference cycle, and what was decided (for the log)."""
         stays = f"the {len(kept)} factor(s) kept stay" if kept else "the schedule alone, held"
         names = self.mode.names.get(entry.key, [])
@@ -410,7 +434,7 @@ class PaybackMoves:
             return None, ("; no goal of the move came through ~/follow_joint_trajectory (its waypoints predict a"
                           " factor's time cost): " + stays)
         try:
-            pick = choose(cap, command_end, planned, sched, self.group, tuple(kept), slack)
+            pick = choose(cap, command_end, planned, sched, self.group, tuple(kept), slack, band)
         except (ListError, ShaperError, ValueError) as err:
             return None, f"; no factor chosen ({err}): " + stays
         if pick is None:

@@ -9,7 +9,7 @@ ringing mode (tens of ms late) shortens it. Against the command every such facto
 nothing is chosen (docs/results/arm_demo.md, "More than one factor per move").
 
 This module measures the time on the accelerometer instead (:func:`imu_settle`: when the deviation from its
-settled mean enters a band for good, the band the flange's 0.05 mm converted at 10 Hz by default) and predicts a
+settled value enters a band for good: the flange's 0.05 mm converted at the move's lowest mode) and predicts a
 factor's cost from the components identified in the move's reference cycle (:func:`unshaped_time_cost`: the
 later of the command's settling and the components' envelope, with the factor and without). The learner keeps a
 factor only when its measured time is no longer than its reference's (one 2 ms sample of tolerance).
@@ -28,12 +28,14 @@ import numpy as np
 from .params import ListError, ListParams
 from .payback import Component, PaybackChoice, lowest_first, paying_factor
 
-__all__ = ["DEFAULT_BAND", "HORIZON", "SETTLED", "SMOOTH", "envelope_settle", "imu_settle", "lowest_paying",
-           "unshaped_time_cost"]
+__all__ = ["DEFAULT_BAND", "DEFAULT_HZ", "HORIZON", "SETTLED", "SMOOTH", "envelope_settle", "imu_settle",
+           "lowest_paying", "unshaped_time_cost"]
 
-#: the accelerometer's settled band, m/s^2: the flange's 0.05 mm at 10 Hz (x = a / (2 pi f)^2, the arm's lowest
-#: mode at home; :func:`~shaper_nodes.core.learning.speed.acceleration_tolerance`)
-DEFAULT_BAND = 5e-5 * (2.0 * math.pi * 10.0) ** 2
+#: the frequency a move's settled band is converted at when no mode is identified in its first reference, Hz
+DEFAULT_HZ = 10.0
+#: the accelerometer's settled band at :data:`DEFAULT_HZ`, m/s^2: the flange's 0.05 mm (x = a / (2 pi f)^2, the
+#: arm's lowest mode at home; :func:`~shaper_nodes.core.learning.speed.acceleration_tolerance`)
+DEFAULT_BAND = 5e-5 * (2.0 * math.pi * DEFAULT_HZ) ** 2
 #: the window of :func:`imu_settle`'s RMS envelope, s (a period of the arm's 10 Hz mode)
 SMOOTH = 0.1
 #: :func:`imu_settle`'s settled value is the accelerometer's mean over this last part of its span, s
