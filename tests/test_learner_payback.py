@@ -72,3 +72,18 @@ def test_m_is_measured_from_the_shaped_commands_end_over_one_second():
     assert m == pytest.approx(1 / math.sqrt(2), rel=0.02)  # the sine's RMS, gravity (the mean) removed
     later, _ = residual_m(cap, 1.3)
     assert later == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_moves_settled_band_is_the_flanges_tolerance_at_its_lowest_mode_that_rings():
+    import math
+
+    from shaper_nodes.core.learning.list.payback import Component
+    from shaper_nodes.core.learning.speed import acceleration_tolerance
+    from shaper_nodes.nodes.learner_payback import PaybackGroup, settle_band
+
+    g = PaybackGroup()
+    low, high = Component(2 * math.pi * 7.9, 0.025, 0.14), Component(2 * math.pi * 20.8, 0.08, 0.3)
+    loop = Component(2 * math.pi * 30.0, 0.4, 0.5)  # damped: the loop's transient
+    assert settle_band([high, loop, low], g) == pytest.approx(acceleration_tolerance(5e-5, 7.9))
+    assert settle_band([loop], g) == pytest.approx(acceleration_tolerance(5e-5, 30.0))  # none rings: the lowest
+    assert settle_band([], g) == pytest.approx(acceleration_tolerance(5e-5, 10.0))

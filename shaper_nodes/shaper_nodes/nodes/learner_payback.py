@@ -48,43 +48,47 @@ scheduler again.
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import JointTrajectory
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
-from shaper_nodes.core.learning.list.payback import EXTRA_DAMPED, PaybackChoice, components, paying_factor, time_cost
+from shaper_nodes.core.learning.list.payback import (
+    EXTRA_DAMPED,
+    Component,
+    PaybackChoice,
+    components,
+    lowest_first,
+    paying_factor,
+    time_cost,
+)
+from shaper_nodes.core.learning.list.settle import DEFAULT_HZ, imu_settle, lowest_paying, unshaped_time_cost
 from shaper_nodes.core.learning.list.stack import MAX_FACTORS, FactorStack, stack_duration, stack_shaper, wanted
 from shaper_nodes.core.learning.list.trials import ListUpdate
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
-from shaper_nodes.core.learning.speed import motion_end_index
+from shaper_nodes.core.learning.speed import acceleration_tolerance
 from shaper_nodes.core.scheduling.moves import MAX_FACTOR_DURATION
 from shaper_nodes.core.shaping import Shaper, ShaperError
 from shaper_nodes.core.shaping.vibration import residual_vibration
-from shaper_nodes.ros.conversions import trajectory_arrays
 from shaper_nodes.ros.diagnostics import ERROR
 from shaper_nodes.ros.parameters import Spec, param, table
 
-from .move_goals import goal_matches
+from .move_goals import GoalRecorder, Planned
 from .trajectory_action import TrajectoryActionProxy
 
 __all__ = ["PARAMETERS", "RESIDUAL_WINDOW", "CycleCapture", "GoalRecorder", "PaybackGroup", "PaybackMoves",
-           "PaybackParams", "Planned", "choose", "factor_of", "phase", "residual_m"]
+           "PaybackParams", "Planned", "choose", "factor_of", "phase", "residual_m", "unshaped"]
 
 #: length of the window M is measured over, from the shaped command's end, s (the demo's residual window)
 RESIDUAL_WINDOW = 1.0
 #: the factor's T2 stays within this fraction of a component's frequency (the reproduction's ``LIST_BAND``)
 BAND = 0.1
-#: goals kept (the latest of each move is the one used)
-KEPT_GOALS = 32
 
 
 @dataclass(frozen=True)
@@ -105,6 +109,10 @@ class PaybackGroup:
                                    " reach).", (1e-9, 1.0), read_only=True)
     servo_zeta: float = param(0.12, "Damping ratio from which an identified eigenvalue is the position loop's,"
                               " not a mode's.", (0.01, 0.99), read_only=True)
+    settle_tolerance: float = param(5e-5, "With no schedule at a move's goal: the settled flange's band, m, that"
+                                    " the move's measured move + settle time is taken to (on the accelerometer, at"
+                                    " a x (2 pi f)^2, f the lowest mode identified in its first reference, 10 Hz if"
+                                    " none).", (1e-7, 0.01), read_only=True)
     max_factors: int = param(1, "Most factors stacked per move: after a factor is kept, a new reference with it in"
                              " place chooses the next on what still rings (1: one factor per move).",
                              (1, MAX_FACTORS), read_only=True)
@@ -119,54 +127,6 @@ class PaybackParams:
 
 #: the payback rule's parameters (derived from PaybackParams)
 PARAMETERS: tuple[Spec, ...] = table(PaybackParams)
-
-
-@dataclass(frozen=True)
-class Planned:
-    """A goal's planned waypoints in the order of the cycle event's joints: times (N,) s from its start,
-    positions (N, J) rad, velocities (N, J) rad/s or None."""
-
-    times: np.ndarray
-    positions: np.ndarray
-    velocities: np.ndarray | None
-
-
-class GoalRecorder:
-    """The goals seen by the learner's proxy (its ``shape`` callable: checked, recorded, sent on unchanged)."""
-
-    def __init__(self) -> None:
-        self._goals: collections.deque[tuple[list[str], np.ndarray, dict[str, np.ndarray]]] = \
-            collections.deque(maxlen=KEPT_GOALS)
-
-    def record(self, traj: JointTrajectory) -> JointTrajectory:
-        """The goal request's check (its arrays readable, :class:`InputError` if not) and its record."""
-        names = list(traj.joint_names)
-        times, fields = trajectory_arrays(traj, names, True)
-        if len(times) < 2:
-            raise InputError("empty", "a goal needs at least two points to be a move")
-        self._goals.append((names, times, fields))
-        return traj
-
-    def lookup(self, names: list[str], start: np.ndarray, goal: np.ndarray) -> Planned | None:
-        """The latest goal from ``start`` to ``goal`` (rad, in the order of ``names``), None if none was seen: its
-        motion only (the points that hold the final pose after it left out: the settling is the motion's), from the
-        start pose at 0 s (a goal's first point comes after it, as for joint_trajectory_controller)."""
-        q0 = np.asarray(start, dtype=float)
-        for got, times, fields in reversed(self._goals):
-            if sorted(got) != sorted(names):
-                continue
-            order = [got.index(n) for n in names]
-            q = fields["positions"][:, order]
-            if not (goal_matches(q0, q[0]) and goal_matches(np.asarray(goal), q[-1])):
-                continue
-            v = fields.get("velocities")
-            v = np.zeros_like(q) if v is None else v[:, order]
-            n = max(motion_end_index(q), 1) + 1
-            t, q, v = times[:n], q[:n], v[:n]
-            if t[0] > 0.0:
-                t, q, v = np.r_[0.0, t], np.vstack([q0, q]), np.vstack([np.zeros_like(q0), v])
-            return Planned(t, q, v)
-        return None
 
 
 @dataclass
@@ -232,12 +192,38 @@ def residual_m(cap: Captured, shaper_end: float) -> tuple[float, float]:
     return float(res.rms), start
 
 
+def unshaped(base: Shaper | None) -> bool:
+    """Whether a move has no schedule at its goal (none, or the scheduler's family ``none``: one impulse)."""
+    return base is None or len(base) == 1
+
+
+def settle_band(comps: list[Component], group: PaybackGroup) -> float:
+    """A move's settled band on the accelerometer, m/s^2: ``payback.settle_tolerance`` at its lowest mode that rings
+    (of ``comps``; the lowest component if none rings, :data:`~shaper_nodes.core.learning.list.settle.DEFAULT_HZ`
+    if none)."""
+    order = lowest_first(comps, float(group.servo_zeta))
+    return acceleration_tolerance(float(group.settle_tolerance), order[0].hz if order else DEFAULT_HZ)
+
+
 def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | None, group: PaybackGroup,
-           kept: tuple[ListParams, ...] = ()) -> PaybackChoice | None:
+           kept: tuple[ListParams, ...] = (), slack: float = 0.0, band: float | None = None) -> PaybackChoice | None:
     """The factor predicted to pay for a move (module docstring), from its reference cycle ``cap`` (shaped
     command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``); with
-    ``kept`` factors, the time cost is theirs and the new one's together, against the schedule alone."""
+    ``kept`` factors, the time cost is theirs and the new one's together, against the schedule alone. With no
+    schedule (:func:`unshaped`): on the lowest mode still ringing, the time cost against the measured move + settle
+    (:func:`~shaper_nodes.core.learning.list.settle.unshaped_time_cost`), within one 2 ms sample plus ``slack`` s
+    (how much shorter the reference's measured move + settle is than the move's unshaped one: its budget)."""
     comps = components(cap.times, cap.accel, command_end, float(group.servo_zeta), extra_damped=EXTRA_DAMPED)
+    if unshaped(base):
+        def command(factors: tuple[ListParams, ...]) -> float:
+            sh = stack_shaper(factors)
+            return 0.0 if sh is None else time_cost(planned.times, planned.positions, planned.velocities, None, sh,
+                                                    float(group.rate_hz), float(group.joint_tolerance),
+                                                    interpolate=True)
+
+        band = settle_band(comps, group) if band is None else band
+        return lowest_paying(comps, unshaped_time_cost(comps, band, kept, command),
+                             TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND)
 
     def cost(p: ListParams) -> float:
         factor = stack_shaper((*kept, p)) if kept else p
@@ -373,28 +359,41 @@ class PaybackMoves:
         if not math.isfinite(m):
             return self.node.skipped(msg, window, f"no accelerometer sample within {RESIDUAL_WINDOW:g} s of the"
                                      f" shaped command's end ({command_end:.3f} s after the START)", "sensor")
+        # with no schedule the vibration sets the move + settle time: measured on the accelerometer, and weighed
         choice, note, st = None, "", self.stack(key)
+        ms = None
+        if unshaped(sched):
+            if st.band is None:  # the move's first cycle, its unshaped reference (or a state saved before bands)
+                st.band = settle_band(components(cap.times, cap.accel, command_end, float(self.group.servo_zeta),
+                                                 extra_damped=EXTRA_DAMPED), self.group)
+            ms = imu_settle(cap.times, cap.accel, cap.motion_end, cap.end, st.band)
         if ph == "reference":
-            keep_when_it_pays(entry, m, False)
-            choice, note = self._choose(entry, cap, command_end, sched, st.kept)
+            # the time budget: the move's first (unshaped) reference's, carried over by every later reference
+            budget = entry.base.get("move_settle_s") if ms is not None and entry.base is not None else None
+            keep_when_it_pays(entry, m, False, move_settle_s=ms if budget is None else budget)
+            slack = 0.0 if ms is None or budget is None else max(budget - ms, 0.0)
+            choice, note = self._choose(entry, cap, command_end, sched, st.kept, slack, st.band)
             st.trial = None if choice is None else choice.params
             st.done = choice is None
             if choice is None and not st.kept:
                 mode.held.add(key)
         elif ph == "trial":
-            decision = keep_when_it_pays(entry, m, True)
+            decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
             base = entry.base["residual_rms"] if entry.base is not None else math.nan
+            t_base = entry.base.get("move_settle_s", math.nan) if entry.base is not None else math.nan
+            timed = "" if ms is None else f"; move + settle {ms:.3f} s against the unshaped {t_base:.3f} s"
             if decision == "learn" and st.trial is not None:
                 st.kept.append(st.trial)
                 more = len(st.kept) < self.max_factors
-                note = (f"; M below the {'reference' if len(st.kept) > 1 else 'schedule'}'s ({base:.4g}): the factor"
-                        f" is kept ({len(st.kept)} kept" + ("; the next cycle is a new reference with them)"
-                                                            if more else ")"))
+                note = (f"; M below the {'reference' if len(st.kept) > 1 or ms is not None else 'schedule'}'s"
+                        f" ({base:.4g}{timed}): the factor is kept ({len(st.kept)} kept"
+                        + ("; the next cycle is a new reference with them)" if more else ")"))
             else:
                 st.done = True
                 if not st.kept:
                     mode.held.add(key)
-                note = (f"; M not below the reference's ({base:.4g}): withdrawn, "
+                note = (f"; {'M not below' if ms is None else 'no lower M or a longer move + settle than'} the"
+                        f" reference's ({base:.4g}{timed}): withdrawn, "
                         + ("the schedule alone, held" if not st.kept else f"the {len(st.kept)} factor(s) kept stay"))
             st.trial = None
         entry.correction = _pair(st.factors())
@@ -404,15 +403,19 @@ class PaybackMoves:
         pred = (choice.predicted, choice.without, choice.cost_s, choice.component.hz) if choice is not None else \
             (math.nan,) * 4
         names = ["move", "M", "a1_used", "t2_used", "a1_next", "t2_next", "predicted", "without", "cost_s",
-                 "component_hz", "applied", "held", "factors_used", "factors_kept", f"phase.{ph}"]
+                 "component_hz", "applied", "held", "factors_used", "factors_kept", "move_settle_s", f"phase.{ph}"]
         values = [float(index), m, u.a1, u.t2, after.a1, after.t2, *pred, 1.0 if applied else 0.0,
-                  1.0 if key in mode.held else 0.0, float(len(ran)), float(len(st.kept)), 1.0]
+                  1.0 if key in mode.held else 0.0, float(len(ran)), float(len(st.kept)),
+                  math.nan if ms is None else ms, 1.0]
         report = self.node.report(msg, (result.start + command_end, result.start + command_end + RESIDUAL_WINDOW),
                                   names, values, residual=m)
         report.shaper_used = mode._shaper_msg(used)
         report.shaper_next = mode._shaper_msg(nxt)
-        with_ = "; ".join(f"factor A1 {p.a1:.4f}, T2 {p.t2 * 1e3:.2f} ms" for p in ran) or "the schedule alone"
-        text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2 with {with_}"
+        with_ = "; ".join(f"factor A1 {p.a1:.4f}, T2 {p.t2 * 1e3:.2f} ms" for p in ran) or \
+            ("the schedule alone" if ms is None else "no factor (unshaped)")
+        text = (f"cycle {cycle}, move {key} ({ph}): M {m:.4g} m/s^2"
+                + ("" if ms is None else f", move + settle {ms:.3f} s (accelerometer, band {st.band:.4g} m/s^2)")
+                + f" with {with_}"
                 + note + ("" if applied else "; not acknowledged by the scheduler"))
         if applied:
             self.node.get_logger().info(text)
@@ -421,7 +424,8 @@ class PaybackMoves:
         return report
 
     def _choose(self, entry: MoveEntry, cap: Captured, command_end: float, sched: Shaper | None,
-                kept: list[ListParams]) -> tuple[PaybackChoice | None, str]:
+                kept: list[ListParams], slack: float = 0.0,
+                band: float | None = None) -> tuple[PaybackChoice | None, str]:
         """The factor predicted to pay for the move after its reference cycle, and what was decided (for the log)."""
         stays = f"the {len(kept)} factor(s) kept stay" if kept else "the schedule alone, held"
         names = self.mode.names.get(entry.key, [])
@@ -430,11 +434,12 @@ class PaybackMoves:
             return None, ("; no goal of the move came through ~/follow_joint_trajectory (its waypoints predict a"
                           " factor's time cost): " + stays)
         try:
-            pick = choose(cap, command_end, planned, sched, self.group, tuple(kept))
+            pick = choose(cap, command_end, planned, sched, self.group, tuple(kept), slack, band)
         except (ListError, ShaperError, ValueError) as err:
             return None, f"; no factor chosen ({err}): " + stays
         if pick is None:
-            return None, (f"; no factor predicted to pay (within {TIME_TOLERANCE_S * 1e3:.1f} ms of the schedule's"
+            whose = "the schedule's" if not unshaped(sched) else "the reference's measured"
+            return None, (f"; no factor predicted to pay (within {TIME_TOLERANCE_S * 1e3:.1f} ms of {whose}"
                           " move + settle): " + stays)
         if stack_duration((*kept, pick.params)) > MAX_FACTOR_DURATION:
             return None, (f"; the factors with the next ({stack_duration((*kept, pick.params)):.3f} s) would be longer"

@@ -33,7 +33,7 @@ from shaper_nodes.core.shaping.families import convolve
 
 from .params import ListError, ListParams
 
-__all__ = ["EXTRA_DAMPED", "SERVO_SKIP", "Component", "PaybackChoice", "component_energy", "components",
+__all__ = ["EXTRA_DAMPED", "SERVO_SKIP", "Component", "PaybackChoice", "component_energy", "components", "lowest_first",
            "paying_factor", "predicted_residual", "settle_crossing", "time_cost"]
 
 #: A1 grid of the candidates, from the zero-vibration value up to this (A2 = 0.02: nearly no factor)
@@ -136,21 +136,30 @@ def component_energy(c: Component, window: float = 1.0) -> float:
     return 0.5 * c.amplitude**2 * mean
 
 
-def _factor_at(params: ListParams, pole: complex) -> complex:
+def _factor_at(params: ListParams, pole: complex, shifted: bool = False) -> complex:
     """A component's amplitude ratio with the factor, at the same time after the move's start
     (:func:`~.params.lti_factor`: A1 + A2 exp(-p T2)). Not credited: that the residual window, which starts at the
     shaped command's end, starts T2 later with the factor (what a component decays meanwhile is no cancellation;
-    a partial pair that moves the window would otherwise look as if it cancelled)."""
+    a partial pair that moves the window would otherwise look as if it cancelled).
+
+    With ``shifted`` the ratio at the shaped command's end instead, T2 later (A1 exp(p T2) + A2): what the window
+    from there measures. On a heavily damped pole the unshifted ratio grows as exp(zeta omega T2) (the late
+    impulse's transient carried back to before it starts: e^9.7 for a 50 ms pair on the loop's 50 Hz pole at
+    damping 0.6); the shifted one stays below 1. Used with no schedule, where the time is weighed apart
+    (:mod:`.settle`)."""
+    if shifted:
+        return params.a1 * cmath.exp(pole * params.t2) + params.a2
     return params.a1 + params.a2 * cmath.exp(-pole * params.t2)
 
 
-def predicted_residual(components: Sequence[Component], params: ListParams | None, window: float = 1.0) -> float:
+def predicted_residual(components: Sequence[Component], params: ListParams | None, window: float = 1.0,
+                       shifted: bool = False) -> float:
     """The residual RMS (m/s^2) the components predict with the factor ``params`` convolved in (None: without):
-    each component's amplitude times the factor's residual ratio at its pole (:func:`_factor_at`), the components'
-    mean squares added (their cross terms left out)."""
+    each component's amplitude times the factor's residual ratio at its pole (:func:`_factor_at`, ``shifted``), the
+    components' mean squares added (their cross terms left out)."""
     total = 0.0
     for c in components:
-        ratio = 1.0 if params is None else abs(_factor_at(params, c.pole))
+        ratio = 1.0 if params is None else abs(_factor_at(params, c.pole, shifted))
         total += component_energy(c, window) * ratio**2
     return math.sqrt(total)
 
@@ -251,7 +260,8 @@ class PaybackChoice:
 
 def paying_factor(components: Sequence[Component], cost: Callable[[ListParams], float], tolerance_s: float,
                   band: float = 0.1, a1_bounds: tuple[float, float] = (0.5, A1_MAX), window: float = 1.0,
-                  gain: float = 0.95) -> PaybackChoice | None:
+                  gain: float = 0.95, targets: Sequence[Component] | None = None,
+                  shifted: bool = False) -> PaybackChoice | None:
     """The two-impulse factor with the least predicted residual among those predicted to cost at most
     ``tolerance_s`` of move + settle time (module docstring); None if none is predicted to lower the residual
     below ``gain`` times its level without a factor.
@@ -261,20 +271,22 @@ def paying_factor(components: Sequence[Component], cost: Callable[[ListParams], 
     zero-vibration value (clipped to ``a1_bounds``) up to ``a1_bounds[1]`` (a partial pair: less amplitude late,
     less delay). Ranked by
     :func:`predicted_residual`; ``cost`` (e.g. :func:`time_cost` bound to the move) is called on them in that
-    order until one is within ``tolerance_s``.
+    order until one is within ``tolerance_s``. With ``targets`` the candidates are designed on those components
+    only (the predicted residual is still over all of them; :func:`lowest_first`); ``shifted``: the residual
+    predicted from the shaped command's end (:func:`_factor_at`).
     """
     if not components:
         return None
     lo, hi = a1_bounds
     without = predicted_residual(components, None, window)
     ranked: list[tuple[float, ListParams, Component, bool]] = []
-    for c in components:
+    for c in components if targets is None else targets:
         zv = ListParams.from_mode(Mode(c.omega, c.zeta))
         a1_start = min(max(zv.a1, lo), hi)
         for k, a1 in enumerate(np.linspace(a1_start, hi, GRID)):
             for t2 in zv.t2 / (1.0 + np.linspace(-band, band, GRID)):  # the frequency within the band, its own in it
                 p = ListParams(float(a1), float(t2))
-                ranked.append((predicted_residual(components, p, window), p, c, k == 0 and a1_start == zv.a1))
+                ranked.append((predicted_residual(components, p, window, shifted), p, c, k == 0 and a1_start == zv.a1))
     ranked.sort(key=lambda x: x[0])
     for pred, p, c, full in ranked:
         if pred >= gain * without:
@@ -283,3 +295,11 @@ def paying_factor(components: Sequence[Component], cost: Callable[[ListParams], 
         if dt <= tolerance_s:
             return PaybackChoice(p, c, pred, without, dt, full)
     return None
+
+
+def lowest_first(components: Sequence[Component], servo_zeta: float) -> list[Component]:
+    """The components in the order a move with no schedule targets them (the reproduction's ``_ringing``): the modes
+    that ring (damping below ``servo_zeta``), lowest first, then the damped ones (the loop's transient), lowest
+    first."""
+    ringing = sorted((c for c in components if c.zeta < servo_zeta), key=lambda c: c.omega)
+    return ringing + sorted((c for c in components if c.zeta >= servo_zeta), key=lambda c: c.omega)

@@ -11,6 +11,7 @@ ROS-free: the learner node (``nodes/learner_payback.py``) keeps one per move in 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -44,6 +45,8 @@ class FactorStack:
     kept: list[ListParams] = field(default_factory=list)
     trial: ListParams | None = None
     done: bool = False
+    #: with no schedule: the accelerometer's settled band of the move, m/s^2 (set at its first reference)
+    band: float | None = None
 
     def factors(self) -> tuple[ListParams, ...]:
         """What the move's goals run with: the kept factors, then the trial (empty: the schedule alone)."""
@@ -62,21 +65,29 @@ class FactorStack:
         return "reference"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kept": [[p.a1, p.t2] for p in self.kept],
-                "trial": None if self.trial is None else [self.trial.a1, self.trial.t2], "done": self.done}
+        d: dict[str, Any] = {"kept": [[p.a1, p.t2] for p in self.kept],
+                             "trial": None if self.trial is None else [self.trial.a1, self.trial.t2],
+                             "done": self.done}
+        if self.band is not None:
+            d["band"] = self.band
+        return d
 
     @classmethod
     def from_dict(cls, d: Any) -> FactorStack:
         """A stack saved by :meth:`to_dict`, checked (:class:`ListError` names the problem)."""
-        if not isinstance(d, Mapping) or set(d) != {"kept", "trial", "done"}:
-            raise ListError(f"a factor stack has the entries done, kept and trial, got {d!r}")
+        if not isinstance(d, Mapping) or set(d) - {"band"} != {"kept", "trial", "done"}:
+            raise ListError(f"a factor stack has the entries done, kept and trial (and may have band), got {d!r}")
+        band = d.get("band")
+        if band is not None and (isinstance(band, bool) or not isinstance(band, (int, float))
+                                 or not math.isfinite(band) or band <= 0):
+            raise ListError(f"band must be a finite number > 0 m/s^2, got {band!r}")
         if not isinstance(d["kept"], list) or len(d["kept"]) > MAX_FACTORS:
             raise ListError(f"kept must be a list of at most {MAX_FACTORS} factors, got {d['kept']!r}")
         if not isinstance(d["done"], bool):
             raise ListError(f"done must be true or false, got {d['done']!r}")
         kept = [_pair(v, "a kept factor") for v in d["kept"]]
         trial = None if d["trial"] is None else _pair(d["trial"], "the trial")
-        return cls(kept, trial, d["done"])
+        return cls(kept, trial, d["done"], None if band is None else float(band))
 
 
 def stack_duration(factors: Sequence[ListParams]) -> float:
