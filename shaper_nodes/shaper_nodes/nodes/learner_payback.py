@@ -223,7 +223,7 @@ def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | N
 
         band = settle_band(comps, group) if band is None else band
         return lowest_paying(comps, unshaped_time_cost(comps, band, kept, command),
-                             TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND)
+                             TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND, kept=kept)
 
     def cost(p: ListParams) -> float:
         factor = stack_shaper((*kept, p)) if kept else p
