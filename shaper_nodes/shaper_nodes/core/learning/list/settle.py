@@ -14,6 +14,12 @@ factor's cost from the components identified in the move's reference cycle (:fun
 later of the command's settling and the components' envelope, with the factor and without). The learner keeps a
 factor only when its measured time is no longer than its reference's (one 2 ms sample of tolerance).
 
+The factor (:func:`lowest_paying`): a full zero-vibration pair on each ringing mode, lowest first, one per mode
+(:func:`full_pair`: as the schedule shapes each mode with one design, and the reproduction's ``list`` case); when
+every ringing mode has one, the pair with the least predicted residual on the lowest mode still ringing, a partial
+pair allowed (what tunes a mode a full pair left ringing). With partial pairs from the start (session 10, H2) one
+mode took two or three of a move's four factors and the others were never reached (docs/results/arm_demo.md).
+
 ROS-free.
 """
 
