@@ -7,8 +7,9 @@ for every goal), and the learner's LIST per move with each factor chosen to pay 
 client is the demo's (:class:`~sim_plant_node.clients.arm_demo.ArmClient`: every move its own cycle on
 ``/cycle_events``), the sim arm in lockstep. Two moves, home -> pick and back, three cycles. Each move's first cycle
 is its unshaped reference: its move + settle time is measured on the accelerometer (there is no schedule whose
-command would predict it), and the factor goes on the lowest mode that rings (7.9 Hz on home->pick, 12.1 Hz on
-pick->home; the strongest would be the loop's 30 Hz transient and the 20.8 Hz mode: docs/results/arm_demo.md).
+command would predict it), and the factor, a full zero-vibration pair, goes on the lowest mode that rings (7.9 Hz
+on home->pick, 12.1 Hz on pick->home; the strongest would be the loop's 30 Hz transient and the 20.8 Hz mode:
+docs/results/arm_demo.md).
 The trial keeps it only if its residual is lower AND its measured move + settle no longer than the reference's by
 more than one 2 ms sample; the scheduler gives each move's goal its factors, convolved.
 """
@@ -86,6 +87,10 @@ def test_list_per_move_with_no_calibration_puts_each_factor_on_the_lowest_mode_a
         assert 0.9 < ref["move_settle_s"] < 3.0, ref
         assert 0.5 <= ref["a1_next"] < 1.0 and ref["t2_next"] > 0.0, ref
         assert 7.0 < ref["component_hz"] < 13.5, (mv.name, ref)  # the lowest, not the loop's 30 Hz or 20.8 Hz
+        # a full pair on it (session 10, H6 listfull): A1 = 1 / (1 + K) (below 0.6 at damping below 0.12), T2 half
+        # its damped period, not a partial pair
+        assert ref["a1_next"] < 0.6, (mv.name, ref)
+        assert 1.0 / (2.0 * ref["t2_next"]) == pytest.approx(ref["component_hz"], rel=0.01), (mv.name, ref)
         assert ref["predicted"] < ref["without"] and ref["cost_s"] <= TIME_TOLERANCE_S, ref
         # cycle 2: the move's goal ran with that factor (the scheduler gave it to the shaper node's proxy), kept
         # only if it paid: a lower residual AND a measured move + settle within one 2 ms sample of the reference's

@@ -142,6 +142,8 @@ def test_a_move_where_two_modes_ring_keeps_two_factors_each_because_it_paid(star
         assert ref1["phase.reference"] == 1.0 and ref1["factors_used"] == 0.0 and math.isnan(ref1["a1_used"])
         assert ref1["predicted"] < ref1["without"] and ref1["cost_s"] <= TIME_TOLERANCE_S, ref1
         assert 7.0 < ref1["component_hz"] < 13.5, ref1  # the lowest that rings (10.0 Hz here), not the strongest
+        assert ref1["a1_next"] < 0.6, ref1  # a full pair on it (A1 = 1 / (1 + K)), T2 half its damped period
+        assert 1.0 / (2.0 * ref1["t2_next"]) == pytest.approx(ref1["component_hz"], rel=0.01), ref1
         budget = ref1["move_settle_s"]  # the unshaped move + settle, measured on the accelerometer, s
         assert 0.9 < budget < 3.0, ref1
         assert trial1["phase.trial"] == 1.0 and trial1["factors_used"] == 1.0, trial1

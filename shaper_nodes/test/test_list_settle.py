@@ -13,7 +13,9 @@ from shaper_nodes.core.learning.list.payback import Component, lowest_first, pay
 from shaper_nodes.core.learning.list.settle import (
     DEFAULT_BAND,
     HORIZON,
+    covered,
     envelope_settle,
+    full_pair,
     imu_settle,
     lowest_paying,
     unshaped_time_cost,
@@ -125,6 +127,36 @@ def test_the_next_factor_goes_on_the_lowest_mode_still_ringing_not_the_strongest
     nxt = lowest_paying([strong, high, low], costly_on_low, 0.0021, 0.12)
     assert nxt is not None and nxt.component == high
     assert lowest_paying([strong, high, low], lambda p: 1.0, 0.0021, 0.12) is None
+
+
+def test_with_no_schedule_each_ringing_mode_gets_one_full_pair_lowest_first_then_the_partial_ones_tune():
+    low = Component(2 * math.pi * 9.95, 0.03, 0.5)
+    high = Component(2 * math.pi * 12.2, 0.04, 0.3)
+    loop = Component(2 * math.pi * 50.0, 0.6, 0.4)  # damped: no full pair
+    comps = [loop, high, low]
+
+    def free(p: ListParams) -> float:
+        return 0.0
+
+    first = lowest_paying(comps, free, 0.0021, 0.12, kept=())
+    zv_low = ListParams.from_mode(Mode(low.omega, low.zeta))
+    assert first is not None and first.component == low and first.full and first.params == zv_low
+    assert covered(low, [zv_low]) and not covered(high, [zv_low])
+    # the next reference: the lowest is covered, so the full pair goes on the next ringing mode up
+    second = lowest_paying(comps, free, 0.0021, 0.12, kept=[zv_low])
+    assert second is not None and second.component == high and second.full
+    assert second.params == ListParams.from_mode(Mode(high.omega, high.zeta))
+    # every ringing mode covered: the partial pairs' rule, on the lowest still ringing (what tunes it)
+    both = [zv_low, second.params]
+    assert full_pair(comps, free, 0.0021, 0.12, both) is None
+    tune = lowest_paying(comps, free, 0.0021, 0.12, kept=both)
+    assert tune is not None and tune == lowest_paying(comps, free, 0.0021, 0.12)
+    # a full pair predicted to cost too much is not chosen: the next mode's, then none
+    def slow_low(p: ListParams) -> float:
+        return 1.0 if p.t2 > 0.045 else 0.0
+
+    assert full_pair(comps, slow_low, 0.0021, 0.12, ()).component == high  # type: ignore[union-attr]
+    assert full_pair(comps, lambda p: 1.0, 0.0021, 0.12, ()) is None
 
 
 def test_the_residual_from_the_shaped_commands_end_stays_bounded_on_the_loops_pole():

@@ -210,8 +210,8 @@ def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | N
     """The factor predicted to pay for a move (module docstring), from its reference cycle ``cap`` (shaped
     command's end at ``command_end`` s from START), its planned goal and the schedule at its goal (``base``); with
     ``kept`` factors, the time cost is theirs and the new one's together, against the schedule alone. With no
-    schedule (:func:`unshaped`): on the lowest mode still ringing, the time cost against the measured move + settle
-    (:func:`~shaper_nodes.core.learning.list.settle.unshaped_time_cost`), within one 2 ms sample plus ``slack`` s
+    schedule (:func:`unshaped`): a full pair per ringing mode, lowest first (``settle.lowest_paying``), the time cost
+    against the measured move + settle (``settle.unshaped_time_cost``), within one 2 ms sample plus ``slack`` s
     (how much shorter the reference's measured move + settle is than the move's unshaped one: its budget)."""
     comps = components(cap.times, cap.accel, command_end, float(group.servo_zeta), extra_damped=EXTRA_DAMPED)
     if unshaped(base):
@@ -223,7 +223,7 @@ def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | N
 
         band = settle_band(comps, group) if band is None else band
         return lowest_paying(comps, unshaped_time_cost(comps, band, kept, command),
-                             TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND)
+                             TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND, kept=kept)
 
     def cost(p: ListParams) -> float:
         factor = stack_shaper((*kept, p)) if kept else p

@@ -274,5 +274,6 @@ def _list_moves(session: Session, client: ArmClient) -> str:
     arm_speed.use_learner_proxy(client, ends_at_rest=False)
     client.wait_ready(listeners + 1)  # the learner's action server, and its subscription of the cycle events
     AckWatch(client.c, "/learner").wait_subscribed(client.c.spin_until, [IMU], WAIT)
-    return (f"LIST (zv2) per move with no calibration: up to {LIST_MOVES_FACTORS} factors stacked per move, each on"
-            " the lowest mode still ringing and kept only if it pays (residual and measured move + settle)")
+    return (f"LIST (zv2) per move with no calibration: up to {LIST_MOVES_FACTORS} factors stacked per move, a full"
+            " pair on each ringing mode lowest first, then on the lowest still ringing, each kept only if it pays"
+            " (residual and measured move + settle)")

@@ -14,6 +14,12 @@ factor's cost from the components identified in the move's reference cycle (:fun
 later of the command's settling and the components' envelope, with the factor and without). The learner keeps a
 factor only when its measured time is no longer than its reference's (one 2 ms sample of tolerance).
 
+The factor (:func:`lowest_paying`): a full zero-vibration pair on each ringing mode, lowest first, one per mode
+(:func:`full_pair`: as the schedule shapes each mode with one design, and the reproduction's ``list`` case); when
+every ringing mode has one, the pair with the least predicted residual on the lowest mode still ringing, a partial
+pair allowed (what tunes a mode a full pair left ringing). With partial pairs from the start (session 10, H2) one
+mode took two or three of a move's four factors and the others were never reached (docs/results/arm_demo.md).
+
 ROS-free.
 """
 
@@ -25,11 +31,13 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .params import ListError, ListParams
-from .payback import Component, PaybackChoice, lowest_first, paying_factor
+from shaper_nodes.core.shaping import Mode
 
-__all__ = ["DEFAULT_BAND", "DEFAULT_HZ", "HORIZON", "SETTLED", "SMOOTH", "envelope_settle", "imu_settle",
-           "lowest_paying", "unshaped_time_cost"]
+from .params import ListError, ListParams
+from .payback import A1_MAX, Component, PaybackChoice, lowest_first, paying_factor, predicted_residual
+
+__all__ = ["COVERED", "DEFAULT_BAND", "DEFAULT_HZ", "HORIZON", "SETTLED", "SMOOTH", "covered", "envelope_settle",
+           "full_pair", "imu_settle", "lowest_paying", "unshaped_time_cost"]
 
 #: the frequency a move's settled band is converted at when no mode is identified in its first reference, Hz
 DEFAULT_HZ = 10.0
@@ -40,6 +48,9 @@ DEFAULT_BAND = 5e-5 * (2.0 * math.pi * DEFAULT_HZ) ** 2
 SMOOTH = 0.1
 #: :func:`imu_settle`'s settled value is the accelerometer's mean over this last part of its span, s
 SETTLED = 0.5
+#: a kept factor is on a mode when its pair's frequency is within this of the mode's damped one (relative: the
+#: factors' band, so a partial pair at the band's edge counts as on its mode)
+COVERED = 0.1
 #: longest settling an envelope is followed for, s after the commanded end
 HORIZON = 10.0
 
@@ -157,14 +168,49 @@ def unshaped_time_cost(components: Sequence[Component], band: float, kept: Seque
     return cost
 
 
+def covered(c: Component, kept: Sequence[ListParams]) -> bool:
+    """Whether a kept factor is on the component: its pair's frequency (1 / (2 T2)) within :data:`COVERED` of the
+    component's damped one."""
+    hz = c.hz * math.sqrt(1.0 - c.zeta**2)
+    return any(abs(1.0 / (2.0 * p.t2 * hz) - 1.0) <= COVERED for p in kept)
+
+
+def full_pair(components: Sequence[Component], cost: Callable[[ListParams], float], tolerance_s: float,
+              servo_zeta: float, kept: Sequence[ListParams] = (), gain: float = 0.95) -> PaybackChoice | None:
+    """The zero-vibration pair (A1 = 1 / (1 + K), K from the identified damping, T2 half the damped period) on the
+    lowest mode that rings (damping below ``servo_zeta``) no ``kept`` factor is on (:func:`covered`), of those
+    predicted to lower the residual (from the shaped command's end) below ``gain`` times its level and to cost at
+    most ``tolerance_s``; None if none is. One full pair per ringing mode, as the schedule shapes each mode with
+    one design (the reproduction's ``list`` case: a ZV pair on each ringing mode)."""
+    without = predicted_residual(components, None)
+    for c in lowest_first(components, servo_zeta):
+        if c.zeta >= servo_zeta or covered(c, kept):
+            continue
+        zv = ListParams.from_mode(Mode(c.omega, c.zeta))
+        p = ListParams(min(zv.a1, A1_MAX), zv.t2)
+        pred = predicted_residual(components, p, shifted=True)
+        if pred < gain * without:
+            dt = cost(p)
+            if dt <= tolerance_s:
+                return PaybackChoice(p, c, pred, without, dt, p == zv)
+    return None
+
+
 def lowest_paying(components: Sequence[Component], cost: Callable[[ListParams], float], tolerance_s: float,
-                  servo_zeta: float, band: float = 0.1) -> PaybackChoice | None:
-    """The factor for a move with no schedule: on the lowest mode still ringing that a factor predicted to pay is
+                  servo_zeta: float, band: float = 0.1,
+                  kept: Sequence[ListParams] | None = None) -> PaybackChoice | None:
+    """The factor for a move with no schedule: with ``kept`` given (the factors kept so far), first a full pair on
+    the lowest ringing mode none of them is on (:func:`full_pair`); then (every ringing mode has one, or none is
+    predicted to pay; ``kept`` None: at once) on the lowest mode still ringing that a factor predicted to pay is
     found for (:func:`~.payback.lowest_first`: the modes that ring lowest first, then the damped ones), the one
     with the least predicted residual among those predicted to cost at most ``tolerance_s``
     (:func:`~.payback.paying_factor` with that component as its target, the residual predicted from the shaped
-    command's end; ``cost`` e.g. :func:`unshaped_time_cost`);
-    None if no component has one."""
+    command's end, a partial pair allowed: what tunes the mode a full pair left ringing; ``cost`` e.g.
+    :func:`unshaped_time_cost`); None if no component has one."""
+    if kept is not None:
+        pick = full_pair(components, cost, tolerance_s, servo_zeta, kept)
+        if pick is not None:
+            return pick
     for target in lowest_first(components, servo_zeta):
         pick = paying_factor(components, cost, tolerance_s, band=band, targets=[target], shifted=True)
         if pick is not None:
