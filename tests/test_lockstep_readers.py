@@ -160,9 +160,13 @@ def test_a_reader_that_stops_acknowledging_is_dropped_with_one_line(start_node, 
                                     QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE))
     # the plant counts the reader from its announcement: the move starts once the plant's side has matched it
     mover.spin_until(lambda: reader.heard, "the plant's subscription of /stalled_reader's acknowledgements")
+    deadline = time.monotonic() + 60.0  # and the announcement taken: the plant holds only for a reader it heard
+    while "lockstep: reader /stalled_reader counted" not in plant.log_path.read_text():
+        assert time.monotonic() < deadline and plant.running(), plant.log_path.read_text()
+        time.sleep(0.05)
     assert mover.move(goal(0.1, 0.5, 0.2)) == 0  # the reader is never spun: the plant waits, then goes on
     log = plant.log_path.read_text()
-    lines = [ln for ln in log.splitlines() if "/stalled_reader" in ln]
+    lines = [ln for ln in log.splitlines() if "/stalled_reader" in ln and " counted from " not in ln]
     assert len(lines) == 1 and "lockstep.reader_timeout" in lines[0], log
     assert "Traceback" not in log
     assert reader.processed is None  # it took nothing: announced only

@@ -222,10 +222,13 @@ def test_a_write_failure_stops_the_recording_cleanly(tmp_path, err):
     rec.add_topic("/imu", "std_msgs/msg/String")
     stop = threading.Event()
 
-    def feed():
+    def feed():  # paced by the writer (each message taken before the next): a writer thread starved by a busy
+        # machine would otherwise find the whole 20 kB before its first flush, and nothing would reach the disk
         while not stop.is_set() and rec.put("/imu", clock.t, cdr("x" * 300)):
             clock.t += 2_000_000
             time.sleep(0.001)
+            while rec.queued_messages and rec.failure is None and not stop.is_set():
+                time.sleep(0.001)
 
     feeder = threading.Thread(target=feed)
     feeder.start()

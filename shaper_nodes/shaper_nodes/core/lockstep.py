@@ -271,16 +271,19 @@ class ReaderGate:
 
     def ack(self, reader: str, t: float, sim_time: float) -> str:
         """Reader ``reader`` processed up to ``t`` (simulated s; :data:`ANNOUNCE`: nothing yet, taken as
-        ``sim_time``, the plant's time now). Returns a line to log ('' if none: a dropped reader is back)."""
+        ``sim_time``, the plant's time now). Returns a line to log ('' if none): the first acknowledgement counts the reader, or a dropped reader is
+        back."""
         if reader not in self.readers:
             return ""
         value = sim_time if t < 0 else t
-        back = reader in self.dropped
+        back, first = reader in self.dropped, reader not in self.acked
         self.dropped.discard(reader)
-        if back or reader not in self.acked:
+        if back or first:
             self.acked[reader] = value
         else:
             self.acked[reader] = max(self.acked[reader], value)
+        if first:  # (a plant holds only for a reader it has heard: a client may wait for this line)
+            return f"lockstep: reader {reader} counted from t = {value:.3f} s (it holds the steps past it)"
         return f"lockstep: reader {reader} is back (processed up to t = {value:.3f} s)" if back else ""
 
     def leave(self, reader: str) -> str:

@@ -466,6 +466,8 @@ class SimPlantNode(Node):
             self._publish_next()
 
     def _watchdog(self) -> None:
+        if not self.readers.waited:  # at rest too: a reader's announcement counts it before the next motion (logged)
+            self.readers.take()
         self._resume()
         if self._free_held:  # (a reader that holds the trajectory is looked at again: gone, or past its timeout)
             self._free_held = False
