@@ -271,8 +271,8 @@ class ReaderGate:
 
     def ack(self, reader: str, t: float, sim_time: float) -> str:
         """Reader ``reader`` processed up to ``t`` (simulated s; :data:`ANNOUNCE`: nothing yet, taken as
-        ``sim_time``, the plant's time now). Returns a line to log ('' if none): the first acknowledgement counts the reader, or a dropped reader is
-        back."""
+        ``sim_time``, the plant's time now). Returns a line to log ('' if none): the first acknowledgement
+        counts the reader, or a dropped reader is back."""
         if reader not in self.readers:
             return ""
         value = sim_time if t < 0 else t
