@@ -47,7 +47,7 @@ from shaper_nodes.core.scheduling import Scheduler, rule_base_from_dict
 from shaper_nodes.core.shaping import Shaper
 from shaper_nodes.core.stamps import stamp_to_sec
 
-from .calibration_pool import worker_pool
+from .worker_pool import worker_pool
 
 SETUP_TOPIC = "/calibrate/setup"
 EVENTS_TOPIC = "/calibrate/events"

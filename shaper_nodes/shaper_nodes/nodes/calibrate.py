@@ -51,8 +51,9 @@ from shaper_nodes.analysis.calibration import (
     sensor_faults,
     setup_dict,
 )
-from shaper_nodes.analysis.calibration_pool import NICENESS, PosePipeline, worker_pool
+from shaper_nodes.analysis.calibration_pool import NICENESS, PosePipeline
 from shaper_nodes.analysis.calibration_report import write_outputs
+from shaper_nodes.analysis.worker_pool import worker_pool
 from shaper_nodes.core.calibration import Plan, PlanError, Waypoint
 from shaper_nodes.core.calibration.plan import approach as plan_approach
 from shaper_nodes.core.calibration.plan import make_plan, quintic_time
