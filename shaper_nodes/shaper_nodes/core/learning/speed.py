@@ -258,7 +258,8 @@ def peak_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | np
     if not over:
         return ratio, joint, None
     j = joint if joint in over else over[0]  # the joint furthest past its limit
-    return ratio, joint, f"joint {names[j]}: measured |{quantity}| {p[j]:.4g} {unit} above its limit {lim[j]:.4g} {unit}"
+    return ratio, joint, (f"joint {names[j]}: measured |{quantity}| {p[j]:.4g} {unit} above its limit"
+                          f" {lim[j]:.4g} {unit}")
 
 
 def effort_check(peaks: np.ndarray | Sequence[float], limits: Sequence[float] | np.ndarray,

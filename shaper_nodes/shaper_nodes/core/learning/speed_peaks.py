@@ -108,7 +108,7 @@ def predict(measured: Sequence[tuple[float, Sequence[float]]], factor: float, po
     """
     s, p = _rows(measured)
     top = int(np.argmax(s))
-    out = p[top] * (factor / s[top]) ** power
+    out: np.ndarray = p[top] * (factor / s[top]) ** power
     if np.unique(s).size > 1:
         a, b = fit(s, p, power)
         out = np.maximum(out, a + b * factor ** power)
