@@ -20,11 +20,11 @@ def test_one_measured_factor_scales_all_of_the_peak_by_s_squared_and_a_speed_by_
     assert predict(rows, 1.8, 2) == pytest.approx([90.0 * 1.44, 7.0 * 1.44])
     assert predict(rows, 1.8, 1) == pytest.approx([90.0 * 1.2, 7.0 * 1.2])
     # the factor the rule allows: 95 % of 150 N m reached at 1.5 sqrt(142.5 / 90)
-    f, why = allowed_factor({"effort": rows}, LIMITS, 2.0)
+    f, why = allowed_factor({"effort": rows}, LIMITS, 1.5, 2.0)
     assert f == pytest.approx(1.5 * math.sqrt(142.5 / 90.0))
     assert why == ("joint shoulder_pan_joint: predicted |effort| 160 N m at x2.000 above 142.5 N m (95 % of its limit"
                    " 150 N m)")
-    assert allowed_factor({"effort": rows}, LIMITS, 1.6) == (1.6, "")  # within: the target itself
+    assert allowed_factor({"effort": rows}, LIMITS, 1.5, 1.6) == (1.6, "")  # within: the target itself
 
 
 def test_two_or_more_factors_fit_a_plus_b_s_squared_and_the_conservative_of_fit_and_rule_is_taken():
@@ -42,16 +42,34 @@ def test_two_or_more_factors_fit_a_plus_b_s_squared_and_the_conservative_of_fit_
     assert fa[0] == 0.0 and fb[0] == pytest.approx((10 + 30 * 1.44 + 50 * 1.96) / (1 + 1.44 ** 2 + 1.96 ** 2))
     assert predict(steep, 1.6, 2)[0] == pytest.approx(max(50 * (1.6 / 1.4) ** 2, fb[0] * 2.56))
     # the allowed factor is where the larger prediction reaches 95 % of the limit
-    f, _ = allowed_factor({"effort": rows}, LIMITS, 3.0)
+    f, _ = allowed_factor({"effort": rows}, LIMITS, 1.4, 3.0)
     assert predict(rows, f, 2)[0] == pytest.approx(142.5)
+
+
+def test_between_measured_factors_the_rule_scales_from_the_one_below_not_the_top():
+    # measured at 1.0, 1.1 and 1.2 (1.2 bad on its residual: the learner is back at 1.0, bisecting towards 1.1)
+    rows = [(1.0, [100.0, 1.0]), (1.1, [106.0, 1.0]), (1.2, [113.0, 1.0])]
+    assert predict(rows, 1.05, 2)[0] == pytest.approx(max(100.0 * 1.05 ** 2, float(
+        np.polyval(np.polyfit([1.0, 1.21, 1.44], [100.0, 106.0, 113.0], 1), 1.05 ** 2))))
+    level = 102.0  # N m: 95 % of the limit, 2 % above what x1.0 measured
+    tight = PeakLimits(NAMES, {"effort": np.array([level / 0.95, 28.0])}, 0.05)
+    f, why = allowed_factor({"effort": rows}, tight, 1.0, 1.05)
+    assert f == pytest.approx(math.sqrt(level / 100.0)) and "at x1.050" in why  # the rule from x1.0 bounds it
+    # (from the top, x1.2, the rule would allow 1.2 sqrt(102 / 113) = 1.14 and the fit 1.035: both above it)
+    # the learner there holds (the raise would be below the resolution), not raised by the fit through x1.2
+    sp = SpeedLearner(SpeedSettings(step=0.1, ceiling=2.0))
+    for peaks in rows:
+        sp.record(peaks[0], {"effort": peaks[1]})
+    sp.factor, sp.good, sp.failed = 1.0, 1.0, 1.1
+    assert sp.update(True, "", {"effort": [100.0, 1.0]}, tight) == 1.0 and "held at x1.000" in sp.held
 
 
 def test_a_joint_without_a_limit_or_without_peaks_bounds_nothing_and_speeds_bound_by_s():
     free = PeakLimits(NAMES, {"effort": np.array([np.inf, np.inf]), "velocity": np.array([math.pi, np.inf])}, 0.0)
-    assert allowed_factor({"effort": [(1.0, [1e4, 1e4])]}, free, 1.5) == (1.5, "")
-    f, why = allowed_factor({"velocity": [(1.0, [2.0, 50.0])]}, free, 2.0)
+    assert allowed_factor({"effort": [(1.0, [1e4, 1e4])]}, free, 1.0, 1.5) == (1.5, "")
+    f, why = allowed_factor({"velocity": [(1.0, [2.0, 50.0])]}, free, 1.0, 2.0)
     assert f == pytest.approx(math.pi / 2.0) and why.startswith("joint shoulder_pan_joint: predicted |velocity| 4")
-    assert allowed_factor({}, LIMITS, 1.7) == (1.7, "")
+    assert allowed_factor({}, LIMITS, 1.5, 1.7) == (1.7, "")
 
 
 def test_the_learner_raises_only_as_far_as_the_prediction_allows_then_holds_naming_the_joint():

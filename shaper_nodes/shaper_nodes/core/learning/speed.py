@@ -379,7 +379,7 @@ class SpeedLearner:
             else:
                 nxt = 0.5 * (self.good + self.failed) if self.failed - self.good >= s.resolution else self.good
             if limits is not None and self.peaks:
-                self.cap, why = allowed_factor(self.peaks, limits, max(nxt, used))
+                self.cap, why = allowed_factor(self.peaks, limits, used, max(nxt, used))
                 if nxt > used and self.cap < nxt:
                     raised = self.cap - used >= s.resolution
                     nxt = self.cap if raised else used

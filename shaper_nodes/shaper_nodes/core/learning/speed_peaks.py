@@ -11,8 +11,9 @@ velocity-product (Coriolis, centripetal) torques x s^2, viscous friction x s; gr
 the dynamic part; the viscous part, x s, lies between them and is over-estimated by s^2 above the measured factors),
 its peak |speed| ``b s`` (power 1). The prediction at ``s`` (:func:`predict`) is the larger of
 
-- the pure-scaling rule from the largest measured factor ``s_t`` (peak ``p_t``): ``p_t (s / s_t)^power``, all of the
-  peak scaled: conservative above ``s_t`` for any ``a >= 0`` (it is all that one measured factor allows);
+- the pure-scaling rule from the largest measured factor ``s_k`` at or below ``s`` (peak ``p_k``):
+  ``p_k (s / s_k)^power``, all of the peak scaled: conservative above ``s_k`` for any ``a >= 0`` (it is all that one
+  measured factor allows; between measured factors, e.g. after a bad cycle, the one below counts, not the top);
 - with two or more measured factors, the least-squares fit ``a + b s^power`` over them, ``a >= 0`` (where the
   unconstrained fit gives ``a < 0`` the peaks grow faster than s^power, and ``a = 0`` with its own ``b`` is fitted):
   it exceeds the rule when the measured peaks grow faster than the model's bound.
@@ -93,59 +94,77 @@ def fit(factors: np.ndarray, peaks: np.ndarray, power: int) -> tuple[np.ndarray,
     return np.where(neg, 0.0, a), np.where(neg, through0, b)
 
 
+def _below(s: np.ndarray, factor: float) -> int:
+    """The index of the largest measured factor at or below ``factor`` (the smallest if none is)."""
+    return max(int(np.searchsorted(s, factor, side="right")) - 1, 0)
+
+
 def predict(measured: Sequence[tuple[float, Sequence[float]]], factor: float, power: int) -> np.ndarray:
     """Each joint's peak predicted at ``factor`` (module docstring): the larger of the pure-scaling rule from the
-    largest measured factor and, with two or more factors, the fit ``a + b s^power`` (``a >= 0``).
+    largest measured factor at or below it and, with two or more factors, the fit ``a + b s^power`` (``a >= 0``).
 
     Parameters
     ----------
     measured : sequence of (factor, (J,) peaks)
-        What the move measured (at least one).
+        What the move measured (at least one; in increasing factor, each factor once: :meth:`.SpeedLearner.record`).
     factor : float
         The factor to predict at.
     power : int
         2 for torques, 1 for speeds.
     """
     s, p = _rows(measured)
-    top = int(np.argmax(s))
-    out: np.ndarray = p[top] * (factor / s[top]) ** power
-    if np.unique(s).size > 1:
+    k = _below(s, factor)
+    out: np.ndarray = p[k] * (factor / s[k]) ** power
+    if s.size > 1:
         a, b = fit(s, p, power)
         out = np.maximum(out, a + b * factor ** power)
     return out
 
 
-def _cap(s: np.ndarray, p: np.ndarray, power: int, level: np.ndarray) -> np.ndarray:
-    """Per joint, the largest factor whose prediction stays within ``level`` (inf: none bounds it)."""
-    top = int(np.argmax(s))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cap = np.where(p[top] > 0, s[top] * (level / np.where(p[top] > 0, p[top], 1.0)) ** (1.0 / power), np.inf)
-        if np.unique(s).size > 1:
-            a, b = fit(s, p, power)
-            room = level - a
-            fitted = np.where(b > 0, (np.maximum(room, 0.0) / np.where(b > 0, b, 1.0)) ** (1.0 / power),
-                              np.where(a + b * s[top] ** power <= level, np.inf, s[top]))
-            cap = np.minimum(cap, fitted)
-    return np.where(np.isinf(level), np.inf, cap)
+def _cap(s: np.ndarray, p: np.ndarray, power: int, level: np.ndarray, start: float) -> np.ndarray:
+    """Per joint, the largest factor from ``start`` up to which the prediction stays within ``level`` (``start``
+    itself when it is above already; inf: nothing bounds it)."""
+    cap = np.full(p.shape[1], np.inf)
+    k0 = _below(s, start)
+    a, b = fit(s, p, power) if s.size > 1 else (np.zeros(p.shape[1]), np.zeros(p.shape[1]))
+    for j in np.flatnonzero(np.isfinite(level)):
+        for k in range(k0, s.size):  # the rule from s[k] holds from s[k] to the next measured factor
+            lo, hi = (start if k == k0 else s[k]), (s[k + 1] if k + 1 < s.size else np.inf)
+            if p[k, j] > 0:
+                cross = s[k] * (level[j] / p[k, j]) ** (1.0 / power)
+                if cross < hi:
+                    cap[j] = max(cross, lo)
+                    break
+        if b[j] > 0:  # the fit, increasing: where it reaches the level
+            cap[j] = min(cap[j], max(max(level[j] - a[j], 0.0) / b[j], 0.0) ** (1.0 / power))
+        elif a[j] > level[j]:
+            cap[j] = min(cap[j], start)
+        cap[j] = max(cap[j], start)
+    return cap
 
 
 def allowed_factor(measured: Mapping[str, Sequence[tuple[float, Sequence[float]]]], limits: PeakLimits,
-                   target: float) -> tuple[float, str]:
-    """The largest factor up to ``target`` whose predicted peaks stay within ``(1 - margin)`` of every limit.
+                   start: float, target: float) -> tuple[float, str]:
+    """The largest factor from ``start`` up to ``target`` whose predicted peaks stay within ``(1 - margin)`` of every
+    limit.
 
     Parameters
     ----------
     measured : mapping of str to sequence of (factor, (J,) peaks)
-        Per quantity (``effort``, ``velocity``), what the move measured (a quantity absent or empty: not predicted).
+        Per quantity (``effort``, ``velocity``), what the move measured, in increasing factor (a quantity absent or
+        empty: not predicted).
     limits : PeakLimits
         The joints, their limits and the margin.
+    start : float
+        The factor the raise starts from (the one just run).
     target : float
         The factor the learner would raise to.
 
     Returns
     -------
     factor : float
-        ``target`` when every prediction at it is within, else the largest factor below it that is.
+        ``target`` when every prediction up to it is within, else the largest factor below it that is (``start``
+        when none above it is).
     why : str
         Empty when ``target`` is allowed; else the joint and quantity that bound it, in one line
         ("joint X: predicted |effort| ... N m at x1.800 above ... N m (95 % of its limit ... N m)").
@@ -161,7 +180,7 @@ def allowed_factor(measured: Mapping[str, Sequence[tuple[float, Sequence[float]]
         level = keep * np.asarray(lim, dtype=float).reshape(-1)
         if level.size != p.shape[1] or p.shape[1] != len(limits.names):
             continue  # (another joint set: not this move's)
-        cap = _cap(s, p, power, level)
+        cap = _cap(s, p, power, level, float(start))
         j = int(np.argmin(cap))
         if cap[j] < best:
             at = predict(rows, target, power)
