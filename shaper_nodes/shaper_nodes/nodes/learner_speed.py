@@ -18,13 +18,16 @@ accelerations x s^2; a hold at the goal keeps its length). A goal matched to no 
 value per joint or one for all) at its request: a goal past a limit is rejected, and one line names the joint, the
 limit and the point. A move's factor never exceeds ``speed.max_factor`` nor the largest factor its planned profile
 allows within the limits (:func:`~shaper_nodes.core.learning.speed.limit_ceiling`), and the scaled points are
-checked again before they are sent. Torque cannot be checked before the move (the node has no dynamic model of the
-robot): it is measured during it. The joint efforts the robot reports on ``speed.joint_states`` (a UR: joint torques,
-N m; the simulated arm: its motor torques) are watched from the move's START to its residual window's end
-(:mod:`.learner_efforts`), and a move whose largest |effort| exceeded ``speed.max_effort`` on a joint (one value per
-joint or one for all; inf: not watched) is a bad cycle, its factor lowered at once as for the residual
-(:func:`~shaper_nodes.core.learning.speed.effort_check`). With a finite limit, a move without efforts measured is
-not learned from.
+checked again before they are sent. Torque cannot be computed before the move (the node has no dynamic model of
+the robot): it is measured during it. The joint efforts and velocities the robot reports on ``speed.joint_states``
+(a UR: joint torques, N m; the simulated arm: its motor torques) are watched from the move's START to its residual
+window's end (:mod:`.learner_efforts`), and a move whose largest |effort| exceeded ``speed.max_effort`` on a joint
+(one value per joint or one for all; inf: not watched), or whose largest measured |velocity| exceeded
+``speed.velocity`` (a robot may overshoot its plan), is a bad cycle, its factor lowered at once as for the residual
+(:func:`~shaper_nodes.core.learning.speed.peak_check`). With a finite effort limit, a move without efforts measured
+is not learned from. **Before a raise** the move's peaks are predicted at the new factor from those it measured at
+the factors it ran at (:mod:`~shaper_nodes.core.learning.speed_peaks`: torque a + b s^2, speed b s), and the raise
+stops where a prediction passes its limit less ``speed.limit_margin`` of it (the log line says which joint).
 
 **What is good.** At the move's END, the settled residual is the peak of the tool accelerometer's deviation from
 its mean (``topics.imu``; the three axes' magnitude) in the window of ``speed.window`` s after the commanded motion
@@ -58,8 +61,11 @@ factor the goal ran with), ``factor_next``, ``ceiling``, ``peak`` and ``toleranc
 converted to the flange, mm), ``frequency_hz``, ``motion_s`` (the scaled plan's motion, s), ``velocity_ratio`` and
 ``acceleration_ratio`` (the scaled plan's largest against its limit), ``effort_ratio`` (the largest measured
 |effort| against its limit; nan: not watched), ``effort_joint`` (that joint's index; -1: none) and ``effort_ok``,
-``ok`` and ``holding``; residual_rms: the window's RMS. A bad cycle's reason (residual, effort: the joint named) is
-on the log line and in the move's saved history.
+``speed_ratio``, ``speed_joint`` and ``speed_ok`` (the same of the measured |velocity| against ``speed.velocity``;
+nan: none reported), ``allowed_factor`` (the factor the predicted peaks allowed; nan: none predicted), ``held`` (1:
+the raise was held or cut short by the prediction), ``ok`` and ``holding``; residual_rms: the window's RMS. A bad
+cycle's reason (residual, effort or speed: the joint named) and a held raise's (the joint predicted past its limit)
+are on the log line and in the move's saved history.
 """
 
 from __future__ import annotations

@@ -51,8 +51,9 @@ class SpeedGroup:
                                         read_only=True)
     acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2 (one per joint, or one"
                                             " for all).", read_only=True)
-    joint_states: str = param("/joint_states", "The joint states whose efforts (N m) are watched during each move"
-                              " against speed.max_effort ('' = none).", read_only=True)
+    joint_states: str = param("/joint_states", "The joint states whose efforts (N m) and velocities (rad/s) are"
+                              " watched during each move against speed.max_effort and speed.velocity ('' = none).",
+                              read_only=True)
     max_effort: tuple[float, ...] = param([math.inf], "Largest measured joint efforts, N m (one per joint, or one"
                                           " for all; > 0, inf = not watched): a move past one is a bad cycle.")
     limit_margin: float = param(0.05, "Before a move's factor is raised, its joint torques and speeds are predicted"
