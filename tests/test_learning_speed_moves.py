@@ -11,7 +11,10 @@ run time through the parameter service, so that the measured residual is above i
 largest good one; the joint torques the arm measures (its /joint_states efforts) stay within the UR5e's published
 limits on every good cycle, and a move whose measured torque exceeds ``speed.max_effort`` (lowered to 10 N m at run
 time; a limit <= 0 is refused) is a bad cycle, its factor lowered at once, the joint named in its saved history; the
-state file holds a speed learner per move; after the learner is killed (SIGKILL) and started
+measured joint speeds stay within their limit; before a raise the torque is predicted at the next factor from those
+measured, and where the prediction passes the limit less the margin (the torque limits scaled at run time so that it
+does, the one measured below them) the factor holds, the joint named in the saved history; the state file holds a
+speed learner per move, with the peaks measured per factor; after the learner is killed (SIGKILL) and started
 again on the same state file, each move resumes at its saved factor. Then the payload changes (2 -> 4.5 kg through the
 plant's parameter service) and the drift watch warns (the identifier's status ``identifier: drift`` at WARN on
 ``/diagnostics``, published by the test's peer): every move's next goal runs at its planned speed again (factor 1).
@@ -29,6 +32,7 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from reproductions.arm_learning import modal_calibration
 from shaper_nodes.core.learning.moves import move_key
+from shaper_nodes.nodes.learner_speed_parameters import SpeedGroup
 from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
@@ -75,6 +79,7 @@ def learned_rightly(mine: list[dict[str, float]]) -> None:
         assert m["speed_factor"] <= m["ceiling"] + 1e-9 and m["speed_factor"] >= 1.0
         assert m["velocity_ratio"] <= 1.0 + 1e-9 and m["acceleration_ratio"] <= 1.0 + 1e-9, m
         assert m["effort_ratio"] > 0.0 and m["effort_ok"] == float(m["effort_ratio"] <= 1.0), m  # torques measured
+        assert 0.0 < m["speed_ratio"] < 1.0 and m["speed_ok"] == 1.0, m  # the measured joint speeds: within
         if m["ok"]:  # raised, unless at the ceiling or holding (the good and the bad factor within the resolution)
             assert m["factor_next"] > m["speed_factor"] or m["speed_factor"] >= m["ceiling"] - 1e-9 or m["holding"], m
         else:  # lowered at once (at the planned speed it cannot go lower)
@@ -155,16 +160,40 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
         why = json.loads(state.read_text())["moves"]["moves"][key]["speed"]["history"][-1]["reason"]
         assert why.startswith("joint ") and "measured |effort|" in why and "above its limit 10 N m" in why, why
 
-        # the state file: a speed learner per move, at the factor learned
+        # the hold before a raise: the torque limits scaled so that at home -> pick's good factor the measured torque
+        # is below them but the one predicted a quarter of the resolution above it passes them less the margin (its
+        # next raise, half way to the bad factor, would go further): the factor holds, the joint named
+        defaults = SpeedGroup()
+        f_good = got[MOVES[0].name][-1]["factor_next"]
+        ratio = max(m["effort_ratio"] for m in got[MOVES[0].name] if m["speed_factor"] == f_good and m["ok"])
+        scale = ratio * (1.0 + 0.25 * defaults.resolution / f_good) ** 2 / (1.0 - defaults.limit_margin)
+        set_param(conductor, "speed.max_effort", [scale * e for e in EFFORT])
+        held = run(client, cycle, 0, MOVES[0])
+        cycle += 1
+        set_param(conductor, "speed.max_effort", list(EFFORT))
+        assert held["speed_factor"] == f_good and held["ok"] and held["effort_ratio"] < 1.0, held  # below its limit
+        assert held["held"] == 1.0 and held["factor_next"] == f_good and held["holding"] == 1.0, held
+        assert f_good <= held["allowed_factor"] < f_good + defaults.resolution, held
+        key = move_key(MOVES[0].positions[0], MOVES[0].positions[-1])
+        why = json.loads(state.read_text())["moves"]["moves"][key]["speed"]["history"][-1]["held"]
+        assert why.startswith("joint ") and "predicted |effort|" in why and f"held at x{f_good:.3f}" in why, why
+        got[MOVES[0].name].append(held)
+        got[MOVES[1].name].append(run(client, cycle, 1, MOVES[1]))  # (back home)
+        cycle += 1
+
+        # the state file: a speed learner per move, at the factor learned, with the peaks measured per factor
         doc = json.loads(state.read_text())
         assert doc["per_move"] == "speed" and len(doc["moves"]["moves"]) == 2
         for move in MOVES:
             entry = doc["moves"]["moves"][move_key(move.positions[0], move.positions[-1])]
             assert entry["speed"]["factor"] == got[move.name][-1]["factor_next"]
             assert entry["cycles"] == len(got[move.name])
+            factors = {m["speed_factor"] for m in got[move.name]}
+            assert {f for f, _ in entry["speed"]["peaks"]["effort"]} == factors, entry["speed"]["peaks"]
+            assert all(len(p) == len(JOINT_NAMES) for _, p in entry["speed"]["peaks"]["velocity"])
 
         # kill -9, and start again on the same state file: each move resumes at its saved factor (the arm is at
-        # home after the torque's bad cycle: home -> pick first)
+        # home: home -> pick first)
         restart_learner(start_node, learner, learner_params, conductor, INPUTS)
         for i in (0, 1):
             move = MOVES[i]
@@ -198,9 +227,10 @@ def test_each_move_learns_to_move_faster_within_the_limits_lowers_at_once_and_re
               json.dumps({k: [(m["speed_factor"], round(m["peak_mm"], 4), round(m["flange_peak_mm"], 4), m["ok"])
                               for m in v] for k, v in after.items()}))
         print("factor, settled peak (learner's estimate mm / flange mm), move + settle s, largest torque / limit per"
-              " move and cycle:",
+              " move and cycle, largest speed / limit:",
               json.dumps({k: [(round(m["speed_factor"], 3), round(m["peak_mm"], 4), round(m["flange_peak_mm"], 4),
-                               round(m["move_settle_s"], 3), round(m["effort_ratio"], 3)) for m in v]
+                               round(m["move_settle_s"], 3), round(m["effort_ratio"], 3), round(m["speed_ratio"], 3))
+                              for m in v]
                           for k, v in got.items()}))
     finally:
         conductor.close()

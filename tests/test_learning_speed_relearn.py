@@ -6,7 +6,8 @@ watch's status on ``/diagnostics`` through the identifier's own reporter (``iden
 does; tests/relearn_peer.py, the MRILC relearn test's too), all real nodes in one process. The learner starts from a
 state file of two moves that learned to run 1.4 times faster (between a good 1.2 and a failed 1.6). Shown: a goal of a
 move runs at its saved factor (the controller receives the motion 1.4 times shorter); at the first WARN every move's
-factor starts again from 1 (state file: factor 1, nothing good or failed, ``drift_warned``), once per episode; the cycle
+factor starts again from 1 (state file: factor 1, nothing good or failed, no peaks measured, ``drift_warned``), once
+per episode; the cycle
 under way (its goal ran at 1.4) is not learned from; the next goal of a move runs as planned (factor 1); a restarted
 learner reads the episode flag back, and a state file whose flag is not a boolean is refused with one line naming it.
 
@@ -65,6 +66,7 @@ def state_doc() -> dict:
         entry, _ = store.entry(start, goal)
         sp = SpeedLearner(SpeedSettings(step=0.2, ceiling=2.0))
         sp.factor, sp.good, sp.failed = SAVED, 1.2, 1.6
+        sp.record(1.2, {"effort": [50.0, 20.0], "velocity": [1.9, 0.9]})  # (the peaks measured: forgotten too)
         entry.speed_state, entry.cycles = sp.to_dict(), 4
     return {"version": 1, "per_move": "speed", "moves": store.to_doc(),
             "joint_names": {move_key(s, g): NAMES for s, g in MOVES}}
@@ -121,6 +123,7 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
         for e in store:
             sp = e.speed()
             assert sp is not None and (sp.factor, sp.good, sp.failed, e.cycles) == (1.0, None, None, 0), e
+            assert sp.peaks == {} and sp.cap is None  # the torques measured on the old payload no longer predict
 
         # the WARN repeated: nothing more; the cycle under way (its goal ran at 1.4) is not learned from
         peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"

@@ -22,7 +22,13 @@ from shaper_nodes.cli import analyze_bag as bag_analysis_cli
 from shaper_nodes.core.identification import NO_SHAPER_NEEDED, ModeFit
 from shaper_nodes.core.shaping.vibration import percentage_vibration, residual_vibration
 from shaper_nodes.recordings import Bag, BagError, mcap_chunks
-from shaper_nodes.recordings.cdr import JointStateDecoder, imu_fast, joint_state_fast
+from shaper_nodes.recordings.cdr import (
+    JointStateDecoder,
+    imu_fast,
+    joint_state_efforts,
+    joint_state_fast,
+    joint_state_motion,
+)
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 MODE_HZ, ZETA = 4.0, 0.02
@@ -62,6 +68,14 @@ def test_fast_decoders_agree_with_rosbags():
             assert got_names == names and np.array_equal(got, pos)
             decoder = JointStateDecoder()
             assert decoder(raw) == (t, got_names, got) and decoder(raw) == (t, got_names, got)  # cached layout
+            # the velocities and efforts behind the positions, each present or empty
+            for vel, eff in ((js.velocity, np.zeros(0)), (np.zeros(0), rng.normal(size=len(names))),
+                             (rng.normal(size=len(names)), rng.normal(size=len(names)))):
+                js.velocity, js.effort = vel, eff
+                raw = STORE.serialize_cdr(js, "sensor_msgs/msg/JointState")
+                decoder(raw)
+                assert joint_state_motion(raw, decoder.positions_end) == (tuple(vel), tuple(eff))
+                assert joint_state_efforts(raw, decoder.positions_end) == tuple(eff)
 
 
 def test_synthetic_writer_patches_what_rosbags_reads(robot_bag):

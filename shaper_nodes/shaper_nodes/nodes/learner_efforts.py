@@ -1,14 +1,16 @@
-"""The speed learner's watch of the measured joint efforts: ``/joint_states``' effort (joint torques, N m) kept per
-sample, so that a move's largest |effort| per joint is known at its END.
+"""The speed learner's watch of the measured joint efforts and speeds: ``/joint_states``' effort (joint torques, N m)
+and velocity (rad/s) kept per sample, so that a move's largest |effort| and |velocity| per joint are known at its END.
 
 A robot reports its joint efforts on ``/joint_states`` (ur_robot_driver: the joints' torques computed from the
-motor currents; the simulated arm: the motor torques its position loops apply, N m). :class:`EffortWatch`
-subscribes to them raw (the fast decoder of :mod:`shaper_nodes.recordings.cdr`, no message object per sample;
-polled, so a fast stream wakes the node a bounded number of times a second), keeps ``(stamp, names, efforts)`` of
-the last ``keep`` s (at most :data:`MAX_SAMPLES`), and answers :meth:`EffortWatch.peaks`: the largest |effort| of
-each of a move's joints between two stamps. A message without one effort per name is not kept (a robot that
-reports no efforts: no peak, and the learner says so); bytes that are not a JointState are dropped with a throttled
-error. The ROS-free rule the peaks go to is :func:`shaper_nodes.core.learning.speed.effort_check`.
+motor currents; the simulated arm: the motor torques its position loops apply, N m), and the joints' measured
+speeds (a robot's can overshoot its plan). :class:`EffortWatch` subscribes to them raw (the fast decoder of
+:mod:`shaper_nodes.recordings.cdr`, no message object per sample; polled, so a fast stream wakes the node a bounded
+number of times a second), keeps ``(stamp, names, efforts, velocities)`` of the last ``keep`` s (at most
+:data:`MAX_SAMPLES`), and answers :meth:`EffortWatch.peaks`: the largest |effort| and |velocity| of each of a move's
+joints between two stamps. Efforts or velocities not one per name are not kept (a robot that reports no efforts:
+no peak, and the learner says so); bytes that are not a JointState are dropped with a throttled error. The
+ROS-free rules the peaks go to are :func:`shaper_nodes.core.learning.speed.peak_check` (the limits) and
+:func:`shaper_nodes.core.learning.speed_peaks.allowed_factor` (the prediction before a raise).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any
 import numpy as np
 from sensor_msgs.msg import JointState
 
-from shaper_nodes.recordings.cdr import JointStateDecoder, joint_state_efforts, little_endian
+from shaper_nodes.recordings.cdr import JointStateDecoder, joint_state_motion, little_endian
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS, subscribe_draining
 
 __all__ = ["MAX_SAMPLES", "EffortWatch"]
@@ -47,8 +49,9 @@ class EffortWatch:
     def __init__(self, node: Any, topic: str, keep: float) -> None:
         self.node, self.topic, self.keep = node, topic, float(keep)
         self.latest = -math.inf  # the newest stamp with efforts, s
-        self._samples: collections.deque[tuple[float, tuple[str, ...], tuple[float, ...]]] = collections.deque(
-            maxlen=MAX_SAMPLES)
+        self._newest = -math.inf  # the newest stamp kept, s
+        self._samples: collections.deque[tuple[float, tuple[str, ...], tuple[float, ...] | None,
+                                               tuple[float, ...] | None]] = collections.deque(maxlen=MAX_SAMPLES)
         self._decode = JointStateDecoder()
         subscribe_draining(node, JointState, topic, self._on_raw, STREAM_QOS)
 
@@ -58,27 +61,30 @@ class EffortWatch:
             if not little_endian(raw):
                 raise ValueError("not little-endian CDR")
             t, names, _ = decode(raw)
-            eff = joint_state_efforts(raw, decode.positions_end)
+            vel, eff = joint_state_motion(raw, decode.positions_end)
         except (ValueError, struct.error) as err:  # (UnicodeDecodeError is a ValueError)
             self.node.get_logger().error(f"{self.topic}: a message dropped: {err}", throttle_duration_sec=5.0)
             return
-        if len(eff) != len(names) or not names:
+        n = len(names)
+        if not n or (len(eff) != n and len(vel) != n):
             return
-        self._samples.append((t, names, eff))
-        if t > self.latest:
-            self.latest = t
+        self._samples.append((t, names, eff if len(eff) == n else None, vel if len(vel) == n else None))
+        if len(eff) == n:
+            self.latest = max(self.latest, t)
+        if t > self._newest:
+            self._newest = t
             old = t - self.keep
             while self._samples[0][0] < old:
                 self._samples.popleft()
 
-    def peaks(self, joints: Sequence[str], start: float, end: float) -> np.ndarray | None:
-        """The largest |effort| of each of ``joints`` in the samples stamped in [``start``, ``end``] s, in their
-        order (None: no sample there carries all of them)."""
+    def peaks(self, joints: Sequence[str], start: float, end: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The largest |effort| and the largest |velocity| of each of ``joints`` in the samples stamped in
+        [``start``, ``end``] s, in their order (None: no sample there carries all of them)."""
         want = list(joints)
-        out: np.ndarray | None = None
+        out: list[np.ndarray | None] = [None, None]
         order: list[int] = []
         names: tuple[str, ...] = ()
-        for t, n, eff in self._samples:
+        for t, n, eff, vel in self._samples:
             if t < start or t > end:
                 continue
             if n is not names:
@@ -86,6 +92,9 @@ class EffortWatch:
                 if not all(j in index for j in want):
                     continue
                 names, order = n, [index[j] for j in want]
-            row = np.abs(np.asarray([eff[i] for i in order], dtype=float))
-            out = row if out is None else np.maximum(out, row)  # (a nan effort stays: a violation)
-        return out
+            for k, values in enumerate((eff, vel)):
+                if values is not None:
+                    row = np.abs(np.asarray([values[i] for i in order], dtype=float))
+                    best = out[k]
+                    out[k] = row if best is None else np.maximum(best, row)  # (a nan stays: a violation)
+        return out[0], out[1]

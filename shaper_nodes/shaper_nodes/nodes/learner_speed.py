@@ -18,13 +18,16 @@ accelerations x s^2; a hold at the goal keeps its length). A goal matched to no 
 value per joint or one for all) at its request: a goal past a limit is rejected, and one line names the joint, the
 limit and the point. A move's factor never exceeds ``speed.max_factor`` nor the largest factor its planned profile
 allows within the limits (:func:`~shaper_nodes.core.learning.speed.limit_ceiling`), and the scaled points are
-checked again before they are sent. Torque cannot be checked before the move (the node has no dynamic model of the
-robot): it is measured during it. The joint efforts the robot reports on ``speed.joint_states`` (a UR: joint torques,
-N m; the simulated arm: its motor torques) are watched from the move's START to its residual window's end
-(:mod:`.learner_efforts`), and a move whose largest |effort| exceeded ``speed.max_effort`` on a joint (one value per
-joint or one for all; inf: not watched) is a bad cycle, its factor lowered at once as for the residual
-(:func:`~shaper_nodes.core.learning.speed.effort_check`). With a finite limit, a move without efforts measured is
-not learned from.
+checked again before they are sent. Torque cannot be computed before the move (the node has no dynamic model of
+the robot): it is measured during it. The joint efforts and velocities the robot reports on ``speed.joint_states``
+(a UR: joint torques, N m; the simulated arm: its motor torques) are watched from the move's START to its residual
+window's end (:mod:`.learner_efforts`), and a move whose largest |effort| exceeded ``speed.max_effort`` on a joint
+(one value per joint or one for all; inf: not watched), or whose largest measured |velocity| exceeded
+``speed.velocity`` (a robot may overshoot its plan), is a bad cycle, its factor lowered at once as for the residual
+(:func:`~shaper_nodes.core.learning.speed.peak_check`). With a finite effort limit, a move without efforts measured
+is not learned from. **Before a raise** the move's peaks are predicted at the new factor from those it measured at
+the factors it ran at (:mod:`~shaper_nodes.core.learning.speed_peaks`: torque a + b s^2, speed b s), and the raise
+stops where a prediction passes its limit less ``speed.limit_margin`` of it (the log line says which joint).
 
 **What is good.** At the move's END, the settled residual is the peak of the tool accelerometer's deviation from
 its mean (``topics.imu``; the three axes' magnitude) in the window of ``speed.window`` s after the commanded motion
@@ -58,8 +61,11 @@ factor the goal ran with), ``factor_next``, ``ceiling``, ``peak`` and ``toleranc
 converted to the flange, mm), ``frequency_hz``, ``motion_s`` (the scaled plan's motion, s), ``velocity_ratio`` and
 ``acceleration_ratio`` (the scaled plan's largest against its limit), ``effort_ratio`` (the largest measured
 |effort| against its limit; nan: not watched), ``effort_joint`` (that joint's index; -1: none) and ``effort_ok``,
-``ok`` and ``holding``; residual_rms: the window's RMS. A bad cycle's reason (residual, effort: the joint named) is
-on the log line and in the move's saved history.
+``speed_ratio``, ``speed_joint`` and ``speed_ok`` (the same of the measured |velocity| against ``speed.velocity``;
+nan: none reported), ``allowed_factor`` (the factor the predicted peaks allowed; nan: none predicted), ``held`` (1:
+the raise was held or cut short by the prediction), ``ok`` and ``holding``; residual_rms: the window's RMS. A bad
+cycle's reason (residual, effort or speed: the joint named) and a held raise's (the joint predicted past its limit)
+are on the log line and in the move's saved history.
 """
 
 from __future__ import annotations
@@ -84,12 +90,13 @@ from shaper_nodes.core.learning.speed import (
     SpeedLearner,
     SpeedSettings,
     acceleration_tolerance,
-    effort_check,
     limit_breach,
     limit_ceiling,
     motion_end_index,
+    peak_check,
     time_scale,
 )
+from shaper_nodes.core.learning.speed_peaks import UNITS, PeakLimits
 from shaper_nodes.core.shaping.vibration import residual_vibration
 from shaper_nodes.ros.conversions import mode_from_msg, trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
@@ -370,41 +377,50 @@ class SpeedMovesMode:
         res = residual_vibration(arr[:, 0], arr[:, 1:], window[0], window[1], remove_mean=True)
         tol = acceleration_tolerance(float(v.tolerance), cyc.frequency)
         joints = self.names.get(cyc.key, [])
-        effort_ratio, effort_joint, breach = math.nan, -1, None
-        if self._watching():
-            peaks = None if self.efforts is None else self.efforts.peaks(joints, cyc.start, window[1])
-            if peaks is None:
-                return self.node.skipped(msg, window, f"no joint efforts measured during the move on"
-                                         f" '{v.joint_states}': speed.max_effort cannot be checked")
-            try:
-                limits = self._per_joint("max_effort", len(joints))
-                effort_ratio, effort_joint, breach = effort_check(peaks, limits, joints)
-            except InputError as err:
-                return self.node.skipped(msg, window, f"the efforts cannot be checked: {err}")
+        effort, speed = (None, None) if self.efforts is None else self.efforts.peaks(joints, cyc.start, window[1])
+        if self._watching() and effort is None:
+            return self.node.skipped(msg, window, f"no joint efforts measured during the move on"
+                                     f" '{v.joint_states}': speed.max_effort cannot be checked")
+        try:
+            limits = PeakLimits(tuple(joints), {"effort": self._per_joint("max_effort", len(joints)),
+                                                "velocity": self._limits(len(joints))[0]}, float(v.limit_margin))
+            watch = {"effort": self._watching(), "velocity": True}
+            checks = [peak_check(p, limits.limits[q], joints, q, UNITS[q]) if p is not None and watch[q]
+                      else (math.nan, -1, None) for q, p in (("effort", effort), ("velocity", speed))]
+        except (InputError, SpeedError) as err:
+            return self.node.skipped(msg, window, f"the measured peaks cannot be checked: {err}")
         reasons = [] if res.peak <= tol else [f"settled residual peak {res.peak:.4g} m/s^2 above {tol:.4g} m/s^2"]
-        reasons += [breach] if breach else []
+        reasons += [c[2] for c in checks if c[2]]
         ok, reason = not reasons, "; ".join(reasons)
         moved = self.store.get(cyc.key)
         assert moved is not None
         sp = moved.speed()
         assert sp is not None
         sp.factor = cyc.factor
-        nxt = sp.factor if self.holding else sp.update(ok, reason)
+        if self.holding:
+            sp.record(cyc.factor, {"effort": effort, "velocity": speed})
+            nxt = sp.factor
+        else:
+            nxt = sp.update(ok, reason, {"effort": effort, "velocity": speed}, limits)
         moved.speed_state = sp.to_dict()
         moved.cycles += 1
         self.node.save()
         index = [e.key for e in self.store].index(cyc.key)
         mm = 1e3 * res.peak / (2.0 * math.pi * cyc.frequency) ** 2
         names = ["move", "speed_factor", "factor_next", "ceiling", "peak", "tolerance", "peak_mm", "frequency_hz",
-                 "motion_s", "velocity_ratio", "acceleration_ratio", "effort_ratio", "effort_joint", "effort_ok", "ok",
-                 "holding"]
+                 "motion_s", "velocity_ratio", "acceleration_ratio", "effort_ratio", "effort_joint", "effort_ok",
+                 "speed_ratio", "speed_joint", "speed_ok", "allowed_factor", "held", "ok", "holding"]
+        (effort_ratio, effort_joint, breach), (speed_ratio, speed_joint, overshoot) = checks
         values = [float(index), cyc.factor, nxt, cyc.ceiling, res.peak, tol, mm, cyc.frequency, cyc.motion,
-                  *cyc.ratios, effort_ratio, float(effort_joint), 0.0 if breach else 1.0, 1.0 if ok else 0.0,
-                  1.0 if self.holding or sp.holding else 0.0]
+                  *cyc.ratios, effort_ratio, float(effort_joint), 0.0 if breach else 1.0, speed_ratio,
+                  float(speed_joint), 0.0 if overshoot else 1.0, math.nan if sp.cap is None else sp.cap,
+                  1.0 if sp.held else 0.0, 1.0 if ok else 0.0, 1.0 if self.holding or sp.holding else 0.0]
+        largest = "".join(f", largest {q} {r:.3g} of its limit ({joints[j]})" for q, (r, j, _) in
+                          zip(("effort", "speed"), checks, strict=True) if j >= 0)
         text = (f"cycle {cycle}, move {cyc.key}: factor {cyc.factor:.3f}, settled peak {res.peak:.4g} m/s^2 in"
                 f" {window[0]:.3f}-{window[1]:.3f} s ({mm:.4f} mm at {cyc.frequency:.3g} Hz; tolerance {tol:.4g}"
-                f" m/s^2)" + (f", largest effort {effort_ratio:.3g} of its limit ({joints[effort_joint]})"
-                              if effort_joint >= 0 else "") + f": {'good' if ok else 'bad: ' + reason} -> {nxt:.3f}")
+                f" m/s^2){largest}: {'good' if ok else 'bad: ' + reason} -> {nxt:.3f}"
+                + (f" (not raised further: {sp.held})" if sp.held else ""))
         if ok:  # (one severity per call site: rclpy refuses a call site that changes it)
             self.node.get_logger().info(text)
         else:

@@ -51,10 +51,15 @@ class SpeedGroup:
                                         read_only=True)
     acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2 (one per joint, or one"
                                             " for all).", read_only=True)
-    joint_states: str = param("/joint_states", "The joint states whose efforts (N m) are watched during each move"
-                              " against speed.max_effort ('' = none).", read_only=True)
+    joint_states: str = param("/joint_states", "The joint states whose efforts (N m) and velocities (rad/s) are"
+                              " watched during each move against speed.max_effort and speed.velocity ('' = none).",
+                              read_only=True)
     max_effort: tuple[float, ...] = param([math.inf], "Largest measured joint efforts, N m (one per joint, or one"
                                           " for all; > 0, inf = not watched): a move past one is a bad cycle.")
+    limit_margin: float = param(0.05, "Before a move's factor is raised, its joint torques and speeds are predicted"
+                                " at the new factor from those measured (torque: a + b s^2, speed: b s); the raise"
+                                " stops where a prediction passes its limit (speed.max_effort, speed.velocity) less"
+                                " this fraction of it.", (0.0, 0.5))
     drift_status: str = param("identifier: drift", "The /diagnostics status whose WARN (a drift warning: a payload"
                               " change) starts every move's factor again from 1 ('' = none).", read_only=True)
 

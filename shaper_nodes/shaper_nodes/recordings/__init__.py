@@ -60,6 +60,7 @@ if TYPE_CHECKING:
         imu_fast,
         joint_state_efforts,
         joint_state_fast,
+        joint_state_motion,
         stamp_parts,
     )
     from .errors import (
@@ -153,6 +154,7 @@ _HOME = {
     "imu_fast": "cdr",
     "joint_state_efforts": "cdr",
     "joint_state_fast": "cdr",
+    "joint_state_motion": "cdr",
     "stamp_parts": "cdr",
 }
 
@@ -191,6 +193,7 @@ __all__ = [
     "is_heartbeat_topic",
     "joint_state_efforts",
     "joint_state_fast",
+    "joint_state_motion",
     "loss_bound",
     "mcap_chunks",
     "mcap_files",

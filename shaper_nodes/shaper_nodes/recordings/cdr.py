@@ -237,13 +237,20 @@ class JointStateDecoder:
 
 def joint_state_efforts(raw, end: int) -> tuple[float, ...]:
     """The efforts of a little-endian CDR sensor_msgs/JointState whose positions end at ``end``."""
+    return joint_state_motion(raw, end)[1]
+
+
+def joint_state_motion(raw, end: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The velocities and the efforts of a little-endian CDR sensor_msgs/JointState whose positions end at
+    ``end``."""
     pos = _align(end, 4)
     (nvel,) = _U32.unpack_from(raw, pos)
-    pos = (_align(pos + 4, 8) if nvel else pos + 4) + 8 * nvel
-    pos = _align(pos, 4)
+    pos = _align(pos + 4, 8) if nvel else pos + 4
+    vel = struct.unpack_from(f"<{nvel}d", raw, pos)
+    pos = _align(pos + 8 * nvel, 4)
     (neff,) = _U32.unpack_from(raw, pos)
     pos += 4
-    return struct.unpack_from(f"<{neff}d", raw, _align(pos, 8) if neff else pos)
+    return vel, struct.unpack_from(f"<{neff}d", raw, _align(pos, 8) if neff else pos)
 
 
 def little_endian(raw) -> bool:

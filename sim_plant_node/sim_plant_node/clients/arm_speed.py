@@ -78,10 +78,12 @@ def start(session: Any, client: Any, imu: str, wait: float) -> str:
 
 def status(m: dict[str, float]) -> str:
     """The learner's last report of a move, in words (the per-move table's last column)."""
-    effort = m.get("effort_ratio", math.nan)
-    torque = "" if math.isnan(effort) else f"; torque {100 * effort:.0f} % of its limit"
-    return (f"factor {m['speed_factor']:.2f} ({'good' if m['ok'] else 'bad'}: peak {m['peak']:.3g} m/s^2,"
-            f" {m['peak_mm']:.4f} mm at {m['frequency_hz']:.3g} Hz{torque}) -> {m['factor_next']:.2f}")
+    effort, speed = m.get("effort_ratio", math.nan), m.get("speed_ratio", math.nan)
+    torque = ("" if math.isnan(effort) else f"; torque {100 * effort:.0f} % of its limit") + (
+        "" if math.isnan(speed) else f"; speed {100 * speed:.0f} %") + ("; the raise cut by the prediction"
+                                                                       if m.get("held") else "")
+    return (f"factor {m['speed_factor']:.3f} ({'good' if m['ok'] else 'bad'}: peak {m['peak']:.3g} m/s^2,"
+            f" {m['peak_mm']:.4f} mm at {m['frequency_hz']:.3g} Hz{torque}) -> {m['factor_next']:.3f}")
 
 
 def summary(per_move: list[list[tuple[Any, Any, Any]]], rows: list[dict[str, Any]]) -> list[str]:
@@ -96,22 +98,26 @@ def summary(per_move: list[list[tuple[Any, Any, Any]]], rows: list[dict[str, Any
         base = sum(float(r["move_and_settle_s"]) for r in sched)
         out.append(f"against the schedule's {base:.3f} s at planned speed: last cycle"
                    f" {100 * (1 - totals[-1] / base):.1f} % shorter")
-    largest: dict[str, tuple[float, str]] = {}  # the largest measured |torque| / limit per move, and its joint
+    for what, key in (("joint torque", "effort"), ("joint speed", "speed")):
+        largest: dict[str, tuple[float, str]] = {}  # the largest measured ratio to its limit per move, and its joint
+        for c in per_move:
+            for run, _, report in c:
+                m = dict(zip(report.metric_names, report.metric_values, strict=True))
+                ratio, joint = m.get(f"{key}_ratio", math.nan), int(m.get(f"{key}_joint", -1))
+                if not math.isnan(ratio) and ratio >= largest.get(run.name, (-1.0, ""))[0]:
+                    largest[run.name] = (ratio, JOINT_NAMES[joint] if 0 <= joint < len(JOINT_NAMES) else "?")
+        if largest:
+            out.append(f"largest measured {what} per move over all cycles, of its joint's limit: "
+                       + ", ".join(f"{k} {100 * r:.0f} % ({j})" for k, (r, j) in largest.items()))
+    factors: dict[str, list[str]] = {}  # per move, the factor of each cycle (* : a bad cycle)
     for c in per_move:
         for run, _, report in c:
             m = dict(zip(report.metric_names, report.metric_values, strict=True))
-            ratio, joint = m.get("effort_ratio", math.nan), int(m.get("effort_joint", -1))
-            if not math.isnan(ratio) and ratio >= largest.get(run.name, (-1.0, ""))[0]:
-                largest[run.name] = (ratio, JOINT_NAMES[joint] if 0 <= joint < len(JOINT_NAMES) else "?")
-    if largest:
-        out.append("largest measured joint torque per move over all cycles, of its joint's limit: "
-                   + ", ".join(f"{k} {100 * r:.0f} % ({j})" for k, (r, j) in largest.items()))
-    last = per_move[-1]
-    factors = []
-    for run, _, report in last:
-        m = dict(zip(report.metric_names, report.metric_values, strict=True))
-        factors.append(f"{run.name} {m.get('speed_factor', math.nan):.2f}")
+            factors.setdefault(run.name, []).append(f"{m.get('speed_factor', math.nan):.3f}"
+                                                    + ("" if m.get("ok", 1.0) else "*"))
+    out.append("factors per move by cycle (*: a bad cycle): " + "; ".join(f"{k} {' '.join(v)}"
+                                                                          for k, v in factors.items()))
     worst = max(float(m.peak_mm) for c in per_move for _, m, _ in c)
-    out.append("; factors in the last cycle: " + ", ".join(factors)
+    out.append("factors in the last cycle: " + ", ".join(f"{k} {v[-1]}" for k, v in factors.items())
                + f"; largest flange peak over all cycles {worst:.4f} mm (tolerance {1e3 * SETTLE_TOLERANCE:g} mm)")
     return out

@@ -21,9 +21,13 @@ samples
 speed
     Learning to move faster: a per-move time-scaling factor raised while the move stays within its
     tolerance and the joint limits, lowered at once on a violation, then bisected.
+speed_peaks
+    A move's joint torques and speeds predicted at a higher factor from those measured at lower
+    ones (torque a + b s^2, speed b s), and the largest factor whose predictions stay within the
+    limits less a margin: the speed learner's hold before a raise.
 state_file
     Atomic JSON state files with a version, checked fully when read, and the start-up load that
     never fails: a file that cannot be used is reported, moved aside if it can be, and ignored.
 """
 
-__all__ = ["list", "moves", "mrilc", "samples", "speed", "state_file"]
+__all__ = ["list", "moves", "mrilc", "samples", "speed", "speed_peaks", "state_file"]
