@@ -5,20 +5,26 @@
 named ``identifier: ...``, as nodes/identifier.py does), the cycle events and (``imu``) the tool accelerometer,
 serves the controller's FollowJointTrajectory action (recording each goal it receives; ``hold``: a goal runs until
 the test releases it), sends goals to the learner's proxy, and keeps the learner's reports, log lines and
-statuses.
+statuses. :meth:`Peer.kill_during_move` kills the learner (its own process) with SIGKILL while a goal of a move runs
+through its proxy at the controller and starts it again (the speed, LIST payback and MRILC per-move learners' tests:
+tests/test_learning_speed_relearn.py, test_learning_kill_during_move.py).
 """
 
 from __future__ import annotations
 
+import json
+import pathlib
 import time
 from collections.abc import Callable, Sequence
 
+from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import Log
 from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory
@@ -30,6 +36,8 @@ from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 
 WAIT = 120.0  # s of wall time for a state to come (two busy cores)
+#: rcl's QoS of /rosout (rcl_qos_profile_rosout_default: reliable, transient local, depth 1000, lifespan 10 s)
+ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class Peer:
@@ -62,8 +70,10 @@ class Peer:
         self.running = 0  # goals the controller is executing now
         self._held: Future | None = None  # while set, the controller's goals run until it is done
         self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        # /rosout's own QoS (transient local, 10 s lifespan): a line the learner logged before this subscription
+        # matched its publisher (a restarted learner's first lines) still arrives
         self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
-                                      else None, 100)
+                                      else None, ROSOUT)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
         self.server = ActionServer(self.node, FollowJointTrajectory, controller, execute_callback=self._execute)
         self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
@@ -141,6 +151,47 @@ class Peer:
         return all(any(i.node_name == "learner" and bytes(i.endpoint_gid) not in before
                        for i in self.node.get_subscriptions_info_by_topic(topic))
                    for topic in inputs) and self.client.server_is_ready()
+
+    def kill_during_move(self, learner, restart: Callable[[], object], inputs: Sequence[str],
+                         trajectory: JointTrajectory, measure: Callable[[JointTrajectory], object],
+                         state: pathlib.Path, what: str = "the goal", gone: bool = False) -> JointTrajectory:
+        """Kill the learner (``learner``: a NodeProcess) with SIGKILL during a move and start it again.
+
+        The move's START must have been sent. ``trajectory`` goes to the learner's proxy; once the controller
+        received what the learner sent on and runs it (held), ``measure(sent)`` publishes part of the move's
+        residual window, and the learner is killed. Shown on the way: the controller still runs the goal after
+        the kill and finishes it (a robot's controller does not need the learner); the state file is byte for
+        byte as when the goal reached the controller (nothing written since, nothing half written: saves are
+        atomic) and parses; the client (the robot program) never gets the result it asked the killed server for
+        (with ``gone``: it sees the server gone from its graph first, once DDS's lease of the killed process ran
+        out: 20 s, Fast DDS's default); then ``restart()`` starts the learner on the same state file and, once
+        its subscriptions of ``inputs`` and its action server are up, the goal's result asked again is answered
+        ``STATUS_UNKNOWN`` (the restarted learner knows no goal of the killed one): a clear end, no hang.
+        Returns what the controller received."""
+        self.hold()
+        handle = self.send(trajectory, what)
+        result = handle.get_result_async()
+        sent, saved = self.goals[-1], state.read_bytes()
+        assert self.running == 1
+        measure(sent)
+        before = self.learner_subscriptions(inputs)
+        assert learner.proc is not None
+        learner.proc.kill()
+        assert learner.proc.wait(timeout=30) == -9
+        assert self.running == 1  # killed during the move
+        self.release()
+        self.spin_until(lambda: self.running == 0, f"the end of {what} at the controller")
+        assert state.read_bytes() == saved and isinstance(json.loads(saved), dict)
+        if gone:
+            self.spin_until(lambda: not self.client.server_is_ready(), "the killed learner's action server gone from"
+                            " the client's graph")
+        assert not result.done(), result.result()  # the killed server's answer never comes
+        restart()
+        self.spin_until(lambda: self.learner_up(inputs, before), "the restarted learner's subscriptions and server")
+        again = handle.get_result_async()
+        self.spin_until(again.done, f"the restarted learner's answer to the result of {what}")
+        assert again.result().status == GoalStatus.STATUS_UNKNOWN, again.result()
+        return sent
 
     def destroy(self) -> None:
         self.release()
