@@ -35,6 +35,7 @@ from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 
+LEARNER_PROXY = "/learner/follow_joint_trajectory"
 WAIT = 120.0  # s of wall time for a state to come (two busy cores)
 #: rcl's QoS of /rosout (rcl_qos_profile_rosout_default: reliable, transient local, depth 1000, lifespan 10 s)
 ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -54,9 +55,13 @@ class Peer:
         :meth:`destroy`.
     imu : bool
         Publish the accelerometer on ``/tip_imu`` (RELIABLE, deep: the learner's ``topics.imu_reliable``).
+    proxy : str
+        The FollowJointTrajectory action the peer sends its goals to: the learner's (default), or the shaper node's
+        when the learner is not in the goals' path (LIST per move without the payback rule).
     """
 
-    def __init__(self, ctx, controller: str, ex: SingleThreadedExecutor | None = None, imu: bool = False) -> None:
+    def __init__(self, ctx, controller: str, ex: SingleThreadedExecutor | None = None, imu: bool = False,
+                 proxy: str = LEARNER_PROXY) -> None:
         self._own_ex = ex is None
         self.ex = SingleThreadedExecutor(context=ctx) if ex is None else ex
         self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
@@ -76,7 +81,8 @@ class Peer:
                                       else None, ROSOUT)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
         self.server = ActionServer(self.node, FollowJointTrajectory, controller, execute_callback=self._execute)
-        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
+        self.client = ActionClient(self.node, FollowJointTrajectory, proxy)
+        self.through_learner = proxy == LEARNER_PROXY
         self.ex.add_node(self.node)
 
     def hold(self) -> None:
@@ -157,17 +163,18 @@ class Peer:
                          state: pathlib.Path, what: str = "the goal", gone: bool = False) -> JointTrajectory:
         """Kill the learner (``learner``: a NodeProcess) with SIGKILL during a move and start it again.
 
-        The move's START must have been sent. ``trajectory`` goes to the learner's proxy; once the controller
-        received what the learner sent on and runs it (held), ``measure(sent)`` publishes part of the move's
-        residual window, and the learner is killed. Shown on the way: the controller still runs the goal after
-        the kill and finishes it (a robot's controller does not need the learner); the state file is byte for
-        byte as when the goal reached the controller (nothing written since, nothing half written: saves are
-        atomic) and parses; the client (the robot program) never gets the result it asked the killed server for
-        (with ``gone``: it sees the server gone from its graph first, once DDS's lease of the killed process ran
-        out: 20 s, Fast DDS's default); then ``restart()`` starts the learner on the same state file and, once
-        its subscriptions of ``inputs`` and its action server are up, the goal's result asked again is answered
-        ``STATUS_UNKNOWN`` (the restarted learner knows no goal of the killed one): a clear end, no hang.
-        Returns what the controller received."""
+        The move's START must have been sent. ``trajectory`` goes to the proxy (the learner's, or the shaper
+        node's when the learner is not in the goals' path: then the goal's result comes as usual, succeeded, and
+        the checks of the client below are moot); once the controller received it and runs it (held),
+        ``measure(sent)`` publishes part of the move's residual window, and the learner is killed. Shown on the
+        way: the controller still runs the goal after the kill and finishes it (a robot's controller does not
+        need the learner); the state file is byte for byte as when the goal reached the controller (nothing
+        written since, nothing half written: saves are atomic) and parses; the client (the robot program) never
+        gets the result it asked the killed server for (with ``gone``: it sees the server gone from its graph
+        first, once DDS's lease of the killed process ran out: 20 s, Fast DDS's default); then ``restart()``
+        starts the learner on the same state file and, once its subscriptions of ``inputs`` and its action
+        server are up, the goal's result asked again is answered ``STATUS_UNKNOWN`` (the restarted learner knows
+        no goal of the killed one): a clear end, no hang. Returns what the controller received."""
         self.hold()
         handle = self.send(trajectory, what)
         result = handle.get_result_async()
@@ -182,6 +189,12 @@ class Peer:
         self.release()
         self.spin_until(lambda: self.running == 0, f"the end of {what} at the controller")
         assert state.read_bytes() == saved and isinstance(json.loads(saved), dict)
+        if not self.through_learner:  # the learner is not in the goal's path: the goal ends as usual
+            self.spin_until(result.done, f"the result of {what}")
+            assert result.result().status == GoalStatus.STATUS_SUCCEEDED, result.result()
+            restart()
+            self.spin_until(lambda: self.learner_up(inputs, before), "the restarted learner's subscriptions")
+            return sent
         if gone:
             self.spin_until(lambda: not self.client.server_is_ready(), "the killed learner's action server gone from"
                             " the client's graph")
