@@ -135,27 +135,29 @@ class Cell:
     def event(self, kind: int, cycle: int, t: float, move: int) -> None:
         self.peer.event(kind, cycle, t, NAMES, *MOVES[move])
 
-    def imu(self, t0: float, upto: float, ring: float = 0.05) -> None:
-        """The accelerometer from the move's start ``t0`` to ``upto`` s after it, at 500 Hz: gravity, and after the
-        motion a decaying 8 Hz ring of ``ring`` m/s^2."""
-        for k in range(int(round(upto * 500)) + 1):
+    def imu(self, t0: float, upto: float, ring: float = 0.05, since: float = 0.0) -> float:
+        """The accelerometer of the move started at ``t0``, from ``since`` to ``upto`` s after its start, at 500 Hz:
+        gravity, and after the motion a decaying 8 Hz ring of ``ring`` m/s^2; the last sample's stamp, s."""
+        for k in range(int(round(since * 500)), int(round(upto * 500)) + 1):
             t = k / 500
             msg = Imu()
             msg.header.stamp = sec_to_time(t0 + t)
             a = ring * math.exp(-(t - MOTION) / 0.3) * math.sin(2 * math.pi * 8.0 * (t - MOTION)) if t > MOTION else 0.0
             msg.linear_acceleration.x, msg.linear_acceleration.z = a, 9.81
             self.peer.imu.publish(msg)
+        return t0 + t
 
     @staticmethod
-    def window(cycle: int) -> tuple[float, float]:
-        """The cycle's START stamp and its END's (the residual window: 1 s from the shaped command's end)."""
-        t0 = 100.0 + 10.0 * cycle
-        return t0, t0 + MOTION + 1.8
+    def start(cycle: int) -> float:
+        """The cycle's START stamp, s."""
+        return 100.0 + 10.0 * cycle
 
-    def finish(self, cycle: int, move: int, ring: float = 0.05) -> dict[str, float]:
-        """The rest of the cycle after its goal: the accelerometer, MOTION_END, END; the learner's report."""
-        t0, end = self.window(cycle)
-        self.imu(t0, end - t0, ring)
+    def finish(self, cycle: int, move: int, ring: float = 0.05, since: float = 0.0) -> dict[str, float]:
+        """The rest of the cycle after its goal: the accelerometer (from ``since`` s after the START) to 1.8 s after
+        the motion (the residual window: 1 s from the shaped command's end), MOTION_END, END (stamped with the last
+        sample's: the END's wait ends with it); the learner's report."""
+        t0 = self.start(cycle)
+        end = self.imu(t0, MOTION + 1.8, ring, since)
         self.event(CycleEvent.MOTION_END, cycle, t0 + MOTION, move)
         self.event(CycleEvent.END, cycle, end, move)
         return self.peer.report(cycle)
@@ -164,7 +166,7 @@ class Cell:
             ring: Callable[[JointTrajectory], float] = lambda _: 0.05) -> tuple[dict[str, float], JointTrajectory]:
         """One move as one cycle, its goal through the proxy; its report and what the controller received (the
         ring's amplitude ``ring`` of that, m/s^2)."""
-        self.event(CycleEvent.START, cycle, self.window(cycle)[0], move)
+        self.event(CycleEvent.START, cycle, self.start(cycle), move)
         sent = self.peer.run_goal(plan(move), f"the goal of cycle {cycle}")
         return self.finish(cycle, move, ring(sent)), sent
 
@@ -172,7 +174,7 @@ class Cell:
         """The move's cycle interrupted by a kill -9 during its goal, half its window measured, and the learner
         started again (:meth:`relearn_peer.Peer.kill_during_move`); the state file as at the last END. Returns what
         the controller received."""
-        t0 = self.window(cycle)[0]
+        t0 = self.start(cycle)
         self.event(CycleEvent.START, cycle, t0, move)
         saved = self.moves()
         sent = self.peer.kill_during_move(self.learner, self.restart, INPUTS, plan(move),
@@ -182,11 +184,9 @@ class Cell:
         return sent
 
     def end_killed(self, cycle: int, move: int) -> None:
-        """The interrupted cycle's MOTION_END and END at the restarted learner: not learned from."""
-        t0, end = self.window(cycle)
-        self.event(CycleEvent.MOTION_END, cycle, t0 + MOTION, move)
-        self.event(CycleEvent.END, cycle, end, move)
-        got = self.peer.report(cycle)
+        """The interrupted cycle's rest (its accelerometer after the kill, MOTION_END, END) at the restarted learner:
+        not learned from (END without its START)."""
+        got = self.finish(cycle, move, since=MOTION + 0.5 + 1 / 500)
         assert got == {"skipped": 1.0}, got
 
     def ask(self, move: int, with_start: bool) -> tuple[np.ndarray, np.ndarray]:
