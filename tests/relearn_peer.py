@@ -1,5 +1,5 @@
 """The test's side of the per-move learners' tests that drive a learner without the arm: one real node named
-``identifier`` (tests/test_learning_speed_relearn.py, test_learning_mrilc_relearn.py, test_learning_speed_kill.py).
+``identifier`` (tests/test_learning_speed_relearn.py, test_learning_mrilc_relearn.py, test_learning_list_kill.py).
 
 :class:`Peer` publishes the drift watch's status on ``/diagnostics`` through the identifier's own reporter (statuses
 named ``identifier: ...``, as nodes/identifier.py does), the cycle events and (``imu``) the tool accelerometer,

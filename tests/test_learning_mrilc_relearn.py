@@ -18,6 +18,10 @@ iteration 2 (not the 4 it would have reached without the relearn), the other fro
 
 The payload change on the lockstep arm with the identifier's real warning is the demo's ``payload`` case
 (tests/test_demo_payload.py, with the LIST learner); this test drives the MRILC learner's side of it.
+
+Also, on the same rig: a kill -9 during a move (its goal at the controller with the move's correction, half its
+residual window measured) resumes every move's correction from its saved state
+(:func:`test_a_kill_9_during_a_move_resumes_every_moves_correction_from_its_saved_state`).
 """
 
 from __future__ import annotations

@@ -206,7 +206,10 @@ def test_a_kill_9_during_a_move_resumes_every_move_from_its_saved_state(start_no
     state file, every move resumes at its saved factor. The interrupted cycle is not learned from, which is right:
     the factor its goal ran with, its START and half its accelerometer window were in the killed process; the state
     saved at the last END is the state before the cycle, as if it had not run. Its END, arriving at the restarted
-    learner, is reported skipped (END without its START), and the move's next cycle runs at the saved factor."""
+    learner, is reported skipped (END without its START), and the move's next cycle runs at the saved factor. The
+    kill and the restart are :meth:`relearn_peer.Peer.kill_during_move` (the LIST and MRILC per-move learners' kill
+    tests too): the state file not written since the goal reached the controller, the client's result of the goal
+    never from the killed learner, ``STATUS_UNKNOWN`` from the restarted one."""
     state = tmp_path / "learner_state.json"
     params = {"mode": "speed_moves", "state_file": str(state), "end_wait": 10.0, "topics.imu_reliable": True,
               "speed.controller": CONTROLLER, "speed.scheduler": "", "speed.frequency_hz": 10.0,
