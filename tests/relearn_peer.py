@@ -1,24 +1,30 @@
 """The test's side of the per-move learners' tests that drive a learner without the arm: one real node named
-``identifier`` (tests/test_learning_speed_relearn.py, test_learning_mrilc_relearn.py, test_learning_speed_kill.py).
+``identifier`` (tests/test_learning_speed_relearn.py, test_learning_mrilc_relearn.py, test_learning_list_kill.py).
 
 :class:`Peer` publishes the drift watch's status on ``/diagnostics`` through the identifier's own reporter (statuses
 named ``identifier: ...``, as nodes/identifier.py does), the cycle events and (``imu``) the tool accelerometer,
 serves the controller's FollowJointTrajectory action (recording each goal it receives; ``hold``: a goal runs until
 the test releases it), sends goals to the learner's proxy, and keeps the learner's reports, log lines and
-statuses.
+statuses. :meth:`Peer.kill_during_move` kills the learner (its own process) with SIGKILL while a goal of a move runs
+through its proxy at the controller and starts it again (the speed, LIST payback and MRILC per-move learners' tests:
+tests/test_learning_speed_relearn.py, test_learning_kill_during_move.py).
 """
 
 from __future__ import annotations
 
+import json
+import pathlib
 import time
 from collections.abc import Callable, Sequence
 
+from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import Log
 from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory
@@ -29,7 +35,10 @@ from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.diagnostics import Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 
+LEARNER_PROXY = "/learner/follow_joint_trajectory"
 WAIT = 120.0  # s of wall time for a state to come (two busy cores)
+#: rcl's QoS of /rosout (rcl_qos_profile_rosout_default: reliable, transient local, depth 1000, lifespan 10 s)
+ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class Peer:
@@ -46,9 +55,13 @@ class Peer:
         :meth:`destroy`.
     imu : bool
         Publish the accelerometer on ``/tip_imu`` (RELIABLE, deep: the learner's ``topics.imu_reliable``).
+    proxy : str
+        The FollowJointTrajectory action the peer sends its goals to: the learner's (default), or the shaper node's
+        when the learner is not in the goals' path (LIST per move without the payback rule).
     """
 
-    def __init__(self, ctx, controller: str, ex: SingleThreadedExecutor | None = None, imu: bool = False) -> None:
+    def __init__(self, ctx, controller: str, ex: SingleThreadedExecutor | None = None, imu: bool = False,
+                 proxy: str = LEARNER_PROXY) -> None:
         self._own_ex = ex is None
         self.ex = SingleThreadedExecutor(context=ctx) if ex is None else ex
         self.node = Node("identifier", context=ctx)  # statuses named "identifier: ..." as the identifier's
@@ -62,11 +75,14 @@ class Peer:
         self.running = 0  # goals the controller is executing now
         self._held: Future | None = None  # while set, the controller's goals run until it is done
         self.node.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        # /rosout's own QoS (transient local, 10 s lifespan): a line the learner logged before this subscription
+        # matched its publisher (a restarted learner's first lines) still arrives
         self.node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg) if m.name == "learner"
-                                      else None, 100)
+                                      else None, ROSOUT)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.statuses.extend(m.status), 100)
         self.server = ActionServer(self.node, FollowJointTrajectory, controller, execute_callback=self._execute)
-        self.client = ActionClient(self.node, FollowJointTrajectory, "/learner/follow_joint_trajectory")
+        self.client = ActionClient(self.node, FollowJointTrajectory, proxy)
+        self.through_learner = proxy == LEARNER_PROXY
         self.ex.add_node(self.node)
 
     def hold(self) -> None:
@@ -141,6 +157,54 @@ class Peer:
         return all(any(i.node_name == "learner" and bytes(i.endpoint_gid) not in before
                        for i in self.node.get_subscriptions_info_by_topic(topic))
                    for topic in inputs) and self.client.server_is_ready()
+
+    def kill_during_move(self, learner, restart: Callable[[], object], inputs: Sequence[str],
+                         trajectory: JointTrajectory, measure: Callable[[JointTrajectory], object],
+                         state: pathlib.Path, what: str = "the goal", gone: bool = False) -> JointTrajectory:
+        """Kill the learner (``learner``: a NodeProcess) with SIGKILL during a move and start it again.
+
+        The move's START must have been sent. ``trajectory`` goes to the proxy (the learner's, or the shaper
+        node's when the learner is not in the goals' path: then the goal's result comes as usual, succeeded, and
+        the checks of the client below are moot); once the controller received it and runs it (held),
+        ``measure(sent)`` publishes part of the move's residual window, and the learner is killed. Shown on the
+        way: the controller still runs the goal after the kill and finishes it (a robot's controller does not
+        need the learner); the state file is byte for byte as when the goal reached the controller (nothing
+        written since, nothing half written: saves are atomic) and parses; the client (the robot program) never
+        gets the result it asked the killed server for (with ``gone``: it sees the server gone from its graph
+        first, once DDS's lease of the killed process ran out: 20 s, Fast DDS's default); then ``restart()``
+        starts the learner on the same state file and, once its subscriptions of ``inputs`` and its action
+        server are up, the goal's result asked again is answered ``STATUS_UNKNOWN`` (the restarted learner knows
+        no goal of the killed one): a clear end, no hang. Returns what the controller received."""
+        self.hold()
+        handle = self.send(trajectory, what)
+        result = handle.get_result_async()
+        sent, saved = self.goals[-1], state.read_bytes()
+        assert self.running == 1
+        measure(sent)
+        before = self.learner_subscriptions(inputs)
+        assert learner.proc is not None
+        learner.proc.kill()
+        assert learner.proc.wait(timeout=30) == -9
+        assert self.running == 1  # killed during the move
+        self.release()
+        self.spin_until(lambda: self.running == 0, f"the end of {what} at the controller")
+        assert state.read_bytes() == saved and isinstance(json.loads(saved), dict)
+        if not self.through_learner:  # the learner is not in the goal's path: the goal ends as usual
+            self.spin_until(result.done, f"the result of {what}")
+            assert result.result().status == GoalStatus.STATUS_SUCCEEDED, result.result()
+            restart()
+            self.spin_until(lambda: self.learner_up(inputs, before), "the restarted learner's subscriptions")
+            return sent
+        if gone:
+            self.spin_until(lambda: not self.client.server_is_ready(), "the killed learner's action server gone from"
+                            " the client's graph")
+        assert not result.done(), result.result()  # the killed server's answer never comes
+        restart()
+        self.spin_until(lambda: self.learner_up(inputs, before), "the restarted learner's subscriptions and server")
+        again = handle.get_result_async()
+        self.spin_until(again.done, f"the restarted learner's answer to the result of {what}")
+        assert again.result().status == GoalStatus.STATUS_UNKNOWN, again.result()
+        return sent
 
     def destroy(self) -> None:
         self.release()

@@ -18,6 +18,10 @@ iteration 2 (not the 4 it would have reached without the relearn), the other fro
 
 The payload change on the lockstep arm with the identifier's real warning is the demo's ``payload`` case
 (tests/test_demo_payload.py, with the LIST learner); this test drives the MRILC learner's side of it.
+
+Also, on the same rig: a kill -9 during a move (its goal at the controller with the move's correction, half its
+residual window measured) resumes every move's correction from its saved state
+(:func:`test_a_kill_9_during_a_move_resumes_every_moves_correction_from_its_saved_state`).
 """
 
 from __future__ import annotations
@@ -67,40 +71,60 @@ def correction(sent: JointTrajectory, index: int) -> float:
     return float(np.max(np.abs(got - planned)))
 
 
-def run_cycle(peer: Peer, cycle: int, index: int, before_end=None) -> tuple[dict[str, float], float]:
-    """One move as one cycle (START, its goal through the learner's proxy, the accelerometer's window, END); the
-    learner's report (name -> value) and how far the goal the controller received is from the plan (rad).
-    ``before_end`` runs after the goal, before the END."""
-    m = MOVES[index]
-    t0 = 100.0 + 10.0 * cycle
-
-    def event(kind: int, t: float) -> None:
-        peer.event(kind, cycle, t, JOINT_NAMES, m.positions[0], m.positions[-1])
-
-    event(CycleEvent.START, t0)
-    moved = correction(peer.run_goal(goal(index), f"the goal of cycle {cycle}"), index)
-    if before_end is not None:
-        before_end()
-    end = float(m.duration)
-    for k in range(int(round(WINDOW / 1e-3)) + 1):  # every ms, as the learner's grid
+def accelerometer(peer: Peer, t0: float, index: int, upto: float) -> None:
+    """The tool accelerometer of move ``index`` started at ``t0``, every ms up to ``upto`` s after it: gravity, and
+    after the motion a decaying 8 Hz ring."""
+    end = float(MOVES[index].duration)
+    for k in range(int(round(upto / 1e-3)) + 1):  # every ms, as the learner's grid
         t = 1e-3 * k
         msg = Imu()
         msg.header.stamp = sec_to_time(t0 + t)
         ring = 0.05 * math.exp(-(t - end) / 0.4) * math.sin(2 * math.pi * 8.0 * (t - end)) if t > end else 0.0
         msg.linear_acceleration.x, msg.linear_acceleration.z = ring, 9.81 + 0.5 * ring
         peer.imu.publish(msg)
-    event(CycleEvent.MOTION_END, t0 + end)
-    event(CycleEvent.END, t0 + WINDOW)
-    return peer.report(cycle), moved
+
+
+def event(peer: Peer, kind: int, cycle: int, t: float, index: int) -> None:
+    """A cycle event of move ``index``."""
+    m = MOVES[index]
+    peer.event(kind, cycle, t, JOINT_NAMES, m.positions[0], m.positions[-1])
+
+
+def finish_cycle(peer: Peer, cycle: int, index: int) -> dict[str, float]:
+    """The rest of a cycle after its goal: the accelerometer's window, MOTION_END, END; the learner's report."""
+    t0 = 100.0 + 10.0 * cycle
+    accelerometer(peer, t0, index, WINDOW)
+    event(peer, CycleEvent.MOTION_END, cycle, t0 + float(MOVES[index].duration), index)
+    event(peer, CycleEvent.END, cycle, t0 + WINDOW, index)
+    return peer.report(cycle)
+
+
+def run_cycle(peer: Peer, cycle: int, index: int, before_end=None,
+              sent: list[JointTrajectory] | None = None) -> tuple[dict[str, float], float]:
+    """One move as one cycle (START, its goal through the learner's proxy, the accelerometer's window, END); the
+    learner's report (name -> value) and how far the goal the controller received is from the plan (rad).
+    ``before_end`` runs after the goal, before the END; ``sent`` gets what the controller received."""
+    event(peer, CycleEvent.START, cycle, 100.0 + 10.0 * cycle, index)
+    got = peer.run_goal(goal(index), f"the goal of cycle {cycle}")
+    if sent is not None:
+        sent.append(got)
+    if before_end is not None:
+        before_end()
+    return finish_cycle(peer, cycle, index), correction(got, index)
+
+
+def learner_params(state) -> dict:
+    """The learner's parameters (its own process), its state in ``state``."""
+    return {"mode": "mrilc_moves", "state_file": str(state), "topics.imu_reliable": True, "end_wait": 10.0,
+            "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator", "mrilc_moves.controller": CONTROLLER,
+            "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION],
+            "mrilc_moves.match_timeout": 30.0, "mrilc_moves.action_timeout": 60.0}
 
 
 def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_relearned_state(
         start_node, ros_context, tmp_path):
     state = tmp_path / "learner_state.json"
-    params = {"mode": "mrilc_moves", "state_file": str(state), "topics.imu_reliable": True, "end_wait": 10.0,
-              "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator", "mrilc_moves.controller": CONTROLLER,
-              "mrilc_moves.velocity": [MAX_VELOCITY], "mrilc_moves.acceleration": [MAX_ACCELERATION],
-              "mrilc_moves.match_timeout": 30.0, "mrilc_moves.action_timeout": 60.0}
+    params = learner_params(state)
     learner = start_node("shaper_nodes", "learner", params)
     peer = Peer(ros_context, CONTROLLER, imu=True)
 
@@ -199,3 +223,72 @@ def test_the_episode_flag_is_checked_and_an_empty_status_watches_nothing(ros_con
         assert all(sub.topic_name != "/diagnostics" for sub in node.subscriptions)
     finally:
         node.destroy_node()
+
+
+def corrected(index: int, saved: dict) -> np.ndarray:
+    """The positions of move ``index``'s planned goal with the correction of its learner as ``saved`` in the state
+    file (its coefficients on the move's B-splines, the learner's default plan settings), rad."""
+    from shaper_nodes.core.learning.mrilc.plan import PlanSettings, plan_move
+    from shaper_nodes.ros.conversions import duration_to_sec
+
+    traj = goal(index)
+    t = np.array([duration_to_sec(p.time_from_start) for p in traj.points])
+    q, v, a = (np.array([getattr(p, f) for p in traj.points]) for f in ("positions", "velocities", "accelerations"))
+    plan = plan_move(t, q, v, a, MOVES[index].positions[0], PlanSettings())
+    dq, _, _ = plan.profile.correction(np.asarray(saved["learner"]["coefficients"], dtype=float))
+    return q + dq
+
+
+def test_a_kill_9_during_a_move_resumes_every_moves_correction_from_its_saved_state(start_node, ros_context, tmp_path):
+    """The learner is killed (SIGKILL) while a goal of a move runs at the controller with the move's correction and half
+    its residual window is measured (:meth:`relearn_peer.Peer.kill_during_move`: the controller finishes the goal,
+    the state file was not written since the last END and parses, the client's result never comes from the killed
+    server, and the restarted learner answers the goal's result ``STATUS_UNKNOWN``, no hang). Started again on the
+    same state file: the interrupted cycle's END is not learned from (END without its START); each move's next
+    goal reaches the controller with the correction saved in the state file (its coefficients on the move's
+    B-splines added to the plan), the same points as before the kill, and its learner resumes at the iteration
+    after its last saved one."""
+    state = tmp_path / "learner_state.json"
+    params = learner_params(state)
+    learner = start_node("shaper_nodes", "learner", params)
+    peer = Peer(ros_context, CONTROLLER, imu=True)
+    sent: list[JointTrajectory] = []
+
+    def saved() -> dict:
+        return json.loads(state.read_text())["moves"]
+
+    try:
+        peer.spin_until(lambda: peer.learner_up(INPUTS, set()), "the learner's subscriptions and action server")
+        for cycle, index, iteration in ((0, 0, 1.0), (1, 1, 1.0), (2, 0, 2.0)):
+            m, _ = run_cycle(peer, cycle, index, sent=sent)
+            assert m["iteration"] == iteration and m["limit_excess"] == 0.0, (cycle, m)
+        before = saved()
+        assert [before[k]["learner"]["cycle"] for k in KEYS] == [3, 2]
+
+        # cycle 3, home -> pick with its correction: killed while the controller runs its goal, half its window
+        t0 = 130.0
+        event(peer, CycleEvent.START, 3, t0, 0)
+        half = float(MOVES[0].duration) + 0.5 * (WINDOW - float(MOVES[0].duration))
+        killed = peer.kill_during_move(learner, lambda: start_node("shaper_nodes", "learner", params), INPUTS,
+                                       goal(0), lambda _: accelerometer(peer, t0, 0, half), state,
+                                       "the goal of cycle 3")
+        assert saved() == before  # the interrupted cycle not learned from
+        want = [corrected(i, before[k]) for i, k in enumerate(KEYS)]
+        got = np.array([p.positions for p in killed.points])
+        assert correction(killed, 0) > 0.0
+        np.testing.assert_allclose(got, want[0], rtol=0, atol=1e-12)
+        assert finish_cycle(peer, 3, 0) == {"skipped": 1.0}  # the interrupted cycle's END at the restarted learner
+
+        # every move resumes from its saved state: its saved correction at the controller, the next iteration
+        for cycle, index, iteration in ((4, 0, 3.0), (5, 1, 2.0)):
+            m, moved = run_cycle(peer, cycle, index, sent=sent)
+            assert m["iteration"] == iteration and moved > 0.0 and m["limit_excess"] == 0.0, (cycle, m)
+            got = np.array([p.positions for p in sent[-1].points])
+            np.testing.assert_allclose(got, want[index], rtol=0, atol=1e-12)
+        assert [p.positions for p in sent[-2].points] == [p.positions for p in killed.points]
+        for k in KEYS:
+            peer.spin_until(lambda k=k: any(f"move {k}: resumes at cycle" in line for line in peer.logs),
+                            f"the restarted learner's line of move {k}")
+        assert [saved()[k]["learner"]["cycle"] for k in KEYS] == [4, 3]
+    finally:
+        peer.destroy()

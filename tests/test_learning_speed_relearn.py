@@ -206,7 +206,10 @@ def test_a_kill_9_during_a_move_resumes_every_move_from_its_saved_state(start_no
     state file, every move resumes at its saved factor. The interrupted cycle is not learned from, which is right:
     the factor its goal ran with, its START and half its accelerometer window were in the killed process; the state
     saved at the last END is the state before the cycle, as if it had not run. Its END, arriving at the restarted
-    learner, is reported skipped (END without its START), and the move's next cycle runs at the saved factor."""
+    learner, is reported skipped (END without its START), and the move's next cycle runs at the saved factor. The
+    kill and the restart are :meth:`relearn_peer.Peer.kill_during_move` (the LIST and MRILC per-move learners' kill
+    tests too): the state file not written since the goal reached the controller, the client's result of the goal
+    never from the killed learner, ``STATUS_UNKNOWN`` from the restarted one."""
     state = tmp_path / "learner_state.json"
     params = {"mode": "speed_moves", "state_file": str(state), "end_wait": 10.0, "topics.imu_reliable": True,
               "speed.controller": CONTROLLER, "speed.scheduler": "", "speed.frequency_hz": 10.0,
@@ -239,26 +242,18 @@ def test_a_kill_9_during_a_move_resumes_every_move_from_its_saved_state(start_no
         assert [saved[k]["speed"]["factor"] for k in keys] == pytest.approx([1.4, 1.2])
         assert [saved[k]["cycles"] for k in keys] == [2, 1]
 
-        # cycle 3, pick -> home at 1.2: accepted, at the controller, which runs it; half its window measured
-        peer.hold()
+        # cycle 3, pick -> home at 1.2: killed while the controller runs its goal, half its window measured (the
+        # window runs to motion + 1.0 s); started again on the same state file
         t0 = 130.0
         event(peer, CycleEvent.START, 3, t0, 1)
-        peer.send(plan(1), "the goal of cycle 3")
-        motion = motion_end(peer.goals[-1])
-        assert motion == pytest.approx(MOTION / 1.2, abs=1e-6) and peer.running == 1
-        imu_window(peer, t0, motion, motion + 0.5)  # the window runs to motion + 1.0 s
-        before = peer.learner_subscriptions(inputs)
-        assert learner.proc is not None
-        learner.proc.kill()
-        assert learner.proc.wait(timeout=30) == -9
-        assert peer.running == 1  # killed during the move
-        peer.release()  # the controller finishes the move (a robot's controller does not need the learner)
-        peer.spin_until(lambda: peer.running == 0, "the end of the move at the controller")
+        sent = peer.kill_during_move(learner, lambda: start_node("shaper_nodes", "learner", params), inputs, plan(1),
+                                     lambda g: imu_window(peer, t0, motion_end(g), motion_end(g) + 0.5), state,
+                                     "the goal of cycle 3")
+        motion = motion_end(sent)
+        assert motion == pytest.approx(MOTION / 1.2, abs=1e-6)
         assert moves() == saved  # the state file: as at the last END
-
-        start_node("shaper_nodes", "learner", params)
-        peer.spin_until(lambda: peer.learner_up(inputs, before), "the restarted learner's subscriptions and server")
-        event(peer, CycleEvent.END, 3, t0 + motion + 1.2, 1)  # the interrupted cycle's END: not learned from
+        # the interrupted cycle's accelerometer (the restarted learner had none of it) and END: not learned from
+        event(peer, CycleEvent.END, 3, imu_window(peer, t0, motion, motion + 1.2), 1)
         assert peer.report(3) == {"skipped": 1.0}
         # every move resumes from its saved state: home -> pick at 1.4, pick -> home at 1.2 (its interrupted cycle
         # neither raised nor lowered it)
