@@ -317,7 +317,8 @@ class ElasticArm:
         return self._q.copy(), self._v.copy()
 
     def motor_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Copies of :attr:`motor_position` and :attr:`motor_velocity` (from the step's views, as :meth:`link_state`)."""
+        """Copies of :attr:`motor_position` and :attr:`motor_velocity` (from the step's views, as
+        :meth:`link_state`)."""
         return self._theta.copy(), self._theta_dot.copy()
 
     def step(self, setpoint: np.ndarray, velocity: np.ndarray | None = None) -> None:
