@@ -29,7 +29,8 @@ lockstep
     of N steps go out as one block. Asks, blocks and late answers follow :mod:`shaper_nodes.core.lockstep`.
     With ``lockstep.readers`` it never steps more than ``lockstep.lead`` beyond the slowest of those readers'
     acknowledgements (:class:`.lockstep.Readers`: taken from their queues when a step needs them, waited on only
-    while a reader holds the plant), and its per-step streams are reliable and 10000 deep.
+    while a reader holds the plant), and its per-step streams are reliable and 10000 deep. The per-step writes of
+    up to 10 periods go out together, in order, and all of them before anything else (:class:`.sensors.WriteBatch`).
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
