@@ -49,7 +49,7 @@ class WriteBatch:
     periods of simulated time (milliseconds of wall time at the plant's lockstep rates). Why: a write to a reader costs
     the writing thread 5.5-7 us against 1.5 with none, and interleaved with the stepping each one found the reader's
     DDS receive thread asleep; written together (issue 34, session 11, with a drained reader): the plant's main thread
-    0.87x and the reader's process 0.84x of their CPU per simulated s, though a write timed alone inside a batch
+    0.87x and the reader's process 0.85x of their CPU per simulated s, though a write timed alone inside a batch
     costs about what it did (the gain is around the writes: fewer wake-ups of the reader on the two cores the plant
     shares, and, presumably, Fast DDS's code and the port's memory kept in cache for a burst; not measured apart).
 
