@@ -256,3 +256,22 @@ def test_the_modes_as_simulated_are_unchanged_by_the_schur_complement_step(model
     got, expected = np.array(got), np.array(expected)
     np.testing.assert_allclose(got[:, 0], expected[:, 0], rtol=1e-6)
     np.testing.assert_allclose(got[:, 1], expected[:, 1], rtol=1e-5)
+
+
+def test_the_plant_s_joint_and_tip_states_are_its_properties_to_the_bit():
+    """ArmPlant.joint_state and tip_state (read from the step's views) are base_position, base_velocity, effort,
+    tip_position and tip_velocity, as copies, over a move and after a reset (the views made again)."""
+    from sim_plant_node.arm.plant import ArmPlant
+
+    plant = ArmPlant(500.0, 2)
+    for pose in (HOME, np.array(POSES["near"])):
+        plant.reset(pose)
+        for k in range(60):
+            plant.step(pose + 0.002 * k, velocity=np.full(6, 0.5) if k % 2 else None)
+            got = (*plant.joint_state(), *plant.tip_state())
+            want = (plant.base_position, plant.base_velocity, plant.effort, plant.tip_position, plant.tip_velocity)
+            for g, w in zip(got, want, strict=True):
+                assert g.tobytes() == w.tobytes()
+            for g in got:  # copies: the next step does not change them
+                g += 1.0
+            assert plant.base_position.tobytes() == want[0].tobytes()

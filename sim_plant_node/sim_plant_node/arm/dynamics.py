@@ -246,6 +246,7 @@ class ElasticArm:
         self._q, self._v, self._a = st[:n], st[2 * n:3 * n], st[4 * n:5 * n]
         self._pos, self._vel, self._pos_vel, self._acc = st[:2 * n], st[2 * n:4 * n], st[:4 * n], st[4 * n:]
         self._acc_link, self._acc_motor = st[4 * n:5 * n], st[5 * n:]
+        self._theta, self._theta_dot = st[n:2 * n], st[3 * n:4 * n]  # (motor_position, motor_velocity)
         self._y = np.zeros(6 * n)  # (tau, b, x_pred, x'_pred) less the drive
         self._y_tau, self._y_b, self._y_pred = self._y[:n], self._y[n:2 * n], self._y[2 * n:]
         self._tau, self._motor, self._coupling, self._inc = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(2 * n)
@@ -310,6 +311,15 @@ class ElasticArm:
     @property
     def motor_velocity(self) -> np.ndarray:
         return self.xd[self.n:]
+
+    def link_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of :attr:`q` and :attr:`v` (read from the step's views: a period's per-step outputs take them)."""
+        return self._q.copy(), self._v.copy()
+
+    def motor_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of :attr:`motor_position` and :attr:`motor_velocity` (from the step's views, as
+        :meth:`link_state`)."""
+        return self._theta.copy(), self._theta_dot.copy()
 
     def step(self, setpoint: np.ndarray, velocity: np.ndarray | None = None) -> None:
         """Advance one step holding the loop's setpoint (rad) and velocity feedforward (rad/s)."""

@@ -140,6 +140,17 @@ class ArmPlant(PlantBase):
     def tip_velocity(self) -> np.ndarray:
         return self.arm.v.copy()
 
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Motor positions and velocities and the motor torques (:attr:`base_position`, :attr:`base_velocity`,
+        :attr:`effort`), read once per period by the controller and once by /joint_states: without the properties'
+        chains of slices."""
+        position, velocity = self.arm.motor_state()
+        return position, velocity, self.arm.torque.copy()
+
+    def tip_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`tip_position` and :attr:`tip_velocity` (as :meth:`joint_state`)."""
+        return self.arm.link_state()
+
     @property
     def tip_acceleration(self) -> np.ndarray:
         """The last IMU specific force (x, y, z of the flange, m/s^2), padded to the joint count."""

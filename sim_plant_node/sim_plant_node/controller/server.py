@@ -69,13 +69,17 @@ class ControllerServer:
         Names of the action and the trajectory topic.
     on_trajectory : callable, optional
         Called after the controller took a trajectory (from the action or the topic): the node steps from then on.
+    before_feedback : callable, optional
+        Called before each feedback message goes out (the node writes the periods' states it keeps first).
     """
 
     def __init__(self, node: Node, controller: JointTrajectoryController, now: Callable[[], float],
                  measured: Callable[[], tuple[np.ndarray, np.ndarray]], busy: Callable[[], str | None],
-                 action: str, topic: str, on_trajectory: Callable[[], None] | None = None) -> None:
+                 action: str, topic: str, on_trajectory: Callable[[], None] | None = None,
+                 before_feedback: Callable[[], None] | None = None) -> None:
         self.node = node
         self._on_trajectory = on_trajectory
+        self._before_feedback = before_feedback
         self.controller = controller
         self._now = now
         self._measured = measured
@@ -196,6 +200,8 @@ class ControllerServer:
                                           accelerations=c.desired[2].tolist())
         fb.actual = JointTrajectoryPoint(positions=position.tolist(), velocities=velocity.tolist())
         fb.error = JointTrajectoryPoint(positions=c.error.tolist(), velocities=(c.desired[1] - velocity).tolist())
+        if self._before_feedback is not None:
+            self._before_feedback()
         self._active[0].publish_feedback(fb)
 
     @property

@@ -29,7 +29,8 @@ lockstep
     of N steps go out as one block. Asks, blocks and late answers follow :mod:`shaper_nodes.core.lockstep`.
     With ``lockstep.readers`` it never steps more than ``lockstep.lead`` beyond the slowest of those readers'
     acknowledgements (:class:`.lockstep.Readers`: taken from their queues when a step needs them, waited on only
-    while a reader holds the plant), and its per-step streams are reliable and 10000 deep.
+    while a reader holds the plant), and its per-step streams are reliable and 10000 deep. The per-step writes of
+    up to 10 periods go out together, in order, and all of them before anything else (:class:`.sensors.WriteBatch`).
 realtime
     Wall-clock rate; the latest shaped setpoint received is applied each period.
 """
@@ -72,7 +73,7 @@ from .feedforward import Feedforward
 from .lockstep import Exchange, Readers
 from .models import START_ONLY, PlantValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
-from .sensors import Sensors, StateBytes, writer
+from .sensors import Sensors, StateBytes, WriteBatch, writer
 from .writer_profile import use_writer_profile
 
 __all__ = ["IDLE_STATE_PERIOD", "LOCKSTEP_IMU_QOS", "MODELS", "PARAMETERS", "WAITING", "SimPlantNode", "main"]
@@ -121,7 +122,11 @@ class SimPlantNode(Node):
         # writer keeps 10000 for a reliable reader, and still matches best-effort readers as a sensor driver does
         imu_pub = self.create_publisher(Imu, t.imu, LOCKSTEP_IMU_QOS if self.mode == "lockstep"
                                         else qos_profile_sensor_data)
-        self.sensors = Sensors(self.joint_names, p.imu, p.joint_states, imu_pub, self._monitor)
+        # lockstep: the per-step writes of a few periods go out together (.sensors.WriteBatch)
+        self._batch = WriteBatch()
+        batch = self._batch if self.mode == "lockstep" else None
+        keep = self._batch.deferred if batch is not None else (lambda write: write)
+        self.sensors = Sensors(self.joint_names, p.imu, p.joint_states, imu_pub, self._monitor, batch)
         # the tip state and the reference as serialized bytes written in place (no message objects per step)
         self._tip_bytes, self._ref_bytes = StateBytes(self.joint_names), StateBytes(self.joint_names)
         self._event_pub = self.create_publisher(CycleEvent, t.cycle_events, 10)
@@ -130,11 +135,12 @@ class SimPlantNode(Node):
         self._clock_pub = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
         self._ref_pub = self.create_publisher(JointState, t.reference, deep)
         # the per-step streams' writes and the optional ones' subscriber counts, without rclpy's per-call wrapper
-        self._js_write, self._tip_write, self._ref_write = (writer(pub) for pub in (self._js_pub, self._tip_pub,
-                                                                                 self._ref_pub))
+        self._js_write, self._tip_write, self._ref_write = (keep(writer(pub)) for pub in (self._js_pub, self._tip_pub,
+                                                                                       self._ref_pub))
+        self._loop_write = keep(self._loop_pub.publish)
         self._tip_count = self._tip_pub.handle.get_subscription_count
         self._ref_count = self._ref_pub.handle.get_subscription_count
-        self._clock_write = None if self._clock_pub is None else writer(self._clock_pub)
+        self._clock_write = None if self._clock_pub is None else keep(writer(self._clock_pub))
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward, qos_profile=SERVICE_QOS)
         self._ff = Feedforward()
         self._cmd_sub = self.create_subscription(Float64MultiArray, t.command_in, self._on_command, 10)
@@ -170,7 +176,8 @@ class SimPlantNode(Node):
                                        list(p.jtc.goal_tolerance), float(p.jtc.goal_time))
             self.jtc = ControllerServer(self, JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate,
                                         defaults, self._applied), self._now, lambda: self.plant.joint_state()[:2],
-                                        self._jtc_busy, t.jtc_action, t.jtc_topic, self._trajectory_taken)
+                                        self._jtc_busy, t.jtc_action, t.jtc_topic, self._trajectory_taken,
+                                        before_feedback=self._batch.flush)
             if self.mode == "lockstep":
                 self._free_timer = self.create_timer(0.002, self._free_run)
         idle = float(p.joint_states.idle_period)
@@ -182,6 +189,7 @@ class SimPlantNode(Node):
         if self.mode == "lockstep":
             self.create_timer(0.05, self._watchdog)  # (also looks again at readers that hold a task's next ask)
             self._publish_clock()
+            self._batch.flush()
         else:
             self.create_timer(1.0 / self.rate, self._realtime_tick)
         if p.task.autostart:
@@ -328,10 +336,13 @@ class SimPlantNode(Node):
             self._begin_step(events, preroll_end)
             self._integrate(self._applied if shaped is None else shaped[i])
             self._publish_clock()
+            self._batch.period()
+        self._batch.flush()  # (the steps' writes before the next ask)
         if self.task is not None:
             self._publish_next()
 
     def _emit_event(self, ev, t: float) -> None:
+        self._batch.flush()  # the steps before the event go out before it
         msg = CycleEvent(event=ev.kind, cycle=ev.cycle, task=str(self.params.value.task.name),
                          joint_names=self.joint_names, start_positions=ev.start.tolist(),
                          goal_positions=ev.goal.tolist())
@@ -380,7 +391,7 @@ class SimPlantNode(Node):
             loop = JointState(name=[f"{j}/{s}" for s in self.plant.loop_signals for j in self.joint_names],
                               position=signals.tolist())
             loop.header.stamp = sec_to_time(t)
-            self._loop_pub.publish(loop)
+            self._loop_write(loop)
         for stamp, force, rate in self.plant.imu(t_start, t, self._axes):
             self.sensors.publish_imu(stamp, force, rate)
         self._monitor.add_positions(t, self._applied)
@@ -414,13 +425,17 @@ class SimPlantNode(Node):
         if self.task is not None or self.exchange.waiting_since is not None:
             return
         deadline = time.monotonic() + 0.02
-        while self.jtc.running and time.monotonic() < deadline:
-            if not self.readers.may_step(self.sim_time + 1.0 / self.rate):  # held: resumed by an acknowledgement
-                self._free_held = True
-                self._free_timer.cancel()
-                return
-            self._jtc_step()
-            self._publish_clock()  # the commanded positions (what "at rest" means)
+        try:
+            while self.jtc.running and time.monotonic() < deadline:
+                if not self.readers.may_step(self.sim_time + 1.0 / self.rate):  # held: resumed by an acknowledgement
+                    self._free_held = True
+                    self._free_timer.cancel()
+                    return
+                self._jtc_step()
+                self._publish_clock()  # the commanded positions (what "at rest" means)
+                self._batch.period()
+        finally:
+            self._batch.flush()  # (before a hold, the goal's result, the next callback)
 
     def _trajectory_taken(self) -> None:
         """The controller took a trajectory: its idle timer runs again (lockstep)."""
