@@ -525,6 +525,35 @@ def test_one_plant_is_one_group():
     assert group_cycles([(0, [mode]), (1, [vague])]) == [[0, 1]]
 
 
+def test_modes_that_change_with_the_shaper_are_not_called_a_plant_change():
+    """The arm demo's recording (one cycle unshaped, then with the calibrated ZV): the unshaped cycle rings at 12.15
+    and 20.78 Hz, the shaped one only at 9.95 Hz, as the ZV cancels the others. The headline names the shaper change,
+    not a payload, tool or pose change; with one shaper on both sides it is a plant change, as before."""
+    from types import SimpleNamespace
+
+    from shaper_nodes.analysis.analyze import CHANGED_DURING, CycleRow, plant_changes
+    from shaper_nodes.analysis.groups import ModeGroup
+
+    def mode(hz: float) -> ModeFit:
+        return ModeFit(2 * math.pi * hz, 0.03, 0.01, 0.001, 0.1, "fit")
+
+    def row(cycle: int, shaper: str) -> CycleRow:
+        return CycleRow(cycle, 0.0, 0.0, 0.0, 1.0, 0.02, 0.1, 500, 0.01, shaper, None)
+
+    groups = [ModeGroup([0], [0], [mode(12.15), mode(20.78)]), ModeGroup([1], [1], [mode(9.951)])]
+    zv = "zv (8 imp., 115.5 ms)"
+    for shapers, first in ((["none", zv], "MODES CHANGE between cycle 0 and cycle 1 with the shaper (none -> " + zv),
+                           (["none", zv + CHANGED_DURING], "MODES CHANGE between cycle 0 and cycle 1 with the shaper"),
+                           ([zv, zv], "PLANT CHANGE between cycle 0 and cycle 1 (a payload, tool or pose change)"),
+                           (["unknown", zv], "PLANT CHANGE between cycle 0 and cycle 1 (a payload")):
+        an = SimpleNamespace(groups=groups, cycles=[row(i, s) for i, s in enumerate(shapers)],
+                             ringing_issue=lambda m: "")
+        line, = plant_changes(an, groups[1])  # type: ignore[arg-type]
+        assert line.startswith(first), line
+        assert "modes 12.15 / 20.78 Hz -> 9.951 Hz (lowest -18.1 %)" in line
+        assert ("need not be a payload, tool or pose change" in line) == line.startswith("MODES CHANGE")
+
+
 def test_settling_is_measured_to_the_noise_floor(tmp_path):
     """A well damped mode decays into the accelerometer noise within the window: with a band asked
     for below the noise (0.001 m/s^2 against 0.01 m/s^2 noise) every cycle still settles, into a band of
