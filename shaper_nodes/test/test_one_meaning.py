@@ -156,7 +156,7 @@ def test_a_refusal_names_whose_parameters_a_params_file_keyed_by_name_holds(tmp_
     assert "/left_arm_shaper only" in hint and "-r __node:=left_arm_shaper" in hint and "\n" not in hint
     renamed = ["shaper_node", "--ros-args", "-r", "__node:=left_arm_shaper", "--params-file", str(dump)]
     assert params_file_keys_hint(renamed) == ""
-    assert "/left_arm_shaper only" in params_file_keys_hint(renamed[:3] + ["__node:=right"] + renamed[4:])
+    assert "/left_arm_shaper only" in params_file_keys_hint([*renamed[:3], "__node:=right", *renamed[4:]])
     shipped = tmp_path / "any.yaml"
     shipped.write_text("/**:\n  ros__parameters:\n    joint_names: [a]\n")
     assert params_file_keys_hint(["shaper_node", "--ros-args", "--params-file", str(shipped)]) == ""
