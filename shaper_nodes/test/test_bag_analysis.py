@@ -539,6 +539,74 @@ def test_one_plant_is_one_group():
     assert group_cycles([(0, [mode]), (1, [vague])]) == [[0, 1]]
 
 
+def test_modes_that_change_with_the_shaper_are_not_called_a_plant_change():
+    """The arm demo's recording (one cycle unshaped, then with the calibrated ZV): the unshaped cycle rings at 12.15
+    and 20.78 Hz, the shaped one only at 9.95 Hz, as the ZV cancels the others. The headline names the shaper change,
+    not a payload, tool or pose change; with one shaper on both sides it is a plant change, as before."""
+    from types import SimpleNamespace
+
+    from shaper_nodes.analysis.analyze import CHANGED_DURING, CycleRow, plant_changes
+    from shaper_nodes.analysis.groups import ModeGroup
+
+    def mode(hz: float) -> ModeFit:
+        return ModeFit(2 * math.pi * hz, 0.03, 0.01, 0.001, 0.1, "fit")
+
+    def row(cycle: int, shaper: str) -> CycleRow:
+        return CycleRow(cycle, 0.0, 0.0, 0.0, 1.0, 0.02, 0.1, 500, 0.01, shaper, None)
+
+    groups = [ModeGroup([0], [0], [mode(12.15), mode(20.78)]), ModeGroup([1], [1], [mode(9.951)])]
+    zv = "zv (8 imp., 115.5 ms)"
+    for shapers, first in ((["none", zv], "MODES CHANGE between cycle 0 and cycle 1 with the shaper (none -> " + zv),
+                           (["none", zv + CHANGED_DURING], "MODES CHANGE between cycle 0 and cycle 1 with the shaper"),
+                           ([zv, zv], "PLANT CHANGE between cycle 0 and cycle 1 (a payload, tool or pose change)"),
+                           (["unknown", zv], "PLANT CHANGE between cycle 0 and cycle 1 (a payload")):
+        an = SimpleNamespace(groups=groups, cycles=[row(i, s) for i, s in enumerate(shapers)],
+                             ringing_issue=lambda m: "")
+        line, = plant_changes(an, groups[1])  # type: ignore[arg-type]
+        assert line.startswith(first), line
+        assert "modes 12.15 / 20.78 Hz -> 9.951 Hz (lowest -18.1 %)" in line
+        assert ("need not be a payload, tool or pose change" in line) == line.startswith("MODES CHANGE")
+
+
+def test_samples_stamped_0_among_stamped_ones_are_left_out(tmp_path):
+    """The lockstep sim plant stamps its joint states at rest 0 before its first step, then simulated time; a
+    recording begun before the first move had them timed by their log time (wall clock, 1.8e9 s), far from the
+    others, and the whole recording came out as one move from there (session 11). They are left out, with a note;
+    a stream stamped 0 throughout (IMU here) is still timed by its log times."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    T = store.types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+
+    def hdr(ns: int):
+        return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="")
+
+    with Writer(tmp_path / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        imu = w.add_connection("/tip_imu", "sensor_msgs/msg/Imu", typestore=store)
+        js = w.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+        log0 = 1_795_929_383 * 10**9
+        for k in range(5):  # at rest before the first step: stamped 0
+            w.write(js, log0 + k * 10**8, store.serialize_cdr(T["sensor_msgs/msg/JointState"](
+                header=hdr(0), name=["j"], position=np.zeros(1), velocity=np.zeros(0), effort=np.zeros(0)),
+                "sensor_msgs/msg/JointState"))
+        for k in range(1, 201):  # simulated time, 2 ms a step; the IMU unstamped
+            ns = k * 2_000_000
+            w.write(js, log0 + 10**9 + ns, store.serialize_cdr(T["sensor_msgs/msg/JointState"](
+                header=hdr(ns), name=["j"], position=np.array([1e-3 * k]), velocity=np.zeros(0), effort=np.zeros(0)),
+                "sensor_msgs/msg/JointState"))
+            w.write(imu, log0 + 10**9 + ns, store.serialize_cdr(T["sensor_msgs/msg/Imu"](
+                header=hdr(0), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=np.zeros(9),
+                angular_velocity=Vec(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=Vec(x=float(k), y=0.0, z=0.0), linear_acceleration_covariance=np.zeros(9)),
+                "sensor_msgs/msg/Imu"))
+    rec = read_recording(tmp_path / "bag")
+    assert rec.joints is not None and len(rec.joints.t) == 200
+    assert rec.joints.t[0] == pytest.approx(0.002) and rec.joints.t[-1] == pytest.approx(0.4)
+    assert any("/joint_states: 5 sample(s) stamped 0 left out" in n for n in rec.notes), rec.notes
+    assert len(rec.accel.t) == 200 and rec.accel.t[0] == pytest.approx(1_795_929_384.002)  # log times
+    assert not any(n.startswith("/tip_imu") and "stamped 0" in n for n in rec.notes)
+
+
 def test_settling_is_measured_to_the_noise_floor(tmp_path):
     """A well damped mode decays into the accelerometer noise within the window: with a band asked
     for below the noise (0.001 m/s^2 against 0.01 m/s^2 noise) every cycle still settles, into a band of

@@ -139,6 +139,21 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def test_a_pool_left_by_an_exception_has_wound_down_when_the_with_ends():
+    """calibrate's abort leaves the pool by an exception with its workers identifying (or warming up): the
+    workers are ended and the pool's manager thread has wound down (its wake-up pipe closed) when the ``with``
+    ends, so the interpreter's exit does not wake it while it closes that pipe (an EBADF traceback at exit)."""
+    from shaper_nodes.analysis.worker_pool import worker_pool
+
+    with pytest.raises(RuntimeError, match="abort"), worker_pool(2) as pool:
+        futures = [pool.submit(time.sleep, 600.0) for _ in range(2)]
+        manager, processes = pool._executor_manager_thread, list(pool._processes.values())
+        raise RuntimeError("abort")
+    assert manager is not None and not manager.is_alive()
+    assert all(not p.is_alive() for p in processes)
+    assert all(f.cancelled() or f.done() for f in futures)
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
 def test_kill_9_of_the_analysis_leaves_no_worker_alive():
     """The analysis' pool (as calibrate and --from-bag run it) killed with -9 while its two workers

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from shaper_nodes.nodes import calibrator as calibrator_module
@@ -78,3 +79,25 @@ def test_no_answer_from_a_server_in_the_graph_ends_at_the_bound():
         with pytest.raises(Aborted, match="no answer and no feedback from the controller for 120 s"):
             cal._await_answer(SimpleNamespace(done=world.done), "the approach to pose 0 (home)")
         assert world.t >= 120.0 and cal.peer_lost
+
+
+@pytest.mark.parametrize(("server_ready", "words"), [
+    (False, "no FollowJointTrajectory server /controller/follow within 120 s"),
+    (True, "no publisher of /tip_imu (the accelerometer) within 120 s"),
+])
+def test_what_a_move_waited_for_in_vain_is_named(server_ready, words):
+    """Before a move calibrate waits for the controller's action server, then for the accelerometer's publisher; a
+    wait that ends says which, in words (it said "no a publisher of /tip_imu", "no the FollowJointTrajectory
+    server ...": session 11, the accelerometer remapped away)."""
+    from shaper_nodes.core.calibration import Waypoint
+
+    with pytest.MonkeyPatch.context() as mp:
+        world = World(out_from=1e9, back_at=1e9, answer_at=None)
+        cal = calibrator(world, mp)
+        cal.names, cal.imu_topic = ["j1"], "/tip_imu"
+        cal._fjt = SimpleNamespace(Goal=lambda trajectory: trajectory)
+        cal.action = SimpleNamespace(server_is_ready=lambda: server_ready)
+        cal._imu_sub = SimpleNamespace(get_publisher_count=lambda: 0)
+        with pytest.raises(Aborted) as stop:
+            cal.move((Waypoint(0.0, np.zeros(1)), Waypoint(1.0, np.ones(1))), "the approach to pose 0 (home)")
+        assert str(stop.value) == words

@@ -18,7 +18,7 @@ from shaper_nodes.nodes.shaper_parameters import (
     displacement,
     ineffective,
 )
-from shaper_nodes.ros.node_main import params_file_problem, params_files
+from shaper_nodes.ros.node_main import params_file_keys_hint, params_file_problem, params_files
 from shaper_nodes.ros.parameters import Spec
 
 RATE = 500.0  # Hz: designs must lie below 125 Hz
@@ -144,6 +144,23 @@ def test_a_params_file_as_ros2_param_dump_writes_it_is_taken(tmp_path):
     path = tmp_path / "dump.yaml"
     path.write_text("/shaper:\n  ros__parameters:\n    limits:\n      position_lower: []\n    use_sim_time: false\n")
     assert params_file_problem(["node", "--ros-args", "--params-file", str(path)]) is None
+
+
+def test_a_refusal_names_whose_parameters_a_params_file_keyed_by_name_holds(tmp_path):
+    """`ros2 param dump /left_arm_shaper > dump.yaml`, then `shaper_node --ros-args --params-file dump.yaml`: the
+    node, named shaper, takes none of the file and refuses its missing joint_names; the refusal adds whose the
+    file's parameters are. No note for a file keyed /** or for a node renamed to the file's key."""
+    dump = tmp_path / "dump.yaml"
+    dump.write_text("/left_arm_shaper:\n  ros__parameters:\n    joint_names: [a]\n")
+    hint = params_file_keys_hint(["shaper_node", "--ros-args", "--params-file", str(dump)])
+    assert "/left_arm_shaper only" in hint and "-r __node:=left_arm_shaper" in hint and "\n" not in hint
+    renamed = ["shaper_node", "--ros-args", "-r", "__node:=left_arm_shaper", "--params-file", str(dump)]
+    assert params_file_keys_hint(renamed) == ""
+    assert "/left_arm_shaper only" in params_file_keys_hint([*renamed[:3], "__node:=right", *renamed[4:]])
+    shipped = tmp_path / "any.yaml"
+    shipped.write_text("/**:\n  ros__parameters:\n    joint_names: [a]\n")
+    assert params_file_keys_hint(["shaper_node", "--ros-args", "--params-file", str(shipped)]) == ""
+    assert params_file_keys_hint(["shaper_node"]) == ""
 
 
 def test_an_array_parameter_takes_no_value_as_the_empty_array():

@@ -96,6 +96,7 @@ def test_chunks_are_closed_by_time_and_flushed_for_low_rate_topics(tmp_path):
         assert reader.topics["/events"].msgcount == 3
         beats = reader.topics[HEARTBEAT].msgcount
         assert beats >= 3
+    assert rec.bag.counts == {"/events": 3, HEARTBEAT: beats}  # what the recorder's closing line prints
     with open(file, "rb") as f:
         summary = make_reader(f).get_summary()
         assert summary is not None and summary.statistics.message_count == 3 + beats

@@ -55,6 +55,8 @@ from .streams import Recording, Signal
 if TYPE_CHECKING:
     pass
 
+#: added to a cycle's shaper label when another shaper became active before its END
+CHANGED_DURING = " (changed during the cycle)"
 #: active shapers that let through at least this V count for the unshaped level
 MIN_V_FOR_LEVEL = 0.2
 #: with remove_mean "auto", a median acceleration larger than this (m/s^2) is an offset (gravity, bias)
@@ -208,7 +210,9 @@ def plant_changes(an: Analysis, main: ModeGroup | None) -> list[str]:
     """The headline when the cycles see several plants: where the modes change (groups that follow each
     other in time: a payload, tool or pose change), from which ringing modes to which, and whose modes
     the recommendation is for; when the groups alternate, that the cycles see several plants. Nothing
-    for one group."""
+    for one group. Where the cycles on either side of a change ran with different shapers the line
+    says so instead of naming a plant change: a shaper hides the modes it cancels (the arm demo's
+    recording: unshaped, then the calibrated ZV, which leaves only the lowest mode)."""
     groups = sorted(an.groups, key=lambda g: g.rows[0])
     if len(groups) < 2:
         return []
@@ -229,8 +233,14 @@ def plant_changes(an: Analysis, main: ModeGroup | None) -> list[str]:
     for a, b in itertools.pairwise(groups):
         ma, mb = ringing(a), ringing(b)
         lo = 100.0 * (mb[0].hz / ma[0].hz - 1.0)
-        out.append(f"PLANT CHANGE between cycle {an.cycles[a.rows[-1]].cycle} and cycle {an.cycles[b.rows[0]].cycle}"
-                   f" (a payload, tool or pose change): modes {hz(ma)} -> {hz(mb)} (lowest {lo:+.1f} %)")
+        before, after = an.cycles[a.rows[-1]], an.cycles[b.rows[0]]
+        shapers = [r.shaper.removesuffix(CHANGED_DURING) for r in (before, after)]
+        what = ("PLANT CHANGE", "(a payload, tool or pose change)")
+        if "unknown" not in shapers and shapers[0] != shapers[1]:
+            what = ("MODES CHANGE", f"with the shaper ({shapers[0]} -> {shapers[1]}: a shaper hides the modes it"
+                    " cancels, so this need not be a payload, tool or pose change)")
+        out.append(f"{what[0]} between cycle {before.cycle} and cycle {after.cycle} {what[1]}:"
+                   f" modes {hz(ma)} -> {hz(mb)} (lowest {lo:+.1f} %)")
     if out:
         out[-1] += whom
     return out
@@ -442,7 +452,7 @@ def _active_shaper(rec: Recording, span: CycleSpan) -> tuple[str, tuple | None]:
     if s.source[i] and s.source[i] not in ("parameters", "user"):
         label += f" [{s.source[i]}]"
     if during:
-        label += " (changed during the cycle)"
+        label += CHANGED_DURING
         return label, None
     return label, (amps, times)
 

@@ -344,6 +344,8 @@ class _Rows:
     t: list[float] = field(default_factory=list)
     p: list[tuple[float, ...]] = field(default_factory=list)
     names: tuple[str, ...] | None = None
+    #: indices (into t) of the samples stamped 0, timed by their log time instead (see :func:`_stamped_only`)
+    unstamped: list[int] = field(default_factory=list)
 
 
 class _Collector:
@@ -363,6 +365,7 @@ class _Collector:
         self.acc_seq: list[int] = []
         self.acc_t: list[float] = []
         self.acc: list[float] = []  # flat x, y, z, x, ...
+        self.acc_unstamped: list[int] = []  # as _Rows.unstamped
         self.js, self.ref, self.eff, self.cmd = _Rows(), _Rows(), _Rows(), _Rows()
         self.fast = {"joints": JointStateDecoder(), "reference": JointStateDecoder()}
         self.events, self.shapers = Events(), Shapers()
@@ -383,12 +386,13 @@ class _Collector:
     def _accel(self, topic: str, seq: int, log_ns: int, raw: Any) -> None:
         if little_endian(raw):
             t, a = imu_fast(raw)
-            if t == 0.0:
-                t = log_ns * 1e-9
         else:
             m = self.decoders[topic](raw)
-            t, la = _stamp(m, log_ns), m.linear_acceleration
+            t, la = stamp_to_sec(m.header.stamp), m.linear_acceleration
             a = (la.x, la.y, la.z)
+        if t == 0.0:
+            self.acc_unstamped.append(len(self.acc_t))
+            t = log_ns * 1e-9
         self.acc_seq.append(seq)
         self.acc_t.append(t)
         self.acc.extend(a)
@@ -400,13 +404,16 @@ class _Collector:
             t, names, p = fast(raw)
             if role == "joints" and self.with_efforts:
                 e = joint_state_efforts(raw, fast.positions_end)
-            if t == 0.0:
-                t = log_ns * 1e-9
         else:
             m = self.decoders[topic](raw)
-            t, names, p = _stamp(m, log_ns), tuple(m.name), tuple(m.position)
+            t, names, p = stamp_to_sec(m.header.stamp), tuple(m.name), tuple(m.position)
             e = tuple(m.effort) if role == "joints" and self.with_efforts else None
         d = self.js if role == "joints" else self.ref
+        if t == 0.0:
+            d.unstamped.append(len(d.t))
+            if e is not None and len(e) == len(names):
+                self.eff.unstamped.append(len(self.eff.t))
+            t = log_ns * 1e-9
         if d.names is None:
             d.names = names
         if e is not None and len(e) == len(names):  # a message without efforts has none
@@ -468,8 +475,9 @@ class _Collector:
         BagError
             No accelerometer sample could be read.
         """
-        accel = _finite(_signal(chosen["accel"], self.acc_seq, self.acc_t, np.array(self.acc).reshape(-1, 3)),
-                        notes) if self.acc else None
+        accel = _finite(_signal(chosen["accel"], *_stamped_only(
+            chosen["accel"], self.acc_seq, self.acc_t, np.array(self.acc).reshape(-1, 3), self.acc_unstamped, notes)),
+            notes) if self.acc else None
         if accel is None or len(accel) == 0:
             raise BagError(f"{path}: no accelerometer message could be read on {chosen['accel']}")
         joints = _rows_signal(chosen["joints"], self.js, notes, self.js.names)
@@ -482,7 +490,29 @@ class _Collector:
 def _rows_signal(topic: str, rows: _Rows, notes: list[str], names: tuple[str, ...] | None = None
                  ) -> Signal | None:
     """The rows as a :class:`Signal` without non-finite samples (noted), or None if there are none."""
-    return _finite(_signal(topic, rows.seq, rows.t, rows.p, names or ()), notes) if rows.t else None
+    if not rows.t:
+        return None
+    seq, t, p = _stamped_only(topic, rows.seq, rows.t, rows.p, rows.unstamped, notes)
+    return _finite(_signal(topic, seq, t, p, names or ()), notes)
+
+
+def _stamped_only(topic: str, seq: list[int], t: list[float], values: Any, unstamped: list[int], notes: list[str]
+                  ) -> tuple[list[int], list[float], Any]:
+    """The rows without their samples stamped 0 when the others are stamped (noted); all of them when none is.
+
+    A message stamped 0 is timed by its log time (the recorder's clock). In a stream stamped on another clock
+    that sample lands far from the others: the lockstep sim plant's joint states at rest before its first step
+    are stamped 0 while the rest are on simulated time, and a recording begun before the first move was read as
+    one move from the wall-clock time of those samples to the end (session 11). A stream stamped 0 throughout is
+    timed by its log times, as before."""
+    if not unstamped or len(unstamped) == len(t):
+        return seq, t, values
+    notes.append(f"{topic}: {len(unstamped)} sample(s) stamped 0 left out (the others are stamped: another clock)")
+    keep = np.ones(len(t), dtype=bool)
+    keep[unstamped] = False
+    idx = np.flatnonzero(keep)
+    kept = values[keep] if isinstance(values, np.ndarray) else [values[i] for i in idx]
+    return [seq[i] for i in idx], [t[i] for i in idx], kept
 
 
 def _finite(sig: Signal, notes: list[str]) -> Signal:

@@ -17,6 +17,10 @@ from shaper_nodes.core.lifetime import die_with_parent
 SINGLE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
+#: how long a pool left by an exception waits for its manager thread to wind down, s (its workers are ended)
+MANAGER_WAIT = 10.0
+
+
 def _worker_start(parent: int, niceness: int = 0) -> None:
     """A pool worker's start: it ends with the process that started it (``kill -9`` of calibrate leaves no
     worker behind), and leaves Ctrl-C (sent to the whole process group) to that process, which stops it;
@@ -34,7 +38,10 @@ def worker_pool(workers: int, niceness: int = 0) -> Iterator[Any]:
 
     prctl's parent-death signal follows the *thread* that started the worker: use the pool (submit, map) from
     the main thread (calibrate and ``--from-bag`` do), whose life is the process's. Leaving the ``with`` block by
-    an exception (Ctrl-C, SIGTERM) ends the workers at once instead of waiting for their poses. ``niceness`` is
+    an exception (Ctrl-C, SIGTERM, calibrate's abort) ends the workers at once instead of waiting for their poses,
+    and waits for the pool's manager thread to wind down: left running, it closed its wake-up pipe while the
+    interpreter's exit woke it, and calibrate's abort ended in "OSError: [Errno 9] Bad file descriptor" under a
+    traceback (once, at load average 25: "no publisher of /tip_imu within 30 s", session 11). ``niceness`` is
     added to each worker's nice value (:class:`PosePipeline`'s, so that the recording goes first).
     """
     import multiprocessing
@@ -50,7 +57,10 @@ def worker_pool(workers: int, niceness: int = 0) -> Iterator[Any]:
         except BaseException:
             for proc in list((getattr(pool, "_processes", None) or {}).values()):
                 proc.terminate()
+            manager = getattr(pool, "_executor_manager_thread", None)
             pool.shutdown(wait=False, cancel_futures=True)
+            if manager is not None:  # wound down (its workers are ended) before the caller exits: at exit
+                manager.join(MANAGER_WAIT)  # CPython 3.11 wakes it, racing its closing of that pipe (EBADF)
             raise
         pool.shutdown(wait=True)
     finally:

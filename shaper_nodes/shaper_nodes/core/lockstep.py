@@ -320,13 +320,22 @@ class ReaderGate:
                                      f" lockstep.reader_timeout ({self.timeout:g} s); stepping on without it")
 
 
+#: a learned period holds while every spacing is within this fraction of a period of a whole number of periods
+GRID_TOLERANCE = 0.01
+
+
 class Gaps:
     """Lost samples of a stream of known period, from gaps in its stamps.
 
     Parameters
     ----------
     period : float or None
-        The stream's sample period, s; None: the smallest positive spacing seen so far.
+        The stream's sample period, s; None: the smallest positive spacing seen so far, as long as every spacing is
+        a whole number of it (within :data:`GRID_TOLERANCE`): a stream stamped on simulated time (lockstep) is on
+        such a grid. One stamped on the wall clock (a real-time plant, a robot's driver) is not: its jitter made
+        the smallest spacing a fraction of the period, and every ordinary spacing then counted as lost samples
+        (the identifier beside a real-time sim plant: "lost 20878 samples of /joint_states" in a cycle of 2.6 s,
+        session 11). Such a stream is :attr:`off_grid` and counts no loss.
     """
 
     def __init__(self, period: float | None = None) -> None:
@@ -338,6 +347,8 @@ class Gaps:
         self.samples = 0
         #: the gaps: (stamp before, stamp after) of each spacing above 1.5 periods
         self.holes: list[tuple[float, float]] = []
+        #: a learned period's stream whose spacings are not whole numbers of it: its gaps are not losses
+        self.off_grid = False
 
     def add(self, t: float) -> None:
         """A sample stamped ``t`` s (a repeated or older stamp is no gap)."""
@@ -347,15 +358,20 @@ class Gaps:
             self.last = t if last is None else last
             return
         d = t - last
-        if not self._fixed and (self.period is None or d < self.period):
-            self.period = d
+        if not self._fixed:
+            if self.period is None or d < self.period:
+                if self.period is not None and not _whole(self.period / d):
+                    self.off_grid = True
+                self.period = d
+            elif not _whole(d / self.period):
+                self.off_grid = True
         if self.period is not None and d > 1.5 * self.period:
             self.holes.append((last, t))
         self.last = t
 
     def lost(self, t0: float = -math.inf, t1: float = math.inf) -> int:
-        """Samples missing with stamps in (t0, t1] s."""
-        if self.period is None:
+        """Samples missing with stamps in (t0, t1] s (none on a stream that is :attr:`off_grid`)."""
+        if self.period is None or self.off_grid:
             return 0
         p, n = self.period, 0
         for a, b in self.holes:  # the missing stamps are a + k p, k = 1 .. m
@@ -364,3 +380,8 @@ class Gaps:
             hi = m if t1 == math.inf else min(m, math.floor((t1 - a) / p + 1e-6))
             n += max(0, hi - lo + 1)
         return n
+
+
+def _whole(ratio: float) -> bool:
+    """Whether ``ratio`` is a whole number within :data:`GRID_TOLERANCE`."""
+    return abs(ratio - round(ratio)) <= GRID_TOLERANCE

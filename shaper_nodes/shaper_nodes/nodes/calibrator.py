@@ -223,10 +223,11 @@ class Calibrator:
                                        accelerations=[0.0] * n, time_from_start=dur(w.time)) for w in waypoints]
         goal = self._fjt.Goal(trajectory=JointTrajectory(joint_names=self.names, points=points))
         server = float(self.p.timeouts.server)
-        self.spin_until(self.action.server_is_ready, server, f"the FollowJointTrajectory server {self.p.action}")
+        self.spin_until(self.action.server_is_ready, server, f"FollowJointTrajectory server {self.p.action}")
         # the accelerometer matched before the arm moves: a simulator in lockstep runs a goal in a blink, and the
         # samples published before the match never come (the rest after the goal publishes none)
-        self.spin_until(lambda: self._imu_sub.get_publisher_count() > 0, server, f"a publisher of {self.imu_topic}")
+        self.spin_until(lambda: self._imu_sub.get_publisher_count() > 0, server,
+                        f"publisher of {self.imu_topic} (the accelerometer)")
         # the goal's feedback on a subscription of calibrate's own: rclpy's client drops what it has not handed
         # over when the result comes, and the first stamp is the start (GoalFeedback)
         goal_id, stamps = self.feedback.new_goal()

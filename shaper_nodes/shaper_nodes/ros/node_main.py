@@ -166,6 +166,34 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     return None
 
 
+def params_file_keys_hint(argv: Sequence[str]) -> str:
+    """For a node that refused its configuration: when every ``--params-file`` of ``argv`` is keyed by node
+    names only (no ``*``), none of them the name the node is given with ``-r __node:=NAME`` (or no such
+    remapping), a phrase saying whose parameters the files hold ("" otherwise). ``ros2 param dump /left_arm
+    > dump.yaml`` writes ``/left_arm:``, which a node started from it under its default name does not take:
+    it then refused a required parameter that the file does hold."""
+    import yaml
+
+    keys: list[str] = []
+    for path in params_files(argv):
+        try:
+            with open(path, encoding="utf-8") as f:
+                tree = yaml.safe_load(f)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            return ""
+        if not isinstance(tree, dict):
+            return ""
+        keys += [str(k) for k in tree]
+    if not keys or any("*" in k for k in keys):
+        return ""
+    given = [a.split("__node:=", 1)[1] for a in argv if "__node:=" in a]
+    if given and any(k.rsplit("/", 1)[-1] == given[-1] for k in keys):
+        return ""
+    first = keys[0].rsplit("/", 1)[-1]
+    return (f" (note: the --params-file holds parameters for {', '.join(keys)} only; a node of another name takes"
+            f" none of them: start it with -r __node:={first}, or key the file '/**:')")
+
+
 def yaml_value(value: Any) -> str:
     """A parameter value as a params file or ``-p name:=value`` writes it."""
     if isinstance(value, str):
@@ -288,7 +316,7 @@ def _run(factory: Callable[[], Any], name: str, argv: list[str], stop: StopSigna
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, OSError, ParameterException) as err:
-        message = " ".join(str(err).split())
+        message = " ".join(str(err).split()) + params_file_keys_hint(argv)
         print(f"{name}: {message}", file=sys.stderr, flush=True)
         return EXIT_CONFIG
     except Exception:
