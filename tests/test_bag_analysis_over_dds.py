@@ -22,6 +22,7 @@ import pytest
 
 from reproductions.common import metric as _metric
 from reproductions.list_cases import CASES, LEARNER
+from shaper_msgs.msg import CycleEvent
 from shaper_nodes.analysis.analyze import Options, analyze
 from shaper_nodes.analysis.streams import read_recording
 from shaper_nodes.recordings import Bag, mcap_chunks
@@ -55,15 +56,22 @@ def test_demo_recording_analysis_matches_the_demo_and_the_plant(joint_demo, tmp_
     assert best is not None and best.nominal_vibration <= 0.05
     assert an.predicted["rms_nominal"] < 0.1 * an.cycles[0].rms
 
-    # the recording cut in the middle of the first chunk that starts after the second cycle's START (the
-    # recorder closes a chunk every second), as a recorder killed while writing leaves it: that cycle's END
-    # is lost
+    # the recording cut in the middle of the first chunk that starts after the second cycle's START was
+    # recorded (the recorder closes a chunk every second), as a recorder killed while writing leaves it: that
+    # cycle's END is lost. Chunks are ordered by log time (when the recorder took a message), which on a busy
+    # machine lags the events' stamps, so the chunk is chosen by the START's and END's log times
+    with Bag(out / "recording") as bag:
+        decode = bag.deserializer("shaper_msgs/msg/CycleEvent")
+        logged = [(decode(raw).event, log_ns * 1e-9) for _, _, log_ns, raw in bag.messages(["/cycle_events"])]
+    # the second START and the END after it, in recording order (each case of the demo counts its cycles from 0)
+    start_logged = [t for kind, t in logged if kind == CycleEvent.START][1]
+    end_logged = next(t for kind, t in logged if kind == CycleEvent.END and t > start_logged)
     mcap = next((out / "recording").glob("*.mcap"))
     data = mcap.read_bytes()
     spans = [(pos, length, *(t * 1e-9 for t in struct.unpack_from("<QQ", data, pos + 9)))
              for pos, length in mcap_chunks(data)]
-    last, length, _, chunk_end = next(c for c in spans if c[2] > an.cycles[1].start)
-    assert chunk_end < an.cycles[1].end
+    last, length, _, chunk_end = next(c for c in spans if c[2] > start_logged)
+    assert chunk_end < end_logged
     (tmp_path / "cut.mcap").write_bytes(data[: last + length // 2])
     cut = read_recording(tmp_path / "cut.mcap")
     (dmg,) = cut.damage
