@@ -154,7 +154,8 @@ def payload_run(plans: list[MovePlan], shapers: list[Any], cycles: int, operator
             relearn = status and not warned
             warned = status
             if relearn:
-                said = watches[i].last.describe() if watches[i].last else ""
+                last = watches[i].last
+                said = last.describe() if last is not None else ""
                 notes.append(f"cycle {cycle}, {p.name}: drift WARN ({said}); every move's correction dropped, its"
                              f" learner restarted ({operator} operator); this move's update not kept")
                 learners = [fresh(j, operator == "told") for j in range(len(plans))]
@@ -164,7 +165,8 @@ def payload_run(plans: list[MovePlan], shapers: list[Any], cycles: int, operator
                          "learner_cycle": upd.cycle, "action": "" if relearn else upd.action,
                          "cost": upd.cost, "gain": upd.gain,
                          "max_correction_rad": float(np.max(np.abs(points[0] - base[0]))),
-                         "limit_excess": profile_excess(*points, lim, base), "warning": status, "relearn": relearn})
+                         "limit_excess": profile_excess(points[0], points[1], points[2], lim, base),
+                         "warning": status, "relearn": relearn})
     return rows, notes
 
 
