@@ -96,3 +96,15 @@ def test_restarted_on_the_2_kg_operator_it_is_not(setup):
     back = within_from(rows, PAYLOAD_AT + 1)
     assert back["all"] is None and back["rotated->place"] is None
     assert all(r["limit_excess"] == 0.0 for r in rows)
+
+
+def test_the_2_kg_model_is_beyond_90_degrees_of_the_4_5_kg_arm_between_their_modes(setup):
+    from reproductions.arm_mrilc_payload import phase_error
+
+    plans = setup[0]
+    for ph in phase_error({p.name: p.positions[-1] for p in plans}, HEAVY, step=0.1):
+        print(ph)
+        assert ph["heavy_hz"][0] < 0.9 * ph["light_hz"][0]  # the payload lowers the lowest mode
+        assert abs(ph["worst_deg"]) > 90.0 and ph["bands"]
+        # a band beyond 90 degrees starts just above a 4.5 kg mode (past its resonance, below the 2 kg one)
+        assert any(0.0 < lo - hz < 0.2 for lo, _ in ph["bands"] for hz in ph["heavy_hz"]), ph
