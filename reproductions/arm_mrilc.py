@@ -164,14 +164,35 @@ def rigid_reference(model: Any, times: np.ndarray, pos: np.ndarray, vel: np.ndar
     return out
 
 
+def run_move(arm: Any, p: MovePlan, points: tuple[np.ndarray, np.ndarray, np.ndarray],
+             linear: dict[Any, Any]) -> tuple[float, np.ndarray, np.ndarray, Any, Any]:
+    """Run the move ``p`` with ``points`` (positions, velocities, accelerations) on the offline ``arm``; its start
+    (s), the IMU's window (times, samples), its measures (:func:`sim_plant_node.arm.metrics.measure_move`) and the
+    residual's parts (:func:`reproductions.residual_split.residual_parts`; ``linear`` their cache)."""
+    from reproductions.residual_split import residual_parts
+    from sim_plant_node.arm.metrics import measure_move
+
+    start = arm.run(p.times, *points)
+    end = start + float(p.times[-1])
+    it, imu = arm.record.window("imu", start, end)
+    lt, link = arm.record.window("link", start, end)
+    tool = arm.plant.model.tool_positions(link)
+    m = measure_move(p.name, start, p.planned_duration, start + p.motion_end, end, it, imu, lt, tool)
+    c_end = start + p.motion_end
+    k = int(np.argmin(np.abs(np.asarray(arm.record.state_t) - c_end)))
+    parts = residual_parts(arm.plant.model, p.positions[-1], arm.record.state[k], it, c_end, linear)
+    arm.record.state_t.clear()
+    arm.record.state.clear()
+    return start, it, imu, m, parts
+
+
 def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case: str, seed: int = 0,
              settings: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``cycles`` cycles of ``plans`` on one offline arm (the moves run back to back); rows and the learners."""
-    from reproductions.residual_split import residual_parts
     from shaper_nodes.core.learning.mrilc.moves import MoveLearner, excess, profile_excess
     from shaper_nodes.core.learning.mrilc.plan import residual_error
     from shaper_nodes.core.shaping.vibration import residual_vibration
-    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, measure_move
+    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW
     from sim_plant_node.arm.offline import OfflineArm
 
     lim = limits()
@@ -198,17 +219,7 @@ def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case
                          "limit_excess": profile_excess(pos, vel, acc, lim, base),
                          "coefficient_excess": excess(lr.coefficients, p.profile, lim),
                          "profile_excess": lim.violation(pos, vel, acc)}
-            start = arm.run(p.times, pos, vel, acc)
-            end = start + float(p.times[-1])
-            it, imu = arm.record.window("imu", start, end)
-            lt, link = arm.record.window("link", start, end)
-            tool = arm.plant.model.tool_positions(link)
-            m = measure_move(p.name, start, p.planned_duration, start + p.motion_end, end, it, imu, lt, tool)
-            c_end = start + p.motion_end
-            k = int(np.argmin(np.abs(np.asarray(arm.record.state_t) - c_end)))
-            parts = residual_parts(arm.plant.model, p.positions[-1], arm.record.state[k], it, c_end, linear)
-            arm.record.state_t.clear()
-            arm.record.state.clear()
+            start, it, imu, m, parts = run_move(arm, p, (pos, vel, acc), linear)
             extra.update(servo_rms=parts.servo_rms, vibration_rms=parts.vibration_rms)
             seen = imu + (noise * rng.standard_normal(imu.shape) if noise > 0 else 0.0)
             noisy = residual_vibration(it, seen, start + p.motion_end, start + p.motion_end + RESIDUAL_WINDOW,

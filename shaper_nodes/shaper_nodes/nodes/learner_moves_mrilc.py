@@ -21,7 +21,8 @@ accelerometer's residual window (``topics.imu``; 1 s after the commanded motion 
 :func:`~shaper_nodes.core.learning.mrilc.plan.residual_error`) with the lifted operator G that
 ``mrilc_moves.operator`` gives (``"module:function"``, called once per family of B-splines as ``f(goal_pose, count,
 samples, first, spacing, period)``; the simulated arm's: ``sim_plant_node.arm.lifted:arm_operator``), computed once
-per move at its first goal.
+per move at its first goal; with ``mrilc_moves.payload_mass`` set (> 0, kg: the payload the robot is told, settable
+at run time) it is called with ``payload=`` that mass too (the simulated arm's provider takes it).
 The learner's divergence guard falls back to its best coefficients (and holds after ``max_fallbacks``).
 
 **Limits.** The learner projects every update inside the joint limits (``mrilc_moves.position_min``, ``position_max``,
@@ -44,7 +45,9 @@ learner starts afresh (:meth:`~.learner_base.LearnerBase.restore`).
 first WARN of the status ``mrilc_moves.drift_status`` (default the identifier's ``identifier: drift``) on
 ``/diagnostics`` (:mod:`.learner_drift`: once per warning episode, an OK ends it), every move's learner is dropped
 with its correction, so each move's next goal runs as the current schedule shaped it (no correction) and its
-learner starts again from zero at that goal (its plan and operator rebuilt from it; a hold ends with it); one line
+learner starts again from zero at that goal (its plan and operator rebuilt from it, for the payload
+``mrilc_moves.payload_mass`` says then: on the operator of the old payload it does not converge,
+docs/results/arm_mrilc_payload.md; a hold ends with it); one line
 on the log and ``/diagnostics`` (``learner: moves``, WARN) names the moves, and the state is saved (atomically,
 with the episode flag ``drift_warned``: a move with no learner is not in it). A cycle whose goal ran with the old
 correction is not learned from.
@@ -58,7 +61,9 @@ learner's cycle), ``cost`` (weighted RMS of the error, m/s^2), ``action.<learn|f
 from __future__ import annotations
 
 import collections
+import functools
 import importlib
+import inspect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -138,6 +143,10 @@ class MrilcMovesGroup:
     drift_status: str = param("identifier: drift", "The /diagnostics status whose WARN (a drift warning: a payload"
                               " change) drops every move's correction and restarts its learner ('' = none).",
                               read_only=True)
+    payload_mass: float = param(0.0, "The payload the robot is told, kg (0: not told, the operator provider's own):"
+                                " when set, the provider is called with payload= it; a change takes effect when each"
+                                " move's operator is next built (a drift warning's relearn, a restart). Set it when"
+                                " the robot's payload changes.", (0.0, 1000.0))
 
 
 @dataclass(frozen=True)
@@ -362,6 +371,17 @@ class MrilcMovesMode:
             vals.append(np.resize(np.asarray(values, dtype=float), joints))
         return JointLimits(*vals)
 
+    def _provider(self, mass: float) -> Callable[..., Any]:
+        """The operator's provider, told the payload ``mass`` kg when it is set (> 0)."""
+        if mass <= 0.0:
+            return self.operator
+        try:
+            inspect.signature(self.operator).bind(*[None] * 6, payload=mass)
+        except TypeError as err:
+            raise ValueError(f"mrilc_moves.payload_mass is set ({mass:g} kg) but the operator's provider takes no"
+                             f" payload= ({err})") from None
+        return functools.partial(self.operator, payload=mass)
+
     def _learner(self, move: _Move, times: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> MoveLearner:
         """The move's learner for this goal's profile: built at its first goal (from its saved state after a
         restart), rebuilt (keeping its state) when the profile changed."""
@@ -370,7 +390,10 @@ class MrilcMovesMode:
             return move.learner
         plan = plan_move(times, q, v, a, move.start, self.settings)
         limits = self._limits(q.shape[1])
-        op = plan_operator(plan, self.operator, move.goal, q.shape[1], self.settings.output_period)
+        mass = float(self.params.value.mrilc_moves.payload_mass)
+        op = plan_operator(plan, self._provider(mass), move.goal, q.shape[1], self.settings.output_period)
+        self.node.get_logger().info(f"move {move.key}: operator built for "
+                                    + (f"a payload of {mass:g} kg" if mass > 0 else "the provider's own payload"))
         state = move.learner.to_dict() if move.learner is not None else move.saved
         kw: dict[str, Any] = {**self.learner_settings, "weights": plan.weights}
         learner = None

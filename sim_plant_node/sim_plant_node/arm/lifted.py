@@ -3,7 +3,7 @@ of a joint profile correction, on the arm linearised at rest at the move's goal 
 
 :func:`lifted_operator` is what ``reproductions.arm_mrilc`` and the learner node's MRILC per move
 (``mode: mrilc_moves``, ``mrilc_moves.operator: sim_plant_node.arm.lifted:arm_operator``) use;
-:func:`arm_operator` is the node's entry: the simulator's arm model, built once per process.
+:func:`arm_operator` is the node's entry: the simulator's arm model, built once per process and payload.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ DELAY = 0
 #: s the controller emulation holds each setpoint (its period at 500 Hz)
 HOLD = 2e-3
 
-_MODEL: list[Any] = []
+#: the arms the node's operators were built on, by payload (None: the model's default)
+_MODEL: dict[float | None, Any] = {}
 
 
 def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, first: int = 0, spacing: float = 0.04,
@@ -74,11 +75,18 @@ def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, firs
     return g
 
 
-def arm_operator(pose: np.ndarray, count: int, samples: int, first: int, spacing: float, period: float) -> np.ndarray:
-    """:func:`lifted_operator` on the simulator's arm (:class:`~.dynamics.ArmModel`, its default payload), the entry
-    the learner node's ``mrilc_moves.operator`` names (the model built at the first call)."""
-    if not _MODEL:
-        from .dynamics import ArmModel
+def arm_operator(pose: np.ndarray, count: int, samples: int, first: int, spacing: float, period: float,
+                 payload: float | None = None) -> np.ndarray:
+    """:func:`lifted_operator` on the simulator's arm (:class:`~.dynamics.ArmModel`), the entry the learner node's
+    ``mrilc_moves.operator`` names: at the model's default payload, or with ``payload`` kg at the flange (the
+    payload the robot is told: the node's ``mrilc_moves.payload_mass`` when it is set; one model built per
+    payload, at its first call)."""
+    from .dynamics import ArmModel
 
-        _MODEL.append(ArmModel())
-    return lifted_operator(_MODEL[0], np.asarray(pose, dtype=float), count, samples, first, spacing, period)
+    key = None if payload is None else float(payload)
+    if key not in _MODEL:
+        model = ArmModel()
+        if key is not None:
+            model.set_payload(key)
+        _MODEL[key] = model
+    return lifted_operator(_MODEL[key], np.asarray(pose, dtype=float), count, samples, first, spacing, period)

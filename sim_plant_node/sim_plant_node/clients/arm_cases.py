@@ -122,6 +122,7 @@ class Session:
     shaper_params: dict[str, Any]
     calibration: pathlib.Path | None = None
     scheduled: bool = False
+    payload_learner: str = "list"  # the payload case's learner: "list" or "mrilc" (clients/arm_payload.py)
 
 
 def _schedule(session: Session, client: ArmClient) -> None:
@@ -173,7 +174,7 @@ def apply_case(case: str, client: ArmClient, recommended: tuple[Any, str] | None
         _schedule(session, client)
         if case == "scheduled":
             return "calibrated schedule: each goal shaped for the modes at its final pose"
-        if case == "scheduled_mrilc_moves":
+        if case == "scheduled_mrilc_moves" or (case == "payload" and session.payload_learner == "mrilc"):
             return _mrilc_moves(session, client)
         if case == "scheduled_speedup":
             from . import arm_speed

@@ -153,7 +153,7 @@ def _main(argv: list[str] | None) -> int:
         shaper_params = {"joint_names": list(JOINT_NAMES), "command_rate": RATE, "use_sim_time": True,
                          "action.server_timeout": 30.0}
         session = Session(start, start("shaper_nodes", "shaper_node", shaper_params), shaper_params,
-                          args.calibration)
+                          args.calibration, payload_learner=args.payload_learner)
         if session.calibration is None and any(c in CALIBRATED for c in cases):
             # first, alone with the sim (the other nodes' subscriptions would slow the lockstep down)
             session.calibration = calibrate_step(out, t_wall)

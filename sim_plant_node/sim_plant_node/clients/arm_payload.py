@@ -11,6 +11,10 @@ through the plant's parameter service (``ros2 param set /sim_plant arm.payload_m
 the case runs ``--list-cycles`` cycles in all. At the watch's first WARN (``identifier: drift`` on
 ``/diagnostics``, after ``watch.confirm`` moves in a row outside their shaper's working band) the learner
 relearns every move from the current schedule (nodes/learner_drift.py, nodes/learner_moves.py).
+With ``--payload-learner mrilc`` the case runs as ``scheduled_mrilc_moves`` does instead (MRILC per move over the
+schedule; at the WARN every move's correction is dropped, nodes/learner_moves_mrilc.py); with ``--payload-told`` too,
+the client tells the learner the payload at the change (its ``mrilc_moves.payload_mass``, through its parameter
+service, as a robot is told its payload), so that the relearn builds the moves' operators for it.
 
 :class:`PayloadWatch` is the client's side: the payload change, the drift statuses (which cycle and move,
 what mode) and the learner's relearn lines on ``/rosout``; :meth:`PayloadWatch.table` is the case's table,
@@ -41,6 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    " the case runs --list-cycles cycles in all)")
     p.add_argument("--payload-mass", type=float, default=4.5,
                    help=f"the {CASE} case: the payload after the change, kg (default 4.5)")
+    p.add_argument("--payload-learner", choices=("list", "mrilc"), default="list",
+                   help=f"the {CASE} case's learner: LIST per move (default) or MRILC per move")
+    p.add_argument("--payload-told", action="store_true",
+                   help=f"the {CASE} case with --payload-learner mrilc: tell the learner the payload at the change"
+                   " (mrilc_moves.payload_mass), so that it relearns on the operator for it")
 
 
 def check_args(args: argparse.Namespace, cases: list[str]) -> str:
@@ -52,6 +61,8 @@ def check_args(args: argparse.Namespace, cases: list[str]) -> str:
                 f" {args.payload_cycle}")
     if not (math.isfinite(args.payload_mass) and args.payload_mass > 0.0):
         return f"--payload-mass must be a finite mass > 0 kg, got {args.payload_mass}"
+    if getattr(args, "payload_told", False) and getattr(args, "payload_learner", "list") != "mrilc":
+        return "--payload-told goes with --payload-learner mrilc"
     return ""
 
 
@@ -105,6 +116,7 @@ class PayloadWatch:
         self.c = conductor
         self.active = CASE in cases
         self.at, self.mass = int(args.payload_cycle), float(args.payload_mass)
+        self.told = bool(getattr(args, "payload_told", False))  # the learner told the payload at the change
         self.drifts: list[Drift] = []
         #: the learner's lines that say it relearned the moves (``/rosout``)
         self.relearned: list[str] = []
@@ -143,6 +155,23 @@ class PayloadWatch:
         self.first.append(first)
         if k == self.at:
             self.c.set_plant(arm__payload_mass=self.mass)
+            if self.told:
+                self._tell_learner()
+
+    def _tell_learner(self) -> None:
+        """The learner's ``mrilc_moves.payload_mass`` set to the new payload, through its parameter service."""
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+
+        cli = self.c.create_client(SetParameters, "/learner/set_parameters")
+        try:
+            req = SetParameters.Request(parameters=[Parameter("mrilc_moves.payload_mass",
+                                                              value=self.mass).to_parameter_msg()])
+            bad = [r.reason for r in self.c.call(cli, req).results if not r.successful]
+        finally:
+            self.c.destroy_client(cli)
+        if bad:
+            raise RuntimeError(f"the learner refused mrilc_moves.payload_mass {self.mass:g}: {bad}")
 
     def where(self, cycle: int) -> tuple[int, int] | None:
         """The case's cycle (from 0) and move index of the learner's cycle ``cycle``."""
