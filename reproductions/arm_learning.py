@@ -1225,6 +1225,20 @@ def checks(rows: list[Row], noise: float) -> list[str]:
                " keep rule below decides. No factor predicted to pay: the move stays at the schedule (and the"
                " factors kept).")
     out.append("")
+    out.append("**The loop's pole in pooled references** (`scheduled_list_factor`, a move with no factor kept whose"
+               " reference finds none predicted to pay; with noise, issue 31 session 11): the move runs its reference"
+               f" again, up to {POOL_CYCLES} cycles, and its windows (the same response each cycle) are averaged at"
+               " the commanded end; in the mean the modes that ring are identified, the loop's damped pole is"
+               " searched beside them (25-110 Hz, damping 0.15-0.7) with its amplitude measured by least squares with"
+               " the pole fixed (`shaper_nodes.core.learning.list.loop_pole`), and `paying_factor` picks a factor on"
+               " it by the same time rule. Such a trial is judged where the part lives: kept when its measured"
+               " amplitude at that pole (its windows pooled, the reference's poles fixed) is below the pooled"
+               " reference's by 2 combined standard errors and its move + settle time is within one 2 ms sample of"
+               " the schedule's; lower but not by that much, it runs again (up to"
+               f" {POOL_CYCLES} windows). The 1 s RMS cannot judge it: the part is 0.0001-0.0002 m/s^2 of it, the"
+               " noise's scatter per window 0.0002. Noise-free every move finds its factor in its first reference,"
+               " so this path does not run.")
+    out.append("")
     out.append("**The keep rule** (`shaper_nodes.core.learning.moves.keep_when_it_pays`, used by"
                " `scheduled_list_factor` and `list`): a learned correction is kept for a move only when its cycle"
                " measured a lower residual than the move's base (the schedule alone; for `list`, the cycle with the"
@@ -1355,8 +1369,9 @@ def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
              "The schedule's servo part against its residual: " + ", ".join(share) + ". "
              + (f"Above 25 % of the residual on {', '.join(high)}: there the goal '25 % of the schedule's residual'"
                 " asks for less than the loop's own transient, which a shaper designed on the arm's modes (the"
-                " schedule, LIST's factor on a mode that rings) does not target; the corrected goal is stated on the"
-                " vibration part." if high else "Below 25 % everywhere: the servo part is no floor here.")]
+                " schedule, LIST's factor on a mode that rings) does not target. The one corrected goal (the goals"
+                " section) asks for the servo part by the time the goal allows and leaves the vibration part at the"
+                " schedule's." if high else "Below 25 % everywhere: the servo part is no floor here.")]
     n_list = max((r["cycle"] for r in rows if r["case"] == "list"), default=0)
     lst = {r["move"]: r for r in rows if r["case"] == "list" and r["cycle"] == n_list}
     cut = [(r, lst[r["move"]]) for r in sc if r["move"] in lst and "servo_rms" in lst[r["move"]]
@@ -1370,8 +1385,8 @@ def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
                   " There no mode rang any more, and `list` tried a factor on the lowest damped eigenvalue"
                   " identified in the residual (the loop's transient; [list](#list)'s notes) and kept it because it"
                   " paid: a two-impulse factor cancels a heavily damped pole's response as it cancels a lightly"
-                  " damped one. The corrected goal above stays on the vibration part; the servo part is a target"
-                  " the schedule and `scheduled_list` leave, not a floor."]
+                  " damped one. The servo part is a target the schedule and `scheduled_list` leave, not a floor: the"
+                  " corrected goal (the goals section) is on it."]
     lines += _tradeoff(rows)
     lines += _servo_cost(rows)
     rig = {r["move"]: r for r in rows if r["case"] == "rigid" and r.get("shaping") == "scheduled"}
