@@ -28,7 +28,10 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
   from the shaped command alone (:func:`~shaper_nodes.core.learning.list.payback.time_cost`, between samples), keeps
   the move + settle time within one 2 ms sample of the schedule's; the next cycle tries it, and it is kept only
   when it pays (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`); the move stops at the first trial
-  that does not pay or when no factor is predicted to pay;
+  that does not pay or when no factor is predicted to pay. A move with no factor kept whose reference finds none
+  first pools its reference windows (up to :data:`POOL_CYCLES`) and looks there for the loop's pole
+  (:mod:`~shaper_nodes.core.learning.list.loop_pole`: what noise hides in one window); a factor on it is judged by
+  its measured amplitude at that pole (``PayingFactors.judge_at_pole``);
 - ``tradeoff`` (one cycle, a side case): what a factor on a mode that rings costs in move + settle time, and
   the factor chosen within larger time budgets (:data:`TRADEOFF_BUDGETS`);
 - ``servo_cost`` (one cycle, a side case): what the pair on the loop's strongest damped component takes off the
@@ -59,7 +62,9 @@ motion's end), late_rms (the same without the servo's first 0.1 s), peak_mm, set
 move_settle_s (0.05 mm), speed_factor, delay_s, torque_ratio (largest joint torque / its limit),
 velocity_ratio, and the residual's servo and vibration parts (servo_rms, vibration_rms, linear_rms: the two
 together; :mod:`reproductions.arm_physics`). Writes docs/results/arm_learning.md and its figures; its goals
-section states the issue's goals and the corrected ones (on the vibration part) and whether each is met.
+section states, per case, the issue's goal and the one corrected goal (the servo part by the time the goal allows,
+docs/results/arm_learning_goals.md (a)) once each, judged on the moves above the noise floor by the one rule
+(:func:`floor_threshold`), and whether each is met.
 """
 
 from __future__ import annotations
