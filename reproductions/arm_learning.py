@@ -1126,6 +1126,11 @@ def _own(r: Row, noise: float) -> float:
     return float(r["linear_rms"] if noise > 0 and r.get("linear_rms") is not None else r["residual_rms"])
 
 
+def _verdict(judged: list[str], met: bool) -> str:
+    """A goal's verdict on the moves ``judged``: none judged is no verdict (a goal met on no move is vacuous)."""
+    return "not judged (no move above the noise floor)" if not judged else "met" if met else "not met"
+
+
 def _goal_lines(rows: list[Row], case: str, base: dict[str, Row | None], n: int, noise: float,
                 worse: list[str]) -> list[str]:
     """A case over the schedule: the issue's goal once and the corrected goal once, each with its verdict on the moves
@@ -1139,9 +1144,8 @@ def _goal_lines(rows: list[Row], case: str, base: dict[str, Row | None], n: int,
             f"every move whose scheduled residual as measured is above the noise floor by the one rule (F + 2 s ="
             f" {threshold:.5f} m/s^2: {', '.join(judged) or 'none'}; judged on the arm's own residual, noise-free)")
     out = [f"  **Issue's goal** (<= 25 % of the schedule's residual on {rule} within {n} cycles; never worse than the"
-           f" schedule after cycle 1): {'met' if judged and not whole and not worse else 'not met'}"
+           f" schedule after cycle 1): {_verdict(judged, not whole and not worse)}"
            + (f" (above 25 %: {', '.join(whole)})" if whole else "")
-           + ("" if judged else " (no move judged)")
            + "; why: [what a factor on a ringing mode costs](#what-a-factor-on-a-mode-that-rings-costs)."]
     return out + _payback_goal(rows, case, base, n, judged, worse)
 
@@ -1178,13 +1182,12 @@ def _payback_goal(rows: list[Row], case: str, base: dict[str, Row | None], n: in
             vib.append(m)
         if r["vibration_rms"] > 0.25 * b["vibration_rms"]:
             vib25.append(f"{m} {100 * r['vibration_rms'] / b['vibration_rms']:.0f} %")
-    met = bool(judged) and not servo and not vib and not worse
+    met = not servo and not vib and not worse
     return [f"  Servo part against the schedule's (the moves judged): {'; '.join(said) or 'none'}.",
             "  **Corrected goal** (the one that counts: the servo part <= 25 % of the schedule's where a factor within"
             " one 2 ms sample of move + settle takes it there, and the vibration part no more than the schedule's, to"
             " 1 %, on the moves the issue's goal judges; never worse than the schedule after cycle 1): "
-            + ("met" if met else "not met")
-            + ("" if judged else " (no move judged)")
+            + _verdict(judged, met)
             + (f" (servo part above 25 %: {', '.join(servo)})" if servo else "")
             + (f" (vibration part above the schedule's: {', '.join(vib)})" if vib else "")
             + (f"; the servo part's 25 % is beyond the time on {', '.join(beyond)}: the pair that takes it there"
