@@ -29,9 +29,9 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
   the move + settle time within one 2 ms sample of the schedule's; the next cycle tries it, and it is kept only
   when it pays (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`); the move stops at the first trial
   that does not pay or when no factor is predicted to pay. A move with no factor kept whose reference finds none
-  first pools its reference windows (up to :data:`POOL_CYCLES`) and looks there for the loop's pole
-  (:mod:`~shaper_nodes.core.learning.list.loop_pole`: what noise hides in one window); a factor on it is judged by
-  its measured amplitude at that pole (``PayingFactors.judge_at_pole``);
+  (or whose factor from one window did not pay) pools its reference windows (up to :data:`POOL_CYCLES`) and looks
+  there for the loop's pole (:mod:`~shaper_nodes.core.learning.list.loop_pole`: what noise hides in one window); a
+  factor on it is judged by its measured amplitude at that pole (``PayingFactors.judge_at_pole``);
 - ``tradeoff`` (one cycle, a side case): what a factor on a mode that rings costs in move + settle time, and
   the factor chosen within larger time budgets (:data:`TRADEOFF_BUDGETS`);
 - ``servo_cost`` (one cycle, a side case): what the pair on the loop's strongest damped component takes off the
@@ -443,6 +443,7 @@ class PayingFactors:
         self.pool: dict[str, list[tuple[Any, Any, float]]] = {}  # the move's reference windows (pooled_pick)
         self.at_pole: dict[str, tuple[list[complex], tuple[float, float]]] = {}  # a pooled trial's poles, reference
         self.trial_pool: dict[str, list[tuple[Any, Any, float]]] = {}  # its trial windows (judge_at_pole)
+        self.pool_only: set[str] = set()  # moves whose trial from one window did not pay: pooled references only
 
     def shaper(self, mv: Any) -> Any:
         """The move's shaper without a trial: the schedule at its goal and the factors kept."""
@@ -479,7 +480,8 @@ class PayingFactors:
                     return time_cost(mv.times, mv.positions, mv.velocities, base,
                                      Shaper(both[0], both[1], "custom"), RATE, JOINT_TOLERANCE, interpolate=True)
 
-                pick = paying_factor(_components(run, SERVO_EXTRA), cost, allowed, band=LIST_BAND)
+                pick = (None if entry.key in self.pool_only
+                        else paying_factor(_components(run, SERVO_EXTRA), cost, allowed, band=LIST_BAND))
                 if pick is None and fixed is None:  # the loop's pole in the move's pooled references
                     pick = self.pooled_pick(mv, run, cost, c)
                     if pick is None and len(self.pool[entry.key]) < POOL_CYCLES:
@@ -523,14 +525,19 @@ class PayingFactors:
             elif judged is not None:  # judge_at_pole's note says why
                 stopped.add(entry.key)
             else:
-                stopped.add(entry.key)
                 b = entry.base or {}
+                pool = fixed is None and entry.key not in self.pool_only
+                if pool:  # a factor from one noisy window that did not pay: the pooled references look again
+                    self.pool_only.add(entry.key)
+                else:
+                    stopped.add(entry.key)
                 ctx.note(case, f"{mv.name}, cycle {c}: the trial did not pay (residual"
                                f" {m:.4f} m/s^2, move + settle {ms:.3f} s against"
                                f" {b.get('residual_rms', math.nan):.4f},"
                                f" {b.get('move_settle_s', math.nan):.3f} s): "
                                + ("the schedule alone" if fixed is None else
-                                  "the factors kept before it"))
+                                  "the factors kept before it")
+                               + ("; its references pooled from here on" if pool else ""))
         return self._row(entry, c, run, used, action, decision)
 
     def _row(self, entry: Any, c: int, run: Run, used: Any, action: str, decision: str) -> Row:
@@ -561,7 +568,9 @@ class PayingFactors:
         if found is None:
             return None
         loop, err = found
-        pick = paying_factor([*ringing, loop], cost, TIME_TOLERANCE_S, band=LIST_BAND, targets=[loop])
+        # predicted on the loop's component alone: the factor is for it (in the 1 s RMS the modes that ring, left as
+        # they are, would hide what it takes off), and its trial is judged at its pole (judge_at_pole)
+        pick = paying_factor([loop], cost, TIME_TOLERANCE_S, band=LIST_BAND)
         if pick is None:
             return None
         fit = fixed_pole_fit(t, y, 0.0, [x.pole for x in ringing] + [loop.pole])
@@ -1234,15 +1243,16 @@ def checks(rows: list[Row], noise: float) -> list[str]:
                " factors kept).")
     out.append("")
     out.append("**The loop's pole in pooled references** (`scheduled_list_factor`, a move with no factor kept whose"
-               " reference finds none predicted to pay; with noise, issue 31 session 11): the move runs its reference"
+               " reference finds none predicted to pay, or whose factor from one window did not pay; with noise,"
+               " issue 31 session 11): the move runs its reference"
                f" again, up to {POOL_CYCLES} cycles, and its windows (the same response each cycle) are averaged at"
                " the commanded end; in the mean the modes that ring are identified, the loop's damped pole is"
                " searched beside them (25-110 Hz, damping 0.15-0.7) with its amplitude measured by least squares with"
                " the pole fixed (`shaper_nodes.core.learning.list.loop_pole`), and `paying_factor` picks a factor on"
-               " it by the same time rule. Such a trial is judged where the part lives: kept when its measured"
-               " amplitude at that pole (its windows pooled, the reference's poles fixed) is below the pooled"
-               " reference's by 2 combined standard errors and its move + settle time is within one 2 ms sample of"
-               " the schedule's; lower but not by that much, it runs again (up to"
+               " it by the same time rule, its gain predicted on that component alone. Such a trial is judged where"
+               " the part lives: kept when its measured amplitude at that pole (its windows pooled, the reference's"
+               " poles fixed) is below the pooled reference's by 2 combined standard errors and its move + settle"
+               " time is within one 2 ms sample of the schedule's; lower but not by that much, it runs again (up to"
                f" {POOL_CYCLES} windows). The 1 s RMS cannot judge it: the part is 0.0001-0.0002 m/s^2 of it, the"
                " noise's scatter per window 0.0002. Noise-free every move finds its factor in its first reference,"
                " so this path does not run.")
