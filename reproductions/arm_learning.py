@@ -28,7 +28,10 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
   from the shaped command alone (:func:`~shaper_nodes.core.learning.list.payback.time_cost`, between samples), keeps
   the move + settle time within one 2 ms sample of the schedule's; the next cycle tries it, and it is kept only
   when it pays (:func:`~shaper_nodes.core.learning.moves.keep_when_it_pays`); the move stops at the first trial
-  that does not pay or when no factor is predicted to pay;
+  that does not pay or when no factor is predicted to pay. A move with no factor kept whose reference finds none
+  (or whose factor from one window did not pay) pools its reference windows (up to :data:`POOL_CYCLES`) and looks
+  there for the loop's pole (:mod:`~shaper_nodes.core.learning.list.loop_pole`: what noise hides in one window); a
+  factor on it is judged by its measured amplitude at that pole (``PayingFactors.judge_at_pole``);
 - ``tradeoff`` (one cycle, a side case): what a factor on a mode that rings costs in move + settle time, and
   the factor chosen within larger time budgets (:data:`TRADEOFF_BUDGETS`);
 - ``servo_cost`` (one cycle, a side case): what the pair on the loop's strongest damped component takes off the
@@ -59,7 +62,9 @@ motion's end), late_rms (the same without the servo's first 0.1 s), peak_mm, set
 move_settle_s (0.05 mm), speed_factor, delay_s, torque_ratio (largest joint torque / its limit),
 velocity_ratio, and the residual's servo and vibration parts (servo_rms, vibration_rms, linear_rms: the two
 together; :mod:`reproductions.arm_physics`). Writes docs/results/arm_learning.md and its figures; its goals
-section states the issue's goals and the corrected ones (on the vibration part) and whether each is met.
+section states, per case, the issue's goal and the one corrected goal (the servo part by the time the goal allows,
+docs/results/arm_learning_goals.md (a)) once each, judged on the moves above the noise floor by the one rule
+(:func:`floor_threshold`), and whether each is met.
 """
 
 from __future__ import annotations
@@ -80,6 +85,7 @@ from reproductions.common import docs_option, save_figure
 from reproductions.residual_split import SERVO_ZETA  # more damped than this: the position loop's transient
 
 RATE = 500.0
+IMU_RATE = 2.0 * RATE  # Hz: the offline arm's accelerometer samples at each of its two substeps
 DWELL = 1.5  # s at rest after each move, as in the demo
 OUT = pathlib.Path("out") / "arm_learning"
 #: the UR5e's published joint speed limit, all six joints: 180 deg/s (UR5e technical specifications;
@@ -404,6 +410,10 @@ def scheduled_list(ctx: Context, cycles: int) -> list[Row]:
 JOINT_TOLERANCE = 0.05e-3 / 1.0
 
 
+#: ``scheduled_list_factor``: a move with no factor kept whose reference finds none predicted to pay runs its reference
+#: again, up to this many cycles, the windows pooled, the loop's pole searched in them (``PayingFactors.pooled_pick``)
+POOL_CYCLES = 3
+
 #: ``scheduled_list_factor`` fits the residual from the commanded end with up to this many more modes than the modes
 #: that ring fill (:func:`~shaper_nodes.core.learning.list.payback.components`' ``extra_damped``;
 #: :data:`~shaper_nodes.core.learning.list.payback.EXTRA_DAMPED`)
@@ -430,6 +440,10 @@ class PayingFactors:
         self.trial: dict[str, Any] = {}  # the factor the move's next cycle tries (a PaybackChoice)
         self.budget: dict[str, float] = {}  # the schedule's move + settle time, s: no kept state is slower
         self.stopped: set[str] = set()
+        self.pool: dict[str, list[tuple[Any, Any, float]]] = {}  # the move's reference windows (pooled_pick)
+        self.at_pole: dict[str, tuple[list[complex], tuple[float, float]]] = {}  # a pooled trial's poles, reference
+        self.trial_pool: dict[str, list[tuple[Any, Any, float]]] = {}  # its trial windows (judge_at_pole)
+        self.pool_only: set[str] = set()  # moves whose trial from one window did not pay: pooled references only
 
     def shaper(self, mv: Any) -> Any:
         """The move's shaper without a trial: the schedule at its goal and the factors kept."""
@@ -466,7 +480,12 @@ class PayingFactors:
                     return time_cost(mv.times, mv.positions, mv.velocities, base,
                                      Shaper(both[0], both[1], "custom"), RATE, JOINT_TOLERANCE, interpolate=True)
 
-                pick = paying_factor(_components(run, SERVO_EXTRA), cost, allowed, band=LIST_BAND)
+                pick = (None if entry.key in self.pool_only
+                        else paying_factor(_components(run, SERVO_EXTRA), cost, allowed, band=LIST_BAND))
+                if pick is None and fixed is None:  # the loop's pole in the move's pooled references
+                    pick = self.pooled_pick(mv, run, cost, c)
+                    if pick is None and len(self.pool[entry.key]) < POOL_CYCLES:
+                        return self._row(entry, c, run, None, "pooling", "")
                 if pick is None:
                     stopped.add(entry.key)
                     ctx.note(case, f"{mv.name}, cycle {c}: no factor predicted to pay"
@@ -492,25 +511,107 @@ class PayingFactors:
             pair = used.shaper()
             run = cell.run(mv, _shaper(_times((current.amplitudes, current.times), (pair.amplitudes, pair.times))))
             m, ms = run.measures.residual_rms, run.measures.move_and_settle_s
-            decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
+            judged = self.at_pole.pop(entry.key, None)
+            if judged is None:
+                decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
+            else:  # judged where the part lives: its measured amplitude at the pole (judge_at_pole)
+                decision = self.judge_at_pole(entry, run, judged, mv.name, c)
+            if decision == "again" and judged is not None:  # not resolved yet: the same trial again, windows pooled
+                trial[entry.key], self.at_pole[entry.key] = choice, judged
+                return self._row(entry, c, run, used, "trial", decision)
             action = "trial"
             if decision == "learn":  # paid: kept; the next cycle is the new reference
                 kept[entry.key] = _times(fixed, (pair.amplitudes, pair.times))
-            else:
+            elif judged is not None:  # judge_at_pole's note says why
                 stopped.add(entry.key)
+            else:
                 b = entry.base or {}
+                pool = fixed is None and entry.key not in self.pool_only
+                if pool:  # a factor from one noisy window that did not pay: the pooled references look again
+                    self.pool_only.add(entry.key)
+                else:
+                    stopped.add(entry.key)
                 ctx.note(case, f"{mv.name}, cycle {c}: the trial did not pay (residual"
                                f" {m:.4f} m/s^2, move + settle {ms:.3f} s against"
                                f" {b.get('residual_rms', math.nan):.4f},"
                                f" {b.get('move_settle_s', math.nan):.3f} s): "
                                + ("the schedule alone" if fixed is None else
-                                  "the factors kept before it"))
-        f = kept.get(entry.key)
+                                  "the factors kept before it")
+                               + ("; its references pooled from here on" if pool else ""))
+        return self._row(entry, c, run, used, action, decision)
+
+    def _row(self, entry: Any, c: int, run: Run, used: Any, action: str, decision: str) -> Row:
+        f = self.kept.get(entry.key)
         entry.correction = None if f is None else (np.asarray(f[0]).tolist(), np.asarray(f[1]).tolist())
         entry.cycles += 1
-        return row(case, c, run, a1=None if used is None else used.a1,
+        return row(self.case, c, run, a1=None if used is None else used.a1,
                    t2=None if used is None else used.t2, action=action, keep=decision,
                    factors=0 if f is None else _factor_count(f))
+
+    def pooled_pick(self, mv: Any, run: Run, cost: Callable[[Any], float], c: int) -> Any:
+        """A factor on the loop's pole found in the move's reference windows pooled (:mod:`~shaper_nodes.core.
+        learning.list.loop_pole`): this reference's window joins the pool; the modes that ring are identified in the
+        pooled mean, the loop's pole searched beside them, its amplitude measured with the pole fixed, and
+        :func:`~shaper_nodes.core.learning.list.payback.paying_factor` picks a factor on it by the same time rule.
+        None if no pole stands above the noise or no factor on it is predicted to pay."""
+        from shaper_nodes.core.learning.list.loop_pole import fixed_pole_fit, loop_pole, pooled
+        from shaper_nodes.core.learning.list.payback import components, paying_factor
+        from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S
+
+        key = self.store.entry(mv.positions[0], mv.positions[-1], origin="schedule")[0].key
+        ce = run.planned_end + run.measures.delay_s
+        pool = self.pool.setdefault(key, [])
+        pool.append((run.times, run.imu, ce))
+        t, y = pooled(pool)
+        ringing = [x for x in components(t, y, 0.0, SERVO_ZETA) if x.zeta < SERVO_ZETA]
+        found = loop_pole(t, y, 0.0, ringing)
+        if found is None:
+            return None
+        loop, err = found
+        # predicted on the loop's component alone: the factor is for it (in the 1 s RMS the modes that ring, left as
+        # they are, would hide what it takes off), and its trial is judged at its pole (judge_at_pole)
+        pick = paying_factor([loop], cost, TIME_TOLERANCE_S, band=LIST_BAND)
+        if pick is None:
+            return None
+        fit = fixed_pole_fit(t, y, 0.0, [x.pole for x in ringing] + [loop.pole])
+        self.at_pole[key] = ([x.pole for x in ringing] + [loop.pole], (fit.amplitudes[-1], fit.errors[-1]))
+        self.ctx.note(self.case, f"{mv.name}, cycle {c}: the loop's pole in {len(pool)} reference windows pooled:"
+                                 f" {loop.hz:.1f} Hz, zeta {loop.zeta:.3f}, amplitude {loop.amplitude:.4f}"
+                                 f" +- {err:.4f} m/s^2 (with the pole fixed; beside {len(ringing)} mode(s) that"
+                                 " ring)")
+        return pick
+
+    def judge_at_pole(self, entry: Any, run: Run, judged: tuple[list[complex], tuple[float, float]], name: str,
+                      c: int) -> str:
+        """The keep rule for a factor chosen from pooled references: the trial pays when its measured amplitude at
+        the loop's pole (least squares with the reference's poles fixed, on the trial's windows pooled) is below the
+        pooled reference's by :data:`~shaper_nodes.core.learning.list.loop_pole.LOWER` combined standard
+        errors AND its move + settle time is within one 2 ms sample of the schedule's (the 1 s RMS cannot resolve
+        the part: it is 0.0001-0.0002 m/s^2 of it, the noise's scatter per window 0.0002). Lower but not by that
+        much: ``"again"``, the same trial once more (up to :data:`POOL_CYCLES` windows); otherwise ``"base"``."""
+        from shaper_nodes.core.learning.list.loop_pole import fixed_pole_fit, lower_at_pole, pooled
+        from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S
+
+        poles, ref = judged
+        pool = self.trial_pool.setdefault(entry.key, [])
+        pool.append((run.times, run.imu, run.planned_end + run.measures.delay_s))
+        t, y = pooled(pool)
+        fit = fixed_pole_fit(t, y, 0.0, poles)
+        trial = (fit.amplitudes[-1], fit.errors[-1])
+        ms = run.measures.move_and_settle_s
+        base = entry.base or {}
+        in_time = ms <= base.get("move_settle_s", math.inf) + TIME_TOLERANCE_S
+        paid = in_time and lower_at_pole(ref, trial)
+        again = in_time and not paid and trial[0] < ref[0] and len(pool) < POOL_CYCLES
+        self.ctx.note(self.case, f"{name}, cycle {c}: amplitude at the loop's pole {trial[0]:.4f} +- {trial[1]:.4f}"
+                                 f" m/s^2 ({len(pool)} trial window(s) pooled) against the pooled reference's"
+                                 f" {ref[0]:.4f} +- {ref[1]:.4f}; move + settle {ms:.3f} s against"
+                                 f" {base.get('move_settle_s', math.nan):.3f} s: "
+                                 + ("paid, kept" if paid else "lower, not resolved: tried again" if again
+                                    else "did not pay"))
+        if paid:
+            entry.best = {"residual_rms": run.measures.residual_rms, "move_settle_s": ms}
+        return "learn" if paid else "again" if again else "base"
 
 
 @register("scheduled_list_factor")
@@ -1012,26 +1113,50 @@ def _list_goal(rows: list[Row], base: dict[str, Row | None], n: int, floor: floa
     return out
 
 
-def _above(b: Row, floor: float) -> bool:
-    """Whether a move's scheduled residual is above the noise floor: the arm's own response (the servo and
-    vibration parts, noise-free) where the row has it, else the measured residual."""
-    level = b["linear_rms"] if b.get("linear_rms") is not None else b["residual_rms"]
-    return bool(float(level) > floor)
+def floor_threshold(noise: float) -> float:
+    """The one rule's threshold (docs/guide/learning.md, "Above the noise floor: one rule"), m/s^2: the noise's
+    floor F = sqrt(3) x ``noise`` plus twice one window's scatter of it, s = F / sqrt(6 N) (N the IMU's samples per
+    axis in the residual window); 0 with no noise (every move judged)."""
+    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW
+
+    floor = math.sqrt(3.0) * noise
+    return floor + 2.0 * floor / math.sqrt(6.0 * RESIDUAL_WINDOW * IMU_RATE)
 
 
-def _whole_goal(rows: list[Row], case: str, base: dict[str, Row | None], n: int, floor: float,
+def _above(b: Row, threshold: float) -> bool:
+    """Whether a move is above the noise floor by the one rule: its scheduled residual *as measured* above
+    ``threshold`` (:func:`floor_threshold`)."""
+    return bool(float(b["residual_rms"]) > threshold)
+
+
+def _own(r: Row, noise: float) -> float:
+    """The residual a goal judges: as measured noise-free; with noise the arm's own (the servo and vibration parts
+    together, noise-free), as the one rule asks where it is known."""
+    return float(r["linear_rms"] if noise > 0 and r.get("linear_rms") is not None else r["residual_rms"])
+
+
+def _verdict(judged: list[str], met: bool) -> str:
+    """A goal's verdict on the moves ``judged``: none judged is no verdict (a goal met on no move is vacuous)."""
+    return "not judged (no move above the noise floor)" if not judged else "met" if met else "not met"
+
+
+def _goal_lines(rows: list[Row], case: str, base: dict[str, Row | None], n: int, noise: float,
                 worse: list[str]) -> list[str]:
-    """The issue's goal on the whole residual for a case over the schedule (and the corrected one for
-    ``scheduled_list_factor``)."""
-    judged = [m for m, b in base.items() if b is not None and _above(b, floor)]
-    whole = [m for m in judged if (r := _get(rows, case, m, n)) is not None and (b := base[m]) is not None
-             and r["residual_rms"] > 0.25 * b["residual_rms"]]
-    out = [f"  Issue's goal on the whole residual (<= 25 % of the schedule's on every move whose residual, the arm's"
-           f" own, noise-free, is above the noise floor: {', '.join(judged) or 'none'}):"
-           f" {'met' if not whole and not worse else 'not met'}"
+    """A case over the schedule: the issue's goal once and the corrected goal once, each with its verdict on the moves
+    above the noise floor by the one rule (:func:`_above`); then what the time forbids, as a record (not a goal)."""
+    threshold = floor_threshold(noise)
+    judged = [m for m, b in base.items() if b is not None and _above(b, threshold)]
+    whole = [f"{m} {100 * _own(r, noise) / _own(b, noise):.0f} %" for m in judged
+             if (r := _get(rows, case, m, n)) is not None and (b := base[m]) is not None
+             and _own(r, noise) > 0.25 * _own(b, noise)]
+    rule = ("every move" if noise == 0 else
+            f"every move whose scheduled residual as measured is above the noise floor by the one rule (F + 2 s ="
+            f" {threshold:.5f} m/s^2: {', '.join(judged) or 'none'}; judged on the arm's own residual, noise-free)")
+    out = [f"  **Issue's goal** (<= 25 % of the schedule's residual on {rule} within {n} cycles; never worse than the"
+           f" schedule after cycle 1): {_verdict(judged, not whole and not worse)}"
            + (f" (above 25 %: {', '.join(whole)})" if whole else "")
            + "; why: [what a factor on a ringing mode costs](#what-a-factor-on-a-mode-that-rings-costs)."]
-    return out + (_payback_goal(rows, base, n, floor, worse) if case == "scheduled_list_factor" else [])
+    return out + _payback_goal(rows, case, base, n, judged, worse)
 
 
 def _servo_beyond_time(rows: list[Row], move: str) -> bool:
@@ -1044,16 +1169,19 @@ def _servo_beyond_time(rows: list[Row], move: str) -> bool:
             and zv["move_settle_s"] > b["move_settle_s"] + 0.0021)
 
 
-def _payback_goal(rows: list[Row], base: dict[str, Row | None], n: int, floor: float, worse: list[str]) -> list[str]:
-    """``scheduled_list_factor``'s corrected goal: what the time the goal allows can take (the tradeoff section and
-    the servo_cost section)."""
+def _payback_goal(rows: list[Row], case: str, base: dict[str, Row | None], n: int, judged: list[str],
+                  worse: list[str]) -> list[str]:
+    """The corrected goal (the one that counts, docs/results/arm_learning_goals.md (a)) on the moves ``judged``: the
+    servo part by the time the goal allows (the servo_cost section), the vibration part left at the schedule's; then
+    the vibration part's 25 %, the record of what the time forbids (the tradeoff section)."""
     servo: list[str] = []
     beyond: list[str] = []
     vib: list[str] = []
     said: list[str] = []
-    for m, b in base.items():
-        r = _get(rows, "scheduled_list_factor", m, n)
-        if r is None or b is None or "servo_rms" not in r or not _above(b, floor):
+    vib25: list[str] = []
+    for m in judged:
+        r, b = _get(rows, case, m, n), base[m]
+        if r is None or b is None or "servo_rms" not in r:
             continue
         ratio = r["servo_rms"] / b["servo_rms"]
         said.append(f"{m} {100 * ratio:.0f} %")
@@ -1061,18 +1189,22 @@ def _payback_goal(rows: list[Row], base: dict[str, Row | None], n: int, floor: f
             (beyond if _servo_beyond_time(rows, m) else servo).append(m)
         if r["vibration_rms"] > 1.01 * b["vibration_rms"]:
             vib.append(m)
+        if r["vibration_rms"] > 0.25 * b["vibration_rms"]:
+            vib25.append(f"{m} {100 * r['vibration_rms'] / b['vibration_rms']:.0f} %")
     met = not servo and not vib and not worse
-    return [f"  Servo part against the schedule's: {'; '.join(said) or 'no move above the noise floor'}.",
-            "  **Corrected goal, by the time the goal allows** (the servo part <= 25 % of the schedule's where a"
-            " factor within one 2 ms sample of move + settle takes it there, and the vibration part no more than the"
-            " schedule's, to 1 %, on every move above the noise floor (as above); never worse than the schedule after"
-            " cycle 1; the vibration part is left: within one 2 ms sample of move + settle no factor lowers it, the"
-            " tradeoff section): " + ("met" if met else "not met")
+    return [f"  Servo part against the schedule's (the moves judged): {'; '.join(said) or 'none'}.",
+            "  **Corrected goal** (the one that counts: the servo part <= 25 % of the schedule's where a factor within"
+            " one 2 ms sample of move + settle takes it there, and the vibration part no more than the schedule's, to"
+            " 1 %, on the moves the issue's goal judges; never worse than the schedule after cycle 1): "
+            + _verdict(judged, met)
             + (f" (servo part above 25 %: {', '.join(servo)})" if servo else "")
             + (f" (vibration part above the schedule's: {', '.join(vib)})" if vib else "")
             + (f"; the servo part's 25 % is beyond the time on {', '.join(beyond)}: the pair that takes it there"
                " costs more than one 2 ms sample ([what a factor on the loop's transient costs]"
-               "(#what-a-factor-on-the-loops-transient-costs))" if beyond else "") + "."]
+               "(#what-a-factor-on-the-loops-transient-costs))" if beyond else "") + ".",
+            "  What the time forbids (a record, not a goal): the vibration part at 25 % of the schedule's, which"
+            " within one 2 ms sample of move + settle no factor reaches (the tradeoff section): "
+            + (f"above it on {', '.join(vib25)}" if vib25 else "at or below it on every move judged") + "."]
 
 
 def checks(rows: list[Row], noise: float) -> list[str]:
@@ -1089,8 +1221,13 @@ def checks(rows: list[Row], noise: float) -> list[str]:
     out = [f"Against the schedule's cycle {last} (per move); noise floor {floor:.4f} m/s^2 (sqrt(3) x the noise).", ""]
     out.append("The issue's goals for LIST over the schedule and for LIST alone are stated on the whole residual;"
                " the [physics section](#what-the-schedule-leaves-the-servo-part-and-the-vibration-part) shows"
-               " which part of it a shaper can act on, and the corrected goal is stated on that part (**corrected**"
-               " lines).")
+               " which part of it a shaper can act on within the time the goal allows, and each case over the"
+               " schedule states the issue's goal once and the one **corrected goal** once (the servo part by the"
+               " time the goal allows, the vibration part left at the schedule's; docs/results/arm_learning_goals.md"
+               " (a)), each with its verdict; the vibration part's 25 % follows as the record of what the time"
+               " forbids, not a goal. Moves are judged by the one noise-floor rule (docs/guide/learning.md: the"
+               " schedule's residual as measured above F + 2 s; with no noise, every move); a move not judged is"
+               " marked [at the floor].")
     out.append("")
     out.append("**Chosen to pay, then kept when it pays** (`scheduled_list_factor`): from the components identified in"
                " a reference cycle (the schedule, then the schedule with the factors kept so far: the modes that ring"
@@ -1104,6 +1241,21 @@ def checks(rows: list[Row], noise: float) -> list[str]:
                " the move + settle time within one 2 ms sample of the schedule's; the next cycle tries it and the"
                " keep rule below decides. No factor predicted to pay: the move stays at the schedule (and the"
                " factors kept).")
+    out.append("")
+    out.append("**The loop's pole in pooled references** (`scheduled_list_factor`, a move with no factor kept whose"
+               " reference finds none predicted to pay, or whose factor from one window did not pay; with noise,"
+               " issue 31 session 11): the move runs its reference"
+               f" again, up to {POOL_CYCLES} cycles, and its windows (the same response each cycle) are averaged at"
+               " the commanded end; in the mean the modes that ring are identified, the loop's damped pole is"
+               " searched beside them (25-110 Hz, damping 0.15-0.7) with its amplitude measured by least squares with"
+               " the pole fixed (`shaper_nodes.core.learning.list.loop_pole`), and `paying_factor` picks a factor on"
+               " it by the same time rule, its gain predicted on that component alone. Such a trial is judged where"
+               " the part lives: kept when its measured amplitude at that pole (its windows pooled, the reference's"
+               " poles fixed) is below the pooled reference's by 2 combined standard errors and its move + settle"
+               " time is within one 2 ms sample of the schedule's; lower but not by that much, it runs again (up to"
+               f" {POOL_CYCLES} windows). The 1 s RMS cannot judge it: the part is 0.0001-0.0002 m/s^2 of it, the"
+               " noise's scatter per window 0.0002. Noise-free every move finds its factor in its first reference,"
+               " so this path does not run.")
     out.append("")
     out.append("**The keep rule** (`shaper_nodes.core.learning.moves.keep_when_it_pays`, used by"
                " `scheduled_list_factor` and `list`): a learned correction is kept for a move only when its cycle"
@@ -1125,7 +1277,9 @@ def checks(rows: list[Row], noise: float) -> list[str]:
                 continue
             above = b["residual_rms"] > floor
             parts.append(f"{m} {100 * r['residual_rms'] / b['residual_rms']:.0f} %"
-                         f" (late {100 * r['late_rms'] / b['late_rms']:.0f} %){'' if above else ' [below the floor]'}")
+                         f" (late {100 * r['late_rms'] / b['late_rms']:.0f} %)"
+                         + ("" if case == "list" or _above(b, floor_threshold(noise)) else " [at the floor]")
+                         + ("" if case != "list" or above else " [below the floor]"))
             if "vibration_rms" in r and "vibration_rms" in b:
                 ratio = r["vibration_rms"] / b["vibration_rms"]
                 judged = b["vibration_rms"] > floor
@@ -1144,11 +1298,7 @@ def checks(rows: list[Row], noise: float) -> list[str]:
         out.append(f"- **{case}**, cycle {n}, residual against the schedule's: " + "; ".join(parts) + ".")
         if vib and case != "list":
             out.append(f"  Vibration part against the schedule's: {'; '.join(vib)}.")
-            out.append(f"  **Corrected goal** (vibration part <= 25 % of the schedule's on every move where the"
-                       f" schedule's is above the noise floor, never worse than the schedule after cycle 1):"
-                       f" {'met' if not missed and not worse else 'not met'}"
-                       + (f" (above 25 %: {', '.join(missed)})" if missed else "") + ".")
-            out += _whole_goal(rows, case, base, n, floor, worse)
+            out += _goal_lines(rows, case, base, n, noise, worse)
         elif case == "list":
             out += _list_goal(rows, base, n, floor, vib, missed)
         if case != "list":
@@ -1237,8 +1387,9 @@ def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
              "The schedule's servo part against its residual: " + ", ".join(share) + ". "
              + (f"Above 25 % of the residual on {', '.join(high)}: there the goal '25 % of the schedule's residual'"
                 " asks for less than the loop's own transient, which a shaper designed on the arm's modes (the"
-                " schedule, LIST's factor on a mode that rings) does not target; the corrected goal is stated on the"
-                " vibration part." if high else "Below 25 % everywhere: the servo part is no floor here.")]
+                " schedule, LIST's factor on a mode that rings) does not target. The one corrected goal (the goals"
+                " section) asks for the servo part by the time the goal allows and leaves the vibration part at the"
+                " schedule's." if high else "Below 25 % everywhere: the servo part is no floor here.")]
     n_list = max((r["cycle"] for r in rows if r["case"] == "list"), default=0)
     lst = {r["move"]: r for r in rows if r["case"] == "list" and r["cycle"] == n_list}
     cut = [(r, lst[r["move"]]) for r in sc if r["move"] in lst and "servo_rms" in lst[r["move"]]
@@ -1252,8 +1403,8 @@ def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
                   " There no mode rang any more, and `list` tried a factor on the lowest damped eigenvalue"
                   " identified in the residual (the loop's transient; [list](#list)'s notes) and kept it because it"
                   " paid: a two-impulse factor cancels a heavily damped pole's response as it cancels a lightly"
-                  " damped one. The corrected goal above stays on the vibration part; the servo part is a target"
-                  " the schedule and `scheduled_list` leave, not a floor."]
+                  " damped one. The servo part is a target the schedule and `scheduled_list` leave, not a floor: the"
+                  " corrected goal (the goals section) is on it."]
     lines += _tradeoff(rows)
     lines += _servo_cost(rows)
     rig = {r["move"]: r for r in rows if r["case"] == "rigid" and r.get("shaping") == "scheduled"}

@@ -116,6 +116,31 @@ def test_a_factor_over_the_schedule_is_kept_only_when_it_pays_and_never_makes_a_
             assert last["residual_rms"] < base["residual_rms"]
 
 
+def test_with_noise_the_loop_pole_of_pooled_references_takes_the_servo_part_off_at_no_time_cost(tmp_path):
+    # 0.01 m/s^2 of IMU noise: one reference window's identification finds no factor on most moves; the pooled
+    # references find the loop's pole, and a trial is kept when its measured amplitude there is lower
+    path = tmp_path / "noisy.json"
+    assert arm_learning.main(["--cycles", "3", "--cases", "scheduled_list_factor", "--schedule", "modal", "--noise",
+                              "0.01", "--no-docs", "--json", str(path), "--out", str(tmp_path / "out")]) == 0
+    doc = json.loads(path.read_text())
+    rows, notes = doc["rows"], doc["notes"]["scheduled_list_factor"]
+    assert any("reference windows pooled" in n for n in notes)
+    kept = 0
+    for m in [mv.name for mv in cycle_moves()]:
+        mine = sorted((r for r in rows if r["move"] == m), key=lambda r: r["cycle"])
+        base = mine[0]
+        assert base["action"] in ("reference", "pooling") and base["factors"] == 0  # the schedule alone
+        for r in mine[1:]:
+            if r["action"] == "pooling":  # pooled references run the schedule alone, as many as POOL_CYCLES
+                assert r["factors"] == 0 and r["cycle"] < arm_learning.POOL_CYCLES
+            if r["keep"] == "learn":  # kept: no slower than the schedule, and the servo part is what it took off
+                assert r["move_settle_s"] <= base["move_settle_s"] + TIME_TOLERANCE_S
+                assert r["servo_rms"] <= 0.3 * base["servo_rms"]
+                assert r["vibration_rms"] <= 1.01 * base["vibration_rms"]
+                kept += 1
+    assert kept >= 4
+
+
 def test_the_tradeoff_measures_what_a_factor_on_a_ringing_mode_costs(tmp_path):
     rows = _rows(tmp_path, "tradeoff", 1)
     by = {(r["move"], r["shaping"]): r for r in rows}

@@ -1,0 +1,154 @@
+"""The position loop's damped pole in a noisy residual: pooled reference windows, the pole searched with the modes
+that ring held fixed, its amplitude measured by least squares with the pole fixed.
+
+Over a schedule with accelerometer noise the loop's transient (the servo part: a pole near 50 Hz damped 0.5-0.7,
+a few ms long) is a few 0.001 m/s^2 in a 1 s RMS against the noise's 0.0173, so one reference window's identification
+(:func:`.payback.components`) finds no component to put a factor on. Two things make it usable:
+
+- the move's reference cycles are the same response each time (the arm starts each move at rest and the schedule is
+  fixed), so their windows, aligned at the commanded end, are averaged (:func:`pooled`): the noise falls as
+  1/sqrt(k);
+- the transient is so heavily damped that what cancels it hardly depends on its pole (a zero-vibration pair on any
+  pole of 45-60 Hz, damping 0.5-0.7, takes the arm's servo part to 2-9 %; docs/results/arm_learning_noise.md), while
+  its *amplitude* with the pole held fixed is a linear least-squares estimate with a standard error
+  (:func:`fixed_pole_fit`): a trial's amplitude at the same pole, measured in the trial's own window, says whether
+  the factor removed it (:func:`lower_at_pole`), where the 1 s RMS cannot (the part is 0.0001-0.0002 m/s^2 of it,
+  the noise's scatter per window 0.0002).
+
+:func:`loop_pole` searches the pole on a grid (damping :data:`ZETA_RANGE`, frequency :data:`HZ_RANGE`) with the modes
+that ring fixed, each candidate's amplitudes by least squares, and keeps the one with the least residual sum of
+squares, reported only when its amplitude is :data:`SIGNIFICANCE` standard errors above zero; a trial is judged
+lower at it at :data:`LOWER` combined standard errors.
+
+ROS-free.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .params import ListError
+from .payback import Component
+
+__all__ = ["HZ_RANGE", "LOWER", "SIGNIFICANCE", "WINDOW", "ZETA_RANGE", "PoleFit", "fixed_pole_fit", "loop_pole",
+           "lower_at_pole", "pooled"]
+
+#: the loop's pole is searched at these frequencies, Hz (from, to, step)
+HZ_RANGE = (25.0, 110.0, 1.0)
+#: ... and damping ratios (from, to, step): a servo pole (>= 0.12, residual_split.SERVO_ZETA) up to 0.7; above it a
+#: zero-vibration pair has A1 over 0.95 and does nearly nothing, and on the noisy arm the search drifts there (a short
+#: transient's frequency and damping trade against each other)
+ZETA_RANGE = (0.15, 0.7, 0.025)
+#: the window after the commanded end the pole is searched in, s (the transient is gone in 0.05 s)
+WINDOW = 0.2
+#: a pole is reported when its amplitude is this many standard errors above zero
+SIGNIFICANCE = 3.0
+#: a trial is judged lower at a pole when its amplitude is below the reference's by this many combined standard errors
+#: (one-sided, about 2 % of equal amplitudes judged lower; conservative: an amplitude near zero reads as the norm of
+#: its noisy coefficients over the axes, about 1.6 standard errors for three)
+LOWER = 2.0
+
+
+@dataclass(frozen=True)
+class PoleFit:
+    """Amplitudes (m/s^2, the norm over axes of each pole's response at the window's start) of fixed poles fitted by
+    least squares, with their standard errors (m/s^2, from the fit's residual variance)."""
+
+    amplitudes: tuple[float, ...]
+    errors: tuple[float, ...]
+    rss: float
+    variance: float
+
+
+def _basis(t: np.ndarray, poles: Sequence[complex]) -> np.ndarray:
+    cols = [np.ones_like(t), t]  # offset and drift per axis, as the identification's model
+    for p in poles:
+        e = np.exp(p.real * t)
+        cols += [e * np.cos(p.imag * t), e * np.sin(p.imag * t)]
+    return np.stack(cols, axis=1)
+
+
+def _window(times: np.ndarray, signal: np.ndarray, start: float, window: float) -> tuple[np.ndarray, np.ndarray]:
+    t = np.asarray(times, dtype=float)
+    y = np.asarray(signal, dtype=float).reshape(t.size, -1)
+    sel = (t >= start) & (t <= start + window)
+    return t[sel] - start, y[sel]
+
+
+def fixed_pole_fit(times: np.ndarray, signal: np.ndarray, start: float, poles: Sequence[complex],
+                   window: float = WINDOW) -> PoleFit:
+    """Each fixed pole's amplitude at ``start`` by linear least squares on ``[start, start + window]`` (per axis: an
+    offset, a drift and each pole's decaying cosine and sine), with its standard error.
+
+    The amplitude is the norm over axes of the pole's cosine coefficients (its response's value at ``start``); its
+    standard error that of one coefficient (the residual variance times the diagonal of (X^T X)^-1).
+
+    Parameters
+    ----------
+    times : (N,) array
+        Sample times, s.
+    signal : (N,) or (N, k) array
+        The accelerometer, m/s^2.
+    start : float
+        The window's start (the commanded end), s.
+    poles : sequence of complex
+        The poles, 1/s (:attr:`.payback.Component.pole`).
+    window : float
+        The window's length, s.
+    """
+    t, y = _window(times, signal, start, window)
+    x = _basis(t, poles)
+    if t.size <= x.shape[1]:
+        raise ListError(f"{t.size} samples in the {window:g} s window cannot fit {len(poles)} poles")
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    rss = float(np.sum((y - x @ coef) ** 2))
+    variance = rss / (y.size - coef.size)
+    diag = np.diag(np.linalg.pinv(x.T @ x))
+    amps = tuple(float(np.linalg.norm(coef[2 + 2 * i])) for i in range(len(poles)))
+    errs = tuple(math.sqrt(variance * float(diag[2 + 2 * i])) for i in range(len(poles)))
+    return PoleFit(amps, errs, rss, variance)
+
+
+def loop_pole(times: np.ndarray, signal: np.ndarray, start: float, ringing: Sequence[Component],
+              window: float = WINDOW) -> tuple[Component, float] | None:
+    """The damped pole that, beside the modes that ring (``ringing``, held fixed), fits the window from ``start``
+    best (grid :data:`HZ_RANGE` x :data:`ZETA_RANGE`, amplitudes by least squares), as a component with its
+    amplitude at ``start``, and its standard error (m/s^2); None when the amplitude is not :data:`SIGNIFICANCE`
+    standard errors above zero."""
+    fixed = [c.pole for c in ringing]
+    best: tuple[float, Component, PoleFit] | None = None
+    for hz in np.arange(HZ_RANGE[0], HZ_RANGE[1] + 1e-9, HZ_RANGE[2]):
+        for zeta in np.arange(ZETA_RANGE[0], ZETA_RANGE[1] + 1e-9, ZETA_RANGE[2]):
+            c = Component(2.0 * math.pi * float(hz), float(zeta), 0.0)
+            fit = fixed_pole_fit(times, signal, start, [*fixed, c.pole], window)
+            if best is None or fit.rss < best[0]:
+                best = (fit.rss, c, fit)
+    assert best is not None
+    _, c, fit = best
+    amp, err = fit.amplitudes[-1], fit.errors[-1]
+    if amp < SIGNIFICANCE * err:
+        return None
+    return Component(c.omega, c.zeta, amp), err
+
+
+def lower_at_pole(reference: tuple[float, float], trial: tuple[float, float], significance: float = LOWER) -> bool:
+    """Whether a trial's measured amplitude at a pole is below the reference's by more than ``significance`` times
+    their combined standard error (each an (amplitude, standard error) pair, m/s^2, :func:`fixed_pole_fit`)."""
+    (a_ref, e_ref), (a_trial, e_trial) = reference, trial
+    return a_trial + significance * math.hypot(e_ref, e_trial) < a_ref
+
+
+def pooled(windows: Sequence[tuple[np.ndarray, np.ndarray, float]],
+           length: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The mean of several cycles' windows of the same response, aligned at their starts: each (times, signal, start)
+    cut to the samples in ``[start, start + length]``, the shortest count taken; returns (times from the start, the
+    mean signal). With independent noise the mean's noise is 1/sqrt(k) of one window's."""
+    if not windows:
+        raise ListError("no window to pool")
+    cut = [_window(t, y, s, length) for t, y, s in windows]
+    n = min(t.size for t, _ in cut)
+    return cut[0][0][:n], np.mean([y[:n] for _, y in cut], axis=0)
