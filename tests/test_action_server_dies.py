@@ -153,7 +153,7 @@ def test_a_goal_of_a_killed_server_ends_as_gone(rig):
 
 def test_a_goal_of_a_restarted_server_ends_as_unknown_to_it(rig):
     r = rig()
-    handle, result = r.running_goal()
+    _handle, result = r.running_goal()
     r.server.kill()
     r.server.start()
     r.spin_until(result.done, "the goal ended (the new server does not know it)")

@@ -26,7 +26,8 @@ without guessing:
   is awaited, the client watches the server: a new instance (a status publisher whose endpoint GID
   was not there when the result was first asked for, or a status list no longer naming a goal it
   named, not ended) makes it ask for the result again, and a server that does not know the goal
-  answers ``STATUS_UNKNOWN`` at once; a server out of the graph (and silent) for a period is gone.
+  answers ``STATUS_UNKNOWN`` at once; a server out of the graph (and silent) for a period (at least
+  :data:`GONE_AFTER`) is gone.
   Either way the result's future completes with status ``STATUS_UNKNOWN`` and, where the result has
   an ``error_string``, the reason ("the action server ... restarted and does not know goal ..." /
   "... is gone"): a caller must take only ``STATUS_SUCCEEDED`` as success. A paused server (SIGSTOP
@@ -45,8 +46,8 @@ from __future__ import annotations
 
 import threading
 import time
-import weakref
 import uuid
+import weakref
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -62,6 +63,9 @@ from .qos import ACTION_CLIENT_QOS
 MAX_STATUSES = 1024
 #: the goal states after which the server has a result
 TERMINAL = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
+#: s at least that a server must be out of the graph (and silent) to be gone: a restarted server's participant
+#: can drop the killed one's from the graph a moment before its own endpoints show (seen once: 0.04 s apart)
+GONE_AFTER = 2.0
 
 
 @dataclass
@@ -270,11 +274,11 @@ class ResilientActionClient(ActionClient):
         now = time.monotonic()
         with self._lock:
             named = {bytes(s.goal_info.goal_id.uuid) for s in status_list}
-            for key, wait in self._results.items():  # a goal named, then dropped while not ended: the server lost it
+            for key, waiting in self._results.items():  # named, then dropped while not ended: the server lost it
                 if key in named:
-                    wait.seen = True
-                elif wait.seen and wait.ended_at is None and not wait.future.done():
-                    wait.restarted, wait.ended_at = True, now - self.resend_period  # asked again at the next check
+                    waiting.seen = True
+                elif waiting.seen and waiting.ended_at is None and not waiting.future.done():
+                    waiting.restarted, waiting.ended_at = True, now - self.resend_period  # asked again next check
             for s in status_list:
                 key = bytes(s.goal_info.goal_id.uuid)
                 self._statuses.pop(key, None)
@@ -355,7 +359,7 @@ class ResilientActionClient(ActionClient):
         for wait in gone:
             self._end_lost(wait, self._action_type.Impl.GetResultService.Response(),
                            f"the action server {self._action_name} is gone (out of the graph and silent for"
-                           f" {period:g} s) with goal {_goal_name(wait)}")
+                           f" {max(period, GONE_AFTER):g} s) with goal {_goal_name(wait)}")
         if idle:
             self._timer.cancel()
 
@@ -364,10 +368,10 @@ class ResilientActionClient(ActionClient):
         return the waits whose server is gone (out of the graph, and nothing heard, for a period)."""
         period = self.resend_period
         if not self.server_is_ready():
-            gone = []
+            gone, after = [], max(period, GONE_AFTER)
             for wait in waits:
                 wait.gone_since = now if wait.gone_since is None else wait.gone_since
-                if now - wait.gone_since > period and now - self._heard > period:
+                if now - wait.gone_since > after and now - self._heard > after:
                     gone.append(wait)
             return gone
         gids = self._server_gids()
