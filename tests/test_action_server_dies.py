@@ -163,8 +163,10 @@ def test_a_goal_of_a_restarted_server_ends_as_unknown_to_it(rig):
     assert r.client.lost == 1
 
 
-def test_a_paused_server_keeps_its_goal(rig):
-    r = rig()
+@pytest.mark.parametrize("proxy", [False, True], ids=["client", "proxy"])
+def test_a_paused_server_keeps_its_goal(rig, proxy):
+    """SIGSTOP for PAUSE s then SIGCONT: a paused server (or controller behind the shaper's proxy) is not dead."""
+    r = rig(proxy=proxy)
     _handle, result = r.running_goal()
     r.server.signal(signal.SIGSTOP)
     end = time.monotonic() + PAUSE
