@@ -195,3 +195,33 @@ def test_the_shaper_proxy_aborts_a_goal_whose_controller_dies(rig, restart):
     assert res.result.error_code != FollowJointTrajectory.Result.SUCCESSFUL
     words = ("restarted and does not know goal",) if restart else ("is gone", "went away")
     assert any(w in res.result.error_string for w in words), res.result.error_string
+
+
+def test_a_status_list_that_drops_a_running_goal_has_its_result_asked_again(ros_context):
+    """The other sign of a new server instance: a status list that no longer names a goal a list named, not ended
+    (a restarted server that has goals of its own publishes one). In-process, the client's steps driven by hand: the
+    result is asked again at the next check; a list from before the goal was named is not such a sign."""
+    import uuid
+
+    from action_msgs.msg import GoalInfo
+    from rclpy.action.client import ClientGoalHandle
+    from unique_identifier_msgs.msg import UUID
+
+    node = rclpy.create_node("dropped_goal_unit", context=ros_context)
+    client = ResilientActionClient(node, FollowJointTrajectory, "/nobody/follow_joint_trajectory", resend_period=60.0)
+    try:
+        gid, other = (UUID(uuid=list(uuid.uuid4().bytes)) for _ in range(2))
+        response = FollowJointTrajectory.Impl.SendGoalService.Response(accepted=True)
+        result = client._get_result_async(ClientGoalHandle(client, gid, response))
+        wait = client._results[bytes(gid.uuid)]
+        client._note_statuses([GoalStatus(goal_info=GoalInfo(goal_id=other), status=GoalStatus.STATUS_EXECUTING)])
+        assert not wait.restarted and wait.ended_at is None  # a list from before the goal's: no sign
+        client._note_statuses([GoalStatus(goal_info=GoalInfo(goal_id=gid), status=GoalStatus.STATUS_EXECUTING)])
+        assert wait.seen and not wait.restarted
+        client._note_statuses([GoalStatus(goal_info=GoalInfo(goal_id=other), status=GoalStatus.STATUS_EXECUTING)])
+        assert wait.restarted and wait.ended_at is not None
+        client._check()
+        assert client.resent == 1 and wait.attempts == 2 and not result.done()
+    finally:
+        client.destroy()
+        node.destroy_node()

@@ -23,15 +23,13 @@ without guessing:
 * **A result lost** (the status says the goal has ended, and no result arrives within
   ``resend_period``) is asked for again; the server keeps results for its ``result_timeout``.
 * **A server killed or restarted while a goal runs** never says that the goal ended. While a result
-  is awaited, the client watches the server: a new instance (a status publisher whose endpoint GID
-  was not there when the result was first asked for, or a status list no longer naming a goal it
-  named, not ended) makes it ask for the result again, and a server that does not know the goal
-  answers ``STATUS_UNKNOWN`` at once; a server out of the graph (and silent) for a period (at least
-  :data:`GONE_AFTER`) is gone.
-  Either way the result's future completes with status ``STATUS_UNKNOWN`` and, where the result has
-  an ``error_string``, the reason ("the action server ... restarted and does not know goal ..." /
-  "... is gone"): a caller must take only ``STATUS_SUCCEEDED`` as success. A paused server (SIGSTOP
-  shorter than the DDS lease, 20 s with Fast DDS) keeps its endpoints and its goals: nothing ends.
+  is awaited the client watches the server: a new instance (a status publisher GID not there when the
+  result was first asked for, or a status list dropping a goal it named, not ended) makes it ask for
+  the result again, which a server not knowing the goal answers ``STATUS_UNKNOWN`` at once; a server
+  out of the graph (and silent) for a period, :data:`GONE_AFTER` at least, is gone. Either way the
+  result comes with status ``STATUS_UNKNOWN`` and the reason in its ``error_string`` (if it has one):
+  only ``STATUS_SUCCEEDED`` is success. A paused server (SIGSTOP shorter than the DDS lease, 20 s with
+  Fast DDS) keeps its endpoints and its goals: nothing ends.
 
 Nothing here waits a fixed time for a state: the periods are resend intervals, and every outcome
 is a message (a response or a status). The work is bounded: one timer, active only while a request
@@ -63,8 +61,8 @@ from .qos import ACTION_CLIENT_QOS
 MAX_STATUSES = 1024
 #: the goal states after which the server has a result
 TERMINAL = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
-#: s at least that a server must be out of the graph (and silent) to be gone: a restarted server's participant
-#: can drop the killed one's from the graph a moment before its own endpoints show (seen once: 0.04 s apart)
+#: s out of the graph (and silent) at least to be gone: a restarted server can drop the killed one from the graph
+#: a moment before its own endpoints show (docs/results/testing.md, H8 deadserver)
 GONE_AFTER = 2.0
 
 
@@ -208,12 +206,10 @@ class ResilientActionClient(ActionClient):
         self.add_future(outer)
         wait = _ResultWait(goal_handle, outer, time.monotonic())
         key = bytes(goal_handle.goal_id.uuid)
-        gids = self._server_gids()
-        wait.gids = gids or None
+        wait.gids = self._server_gids() or None
         with self._lock:
             self._results[key] = wait
-            status = self._statuses.get(key, (GoalStatus.STATUS_UNKNOWN,))[0]
-            if status in TERMINAL:
+            if self._statuses.get(key, (GoalStatus.STATUS_UNKNOWN,))[0] in TERMINAL:
                 wait.ended_at = time.monotonic()
             wait.seen = key in self._statuses
         self._request_result(wait)
@@ -278,7 +274,8 @@ class ResilientActionClient(ActionClient):
                 if key in named:
                     waiting.seen = True
                 elif waiting.seen and waiting.ended_at is None and not waiting.future.done():
-                    waiting.restarted, waiting.ended_at = True, now - self.resend_period  # asked again next check
+                    waiting.restarted = True
+                    self._ask_again(waiting, now)
             for s in status_list:
                 key = bytes(s.goal_info.goal_id.uuid)
                 self._statuses.pop(key, None)
@@ -383,9 +380,15 @@ class ResilientActionClient(ActionClient):
                 elif gids - wait.gids and not wait.restarted:
                     wait.gids = gids
                     wait.restarted = True
-                    if wait.ended_at is None:
-                        wait.ended_at = now - period  # asked again now
+                    self._ask_again(wait, now)
         return []
+
+    def _ask_again(self, wait: _ResultWait, now: float) -> None:
+        """Make the result's request due at the next check, and again every period until answered (lock held)."""
+        past = now - 2 * self.resend_period
+        wait.asked_at = past
+        if wait.ended_at is None:
+            wait.ended_at = past
 
     def destroy(self) -> None:
         self._timer.cancel()
