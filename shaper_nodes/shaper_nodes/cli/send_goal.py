@@ -14,13 +14,13 @@ wherever the arm is to the one point, and what a shaper shapes is that one point
 adds a last point holding the goal S s longer, so the controller keeps executing while the arm
 settles (a simulator in lockstep keeps its time running through it).
 
-It prints the result, ``succeeded`` or ``aborted``/``canceled``/``rejected`` with the
-controller's ``error_code`` (and its name) and ``error_string``, and the last feedback's largest
-position error, and exits 0 when the goal succeeded, 1 when it did not (rejected, aborted,
-canceled) or a wait ran out (the line names what did not come: the action server, the joint
-states, the answer to the goal, its result), 2 for bad input, 130 after Ctrl-C (the goal is
-cancelled first). Every wait is bounded in wall time: ``--timeout`` for the server, the joint
-states and the answer, ``--result-timeout`` for the result.
+It prints the result, ``succeeded`` or ``aborted``/``canceled``/``rejected``/``unknown`` (the action
+server gone, or restarted without the goal) with the controller's ``error_code`` (and its name) and
+``error_string``, and the last feedback's largest position error, and exits 0 when the goal succeeded,
+1 when it did not (rejected, aborted, canceled, unknown) or a wait ran out (the line names what did
+not come: the action server, the joint states, the answer to the goal, its result), 2 for bad input,
+130 after Ctrl-C (the goal is cancelled first). Every wait is bounded in wall time: ``--timeout`` for
+the server, the joint states and the answer, ``--result-timeout`` for the result.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class WaitError(RuntimeError):
 
 @dataclass(frozen=True)
 class Outcome:
-    """A goal's end: its status (``succeeded``, ``aborted``, ``canceled``, ``rejected``), the controller's
+    """A goal's end: its status (``succeeded``, ``aborted``, ``canceled``, ``rejected``, ``unknown``), the controller's
     result (error code, its name, error string) and the last feedback's largest |position error| (rad or m,
     NaN without feedback)."""
 
@@ -209,7 +209,8 @@ class GoalSender:
         self.handle = None
         res = result.result()
         status = {GoalStatus.STATUS_SUCCEEDED: "succeeded", GoalStatus.STATUS_ABORTED: "aborted",
-                  GoalStatus.STATUS_CANCELED: "canceled"}.get(res.status, f"status {res.status}")
+                  GoalStatus.STATUS_CANCELED: "canceled", GoalStatus.STATUS_UNKNOWN: "unknown"}.get(
+                      res.status, f"status {res.status}")
         code = int(res.result.error_code)
         return Outcome(status, code, _code_name(self.fjt.Result, code), str(res.result.error_string),
                        errors[-1] if errors else math.nan)

@@ -252,7 +252,8 @@ class Calibrator:
         from action_msgs.msg import GoalStatus
 
         if res.status != GoalStatus.STATUS_SUCCEEDED or res.result.error_code != 0:
-            state = {GoalStatus.STATUS_ABORTED: "aborted", GoalStatus.STATUS_CANCELED: "canceled"}.get(
+            state = {GoalStatus.STATUS_ABORTED: "aborted", GoalStatus.STATUS_CANCELED: "canceled",
+                     GoalStatus.STATUS_UNKNOWN: "lost (gone, or restarted without it)"}.get(
                 res.status, f"status {res.status}")
             raise Aborted(f"the controller {state} the goal of {what}: error_code {res.result.error_code}"
                           f" {res.result.error_string!r}")

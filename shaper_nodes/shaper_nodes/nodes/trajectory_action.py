@@ -384,6 +384,8 @@ class TrajectoryActionProxy:
                 handle.abort()
                 return result
             handle.canceled()
+        elif status == GoalStatus.STATUS_UNKNOWN:  # the controller gone, or restarted without the goal (the client)
+            return self._abort(fwd, result.error_string or f"controller {self.controller_name} does not know the goal")
         else:
             if status != GoalStatus.STATUS_ABORTED and not result.error_string:
                 result.error_string = f"controller {self.controller_name} ended the goal with status {status}"

@@ -22,6 +22,14 @@ without guessing:
   resent request is taken as final only when no status names the goal one more period later).
 * **A result lost** (the status says the goal has ended, and no result arrives within
   ``resend_period``) is asked for again; the server keeps results for its ``result_timeout``.
+* **A server killed or restarted while a goal runs** never says that the goal ended. While a result
+  is awaited the client watches the server: a new instance (a status publisher GID not there when the
+  result was first asked for, or a status list dropping a goal it named, not ended) makes it ask for
+  the result again, which a server not knowing the goal answers ``STATUS_UNKNOWN`` at once; a server
+  out of the graph (and silent) for a period, :data:`GONE_AFTER` at least, is gone. Either way the
+  result comes with status ``STATUS_UNKNOWN`` and the reason in its ``error_string`` (if it has one):
+  only ``STATUS_SUCCEEDED`` is success. A paused server (SIGSTOP shorter than the DDS lease, 20 s with
+  Fast DDS) keeps its endpoints and its goals: nothing ends.
 
 Nothing here waits a fixed time for a state: the periods are resend intervals, and every outcome
 is a message (a response or a status). The work is bounded: one timer, active only while a request
@@ -36,6 +44,7 @@ from __future__ import annotations
 
 import threading
 import time
+import uuid
 import weakref
 from dataclasses import dataclass, field
 from typing import Any
@@ -52,6 +61,9 @@ from .qos import ACTION_CLIENT_QOS
 MAX_STATUSES = 1024
 #: the goal states after which the server has a result
 TERMINAL = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
+#: s out of the graph (and silent) at least to be gone: a restarted server can drop the killed one from the graph
+#: a moment before its own endpoints show (docs/results/testing.md, H8 deadserver)
+GONE_AFTER = 2.0
 
 
 @dataclass
@@ -75,6 +87,10 @@ class _ResultWait:
     ended_at: float | None = None
     attempts: int = 1
     requests: list[Future] = field(default_factory=list)
+    gids: frozenset[bytes] | None = None  # the server's status publisher endpoints when first seen
+    seen: bool = False  # a status list has named the goal (not ended): a later list without it lost it
+    gone_since: float | None = None  # the server out of the graph since
+    restarted: bool = False  # a new server instance suspected: asked again, UNKNOWN is its answer
 
 
 class ResilientActionClient(ActionClient):
@@ -115,6 +131,10 @@ class ResilientActionClient(ActionClient):
         self.resent = 0
         #: goals whose handle came from the status topic because their response was lost
         self.recovered = 0
+        #: results ended by the client because the server was gone or restarted (status UNKNOWN)
+        self.lost = 0
+        self._heard = time.monotonic()  # the last status or feedback message (steady s)
+        self._status_topic = action_name.rstrip("/") + "/_action/status"
         self._timer = node.create_timer(self.resend_period / 4, self._check, callback_group=self.callback_group,
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._timer.cancel()
@@ -186,10 +206,12 @@ class ResilientActionClient(ActionClient):
         self.add_future(outer)
         wait = _ResultWait(goal_handle, outer, time.monotonic())
         key = bytes(goal_handle.goal_id.uuid)
+        wait.gids = self._server_gids() or None
         with self._lock:
             self._results[key] = wait
             if self._statuses.get(key, (GoalStatus.STATUS_UNKNOWN,))[0] in TERMINAL:
                 wait.ended_at = time.monotonic()
+            wait.seen = key in self._statuses
         self._request_result(wait)
         self._timer.reset()
         return outer
@@ -200,16 +222,46 @@ class ResilientActionClient(ActionClient):
         inner.add_done_callback(lambda f, w=wait: self._on_result(w, f))
 
     def _on_result(self, wait: _ResultWait, inner: Future) -> None:
+        response = inner.result()
+        if response.status == GoalStatus.STATUS_UNKNOWN:
+            self._end_lost(wait, response, f"the action server {self._action_name} "
+                           + ("restarted and does not know goal" if wait.restarted
+                              else "does not know goal (it restarted, or the goal's result expired):")
+                           + f" {_goal_name(wait)}")
+        else:
+            self._end(wait, response)
+
+    def _end(self, wait: _ResultWait, response: Any) -> bool:
+        """Complete the result's future with ``response`` (once); drop its requests still pending."""
         key = bytes(wait.handle.goal_id.uuid)
         with self._lock:
             if wait.future.done():
-                return
+                return False
             if self._results.get(key) is wait:
                 del self._results[key]
-        wait.future.set_result(inner.result())
+        for request in wait.requests:
+            if not request.done():
+                self._remove_pending_result_request(request)
+        wait.future.set_result(response)
+        return True
+
+    def _end_lost(self, wait: _ResultWait, response: Any, why: str) -> None:
+        """End the goal as failed: status UNKNOWN, ``why`` in the result's ``error_string`` (if it has one)."""
+        response.status = GoalStatus.STATUS_UNKNOWN
+        if hasattr(response.result, "error_string") and not response.result.error_string:
+            response.result.error_string = why
+        if self._end(wait, response):
+            self.lost += 1
+            self._node.get_logger().error(f"{self._action_name}: the goal has failed: {why}")
+
+    def _server_gids(self) -> frozenset[bytes]:
+        """The endpoint GIDs of the action's status publishers in the graph (one per server instance)."""
+        return frozenset(bytes(i.endpoint_gid) for i in self._node.get_publishers_info_by_topic(self._status_topic))
 
     # ------------------------------------------------------------------ status and resends
     async def execute(self, taken_data: Any) -> None:
+        if "status" in taken_data or "feedback" in taken_data:
+            self._heard = time.monotonic()
         if "status" in taken_data:
             self._note_statuses(taken_data["status"].status_list)
         await super().execute(taken_data)
@@ -217,6 +269,13 @@ class ResilientActionClient(ActionClient):
     def _note_statuses(self, status_list: Any) -> None:
         now = time.monotonic()
         with self._lock:
+            named = {bytes(s.goal_info.goal_id.uuid) for s in status_list}
+            for key, waiting in self._results.items():  # named, then dropped while not ended: the server lost it
+                if key in named:
+                    waiting.seen = True
+                elif waiting.seen and waiting.ended_at is None and not waiting.future.done():
+                    waiting.restarted = True
+                    self._ask_again(waiting, now)
             for s in status_list:
                 key = bytes(s.goal_info.goal_id.uuid)
                 self._statuses.pop(key, None)
@@ -270,6 +329,9 @@ class ResilientActionClient(ActionClient):
         results = []
         with self._lock:
             goals, done = self._due_goals(now, period)
+            waits = [w for w in self._results.values() if not w.future.done()]
+        gone = self._watch_server(waits, now) if waits else []
+        with self._lock:
             for key, wait in list(self._results.items()):
                 if wait.future.done():
                     del self._results[key]
@@ -291,13 +353,51 @@ class ResilientActionClient(ActionClient):
                 f"{self._action_name}: the goal has ended but its result has not arrived after {period:g} s;"
                 " asking again")
             self._request_result(wait)
+        for wait in gone:
+            self._end_lost(wait, self._action_type.Impl.GetResultService.Response(),
+                           f"the action server {self._action_name} is gone (out of the graph and silent for"
+                           f" {max(period, GONE_AFTER):g} s) with goal {_goal_name(wait)}")
         if idle:
             self._timer.cancel()
+
+    def _watch_server(self, waits: list[_ResultWait], now: float) -> list[_ResultWait]:
+        """Note a restarted server (a status publisher not there before: its results are asked for again) and
+        return the waits whose server is gone (out of the graph, and nothing heard, for a period)."""
+        period = self.resend_period
+        if not self.server_is_ready():
+            gone, after = [], max(period, GONE_AFTER)
+            for wait in waits:
+                wait.gone_since = now if wait.gone_since is None else wait.gone_since
+                if now - wait.gone_since > after and now - self._heard > after:
+                    gone.append(wait)
+            return gone
+        gids = self._server_gids()
+        with self._lock:
+            for wait in waits:
+                wait.gone_since = None
+                if wait.gids is None:
+                    wait.gids = gids or None
+                elif gids - wait.gids and not wait.restarted:
+                    wait.gids = gids
+                    wait.restarted = True
+                    self._ask_again(wait, now)
+        return []
+
+    def _ask_again(self, wait: _ResultWait, now: float) -> None:
+        """Make the result's request due at the next check, and again every period until answered (lock held)."""
+        past = now - 2 * self.resend_period
+        wait.asked_at = past
+        if wait.ended_at is None:
+            wait.ended_at = past
 
     def destroy(self) -> None:
         self._timer.cancel()
         self._node.destroy_timer(self._timer)
         super().destroy()
+
+
+def _goal_name(wait: _ResultWait) -> str:
+    return str(uuid.UUID(bytes=bytes(wait.handle.goal_id.uuid)))
 
 
 class GoalFeedback:

@@ -245,8 +245,14 @@ class ArmClient:
         result = handle.get_result_async()
         self.c.spin_until(result.done, 300.0, f"the result of {move.name}")
         res = result.result()
-        if res.result.error_code != 0:
-            raise RuntimeError(f"{move.name}: {res.result.error_code} {res.result.error_string}")
+        from action_msgs.msg import GoalStatus
+
+        # only SUCCEEDED is success: an empty result (error_code 0) comes with UNKNOWN when the server is gone or
+        # restarted without the goal (ResilientActionClient), with ABORTED when the shaper's proxy lost its controller
+        if res.status != GoalStatus.STATUS_SUCCEEDED or res.result.error_code != 0:
+            state = {GoalStatus.STATUS_ABORTED: "aborted", GoalStatus.STATUS_CANCELED: "canceled",
+                     GoalStatus.STATUS_UNKNOWN: "unknown to the server"}.get(res.status, f"status {res.status}")
+            raise RuntimeError(f"{move.name}: {state}: error_code {res.result.error_code} {res.result.error_string}")
         end = self.rest_after(start, f"after {move.name}") if self.ends_at_rest else start + move.duration + DWELL
         self.wait_samples(end, move.name)
         return MoveRun(index, move.name, start, end - start - DWELL if self.ends_at_rest else move.duration, end)
