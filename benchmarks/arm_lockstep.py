@@ -147,6 +147,8 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
     from shaper_nodes.ros.launching import NodeProcess
     from sim_plant_node.arm.description import JOINT_NAMES
 
+    from .arm_readers import succeeded
+
     env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     with tempfile.TemporaryDirectory(prefix="arm_bench_") as tmp:
         sim = NodeProcess("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": HOME.tolist()},
@@ -179,6 +181,7 @@ def node(seconds: float = 10.0, progress: Callable[[str], None] = print) -> dict
             while not result.done():
                 ex.spin_once(timeout_sec=0.01)
             wall = time.perf_counter() - t0
+            succeeded(result.result(), "arm_lockstep")
         finally:
             ex.shutdown()
             client.destroy()

@@ -61,6 +61,15 @@ MODES = ("objects", "raw", "raw_drain", "raw_events")
 ALONE = "alone"
 
 
+def succeeded(result: Any, what: str) -> None:
+    """Raise unless a FollowJointTrajectory goal's result (``get_result_async``'s) says SUCCEEDED: no rate is
+    reported for a goal that failed (aborted, or unknown to a server that went away)."""
+    from action_msgs.msg import GoalStatus
+
+    if result.status != GoalStatus.STATUS_SUCCEEDED:
+        raise RuntimeError(f"{what}: the goal ended with status {result.status} ({result.result.error_string})")
+
+
 # ------------------------------------------------------------------------------------------- callbacks
 def _cpu_per_call(fn: Callable[[], None], n: int, repeats: int = 5) -> float:
     """Least CPU time per call of ``fn``, s, over ``repeats`` passes of ``n`` calls."""
@@ -376,6 +385,7 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
         result = sent.result().get_result_async()
         spin_until(result.done, 600.0, "result")
         wall, plant_cpu = time.perf_counter() - t0, (_cpu_of(sim.proc.pid) - cpu0) / seconds
+        succeeded(result.result(), "arm_readers")
         take_all(clock_sub, Clock, lambda got: on_clock(got[0]), 1000)  # (the ticks since the last poll)
         end = clock[0]
         if alone:
