@@ -118,8 +118,8 @@ class PooledPole:
         ref = st.reference
         decision, trial = judge_pole(t, y, st.poles, ref, count, True, self.cycles)
         self.measured[key] = (count, *trial)
-        if decision != "again":
-            st.reset()
+        if decision != "again":  # decided: the move has its factor, or is held (nothing pooled any more)
+            del self.states[key]
         return decision, trial, count, (
             f"; amplitude at the loop's pole {trial[0]:.4g} +- {trial[1]:.4g} m/s^2 ({count} trial window(s) pooled)"
             f" against the pooled reference's {ref[0]:.4g} +- {ref[1]:.4g}: "
