@@ -124,7 +124,8 @@ class PooledPole:
             f"; amplitude at the loop's pole {trial[0]:.4g} +- {trial[1]:.4g} m/s^2 ({count} trial window(s) pooled)"
             f" against the pooled reference's {ref[0]:.4g} +- {ref[1]:.4g}: "
             + {"learn": "lower, the factor is kept", "again": "lower, not resolved: the trial runs again",
-               "base": "not lower: withdrawn, the schedule alone, held"}[decision])
+               "base": ("lower, not resolved in the windows allowed" if trial[0] < ref[0] else "not lower")
+               + ": withdrawn, the schedule alone, held"}[decision])
 
     def single_failed(self, key: str) -> bool:
         """A factor from one window did not pay and the move has none kept: True if its references are pooled from
