@@ -554,8 +554,8 @@ class PayingFactors:
         pooled mean, the loop's pole searched beside them, its amplitude measured with the pole fixed, and
         :func:`~shaper_nodes.core.learning.list.payback.paying_factor` picks a factor on it by the same time rule.
         None if no pole stands above the noise or no factor on it is predicted to pay."""
-        from shaper_nodes.core.learning.list.loop_pole import fixed_pole_fit, loop_pole, pooled
-        from shaper_nodes.core.learning.list.payback import components, paying_factor
+        from shaper_nodes.core.learning.list.loop_pole import pooled
+        from shaper_nodes.core.learning.list.pole_rule import pole_pick
         from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S
 
         key = self.store.entry(mv.positions[0], mv.positions[-1], origin="schedule")[0].key
@@ -563,23 +563,16 @@ class PayingFactors:
         pool = self.pool.setdefault(key, [])
         pool.append((run.times, run.imu, ce))
         t, y = pooled(pool)
-        ringing = [x for x in components(t, y, 0.0, SERVO_ZETA) if x.zeta < SERVO_ZETA]
-        found = loop_pole(t, y, 0.0, ringing)
+        found = pole_pick(t, y, cost, TIME_TOLERANCE_S, SERVO_ZETA, LIST_BAND)
         if found is None:
             return None
-        loop, err = found
-        # predicted on the loop's component alone: the factor is for it (in the 1 s RMS the modes that ring, left as
-        # they are, would hide what it takes off), and its trial is judged at its pole (judge_at_pole)
-        pick = paying_factor([loop], cost, TIME_TOLERANCE_S, band=LIST_BAND)
-        if pick is None:
-            return None
-        fit = fixed_pole_fit(t, y, 0.0, [x.pole for x in ringing] + [loop.pole])
-        self.at_pole[key] = ([x.pole for x in ringing] + [loop.pole], (fit.amplitudes[-1], fit.errors[-1]))
+        loop, err = found.loop, found.error
+        self.at_pole[key] = (list(found.poles), found.reference)
         self.ctx.note(self.case, f"{mv.name}, cycle {c}: the loop's pole in {len(pool)} reference windows pooled:"
                                  f" {loop.hz:.1f} Hz, zeta {loop.zeta:.3f}, amplitude {loop.amplitude:.4f}"
-                                 f" +- {err:.4f} m/s^2 (with the pole fixed; beside {len(ringing)} mode(s) that"
+                                 f" +- {err:.4f} m/s^2 (with the pole fixed; beside {found.ringing} mode(s) that"
                                  " ring)")
-        return pick
+        return found.choice
 
     def judge_at_pole(self, entry: Any, run: Run, judged: tuple[list[complex], tuple[float, float]], name: str,
                       c: int) -> str:
@@ -589,20 +582,19 @@ class PayingFactors:
         errors AND its move + settle time is within one 2 ms sample of the schedule's (the 1 s RMS cannot resolve
         the part: it is 0.0001-0.0002 m/s^2 of it, the noise's scatter per window 0.0002). Lower but not by that
         much: ``"again"``, the same trial once more (up to :data:`POOL_CYCLES` windows); otherwise ``"base"``."""
-        from shaper_nodes.core.learning.list.loop_pole import fixed_pole_fit, lower_at_pole, pooled
+        from shaper_nodes.core.learning.list.loop_pole import pooled
+        from shaper_nodes.core.learning.list.pole_rule import judge_pole
         from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S
 
         poles, ref = judged
         pool = self.trial_pool.setdefault(entry.key, [])
         pool.append((run.times, run.imu, run.planned_end + run.measures.delay_s))
         t, y = pooled(pool)
-        fit = fixed_pole_fit(t, y, 0.0, poles)
-        trial = (fit.amplitudes[-1], fit.errors[-1])
         ms = run.measures.move_and_settle_s
         base = entry.base or {}
         in_time = ms <= base.get("move_settle_s", math.inf) + TIME_TOLERANCE_S
-        paid = in_time and lower_at_pole(ref, trial)
-        again = in_time and not paid and trial[0] < ref[0] and len(pool) < POOL_CYCLES
+        decision, trial = judge_pole(t, y, tuple(poles), ref, len(pool), in_time, POOL_CYCLES)
+        paid, again = decision == "learn", decision == "again"
         self.ctx.note(self.case, f"{name}, cycle {c}: amplitude at the loop's pole {trial[0]:.4f} +- {trial[1]:.4f}"
                                  f" m/s^2 ({len(pool)} trial window(s) pooled) against the pooled reference's"
                                  f" {ref[0]:.4f} +- {ref[1]:.4f}; move + settle {ms:.3f} s against"

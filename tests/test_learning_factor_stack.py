@@ -175,16 +175,16 @@ def test_a_move_where_two_modes_ring_keeps_two_factors_each_because_it_paid(star
 
 def test_a_state_saved_with_one_factor_per_move_resumes_as_its_stack():
     from shaper_nodes.core.learning.moves import MoveStore, keep_when_it_pays
-    from shaper_nodes.nodes.learner_payback import _legacy_stack
+    from shaper_nodes.nodes.learner_payback import legacy_stack
 
     store = MoveStore()
     entry, _ = store.entry([0.0, 0.0], [1.0, 0.5])
-    assert _legacy_stack(entry, False) == FactorStack()  # its reference next
+    assert legacy_stack(entry, False) == FactorStack()  # its reference next
     keep_when_it_pays(entry, 0.01, False)
     pair = ListParams(0.9, 0.01)
     sh = pair.shaper()
     entry.correction = (sh.amplitudes.tolist(), sh.times.tolist())
-    assert _legacy_stack(entry, False) == FactorStack([], pair)  # on trial
+    assert legacy_stack(entry, False) == FactorStack([], pair)  # on trial
     keep_when_it_pays(entry, 0.005, True)
-    assert _legacy_stack(entry, False) == FactorStack([pair], None, True)  # kept: no more looked for
-    assert _legacy_stack(entry, True) == FactorStack()  # held at the schedule alone
+    assert legacy_stack(entry, False) == FactorStack([pair], None, True)  # kept: no more looked for
+    assert legacy_stack(entry, True) == FactorStack()  # held at the schedule alone

@@ -36,6 +36,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from shaper_msgs.msg import CycleEvent
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.learning.list import ListParams
+from shaper_nodes.core.learning.list.pole_rule import PoleState
 from shaper_nodes.core.learning.list.stack import FactorStack, stack_shaper
 from shaper_nodes.core.learning.moves import MoveStore, keep_when_it_pays, move_key
 from shaper_nodes.core.shaping.families import convolve
@@ -119,6 +120,8 @@ class Cell:
         self.learner = start_node("shaper_nodes", "learner", self.params)
         self.peer = Peer(ros_context, CONTROLLER, imu=True, proxy=proxy)
         self.at = self.peer.node.create_client(ShaperAt, "/scheduler/shaper_at")
+        #: added to each accelerometer sample (x, y, z m/s^2) of the move started at t0, sample k (500 Hz); None: none
+        self.extra: Callable[[float, int], np.ndarray] | None = None
 
     def restart(self) -> None:
         """The learner started again (the same parameters: the same state file)."""
@@ -143,7 +146,8 @@ class Cell:
             msg = Imu()
             msg.header.stamp = sec_to_time(t0 + t)
             a = ring * math.exp(-(t - MOTION) / 0.3) * math.sin(2 * math.pi * 8.0 * (t - MOTION)) if t > MOTION else 0.0
-            msg.linear_acceleration.x, msg.linear_acceleration.z = a, 9.81
+            x, y, z = (a, 0.0, 9.81) if self.extra is None else np.array([a, 0.0, 9.81]) + self.extra(t0, k)
+            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = x, y, z
             self.peer.imu.publish(msg)
         return t0 + t
 
@@ -316,5 +320,92 @@ def test_iterative_a_kill_9_during_a_move_resumes_every_moves_learner_from_its_s
         got, after0 = cell.run(5, 0, ring(0))
         assert got["iteration"] == 3.0 and used(got) == pytest.approx(following(reports[2]), rel=1e-12), got
         assert ring(0)(after0) == 0.03
+    finally:
+        cell.close()
+
+
+#: the pooled-pole test's accelerometer noise per axis, m/s^2, and the loop's transient (50 Hz, damping 0.6)
+NOISE, LOOP_HZ, LOOP_ZETA = 0.005, 50.0, 0.6
+
+
+def test_payback_the_pooled_references_and_the_trial_at_the_pole_survive_kill_9_between_and_during_cycles(
+        start_node, ros_context, tmp_path):
+    """The pooled-pole rule (``payback.pool_cycles`` 3, nodes/learner_payback_pole.py): pick -> home has a
+    reference measured and its references pooled (its factor from one window did not pay: state file). Its
+    reference cycles with noise (``NOISE``, seeded per cycle) and the 8 Hz ring pool their windows (the state file's
+    ``poles``: the count and a running sum of one window's samples); the learner is killed -9 during the second
+    (its goal at the controller: not learned from, the pool as saved) and between the next two (restarted on the
+    state file: the pool resumes at its count). The third window pooled holds the loop's transient (50 Hz, damping
+    0.6, at the shaped command's end): the pole found in the mean, a factor on it chosen by the time rule and tried;
+    its trial (no transient) is judged at the pole and kept."""
+    state = tmp_path / "learner_state.json"
+    doc = state_doc()
+    stacks = doc["stacks"]
+    stacks[KEYS[1]] = FactorStack().to_dict()  # pick -> home: its reference measured, no factor
+    doc["moves"]["moves"][KEYS[1]]["correction"] = None
+    doc["poles"] = {KEYS[1]: PoleState(pooled_only=True).to_dict()}
+    state.write_text(json.dumps(doc))
+    cell = Cell(start_node, ros_context, state, LEARNER_PROXY, **{
+        "payback.enabled": True, "payback.controller": "/shaper/follow_joint_trajectory",
+        "payback.action_timeout": 60.0, "payback.pool_cycles": 3})
+    loop: dict[int, float] = {}  # cycle -> the transient's amplitude at the shaped command's end, m/s^2
+
+    def extra(t0: float, k: int) -> np.ndarray:
+        cycle = int(round((t0 - 100.0) / 10.0))
+        noise = np.random.default_rng(cycle).normal(0.0, NOISE, (int(round((MOTION + 1.8) * 500)) + 1, 3))[k]
+        t = k / 500 - MOTION - sched_end
+        w = 2 * math.pi * LOOP_HZ
+        a = loop.get(cycle, 0.0) * math.exp(-LOOP_ZETA * w * t) * math.cos(w * math.sqrt(1 - LOOP_ZETA**2) * t) \
+            if t >= 0 else 0.0
+        return noise + np.array([a, 0.0, 0.0])
+
+    def pool() -> dict | None:
+        return cell.moves().get("poles", {}).get(KEYS[1])
+
+    try:
+        cell.peer.spin_until(lambda: cell.peer.learner_up(INPUTS, set()), "the learner's subscriptions and server")
+        cell.wait_started(2, 1)
+        sched_end = float(cell.ask(1, False)[1][-1])
+        cell.extra = extra
+        got, _ = cell.run(0, 1)
+        assert got["phase.reference"] == 1.0 and got["pooled"] == 1.0 and got["held"] == 0.0, got
+        assert math.isnan(got["a1_next"]) and pool()["pool"]["count"] == 1  # no pole in one window: again
+
+        # killed during its next reference (its goal at the controller, half the window measured): not learned from
+        cell.kill(1, 1)
+        cell.wait_started(2, 2)
+        cell.end_killed(1, 1)
+        assert pool()["pool"]["count"] == 1
+        got, _ = cell.run(2, 1)
+        assert got["pooled"] == 2.0 and math.isnan(got["a1_next"]) and got["held"] == 0.0, got
+        saved = pool()
+        assert saved["pool"]["count"] == 2 and len(saved["pool"]["times"]) <= 501  # one window's samples, 1 s
+        assert np.asarray(saved["pool"]["sum"]).shape == (len(saved["pool"]["times"]), 3)
+
+        # killed between two cycles: restarted on the state file, the pool resumes at its count
+        before = cell.peer.learner_subscriptions(INPUTS)
+        cell.learner.proc.kill()
+        assert cell.learner.proc.wait(timeout=30) == -9
+        cell.restart()
+        cell.peer.spin_until(lambda: cell.peer.learner_up(INPUTS, before), "the restarted learner")
+        cell.wait_started(2, 3)
+        assert pool() == saved
+        loop[3] = 0.3
+        got, _ = cell.run(3, 1)
+        assert got["pooled"] == 3.0 and got["held"] == 0.0 and got["at_pole"] > 3.0 * got["at_pole_error"], got
+        a1, t2 = following(got)
+        assert 0.5 <= a1 < 1.0 and 1.0 / (2.2 * LOOP_HZ) < t2 < 1.0 / (1.2 * LOOP_HZ), got  # on the loop's pole
+        assert got["cost_s"] <= 0.002 + 1e-9, got
+        judged = pool()
+        assert judged["poles"] is not None and judged["pool"]["count"] == 0
+
+        # the trial (no transient): judged at the pole, kept
+        got, _ = cell.run(4, 1)
+        assert got["phase.trial"] == 1.0 and used(got) == (a1, t2) and got["pooled"] == 1.0, got
+        assert got["at_pole"] + 2.0 * math.hypot(got["at_pole_error"], judged["reference"][1]) \
+            < judged["reference"][0], got
+        assert got["factors_kept"] == 1.0 and got["held"] == 0.0, got
+        doc = cell.moves()
+        assert doc["stacks"][KEYS[1]]["kept"] == [[a1, t2]] and KEYS[1] not in doc.get("poles", {})
     finally:
         cell.close()

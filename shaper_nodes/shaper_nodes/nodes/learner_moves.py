@@ -88,7 +88,8 @@ from .move_goals import load_moves
 
 #: why a move's cycle is not learned from once it is held at the schedule alone
 HELD = "held at the schedule alone: no factor was measured better than it (~/hold false learns again)"
-_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", FLAG, "stacks", "saved_at"}
+_DOC_KEYS = {"version", "structure", "per_move", "moves", "joint_names", "at_schedule", FLAG, "stacks", "poles",
+             "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move was relearned (drift warning) while this cycle ran"
 
@@ -149,6 +150,7 @@ class MovesMode:
         self.structure = self.config.structure
         self.user_delay = float(v.list.window_delay) > 0.0
         self.saved_stacks: Any = None  # the payback rule's stacked factors per move, as saved ("stacks")
+        self.saved_poles: Any = None  # ... and its pooled windows per move ("poles": learner_payback_pole)
         restored = node.restore(self._build, {"structure": self.structure, "per_move": True})
         #: the moves, their joint names, and those held at the schedule alone (no factor measured better)
         self.store, self.names, self.held, warned = restored if restored is not None else (MoveStore(), {}, set(),
@@ -207,7 +209,7 @@ class MovesMode:
         held = doc.get("at_schedule") or []
         if not isinstance(held, list) or not all(isinstance(k, str) for k in held):
             raise MoveError("at_schedule must be a list of move keys")
-        self.saved_stacks = doc.get("stacks")
+        self.saved_stacks, self.saved_poles = doc.get("stacks"), doc.get("poles")
         return store, names, {k for k in held if k in store}, saved_flag(doc)
 
     def state(self) -> dict[str, Any]:
@@ -218,7 +220,7 @@ class MovesMode:
         doc = {"structure": self.structure, "per_move": True, "moves": self.store.to_doc(),
                "joint_names": self.names, "at_schedule": sorted(self.held), FLAG: self.drift.warned}
         if self.payback is not None:
-            doc["stacks"] = self.payback.stacks_doc()
+            doc["stacks"], doc["poles"] = self.payback.stacks_doc(), self.payback.pole.doc()
         return doc
 
     def describe(self) -> str:
@@ -277,7 +279,7 @@ class MovesMode:
         self.learners.clear()
         self.held.clear()
         if self.payback is not None:
-            self.payback.stacks.clear()
+            self.payback.clear()
         for cycle in self._cycle_move:  # under way: it ran with the factor withdrawn now
             self._skip.setdefault(cycle, RESET)
         self.node.save()

@@ -37,11 +37,20 @@ reproduction's ``scheduled_list_factor`` case (``reproductions.arm_learning``) i
   is not tried). A trial that does not pay is withdrawn and the move stays with the factors kept before it.
 - **after**: the kept factors (or the schedule alone) stay; each cycle is still measured and reported. The default
   ``payback.max_factors`` 1 is one factor per move.
+- **pooled references** (``payback.pool_cycles``, default 3; :mod:`.learner_payback_pole`, the rule of
+  :mod:`shaper_nodes.core.learning.list.pole_rule`, the reproduction's): a move over a schedule with no factor kept
+  whose reference finds none predicted to pay runs its reference again, up to that many cycles, the windows aligned
+  at the shaped command's end and averaged; the loop's pole is searched in the mean and a factor on it chosen by the
+  same time rule; its trial is judged at the pole (its own windows pooled: kept when its amplitude there is lower by
+  2 combined standard errors, run again when lower but not resolved, withdrawn otherwise). A factor from one window
+  whose trial did not pay sends the move's references to the pool from then on.
 
 State: the move's entry (:class:`~shaper_nodes.core.learning.moves.MoveEntry`): ``base`` (the latest reference's
 M), ``correction`` (the factors kept and on trial, convolved), ``best`` (the kept trial's M); the move's
 :class:`~shaper_nodes.core.learning.list.stack.FactorStack` (the factors kept, the trial, whether more are looked
-for) in the document's ``stacks``; moves held at the schedule alone are the document's ``at_schedule``. Saved
+for) in the document's ``stacks``; the pooled windows (a running sum, one second of accelerometer per move at
+most) and the poles a trial is judged at in ``poles``; moves held at the schedule alone are the document's
+``at_schedule``. Saved
 atomically after every cycle; after a restart (a kill -9) every move resumes in its phase, its factors sent to the
 scheduler again.
 """
@@ -49,7 +58,7 @@ scheduler again.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -58,7 +67,7 @@ from sensor_msgs.msg import JointState
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.learning.list import ListError, ListLearner, ListParams
+from shaper_nodes.core.learning.list import ListError, ListParams
 from shaper_nodes.core.learning.list.payback import (
     EXTRA_DAMPED,
     Component,
@@ -69,132 +78,36 @@ from shaper_nodes.core.learning.list.payback import (
     time_cost,
 )
 from shaper_nodes.core.learning.list.settle import DEFAULT_HZ, imu_settle, lowest_paying, unshaped_time_cost
-from shaper_nodes.core.learning.list.stack import MAX_FACTORS, FactorStack, stack_duration, stack_shaper, wanted
-from shaper_nodes.core.learning.list.trials import ListUpdate
+from shaper_nodes.core.learning.list.stack import FactorStack, stack_duration, stack_shaper, wanted
 from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S, MoveEntry, keep_when_it_pays
 from shaper_nodes.core.learning.speed import acceleration_tolerance
 from shaper_nodes.core.scheduling.moves import MAX_FACTOR_DURATION
 from shaper_nodes.core.shaping import Shaper, ShaperError
-from shaper_nodes.core.shaping.vibration import residual_vibration
 from shaper_nodes.ros.diagnostics import ERROR
-from shaper_nodes.ros.parameters import Spec, param, table
 
+from .learner_payback_cycle import (
+    RESIDUAL_WINDOW,
+    Captured,
+    CycleCapture,
+    factor_of,
+    legacy_stack,
+    phase,
+    residual_m,
+    unshaped,
+)
+from .learner_payback_parameters import PARAMETERS, PaybackGroup, PaybackParams
+from .learner_payback_pole import PooledPole
 from .move_goals import GoalRecorder, Planned
 from .trajectory_action import TrajectoryActionProxy
 
-__all__ = ["PARAMETERS", "RESIDUAL_WINDOW", "CycleCapture", "GoalRecorder", "PaybackGroup", "PaybackMoves",
-           "PaybackParams", "Planned", "choose", "factor_of", "phase", "residual_m", "unshaped"]
+__all__ = ["PARAMETERS", "RESIDUAL_WINDOW", "Captured", "CycleCapture", "GoalRecorder", "PaybackGroup", "PaybackMoves",
+           "PaybackParams", "Planned", "choose", "factor_of", "legacy_stack", "phase", "residual_m", "scheduled_cost",
+           "settle_band", "unshaped"]
 
-#: length of the window M is measured over, from the shaped command's end, s (the demo's residual window)
-RESIDUAL_WINDOW = 1.0
 #: the factor's T2 stays within this fraction of a component's frequency (the reproduction's ``LIST_BAND``)
 BAND = 0.1
 
 
-@dataclass(frozen=True)
-class PaybackGroup:
-    """payback.*: LIST per move with each factor chosen to pay before it is tried (nodes/learner_payback.py)."""
-
-    enabled: bool = param(False, "With list.per_move: choose each move's factor from its reference cycle's"
-                          " components and its predicted time cost (the reproduction's scheduled_list_factor)"
-                          " instead of the iterative LIST learner; needs payback.controller.", read_only=True)
-    controller: str = param("/shaper/follow_joint_trajectory", "The FollowJointTrajectory action the learner's"
-                            " ~/follow_joint_trajectory sends each goal on to, unchanged (the shaper node's proxy);"
-                            " the goals' waypoints predict the factors' time cost.", read_only=True)
-    action_timeout: float = param(30.0, "How long a goal waits for the next action server and its answer, s.",
-                                  (0.1, 600.0), read_only=True)
-    rate_hz: float = param(500.0, "The shaper node's command rate, Hz (the predicted shaped command's).",
-                           (1.0, 10000.0), read_only=True)
-    joint_tolerance: float = param(5e-5, "The settling band of the predicted command, rad (0.05 mm at 1 m of"
-                                   " reach).", (1e-9, 1.0), read_only=True)
-    servo_zeta: float = param(0.12, "Damping ratio from which an identified eigenvalue is the position loop's,"
-                              " not a mode's.", (0.01, 0.99), read_only=True)
-    settle_tolerance: float = param(5e-5, "With no schedule at a move's goal: the settled flange's band, m, that"
-                                    " the move's measured move + settle time is taken to (on the accelerometer, at"
-                                    " a x (2 pi f)^2, f the lowest mode identified in its first reference, 10 Hz if"
-                                    " none).", (1e-7, 0.01), read_only=True)
-    max_factors: int = param(1, "Most factors stacked per move: after a factor is kept, a new reference with it in"
-                             " place chooses the next on what still rings (1: one factor per move).",
-                             (1, MAX_FACTORS), read_only=True)
-
-
-@dataclass(frozen=True)
-class PaybackParams:
-    """The payback rule's parameters (declared by the per-move LIST mode)."""
-
-    payback: PaybackGroup = field(default_factory=PaybackGroup)
-
-
-#: the payback rule's parameters (derived from PaybackParams)
-PARAMETERS: tuple[Spec, ...] = table(PaybackParams)
-
-
-@dataclass
-class Captured:
-    """One cycle's samples as :class:`~shaper_nodes.core.learning.list.ListSession` hands them over."""
-
-    times: np.ndarray
-    accel: np.ndarray
-    motion_end: float
-    end: float
-    used: ListParams | None
-
-
-class CycleCapture(ListLearner):
-    """A learner for :class:`~shaper_nodes.core.learning.list.ListSession` that learns nothing: it keeps the cycle's
-    checked samples (:attr:`captured`) for the payback rule, so the session's bookkeeping (the cycle's samples,
-    saturation, stale sensor, the shaper it ran with) is the one the iterative LIST uses."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.captured: Captured | None = None
-
-    def update(self, times: Any, accel: Any, motion_end: float, end: float, used: ListParams | None,
-               direction: float = 1.0) -> ListUpdate:
-        a = np.asarray(accel, dtype=float)
-        t = np.asarray(times, dtype=float)
-        self.captured = Captured(t, a.reshape(t.size, -1), float(motion_end), float(end), used)
-        return ListUpdate(0, math.nan, math.nan, used, used, "none", "reference" if used is None else "hold",
-                          "captured for the payback rule")
-
-
-def factor_of(entry: MoveEntry) -> ListParams | None:
-    """The two-impulse factor a move's entry holds (on trial or kept), None if none."""
-    if entry.correction is None:
-        return None
-    a, t = entry.correction
-    return ListParams(float(a[0]), float(t[-1])) if len(a) == 2 else None
-
-
-def phase(entry: MoveEntry, held: bool) -> str:
-    """The move's phase: ``held`` (the schedule alone: nothing paid), ``reference`` (its next cycle is the
-    schedule alone, measured as the base), ``trial`` (the chosen factor, to be judged) or ``kept`` (it paid)."""
-    if held:
-        return "held"
-    if entry.base is None or factor_of(entry) is None:
-        return "reference"
-    return "kept" if entry.best is not None and entry.best != entry.base else "trial"
-
-
-def _legacy_stack(entry: MoveEntry, held: bool) -> FactorStack:
-    """The factors of a move saved before stacks were (one factor per move: :func:`phase` of its entry)."""
-    ph, f = phase(entry, held), factor_of(entry)
-    if ph == "trial":
-        return FactorStack([], f)
-    return FactorStack([f], None, True) if ph == "kept" and f is not None else FactorStack()
-
-
-def residual_m(cap: Captured, shaper_end: float) -> tuple[float, float]:
-    """The cycle's M (m/s^2: RMS of the accelerometer's deviation from its mean over :data:`RESIDUAL_WINDOW` s from
-    the shaped command's end, MOTION_END + ``shaper_end`` s, cut at END) and that end (s from START)."""
-    start = cap.motion_end + shaper_end
-    res = residual_vibration(cap.times, cap.accel, start, min(start + RESIDUAL_WINDOW, cap.end), remove_mean=True)
-    return float(res.rms), start
-
-
-def unshaped(base: Shaper | None) -> bool:
-    """Whether a move has no schedule at its goal (none, or the scheduler's family ``none``: one impulse)."""
-    return base is None or len(base) == 1
 
 
 def settle_band(comps: list[Component], group: PaybackGroup) -> float:
@@ -225,13 +138,20 @@ def choose(cap: Captured, command_end: float, planned: Planned, base: Shaper | N
         return lowest_paying(comps, unshaped_time_cost(comps, band, kept, command),
                              TIME_TOLERANCE_S + slack, float(group.servo_zeta), band=BAND, kept=kept)
 
+    return paying_factor(comps, scheduled_cost(planned, base, group, kept), TIME_TOLERANCE_S, band=BAND)
+
+
+def scheduled_cost(planned: Planned, base: Shaper | None, group: PaybackGroup,
+                   kept: tuple[ListParams, ...] = ()) -> Callable[[ListParams], float]:
+    """A factor's predicted time cost over the schedule ``base`` at the move's goal, s: the ``kept`` factors and it
+    together against the schedule alone (:func:`~shaper_nodes.core.learning.list.payback.time_cost`)."""
     def cost(p: ListParams) -> float:
         factor = stack_shaper((*kept, p)) if kept else p
         assert factor is not None
         return time_cost(planned.times, planned.positions, planned.velocities, base, factor, float(group.rate_hz),
                          float(group.joint_tolerance), interpolate=True)
 
-    return paying_factor(comps, cost, TIME_TOLERANCE_S, band=BAND)
+    return cost
 
 
 def _pair(factors: tuple[ListParams, ...]) -> tuple[list[float], list[float]] | None:
@@ -262,10 +182,13 @@ class PaybackMoves:
         for entry in mode.store:
             try:
                 self.stacks[entry.key] = FactorStack.from_dict(saved[entry.key]) if entry.key in saved else \
-                    _legacy_stack(entry, entry.key in mode.held)
+                    legacy_stack(entry, entry.key in mode.held)
             except ListError as err:  # the move keeps its other state; its factors start afresh
                 self.node.get_logger().error(f"move {entry.key}: saved factors left out ({err})")
                 self.stacks[entry.key] = FactorStack()
+        #: per move, the pooled-pole rule's state (``payback.pool_cycles``; :mod:`.learner_payback_pole`)
+        self.pole = PooledPole(int(group.pool_cycles), float(group.servo_zeta), BAND, mode.saved_poles,
+                               [e.key for e in mode.store], self.node.get_logger().error)
         self.proxy = TrajectoryActionProxy(self.node, "~/follow_joint_trajectory", controller, self.goals.record,
                                            self._refused, lambda: None, float(group.action_timeout))
 
@@ -274,6 +197,11 @@ class PaybackMoves:
 
     def stacks_doc(self) -> dict[str, Any]:
         return {k: s.to_dict() for k, s in self.stacks.items()}
+
+    def clear(self) -> None:
+        """Every move learns again (a drift warning): no factor, nothing pooled."""
+        self.stacks.clear()
+        self.pole.clear()
 
     def wanted(self, key: str) -> ListParams | tuple[ListParams, ...] | None:
         """What the move's goals run with (the kept factors and the trial), None: the schedule alone."""
@@ -299,6 +227,7 @@ class PaybackMoves:
             ph, st = self.phase(entry.key), self.stack(entry.key)
             if on and ph in ("reference", "trial"):
                 st.trial, st.done = None, True
+                self.pole.clear(entry.key)
                 if not st.kept:
                     mode.held.add(entry.key)
                 entry.correction = _pair(st.factors())
@@ -306,6 +235,7 @@ class PaybackMoves:
                 mode.held.discard(entry.key)
                 entry.base = entry.best = None
                 self.stacks[entry.key] = FactorStack()
+                self.pole.clear(entry.key)
         self.node.save()
 
     async def _schedule_at(self, entry: MoveEntry, names: list[str]) -> Shaper | None:
@@ -372,11 +302,13 @@ class PaybackMoves:
             budget = entry.base.get("move_settle_s") if ms is not None and entry.base is not None else None
             keep_when_it_pays(entry, m, False, move_settle_s=ms if budget is None else budget)
             slack = 0.0 if ms is None or budget is None else max(budget - ms, 0.0)
-            choice, note = self._choose(entry, cap, command_end, sched, st.kept, slack, st.band)
+            choice, note, again = self._choose(entry, cap, command_end, sched, st.kept, slack, st.band)
             st.trial = None if choice is None else choice.params
-            st.done = choice is None
-            if choice is None and not st.kept:
+            st.done = choice is None and not again
+            if st.done and not st.kept:
                 mode.held.add(key)
+        elif ph == "trial" and self.pole.judging(key):  # a factor from pooled references: judged at the pole
+            note = self._judged(entry, st, cap, command_end, m)
         elif ph == "trial":
             decision = keep_when_it_pays(entry, m, True, move_settle_s=ms)
             base = entry.base["residual_rms"] if entry.base is not None else math.nan
@@ -388,13 +320,15 @@ class PaybackMoves:
                 note = (f"; M below the {'reference' if len(st.kept) > 1 or ms is not None else 'schedule'}'s"
                         f" ({base:.4g}{timed}): the factor is kept ({len(st.kept)} kept"
                         + ("; the next cycle is a new reference with them)" if more else ")"))
-            else:
-                st.done = True
-                if not st.kept:
+            else:  # with no factor kept over a schedule: its references pooled from here on (learner_payback_pole)
+                pool = not st.kept and not unshaped(sched) and self.pole.single_failed(key)
+                st.done = not pool
+                if not st.kept and not pool:
                     mode.held.add(key)
                 note = (f"; {'M not below' if ms is None else 'no lower M or a longer move + settle than'} the"
                         f" reference's ({base:.4g}{timed}): withdrawn, "
-                        + ("the schedule alone, held" if not st.kept else f"the {len(st.kept)} factor(s) kept stay"))
+                        + ("its references pooled from here on" if pool else "the schedule alone, held"
+                           if not st.kept else f"the {len(st.kept)} factor(s) kept stay"))
             st.trial = None
         entry.correction = _pair(st.factors())
         nxt, applied, index = await mode.close_cycle(entry)
@@ -402,11 +336,13 @@ class PaybackMoves:
         after = st.factors()[-1] if st.factors() else ListParams(math.nan, math.nan)  # the trial or the last kept
         pred = (choice.predicted, choice.without, choice.cost_s, choice.component.hz) if choice is not None else \
             (math.nan,) * 4
+        pooled = self.pole.measured.pop(key, (0, math.nan, math.nan))  # (learner_payback_pole)
         names = ["move", "M", "a1_used", "t2_used", "a1_next", "t2_next", "predicted", "without", "cost_s",
-                 "component_hz", "applied", "held", "factors_used", "factors_kept", "move_settle_s", f"phase.{ph}"]
+                 "component_hz", "applied", "held", "factors_used", "factors_kept", "move_settle_s", "pooled",
+                 "at_pole", "at_pole_error", f"phase.{ph}"]
         values = [float(index), m, u.a1, u.t2, after.a1, after.t2, *pred, 1.0 if applied else 0.0,
                   1.0 if key in mode.held else 0.0, float(len(ran)), float(len(st.kept)),
-                  math.nan if ms is None else ms, 1.0]
+                  math.nan if ms is None else ms, float(pooled[0]), pooled[1], pooled[2], 1.0]
         report = self.node.report(msg, (result.start + command_end, result.start + command_end + RESIDUAL_WINDOW),
                                   names, values, residual=m)
         report.shaper_used = mode._shaper_msg(used)
@@ -423,28 +359,58 @@ class PaybackMoves:
             self.node.get_logger().error(text)
         return report
 
+    def _judged(self, entry: MoveEntry, st: FactorStack, cap: Captured, command_end: float, m: float) -> str:
+        """A trial of a factor from pooled references judged at the loop's pole (:mod:`.learner_payback_pole`):
+        kept, run again, or withdrawn (the move held); what was decided (for the log)."""
+        decision, _, _, note = self.pole.trial(entry.key, cap, command_end)
+        if decision == "learn" and st.trial is not None:
+            st.kept.append(st.trial)
+            entry.best = {"residual_rms": m}
+            note += f" ({len(st.kept)} kept" + ("; the next cycle is a new reference with them)"
+                                                if len(st.kept) < self.max_factors else ")")
+        elif decision == "base":
+            st.done = True
+            if not st.kept:
+                self.mode.held.add(entry.key)
+        if decision != "again":
+            st.trial = None
+        return note
+
     def _choose(self, entry: MoveEntry, cap: Captured, command_end: float, sched: Shaper | None,
                 kept: list[ListParams], slack: float = 0.0,
-                band: float | None = None) -> tuple[PaybackChoice | None, str]:
-        """The factor predicted to pay for the move after its reference cycle, and what was decided (for the log)."""
+                band: float | None = None) -> tuple[PaybackChoice | None, str, bool]:
+        """The factor predicted to pay for the move after its reference cycle, what was decided (for the log), and
+        whether the move runs its reference again (its windows pooled: :mod:`.learner_payback_pole`)."""
         stays = f"the {len(kept)} factor(s) kept stay" if kept else "the schedule alone, held"
         names = self.mode.names.get(entry.key, [])
         planned = self.goals.lookup(names, np.asarray(entry.start), np.asarray(entry.goal)) if names else None
         if planned is None:
             return None, ("; no goal of the move came through ~/follow_joint_trajectory (its waypoints predict a"
-                          " factor's time cost): " + stays)
-        try:
-            pick = choose(cap, command_end, planned, sched, self.group, tuple(kept), slack, band)
-        except (ListError, ShaperError, ValueError) as err:
-            return None, f"; no factor chosen ({err}): " + stays
+                          " factor's time cost): " + stays), False
+        pick, why = None, "; its references pooled"
+        if not self.pole.pooled_only(entry.key):
+            try:
+                pick = choose(cap, command_end, planned, sched, self.group, tuple(kept), slack, band)
+            except (ListError, ShaperError, ValueError) as err:
+                why = f"; no factor chosen ({err})"
+            else:
+                whose = "the schedule's" if not unshaped(sched) else "the reference's measured"
+                why = f"; no factor predicted to pay (within {TIME_TOLERANCE_S * 1e3:.1f} ms of {whose} move + settle)"
+        if pick is None and not kept and not unshaped(sched) and self.pole.cycles > 0:  # the loop's pole, pooled
+            try:
+                cost = scheduled_cost(planned, sched, self.group)
+                found, again, note = self.pole.reference(entry.key, cap, command_end, cost)
+            except (ListError, ShaperError, ValueError) as err:
+                found, again, note = None, False, f"; no loop's pole searched ({err}): " + stays
+            if found is None or stack_duration((found.choice.params,)) <= MAX_FACTOR_DURATION:
+                return None if found is None else found.choice, why + note, again
         if pick is None:
-            whose = "the schedule's" if not unshaped(sched) else "the reference's measured"
-            return None, (f"; no factor predicted to pay (within {TIME_TOLERANCE_S * 1e3:.1f} ms of {whose}"
-                          " move + settle): " + stays)
+            return None, why + ": " + stays, False
         if stack_duration((*kept, pick.params)) > MAX_FACTOR_DURATION:
             return None, (f"; the factors with the next ({stack_duration((*kept, pick.params)):.3f} s) would be longer"
-                          f" than a move's correction may be ({MAX_FACTOR_DURATION:g} s): not tried; " + stays)
+                          f" than a move's correction may be ({MAX_FACTOR_DURATION:g} s): not tried; " + stays), False
         c = pick.component
         return pick, (f"; next: factor on {c.hz:.2f} Hz, zeta {c.zeta:.3f}: A1 {pick.params.a1:.4f}, T2"
                       f" {pick.params.t2 * 1e3:.2f} ms{'' if pick.full else ' (partial)'}, predicted M"
-                      f" {pick.predicted:.4g} against {pick.without:.4g} m/s^2, time cost {pick.cost_s * 1e3:+.1f} ms")
+                      f" {pick.predicted:.4g} against {pick.without:.4g} m/s^2, time cost {pick.cost_s * 1e3:+.1f} ms"
+                      ), False

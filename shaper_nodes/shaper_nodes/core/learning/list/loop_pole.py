@@ -26,16 +26,17 @@ ROS-free.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .params import ListError
 from .payback import Component
 
-__all__ = ["HZ_RANGE", "LOWER", "SIGNIFICANCE", "WINDOW", "ZETA_RANGE", "PoleFit", "fixed_pole_fit", "loop_pole",
-           "lower_at_pole", "pooled"]
+__all__ = ["HZ_RANGE", "LOWER", "SIGNIFICANCE", "WINDOW", "ZETA_RANGE", "PoleFit", "Pool", "fixed_pole_fit",
+           "loop_pole", "lower_at_pole", "pooled"]
 
 #: the loop's pole is searched at these frequencies, Hz (from, to, step)
 HZ_RANGE = (25.0, 110.0, 1.0)
@@ -142,13 +143,76 @@ def lower_at_pole(reference: tuple[float, float], trial: tuple[float, float], si
     return a_trial + significance * math.hypot(e_ref, e_trial) < a_ref
 
 
+class Pool:
+    """Windows of the same response pooled as they come (:func:`pooled`'s mean, kept as a running sum: its size does
+    not grow with the count): the first window's times from its start, the sum of the windows' samples over the
+    shortest count so far, and the count. Saved and restored (:meth:`to_dict`, :meth:`from_dict`) by the learner
+    node between cycles."""
+
+    def __init__(self, length: float = 1.0) -> None:
+        self.length = float(length)
+        self.times: np.ndarray | None = None
+        self.total: np.ndarray | None = None
+        self.count = 0
+
+    def add(self, times: np.ndarray, signal: np.ndarray, start: float) -> None:
+        """One window more: ``signal`` (m/s^2, (N,) or (N, k)) at ``times`` (s), from ``start`` for :attr:`length` s."""
+        t, y = _window(times, signal, start, self.length)
+        if self.total is None or self.times is None:
+            self.times, self.total = t, y.copy()
+        else:
+            if y.shape[1] != self.total.shape[1]:
+                raise ListError(f"a window of {y.shape[1]} axes cannot join a pool of {self.total.shape[1]}")
+            n = min(self.times.size, t.size)
+            self.times, self.total = self.times[:n], self.total[:n] + y[:n]
+        self.count += 1
+
+    def mean(self) -> tuple[np.ndarray, np.ndarray]:
+        """(times from the start, s; the mean signal, m/s^2)."""
+        if self.total is None or self.times is None or not self.count:
+            raise ListError("no window to pool")
+        return self.times, self.total / self.count
+
+    def to_dict(self) -> dict[str, Any]:
+        """The pool as plain data: ``count``, ``length``, ``times`` (s from the start) and ``sum`` (per sample, per
+        axis, m/s^2); about 4 numbers per sample of a three-axis accelerometer."""
+        return {"count": self.count, "length": self.length,
+                "times": [] if self.times is None else self.times.tolist(),
+                "sum": [] if self.total is None else self.total.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Pool:
+        """A pool saved by :meth:`to_dict`, checked (:class:`ListError` names the problem)."""
+        if not isinstance(d, Mapping) or set(d) != {"count", "length", "times", "sum"}:
+            got = sorted(d) if isinstance(d, Mapping) else d
+            raise ListError(f"a pool has the entries count, length, sum and times, got {got!r:.200}")
+        count, length = d["count"], d["length"]
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            raise ListError(f"a pool's count must be an integer >= 0, got {count!r}")
+        if isinstance(length, bool) or not isinstance(length, (int, float)) or not 0 < length < math.inf:
+            raise ListError(f"a pool's length must be a finite number > 0 s, got {length!r}")
+        pool = cls(float(length))
+        if count == 0:
+            return pool
+        try:
+            t = np.asarray(d["times"], dtype=float)
+            y = np.asarray(d["sum"], dtype=float)
+        except (TypeError, ValueError) as err:
+            raise ListError(f"a pool's times and sum must be numbers: {err}") from None
+        if t.ndim != 1 or y.ndim != 2 or y.shape[0] != t.size or t.size == 0 or not (
+                np.all(np.isfinite(t)) and np.all(np.isfinite(y))) or np.any(np.diff(t) <= 0):
+            raise ListError(f"a pool's times must be finite and increasing and its sum one finite row per time, got"
+                            f" {t.shape} times and a sum of shape {y.shape}")
+        pool.times, pool.total, pool.count = t, y, count
+        return pool
+
+
 def pooled(windows: Sequence[tuple[np.ndarray, np.ndarray, float]],
            length: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """The mean of several cycles' windows of the same response, aligned at their starts: each (times, signal, start)
     cut to the samples in ``[start, start + length]``, the shortest count taken; returns (times from the start, the
-    mean signal). With independent noise the mean's noise is 1/sqrt(k) of one window's."""
-    if not windows:
-        raise ListError("no window to pool")
-    cut = [_window(t, y, s, length) for t, y, s in windows]
-    n = min(t.size for t, _ in cut)
-    return cut[0][0][:n], np.mean([y[:n] for _, y in cut], axis=0)
+    mean signal). With independent noise the mean's noise is 1/sqrt(k) of one window's (:class:`Pool`)."""
+    pool = Pool(length)
+    for t, y, s in windows:
+        pool.add(t, y, s)
+    return pool.mean()

@@ -1,0 +1,134 @@
+"""The pooled-pole rule per move (core/learning/list/pole_rule.py) and the running pool it keeps (loop_pole.Pool):
+the pool is the mean of the windows, bit for bit, and survives a save; the loop's pole found in pooled references
+gives a factor and the reference's amplitude at it; a trial is kept, run again or withdrawn by its amplitude there."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from shaper_nodes.core.learning.list.loop_pole import Pool, pooled
+from shaper_nodes.core.learning.list.params import ListError, ListParams
+from shaper_nodes.core.learning.list.payback import Component
+from shaper_nodes.core.learning.list.pole_rule import POOL_CYCLES, PoleState, judge_pole, pole_pick
+
+RATE = 1000.0  # Hz
+T = np.arange(0.0, 1.0, 1.0 / RATE)
+LOOP = Component(2.0 * math.pi * 50.0, 0.6, 0.0)
+RING = Component(2.0 * math.pi * 12.0, 0.04, 0.0)
+
+
+def _response(c: Component, amplitude: float, direction: tuple[float, float, float]) -> np.ndarray:
+    p = c.pole
+    d = np.asarray(direction, dtype=float)
+    return amplitude * np.outer(np.exp(p.real * T) * np.cos(p.imag * T), d / np.linalg.norm(d))
+
+
+def _signal(loop_amp: float, noise: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    clean = (_response(LOOP, loop_amp, (1.0, 0.5, -0.3)) + _response(RING, 0.01, (0.2, 1.0, 0.1))
+             + np.array([0.1, -9.81, 0.05]))
+    return clean + noise * rng.standard_normal(clean.shape)
+
+
+def _windows(loop_amp: float, noise: float, seeds: range) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Windows of the same response at different starts (each cycle's own clock), the commanded end at 0.3 s."""
+    pad = np.zeros((300, 3)) + np.array([0.1, -9.81, 0.05])
+    return [(np.arange(T.size + 300) / RATE + 7.0 * k, np.vstack([pad, _signal(loop_amp, noise, k)]), 7.0 * k + 0.3)
+            for k in seeds]
+
+
+def test_the_running_pool_is_the_mean_of_the_windows_bit_for_bit_and_survives_a_save():
+    windows = _windows(0.04, 0.01, range(3))
+    cut = [(t[(t >= s) & (t <= s + 1.0)] - s, y[(t >= s) & (t <= s + 1.0)]) for t, y, s in windows]
+    n = min(t.size for t, _ in cut)
+    want = np.mean([y[:n] for _, y in cut], axis=0)  # the mean as pooled() took it before the running sum
+    pool = Pool()
+    for k, (t, y, s) in enumerate(windows):
+        pool.add(t, y, s)
+        pool = Pool.from_dict(json.loads(json.dumps(pool.to_dict())))  # saved and restored after every cycle
+        assert pool.count == k + 1
+    times, mean = pool.mean()
+    assert np.array_equal(mean, want) and np.array_equal(times, cut[0][0][:n])
+    assert np.array_equal(pooled(windows)[1], want)
+    # bounded: one window's samples, whatever the count (4 numbers per sample of three axes)
+    assert len(pool.to_dict()["times"]) == n and np.asarray(pool.to_dict()["sum"]).shape == (n, 3)
+
+
+def test_a_shorter_window_cuts_the_pool_and_bad_saved_pools_are_refused():
+    pool = Pool()
+    pool.add(T, np.ones((T.size, 3)), 0.0)
+    pool.add(T[:-10] + 2.0, 3.0 * np.ones((T.size - 10, 3)), 2.0)
+    t, y = pool.mean()
+    assert t.size == T.size - 10 and np.allclose(y, 2.0)
+    with pytest.raises(ListError, match="axes"):
+        pool.add(T, np.ones((T.size, 2)), 0.0)
+    with pytest.raises(ListError, match="no window"):
+        Pool().mean()
+    good = pool.to_dict()
+    for bad in ({**good, "count": -1}, {**good, "count": True}, {**good, "length": 0.0},
+                {**good, "sum": good["sum"][:-1]}, {**good, "times": good["times"][::-1]},
+                {**good, "sum": [[math.nan] * 3] * len(good["times"])}, {"count": 1}, [1, 2]):
+        with pytest.raises(ListError):
+            Pool.from_dict(bad)
+    assert Pool.from_dict(Pool().to_dict()).count == 0
+
+
+def _cost(p: ListParams) -> float:
+    return 0.0  # every factor within the time rule
+
+
+def test_the_loop_pole_is_picked_in_pooled_references_where_one_window_cannot_resolve_it():
+    # the loop's part at 0.03 m/s^2 (5 ms long) under 0.03 of noise: one window does not resolve it, three pooled do
+    windows = _windows(0.03, 0.03, range(POOL_CYCLES))
+    one = pole_pick(*pooled(windows[:1]), _cost, 0.002, 0.12, 0.1)
+    pick = pole_pick(*pooled(windows), _cost, 0.002, 0.12, 0.1)
+    assert one is None
+    assert pick is not None
+    assert pick.choice.component == pick.loop and pick.loop.zeta >= 0.12
+    assert pick.poles[-1] == pick.loop.pole and pick.ringing == len(pick.poles) - 1
+    assert pick.reference[0] > 3.0 * pick.reference[1] > 0.0
+    # a factor on it that costs more than the time rule allows is not chosen
+    assert pole_pick(*pooled(windows), lambda p: 1.0, 0.002, 0.12, 0.1) is None
+
+
+def test_a_trial_is_kept_run_again_or_withdrawn_by_its_amplitude_at_the_pole():
+    ref_windows = _windows(0.04, 0.01, range(2))
+    pick = pole_pick(*pooled(ref_windows), _cost, 0.002, 0.12, 0.1)
+    assert pick is not None
+    gone = pooled(_windows(0.0, 0.01, range(10, 11)))
+    assert judge_pole(*gone, pick.poles, pick.reference, 1)[0] == "learn"
+    same = pooled(_windows(0.04, 0.01, range(20, 21)))
+    assert judge_pole(*same, pick.poles, pick.reference, 1)[0] == "base"
+    # lower but within the combined errors: again while fewer than POOL_CYCLES windows, then withdrawn
+    ref = (pick.reference[0], 0.6 * pick.reference[0])
+    decision, trial = judge_pole(*gone, pick.poles, ref, 1)
+    assert decision == "again" and trial[0] < ref[0]
+    assert judge_pole(*gone, pick.poles, ref, POOL_CYCLES)[0] == "base"
+    assert judge_pole(*gone, pick.poles, pick.reference, 1, in_time=False)[0] == "base"
+
+
+def test_a_moves_pole_state_survives_a_save_and_bad_ones_are_refused():
+    st = PoleState()
+    for t, y, s in _windows(0.04, 0.01, range(2)):
+        st.pool.add(t, y, s)
+    restored = PoleState.from_dict(json.loads(json.dumps(st.to_dict())))
+    assert restored.pool.count == 2 and not restored.judging
+    pick = pole_pick(*st.pool.mean(), _cost, 0.002, 0.12, 0.1)
+    assert pick is not None
+    st.chosen(pick)
+    assert st.judging and st.pool.count == 0  # the references' pool gave way to the trial's
+    restored = PoleState.from_dict(json.loads(json.dumps(st.to_dict())))
+    assert restored.poles == pytest.approx(pick.poles) and restored.reference == pytest.approx(pick.reference)
+    st.reset()
+    assert not st.judging and st.pool.count == 0
+    good = PoleState(pooled_only=True).to_dict()
+    assert PoleState.from_dict(good).pooled_only
+    for bad in ({**good, "pooled_only": 1}, {**good, "poles": [[-1.0, 2.0]]}, {**good, "reference": [0.1, 0.01]},
+                {**good, "poles": [[-1.0]], "reference": [0.1, 0.01]},
+                {**good, "poles": [[-1.0, 2.0]], "reference": [-0.1, 0.01]}, {"pool": good["pool"]}):
+        with pytest.raises(ListError):
+            PoleState.from_dict(bad)
