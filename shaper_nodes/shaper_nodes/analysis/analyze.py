@@ -49,7 +49,7 @@ from shaper_nodes.recordings import BagError
 
 from .groups import GROUP_GAP, GROUP_SIGMAS, MIN_SHARE, ModeGroup, _ranges, group_cycles
 from .replay import LEARNER_REPLAYS, LearnerReplay
-from .segment import GAP_FACTOR, CycleSpan, from_events, from_motion, position_noise
+from .segment import GAP_FACTOR, REST_FRACTION, CycleSpan, from_events, from_motion, position_noise
 from .streams import Recording, Signal
 
 if TYPE_CHECKING:
@@ -183,14 +183,16 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
                      " (gravity, bias): each window's mean is removed")
     tolerance, accel_noise, noise_notes = _noise(rec, opt)
     notes += noise_notes
-    rows, traces, windows = _cycles(rec, spans, opt, remove_mean, tolerance, accel_noise)
+    rows, traces, windows = _cycles(rec, spans, opt, remove_mean, tolerance, accel_noise, notes)
     for i, r in enumerate(rows):
         if r.issue:
             notes.append(f"cycle {r.cycle} (#{i}): {r.issue}; left out of the modes and the prediction")
     spectrum = _spectrum(windows)
     groups, id_notes = _identify(windows, rows, opt, accel_noise)
     notes += id_notes
-    main = max(reversed(groups), key=lambda g: len(g.rows)) if groups else None  # ties: the latest
+    main, main_note = main_group(groups, rows)
+    if main_note:
+        notes.append(main_note)
     modes = main.modes if main is not None else []
     if len(groups) > 1:
         for g in groups:
@@ -204,6 +206,32 @@ def analyze(rec: Recording, options: Options | None = None) -> Analysis:
                    replays, notes, remove_mean, groups, tolerance, accel_noise)
     out.headline = plant_changes(out, main)
     return out
+
+
+def _unshaped(row: CycleRow) -> bool:
+    """The cycle ran with no shaper (family "none" active throughout), so it shows every mode."""
+    return row.shaper.split(" ")[0] == "none" and not row.shaper.endswith(CHANGED_DURING)
+
+
+def main_group(groups: list[ModeGroup], rows: list[CycleRow]) -> tuple[ModeGroup | None, str]:
+    """The group whose modes, recommendation and prediction the analysis gives, and a note on the choice.
+
+    A shaper hides the modes it cancels, so the group with the most unshaped cycles (active shaper
+    "none") comes first, then the largest, ties the latest: on a recording of one cycle per shaper
+    (the demo's) that is the unshaped cycle, not the last shaped one. With cycles that ran shaped
+    only (the shaper recorded), the note says the modes are what the shapers let through."""
+    if not groups:
+        return None, ""
+    main = max(reversed(groups), key=lambda g: (sum(_unshaped(rows[i]) for i in g.rows), len(g.rows)))
+    largest = max(reversed(groups), key=lambda g: len(g.rows))
+    if main is not largest:
+        return main, (f"modes and recommendation from the unshaped cycles #{_ranges(main.rows)}, not the"
+                      f" {len(largest.rows)} shaped cycle(s) #{_ranges(largest.rows)}: a shaper hides the modes"
+                      " it cancels")
+    if any(r.shaper != "unknown" for r in rows) and not any(_unshaped(r) for r in rows):
+        return main, ("every cycle ran with a shaper, which hides the modes it cancels: the modes are those"
+                      " the shapers let through; record a few cycles with the shaper 'none' to see them all")
+    return main, ""
 
 
 def plant_changes(an: Analysis, main: ModeGroup | None) -> list[str]:
@@ -298,7 +326,7 @@ def _noise(rec: Recording, opt: Options) -> tuple[float, float, list[str]]:
 
 
 def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: bool, tolerance: float,
-            accel_noise: float
+            accel_noise: float, notes: list[str]
             ) -> tuple[list[CycleRow], list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
     """Per cycle: its figures, its trace (time from START in s, acceleration in m/s^2) and its residual
     window (time in s, acceleration in m/s^2; empty for a cycle with an issue). Positions are at rest
@@ -310,6 +338,7 @@ def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: b
     rows: list[CycleRow] = []
     traces: list[tuple[np.ndarray, np.ndarray]] = []
     windows: list[tuple[np.ndarray, np.ndarray]] = []
+    floored: list[int] = []
     for span in spans:
         a0, a1 = np.searchsorted(acc.t, span.start, side="left"), np.searchsorted(acc.t, span.end, side="right")
         at, av = acc.t[a0:a1], acc.values[a0:a1]
@@ -320,6 +349,11 @@ def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: b
             pt, pv = np.zeros(0), np.zeros((0, 1))
         if opt.settle_tolerance is None:  # at rest: within the noise floor, or ringing about the final value
             rest = reached_rest(pt, pv, span.motion_end, tolerance)
+            if len(pt) > 1 and rest >= float(pt[-1]):  # never: noise-free positions still creeping (elastic joints)
+                size = float(np.nanmax(np.abs(pv[-1] - pv[0])))
+                if REST_FRACTION * size > tolerance:
+                    rest = reached_rest(pt, pv, span.motion_end, REST_FRACTION * size)
+                    floored.append(span.cycle)
             res = evaluate_cycle(span.cycle, span.start, rest, span.end, at, av, np.zeros(0), np.zeros((0, 1)),
                                  tolerance, remove_mean).residual
         else:
@@ -335,6 +369,10 @@ def _cycles(rec: Recording, spans: list[CycleSpan], opt: Options, remove_mean: b
         traces.append((at - span.start, av))
         inside = (at >= res.window_start) & (at < res.window_end)  # as residual_vibration selects
         windows.append((at[inside], av[inside]) if not issue else (np.zeros(0), np.zeros((0, av.shape[1]))))
+    if floored:
+        notes.append(f"cycle(s) {', '.join(map(str, floored))}: the positions never came within {tolerance:.2g} of"
+                     f" their final value (noise-free joints still creeping): at rest within {100 * REST_FRACTION:g} %"
+                     " of the move's size instead (set --settle-tolerance to choose)")
     return rows, traces, windows
 
 
