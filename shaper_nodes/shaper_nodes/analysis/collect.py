@@ -57,6 +57,7 @@ class _Collector:
         self.js, self.ref, self.eff, self.cmd = _Rows(), _Rows(), _Rows(), _Rows()
         self.fast = {"joints": JointStateDecoder(), "reference": JointStateDecoder()}
         self.events, self.shapers = Events(), Shapers()
+        self.events_unstamped: list[int] = []  # indices of the events stamped 0 (timed by their log time)
 
     def add(self, role: str, topic: str, msgtype: str, seq: int, log_ns: int, raw: Any) -> None:
         """Decode one message of ``topic`` (logged at ``log_ns``, ns) and keep what its role uses."""
@@ -136,6 +137,8 @@ class _Collector:
         m = self.decoders[topic](raw)
         events = self.events
         events.seq.append(seq)
+        if not (m.header.stamp.sec or m.header.stamp.nanosec):
+            self.events_unstamped.append(len(events.t))
         events.t.append(_stamp(m, log_ns))
         events.kind.append(int(m.event))
         events.cycle.append(int(m.cycle))
@@ -172,6 +175,12 @@ class _Collector:
         commands = _rows_signal(chosen["commands"], self.cmd, notes)
         reference = _rows_signal(chosen["reference"], self.ref, notes, self.ref.names)
         efforts = _rows_signal(f"{chosen['joints']} (efforts)", self.eff, notes, self.js.names)
+        zero = self.events_unstamped
+        if zero and len(zero) < len(self.events.t):  # among stamped events: time 0 of their clock, not unstamped
+            for i in zero:
+                self.events.t[i] = 0.0
+            notes.append(f"{chosen['events']}: {len(zero)} event(s) stamped 0 among stamped ones: taken at time 0"
+                         " of their clock (a simulator's first instant), not at the time they were logged")
         return accel, joints, commands, reference, efforts
 
 

@@ -9,7 +9,8 @@ simulator's simulated time: no ``use_sim_time`` needed), as the CycleEvent messa
 
 - START at the stamp of the latest joint state before the goal is sent (a lockstep simulator at rest
   republishes its last state and does not step between goals, so this is when the goal's motion starts;
-  on a robot the controller starts it a few milliseconds later),
+  on a robot the controller starts it a few milliseconds later; a simulator's first goal starts at 0,
+  which the analysis takes as time 0 among stamped events, not as "no stamp"),
 - MOTION_END ``--duration`` s later (the unshaped command reaches the goal),
 - END ``--duration + --hold`` s after START (the goal's last point: the hold is the cycle's residual
   window, so ``--cycle`` needs ``--hold`` > 0).
