@@ -180,7 +180,8 @@ def _identify(windows, rows: list[CycleRow], opt: Options, accel_noise: float = 
                      f" {100 * MIN_SHARE:g} % of its strongest) within {100 * GROUP_GAP:g} % or {GROUP_SIGMAS:g}"
                      " combined sigma: "
                      + "; ".join(g.label for g in groups)
-                     + ". Modes, recommendation and prediction are the largest group's; each group's are listed")
+                     + ". Modes, recommendation and prediction are one group's (the most unshaped cycles, then the"
+                     " largest); each group's are listed")
     for g in groups:
         if not g.modes:
             notes.append(f"group of cycles {g.cycles}: no mode found in at least half of its cycles")
