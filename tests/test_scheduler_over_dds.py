@@ -273,3 +273,84 @@ def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_contex
         ex.shutdown()
         node.destroy_node()
         probe.destroy_node()
+
+
+def test_a_dead_joint_state_feed_is_stale_a_live_one_on_fast_simulated_time_is_not(ros_context):
+    """stale_timeout counts on the node's clock and on the steady clock: on simulated time running 100 times
+    faster than the wall clock (a lockstep plant), joint states that keep coming but arrive seconds of simulated
+    time apart (a feed thread a few milliseconds late) are not stale; a feed that stops is, once stale_timeout
+    passed on both clocks."""
+    from conftest import Diagnosed
+    from rosgraph_msgs.msg import Clock as ClockMsg
+    from std_msgs.msg import Header
+
+    from shaper_nodes.ros.conversions import sec_to_time
+
+    rule = {"membership": ["triangular"], "frequency_hz": [10.0], "damping_ratio": [0.05]}
+    overrides = [Parameter(k, value=v) for k, v in {"premises": ["joint_1"], "rule_names": ["low", "high"],
+                                                    "interpolation": "modes", "period": 0.02, "use_sim_time": True,
+                                                    "stale_timeout": 2.0, "error_throttle": 1.0}.items()]
+    for name, peak in (("low", 0.0), ("high", 1.0)):
+        overrides += [Parameter(f"rules.{name}.{k}", value=v) for k, v in rule.items()]
+        overrides += [Parameter(f"rules.{name}.membership_params", value=[peak - 1.0, peak, peak + 1.0])]
+    node = SchedulerNode(context=ros_context, parameter_overrides=overrides)
+    probe = Node("probe", context=ros_context)
+    diag = Diagnosed(probe)
+    modes: list[ModeEstimate] = []
+    probe.create_subscription(ModeEstimate, "/scheduler/mode_estimate", modes.append, 100)
+    clock = probe.create_publisher(ClockMsg, "/clock", 10)
+    js = probe.create_publisher(JointState, "/joint_states", 10)
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (node, probe):
+        ex.add_node(n)
+
+    def spin_until(cond, what, timeout=60.0):
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            ex.spin_once(timeout_sec=0.02)
+
+    def advance(t: float) -> None:  # simulated time jumps 5 s: the scheduler's clock and its period timer follow
+        clock.publish(ClockMsg(clock=sec_to_time(t)))
+        spin_until(lambda: node._now() >= t, f"the scheduler's clock at {t:g} s")
+
+    evaluated: list[tuple[float, bool]] = []  # (node clock s, not stale) of every evaluation of the rule base
+    evaluate = node._evaluate
+
+    def counted():
+        had_pose = node._pose is not None
+        interp = evaluate()
+        if had_pose:
+            evaluated.append((node._now(), interp is not None))
+        return interp
+
+    node._evaluate = counted
+    try:
+        spin_until(lambda: clock.get_subscription_count() > 0 and js.get_subscription_count() > 0, "the subscribers")
+        t = 1.0
+        advance(t)
+        for step in range(10):  # live: a joint state at every jump, evaluated after the next jump
+            stamp = sec_to_time(t)
+            before = node._pose
+            js.publish(JointState(header=Header(stamp=stamp), name=["joint_1"], position=[0.5]))
+            spin_until(lambda before=before: node._pose is not before, f"joint state {step}")
+            t += 5.0
+            advance(t)
+            spin_until(lambda t=t: any(at >= t for at, _ in evaluated), f"an evaluation after the jump to {t:g} s")
+            assert all(fresh for _, fresh in evaluated), f"stale at step {step}: {evaluated}"
+        assert node.diagnostics.counts["stale"] == 0 and modes
+        # dead: no more joint states, simulated time goes on: stale once 2 s passed on both clocks
+        deadline = time.monotonic() + 60.0
+        while not node.diagnostics.counts["stale"]:
+            assert time.monotonic() < deadline, "no stale report within 60 s of a dead feed"
+            t += 5.0
+            advance(t)
+            spin_until(lambda t=t: any(at >= t for at, _ in evaluated), f"an evaluation after the jump to {t:g} s")
+        assert not evaluated[-1][1]
+        spin_until(lambda: diag.find("scheduler", "no joint states"), "the stale report on /diagnostics")
+        assert "stale_timeout (2 s of the node's clock and of the steady clock)" in \
+            diag.find("scheduler", "no joint states").message
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        probe.destroy_node()

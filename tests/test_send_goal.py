@@ -85,6 +85,63 @@ def test_a_goal_from_the_present_pose_succeeds_and_the_arm_gets_there(start_node
     assert f"send_goal: rejected: {ACTION} rejected the goal" in log, log
 
 
+def test_cycle_marks_the_goal_on_cycle_events_stamped_on_the_sims_clock(start_node, ros_context):
+    """``--cycle N``: START before the goal at the stamp of the arm's joint states at rest (the lockstep sim does
+    not step between goals, so the motion starts there), MOTION_END --duration and END --duration + --hold
+    later, each naming the task, the joints, the start pose and the goal, as a learner per move wants them."""
+    from shaper_msgs.msg import CycleEvent
+
+    sim(start_node)
+    node = rclpy.create_node("probe", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    events: list[CycleEvent] = []
+    states: list[tuple[float, np.ndarray]] = []
+
+    def on_state(msg):
+        states.append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
+                       np.array([msg.position[list(msg.name).index(j)] for j in JOINT_NAMES])))
+
+    node.create_subscription(CycleEvent, "/cycle_events", events.append, 10)
+    node.create_subscription(JointState, "/joint_states", on_state, 1000)
+    deadline = time.monotonic() + 120.0
+    while not states:  # the arm at rest, seen before the goal
+        assert time.monotonic() < deadline, "no joint state of the arm at rest"
+        executor.spin_once(timeout_sec=0.05)
+    proc = start_node("shaper_nodes", "send_goal", {}, args=goal_args(
+        GOAL, JOINT_NAMES, "--from-current", "--hold", "0.5", "--cycle", "3", "--task", "pick"))
+    try:
+        deadline = time.monotonic() + 300.0
+        while proc.proc.poll() is None or len(events) < 3:
+            assert time.monotonic() < deadline, f"send_goal and its three marks: {events}"
+            executor.spin_once(timeout_sec=0.05)
+        log = proc.log_path.read_text()
+        assert proc.proc.returncode == 0 and "succeeded" in log, log
+        assert [e.event for e in events] == [CycleEvent.START, CycleEvent.MOTION_END, CycleEvent.END]
+        t = [e.header.stamp.sec + 1e-9 * e.header.stamp.nanosec for e in events]
+        assert t[1] - t[0] == pytest.approx(1.5, abs=1e-6) and t[2] - t[0] == pytest.approx(2.0, abs=1e-6)
+        assert f"marked cycle 3 of 'pick' on /cycle_events: START at {t[0]:.3f} s" in log, log
+        for e in events:
+            assert e.cycle == 3 and e.task == "pick" and list(e.joint_names) == list(JOINT_NAMES)
+            assert list(e.start_positions) == pytest.approx(HOME.tolist(), abs=1e-3)
+            assert list(e.goal_positions) == pytest.approx(GOAL, abs=1e-12)
+        # the motion starts at START on the sim's clock: at rest at HOME up to it, moving after it
+        deadline = time.monotonic() + 60.0
+        while not states or states[-1][0] < t[2] - 0.01:
+            assert time.monotonic() < deadline, "joint states up to the END"
+            executor.spin_once(timeout_sec=0.05)
+        before = [q for ts, q in states if ts <= t[0]]
+        after = [q for ts, q in states if t[0] + 0.2 <= ts <= t[1]]
+        assert before and np.allclose(before[-1], before[0], atol=1e-9), (t, [ts for ts, _ in states[:5]], len(states))
+        assert after and np.max(np.abs(after[-1] - before[-1])) > 0.05
+        at_end = [q for ts, q in states if ts >= t[2] - 0.01]
+        assert at_end and at_end[0] == pytest.approx(GOAL, abs=1e-2)
+    finally:
+        proc.stop()
+        executor.shutdown()
+        node.destroy_node()
+
+
 def test_an_aborted_goal_prints_the_controllers_code_its_name_and_its_text(start_node):
     sim(start_node, **{"jtc.trajectory_tolerance": [1e-6]})  # every move violates the path tolerance
     code, log = send_goal(start_node, goal_args(GOAL, JOINT_NAMES, "--from-current"))
@@ -111,6 +168,8 @@ VALID = {"--positions": [str(p) for p in GOAL], "--duration": ["1"]}
     ({"--positions": ["0", "1", "2", "3", "4", "x"]}, "--positions: 'x' is not a number"),
     ({"--duration": ["0"]}, "--duration must be finite and > 0, got '0'"),
     ({"--hold": ["-1"]}, "--hold must be >= 0, got -1"),
+    ({"--cycle": ["2"]}, "--cycle needs --hold > 0"),
+    ({"--cycle": ["-1"], "--hold": ["1"]}, "--cycle must be an integer >= 0, got '-1'"),
 ])
 def test_bad_input_is_one_line_and_exit_2_before_anything_starts(capsys, change, words):
     argv = ["send_goal", "--action", ACTION, "--joints", *JOINT_NAMES]

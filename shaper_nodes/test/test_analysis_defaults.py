@@ -93,6 +93,60 @@ def test_defaults_find_the_payload_change_and_put_it_in_the_headline():
         assert percentage_vibration(np.asarray(best.amplitudes), np.asarray(best.times), m.omega, m.zeta) < 0.05
     text = table(an)
     assert text.splitlines()[1].startswith("PLANT CHANGE") and "nan" not in text and "± 0 " not in text
+    # every cycle ran with the calibration's ZV: the analysis says its modes are what the ZV let through
+    assert any(n.startswith("every cycle ran with a shaper") for n in an.notes), an.notes
+
+
+def test_without_cycle_events_the_arms_moves_are_found_in_its_noise_free_joint_states():
+    """An owner's recording of goals sent by hand has no cycle events: the moves come from the joint states. The
+    sim arm's are noise-free (position noise 5e-9 rad) while its elastic joints ring through every hold, so the
+    noise band never saw rest and the 18 moves came out as 2 (session 11); the edge of a move is then where the
+    positions come within 0.1 % of its size of rest, and the analysis says so. The reach-home move of each
+    cycle (what the cycle events mark) gives the events' window and residual."""
+    import dataclasses
+
+    rec = read_recording(PRODUCTION)
+    by_events = analyze(rec, DEFAULTS)
+    by_motion = analyze(rec, dataclasses.replace(DEFAULTS, segmentation="motion"))
+    assert by_motion.segmentation == "motion end of the joint states (/joint_states)"
+    assert len(by_motion.cycles) == 3 * 6  # three cycles of the six pick-and-place moves
+    assert any("never came within the noise band" in n and "0.1 % of the move's size" in n for n in by_motion.notes)
+    assert not any("the whole recording is one move" in n for n in by_motion.notes)
+    for k, marked in enumerate(by_events.cycles):
+        found = by_motion.cycles[6 * k + 5]
+        assert found.window_start == pytest.approx(marked.window_start, abs=0.01)
+        assert found.rms == pytest.approx(marked.rms, rel=0.05)  # the events' END is 0.12 s before the next move
+    assert all(r.samples > 0 for r in by_motion.cycles)  # every move's window, the creeping pan moves' too
+    assert all(r.motion_end <= r.window_start < r.end for r in by_motion.cycles)
+
+
+def test_the_modes_come_from_the_unshaped_cycles_when_one_cycle_ran_per_shaper():
+    """The arm demo's recording holds one cycle per case (none, zv, ...): each cycle is a group of its own
+    (a shaper hides the modes it cancels), and the modes and recommendation are the unshaped cycle's, not
+    the latest group's."""
+    from types import SimpleNamespace
+
+    from shaper_nodes.analysis.analyze import main_group
+    from shaper_nodes.analysis.groups import ModeGroup
+
+    def fit(hz: float) -> ModeFit:
+        return ModeFit(2 * math.pi * hz, 0.03, 0.01, 0.001, 1.0, "test")
+
+    rows = [SimpleNamespace(shaper=s) for s in ("none", "zv (2 imp., 50.0 ms)", "zv (2 imp., 49.0 ms) [scheduler]")]
+    groups = [ModeGroup([0], [0], [fit(12.15), fit(20.78)]), ModeGroup([1], [0], [fit(9.95)]),
+              ModeGroup([2], [0], [fit(9.9)])]
+    main, note = main_group(groups, rows)
+    assert main is groups[0] and note.startswith("modes and recommendation from the unshaped cycles #0")
+    # more unshaped cycles win over a larger group; without unshaped cycles the largest, ties the latest
+    rows += [SimpleNamespace(shaper="none")]
+    assert main_group([ModeGroup([0, 3], [0, 1], [fit(12.0)]), ModeGroup([1, 2], [0, 0], [fit(9.9)])],
+                      rows)[0].rows == [0, 3]
+    shaped = [SimpleNamespace(shaper="zv"), SimpleNamespace(shaper="zvd")]
+    main, note = main_group([ModeGroup([0], [0], [fit(9.0)]), ModeGroup([1], [1], [fit(8.0)])], shaped)
+    assert main.rows == [1] and note.startswith("every cycle ran with a shaper")
+    unknown = [SimpleNamespace(shaper="unknown")] * 2  # no shaper topic: taken as unshaped, nothing to say
+    assert main_group([ModeGroup([0, 1], [0, 1], [fit(9.0)])], unknown)[1] == ""
+    assert main_group([], unknown) == (None, "")
 
 
 def test_analyze_fleet_agrees_with_analyze_bag_on_the_same_recordings(tmp_path, capsys):

@@ -339,12 +339,15 @@ def test_stamped_monitor_completes_a_cycle_whose_last_samples_were_lost():
 
 
 # ------------------------------------------------------------------------------ MRILC replay
-def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float = 200.0):
+def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float = 200.0, first_at: int = 200,
+                     log_offset_ns: int = 0):
     """Seed 000's loop on the perturbed plant (w = 5, zeta = 0.15) at 200 Hz with u2 = 0 (a run
     without learning), recorded as the sim plant and the conductor publish it: /joint_states
     (y, u), /sim_plant/reference (r_s, stamped at the start of its period), /cycle_events (the
     END logged before the cycle's last samples, as in a lockstep recording), and a tip
-    accelerometer (y''). Returns the model, and the cycle's r_s, y and u (samples x 1)."""
+    accelerometer (y''). The first cycle starts at sample ``first_at``; messages are logged ``log_offset_ns``
+    after their stamp (a recorder's wall clock beside simulated time). Returns the model, and the cycle's r_s,
+    y and u (samples x 1)."""
     import pathlib
 
     from shaper_nodes.analysis.synthetic import trapezoid
@@ -377,7 +380,7 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
         ("ev", "/cycle_events", "shaper_msgs/msg/CycleEvent")) if reference or name != "ref"}
 
     def write(name, ns, msg, kind):
-        writer.write(conn[name], ns, store.serialize_cdr(msg, kind))
+        writer.write(conn[name], ns + log_offset_ns, store.serialize_cdr(msg, kind))
 
     def hdr(ns):
         return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="")
@@ -389,7 +392,7 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
 
     try:
         for c in range(cycles):
-            first = 200 + c * (n + 100)  # sample index of the cycle's START (1 s, then 0.5 s apart)
+            first = first_at + c * (n + 100)  # sample index of the cycle's START (1 s, then 0.5 s apart)
             event(0, c, first * step_ns)
             for i in range(n):
                 ns = (first + i) * step_ns
@@ -918,3 +921,15 @@ def test_commands_in_lockstep_blocks_are_skipped_with_the_reason(tmp_path):
     assert rec.commands is None or len(rec.commands) == 0
     assert any("/forward_position_controller/commands: 8 message(s) could not be decoded" in n
                and "a block of 25 samples" in n for n in rec.notes), rec.notes
+
+
+def test_a_cycle_event_stamped_0_among_stamped_ones_is_at_time_0_not_at_its_log_time(tmp_path):
+    """A lockstep simulator's clock starts at 0: the first goal's START (send_goal --cycle) is stamped 0, which
+    alone would read as "no stamp" and be timed by the recorder's wall clock; among stamped events it is time 0."""
+    _mrilc_recording(tmp_path / "zero", cycles=2, reference=False, first_at=0, log_offset_ns=1_795_000_000 * 10**9)
+    rec = read_recording(tmp_path / "zero")
+    assert any("/cycle_events: 1 event(s) stamped 0 among stamped ones" in n for n in rec.notes), rec.notes
+    an = analyze(rec, Options(learners=()))
+    assert an.segmentation == "cycle events (/cycle_events)"
+    assert [r.start for r in an.cycles] == [0.0, pytest.approx(260 / 200.0)]
+    assert all(r.samples > 0 and not r.issue for r in an.cycles)

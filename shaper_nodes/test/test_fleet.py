@@ -104,6 +104,13 @@ def test_robot_from_metadata_else_folder_and_refusals(tmp_path):
     assert content_key(tmp_path / "day_1" / "rec_a", OPTIONS) != content_key(tmp_path / "day_1" / "rec_b", OPTIONS)
     assert content_key(tmp_path / "day_1" / "rec_b", OPTIONS) != content_key(tmp_path / "day_1" / "rec_b",
                                                                             Options(learners=(), max_modes=1))
+    # a recording directly in the fleet's folder has no robot folder: it is a robot of its own (bags/ holds the
+    # 1-D demo and the arm's production run side by side: not one robot), unless its metadata names one
+    write_bag(tmp_path / "loose_run", t, u, a)
+    assert robot_of(tmp_path / "loose_run", root=tmp_path) == "loose_run"
+    assert robot_of(tmp_path / "day_1" / "rec_b", root=tmp_path) == "day_1"
+    assert robot_of(tmp_path / "day_1" / "rec_a", root=tmp_path / "day_1") == "arm_7"
+    assert robot_of(tmp_path / "day_1" / "rec_b", root=tmp_path / "day_1") == "rec_b"
     with pytest.raises(FleetError, match="more than 1 recordings"):
         find_recordings(tmp_path, limit=1)
     with pytest.raises(FleetError, match="not a folder"):
@@ -238,3 +245,17 @@ def test_analyze_fleet_refuses_a_metadata_yaml_just_over_the_default_bound(tmp_p
     (res,) = run_fleet(find_recordings(tmp_path), OPTIONS, None, workers=0).results
     assert res.error == f"BagError: {refused.value}" and "beyond the limit of 16 MiB" in res.error
     assert res.robot == "cell_5"
+
+
+def test_loose_recordings_are_robots_of_their_own_and_a_moved_recording_changes_robot(tmp_path):
+    t, u, a, _ = simulate(cycles=2, rate=250.0, dwell=1.0)
+    for name in ("one_arm", "other_arm"):
+        write_bag(tmp_path / name, t, u, a)
+    cache = Cache(tmp_path / ".fleet_cache")
+    run = run_fleet(find_recordings(tmp_path), OPTIONS, cache, workers=0, root=tmp_path)
+    assert sorted(r.robot for r in run.results) == ["one_arm", "other_arm"]
+    assert run.analysed == 2
+    (tmp_path / "cell_4").mkdir()
+    (tmp_path / "one_arm").rename(tmp_path / "cell_4" / "one_arm")  # same bytes, cached: the folder decides
+    run = run_fleet(find_recordings(tmp_path), OPTIONS, cache, workers=0, root=tmp_path)
+    assert run.cached == 2 and sorted(r.robot for r in run.results) == ["cell_4", "other_arm"]

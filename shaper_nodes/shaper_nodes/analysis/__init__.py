@@ -4,15 +4,18 @@ Recordings are opened and read through :mod:`shaper_nodes.recordings` (bounded, 
 recovered); nothing here imports ``shaper_nodes.ros`` or ``shaper_nodes.nodes``.
 
 - :mod:`.streams`: find the accelerometer, joint-state, command, cycle-event and shaper topics
-  by type and extract them into arrays.
+  by type and extract them into arrays (:mod:`.signals`: the arrays; :mod:`.collect`: the rows read
+  from the messages, turned into them).
 - :mod:`.segment`: cycles from the cycle events, or from the motion of the commands or joint states
   when there are none, with thresholds from the positions' measured noise.
 - :mod:`.groups`: cycles that see different modes (several plants, payloads or poses), grouped.
 - :mod:`.analyze`: per-cycle residual vibration and settling, spectrum, modes, recommended shaper,
-  and the learner replays the options ask for.
+  and the learner replays the options ask for; its steps in :mod:`.cycle_rows` (the cycles, their rest
+  and figures) and :mod:`.verdict` (the modes of each group, whose are given, the recommendation, the
+  headline).
 - :mod:`.replay`: what the learners (LIST, MRILC) would have done over a recording, fed as the live
   nodes are fed; the registry ``LEARNER_REPLAYS``.
-- :mod:`.report`: terminal table, Markdown, CSV, JSON and PNG plots.
+- :mod:`.report`: terminal table, Markdown, CSV, JSON; :mod:`.report_figures`: the PNG plots.
 - :mod:`.fleet`, :mod:`.fleet_drift`, :mod:`.fleet_report`: a fleet's recordings analysed on Dask and cached
   by content, each robot's modes against its baseline (drift alerts, retunes), the fleet report.
 

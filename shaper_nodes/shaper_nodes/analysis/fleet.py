@@ -182,8 +182,12 @@ def options_doc(options: Options) -> dict[str, Any]:
     return json_ready(doc)
 
 
-def robot_of(path: pathlib.Path, limits: ReadLimits | None = None) -> str:
-    """``robot`` of the rosbag2 metadata's custom_data, else the name of the folder holding the recording.
+def robot_of(path: pathlib.Path, limits: ReadLimits | None = None, root: pathlib.Path | None = None) -> str:
+    """The robot that made a recording: ``robot`` of the rosbag2 metadata's custom_data, else the name of
+    the folder holding the recording (``fleet/cell_3/rec_012``: ``cell_3``), except that a recording
+    directly in the fleet's folder ``root`` (no robot folder) is a robot of its own, named by the
+    recording (``bags/arm_production_payload``: ``arm_production_payload``), not one robot with every
+    other loose recording there.
 
     metadata.yaml is read through :func:`shaper_nodes.recordings.read_metadata` (its size checked
     against ``limits.metadata_bytes`` before it is parsed); one beyond the limit, or unreadable, gives
@@ -198,6 +202,8 @@ def robot_of(path: pathlib.Path, limits: ReadLimits | None = None) -> str:
                 return str(name)
         except (BagError, OSError, AttributeError):
             pass
+    if root is not None and path != root and path.parent.resolve() == root.resolve():
+        return path.stem if path.is_file() else path.name
     return path.parent.name or str(path.parent)
 
 
@@ -310,8 +316,12 @@ def _preload() -> None:
 
 def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | None, *, workers: int = 1,
               scheduler: str | None = None, processes: bool = True, progress: bool = False,
-              warn: Callable[[str], None] = lambda s: None, limits: ReadLimits | None = None) -> FleetRun:
+              warn: Callable[[str], None] = lambda s: None, limits: ReadLimits | None = None,
+              root: pathlib.Path | None = None) -> FleetRun:
     """Analyse the recordings not in the cache; returns every result (cached or new), in order.
+
+    Each result's robot is :func:`robot_of` the recording under the fleet's folder ``root`` (found
+    again for cached results: the folder a recording sits in is not part of its content key).
 
     Every recording is read within ``limits`` (default: :class:`ReadLimits`'s, as ``analyze_bag``'s).
 
@@ -358,6 +368,8 @@ def run_fleet(paths: Iterable[pathlib.Path], options: Options, cache: Cache | No
         if bar is not None:
             bar.close()
     out = [r for r in results if r is not None]
+    for r in out:
+        r.robot = robot_of(pathlib.Path(r.path), limits, root)
     return FleetRun(out, len(todo), cached, time.perf_counter() - started, where, startup[0])
 
 

@@ -170,8 +170,8 @@ def robot_drift(robot: str, results: Sequence[Result], rule: DriftRule) -> Robot
     usable = [p for p in points if not p.result.error and p.result.modes]
     out = RobotDrift(robot, points)
     if len(usable) <= rule.baseline:
-        out.note = (f"{len(usable)} recordings with a mode: not more than the {rule.baseline} of the baseline,"
-                    " nothing to compare yet")
+        out.note = (f"{len(usable)} recordings with a mode, all in the baseline of {rule.baseline}: none after it"
+                    " to compare with it yet")
     base = usable[:rule.baseline]
     for p in base:
         p.in_baseline = True

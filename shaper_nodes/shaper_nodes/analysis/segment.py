@@ -16,7 +16,10 @@ signal's own noise (:func:`position_noise`):
    does not set it), or ``threshold`` when given (``--motion-threshold``);
 4. each run of moving samples is widened to where the positions leave and reach rest: the last
    sample before it (the first after it) within ``NOISE_SIGMAS x sigma_p`` (or one quantisation
-   step) of the rest position next to it; runs closer than ``min_rest`` s are one move; moves
+   step) of the rest position next to it, or, where they never get within that band before the
+   next move (noise-free positions of elastic joints still ringing from the move, as a simulator
+   reports them), within :data:`REST_FRACTION` of the move's size (the note says how many edges took
+   this band); runs closer than ``min_rest`` s are one move; moves
    whose largest joint displacement is below :data:`MIN_MOVE_FRACTION` of the largest move's are
    noise;
 5. a cycle runs from the start of a move to the start of the next (the last to the end of the
@@ -50,6 +53,9 @@ MIN_REST = 0.05
 GAP_FACTOR = 5.0
 #: moves whose largest joint displacement is below this fraction of the largest move's are noise
 MIN_MOVE_FRACTION = 0.01
+#: where positions never come within their noise band of rest before the next move (an elastic joint
+#: ringing in noise-free joint states), a move's edge is where they come within this fraction of its size
+REST_FRACTION = 1e-3
 
 
 @dataclass(frozen=True)
@@ -221,8 +227,13 @@ def from_motion(signal: Signal, end_time: float | None = None, threshold: float 
     breaks = np.flatnonzero(np.diff(idx) > 1)
     starts = np.concatenate([[idx[0]], idx[breaks + 1]])
     stops = np.concatenate([idx[breaks], [idx[-1]]]) + 1  # sample index where the run is at rest
-    _widen(p, speed, starts, stops, window, np.maximum(NOISE_SIGMAS * noise.sigma,
-                                                       1.5 * np.where(noise.quantised, noise.step, 0.0)))
+    band = np.maximum(NOISE_SIGMAS * noise.sigma, 1.5 * np.where(noise.quantised, noise.step, 0.0))
+    floored = _widen(p, speed, starts, stops, window, band)
+    if floored:
+        notes.append(f"{signal.topic}: {floored} move edge(s) where the positions never came within the noise band"
+                     f" ({NOISE_SIGMAS:g} x {float(np.max(noise.sigma)):.2g}) of rest before the next move (joints"
+                     f" still ringing in noise-free positions): taken where they come within"
+                     f" {100 * REST_FRACTION:g} % of the move's size of rest")
     moves: list[list[int]] = []
     for a, b in zip(starts, stops, strict=True):
         if moves and t[a] - t[moves[-1][1]] < min_rest:
@@ -253,10 +264,13 @@ def from_motion(signal: Signal, end_time: float | None = None, threshold: float 
 
 
 def _widen(p: np.ndarray, speed: np.ndarray, starts: np.ndarray, stops: np.ndarray, window: int,
-           tol: np.ndarray) -> None:
+           tol: np.ndarray) -> int:
     """Move each run's first sample ``starts`` and stop ``stops`` (in place) out to where the positions
     ``p`` are at rest: noiseless (``window`` 1) while they change at all, else to within ``tol``
-    (per joint, rad or m) of the rest next to the run (:func:`_rest_edge`)."""
+    (per joint, rad or m) of the rest next to the run (:func:`_rest_edge`); an edge that finds no rest
+    within ``tol`` before the neighbouring run (or the recording's end) is taken within
+    :data:`REST_FRACTION` of the run's size instead. Returns how many edges were."""
+    floored = 0
     for k in range(starts.size):
         if window == 1:
             lo = stops[k - 1] if k else 0
@@ -269,8 +283,16 @@ def _widen(p: np.ndarray, speed: np.ndarray, starts: np.ndarray, stops: np.ndarr
             lo = stops[k - 1] if k else 0
             hi = starts[k + 1] if k + 1 < starts.size else p.shape[0] - 1
             a, b = int(starts[k]), int(stops[k])
-            starts[k] = _rest_edge(p, a, int(lo), b, window // 2, tol, -1)
-            stops[k] = _rest_edge(p, b, int(hi), int(starts[k]), window // 2, tol, +1)
+            floor = np.maximum(tol, REST_FRACTION * float(np.nanmax(np.abs(p[b] - p[a]))))
+            for edge, bound, inner, direction in ((starts, int(lo), b, -1), (stops, int(hi), None, +1)):
+                i = a if direction < 0 else b
+                inner_i = inner if inner is not None else int(starts[k])
+                j = _rest_edge(p, i, bound, inner_i, window // 2, tol, direction)
+                if j == bound and bound != i and np.any(floor > tol):
+                    j = _rest_edge(p, i, bound, inner_i, window // 2, floor, direction)
+                    floored += 1
+                edge[k] = j
+    return floored
 
 
 def _rest_edge(p: np.ndarray, i: int, bound: int, inner: int, half: int, tol: np.ndarray, direction: int) -> int:

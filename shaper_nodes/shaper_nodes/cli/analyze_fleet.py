@@ -82,7 +82,8 @@ def main(argv: list[str] | None = None) -> int:
             raise FleetError(f"{args.folder}: no recording (rosbag2 folder or .mcap file) found")
         cache = None if args.no_cache else Cache(args.cache or args.folder / ".fleet_cache")
         run = run_fleet(paths, options, cache, workers=args.workers, scheduler=args.scheduler,
-                        progress=not args.quiet and sys.stderr.isatty(), warn=warn, limits=limits_of(args))
+                        progress=not args.quiet and sys.stderr.isatty(), warn=warn, limits=limits_of(args),
+                        root=args.folder)
     except (FleetError, ValueError, OSError) as err:
         print(f"analyze_fleet: {err}", file=sys.stderr)
         return 2
@@ -102,7 +103,9 @@ def main(argv: list[str] | None = None) -> int:
               + (f" (cluster start {run.startup_s:.1f} s)" if run.startup_s else ""))
         for d in drift:
             base = f"baseline {d.baseline_hz:8.4g} Hz" if math.isfinite(d.baseline_hz) else "baseline: none     "
-            print(f"  {d.robot:<20} {len(d.points):>4} rec.  {base}  {d.verdict}" + (f"  ({d.note})" if d.note else ""))
+            why = ": the baseline is not steady (below)" if d.baseline_issue and not d.alerts else ""
+            print(f"  {d.robot:<20} {len(d.points):>4} rec.  {base}  {d.verdict}{why}"
+                  + (f"  ({d.note})" if d.note else ""))
             if d.baseline_issue:
                 print(f"      the baseline is not steady: {d.baseline_issue}")
             for p in d.points:

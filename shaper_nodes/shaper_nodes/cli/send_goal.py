@@ -2,7 +2,7 @@
 
     send_goal --action /shaper/follow_joint_trajectory --joints J1 J2 ... --positions P1 P2 ... --duration S
               [--from-current] [--hold S] [--joint-states TOPIC] [--timeout S] [--result-timeout S]
-              [--ros-args ...]
+              [--cycle N [--task NAME] [--events TOPIC]] [--ros-args ...]
 
 The goal is a ``trajectory_msgs/JointTrajectory`` for the joints named (the controller's, all of
 them: joint_trajectory_controller and the shaper node refuse partial goals) ending at the
@@ -12,7 +12,10 @@ present pose (read from ``--joint-states``) at time 0, so the whole motion is in
 and a shaper in front of the controller shapes it (without it the controller interpolates from
 wherever the arm is to the one point, and what a shaper shapes is that one point); ``--hold S``
 adds a last point holding the goal S s longer, so the controller keeps executing while the arm
-settles (a simulator in lockstep keeps its time running through it).
+settles (a simulator in lockstep keeps its time running through it). ``--cycle N`` marks the goal as
+cycle N of task ``--task`` on ``--events`` (START, MOTION_END, END, stamped on the joint states' clock;
+the hold is the cycle's residual window), for a learner per move, the identifier or a recording
+(cli/cycle_marks.py).
 
 It prints the result, ``succeeded`` or ``aborted``/``canceled``/``rejected``/``unknown`` (the action
 server gone, or restarted without the goal) with the controller's ``error_code`` (and its name) and
@@ -111,6 +114,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument("--timeout", type=number("--timeout", positive=True), default=10.0,
                    help="wait for the action server, the joint states and the answer to the goal, s (wall; default"
                         " 10)")
+    p.add_argument("--cycle", type=_cycle, default=None, metavar="N", help="mark the goal as cycle N (an integer"
+                   " >= 0) on --events: START before it, MOTION_END --duration s and END --duration + --hold s"
+                   " later, stamped on the joint states' clock; needs --hold > 0 (the residual window)")
+    p.add_argument("--task", default=PROG, help=f"the task named in the cycle marks (default {PROG})")
+    p.add_argument("--events", default="/cycle_events", help="topic of the cycle marks (default /cycle_events)")
     p.add_argument("--result-timeout", type=number("--result-timeout", positive=True), default=None,
                    help="wait for the result, s (wall; default 60 + 10 x (duration + hold))")
     args = p.parse_args(list(argv))
@@ -122,9 +130,21 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         raise UsageError(f"--positions needs one value per joint ({len(args.joints)}), got {len(args.positions)}")
     if args.hold < 0:
         raise UsageError(f"--hold must be >= 0, got {args.hold:g}")
+    if args.cycle is not None and not args.hold > 0:
+        raise UsageError("--cycle needs --hold > 0: the hold after the motion is the cycle's residual window")
     if args.result_timeout is None:
         args.result_timeout = 60.0 + 10.0 * (args.duration + args.hold)
     return args
+
+
+def _cycle(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--cycle must be an integer >= 0, got {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"--cycle must be an integer >= 0, got {text!r}")
+    return n
 
 
 def trajectory_points(positions: Sequence[float], duration: float, start: Sequence[float] | None = None,
@@ -158,16 +178,17 @@ class GoalSender:
                 raise WaitError(f"no {what} within {timeout:g} s")
             self.executor.spin_once(timeout_sec=POLL)
 
-    def current(self, topic: str, joints: Sequence[str], timeout: float) -> list[float]:
-        """The present positions of ``joints`` from the first joint state that names them all."""
+    def current(self, topic: str, joints: Sequence[str], timeout: float) -> tuple[list[float], float]:
+        """The present positions of ``joints`` from the first joint state that names them all, and its stamp (s)."""
         from sensor_msgs.msg import JointState
 
-        got: list[list[float]] = []
+        got: list[tuple[list[float], float]] = []
 
         def on_state(msg: Any) -> None:
             names = list(msg.name)
             if not got and all(j in names for j in joints) and len(msg.position) == len(names):
-                got.append([float(msg.position[names.index(j)]) for j in joints])
+                got.append(([float(msg.position[names.index(j)]) for j in joints],
+                            msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec))
 
         sub = self.node.create_subscription(JointState, topic, on_state, 10)
         try:
@@ -177,7 +198,7 @@ class GoalSender:
         return got[0]
 
     def send(self, joints: Sequence[str], points: Sequence[tuple[float, Sequence[float]]], timeout: float,
-             result_timeout: float) -> Outcome:
+             result_timeout: float, on_send: Callable[[], None] | None = None) -> Outcome:
         from action_msgs.msg import GoalStatus
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -192,6 +213,8 @@ class GoalSender:
                                  time_from_start=dur(t)) for t, p in points]))
         self.spin_until(self.client.server_is_ready, timeout, f"FollowJointTrajectory server {self.action_name}")
         errors: list[float] = []
+        if on_send is not None:
+            on_send()
 
         def on_feedback(msg: Any) -> None:
             e = [abs(x) for x in msg.feedback.error.positions]
@@ -253,11 +276,30 @@ def main(args: list[str] | None = None) -> int:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     sender = GoalSender(node, executor, opts.action)
+    marks = None
     try:
-        start = sender.current(opts.joint_states, opts.joints, opts.timeout) if opts.from_current else None
-        points = trajectory_points(opts.positions, opts.duration, start, opts.hold)
+        here, stamp = (sender.current(opts.joint_states, opts.joints, opts.timeout)
+                       if opts.from_current or opts.cycle is not None else (None, 0.0))
+        points = trajectory_points(opts.positions, opts.duration, here if opts.from_current else None, opts.hold)
+        on_send = None
+        if opts.cycle is not None and here is not None:
+            from shaper_nodes.cli.cycle_marks import CycleMarks, CycleSpec
+
+            marks = CycleMarks(node, CycleSpec(opts.cycle, opts.task, opts.events), opts.joints, opts.joint_states)
+            marks.wait_listeners(sender.spin_until, opts.timeout, PROG)
+            cycle_marks, start_pose = marks, here
+
+            def on_send() -> None:  # START as the goal goes out, at the latest joint state's stamp
+                nonlocal stamp
+                stamp = max(stamp, cycle_marks.latest)
+                cycle_marks.start(stamp, start_pose, opts.positions)
         print(f"{PROG}: sending {len(points)} point(s) over {points[-1][0]:g} s to {opts.action}", flush=True)
-        outcome = sender.send(opts.joints, points, opts.timeout, opts.result_timeout)
+        outcome = sender.send(opts.joints, points, opts.timeout, opts.result_timeout, on_send)
+        if marks is not None and here is not None and outcome.ok:
+            marks.finish(stamp, opts.duration, opts.hold, here, opts.positions, opts.timeout, PROG)
+            print(f"{PROG}: marked cycle {opts.cycle} of {opts.task!r} on {opts.events}: START at {stamp:.3f} s,"
+                  f" MOTION_END {stamp + opts.duration:.3f} s, END {stamp + opts.duration + opts.hold:.3f} s",
+                  flush=True)
     except KeyboardInterrupt:
         sender.cancel()
         print(f"\n{PROG}: cancelled", file=sys.stderr)

@@ -15,7 +15,12 @@ it keeps alive, MAX_STAGES - 1).
 Premises outside the rule base's range are clamped to it (never extrapolated) and reported
 (a warning and a /diagnostics status). Joint states missing a premise joint or carrying
 non-finite positions are refused and reported; without joint states for ``stale_timeout`` s
-the scheduler stops updating and says so.
+the scheduler stops updating and says so: for ``stale_timeout`` s of the node's clock *and* of the
+steady clock since the last one arrived. With simulated time running faster than real time (a
+lockstep plant at 20x) a live feed whose thread lags a few wall-clock milliseconds behind the plant
+is a second of simulated time late, so the node's clock alone would call it stale after every goal;
+a dead feed is still called stale once ``stale_timeout`` s passed on both clocks (on a robot, where
+both are the same clock, nothing changes; while simulated time stands still, nothing is stale).
 
 Cost at a fast joint state stream: /joint_states is taken on a lean node of its own
 (``<name>_joint_states``, ros/side_node.py) served on a thread of its own by a take loop (``feed``
@@ -139,9 +144,9 @@ class SchedulerNode(Node):
         self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at, qos_profile=SERVICE_QOS)
         self.moves = MoveService(self, float(p.move_tolerance))
 
-        # latest (premise values, node clock time they arrived s, their header stamp (sec, nanosec)), set by the
-        # feed's thread
-        self._pose: tuple[list[float], float, tuple[int, int]] | None = None
+        # latest (premise values, node clock and steady clock time they arrived s, their header stamp (sec,
+        # nanosec)), set by the feed's thread
+        self._pose: tuple[list[float], float, float, tuple[int, int]] | None = None
         self._poses = RawJointStates()
         self._interp: Interpolation | None = None  # the rule base at the latest evaluation
         self._estimate: ModeEstimate | None = None  # ... as published
@@ -223,7 +228,7 @@ class SchedulerNode(Node):
             self._refusals.append(str(err))
             self._wake.trigger()
             return
-        self._pose = (z, self._now(), stamp)
+        self._pose = (z, self._now(), time.monotonic(), stamp)
         if self.last_sent is None:
             # the first shaper goes out as soon as a pose and the shaper node are there, also while
             # simulated time stands still (a lockstep plant at rest) and the period timer does not fire
@@ -257,10 +262,12 @@ class SchedulerNode(Node):
         pose = self._pose
         if pose is None:
             return None
-        z, z_stamp, (sec, nanosec) = pose
+        z, z_at, z_steady, (sec, nanosec) = pose
         stamp = Time(sec=sec, nanosec=nanosec)
-        if self._now() - z_stamp > float(self.params.value.stale_timeout):
-            self.diagnostics.report("stale", WARN, "no joint states for stale_timeout; not updating the shaper")
+        timeout = float(self.params.value.stale_timeout)
+        if self._now() - z_at > timeout and time.monotonic() - z_steady > timeout:
+            self.diagnostics.report("stale", WARN, f"no joint states for stale_timeout ({timeout:g} s of the node's"
+                                    " clock and of the steady clock); not updating the shaper")
             return None
         interp, estimate = self._interp, self._estimate
         if interp is None or estimate is None or self.core.moved(z, interp):

@@ -68,7 +68,8 @@ class SchedulerParams:
     relative_change: float = param(
         0.01, "Least change that sends a new shaper: |d omega| / omega or |d zeta| / max(zeta,"
         " 0.01), fraction.", (0.0, 10.0), check=lambda v: RateLimit(relative_change=v))
-    stale_timeout: float = param(1.0, "Joint states older than this stop the updates, s.", (0.001, 3600.0))
+    stale_timeout: float = param(1.0, "No joint states for this long, on the node's clock and on the steady"
+                                 " clock, stops the updates, s.", (0.001, 3600.0))
     error_throttle: float = param(1.0, "Least time between two reports of the same problem, s.", (0.0, 3600.0))
     move_tolerance: float = param(
         MOVE_TOLERANCE, "A ~/shaper_at request is a move the learner corrected (~/set_move_shaper) when every"
