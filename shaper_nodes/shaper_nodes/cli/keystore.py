@@ -11,7 +11,7 @@
     KEYSTORE/enclaves/<root>/<role>/            one enclave per role of the policy:
         cert.pem, key.pem                       identity (subject CN=<enclave path>, signed by the CA)
         identity_ca.cert.pem, permissions_ca.cert.pem, governance.p7s
-        permissions.xml, permissions.p7s        the role's grants (core/security.py), signed
+        permissions.xml, permissions.p7s        the role's grants (core/security/), signed
 
 Documents are signed as S/MIME in text mode (``openssl smime -sign -text``, SHA-256, detached),
 as sros2 signs them. An existing CA and existing enclave identities are kept (so enclaves can be

@@ -51,7 +51,8 @@ class Calibrator:
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu, JointState
 
-        from shaper_nodes.ros.action_client import GoalFeedback, ResilientActionClient
+        from shaper_nodes.ros.action_client import ResilientActionClient
+        from shaper_nodes.ros.goal_feedback import GoalFeedback
         from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader, subscribe_draining
 
         self.node, self.executor, self.p = node, executor, params

@@ -24,6 +24,9 @@ shaper_client
 action_client
     ``ResilientActionClient``: an rclpy action client whose goals and results survive a service
     response lost at start-up (recovered from the status topic, or asked again with the same goal id).
+goal_feedback
+    ``GoalFeedback``: the feedback stamps of chosen goals on a subscription of the caller's own, kept after
+    their results arrive (rclpy's client drops them).
 pose_shaper
     A whole trajectory shaped for its final pose with the shaper a scheduler's ``~/shaper_at``
     gives (the shaper node's ``action.scheduler``), falling back to the active shaper with a warning.

@@ -21,6 +21,9 @@ samples
 speed
     Learning to move faster: a per-move time-scaling factor raised while the move stays within its
     tolerance and the joint limits, lowered at once on a violation, then bisected.
+speed_limits
+    The rules a time-scaled move is held to (the speed learner's and its node's): the profile run faster, the
+    joint limits' ceiling and breaches, measured peaks against limits, a flange tolerance as an accelerometer level.
 speed_peaks
     A move's joint torques and speeds predicted at a higher factor from those measured at lower
     ones (torque a + b s^2, speed b s), and the largest factor whose predictions stay within the
@@ -30,4 +33,4 @@ state_file
     never fails: a file that cannot be used is reported, moved aside if it can be, and ignored.
 """
 
-__all__ = ["list", "moves", "mrilc", "samples", "speed", "speed_peaks", "state_file"]
+__all__ = ["list", "moves", "mrilc", "samples", "speed", "speed_limits", "speed_peaks", "state_file"]
