@@ -125,6 +125,24 @@ def _crossing(modes_at: ModesAt, branch: int, target: float, lo: float, hi: floa
     return mass, modes[branch] if branch < len(modes) else f
 
 
+def _candidates(modes_at: ModesAt, target: float, masses: list[float], table: list[list[float]],
+                branches: int) -> list[tuple[float, int, float]]:
+    """Every (mass, branch, model Hz) where a branch of the grid's ``table`` crosses ``target``."""
+    found: list[tuple[float, int, float]] = []
+    last = len(masses) - 2
+    for k in range(branches):
+        for i in range(len(masses) - 1):
+            a, b = table[i][k] - target, table[i + 1][k] - target
+            if a == 0.0:
+                found.append((masses[i], k, table[i][k]))
+            elif b == 0.0 and i == last:
+                found.append((masses[i + 1], k, table[i + 1][k]))
+            elif a * b < 0.0:
+                mass, hz = _crossing(modes_at, k, target, masses[i], masses[i + 1], table[i][k])
+                found.append((mass, k, hz))
+    return found
+
+
 def payload_from_modes(measured_hz: Sequence[float], modes_at: ModesAt, mass_range: tuple[float, float] = MASS_RANGE,
                        grid: int = GRID, match: float = MATCH, separation: float = SEPARATION) -> PayloadEstimate:
     """The payload whose model mode matches the measured one (module docstring).
@@ -172,17 +190,7 @@ def payload_from_modes(measured_hz: Sequence[float], modes_at: ModesAt, mass_ran
     masses = [lo + (hi - lo) * i / (grid - 1) for i in range(grid)]
     table = [_modes(modes_at, m) for m in masses]
     branches = min(len(row) for row in table)
-    found: list[tuple[float, int, float]] = []  # (mass, branch, model Hz)
-    for k in range(branches):
-        for i in range(grid - 1):
-            a, b = table[i][k] - target, table[i + 1][k] - target
-            if a == 0.0:
-                found.append((masses[i], k, table[i][k]))
-            elif b == 0.0 and i == grid - 2:
-                found.append((masses[i + 1], k, table[i + 1][k]))
-            elif a * b < 0.0:
-                mass, hz = _crossing(modes_at, k, target, masses[i], masses[i + 1], table[i][k])
-                found.append((mass, k, hz))
+    found = _candidates(modes_at, target, masses, table, branches)
     if not found:
         span = ", ".join(f"{min(row[k] for row in table):.4g}-{max(row[k] for row in table):.4g}"
                          for k in range(min(branches, 3)))
