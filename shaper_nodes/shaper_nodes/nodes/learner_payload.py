@@ -14,8 +14,9 @@ in ``mrilc_moves.payload_range`` kg whose model mode at that pose matches it. Fo
 for it at the relearn, and the state file keeps it (``payload``: the mass, ``"source": "drift"``, the mode and the
 move) so that a restarted learner builds for it again. Refused (no mode in the warning, a cycle the learner did not
 see, no mass in the range, an ambiguous mode, no ``mrilc_moves.modes``), the relearn goes on with
-``payload_mass`` as it was (today's behaviour). Either way one line on the log and the status ``learner: payload``
-on /diagnostics (OK with ``mass_kg``, ``mode_hz``, ``move``; WARN with the reason).
+``payload_mass`` as it was (today's behaviour). A payload told since the last relearn (``payload_mass`` set from
+outside, e.g. ``ros2 param set``) is the owner's word: kept, nothing worked out. Either way one line on the log and
+the status ``learner: payload`` on /diagnostics (OK with ``mass_kg``, ``mode_hz``, ``move``; WARN with the reason).
 
 Why on by default: on the operator of the old payload the relearn does not converge after a 2 -> 4.5 kg change
 (docs/results/arm_mrilc_payload.md), and an owner does not always tell the robot its payload; the drift watch has
@@ -99,6 +100,10 @@ class PayloadGlue:
                              f" {rng}")
         self.range = (rng[0], rng[1])
         self._moves: collections.OrderedDict[int, str] = collections.OrderedDict()
+        self._setting = False  # (the node setting payload_mass itself)
+        #: payload_mass was set from outside (told) since the last relearn: the owner's word is kept
+        self.told = False
+        node.add_post_set_parameters_callback(self._on_set)
         #: the payload from the drift in force (the state file's entry), None: none
         self.estimate: dict[str, Any] | None = None
         if saved is not None:
@@ -136,7 +141,14 @@ class PayloadGlue:
         """At a drift warning's relearn: the payload from the warning's mode (``values``, its KeyValues) at the
         goal (``goals``: move key -> goal pose) of the move of its cycle; taken as ``payload_mass``, or refused
         (module docstring)."""
+        told, self.told = self.told, False
         if not self.enabled:
+            return
+        if told:
+            text = (f"payload told ({self.mass():g} kg, mrilc_moves.payload_mass) since the last relearn: kept, not"
+                    " worked out from the drift's mode")
+            self.node.get_logger().info(text)
+            self.node.diagnostics.publish("payload", OK, text)
             return
         try:
             key, est = self._estimate(values, goals)
@@ -172,9 +184,17 @@ class PayloadGlue:
 
         return key, payload_from_modes([_number(x) for x in measured], modes_at, self.range)
 
+    def _on_set(self, params: list[Parameter]) -> None:
+        if not self._setting and any(p.name == "mrilc_moves.payload_mass" for p in params):
+            self.told = True
+
     def _take(self, entry: dict[str, Any], text: str) -> None:
         self.estimate = entry
-        result = self.node.set_parameters([Parameter("mrilc_moves.payload_mass", value=float(entry["mass"]))])[0]
+        self._setting = True
+        try:
+            result = self.node.set_parameters([Parameter("mrilc_moves.payload_mass", value=float(entry["mass"]))])[0]
+        finally:
+            self._setting = False
         if not result.successful:  # (the range is 0-1000 kg, the search's within it)
             self.estimate = None
             text = f"{text}: refused by mrilc_moves.payload_mass ({result.reason})"
