@@ -1,7 +1,7 @@
 """MRILC per move after a payload change: 2 -> 4.5 kg mid-run, the drift warning, every move relearned (issue 31
 item 5 with MRILC).
 
-``python -m reproductions.arm_mrilc_payload [--cycles N] [--operator default|told|both] [--json PATH]``
+``python -m reproductions.arm_mrilc_payload [--cycles N] [--operator default|told|drift|all] [--json PATH]``
 (``./run exec python -m reproductions.arm_mrilc_payload``) runs :mod:`reproductions.arm_mrilc`'s cycle (the
 calibrated schedule, MRILC per move, the ROS-free arm, deterministic) with the payload changed from 2 to
 :data:`~reproductions.arm_learning.HEAVY` kg after :data:`~reproductions.arm_learning.PAYLOAD_AT` cycles, as
@@ -18,7 +18,11 @@ calibrated schedule, MRILC per move, the ROS-free arm, deterministic) with the p
 - the learner restarted with the operator ``--operator`` names: ``default``, the arm linearised at its default
   payload (what the node's ``sim_plant_node.arm.lifted:arm_operator`` gives, whatever the payload), or ``told``, the
   arm linearised with the payload the robot is told (:func:`told_operators`, the payload the controller's gravity
-  feedforward already follows: ``ArmModel.set_payload``).
+  feedforward already follows: ``ArmModel.set_payload``), or ``drift``, the arm linearised with the payload worked
+  out from the warning's modes (:func:`drift_estimate`: the modes identified in the residual of the move whose END
+  brought the warning, the strongest (rated) first, matched to the model's modes at its goal as the learner node's
+  ``mrilc_moves.payload_from_drift`` does; refused, the default operator), with the estimate's error and its
+  scatter when 0.01 m/s^2 of noise is added to that residual (20 seeds).
 
 Rows: case (the operator), move, cycle, payload_kg, residual_rms (m/s^2, noise-free), peak_mm (the flange's largest
 distance from its rest in the residual window, against 0.05 mm), move_settle_s, servo_rms / vibration_rms, the
@@ -371,8 +375,8 @@ def report(rows: list[dict[str, Any]], notes: dict[str, list[str]], conv: list[d
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m reproductions.arm_mrilc_payload", description=__doc__.split("\n\n")[0])
     p.add_argument("--cycles", type=int, default=12, help="cycles in all (default 12: 3 at 2 kg, 9 at 4.5 kg)")
-    p.add_argument("--operator", choices=(*OPERATORS, "both"), default="both",
-                   help="the operator the learners restart with (default both, one run each)")
+    p.add_argument("--operator", choices=(*OPERATORS, "all"), default="all",
+                   help="the operator the learners restart with (default all, one run each)")
     p.add_argument("--json", type=pathlib.Path, default=None, help="write the rows to this JSON file")
     p.add_argument("--no-docs", action="store_true", help="do not write the docs page")
     docs_option(p, "arm_mrilc_payload.md")
@@ -391,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
     conv = convergence(plans, told_operators(plans, HEAVY))
     phase = phase_error({p.name: p.positions[-1] for p in plans}, HEAVY)
     rows, notes = [], {}
-    for op in OPERATORS if args.operator == "both" else (args.operator,):
+    for op in OPERATORS if args.operator == "all" else (args.operator,):
         r, n = payload_run(plans, shapers, args.cycles, op)
         rows += r
         notes[op] = n
