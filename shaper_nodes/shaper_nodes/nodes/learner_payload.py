@@ -180,7 +180,10 @@ class PayloadGlue:
         pose, modes = list(goals[key]), self.modes
 
         def modes_at(mass: float) -> list[float]:
-            return [float(x) for x in modes(pose, mass)]
+            try:
+                return [float(x) for x in modes(pose, mass)]
+            except Exception as err:  # (the owner's provider: whatever it raises refuses the estimate, not the relearn)
+                raise PayloadRefused(f"mrilc_moves.modes failed at {mass:.6g} kg: {err!r}") from None
 
         return key, payload_from_modes([_number(x) for x in measured], modes_at, self.range)
 
