@@ -1,7 +1,7 @@
 """MRILC per move after a payload change: 2 -> 4.5 kg mid-run, the drift warning, every move relearned (issue 31
 item 5 with MRILC).
 
-``python -m reproductions.arm_mrilc_payload [--cycles N] [--operator default|told|both] [--json PATH]``
+``python -m reproductions.arm_mrilc_payload [--cycles N] [--operator default|told|drift|all] [--json PATH]``
 (``./run exec python -m reproductions.arm_mrilc_payload``) runs :mod:`reproductions.arm_mrilc`'s cycle (the
 calibrated schedule, MRILC per move, the ROS-free arm, deterministic) with the payload changed from 2 to
 :data:`~reproductions.arm_learning.HEAVY` kg after :data:`~reproductions.arm_learning.PAYLOAD_AT` cycles, as
@@ -18,7 +18,11 @@ calibrated schedule, MRILC per move, the ROS-free arm, deterministic) with the p
 - the learner restarted with the operator ``--operator`` names: ``default``, the arm linearised at its default
   payload (what the node's ``sim_plant_node.arm.lifted:arm_operator`` gives, whatever the payload), or ``told``, the
   arm linearised with the payload the robot is told (:func:`told_operators`, the payload the controller's gravity
-  feedforward already follows: ``ArmModel.set_payload``).
+  feedforward already follows: ``ArmModel.set_payload``), or ``drift``, the arm linearised with the payload worked
+  out from the warning's modes (:func:`drift_estimate`: the modes identified in the residual of the move whose END
+  brought the warning, the strongest (rated) first, matched to the model's modes at its goal as the learner node's
+  ``mrilc_moves.payload_from_drift`` does; refused, the default operator), with the estimate's error and its
+  scatter when 0.01 m/s^2 of noise is added to that residual (20 seeds).
 
 Rows: case (the operator), move, cycle, payload_kg, residual_rms (m/s^2, noise-free), peak_mm (the flange's largest
 distance from its rest in the residual window, against 0.05 mm), move_settle_s, servo_rms / vibration_rms, the
@@ -43,7 +47,9 @@ import numpy as np
 from reproductions.arm_mrilc import OUTPUT_PERIOD, RATE, TREND_DEGREE, MovePlan, limits, plan_moves, run_move
 from reproductions.common import docs_option
 
-OPERATORS = ("default", "told")
+OPERATORS = ("default", "told", "drift")
+#: the IMU noise of the scatter trials at the warning cycle, m/s^2 (the demo's)
+NOISE = 0.01
 #: s after the commanded motion the drift watch's identification starts (reproductions.arm_learning's payload case)
 IDENTIFY_SKIP = 0.1
 #: the flange's settle tolerance, mm (sim_plant_node.arm.metrics.SETTLE_TOLERANCE)
@@ -163,6 +169,8 @@ def payload_run(plans: list[MovePlan], shapers: list[Any], cycles: int, operator
         p = plans[i]
         return MoveLearner(told[i] if heavy else p.operator, p.profile, lim, **{"weights": p.weights, **kw})
 
+    estimate: dict[str, Any] = {}
+
     learners = [fresh(i, False) for i in range(len(plans))]
     watches = [DriftWatch(confirm=2) for _ in plans]
     closed = np.allclose(plans[-1].positions[-1], plans[0].start)  # the moves come back to the start
@@ -208,7 +216,13 @@ def payload_run(plans: list[MovePlan], shapers: list[Any], cycles: int, operator
                 said = last.describe() if last is not None else ""
                 notes.append(f"cycle {cycle}, {p.name}: drift WARN ({said}); every move's correction dropped, its"
                              f" learner restarted ({operator} operator); this move's update not kept")
-                learners = [fresh(j, operator == "told") for j in range(len(plans))]
+                if operator == "drift":  # the payload from the warning's modes at this move's goal
+                    estimate = drift_estimate(p.positions[-1], [strongest, *[f for f in fits if f is not strongest]],
+                                              (t[sel], imu[sel]))
+                    notes.append(estimate["note"])
+                    if estimate.get("mass") is not None:
+                        told = told_operators(plans, estimate["mass"])
+                learners = [fresh(j, operator in ("told", "drift")) for j in range(len(plans))]
             rows.append({"case": operator, "move": p.name, "cycle": cycle, "payload_kg": mass,
                          "residual_rms": m.residual_rms, "peak_mm": m.peak_mm, "move_settle_s": m.move_and_settle_s,
                          "servo_rms": parts.servo_rms, "vibration_rms": parts.vibration_rms,
@@ -216,8 +230,69 @@ def payload_run(plans: list[MovePlan], shapers: list[Any], cycles: int, operator
                          "cost": upd.cost, "gain": upd.gain,
                          "max_correction_rad": float(np.max(np.abs(points[0] - base[0]))),
                          "limit_excess": profile_excess(points[0], points[1], points[2], lim, base),
-                         "warning": status, "relearn": relearn})
+                         "warning": status, "relearn": relearn,
+                         "estimated_kg": estimate.get("mass") if relearn else None})
     return rows, notes
+
+
+def drift_estimate(pose: np.ndarray, fits: list[Any], window: tuple[np.ndarray, np.ndarray] | None = None,
+                   trials: int = 20) -> dict[str, Any]:
+    """The payload from the warning's modes ``fits`` (the rated one first) at ``pose``, as the learner node's
+    ``payload_from_drift`` works it out (:func:`~shaper_nodes.core.learning.mrilc.payload.payload_from_modes` on
+    ``sim_plant_node.arm.lifted:arm_modes``): ``mass`` (None: refused, the learner keeps the default operator),
+    ``note``; with the residual ``window`` (t, imu), ``trials`` identifications of it with :data:`NOISE` m/s^2 of
+    white noise added (seeds 1..trials), the rated (strongest) mode and the mass each gives: ``scatter``."""
+    from reproductions.arm_learning import HEAVY
+    from reproductions.residual_split import SERVO_ZETA
+    from shaper_nodes.core.identification import IdentificationError, identify
+    from shaper_nodes.core.learning.mrilc.payload import PayloadRefused, payload_from_modes
+    from sim_plant_node.arm.lifted import arm_modes
+
+    def modes_at(mass: float) -> list[float]:
+        return arm_modes(pose, mass)
+
+    hz = [f.hz for f in fits]
+    out: dict[str, Any] = {"modes_hz": hz, "mass": None}
+    try:
+        est = payload_from_modes(hz, modes_at)
+        out["mass"] = est.mass
+        out["note"] = (f"from the drift's modes ({', '.join(f'{f:.4g}' for f in hz)} Hz, the first rated): "
+                       f"{est.describe()}; the true {HEAVY:g} kg missed by {est.mass - HEAVY:+.3g} kg"
+                       f" ({100 * (est.mass - HEAVY) / HEAVY:+.2g} %)")
+    except PayloadRefused as err:
+        out["note"] = (f"from the drift's modes ({', '.join(f'{f:.4g}' for f in hz)} Hz): refused ({err});"
+                       " default operator")
+    if window is None or trials <= 0:
+        return out
+    scatter: list[dict[str, Any]] = []
+    for seed in range(1, trials + 1):
+        t, imu = window
+        noisy = imu + np.random.default_rng(seed).normal(0.0, NOISE, imu.shape)
+        try:
+            got = [f for f in identify(t, noisy, max_modes=3) if 2.0 < f.hz < 40.0 and f.zeta < SERVO_ZETA]
+        except IdentificationError:
+            got = []
+        if not got:
+            scatter.append({"seed": seed, "modes_hz": [], "mass": None, "why": "no mode"})
+            continue
+        rated = max(got, key=lambda f: f.amplitude)
+        modes = [rated.hz, *[f.hz for f in got if f is not rated]]
+        try:
+            scatter.append({"seed": seed, "modes_hz": modes, "mass": payload_from_modes(modes, modes_at).mass})
+        except PayloadRefused as err:
+            scatter.append({"seed": seed, "modes_hz": modes, "mass": None, "why": str(err)})
+    out["scatter"] = scatter
+    kg = np.array([x["mass"] for x in scatter if x["mass"] is not None])
+    rated_hz = np.array([x["modes_hz"][0] for x in scatter if x["modes_hz"]])
+    refused = [str(x.get("why", "")) for x in scatter if x["mass"] is None]
+    kinds = sorted({w.split(":")[0].split(" (")[0] for w in refused})
+    out["note"] += (f". With {NOISE:g} m/s^2 of noise on the same residual ({trials} seeds): the rated mode "
+                    + (f"{rated_hz.mean():.4g} +- {rated_hz.std():.2g} Hz ({rated_hz.min():.4g}-{rated_hz.max():.4g})"
+                       if rated_hz.size else "never identified")
+                    + (f", the payload {kg.mean():.3g} +- {kg.std():.2g} kg ({kg.min():.3g}-"
+                       f"{kg.max():.3g}) in {kg.size}" if kg.size else ", no payload")
+                    + (f", refused in {len(refused)} ({'; '.join(kinds)})" if refused else ", none refused"))
+    return out
 
 
 def within_from(rows: list[dict[str, Any]], change: int) -> dict[str, int | None]:
@@ -300,8 +375,8 @@ def report(rows: list[dict[str, Any]], notes: dict[str, list[str]], conv: list[d
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m reproductions.arm_mrilc_payload", description=__doc__.split("\n\n")[0])
     p.add_argument("--cycles", type=int, default=12, help="cycles in all (default 12: 3 at 2 kg, 9 at 4.5 kg)")
-    p.add_argument("--operator", choices=(*OPERATORS, "both"), default="both",
-                   help="the operator the learners restart with (default both, one run each)")
+    p.add_argument("--operator", choices=(*OPERATORS, "all"), default="all",
+                   help="the operator the learners restart with (default all, one run each)")
     p.add_argument("--json", type=pathlib.Path, default=None, help="write the rows to this JSON file")
     p.add_argument("--no-docs", action="store_true", help="do not write the docs page")
     docs_option(p, "arm_mrilc_payload.md")
@@ -320,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
     conv = convergence(plans, told_operators(plans, HEAVY))
     phase = phase_error({p.name: p.positions[-1] for p in plans}, HEAVY)
     rows, notes = [], {}
-    for op in OPERATORS if args.operator == "both" else (args.operator,):
+    for op in OPERATORS if args.operator == "all" else (args.operator,):
         r, n = payload_run(plans, shapers, args.cycles, op)
         rows += r
         notes[op] = n

@@ -8,7 +8,8 @@ cycle 3 (rotated->place then rings past 0.05 mm), the drift watch warns, every l
 Shown: the lifted law built on the 2 kg operator has directions that grow on the 4.5 kg arm (eigenvalues of L G
 with a negative real part), none on its own; the node's provider told the payload gives the 4.5 kg operator;
 restarted on it, the learner takes the flange within 0.05 mm within 5 cycles of the change and keeps it there,
-every limit held, no fallback; restarted on the 2 kg operator (the node before), rotated->place is not.
+every limit held, no fallback; restarted on the 2 kg operator (the node before), rotated->place is not; restarted on
+the payload worked out from the warning's modes (``drift``), within 1 % of 4.5 kg, as told.
 """
 
 from __future__ import annotations
@@ -89,6 +90,18 @@ def test_restarted_on_the_told_operator_it_is_back_within_the_tolerance_within_5
     assert back is not None and back - change + 1 <= 5, back
     assert all(r["limit_excess"] == 0.0 for r in rows)
     assert not any(r["action"] in ("fallback", "hold") for r in rows[at:])
+
+
+def test_restarted_on_the_payload_from_the_drifts_modes_it_is_back_within_5_cycles(setup):
+    """The operator case ``drift``: the payload worked out from the warning's modes at the warning move's goal (the
+    learner node's ``payload_from_drift``) within 1 % of 4.5 kg, and on its operator every move within the tolerance
+    within 5 cycles of the change, every limit held."""
+    rows = run(setup, "drift")
+    (est,) = [r["estimated_kg"] for r in rows if r["relearn"]]
+    assert est is not None and abs(est - HEAVY) < 0.01 * HEAVY, est
+    back = within_from(rows, PAYLOAD_AT + 1)["all"]
+    assert back is not None and back - PAYLOAD_AT <= 5, back
+    assert all(r["limit_excess"] == 0.0 for r in rows)
 
 
 def test_restarted_on_the_2_kg_operator_it_is_not(setup):

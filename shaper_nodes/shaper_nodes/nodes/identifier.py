@@ -33,7 +33,9 @@ at the mode, and the working band around the design mode where V stays under
 ``watch.tolerance`` (:mod:`shaper_nodes.core.identification.drift`). When ``watch.confirm``
 cycles in a row find the mode outside the band, a WARN ``identifier: drift`` on /diagnostics
 names the numbers (logged once, until the mode comes back); every check publishes the status
-(OK inside the band). A change of the active shaper starts the count again. The identity
+(OK inside the band), with the numbers as KeyValues too (``cycle``, ``mode_hz`` the rated mode, ``zeta``, ...,
+and ``modes_hz``: every sharp mode of the cycle, strongest first, which the MRILC learner's payload from the
+drift reads). A change of the active shaper starts the count again. The identity
 shaper is not watched. With ``watch.scheduler`` (a shaper node shaping each goal through that
 scheduler, whose active shaper does not change), each cycle is rated against the shaper its move
 ran with, asked of the scheduler at its START (:mod:`.identifier_moves`), and the active shaper is

@@ -87,7 +87,9 @@ class DriftRating:
                   ("outside_in_a_row", str(watch.outside_in_a_row)), ("shaper_revision", str(active.revision)),
                   ("not_drift", "no" if rating.aside is None else "baseline" if rating.aside.baseline is not None
                    else "above"),
-                  ("set_aside", str(len(rating.set_aside)))]
+                  ("set_aside", str(len(rating.set_aside))),
+                  # every sharp mode of the cycle, Hz, strongest first (the learner's payload from the drift)
+                  ("modes_hz", ",".join(f"{m.hz:.6g}" for m in sorted(sharp, key=lambda m: -m.amplitude)))]
         if watch.warning:
             text = (f"the mode has drifted out of {self.band()} ({watch.outside_in_a_row} cycles in a row): {text};"
                     " retune the shaper (~/identify with apply)")

@@ -79,6 +79,8 @@ class DriftWarnings:
         self.warned = bool(warned)
         #: warning episodes acted on since start
         self.resets = 0
+        #: the KeyValues of the WARN last acted on (key -> value; the mode the identifier measured)
+        self.values: dict[str, str] = {}
         self.diagnostics: Diagnostics = node.diagnostics
         if status:
             # the node's default group, as the cycle events': an episode's action never interleaves with a
@@ -100,6 +102,7 @@ class DriftWarnings:
             if level == LEVEL_WARN:
                 if not self.warned:
                     self.warned = True
+                    self.values = {str(kv.key): str(kv.value) for kv in status.values}
                     self.resets += 1
                     await self.on_warning(str(status.message))
             elif level == LEVEL_OK:

@@ -47,7 +47,9 @@ first WARN of the status ``mrilc_moves.drift_status`` (default the identifier's 
 with its correction, so each move's next goal runs as the current schedule shaped it (no correction) and its
 learner starts again from zero at that goal (its plan and operator rebuilt from it, for the payload
 ``mrilc_moves.payload_mass`` says then: on the operator of the old payload it does not converge,
-docs/results/arm_mrilc_payload.md; a hold ends with it); one line
+docs/results/arm_mrilc_payload.md; with ``mrilc_moves.payload_from_drift`` and ``mrilc_moves.modes`` the payload
+is first worked out from the mode the warning carries and set as ``payload_mass``, :mod:`.learner_payload`; a hold
+ends with it); one line
 on the log and ``/diagnostics`` (``learner: moves``, WARN) names the moves, and the state is saved (atomically,
 with the episode flag ``drift_warned``: a move with no learner is not in it). A cycle whose goal ran with the old
 correction is not learned from.
@@ -61,11 +63,7 @@ learner's cycle), ``cost`` (weighted RMS of the error, m/s^2), ``action.<learn|f
 from __future__ import annotations
 
 import collections
-import functools
-import importlib
-import inspect
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -94,6 +92,8 @@ from shaper_nodes.ros.parameters import Spec, declare, param, table
 from .learner_base import LearnerBase
 from .learner_drift import FLAG, DriftWarnings, saved_flag
 from .learner_list import TopicParams, subscribe_imu
+from .learner_payload import KEY, PayloadGlue, saved_payload
+from .learner_payload import load_provider as load_operator  # (kept: the provider's loader)
 from .move_goals import MATCH as MATCH  # (re-exported: the tolerance of the match, rad)
 from .move_goals import await_match, goal_matches
 from .trajectory_action import TrajectoryActionProxy
@@ -146,7 +146,16 @@ class MrilcMovesGroup:
     payload_mass: float = param(0.0, "The payload the robot is told, kg (0: not told, the operator provider's own):"
                                 " when set, the provider is called with payload= it; a change takes effect when each"
                                 " move's operator is next built (a drift warning's relearn, a restart). Set it when"
-                                " the robot's payload changes.", (0.0, 1000.0))
+                                " the robot's payload changes (payload_from_drift sets it too).", (0.0, 1000.0))
+    payload_from_drift: bool = param(True, "At a drift warning's relearn, work the payload out from the mode the"
+                                     " warning carries (with modes set) and set payload_mass to it; refused (no mass"
+                                     " in payload_range matches, ambiguous), payload_mass is kept. Default on: on the"
+                                     " old payload's operator the relearn does not converge.", read_only=True)
+    modes: str = param("", "The model's modes, 'module:function' called as f(goal_pose, payload) -> Hz; the"
+                       " simulated arm's: 'sim_plant_node.arm.lifted:arm_modes' ('' = no payload from the drift).",
+                       read_only=True)
+    payload_range: tuple[float, ...] = param([0.0, 10.0], "The payloads searched for the drift's mode, [low, high]"
+                                             " kg (default 0 to twice a UR5e's rated 5 kg).", read_only=True)
 
 
 @dataclass(frozen=True)
@@ -159,20 +168,6 @@ class MrilcMovesParams:
 
 #: the MRILC-per-move mode's parameters (derived from MrilcMovesParams)
 PARAMETERS: tuple[Spec, ...] = table(MrilcMovesParams)
-
-
-def load_operator(name: str) -> Callable[..., Any]:
-    """The provider ``module:function`` names. Raises ValueError naming the problem."""
-    module, _, func = name.partition(":")
-    if not module or not func:
-        raise ValueError(f"mrilc_moves.operator must be 'module:function', got {name!r}")
-    try:
-        out = getattr(importlib.import_module(module), func)
-    except (ImportError, AttributeError) as err:
-        raise ValueError(f"mrilc_moves.operator {name!r} cannot be loaded: {err}") from None
-    if not callable(out):
-        raise ValueError(f"mrilc_moves.operator {name!r} is not callable")
-    return out
 
 
 @dataclass
@@ -218,7 +213,9 @@ class MrilcMovesMode:
             if not values or not all(math.isfinite(x) for x in values):
                 raise ValueError(f"mrilc_moves.{name} must be one or more finite numbers, got {values}")
         self.match_timeout = float(v.match_timeout)
+        self._saved_payload: dict[str, Any] | None = None
         restored = node.restore(self._build, {"per_move": "mrilc"})
+        self.payload = PayloadGlue(node, self.params, self.operator, self._saved_payload)
         self.moves, warned = restored if restored is not None else ({}, False)
         self._resumed = len(self.moves)
         self._cycles: dict[int, _Cycle] = {}
@@ -234,7 +231,8 @@ class MrilcMovesMode:
 
     # ----------------------------------------------------------------- state
     def _build(self, doc: dict[str, Any]) -> tuple[dict[str, _Move], bool]:
-        if set(doc) - {"version", "per_move", "moves", FLAG, "saved_at"} or not isinstance(doc.get("moves"), dict):
+        if set(doc) - {"version", "per_move", "moves", FLAG, KEY, "saved_at"} or not isinstance(doc.get("moves"),
+                                                                                            dict):
             raise MrilcError(f"per-move MRILC state entries differ: got {sorted(doc)}")
         out = {}
         for key, entry in doc["moves"].items():
@@ -250,7 +248,9 @@ class MrilcMovesMode:
                 raise MrilcError(f"move {key}: joint_names must be a list of names")
             out[key] = _Move(key, [float(x) for x in entry["start"]], [float(x) for x in entry["goal"]], names,
                              saved=entry["learner"])
-        return out, saved_flag(doc, MrilcError)
+        warned = saved_flag(doc, MrilcError)
+        self._saved_payload = saved_payload(doc)
+        return out, warned
 
     def state(self) -> dict[str, Any]:
         moves = {}
@@ -258,12 +258,13 @@ class MrilcMovesMode:
             learner = m.learner.to_dict() if m.learner is not None else m.saved
             if learner is not None:
                 moves[key] = {"start": m.start, "goal": m.goal, "joint_names": m.names, "learner": learner}
-        return {"per_move": "mrilc", "moves": moves, FLAG: self.drift.warned}
+        return {"per_move": "mrilc", "moves": moves, FLAG: self.drift.warned, **self.payload.state()}
 
     async def relearn(self, warning: str) -> None:
         """A drift warning: every move's correction dropped, its learner restarted at its next goal (module
         docstring)."""
         keys = [k for k, m in self.moves.items() if m.learner is not None or m.saved is not None]
+        self.payload.from_drift(self.drift.values, {k: m.goal for k, m in self.moves.items()})
         for m in self.moves.values():
             m.learner = m.saved = m.plan = m.times = None
         for cyc in self._cycles.values():  # under way: its goal ran with the correction dropped now
@@ -371,17 +372,6 @@ class MrilcMovesMode:
             vals.append(np.resize(np.asarray(values, dtype=float), joints))
         return JointLimits(*vals)
 
-    def _provider(self, mass: float) -> Callable[..., Any]:
-        """The operator's provider, told the payload ``mass`` kg when it is set (> 0)."""
-        if mass <= 0.0:
-            return self.operator
-        try:
-            inspect.signature(self.operator).bind(*[None] * 6, payload=mass)
-        except TypeError as err:
-            raise ValueError(f"mrilc_moves.payload_mass is set ({mass:g} kg) but the operator's provider takes no"
-                             f" payload= ({err})") from None
-        return functools.partial(self.operator, payload=mass)
-
     def _learner(self, move: _Move, times: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> MoveLearner:
         """The move's learner for this goal's profile: built at its first goal (from its saved state after a
         restart), rebuilt (keeping its state) when the profile changed."""
@@ -390,8 +380,8 @@ class MrilcMovesMode:
             return move.learner
         plan = plan_move(times, q, v, a, move.start, self.settings)
         limits = self._limits(q.shape[1])
-        mass = float(self.params.value.mrilc_moves.payload_mass)
-        op = plan_operator(plan, self._provider(mass), move.goal, q.shape[1], self.settings.output_period)
+        mass = self.payload.mass()
+        op = plan_operator(plan, self.payload.provider(), move.goal, q.shape[1], self.settings.output_period)
         self.node.get_logger().info(f"move {move.key}: operator built for "
                                     + (f"a payload of {mass:g} kg" if mass > 0 else "the provider's own payload"))
         state = move.learner.to_dict() if move.learner is not None else move.saved
@@ -420,6 +410,7 @@ class MrilcMovesMode:
                 self.moves[key] = _Move(key, [float(x) for x in msg.start_positions],
                                         [float(x) for x in msg.goal_positions], list(msg.joint_names))
             self._last = self._cycles[cycle] = _Cycle(key, stamp, np.asarray(msg.goal_positions, dtype=float))
+            self.payload.seen(cycle, key)
             while len(self._cycles) > 64:  # ENDs that never came
                 self._cycles.pop(next(iter(self._cycles)))
             return None

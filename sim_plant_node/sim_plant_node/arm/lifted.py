@@ -3,7 +3,8 @@ of a joint profile correction, on the arm linearised at rest at the move's goal 
 
 :func:`lifted_operator` is what ``reproductions.arm_mrilc`` and the learner node's MRILC per move
 (``mode: mrilc_moves``, ``mrilc_moves.operator: sim_plant_node.arm.lifted:arm_operator``) use;
-:func:`arm_operator` is the node's entry: the simulator's arm model, built once per process and payload.
+:func:`arm_operator` is the node's entry: the simulator's arm model, built once per process and payload;
+:func:`arm_modes` its modes at a pose for a payload (``mrilc_moves.modes``).
 """
 
 from __future__ import annotations
@@ -90,3 +91,22 @@ def arm_operator(pose: np.ndarray, count: int, samples: int, first: int, spacing
             model.set_payload(key)
         _MODEL[key] = model
     return lifted_operator(_MODEL[key], np.asarray(pose, dtype=float), count, samples, first, spacing, period)
+
+
+#: the arm the node's modes are computed on (one model, its payload set per call)
+_MODES_MODEL: list[Any] = []
+
+
+def arm_modes(pose: np.ndarray, payload: float) -> list[float]:
+    """The simulator's arm's vibration modes (Hz, lowest first) at ``pose`` (rad) holding ``payload`` kg at the
+    flange: the entry the learner node's ``mrilc_moves.modes`` names (the payload worked out from a drifted mode,
+    :mod:`shaper_nodes.core.learning.mrilc.payload`). Raises ValueError for a payload the model cannot take."""
+    from .dynamics import ArmModel
+    from .modal import modes
+
+    if not _MODES_MODEL:
+        _MODES_MODEL.append(ArmModel())
+    model = _MODES_MODEL[0]
+    if model.payload[0] != float(payload):
+        model.set_payload(float(payload))
+    return [md.omega / (2.0 * np.pi) for md in modes(model, np.asarray(pose, dtype=float))]

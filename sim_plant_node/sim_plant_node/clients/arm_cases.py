@@ -220,6 +220,7 @@ def _mrilc_moves(session: Session, client: ArmClient) -> str:
     session.start("shaper_nodes", "learner", {"mode": "mrilc_moves", "use_sim_time": True,
                                                "topics.imu_reliable": True,
                                                "mrilc_moves.operator": "sim_plant_node.arm.lifted:arm_operator",
+                                               "mrilc_moves.modes": "sim_plant_node.arm.lifted:arm_modes",
                                                "mrilc_moves.velocity": [MAX_VELOCITY],
                                                "mrilc_moves.acceleration": [MAX_ACCELERATION]})
     session.shaper = session.start("shaper_nodes", "shaper_node", {
