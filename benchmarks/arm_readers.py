@@ -517,11 +517,11 @@ def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> N
         print("\nPer run, the plant's main thread (CPU and wait for a core per sim s, preempted per period) and the"
               " readers' DDS receive threads (wake-ups per sim s)")
         for r in threaded:
-            wakeups = r["readers' DDS wake-ups per sim s"]
-            print(f"{r['mode'] if r['mode'] != ALONE else 'no reader':>10} | {r['sim s per wall s']:6.2f} sim s/wall s |"
-                  f" CPU {r['plant main thread CPU per sim s']:.4f} | waiting {r['plant main thread waiting per sim s']:.4f}"
-                  f" | preempted {r['plant main thread preemptions per period']:.2f} |"
-                  f" wake-ups {wakeups:.0f}")
+            label = r["mode"] if r["mode"] != ALONE else "no reader"
+            cpu, waiting = r["plant main thread CPU per sim s"], r["plant main thread waiting per sim s"]
+            preempted, wakeups = r["plant main thread preemptions per period"], r["readers' DDS wake-ups per sim s"]
+            print(f"{label:>10} | {r['sim s per wall s']:6.2f} sim s/wall s | CPU {cpu:.4f} | waiting {waiting:.4f} |"
+                  f" preempted {preempted:.2f} | wake-ups {wakeups:.0f}")
 
 
 def main(argv: list[str] | None = None) -> int:

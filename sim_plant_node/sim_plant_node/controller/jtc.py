@@ -236,16 +236,16 @@ class JointTrajectoryController:
             return None
         t = time - self.start_time
         n = len(self.joints)
-        ahead = t + self.period
+        t_next = t + self.period
         kept_t, kept_trajectory, kept = self._ahead
         # the sample at t is the last update's at its t + period when the times meet to the bit: the same product,
         # taken rather than computed again (read only, as every sample here)
         now = kept if kept_t == t and kept_trajectory is self.trajectory else self.trajectory.sample_stacked(t)
-        nxt = self.trajectory.sample_stacked(ahead)
-        self._ahead = (ahead, self.trajectory, nxt)
+        nxt = self.trajectory.sample_stacked(t_next)
+        self._ahead = (t_next, self.trajectory, nxt)
         self.desired = (now[:n], now[n:2 * n], now[2 * n:])
         self.error = now[:n] - np.asarray(position, dtype=float)
-        before_last = t + self.period < self.trajectory.end_time
+        before_last = t_next < self.trajectory.end_time
         tol = self.tolerances
         if (before_last or first_sample) and _violates(self.error, tol.path):
             self.hold(position)
