@@ -286,7 +286,7 @@ class LockstepReader:
         if sent is not None and latest.get(stream, -math.inf) < t < sent + acks.period - _QUIET_SLACK:
             # a sample that advances its stream short of the next acknowledgement: none can come of it (the time
             # processed, the oldest of the streams' latest stamps, is at most this one), so it is kept as Acks.took
-            # keeps it, without that call's look at every stream (a fifth of a drained reader's Python time)
+            # keeps it, without that call's look at every stream (took 0.44 -> 0.36 us a sample, benchmarks.md)
             latest[stream] = t
             return
         ack = acks.took(stream, t)
