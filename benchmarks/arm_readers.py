@@ -329,6 +329,8 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
     from shaper_nodes.ros.lockstep_reader import AckWatch, header_stamp, subscribe_draining, take_all
     from sim_plant_node.arm.description import JOINT_NAMES
 
+    from .arm_threads import between, run_figures, snapshot
+
     env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     alone = mode == ALONE
     names = [] if alone else [READER if k == 0 else f"{READER}_{k}" for k in range(readers)]
@@ -379,17 +381,21 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
         progress(f"arm readers: {mode}{f' x {readers}' if readers > 1 and not alone else ''}, a {seconds:g} s goal in"
                  " lockstep")
         assert sim.proc is not None
+        pids = [sim.proc.pid, *(proc.pid for proc in procs.procs)]
+        threads0 = [snapshot(pid) for pid in pids]  # (per thread: benchmarks.arm_threads)
         cpu0, t0 = _cpu_of(sim.proc.pid), time.perf_counter()
         sent = client.send_goal_async(goal)
         spin_until(sent.done, 60.0, "goal response")
         result = sent.result().get_result_async()
         spin_until(result.done, 600.0, "result")
         wall, plant_cpu = time.perf_counter() - t0, (_cpu_of(sim.proc.pid) - cpu0) / seconds
+        threads = [between(a, snapshot(pid)) for pid, a in zip(pids, threads0, strict=True)]
+        per_thread = run_figures(pids[0], threads[0], threads[1:], seconds, round(seconds * RATE))
         succeeded(result.result(), "arm_readers")
         take_all(clock_sub, Clock, lambda got: on_clock(got[0]), 1000)  # (the ticks since the last poll)
         end = clock[0]
         if alone:
-            return {"mode": mode, "sim s per wall s": seconds / wall, "plant CPU per sim s": plant_cpu}
+            return {"mode": mode, "sim s per wall s": seconds / wall, "plant CPU per sim s": plant_cpu, **per_thread}
         for ack in acks:
             try:  # the samples of the run's last period (the reference is stamped at its period's start)
                 spin_until(functools.partial(_reached, ack, end - 1.0 / RATE - 1e-6), 60.0, "")
@@ -404,7 +410,7 @@ def _one(mode: str, seconds: float, tmp: pathlib.Path, progress: Callable[[str],
         ctx.try_shutdown()
         sim.stop()
     return {"mode": mode, "readers": readers, "sim s per wall s": seconds / wall, "plant CPU per sim s": plant_cpu,
-            **_combined(mode, gots, wall)}
+            **per_thread, **_combined(mode, gots, wall)}
 
 
 def _reached(ack: Any, t: float) -> bool:
@@ -506,6 +512,16 @@ def print_tables(per_message: dict[str, float], runs: list[dict[str, Any]]) -> N
     alone = [r["sim s per wall s"] for r in runs if r["mode"] == ALONE]
     if alone:
         print(f"the plant with no reader: median {statistics.median(alone):.2f} sim s per wall s")
+    threaded = [r for r in runs if "plant main thread CPU per sim s" in r]
+    if threaded:  # (benchmarks.arm_threads: Linux only)
+        print("\nPer run, the plant's main thread (CPU and wait for a core per sim s, preempted per period) and the"
+              " readers' DDS receive threads (wake-ups per sim s)")
+        for r in threaded:
+            label = r["mode"] if r["mode"] != ALONE else "no reader"
+            cpu, waiting = r["plant main thread CPU per sim s"], r["plant main thread waiting per sim s"]
+            preempted, wakeups = r["plant main thread preemptions per period"], r["readers' DDS wake-ups per sim s"]
+            print(f"{label:>10} | {r['sim s per wall s']:6.2f} sim s/wall s | CPU {cpu:.4f} | waiting {waiting:.4f} |"
+                  f" preempted {preempted:.2f} | wake-ups {wakeups:.0f}")
 
 
 def main(argv: list[str] | None = None) -> int:

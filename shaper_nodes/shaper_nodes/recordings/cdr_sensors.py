@@ -120,7 +120,8 @@ class JointStateReader:
 
     def __init__(self) -> None:
         self._prefix = b""  # the bytes from the frame_id's length to the position count, of the last layout
-        self._checks: tuple[tuple[int, bytes], ...] = ()  # (offset, bytes) of the velocity and effort counts
+        # the velocity and effort counts of the last layout: their offsets and their bytes
+        self._velocity_at, self._velocity_count, self._effort_at, self._effort_count = 0, b"", 0, b""
         self._end = -1  # the bytes the last layout needs (-1: none yet)
         self._names: tuple[str, ...] = ()
         self._at = 0
@@ -137,7 +138,8 @@ class JointStateReader:
         """
         n = len(self._prefix)
         if not (0 <= self._end <= len(raw) and raw[12:12 + n] == self._prefix and raw[0] == 0 and raw[1] == 1
-                and all(raw[at:at + 4] == b for at, b in self._checks)):
+                and raw[self._velocity_at:self._velocity_at + 4] == self._velocity_count
+                and raw[self._effort_at:self._effort_at + 4] == self._effort_count):
             self._parse(raw)
         sec, nanosec = _STAMP.unpack_from(raw, 4)
         return sec + 1e-9 * nanosec, self._names, self._unpack.unpack_from(raw, self._at)
@@ -172,7 +174,8 @@ class JointStateReader:
             counts.append(_align(pos, 4))
             _, _, pos = _doubles(raw, pos, what, field)
         self._prefix = bytes(raw[12:count_at + 4])
-        self._checks = tuple((c, bytes(raw[c:c + 4])) for c in counts)
+        (self._velocity_at, self._velocity_count), (self._effort_at, self._effort_count) = (
+            (c, bytes(raw[c:c + 4])) for c in counts)
         self._names, self._at = tuple(names), at
         self._unpack = struct.Struct(f"<{npos}d")
         self._end = pos

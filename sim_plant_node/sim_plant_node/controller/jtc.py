@@ -186,6 +186,7 @@ class JointTrajectoryController:
         self.goal_active = False
         self.desired = (self.command.copy(), np.zeros(len(joints)), np.zeros(len(joints)))
         self.error = np.zeros(len(joints))
+        self._ahead: tuple[float, Trajectory | None, Any] = (math.nan, None, None)  # the last update's later sample
 
     # ------------------------------------------------------------------ inputs
     def accept(self, names: list[str], points: list[RawPoint], stamp: float) -> None:
@@ -235,10 +236,16 @@ class JointTrajectoryController:
             return None
         t = time - self.start_time
         n = len(self.joints)
-        now, nxt = self.trajectory.sample_stacked(t), self.trajectory.sample_stacked(t + self.period)
+        t_next = t + self.period
+        kept_t, kept_trajectory, kept = self._ahead
+        # the sample at t is the last update's at its t + period when the times meet to the bit: the same product,
+        # taken rather than computed again (read only, as every sample here)
+        now = kept if kept_t == t and kept_trajectory is self.trajectory else self.trajectory.sample_stacked(t)
+        nxt = self.trajectory.sample_stacked(t_next)
+        self._ahead = (t_next, self.trajectory, nxt)
         self.desired = (now[:n], now[n:2 * n], now[2 * n:])
         self.error = now[:n] - np.asarray(position, dtype=float)
-        before_last = t + self.period < self.trajectory.end_time
+        before_last = t_next < self.trajectory.end_time
         tol = self.tolerances
         if (before_last or first_sample) and _violates(self.error, tol.path):
             self.hold(position)
