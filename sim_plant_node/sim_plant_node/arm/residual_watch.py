@@ -22,6 +22,7 @@ It is the simulator's truth: a real robot has no such report (its state is not m
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass
@@ -67,21 +68,12 @@ class Split:
     seconds: float
 
 
-@dataclass
-class _Pending:
-    start: float
-    goal: np.ndarray
-    state: np.ndarray
-    payload: Any
-    physics: float  # the arm's physics time at the commanded end (a reset sets it back)
-    forces: list[np.ndarray]
-    periods: int = 0
-
-
 class ResidualWatch:
     """Watches an :class:`~.plant.ArmPlant` period by period (module docstring).
 
-    Call :meth:`before` with the setpoint just before the plant steps a period, :meth:`after` just after.
+    Call :meth:`before` with the setpoint just before the plant steps a period, :meth:`after` just after. Per period
+    it compares six floats and keeps a reference to the period's IMU samples; a period of a motion also copies the
+    arm's state (the commanded end may be there); the split's work comes once per move.
     """
 
     def __init__(self, plant: Any, window: float = RESIDUAL_WINDOW) -> None:
@@ -89,48 +81,56 @@ class ResidualWatch:
         self.window = float(window)
         self._periods = int(round(self.window * plant.rate))
         self._dt = 1.0 / (plant.rate * plant.substeps)  # between IMU samples, s
-        self._last: np.ndarray | None = None
-        self._last_force: np.ndarray | None = None  # the IMU's last sample, m/s^2 (noise-free)
         self._samples = int(round(self.window * plant.rate * plant.substeps))  # IMU samples in the window
-        self._pending: _Pending | None = None
+        self._last: list[float] | None = None
+        self._last_force: np.ndarray | None = None  # the IMU's last sample, m/s^2 (noise-free)
+        #: the commanded end, if one is pending: (t_start s, held setpoint, the arm's state, the IMU's sample there,
+        #: the model's spec (its payload) and the physics time)
+        self._mark: tuple[float, list[float], np.ndarray, np.ndarray, Any, float] | None = None
+        self._window: list[list[Any]] = []  # each period's IMU samples since the mark
         self._cache: dict[Any, LinearArm] = {}
 
     def before(self, t_start: float, command: np.ndarray) -> None:
         """The period that starts at ``t_start`` (s) holds ``command`` (rad)."""
-        c = np.array(command, dtype=float)
+        # (compared as Python floats: cheaper than numpy's reductions on six numbers)
+        c = command.tolist()
         last, self._last = self._last, c
-        if last is None or self._last_force is None or not np.any(np.abs(c - last) > CHANGE_TOLERANCE):
+        if last is None or self._last_force is None or c == last or max(
+                abs(a - b) for a, b in zip(c, last, strict=True)) <= CHANGE_TOLERANCE:
             return
-        self._pending = _Pending(t_start, c, self.plant.state, self.plant.model.payload, self.plant.arm.time,
-                                 [self._last_force])
+        plant = self.plant
+        self._mark = (t_start, c, plant.state, self._last_force, plant.model.spec, plant.arm.time)
+        self._window = []
 
     def after(self) -> Split | None:
         """The period was stepped: its IMU samples; the move's split once its window has passed (else None)."""
         samples = self.plant.imu_samples
         self._last_force = samples[-1][1]
-        p = self._pending
-        if p is None:
+        if self._mark is None:
             return None
-        if samples[0][0] <= p.physics:  # the arm was reset: its state is not the window's
-            self._pending = None
+        self._window.append(samples)
+        if len(self._window) < self._periods:
             return None
-        p.forces.extend(f for _, f, _ in samples)
-        p.periods += 1
-        if p.periods < self._periods:
-            return None
-        self._pending = None
-        if self.plant.model.payload != p.payload:
-            return None
-        return self._split(p)
+        mark, window = self._mark, self._window
+        self._mark, self._window = None, []
+        physics = [t for period in window for t, _, _ in period]
+        spec = self.plant.model.spec
+        if physics[0] <= mark[5] or any(b <= a for a, b in itertools.pairwise(physics)):
+            return None  # the arm was reset within the window: its state is not the window's
+        if (spec.payload_mass, spec.payload_offset) != (mark[4].payload_mass, mark[4].payload_offset):
+            return None  # the payload changed within the window
+        return self._split(mark, [mark[3], *(f for period in window for _, f, _ in period)])
 
-    def _split(self, p: _Pending) -> Split:
+    def _split(self, mark: tuple, forces_list: list[np.ndarray]) -> Split:
         from shaper_nodes.core.shaping.vibration import residual_vibration
 
         t0 = time.perf_counter()
-        forces = np.asarray(p.forces[:self._samples])
+        t_start, held, state = mark[0], np.array(mark[1]), mark[2]
+        payload = (mark[4].payload_mass, mark[4].payload_offset)
+        forces = np.asarray(forces_list[:self._samples])
         times = np.arange(len(forces)) * self._dt  # from the commanded end
-        if len(self._cache) >= CACHE_SIZE and (p.goal.tobytes(), p.payload) not in self._cache:
+        if len(self._cache) >= CACHE_SIZE and (held.tobytes(), payload) not in self._cache:
             del self._cache[next(iter(self._cache))]
-        parts = parts_of(linear_cached(self.plant.model, p.goal, self._cache), p.state, times)
+        parts = parts_of(linear_cached(self.plant.model, held, self._cache), state, times)
         own = residual_vibration(times, forces, -math.inf, math.inf, remove_mean=True)
-        return Split(p.start, p.start + self.window, p.goal, parts, own.rms, own.peak, time.perf_counter() - t0)
+        return Split(t_start, t_start + self.window, held, parts, own.rms, own.peak, time.perf_counter() - t0)

@@ -16,7 +16,8 @@ The model (``plant.model``: :mod:`sim_plant_node.models`, :mod:`sim_plant_node.a
 the model. The arm stands behind an emulation of joint_trajectory_controller
 (:mod:`sim_plant_node.controller`); in lockstep it steps while the controller executes a trajectory, and
 at rest publishes its last joint state again every 0.1 s of wall time. ``~/set_feedforward`` installs a
-profile at the next START (:mod:`.feedforward`).
+profile at the next START (:mod:`.feedforward`). The arm reports each move's residual split (servo and vibration
+parts, m/s^2) on ``~/residual_parts`` (:mod:`.residual_report`): the simulator's truth, from the arm's state.
 
 Modes (parameter ``mode``)
 --------------------------
