@@ -270,6 +270,10 @@ class ElasticArm:
     def x(self, value: np.ndarray) -> None:
         self._state[:2 * self.n] = value
 
+    def state_copy(self) -> np.ndarray:
+        """(x, xd) as a new array: the positions, then the velocities."""
+        return self._state[:4 * self.n].copy()
+
     @property
     def xd(self) -> np.ndarray:
         """Their velocities, rad/s (a view of the state)."""

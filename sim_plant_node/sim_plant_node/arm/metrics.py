@@ -17,6 +17,7 @@ kinematics, the commanded joint positions):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,6 +101,14 @@ def late_residual(imu_times: np.ndarray, imu: np.ndarray, commanded_end: float) 
     (which no input shaper removes: it follows the end of any commanded motion)."""
     return residual_vibration(imu_times, imu, commanded_end + SERVO_TRANSIENT, commanded_end + RESIDUAL_WINDOW,
                               remove_mean=True).rms
+
+
+def noise_floor_threshold(noise: float, imu_rate: float = 1000.0) -> float:
+    """The one rule's threshold (docs/guide/learning.md, "Above the noise floor: one rule"), m/s^2: the floor of an
+    accelerometer with white noise ``noise`` m/s^2 per axis, F = sqrt(3) x ``noise``, plus twice one window's
+    scatter of it, s = F / sqrt(6 N) (N = RESIDUAL_WINDOW x ``imu_rate`` samples per axis); 0 with no noise."""
+    floor = math.sqrt(3.0) * noise
+    return floor + 2.0 * floor / math.sqrt(6.0 * RESIDUAL_WINDOW * imu_rate)
 
 
 def inverse_dynamics_peaks(model, times: np.ndarray, positions: np.ndarray, every: int = 5) -> np.ndarray:

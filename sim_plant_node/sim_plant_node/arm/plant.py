@@ -100,7 +100,7 @@ class ArmPlant(PlantBase):
     @property
     def state(self) -> np.ndarray:
         """Positions and velocities of the links and motors (no other model takes them)."""
-        return np.concatenate([self.arm.x, self.arm.xd])
+        return self.arm.state_copy()
 
     @state.setter
     def state(self, value: np.ndarray) -> None:

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from .arm_split import Splits
+
 RATE = 500.0
 SUBSTEPS = 2  # the sim plant's arm.substeps (its default): the flange IMU at RATE x SUBSTEPS
 #: the streams the demo's measures read (and the joint states, whose repeated stamp says the arm rests)
@@ -146,6 +148,8 @@ class ArmClient:
         subscribe_draining(conductor, JointState, JOINTS, on_joints, STREAM_QOS)
         subscribe_draining(conductor, Clock, "/clock", on_clock, 100)
         conductor.create_subscription(CycleReport, "/learner/reports", self.reports.append, 100)
+        #: the sim plant's servo/vibration split of each move (.arm_split)
+        self.splits = Splits(conductor)
         #: what the recorder has taken (its lockstep acknowledgements)
         self.recorder = AckWatch(conductor, RECORDER)
         self.events = conductor.create_publisher(CycleEvent, "/cycle_events", 10)

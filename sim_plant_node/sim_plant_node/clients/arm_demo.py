@@ -58,6 +58,7 @@ from .arm_cases import (
 )
 from .arm_client import IMU, JOINTS, RATE, RECORDER, SUBSTEPS, ArmClient, MoveRun, learned_report
 from .arm_report import case_rows, losses, per_move_table, plot, sums, table, write_report
+from .arm_split import write_csv as write_splits
 
 # the names the tests and scripts/arm_reference_bags.py import from here
 __all__ = ["CASES", "DEFAULT_CASES", "ArmClient", "MoveRun", "_learned", "_losses", "_per_move_table", "_sums",
@@ -145,6 +146,7 @@ def _main(argv: list[str] | None) -> int:
     traces: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
     reference_paths: dict[int, np.ndarray] = {}
     per_move: list[list[tuple[MoveRun, Any, Any]]] = []  # per cycle of the per-move case: (run, measure, report)
+    splits: list[tuple[str, int, int, str, Any]] = []  # per case, cycle and move: the sim plant's split (arm_split)
     with node_session(out, "arm") as (start, ctx):
         start("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
                                               "task.start": HOME.tolist(), "imu.noise_stddev": args.noise,
@@ -187,6 +189,8 @@ def _main(argv: list[str] | None) -> int:
                         cycle_index += len(moves) - 1
                     else:
                         runs = client.run_cycle(cycle_index, moves, lambda: print(".", end="", flush=True))
+                    client.splits.wait(client.c.spin_until, runs)
+                    splits += [(case, k + 1, r.index, r.name, client.splits.of(r.start, r.end)) for r in runs]
                     if learning and case not in PER_MOVE:
                         client.c.spin_until(lambda c=cycle_index: any(r.cycle == c for r in client.reports), 120.0,
                                             "the learner's report")
@@ -200,6 +204,7 @@ def _main(argv: list[str] | None) -> int:
         finally:
             arrays: dict[str, Any] = {k: np.asarray(v) for k, v in client.s.__dict__.items()}
             np.savez_compressed(out / "streams.npz", **arrays)
+            write_splits(out / "splits.csv", splits)
             conductor.close()
     write_report(out, rows, cases, per_move, traces, [f"{i + 1}. {m.name}" for i, m in enumerate(moves)], args.noise,
                  payload.table(per_move, args.noise))

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from . import arm_split
 from .arm_client import ArmClient, MoveRun
 
 
@@ -162,7 +163,8 @@ def case_rows(client: ArmClient, case: str, runs: list[MoveRun], installed: str,
             lt - planned_end, 1e3 * np.linalg.norm(tool - tool[-1], axis=1))
         rows.append({"case": case, "move": f"{run.index + 1}. {run.name}", **m.__dict__,
                      "move_and_settle_s": m.move_and_settle_s, "installed": installed,
-                     "lost": client.lockstep.describe_lost(run.start, run.end)})
+                     "lost": client.lockstep.describe_lost(run.start, run.end),
+                     **arm_split.columns(client.splits.of(run.start, run.end))})
 
 
 def write_report(out: pathlib.Path, rows: list[dict[str, Any]], cases: list[str],
@@ -189,6 +191,7 @@ def write_report(out: pathlib.Path, rows: list[dict[str, Any]], cases: list[str]
 
             lines += summary(per_move, rows)
     lines += payload_table
+    lines += arm_split.table(rows, cases, noise)
     from ..arm.metrics import RESIDUAL_WINDOW, SETTLE_TOLERANCE
 
     note = (f"Residual vibration: the flange IMU's specific force minus its mean, over {RESIDUAL_WINDOW:g} s after"

@@ -16,7 +16,8 @@ The model (``plant.model``: :mod:`sim_plant_node.models`, :mod:`sim_plant_node.a
 the model. The arm stands behind an emulation of joint_trajectory_controller
 (:mod:`sim_plant_node.controller`); in lockstep it steps while the controller executes a trajectory, and
 at rest publishes its last joint state again every 0.1 s of wall time. ``~/set_feedforward`` installs a
-profile at the next START (:mod:`.feedforward`).
+profile at the next START (:mod:`.feedforward`). The arm reports each move's residual split (servo and vibration
+parts, m/s^2) on ``~/residual_parts`` (:mod:`.residual_report`): the simulator's truth, from the arm's state.
 
 Modes (parameter ``mode``)
 --------------------------
@@ -73,6 +74,7 @@ from .feedforward import Feedforward
 from .lockstep import Exchange, Readers
 from .models import START_ONLY, PlantValues, build_plant, make_task
 from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
+from .residual_report import residual_reports
 from .sensors import Sensors, StateBytes, WriteBatch, writer
 from .writer_profile import use_writer_profile
 
@@ -143,6 +145,8 @@ class SimPlantNode(Node):
         self._clock_write = None if self._clock_pub is None else keep(writer(self._clock_pub))
         self.create_service(SetFeedforward, "~/set_feedforward", self._on_set_feedforward, qos_profile=SERVICE_QOS)
         self._ff = Feedforward()
+        # the arm: each move's residual split on ~/residual_parts (.residual_report)
+        self._parts = residual_reports(self, self.plant, self._now, self._batch.flush)
         self._cmd_sub = self.create_subscription(Float64MultiArray, t.command_in, self._on_command, 10)
         self.create_subscription(ShaperMsg, t.active_shaper, self._on_shaper, LATCHED)
         self.create_service(Trigger, "~/start_task", self._on_start, qos_profile=SERVICE_QOS)
@@ -378,6 +382,8 @@ class SimPlantNode(Node):
         if ff is not None and ff[0] == "command":
             command = command + ff[1]
         self.plant.set_effort(ff[1] if ff is not None and ff[0] == "effort" else None)
+        if self._parts is not None:
+            self._parts.before(t_start, command)
         self.plant.step(command, cycle_time=self._cycle_time(), velocity=velocity)
         self.step_index += 1
         self.sim_time = self.step_index / self.rate
@@ -395,6 +401,8 @@ class SimPlantNode(Node):
         for stamp, force, rate in self.plant.imu(t_start, t, self._axes):
             self.sensors.publish_imu(stamp, force, rate)
         self._monitor.add_positions(t, self._applied)
+        if self._parts is not None:  # (a report goes out after this period's samples)
+            self._parts.after()
 
     # ----------------------------------------------------------------- the trajectory controller (arm)
     def _jtc_busy(self) -> str | None:

@@ -1,0 +1,136 @@
+"""The sim plant node reports each move's residual split over DDS (``~/residual_parts``, issue 31).
+
+A real sim plant node (the arm in lockstep, the accelerometer noise-free) runs two of the demo's moves as
+FollowJointTrajectory goals held 1.5 s at their end; a client reads the report of each, and measures the residual
+itself from what it received over DDS (the IMU and the commanded positions), as the demo does
+(:func:`sim_plant_node.arm.metrics.measure_move`). The report's window starts where the client finds the commanded
+motion's end; its parts are finite; the arm's own residual it gives is the client's; the two parts together (the
+RMS of their sum, ``linear_rms``) are within 5 % of that residual.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from action_msgs.msg import GoalStatus
+from builtin_interfaces.msg import Duration
+from conftest import arm_parameters
+from control_msgs.action import FollowJointTrajectory
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import Imu, JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from shaper_msgs.msg import CycleReport
+from shaper_nodes.ros.action_client import ResilientActionClient
+from shaper_nodes.ros.lockstep_reader import STREAM_QOS
+from sim_plant_node.arm.description import JOINT_NAMES
+from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, motion_end
+from sim_plant_node.node.residual_report import METRICS, REPORT_QOS
+
+ACTION = "/joint_trajectory_controller/follow_joint_trajectory"
+DWELL = 1.5  # s each goal holds its end (the demo's): the residual window fits in it
+#: the two parts together against the arm's residual as measured over DDS (the linearisation's error; the
+#: reproductions find 3 % on the cycle's moves, docs/results/arm_residual_parts.md)
+LINEAR_TOLERANCE = 0.05
+
+
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def duration(t: float) -> Duration:
+    return Duration(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)) % 1_000_000_000)
+
+
+def goal(move) -> FollowJointTrajectory.Goal:
+    """The move as the demo's client sends it: its waypoints, then its end held DWELL s."""
+    pts = [JointTrajectoryPoint(positions=p.tolist(), velocities=v.tolist(), accelerations=a.tolist(),
+                                time_from_start=duration(t))
+           for t, p, v, a in zip(move.times[1:], move.positions[1:], move.velocities[1:], move.accelerations[1:],
+                                 strict=True)]
+    pts.append(JointTrajectoryPoint(positions=move.positions[-1].tolist(), velocities=[0.0] * 6,
+                                    accelerations=[0.0] * 6, time_from_start=duration(move.duration + DWELL)))
+    return FollowJointTrajectory.Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES), points=pts))
+
+
+class Client:
+    def __init__(self, ctx) -> None:
+        self.node = rclpy.create_node("split_client", context=ctx)
+        self.action = ResilientActionClient(self.node, FollowJointTrajectory, ACTION)
+        self.reports: list[CycleReport] = []
+        self.imu: list[tuple[float, tuple[float, float, float]]] = []
+        self.cmd: list[tuple[float, list[float]]] = []
+        self.node.create_subscription(CycleReport, "/sim_plant/residual_parts", self.reports.append, REPORT_QOS)
+        self.node.create_subscription(Imu, "/tip_imu", lambda m: self.imu.append(
+            (stamp(m), (m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z))), STREAM_QOS)
+        self.node.create_subscription(JointState, "/sim_plant/reference", lambda m: self.cmd.append(
+            (stamp(m), list(m.position))), STREAM_QOS)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.node)
+
+    def spin_until(self, cond, what: str, timeout: float = 120.0) -> None:
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.action.destroy()
+        self.node.destroy_node()
+
+
+def test_each_move_reports_its_servo_and_vibration_parts_from_the_arms_state(start_node, ros_context):
+    from shaper_nodes.core.shaping.vibration import residual_vibration
+    from sim_plant_node.arm.task import HOME, cycle_moves
+
+    sim = start_node("sim_plant_node", "sim_plant", arm_parameters(noise=0.0, **{"task.start": HOME.tolist()}))
+    client = Client(ros_context)
+    try:
+        client.spin_until(lambda: client.action.server_is_ready() or not sim.running(), "the controller's server")
+        assert sim.running(), "the sim plant node exited"
+        # every stream this test reads matched on both ends before the first step (the plant publishes the
+        # commanded positions only to subscribers)
+        for topic in ("/sim_plant/residual_parts", "/tip_imu", "/sim_plant/reference"):
+            client.spin_until(lambda t=topic: client.node.count_publishers(t) > 0, f"the sim plant's {topic}")
+        moves = cycle_moves()[:2]
+        for k, move in enumerate(moves):
+            future = client.action.send_goal_async(goal(move))
+            client.spin_until(future.done, f"the answer to {move.name}")
+            handle = future.result()
+            assert handle.accepted, move.name
+            result = handle.get_result_async()
+            client.spin_until(result.done, f"the result of {move.name}")
+            assert result.result().status == GoalStatus.STATUS_SUCCEEDED, move.name
+            client.spin_until(lambda n=k + 1: len(client.reports) >= n, f"the split of {move.name}")
+        # every sample up to the last window's end received (reliable streams, the plant at rest after the goals)
+        last_end = client.reports[-1].window_end
+        client.spin_until(lambda: client.imu and client.imu[-1][0] >= last_end and client.cmd
+                          and client.cmd[-1][0] >= last_end - 0.002, "the samples up to the last window's end")
+    finally:
+        client.close()
+
+    assert len(client.reports) == len(moves)  # one per move: no report at rest, none before the first motion
+    it = np.array([t for t, _ in client.imu])
+    imu = np.array([a for _, a in client.imu])
+    ct = np.array([t for t, _ in client.cmd])
+    cq = np.array([q for _, q in client.cmd])
+    assert np.all(np.diff(it) > 0) and np.all(np.diff(ct) > 0)  # nothing lost or out of order on the way
+    starts = [0.0, *[r.window_end for r in client.reports[:-1]]]
+    for move, report, after in zip(moves, client.reports, starts, strict=True):
+        m = dict(zip(report.metric_names, report.metric_values, strict=True))
+        assert list(report.metric_names) == list(METRICS) and report.source == "sim_plant"
+        assert all(math.isfinite(v) for v in report.metric_values), m
+        assert m["servo_rms"] > 0 and m["vibration_rms"] > 0 and m["split_s"] >= 0
+        sel = (ct > after) & (ct < report.window_end)
+        c_end = motion_end(ct[sel], cq[sel])  # where the client finds the move's commanded end
+        assert report.window_start == pytest.approx(c_end, abs=1e-6), move.name
+        assert report.window_end == pytest.approx(c_end + RESIDUAL_WINDOW, abs=1e-6), move.name
+        measured = residual_vibration(it, imu, c_end, c_end + RESIDUAL_WINDOW, remove_mean=True)
+        assert measured.samples == 1000
+        assert report.residual_rms == pytest.approx(measured.rms, rel=1e-6), move.name  # the arm's own, noise-free
+        assert m["linear_rms"] == pytest.approx(measured.rms, rel=LINEAR_TOLERANCE), move.name
