@@ -137,9 +137,9 @@ def test_a_qos_event_of_a_subscription_is_served_by_the_loop(context):
 
 
 def test_a_qos_event_is_served_while_messages_flow(context):
-    """The event handlers are in the wait set once per EVENT_PERIOD only (ros/take_loop.py): an incompatible-QoS
-    event on one subscription still reaches its callback while another subscription gets a message every
-    millisecond (the loop waking for messages, not for events), and the messages keep coming."""
+    """An incompatible-QoS event on one subscription reaches its callback while another subscription gets a
+    message every millisecond (the loop waking for messages), and the messages keep coming (a guard for any
+    change that takes the event handlers off the per-message path)."""
     node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
                 parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
     events: queue.Queue = queue.Queue()

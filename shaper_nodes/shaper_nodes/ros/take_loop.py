@@ -11,9 +11,8 @@ every message of every ready subscription in arrival order (``take_message``, ra
 subscription was made), calling its callback with the message, and its info for a two-argument
 callback, as rclpy's executors do. The subscriptions' QoS event handlers (rclpy's ``EventHandler``,
 two or three per subscription) are added and checked by their event handles in C
-(``WaitSet.add_event``, ``WaitSet.is_ready``) rather than through their Python methods, and only once
-per :data:`EVENT_PERIOD` (0.1 s), not at every message: a wake-up without them waits at most until they
-are due; a ready one is then served through its own API (``is_ready``, ``take_data``, ``execute``).
+(``WaitSet.add_event``, ``WaitSet.is_ready``) rather than through their Python methods at every
+wake-up; a ready one is then served through its own API (``is_ready``, ``take_data``, ``execute``).
 
 The wait set is rclpy's own C++ class (``_rclpy.WaitSet`` from
 ``rclpy.impl.implementation_singleton``), which rclpy exposes in no public API; this module is the
@@ -34,7 +33,6 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -48,12 +46,6 @@ from rclpy.waitable import NumberOfEntities
 INTERNALS = ("WaitSet", "GuardCondition")
 #: where rclpy's ``EventHandler`` keeps its event handle (a name-mangled attribute; checked by the same test)
 EVENT_HANDLE = "_EventHandler__event"
-#: s, how often the subscriptions' QoS event handlers are in the wait set: a wake-up with them in it adds and
-#: checks two or three handles per subscription (about 0.4 us each hot, several times that at 1 kHz with cold
-#: caches, and rmw_wait attaches and detaches each); between two such wake-ups the loop waits for messages only,
-#: at most until the next is due, so an event (incompatible QoS or type: set up once, not per message) is served
-#: within this time, while messages flow or not
-EVENT_PERIOD = 0.1
 
 
 class TakeLoop:
@@ -130,30 +122,23 @@ class TakeLoop:
             wake = self._wake
             if not node.context.ok():
                 self._stop = True
-            # the event handlers are in the wait set once per EVENT_PERIOD, not at every message (see EVENT_PERIOD)
-            period, events_due, clock = round(EVENT_PERIOD * 1e9), 0, time.monotonic_ns
             while not self._stop:
                 wait_set.clear_entities()
-                now = clock()
-                with_events = now >= events_due
-                if with_events:
-                    for e in events:
-                        add_event(e)
+                for e in events:
+                    add_event(e)
                 for h in handles:
                     add_subscription(h)
                 wait_set.add_guard_condition(wake)
                 for w in others:
                     w.add_to_wait_set(wait_set)
-                wait_set.wait(-1 if with_events else events_due - now)
+                wait_set.wait(-1)
                 if self._stop:
                     break
                 ready = wait_set.get_ready_entities("subscription")
                 for sub, handle, pointer, two in served:
                     if pointer in ready:
                         self._drain(sub, handle, two)
-                if with_events:
-                    events_due = clock() + period
-                _serve_events(wait_set, handlers if with_events else [], others)
+                _serve_events(wait_set, handlers, others)
             wait_set.destroy_when_not_in_use()
 
     def _drain(self, sub: Subscription, handle: Any, two_args: bool) -> None:
