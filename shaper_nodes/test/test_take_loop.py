@@ -6,6 +6,7 @@ import contextlib
 import importlib.metadata
 import inspect
 import queue
+import threading
 import time
 
 import pytest
@@ -130,6 +131,51 @@ def test_a_qos_event_of_a_subscription_is_served_by_the_loop(context):
         assert list(got.get(timeout=1.0).data) == [1.0, 2.0]
         assert loop.running
     finally:
+        loop.stop(timeout=10.0)
+        peer.destroy_node()
+        node.destroy_node()
+
+
+def test_a_qos_event_is_served_while_messages_flow(context):
+    """An incompatible-QoS event on one subscription reaches its callback while another subscription gets a
+    message every millisecond (the loop waking for messages), and the messages keep coming (a guard for any
+    change that takes the event handlers off the per-message path)."""
+    node = Node("take_probe", context=context, start_parameter_services=False, enable_rosout=False,
+                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+    events: queue.Queue = queue.Queue()
+    got: list = []
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(Float64MultiArray, "take_flow", got.append, reliable)
+    node.create_subscription(Float64MultiArray, "take_probe", lambda m: None, reliable,
+                             event_callbacks=SubscriptionEventCallbacks(incompatible_qos=events.put))
+    loop = TakeLoop(node, "loop").start()
+    peer = Node("take_peer", context=context)
+    stop = threading.Event()
+    flow = peer.create_publisher(Float64MultiArray, "take_flow", reliable)
+
+    def publish() -> None:
+        while not stop.wait(0.001):
+            flow.publish(Float64MultiArray(data=[1.0]))
+
+    sender = threading.Thread(target=publish, daemon=True)
+    sender.start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while len(got) < 200 and time.monotonic() < deadline:  # a state: the flow matched and running
+            time.sleep(0.01)
+        assert len(got) >= 200, "the flowing subscription got no messages"
+        peer.create_publisher(Float64MultiArray, "take_probe",
+                              QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        info = events.get(timeout=30.0)  # a state: the event, with a generous bound
+        assert info.total_count >= 1
+        before = len(got)
+        deadline = time.monotonic() + 30.0
+        while len(got) < before + 100 and time.monotonic() < deadline:  # a state: more messages
+            time.sleep(0.01)
+        assert len(got) >= before + 100 and loop.running
+    finally:
+        stop.set()
+        sender.join(10.0)
         loop.stop(timeout=10.0)
         peer.destroy_node()
         node.destroy_node()

@@ -70,6 +70,7 @@ limits); the node reads them typed, ``self.params.value`` (kept up to date on ev
 
 from __future__ import annotations
 
+from time import time_ns
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
@@ -161,7 +162,8 @@ class ShaperNode(Node):
         # arrivals, rate watches, forwarded and refused counts (ros/stream_watch.py)
         self.watch = StreamWatch(self.rate, self.diagnostics, lambda k: self._subs[f"{k}_in"].get_publisher_count())
         self.rejections, self.forwarded, self.watched = self.watch.rejections, self.watch.forwarded, self.watch.watched
-        self._arrived, self._count_forwarded = self.watch.arrived, self.watch.count_forwarded
+        self._arrived, self._count_forwarded, self._passed = (self.watch.arrived, self.watch.count_forwarded,
+                                                              self.watch.passed)
         self._arrivals_max = self.watch.arrivals_max
         # whole trajectories: served by a side node on a thread of its own, never in the streaming thread
         self._side = SideNode(self, "trajectories")
@@ -346,15 +348,17 @@ class ShaperNode(Node):
 
     # ----------------------------------------------------------------- data paths
     def _on_array(self, data: bytes, info: dict[str, Any] | None) -> None:
-        """The array input, serialized: shaped and published as bytes (ros/raw_stream.py)."""
-        self._arrived("array", info)
+        """The array input, serialized: shaped and published as bytes (ros/raw_stream.py); its arrival and
+        count kept after the publish (the time it was taken read first)."""
+        taken = time_ns()
         try:
             out = self._raw_arrays.shape(data)
         except InputError as err:
+            self._arrived("array", info, taken)
             self._reject(self._in_topics["array_in"], err)
             return
         self._array_pub.publish(out)
-        self._count_forwarded("array")
+        self._passed("array", info, taken)
 
     def _on_stream(self, data: bytes, info: dict[str, Any] | None) -> None:
         """The stream topic's JointTrajectory, serialized: shaped and published as bytes (ros/raw_stream.py)."""

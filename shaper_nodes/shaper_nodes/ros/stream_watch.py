@@ -72,11 +72,19 @@ class StreamWatch:
         self._arrivals_in = dict.fromkeys(STREAMS, 0)  # appended, by the one thread of each stream
         self._arrivals_seen = dict.fromkeys(STREAMS, 0)  # through the rate watch
 
-    def arrived(self, stream: str, info: dict[str, Any] | None) -> None:
-        """Keep a streamed message's info (the middleware's stamps) and when it was taken, for the rate
-        watch; only an append on the streaming path."""
-        self._arrivals[stream].append((info, time.time_ns()))
+    def arrived(self, stream: str, info: dict[str, Any] | None, taken_ns: int | None = None) -> None:
+        """Keep a streamed message's info (the middleware's stamps) and when it was taken (``taken_ns``, wall
+        clock ns; default now), for the rate watch; only an append on the streaming path."""
+        self._arrivals[stream].append((info, time.time_ns() if taken_ns is None else taken_ns))
         self._arrivals_in[stream] += 1
+
+    def passed(self, stream: str, info: dict[str, Any] | None, taken_ns: int) -> None:
+        """:meth:`arrived` and :meth:`count_forwarded` of a streamed message passed on, in one call: the
+        bookkeeping a stream's callback does after its publish (``taken_ns``: when it was taken, read before
+        the work), off the hop's latency."""
+        self._arrivals[stream].append((info, taken_ns))
+        self._arrivals_in[stream] += 1
+        self.forwarded[stream] += 1  # (one writer per path: see count_forwarded)
 
     def count_forwarded(self, path: str) -> None:
         """One message passed on by ``path``."""
