@@ -36,7 +36,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from shaper_nodes.cli.common import Parser, UsageError, number
+from shaper_nodes.cli.common import Parser, UsageError, count, number
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
 
 PROG = "send_goal"
@@ -114,9 +114,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument("--timeout", type=number("--timeout", positive=True), default=10.0,
                    help="wait for the action server, the joint states and the answer to the goal, s (wall; default"
                         " 10)")
-    p.add_argument("--cycle", type=_cycle, default=None, metavar="N", help="mark the goal as cycle N (an integer"
-                   " >= 0) on --events: START before it, MOTION_END --duration s and END --duration + --hold s"
-                   " later, stamped on the joint states' clock; needs --hold > 0 (the residual window)")
+    p.add_argument("--cycle", type=count("--cycle"), default=None, metavar="N",
+                   help="mark the goal as cycle N (an integer >= 0) on --events: START before it, MOTION_END"
+                   " --duration s and END --duration + --hold s later, stamped on the joint states' clock; needs"
+                   " --hold > 0 (the residual window)")
     p.add_argument("--task", default=PROG, help=f"the task named in the cycle marks (default {PROG})")
     p.add_argument("--events", default="/cycle_events", help="topic of the cycle marks (default /cycle_events)")
     p.add_argument("--result-timeout", type=number("--result-timeout", positive=True), default=None,
@@ -135,16 +136,6 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     if args.result_timeout is None:
         args.result_timeout = 60.0 + 10.0 * (args.duration + args.hold)
     return args
-
-
-def _cycle(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--cycle must be an integer >= 0, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"--cycle must be an integer >= 0, got {text!r}")
-    return n
 
 
 def trajectory_points(positions: Sequence[float], duration: float, start: Sequence[float] | None = None,
