@@ -24,19 +24,8 @@ Learner replays: those of :data:`~.replay.LEARNER_REPLAYS` that the options ask 
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from shaper_nodes.core.identification import (
-    MAX_RINGING_DAMPING,
-    NOISE_FLOOR_SIGMAS,
-    ModeFit,
-    Recommendation,
-    ringing_issue,
-)
 from shaper_nodes.recordings import BagError
 
 from .cycle_rows import (  # noqa: F401 (the names of the analysis, re-exported)
@@ -56,7 +45,8 @@ from .cycle_rows import (  # noqa: F401 (the names of the analysis, re-exported)
     _segment,
     reached_rest,
 )
-from .groups import ModeGroup
+from .options import Options
+from .outcome import Analysis
 from .replay import LEARNER_REPLAYS, LearnerReplay
 from .segment import CycleSpan
 from .streams import Recording
@@ -73,76 +63,6 @@ from .verdict import (  # noqa: F401 (the names of the analysis, re-exported)
     plant_changes,
     shaper_of,
 )
-
-
-@dataclass(frozen=True)
-class Options:
-    """What the analysis is asked to do (the CLI's options).
-
-    settle_tolerance : rad or m, positions at rest; band : settling band, m/s^2 (a float) or
-    a fraction of the cycle's peak (a string ending in %); remove_mean : "auto", "yes", "no";
-    segmentation : "auto", "events", "motion"; method, max_modes, band_hz : identification;
-    target, sigmas, min_saving : recommendation (:func:`recommend_shaper`); max_damping : damping ratio
-    above which an identified mode does not ring (default :data:`MAX_RINGING_DAMPING`, 0.3), and
-    noise_sigmas : a mode whose initial amplitude is at most this many accelerometer noise standard
-    deviations (per axis, measured on the recording) is at the noise floor (default
-    :data:`NOISE_FLOOR_SIGMAS`, 1): such modes are reported but neither designed on nor used to choose
-    the shaper, and a group of cycles with no ringing mode gets "no shaper needed"; identify_cycles : most
-    cycles identified (evenly spread over the usable ones; 0 = all); learners : names of
-    :data:`LEARNER_REPLAYS` to run; learner_params : parameters as the live learner node takes
-    them; motion_threshold : speed (rad/s or m/s) above which a sample moves when the cycles come
-    from the motion (default: from the top speed and the measured noise).
-    """
-
-    settle_tolerance: float | None = None
-    band: str = "5%"
-    remove_mean: str = "auto"
-    segmentation: str = "auto"
-    positions: str = "auto"
-    method: str = "fit"
-    max_modes: int = 3
-    band_hz: tuple[float, float] | None = None
-    target: float = 0.05
-    sigmas: float = 2.0
-    identify_cycles: int = 20
-    learners: tuple[str, ...] = ("list", "mrilc")
-    learner_params: Mapping[str, object] = field(default_factory=dict)
-    motion_threshold: float | None = None
-    min_saving: float = 0.2
-    max_damping: float = MAX_RINGING_DAMPING
-    noise_sigmas: float = NOISE_FLOOR_SIGMAS
-
-
-@dataclass
-class Analysis:
-    recording: Recording
-    options: Options
-    segmentation: str
-    cycles: list[CycleRow]
-    traces: list[tuple[np.ndarray, np.ndarray]]  # per cycle: time from START (s), acceleration (N, 3)
-    spectrum: tuple[np.ndarray, np.ndarray] | None  # Hz, (m/s^2)^2/Hz
-    modes: list[ModeFit]
-    recommendation: Recommendation | None
-    unshaped_level: float
-    predicted: dict
-    replays: dict[str, LearnerReplay]
-    notes: list[str]
-    removed_mean: bool
-    groups: list[ModeGroup] = field(default_factory=list)  # several when cycles see different modes
-    settle_tolerance: float = float("nan")  # positions at rest within this (rad or m), as used
-    accel_noise: float = float("nan")  # accelerometer noise per axis, m/s^2 (third differences' MAD)
-    headline: list[str] = field(default_factory=list)  # what changed between groups of cycles, first in reports
-
-    def ringing_issue(self, mode: ModeFit) -> str:
-        """Why ``mode`` is not used for the shaper ("" if it is): it does not ring (damping ratio above
-        ``options.max_damping``) or is at the noise floor (see :class:`Options`)."""
-        return ringing_issue(mode, self.options.max_damping, self.accel_noise if math.isfinite(self.accel_noise)
-                             else 0.0, self.options.noise_sigmas)
-
-    @property
-    def origin(self) -> float:
-        """Whole second at or before the first accelerometer sample: reports give times from it, s."""
-        return float(math.floor(self.recording.accel.t[0]))
 
 
 def analyze(rec: Recording, options: Options | None = None) -> Analysis:

@@ -21,7 +21,7 @@ from .segment import GAP_FACTOR, REST_FRACTION, CycleSpan, from_events, from_mot
 from .streams import Recording, Signal
 
 if TYPE_CHECKING:
-    from .analyze import Options
+    from .options import Options
 
 #: added to a cycle's shaper label when another shaper became active before its END
 CHANGED_DURING = " (changed during the cycle)"

@@ -27,7 +27,8 @@ from .cycle_rows import CHANGED_DURING, CycleRow
 from .groups import GROUP_GAP, GROUP_SIGMAS, MIN_SHARE, ModeGroup, _ranges, group_cycles
 
 if TYPE_CHECKING:
-    from .analyze import Analysis, Options
+    from .options import Options
+    from .outcome import Analysis
 
 #: active shapers that let through at least this V count for the unshaped level
 MIN_V_FOR_LEVEL = 0.2
