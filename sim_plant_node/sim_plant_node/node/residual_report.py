@@ -20,8 +20,9 @@ It is the simulator's truth, from the arm's state: a real robot has no such repo
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rclpy.node import Node
@@ -30,8 +31,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from shaper_msgs.msg import CycleReport
 from shaper_nodes.ros.conversions import sec_to_time
 
-from ..arm.plant import ArmPlant
-from ..arm.residual_watch import ResidualWatch, Split
+if TYPE_CHECKING:  # the arm's modules load Pinocchio: only when the plant is the arm (test_lazy_imports)
+    from ..arm.plant import ArmPlant
+    from ..arm.residual_watch import Split
 
 __all__ = ["METRICS", "REPORT_QOS", "TOPIC", "ResidualReports", "residual_reports"]
 
@@ -45,6 +47,8 @@ class ResidualReports:
     """The watch and its publisher; ``flush`` runs before a report goes out (the samples before it first)."""
 
     def __init__(self, node: Node, plant: ArmPlant, now: Callable[[], float], flush: Callable[[], None]) -> None:
+        from ..arm.residual_watch import ResidualWatch
+
         self.watch = ResidualWatch(plant)
         self._pub = node.create_publisher(CycleReport, TOPIC, REPORT_QOS)
         self._now, self._flush = now, flush
@@ -74,4 +78,5 @@ def message(split: Split, count: int, now: float) -> CycleReport:
 def residual_reports(node: Node, plant: Any, now: Callable[[], float],
                      flush: Callable[[], None]) -> ResidualReports | None:
     """The reports for ``plant`` if it is the arm (the only model whose state gives the split), else None."""
-    return ResidualReports(node, plant, now, flush) if isinstance(plant, ArmPlant) else None
+    arm = sys.modules.get("sim_plant_node.arm.plant")  # loaded if the plant is the arm; not loaded for another model
+    return ResidualReports(node, plant, now, flush) if arm is not None and isinstance(plant, arm.ArmPlant) else None
