@@ -120,3 +120,23 @@ def test_residual_parts_takes_the_window_by_the_rule():
     t = grid(C_END)
     fewer = residual_parts(model, goal, state, t[1:], C_END, cache)
     assert abs(fewer.servo_rms - a.servo_rms) > 1e-4 * a.servo_rms
+
+
+def test_the_demo_clients_windows_are_the_rules_on_integer_ns_stamps():
+    """The demo's client (sim_plant_node.clients.arm_client.Streams.window, over DDS) selects a move's samples as
+    the offline arm's Record.window does with the rule: commands [t0, t1), the other streams (t0, t1]."""
+    from sim_plant_node.arm.offline import Record
+    from sim_plant_node.clients.arm_client import Streams
+
+    ns = 7_000_000_000 + np.arange(-40, 3000) * 1_000_000  # 1 ms apart from 40 ms before t0
+    t = [float(x // 1_000_000_000) + 1e-9 * float(x % 1_000_000_000) for x in ns]
+    t0 = 7.0
+    t1 = t[2500]
+    s, r = Streams(), Record()
+    for name in ("imu", "cmd", "link"):
+        setattr(s, name + "_t", list(t))
+        setattr(s, name, [[float(i)] for i in range(len(t))])
+        setattr(r, name + "_t", list(t))
+        setattr(r, name, [np.array([float(i)]) for i in range(len(t))])
+        a, b = s.window(name, t0, t1), r.window(name, t0, t1)
+        assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]), name
