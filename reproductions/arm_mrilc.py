@@ -191,8 +191,7 @@ def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case
     """``cycles`` cycles of ``plans`` on one offline arm (the moves run back to back); rows and the learners."""
     from shaper_nodes.core.learning.mrilc.moves import MoveLearner, excess, profile_excess
     from shaper_nodes.core.learning.mrilc.plan import residual_error
-    from shaper_nodes.core.shaping.vibration import residual_vibration
-    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW
+    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, window_residual
     from sim_plant_node.arm.offline import OfflineArm
 
     lim = limits()
@@ -222,8 +221,7 @@ def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case
             start, it, imu, m, parts = run_move(arm, p, (pos, vel, acc), linear)
             extra.update(servo_rms=parts.servo_rms, vibration_rms=parts.vibration_rms)
             seen = imu + (noise * rng.standard_normal(imu.shape) if noise > 0 else 0.0)
-            noisy = residual_vibration(it, seen, start + p.motion_end, start + p.motion_end + RESIDUAL_WINDOW,
-                                       remove_mean=True).rms
+            noisy = window_residual(it, seen, start + p.motion_end, start + p.motion_end + RESIDUAL_WINDOW).rms
             if learn:
                 upd = learners[p.name].update(residual_error(p.core, it - start, seen, TREND_DEGREE))
                 extra.update(action=upd.action, tracking_rms=upd.cost)

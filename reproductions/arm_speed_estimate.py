@@ -20,7 +20,7 @@ import math
 def rows(factors: list[float], noise: float = 0.0) -> list[dict[str, float | str]]:
     """One row per factor and move (module docstring)."""
     from reproductions.arm_learning import Cell, Context, modal_calibration
-    from shaper_nodes.core.shaping.vibration import residual_vibration
+    from sim_plant_node.arm.metrics import window_residual
     from sim_plant_node.arm.task import cycle_moves
 
     ctx = Context(modal_calibration(), noise=noise)
@@ -31,7 +31,7 @@ def rows(factors: list[float], noise: float = 0.0) -> list[dict[str, float | str
             run = cell.run(mv, shaper, factor)
             f = min(m.omega for m in shaper.modes) / (2 * math.pi)
             end = mv.duration / factor + float(shaper.times[-1])  # the commanded motion's end, s from the start
-            peak = residual_vibration(run.times, run.imu, end + 0.1, end + 1.0, remove_mean=True).peak
+            peak = window_residual(run.times, run.imu, end + 0.1, end + 1.0).peak
             estimate = 1e3 * peak / (2 * math.pi * f) ** 2
             out.append({"factor": factor, "move": mv.name, "f_hz": f, "peak": peak, "estimate_mm": estimate,
                         "flange_mm": run.measures.peak_mm, "ratio": estimate / run.measures.peak_mm,

@@ -28,7 +28,7 @@ from shaper_msgs.msg import CycleReport
 from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 from sim_plant_node.arm.description import JOINT_NAMES
-from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, motion_end
+from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, in_window, motion_end, window_residual
 from sim_plant_node.node.residual_report import METRICS, REPORT_QOS
 
 ACTION = "/joint_trajectory_controller/follow_joint_trajectory"
@@ -132,5 +132,11 @@ def test_each_move_reports_its_servo_and_vibration_parts_from_the_arms_state(sta
         assert report.window_end == pytest.approx(c_end + RESIDUAL_WINDOW, abs=1e-6), move.name
         measured = residual_vibration(it, imu, c_end, c_end + RESIDUAL_WINDOW, remove_mean=True)
         assert measured.samples == 1000
+        # the measures' window rule selects the same samples on these integer-ns stamps (the bare float rule and the
+        # node's count by samples agree there; the rule makes the offline arm's summed stamps agree too)
+        bare = (it >= c_end) & (it < c_end + RESIDUAL_WINDOW)
+        assert np.array_equal(in_window(it, c_end, c_end + RESIDUAL_WINDOW), bare), move.name
+        ours = window_residual(it, imu, c_end, c_end + RESIDUAL_WINDOW)
+        assert (ours.samples, ours.rms, ours.peak) == (measured.samples, measured.rms, measured.peak), move.name
         assert report.residual_rms == pytest.approx(measured.rms, rel=1e-6), move.name  # the arm's own, noise-free
         assert m["linear_rms"] == pytest.approx(measured.rms, rel=LINEAR_TOLERANCE), move.name

@@ -64,11 +64,10 @@ def node_speed_estimate(run: Run, shaper: Any, lowest: Any) -> tuple[float, floa
     duration) + 0.1 s to 1 s after it, m/s^2; the same converted to the flange at the schedule's lowest mode
     ``lowest`` (x = a / (2 pi f)^2), mm; and the tolerance 0.05 mm converted there, m/s^2."""
     from shaper_nodes.core.learning.speed import acceleration_tolerance
-    from shaper_nodes.core.shaping.vibration import residual_vibration
-    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, SERVO_TRANSIENT, SETTLE_TOLERANCE
+    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, SERVO_TRANSIENT, SETTLE_TOLERANCE, window_residual
 
     end = run.planned_end + float(shaper.times[-1])
-    peak = residual_vibration(run.times, run.imu, end + SERVO_TRANSIENT, end + RESIDUAL_WINDOW, remove_mean=True).peak
+    peak = window_residual(run.times, run.imu, end + SERVO_TRANSIENT, end + RESIDUAL_WINDOW).peak
     f = lowest.omega / (2.0 * math.pi)
     return peak, 1e3 * peak / (2.0 * math.pi * f) ** 2, acceleration_tolerance(SETTLE_TOLERANCE, f)
 

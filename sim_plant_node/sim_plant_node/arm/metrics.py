@@ -13,6 +13,13 @@ kinematics, the commanded joint positions):
 - the shaper's delay: how much later the commanded motion ends than the planned one, s;
 - path deviation: the largest distance of the commanded tool path (forward kinematics of the
   commanded joint positions) from the unshaped one, mm.
+
+The windows select samples by their stamps with one rule, :func:`in_window`: a stamp within
+:data:`STAMP_TOLERANCE` of an edge is on it. The residual window is [commanded end, + RESIDUAL_WINDOW): the
+sample at the commanded end in, the one at the window's end out, whichever side of the edge rounding put it.
+The offline arm's stamps are sums period by period and land a few 1e-15 s either side of the commanded end
+(itself a command's stamp), so the bare ``t >= commanded_end`` took that sample on some moves and not on others;
+the sim plant node and the DDS stamps (integer ns) count by samples, which this rule gives too.
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shaper_nodes.core.shaping.vibration import residual_vibration, settle_time
+from shaper_nodes.core.shaping.vibration import ResidualVibration, residual_vibration, settle_time
 
 #: the settling band of the flange, m: 0.05 mm, a little over the UR5e's specified pose
 #: repeatability (+-0.03 mm, ISO 9283), so that a settled tool is as still as the arm can place it
@@ -32,6 +39,27 @@ RESIDUAL_WINDOW = 1.0
 #: the position loop's transient after the commanded motion's end, s: the joints' servo (50 Hz, damping
 #: 0.7) settles its tracking lag in a few of its periods; :func:`late_residual` starts after it
 SERVO_TRANSIENT = 0.1
+#: s: a stamp this close to a window's edge is on it (:func:`in_window`). A quarter of a nanosecond: integer-ns
+#: stamps (DDS) select exactly as by their integers; far above the offline arm's rounding (its stamps are sums of
+#: periods: a few ulps apart from the commanded end's, drifting at most ~500 ulps of t, < 2.5e-10 s below
+#: t = 4096 s, across one window) and 4e6 times below the IMU's 1 ms between samples
+STAMP_TOLERANCE = 2.5e-10
+
+
+def in_window(times: np.ndarray, start: float, end: float, closed: str = "left") -> np.ndarray:
+    """Which ``times`` (s) lie in [start, end) (``closed="left"``), (start, end] (``"right"``) or [start, end]
+    (``"both"``), a stamp within :data:`STAMP_TOLERANCE` of an edge counted on it (module docstring)."""
+    t = np.asarray(times, dtype=float)
+    lo = t >= start - STAMP_TOLERANCE if closed in ("left", "both") else t > start + STAMP_TOLERANCE
+    hi = t <= end + STAMP_TOLERANCE if closed in ("right", "both") else t < end - STAMP_TOLERANCE
+    return lo & hi
+
+
+def window_residual(times: np.ndarray, imu: np.ndarray, start: float, end: float) -> ResidualVibration:
+    """RMS and peak of the IMU's deviation from its mean over [start, end) (:func:`in_window`'s rule), m/s^2."""
+    t = np.asarray(times, dtype=float)
+    sel = in_window(t, start, end)
+    return residual_vibration(t[sel], np.asarray(imu, dtype=float)[sel], -math.inf, math.inf, remove_mean=True)
 
 
 @dataclass(frozen=True)
@@ -81,13 +109,13 @@ def measure_move(move: str, planned_start: float, planned_duration: float, comma
                  imu_times: np.ndarray, imu: np.ndarray, tool_times: np.ndarray, tool: np.ndarray,
                  path: np.ndarray | None = None, reference_path: np.ndarray | None = None) -> MoveMeasures:
     """The measures of one move (module docstring); times in s, tool positions in m, imu (N, 3) m/s^2."""
-    res = residual_vibration(imu_times, imu, commanded_end, commanded_end + RESIDUAL_WINDOW, remove_mean=True)
+    res = window_residual(imu_times, imu, commanded_end, commanded_end + RESIDUAL_WINDOW)
     planned_end = planned_start + planned_duration
-    sel = (tool_times >= planned_end) & (tool_times <= window_end)
+    sel = in_window(tool_times, planned_end, window_end, "both")
     t, p = tool_times[sel], tool[sel]
     dist = np.linalg.norm(p - p[-1], axis=1) if p.shape[0] else np.zeros(0)
-    in_window = (t >= commanded_end) & (t < commanded_end + RESIDUAL_WINDOW)
-    peak = float(np.max(dist[in_window])) if np.any(in_window) else float("nan")
+    residual = in_window(t, commanded_end, commanded_end + RESIDUAL_WINDOW)
+    peak = float(np.max(dist[residual])) if np.any(residual) else float("nan")
     settled = settle_time(t, dist[:, None], planned_end, SETTLE_TOLERANCE) if t.size else planned_end
     deviation = (path_deviation(path, reference_path) if path is not None and reference_path is not None
                  else float("nan"))
@@ -99,8 +127,7 @@ def late_residual(imu_times: np.ndarray, imu: np.ndarray, commanded_end: float) 
     """RMS of the IMU's deviation from its mean over the residual window without its first
     :data:`SERVO_TRANSIENT` s, m/s^2: the modes' ringing, without the position loop's transient
     (which no input shaper removes: it follows the end of any commanded motion)."""
-    return residual_vibration(imu_times, imu, commanded_end + SERVO_TRANSIENT, commanded_end + RESIDUAL_WINDOW,
-                              remove_mean=True).rms
+    return window_residual(imu_times, imu, commanded_end + SERVO_TRANSIENT, commanded_end + RESIDUAL_WINDOW).rms
 
 
 def noise_floor_threshold(noise: float, imu_rate: float = 1000.0) -> float:

@@ -35,10 +35,13 @@ class Record:
     state: list[np.ndarray] = field(default_factory=list)
 
     def window(self, which: str, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
-        """Samples in [t0, t1) (commands, stamped at their period's start) or (t0, t1] (the others)."""
+        """Samples in [t0, t1) (commands, stamped at their period's start) or (t0, t1] (the others), by
+        :func:`.metrics.in_window`'s rule."""
+        from .metrics import in_window
+
         t = np.asarray(getattr(self, which + "_t"))
         v = np.asarray(getattr(self, which))
-        sel = (t >= t0) & (t < t1) if which == "cmd" else (t > t0) & (t <= t1)
+        sel = in_window(t, t0, t1, "left" if which == "cmd" else "right")
         return t[sel], v[sel]
 
 

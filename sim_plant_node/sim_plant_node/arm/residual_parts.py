@@ -126,7 +126,7 @@ class Parts:
 def residual_parts(model: Any, goal: np.ndarray, state: np.ndarray, imu_times: np.ndarray, commanded_end: float,
                    cache: dict[Any, LinearArm] | None = None) -> Parts:
     """The servo and vibration parts of a move's residual (module docstring), on the IMU's samples in the residual
-    window [commanded_end, commanded_end + RESIDUAL_WINDOW).
+    window [commanded_end, commanded_end + RESIDUAL_WINDOW) (:func:`.metrics.in_window`'s rule).
 
     Parameters
     ----------
@@ -143,10 +143,10 @@ def residual_parts(model: Any, goal: np.ndarray, state: np.ndarray, imu_times: n
     cache : dict, optional
         Linearisations kept by goal pose and payload (the same goal recurs every cycle; the caller bounds it).
     """
-    from .metrics import RESIDUAL_WINDOW
+    from .metrics import RESIDUAL_WINDOW, in_window
 
     t = np.asarray(imu_times, dtype=float)
-    sel = (t >= commanded_end) & (t < commanded_end + RESIDUAL_WINDOW)
+    sel = in_window(t, commanded_end, commanded_end + RESIDUAL_WINDOW)
     return parts_of(linear_cached(model, goal, cache), state, t[sel] - commanded_end)
 
 
