@@ -7,8 +7,9 @@ latency and this node's is what the shaper's own work (validation, FIR, message 
 
 Run it as ``python -m benchmarks.echo_node [--in TOPIC] [--out TOPIC] [--take] [--ros-args ...]``;
 SIGINT stops it cleanly. ``--take`` echoes the serialized bytes from a lean side node served by the
-shaper's take loop (:class:`shaper_nodes.ros.side_node.SideNode` with ``take=True``) instead: the
-round trip of a Python node that does no work on the shaper's own path, the floor of the shaper's hop.
+shaper's take loop (:class:`shaper_nodes.ros.side_node.SideNode` with ``take=True``) instead, written by a publisher
+of the main node as the shaper's are: the round trip of a Python node that does no work on the shaper's own path, the
+floor of the shaper's hop.
 """
 
 from __future__ import annotations
@@ -53,7 +54,9 @@ def _spin_take(in_topic: str, out_topic: str, context: rclpy.context.Context, ex
 
     parent = Node("bench_echo", context=context)  # names the side node; spun by ``executor`` for SIGINT only
     side = SideNode(parent, "take", take=True)
-    pub = side.node.create_publisher(Float64MultiArray, out_topic, DEPTH)
+    # the publisher on the parent, as the shaper node's are on its main node: on the side node its QoS event handlers
+    # would sit in the take loop's wait set, a cost per wake-up the shaper's loop does not pay (session 12, hopwork)
+    pub = parent.create_publisher(Float64MultiArray, out_topic, DEPTH)
     side.node.create_subscription(Float64MultiArray, in_topic, pub.publish, DEPTH, raw=True)
     side.start()
     parent.get_logger().info(f"echoing {in_topic} -> {out_topic} (raw, take loop)")
