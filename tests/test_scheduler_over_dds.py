@@ -250,14 +250,8 @@ def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_contex
     for n in (node, probe):
         ex.add_node(n)
 
-    def spin_until(cond, what, timeout=60.0):
-        end = time.monotonic() + timeout
-        while not cond():
-            assert time.monotonic() < end, f"timed out waiting for {what}"
-            ex.spin_once(timeout_sec=0.02)
-
     try:
-        spin_until(lambda: diag.find("scheduler", "none matched"), "the report of the unmatched publisher")
+        spin_until(ex, lambda: diag.find("scheduler", "none matched"), 60.0, "the report of the unmatched publisher")
         status = diag.find("scheduler", "none matched")
         assert "/joint_states" in status.message and "incompatible QoS" in status.message
         assert not modes  # nothing came through the unmatched publisher
@@ -267,7 +261,7 @@ def test_joint_states_published_with_an_incompatible_qos_are_reported(ros_contex
             reliable.publish(JointState(name=["joint_1"], position=[0.5]))
             return True
 
-        spin_until(lambda: pose() and modes, "a mode estimate from the matching publisher's pose")
+        spin_until(ex, lambda: pose() and modes, 60.0, "a mode estimate from the matching publisher's pose")
         assert modes[-1].modes[0].frequency_hz == pytest.approx(15.0)  # between the rules' 10 and 20 Hz
     finally:
         ex.shutdown()
@@ -304,15 +298,9 @@ def test_a_dead_joint_state_feed_is_stale_a_live_one_on_fast_simulated_time_is_n
     for n in (node, probe):
         ex.add_node(n)
 
-    def spin_until(cond, what, timeout=60.0):
-        end = time.monotonic() + timeout
-        while not cond():
-            assert time.monotonic() < end, f"timed out waiting for {what}"
-            ex.spin_once(timeout_sec=0.02)
-
     def advance(t: float) -> None:  # simulated time jumps 5 s: the scheduler's clock and its period timer follow
         clock.publish(ClockMsg(clock=sec_to_time(t)))
-        spin_until(lambda: node._now() >= t, f"the scheduler's clock at {t:g} s")
+        spin_until(ex, lambda: node._now() >= t, 60.0, f"the scheduler's clock at {t:g} s")
 
     evaluated: list[tuple[float, bool]] = []  # (node clock s, not stale) of every evaluation of the rule base
     evaluate = node._evaluate
@@ -326,17 +314,19 @@ def test_a_dead_joint_state_feed_is_stale_a_live_one_on_fast_simulated_time_is_n
 
     node._evaluate = counted
     try:
-        spin_until(lambda: clock.get_subscription_count() > 0 and js.get_subscription_count() > 0, "the subscribers")
+        spin_until(ex, lambda: clock.get_subscription_count() > 0 and js.get_subscription_count() > 0,
+                   60.0, "the subscribers")
         t = 1.0
         advance(t)
         for step in range(10):  # live: a joint state at every jump, evaluated after the next jump
             stamp = sec_to_time(t)
             before = node._pose
             js.publish(JointState(header=Header(stamp=stamp), name=["joint_1"], position=[0.5]))
-            spin_until(lambda before=before: node._pose is not before, f"joint state {step}")
+            spin_until(ex, lambda before=before: node._pose is not before, 60.0, f"joint state {step}")
             t += 5.0
             advance(t)
-            spin_until(lambda t=t: any(at >= t for at, _ in evaluated), f"an evaluation after the jump to {t:g} s")
+            spin_until(ex, lambda t=t: any(at >= t for at, _ in evaluated),
+                       60.0, f"an evaluation after the jump to {t:g} s")
             assert all(fresh for _, fresh in evaluated), f"stale at step {step}: {evaluated}"
         assert node.diagnostics.counts["stale"] == 0 and modes
         # dead: no more joint states, simulated time goes on: stale once 2 s passed on both clocks
@@ -345,9 +335,10 @@ def test_a_dead_joint_state_feed_is_stale_a_live_one_on_fast_simulated_time_is_n
             assert time.monotonic() < deadline, "no stale report within 60 s of a dead feed"
             t += 5.0
             advance(t)
-            spin_until(lambda t=t: any(at >= t for at, _ in evaluated), f"an evaluation after the jump to {t:g} s")
+            spin_until(ex, lambda t=t: any(at >= t for at, _ in evaluated),
+                       60.0, f"an evaluation after the jump to {t:g} s")
         assert not evaluated[-1][1]
-        spin_until(lambda: diag.find("scheduler", "no joint states"), "the stale report on /diagnostics")
+        spin_until(ex, lambda: diag.find("scheduler", "no joint states"), 60.0, "the stale report on /diagnostics")
         assert "stale_timeout (2 s of the node's clock and of the steady clock)" in \
             diag.find("scheduler", "no joint states").message
     finally:
