@@ -274,16 +274,14 @@ def summary(rows: list[dict[str, Any]], noise: float = 0.0) -> str:
     residual's servo and vibration parts (:mod:`reproductions.residual_split`); the largest correction; the
     goals (the residual, and its vibration part, at most 25 % of the schedule's at the last cycle on every move,
     every limit held exactly, no move slower)."""
-    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW
+    from sim_plant_node.arm.metrics import noise_floor
 
     sched = {r["move"]: r for r in rows if r["case"] == CASES[0]}
     learned = [r for r in rows if r["case"] == CASES[1]]
     last = max(r["cycle"] for r in learned)
-    floor = math.sqrt(3.0) * noise
     # one rule for "above the noise floor" (docs/guide/learning.md): the schedule's residual as measured above the
     # floor by more than twice the scatter of the noise's RMS over one window (N samples per axis: F / sqrt(6 N))
-    scatter = floor / math.sqrt(6.0 * RESIDUAL_WINDOW * 2.0 * RATE)  # the IMU samples at twice the controller
-    threshold = floor + 2.0 * scatter
+    floor, scatter, threshold = noise_floor(noise, 2.0 * RATE)  # the IMU samples at twice the controller
     lines = [f"| move | scheduled residual (noise-free) | MRILC at cycle {last} | ratio | best cycle ratio |"
              " servo / vibration part, scheduled | the same, MRILC | vibration ratio (best) |"
              " move + settle s sched -> MRILC | largest correction rad, rad/s, rad/s^2 |",
