@@ -31,4 +31,16 @@ logs of the node processes go to ``out/<module>/``):
 
 :mod:`reproductions.common` holds what they share (the ``--docs`` option, the logs folder, the
 driver of the learner runs).
+
+The arm's reproductions run the six-axis arm and its controller emulation without ROS
+(:mod:`sim_plant_node.arm.offline`), deterministic, each writing its page under ``docs/results/``:
+:mod:`reproductions.arm_modes` (the lowest mode over the workspace), :mod:`reproductions.arm_calibration`
+(the calibration against modal analysis, and its schedule), :mod:`reproductions.arm_learning` (learning per
+move: LIST over the schedule and alone, speed-up, payload change), :mod:`reproductions.arm_mrilc` and
+:mod:`reproductions.arm_mrilc_payload` (MRILC per move, and after a payload change),
+:mod:`reproductions.arm_physics` (the residual's servo and vibration parts; the measure in
+:mod:`reproductions.residual_split`), :mod:`reproductions.arm_speed_estimate` (the speed learner's
+accelerometer test against the flange), :mod:`reproductions.arm_speed_list` (the page of
+``scheduled_list_speedup``). :mod:`reproductions.bag_noise` is the bag analysis with measured joint states
+(noise and encoder steps).
 """

@@ -31,6 +31,11 @@ order
 cdr
     Pure-Python CDR: messages serialized in place for publishers (the sim plant's JointState,
     Clock, Imu), and the fields of Imu and JointState parsed directly by the analyses.
+cdr_arrays, cdr_trajectory
+    std_msgs/Float64MultiArray and trajectory_msgs/JointTrajectory read from and written to serialized bytes
+    (the shaper node's raw streamed inputs and outputs).
+cdr_sensors
+    Checked readers of serialized Imu and JointState (the stamp and the fields a reader uses).
 errors
     :class:`BagError` (every refusal and failure to read) and :class:`ChunkTooLarge`.
 """

@@ -43,4 +43,13 @@ message_types
     recordings themselves are read and written by ``shaper_nodes.recordings``.
 launching
     Installed node executables started as ``ros2 run`` starts them, for tests and tools.
+raw_stream
+    Streamed inputs on serialized messages (the shaper's array and JointTrajectory inputs, the scheduler's
+    joint states): bytes in, the core's rules, bytes out.
+take_loop
+    A lean node's subscriptions taken on one wait set built once, instead of rclpy's executor.
+stream_watch
+    The shaper node's bookkeeping of its inputs: arrivals through the rate watch, forwarded and refused counts.
+lockstep_reader
+    A lockstep reader's side on the wire: its acknowledgements to the sim plant, and its lost samples.
 """

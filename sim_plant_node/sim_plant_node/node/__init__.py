@@ -18,6 +18,9 @@ writer_profile
     The Fast DDS times of the plant's writers (a profiles file named before ``rclpy.init``).
 feedforward
     The ``~/set_feedforward`` profile: its checks, installed at a cycle's START. Free of ROS.
+residual_report
+    The arm's residual split per move (:mod:`sim_plant_node.arm.residual_watch`) on ``~/residual_parts``.
 """
 
-__all__ = ["feedforward", "lockstep", "models", "parameters", "sensors", "sim_plant", "writer_profile"]
+__all__ = ["feedforward", "lockstep", "models", "parameters", "residual_report", "sensors", "sim_plant",
+           "writer_profile"]
