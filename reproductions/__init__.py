@@ -14,7 +14,8 @@ logs of the node processes go to ``out/<module>/``):
 :mod:`reproductions.closed_loop_cases`
     Seeds 001 and 002: the time-delay feedback controller around plants inside and outside its
     stable interval, and ZV with the QFT loops against open-loop ZV and ZVD on the eight corner
-    plants. Writes docs/results/closed_loop_results.md.
+    plants. Writes docs/results/closed_loop_results.md; what it measures on the loops' signals is
+    :mod:`reproductions.closed_loop_measures`.
     ``./run exec python -m reproductions.closed_loop_cases``
 :mod:`reproductions.list_cases`
     Seed 003, LIST: the four cases (LTI, time-varying mass, hardening spring, saturated
@@ -22,7 +23,8 @@ logs of the node processes go to ``out/<module>/``):
     ``./run exec python -m reproductions.list_cases``
 :mod:`reproductions.scheduler_cases`
     Seed 004: the two-mass system through five velocity steps with a fixed ZV, the two-set
-    switch and the TS fuzzy scheduler. Writes docs/results/scheduler_results.md.
+    switch and the TS fuzzy scheduler. Writes docs/results/scheduler_results.md; its rule bases (ROS-free)
+    are :mod:`reproductions.scheduler_rules`.
     ``./run exec python -m reproductions.scheduler_cases``
 :mod:`reproductions.bag_results`
     The bag analysis on the demo's recording and on a recording by another writer, whole and
