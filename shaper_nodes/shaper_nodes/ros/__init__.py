@@ -12,6 +12,8 @@ diagnostics
 graph_watch
     The graph around a node's command path, watched: another node of its name, other publishers,
     wrong types, incompatible QoS, on the log once and on ``/diagnostics``.
+graph_rules
+    The graph watch's decisions without a graph: the findings, their status, and which hold (logged once).
 parameters
     Parameter tables (``Spec``), ``declare_all`` and ``values``: each node declares its
     parameters from one table, derived from its typed parameter class (``param``, ``table``,
