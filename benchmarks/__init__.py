@@ -17,7 +17,8 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
   objects against the serialized bytes the shaper node reads and writes (no DDS).
 * :mod:`benchmarks.raw_trajectory` (run on its own): the same for the stream topic's JointTrajectory.
 * :mod:`benchmarks.arm_readers` (run on its own): the arm's readers' callbacks on message objects against
-  serialized bytes, and the sim plant in lockstep with one reader of the demo client's streams.
+  serialized bytes, and the sim plant in lockstep with one reader of the demo client's streams (its per-message
+  parts in :mod:`benchmarks.arm_reader_calls`).
 * :mod:`benchmarks.fir_throughput`: joint-samples per second of the FIR core
   (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter`` (median per
   block or per 100 samples; ``python -m benchmarks.fir_throughput --runs 3`` on its own).

@@ -90,13 +90,13 @@ class MovePlan:
     grid: np.ndarray            # output sample times from the move's start, s
     reference: np.ndarray       # (len(grid), 3) the rigid arm's specific force, m/s^2
     weights: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (grid x 3,) weight of each output sample
-    profile: Any = None         # moves.Profile
+    profile: Any = None         # profile.Profile
     operator: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # the lifted G
     core: Any = None            # shaper_nodes.core.learning.mrilc.plan.MovePlan: the learner node's set-up
 
 
 def limits() -> Any:
-    from shaper_nodes.core.learning.mrilc.moves import JointLimits
+    from shaper_nodes.core.learning.mrilc.profile import JointLimits
     from sim_plant_node.arm.task import MAX_ACCELERATION, MAX_VELOCITY
 
     return JointLimits(np.full(6, -POSITION_LIMIT), np.full(6, POSITION_LIMIT), np.full(6, MAX_VELOCITY),
@@ -189,8 +189,9 @@ def run_move(arm: Any, p: MovePlan, points: tuple[np.ndarray, np.ndarray, np.nda
 def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case: str, seed: int = 0,
              settings: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``cycles`` cycles of ``plans`` on one offline arm (the moves run back to back); rows and the learners."""
-    from shaper_nodes.core.learning.mrilc.moves import MoveLearner, excess, profile_excess
+    from shaper_nodes.core.learning.mrilc.moves import MoveLearner
     from shaper_nodes.core.learning.mrilc.plan import residual_error
+    from shaper_nodes.core.learning.mrilc.profile import excess, profile_excess
     from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, window_residual
     from sim_plant_node.arm.offline import OfflineArm
 
