@@ -17,7 +17,8 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
   objects against the serialized bytes the shaper node reads and writes (no DDS).
 * :mod:`benchmarks.raw_trajectory` (run on its own): the same for the stream topic's JointTrajectory.
 * :mod:`benchmarks.arm_readers` (run on its own): the arm's readers' callbacks on message objects against
-  serialized bytes, and the sim plant in lockstep with one reader of the demo client's streams.
+  serialized bytes, and the sim plant in lockstep with one reader of the demo client's streams (its per-message
+  parts in :mod:`benchmarks.arm_reader_calls`).
 * :mod:`benchmarks.fir_throughput`: joint-samples per second of the FIR core
   (``StreamingShaper``), sample by sample and in blocks, against ``scipy.signal.lfilter`` (median per
   block or per 100 samples; ``python -m benchmarks.fir_throughput --runs 3`` on its own).
@@ -38,4 +39,13 @@ baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures 
 * :mod:`benchmarks.streaming_gap`: the shaper node's streaming path at 1 kHz while the largest
   whole trajectory it accepts is shaped, against streaming alone in the same run; and the
   interpreter stalls a trajectory causes the node's process, per trajectory size.
+
+Run on their own (``python -m benchmarks.NAME``): :mod:`benchmarks.latency_executors` (the shaper's hop with
+each ``stream_executor``), :mod:`benchmarks.big_goal` (a huge FollowJointTrajectory goal against the shaper
+node), :mod:`benchmarks.mrilc_update` (one MRILC update against a floor), :mod:`benchmarks.plant_step` and
+:mod:`benchmarks.arm_step` (a lockstep plant's own cost per step, one joint and the arm),
+:mod:`benchmarks.arm_imu_tail` (a burst of reliable Imu samples to its last, message objects against CDR
+bytes), :mod:`benchmarks.arm_threads` (per-thread scheduler figures from /proc),
+:mod:`benchmarks.profile_node` (cProfile of a node under the latency driver; :mod:`benchmarks._profiled` runs a
+program profiled in every thread).
 """

@@ -41,7 +41,7 @@ from shaper_nodes.core.shaping import Mode, design
 
 
 def _spec() -> dict:
-    from reproductions.scheduler_cases import rule_base_spec
+    from reproductions.scheduler_rules import rule_base_spec
 
     return rule_base_spec(np.linspace(0.0, 0.7, 8))
 
@@ -106,7 +106,7 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, repeats: int = 2,
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
 
-    from reproductions.scheduler_cases import scheduler_parameters
+    from reproductions.scheduler_rules import scheduler_parameters
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
     from .latency import proc_cpu_seconds

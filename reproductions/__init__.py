@@ -14,7 +14,8 @@ logs of the node processes go to ``out/<module>/``):
 :mod:`reproductions.closed_loop_cases`
     Seeds 001 and 002: the time-delay feedback controller around plants inside and outside its
     stable interval, and ZV with the QFT loops against open-loop ZV and ZVD on the eight corner
-    plants. Writes docs/results/closed_loop_results.md.
+    plants. Writes docs/results/closed_loop_results.md; what it measures on the loops' signals is
+    :mod:`reproductions.closed_loop_measures`.
     ``./run exec python -m reproductions.closed_loop_cases``
 :mod:`reproductions.list_cases`
     Seed 003, LIST: the four cases (LTI, time-varying mass, hardening spring, saturated
@@ -22,7 +23,8 @@ logs of the node processes go to ``out/<module>/``):
     ``./run exec python -m reproductions.list_cases``
 :mod:`reproductions.scheduler_cases`
     Seed 004: the two-mass system through five velocity steps with a fixed ZV, the two-set
-    switch and the TS fuzzy scheduler. Writes docs/results/scheduler_results.md.
+    switch and the TS fuzzy scheduler. Writes docs/results/scheduler_results.md; its rule bases (ROS-free)
+    are :mod:`reproductions.scheduler_rules`.
     ``./run exec python -m reproductions.scheduler_cases``
 :mod:`reproductions.bag_results`
     The bag analysis on the demo's recording and on a recording by another writer, whole and
@@ -31,4 +33,16 @@ logs of the node processes go to ``out/<module>/``):
 
 :mod:`reproductions.common` holds what they share (the ``--docs`` option, the logs folder, the
 driver of the learner runs).
+
+The arm's reproductions run the six-axis arm and its controller emulation without ROS
+(:mod:`sim_plant_node.arm.offline`), deterministic, each writing its page under ``docs/results/``:
+:mod:`reproductions.arm_modes` (the lowest mode over the workspace), :mod:`reproductions.arm_calibration`
+(the calibration against modal analysis, and its schedule), :mod:`reproductions.arm_learning` (learning per
+move: LIST over the schedule and alone, speed-up, payload change), :mod:`reproductions.arm_mrilc` and
+:mod:`reproductions.arm_mrilc_payload` (MRILC per move, and after a payload change),
+:mod:`reproductions.arm_physics` (the residual's servo and vibration parts; the measure in
+:mod:`reproductions.residual_split`), :mod:`reproductions.arm_speed_estimate` (the speed learner's
+accelerometer test against the flange), :mod:`reproductions.arm_speed_list` (the page of
+``scheduled_list_speedup``). :mod:`reproductions.bag_noise` is the bag analysis with measured joint states
+(noise and encoder steps).
 """

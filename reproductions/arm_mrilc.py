@@ -90,13 +90,13 @@ class MovePlan:
     grid: np.ndarray            # output sample times from the move's start, s
     reference: np.ndarray       # (len(grid), 3) the rigid arm's specific force, m/s^2
     weights: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (grid x 3,) weight of each output sample
-    profile: Any = None         # moves.Profile
+    profile: Any = None         # profile.Profile
     operator: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # the lifted G
     core: Any = None            # shaper_nodes.core.learning.mrilc.plan.MovePlan: the learner node's set-up
 
 
 def limits() -> Any:
-    from shaper_nodes.core.learning.mrilc.moves import JointLimits
+    from shaper_nodes.core.learning.mrilc.profile import JointLimits
     from sim_plant_node.arm.task import MAX_ACCELERATION, MAX_VELOCITY
 
     return JointLimits(np.full(6, -POSITION_LIMIT), np.full(6, POSITION_LIMIT), np.full(6, MAX_VELOCITY),
@@ -189,8 +189,9 @@ def run_move(arm: Any, p: MovePlan, points: tuple[np.ndarray, np.ndarray, np.nda
 def run_case(plans: list[MovePlan], cycles: int, noise: float, learn: bool, case: str, seed: int = 0,
              settings: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``cycles`` cycles of ``plans`` on one offline arm (the moves run back to back); rows and the learners."""
-    from shaper_nodes.core.learning.mrilc.moves import MoveLearner, excess, profile_excess
+    from shaper_nodes.core.learning.mrilc.moves import MoveLearner
     from shaper_nodes.core.learning.mrilc.plan import residual_error
+    from shaper_nodes.core.learning.mrilc.profile import excess, profile_excess
     from sim_plant_node.arm.metrics import RESIDUAL_WINDOW, window_residual
     from sim_plant_node.arm.offline import OfflineArm
 
@@ -274,16 +275,14 @@ def summary(rows: list[dict[str, Any]], noise: float = 0.0) -> str:
     residual's servo and vibration parts (:mod:`reproductions.residual_split`); the largest correction; the
     goals (the residual, and its vibration part, at most 25 % of the schedule's at the last cycle on every move,
     every limit held exactly, no move slower)."""
-    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW
+    from sim_plant_node.arm.metrics import noise_floor
 
     sched = {r["move"]: r for r in rows if r["case"] == CASES[0]}
     learned = [r for r in rows if r["case"] == CASES[1]]
     last = max(r["cycle"] for r in learned)
-    floor = math.sqrt(3.0) * noise
     # one rule for "above the noise floor" (docs/guide/learning.md): the schedule's residual as measured above the
     # floor by more than twice the scatter of the noise's RMS over one window (N samples per axis: F / sqrt(6 N))
-    scatter = floor / math.sqrt(6.0 * RESIDUAL_WINDOW * 2.0 * RATE)  # the IMU samples at twice the controller
-    threshold = floor + 2.0 * scatter
+    floor, scatter, threshold = noise_floor(noise, 2.0 * RATE)  # the IMU samples at twice the controller
     lines = [f"| move | scheduled residual (noise-free) | MRILC at cycle {last} | ratio | best cycle ratio |"
              " servo / vibration part, scheduled | the same, MRILC | vibration ratio (best) |"
              " move + settle s sched -> MRILC | largest correction rad, rad/s, rad/s^2 |",

@@ -155,8 +155,9 @@ def payload_run(plans: list[MovePlan], shapers: list[Any], cycles: int, operator
     from reproductions.residual_split import SERVO_ZETA
     from shaper_nodes.core.identification import IdentificationError, identify
     from shaper_nodes.core.identification.drift import DriftWatch, check_mode
-    from shaper_nodes.core.learning.mrilc.moves import MoveLearner, profile_excess
+    from shaper_nodes.core.learning.mrilc.moves import MoveLearner
     from shaper_nodes.core.learning.mrilc.plan import residual_error
+    from shaper_nodes.core.learning.mrilc.profile import profile_excess
     from sim_plant_node.arm.offline import OfflineArm
 
     if operator not in OPERATORS:

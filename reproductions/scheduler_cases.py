@@ -33,8 +33,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from reproductions.common import docs_option, logs_folder
+from reproductions.scheduler_rules import (
+    FUZZY_POINTS,
+    JOINT,
+    interpolation_table,
+    mode_at,
+    rule_base_spec,
+    scheduler_parameters,
+    switch_spec,
+    true_mode_curve,
+)
 from shaper_nodes.core.cycles import END, START
-from sim_plant_node.models.two_mass import STEP_LEVELS, STEP_POSES, m1_of, two_mass_matrices
+from sim_plant_node.models.two_mass import STEP_LEVELS, STEP_POSES
 
 if TYPE_CHECKING:
     from sim_plant_node.clients.conductor import StartNode
@@ -43,59 +53,6 @@ RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz
 DWELL = 30.0      # s per step
 WINDOW = 10.0     # s after a step where its residual window starts
 PREROLL = 4.0     # s at rest before the first step (the scheduler's first shaper is active before the task starts)
-JOINT = "joint_1"
-FUZZY_POINTS = tuple(np.linspace(0.0, 0.7, 8))  # every 0.1 m
-
-
-def _mode_at(m1: float):
-    from shaper_nodes.core.scheduling import modes_of
-
-    return modes_of(two_mass_matrices(m1)[0])[0]
-
-
-def rule_base_spec(points, premise: str = "joint_1", membership: str = "triangular",
-                   with_models: bool = True, with_modes: bool = True) -> dict:
-    """A rule base (the mapping core.scheduling.fuzzy.rule_base_from_dict takes) with one rule per pose x0
-    in ``points`` (m): eq. (1) linearised at m1 = 10 x0 + 1 and/or its mode, and triangles
-    peaking at each point (shoulders at the ends)."""
-    from shaper_nodes.core.scheduling import modes_of, triangular_partition
-
-    rules = {}
-    for i, (x, mf) in enumerate(zip(points, triangular_partition(points), strict=True)):
-        a, b = two_mass_matrices(float(m1_of(x)))
-        rule: dict = {"membership": [membership], "membership_params": [mf.a, mf.b, mf.c]}
-        if with_models:
-            rule.update(a_matrix=a.ravel().tolist(), b_matrix=b.ravel().tolist())
-        if with_modes:
-            (mode,) = modes_of(a)
-            rule.update(natural_frequency=[mode.omega], damping_ratio=[mode.zeta])
-        rules[f"x{i}"] = rule
-    return {"premises": [premise], "rules": rules}
-
-
-def scheduler_parameters(spec: dict) -> dict:
-    """The scheduler node's parameters (flat names) for a rule base mapping (see rule_base_spec)."""
-    out: dict = {"premises": list(spec["premises"]), "rule_names": list(spec["rules"])}
-    if spec.get("range"):
-        out["range"] = [float(v) for v in spec["range"]]
-    for name, rule in spec["rules"].items():
-        for key, value in rule.items():
-            if key == "natural_frequency":  # the core's rad/s; the node takes Hz
-                key, value = "frequency_hz", [float(w) / (2 * math.pi) for w in value]
-            out[f"rules.{name}.{key}"] = [v if isinstance(v, str) else float(v) for v in value]
-    return out
-
-
-def switch_spec() -> dict:
-    """Seed 004 eq. (9) as a rule base: crisp sets x0 <= 0.35 (m1 = 1.2) and x0 > 0.35 (m1 = 8)."""
-    rules = {}
-    for name, (lo, hi), m1 in (("light", (-1e3, 0.35), 1.2), ("heavy", (0.35 + 1e-9, 1e3), 8.0)):
-        a, b = two_mass_matrices(m1)
-        rules[name] = {"membership": ["trapezoidal"], "membership_params": [lo, lo, hi, hi],
-                       "a_matrix": a.ravel().tolist(), "b_matrix": b.ravel().tolist()}
-    return {"premises": [JOINT], "rules": rules}
-
-
 @dataclass(frozen=True)
 class Case:
     name: str
@@ -105,7 +62,7 @@ class Case:
 
 
 def _cases() -> dict[str, Case]:
-    first = _mode_at(1.2)
+    first = mode_at(1.2)
     fuzzy = scheduler_parameters(rule_base_spec(FUZZY_POINTS, JOINT))
     return {
         "a": Case("a", "ZV on the first step's mode (m1 = 1.2 kg), fixed",
@@ -339,34 +296,6 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
 
 
 # --------------------------------------------------------------------------------------------- docs
-def interpolation_table() -> str:
-    """Frequency error of the interpolated mode against the plant's over x0 in [0, 0.7] m, for
-    rule bases of several sizes, interpolating the models or the mode parameters (ROS-free)."""
-    from shaper_nodes.core.scheduling import rule_base_from_dict
-
-    xs = np.linspace(0.0, 0.7, 281)
-    true = np.array([_mode_at(float(m1)).omega for m1 in m1_of(xs)])
-    mids = [0.5 * (a + b) for a, b in zip((0.0, *STEP_POSES[:-1]), STEP_POSES, strict=True)]
-    lines = ["| operating points x0 (m) | interpolating | largest error | error at the steps' midpoints"
-             f" x0 = {', '.join(f'{m:.3g}' for m in mids)} m |", "|---|---|---|---|"]
-    for label, pts in (("0.02, 0.7 (the paper's two)", STEP_POSES[::4]),
-                       ("0, 0.175, ..., 0.7 (5)", np.linspace(0, 0.7, 5)),
-                       ("0, 0.1, ..., 0.7 (8, case c)", FUZZY_POINTS)):
-        base = rule_base_from_dict(rule_base_spec(pts, JOINT))
-        for method in ("model", "modes"):
-            err = np.array([base.evaluate([x], method).modes[0].omega for x in xs]) / true - 1
-            at = np.interp(mids, xs, err)
-            lines.append(f"| {label} | {method} | {100 * np.max(np.abs(err)):.1f} % |"
-                         f" {', '.join(f'{100 * e:+.1f}' for e in at)} % |")
-    return "\n".join(lines) + "\n"
-
-
-def true_mode_curve(t: np.ndarray, x0: np.ndarray):
-    """The plant's mode (eq. (1) linearised at the present m1) along a run: rad/s and -."""
-    out = np.array([[m.omega, m.zeta] for m in (_mode_at(float(m1)) for m1 in m1_of(x0))])
-    return out[:, 0], out[:, 1]
-
-
 def markdown(runs: dict[str, Run]) -> str:
     names = list(runs)
     lines = ["| step | x0 (m) | " + " | ".join(f"({n}) residual (mm)" for n in names) + " |",

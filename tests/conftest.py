@@ -401,7 +401,7 @@ def start_scheduled_arm(start_node, rule_base, rate: float, readers: list[str], 
     """The arm in lockstep (waiting for ``readers``), the scheduler on ``rule_base`` (ZV, modes interpolated)
     and the shaper node asking it, all on simulated time: the per-move learners' rig. ``shaper`` adds to the
     shaper node's parameters (e.g. ``action.controller``)."""
-    from reproductions.scheduler_cases import scheduler_parameters
+    from reproductions.scheduler_rules import scheduler_parameters
     from sim_plant_node.arm.description import JOINT_NAMES
     from sim_plant_node.arm.task import HOME
 

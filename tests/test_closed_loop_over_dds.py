@@ -9,21 +9,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reproductions.closed_loop_cases import (
-    DELAY_USED,
+from reproductions.closed_loop_cases import DELAY_USED, OMEGA_A, Run002, run_seed001, run_seed002, tdf_interval_from_cli
+from reproductions.closed_loop_measures import (
     EVENT_TIME,
-    OMEGA_A,
-    Run002,
     dominant_oscillation,
     event_effect,
     growth,
     residual,
-    run_seed001,
-    run_seed002,
     settle_time,
     settled_window,
     shaper_floor,
-    tdf_interval_from_cli,
     vibration,
 )
 from shaper_nodes.core.closed_loop.qft import corners, nominal

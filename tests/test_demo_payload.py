@@ -47,7 +47,7 @@ TOL_MM = SETTLE_TOLERANCE * 1e3
 
 def test_a_payload_change_warns_relearns_and_every_move_is_back_within_the_tolerance(start_node, ros_context,
                                                                                     tmp_path):
-    from reproductions.scheduler_cases import scheduler_parameters
+    from reproductions.scheduler_rules import scheduler_parameters
 
     state = tmp_path / "learner_state.json"
     start_node("sim_plant_node", "sim_plant", {"plant.model": "arm", "task.start": ROTATED.tolist(), "rate": RATE,

@@ -20,7 +20,8 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
-from reproductions.scheduler_cases import CASES, rule_base_spec, run_case, scheduler_parameters
+from reproductions.scheduler_cases import CASES, run_case
+from reproductions.scheduler_rules import rule_base_spec, scheduler_parameters
 from shaper_msgs.msg import ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetShaper, ShaperAt

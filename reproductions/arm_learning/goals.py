@@ -3,8 +3,6 @@ moves above the noise floor by the one rule (:func:`floor_threshold`)."""
 
 from __future__ import annotations
 
-import math
-
 from reproductions.arm_learning.factors import SERVO_EXTRA
 from reproductions.arm_learning.paying import POOL_CYCLES
 from reproductions.arm_learning.runs import HEAVY, IMU_RATE, Row
@@ -42,10 +40,9 @@ def floor_threshold(noise: float) -> float:
     """The one rule's threshold (docs/guide/learning.md, "Above the noise floor: one rule"), m/s^2: the noise's
     floor F = sqrt(3) x ``noise`` plus twice one window's scatter of it, s = F / sqrt(6 N) (N the IMU's samples per
     axis in the residual window); 0 with no noise (every move judged)."""
-    from sim_plant_node.arm.metrics import RESIDUAL_WINDOW
+    from sim_plant_node.arm.metrics import noise_floor
 
-    floor = math.sqrt(3.0) * noise
-    return floor + 2.0 * floor / math.sqrt(6.0 * RESIDUAL_WINDOW * IMU_RATE)
+    return noise_floor(noise, IMU_RATE).threshold
 
 
 def _above(b: Row, threshold: float) -> bool:
@@ -134,12 +131,12 @@ def _payback_goal(rows: list[Row], case: str, base: dict[str, Row | None], n: in
 
 def checks(rows: list[Row], noise: float) -> list[str]:
     """The issue's "must show" items, measured on ``rows`` (lines of markdown)."""
-    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE
+    from sim_plant_node.arm.metrics import SETTLE_TOLERANCE, noise_floor
 
     have = {r["case"] for r in rows}
     if "scheduled" not in have:
         return []
-    floor = math.sqrt(3.0) * noise  # RMS of the norm of three axes of white noise
+    floor = noise_floor(noise).floor  # RMS of the norm of three axes of white noise
     last = max(r["cycle"] for r in rows if r["case"] == "scheduled")
     moves = list(dict.fromkeys(r["move"] for r in rows if r["case"] == "scheduled"))
     base = {m: _get(rows, "scheduled", m, last) for m in moves}

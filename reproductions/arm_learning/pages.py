@@ -3,7 +3,6 @@ factor costs), the sums per cycle, the tables per case."""
 
 from __future__ import annotations
 
-import math
 import pathlib
 
 from reproductions.arm_learning.factors import SERVO_EXTRA
@@ -81,13 +80,14 @@ def decomposition(rows: list[Row]) -> list[str]:
 
 def physics(rows: list[Row], noise: float = 0.0) -> list[str]:
     """What the schedule's residual is made of, measured (lines of markdown)."""
+    from sim_plant_node.arm.metrics import noise_floor
 
     sc = [r for r in rows if r["case"] == "scheduled"]
     if not sc or "servo_rms" not in sc[0]:
         return []
     last = max(r["cycle"] for r in sc)
     sc = [r for r in sc if r["cycle"] == last]
-    floor = math.sqrt(3.0) * noise
+    floor = noise_floor(noise).floor
     share = [f"{r['move']} {100 * r['servo_rms'] / r['residual_rms']:.0f} %" for r in sc]
     high = [r["move"] for r in sc if r["servo_rms"] > 0.25 * r["residual_rms"]]
     fit = max(abs(r["linear_rms"] / r["residual_rms"] - 1) for r in rows if r["case"] != "rigid" and "linear_rms" in r)

@@ -21,17 +21,14 @@ import pytest
 import yaml
 
 from shaper_nodes.analysis.calibration import (
-    DIGITS,
     END,
     MOTION_END,
     START,
     PoseData,
     compute,
-    report_dict,
-    scheduler_yaml,
     setup_dict,
-    shaper_yaml,
 )
+from shaper_nodes.analysis.calibration_outputs import DIGITS, report_dict, scheduler_yaml, shaper_yaml
 from shaper_nodes.analysis.calibration_report import write_outputs
 from shaper_nodes.core.calibration import Decay, IdentifySettings, PoseResult, identify_pose, rule_base_spec
 from shaper_nodes.core.calibration.plan import (

@@ -25,10 +25,9 @@ from shaper_nodes.analysis.calibration import (
     PoseData,
     compute,
     pose_sensor_fault,
-    report_dict,
-    sensor_faults,
     setup_dict,
 )
+from shaper_nodes.analysis.calibration_outputs import report_dict, sensor_faults
 from shaper_nodes.core.calibration import IdentifySettings
 from shaper_nodes.core.calibration.plan import make_plan
 from shaper_nodes.nodes.calibrate_stops import (

@@ -23,11 +23,10 @@ from matplotlib.colors import to_rgba
 from shaper_nodes.analysis.calibration import (
     WIRING,
     assemble,
-    scheduler_yaml,
     setup_dict,
-    shaper_yaml,
     wiring_of,
 )
+from shaper_nodes.analysis.calibration_outputs import scheduler_yaml, shaper_yaml
 from shaper_nodes.analysis.calibration_report import (
     RESIDUAL_SERIES,
     modes_figure,

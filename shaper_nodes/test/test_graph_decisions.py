@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
-from shaper_nodes.ros.graph_watch import (
+from shaper_nodes.ros.graph_rules import (
     UNKNOWN_NODE,
     Endpoint,
     Latch,

@@ -11,15 +11,12 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.learning.mrilc.model import MrilcError
-from shaper_nodes.core.learning.mrilc.moves import (
-    STATE_VERSION,
+from shaper_nodes.core.learning.mrilc.moves import STATE_VERSION, MoveLearner, moves_from_dict, moves_to_dict
+from shaper_nodes.core.learning.mrilc.profile import (
     JointLimits,
-    MoveLearner,
     Profile,
     clip_into,
     excess,
-    moves_from_dict,
-    moves_to_dict,
     profile_excess,
     project,
     spline_basis,

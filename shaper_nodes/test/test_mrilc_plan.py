@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.learning.mrilc.model import MrilcError
-from shaper_nodes.core.learning.mrilc.moves import JointLimits
 from shaper_nodes.core.learning.mrilc.plan import (
     PlanSettings,
     limit_breach,
@@ -18,6 +17,7 @@ from shaper_nodes.core.learning.mrilc.plan import (
     plan_operator,
     residual_error,
 )
+from shaper_nodes.core.learning.mrilc.profile import JointLimits
 
 PERIOD = 2e-3
 

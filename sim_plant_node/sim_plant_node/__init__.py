@@ -20,6 +20,11 @@ node
 clients
     What drives the node from outside: the conductor (start nodes, run cycles, collect results), the
     demo (``demo``, ``python -m sim_plant_node.demo``) and the arm's demo.
+
+Modules
+-------
+demo
+    ``python -m sim_plant_node.demo``: the demo, which lives in :mod:`.clients.demo`.
 """
 
-__all__ = ["arm", "clients", "controller", "models", "node"]
+__all__ = ["arm", "clients", "controller", "demo", "models", "node"]

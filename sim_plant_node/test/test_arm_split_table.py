@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from sim_plant_node.arm.metrics import noise_floor_threshold
+from sim_plant_node.arm.metrics import noise_floor
 from sim_plant_node.clients import arm_split
 
 
@@ -33,8 +33,8 @@ def test_the_servo_part_is_judged_where_the_reproduction_reached_it_and_the_vibr
 
 
 def test_moves_at_the_noise_floor_are_not_judged_and_no_table_without_the_schedule():
-    floor = noise_floor_threshold(0.01)
-    assert math.isclose(floor, 0.01777, abs_tol=5e-6) and noise_floor_threshold(0.0) == 0.0
+    floor = noise_floor(0.01).threshold
+    assert math.isclose(floor, 0.01777, abs_tol=5e-6) and noise_floor(0.0).threshold == 0.0
     quiet = rows({"home->rotated": (0.004, 0.02), "home->pick": (0.004, 0.02)}, residual=floor)
     text = "\n".join(arm_split.table(quiet, ["scheduled", "scheduled_list_moves"], 0.01))
     assert "no (at the floor)" in text and "not judged (no move above the noise floor)" in text

@@ -231,7 +231,7 @@ def test_delay_loop_overshoot_converges_to_the_exact_continuous_loop():
 
 
 def test_modal_split_separates_settling_from_vibration():
-    from reproductions.closed_loop_cases import dominant_oscillation, modal_split
+    from reproductions.closed_loop_measures import dominant_oscillation, modal_split
 
     dt = 1e-3
     t = np.arange(900) * dt

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from reproductions.scheduler_cases import rule_base_spec
+from reproductions.scheduler_rules import rule_base_spec
 from shaper_nodes.core.identification.modes import identify
 from shaper_nodes.core.scheduling.fuzzy import rule_base_from_dict
 from sim_plant_node.models.two_mass import (

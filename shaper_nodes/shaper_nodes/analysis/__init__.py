@@ -18,6 +18,13 @@ recovered); nothing here imports ``shaper_nodes.ros`` or ``shaper_nodes.nodes``.
 - :mod:`.report`: terminal table, Markdown, CSV, JSON; :mod:`.report_figures`: the PNG plots.
 - :mod:`.fleet`, :mod:`.fleet_drift`, :mod:`.fleet_report`: a fleet's recordings analysed on Dask and cached
   by content, each robot's modes against its baseline (drift alerts, retunes), the fleet report.
+- :mod:`.calibration`: a calibration's results from its recording (the pose map, the scheduler's rule base),
+  identified in :mod:`.calibration_pool` on :mod:`.worker_pool`'s processes; :mod:`.calibration_outputs`
+  makes report.json and the YAML files' texts, :mod:`.calibration_report` writes them with report.md and its
+  figures.
+- :mod:`.outcome` (:class:`~.outcome.Analysis`, what the analysis found), :mod:`.text` (numbers in the
+  reports' texts), :mod:`.options` (the analysis' options), :mod:`.synthetic` (recordings as a robot's own
+  recorder writes them, for tests and benchmarks).
 
 The CLIs are :mod:`shaper_nodes.cli.analyze_bag` (``analyze_bag``) and :mod:`shaper_nodes.cli.list_replay`
 (``list_replay``); see docs/guide/analysis.md.

@@ -26,7 +26,8 @@ import numpy as np
 
 from shaper_nodes.core.files import write_atomic
 
-from .calibration import Calibration, assemble, plan_from_setup, report_dict, scheduler_yaml, shaper_yaml, wiring_of
+from .calibration import Calibration, assemble, plan_from_setup, wiring_of
+from .calibration_outputs import report_dict, scheduler_yaml, shaper_yaml
 from .text import plus_minus_fixed
 
 #: the residual figure's series: (report key, label); nominal and worst case side by side, like with like

@@ -15,6 +15,12 @@ analyze_bag
 keystore
     ``shaper_keystore``: the suite's SROS2 keystore (CA, one enclave per node, signed permissions
     from :mod:`shaper_nodes.core.security`), made with ``openssl``.
+analyze_fleet
+    ``analyze_fleet``: a fleet's recordings analysed in parallel on Dask (modes over time per robot, drift
+    alerts, retunes).
+send_goal
+    ``send_goal``: one FollowJointTrajectory goal sent and its result printed (for machines without ros2cli);
+    its ``--cycle`` marks on /cycle_events in :mod:`.cycle_marks`.
 common
     What they share: argument types, the parser that does not exit, text tables and the ``main``
     that turns bad input into exit status 2.

@@ -30,6 +30,10 @@ cycle_records
     samples, a failed or saturated sensor).
 checks
     The one home of the number and array checks, with errors that name the problem.
+calibration
+    Calibration of a robot's workspace: the plan (poses, excitations, limits) and the pose map it measures.
+lifetime
+    A child process that ends with its parent (the parent-death signal).
 memory
     Freed memory given back to the system after something large was dropped (glibc ``malloc_trim``).
 files
@@ -51,5 +55,5 @@ lazy
     never needs them starts without them.
 """
 
-__all__ = ["checks", "closed_loop", "closed_pipe", "cycle_records", "cycles", "files", "identification", "lazy",
-           "learning", "lockstep", "rate", "scheduling", "security", "shaping", "stamps"]
+__all__ = ["calibration", "checks", "closed_loop", "closed_pipe", "cycle_records", "cycles", "files", "identification",
+           "lazy", "learning", "lifetime", "lockstep", "memory", "rate", "scheduling", "security", "shaping", "stamps"]

@@ -48,9 +48,9 @@ from shaper_nodes.analysis.calibration import (
     plan_from_setup,
     pose_folders,
     read_recording,
-    sensor_faults,
     setup_dict,
 )
+from shaper_nodes.analysis.calibration_outputs import sensor_faults
 from shaper_nodes.analysis.calibration_pool import NICENESS, PosePipeline
 from shaper_nodes.analysis.calibration_report import write_outputs
 from shaper_nodes.analysis.worker_pool import worker_pool

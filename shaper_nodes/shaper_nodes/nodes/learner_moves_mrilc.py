@@ -76,7 +76,7 @@ from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.cycles import END, START
 from shaper_nodes.core.learning.moves import MoveError, move_key
 from shaper_nodes.core.learning.mrilc.model import MrilcError
-from shaper_nodes.core.learning.mrilc.moves import JointLimits, MoveLearner, clip_into, profile_excess
+from shaper_nodes.core.learning.mrilc.moves import MoveLearner
 from shaper_nodes.core.learning.mrilc.plan import (
     MovePlan,
     PlanSettings,
@@ -85,6 +85,7 @@ from shaper_nodes.core.learning.mrilc.plan import (
     plan_operator,
     residual_error,
 )
+from shaper_nodes.core.learning.mrilc.profile import JointLimits, clip_into, profile_excess
 from shaper_nodes.ros.conversions import trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
 from shaper_nodes.ros.parameters import Spec, declare, param, table

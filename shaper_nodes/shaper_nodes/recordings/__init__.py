@@ -15,8 +15,10 @@ bounds
     size (:func:`read_metadata`, the one entry point to a recording's metadata), chunk sizes and
     compression ratios (:func:`scan_mcap`, :func:`check_chunk`), bounded inflation (:func:`inflate`).
 recovery
-    A damaged or unclosed MCAP file read record by record; :class:`Damage` and what it lost
-    (:func:`describe_damage`, :func:`describe_unclosed`).
+    A damaged or unclosed MCAP file read record by record (:func:`mcap_chunks`: its chunks' offsets).
+damage
+    :class:`Damage`, what a damaged or unclosed file lost, and how it is said (:func:`describe_damage`,
+    :func:`describe_unclosed`).
 writer
     :class:`BagWriter` (chunks closed and flushed by time, heartbeats, clean abandon),
     :class:`QueuedRecording` (the recorder's bounded queue and writer thread),
@@ -31,6 +33,11 @@ order
 cdr
     Pure-Python CDR: messages serialized in place for publishers (the sim plant's JointState,
     Clock, Imu), and the fields of Imu and JointState parsed directly by the analyses.
+cdr_arrays, cdr_trajectory
+    std_msgs/Float64MultiArray and trajectory_msgs/JointTrajectory read from and written to serialized bytes
+    (the shaper node's raw streamed inputs and outputs).
+cdr_sensors
+    Checked readers of serialized Imu and JointState (the stamp and the fields a reader uses).
 errors
     :class:`BagError` (every refusal and failure to read) and :class:`ChunkTooLarge`.
 """
@@ -63,6 +70,11 @@ if TYPE_CHECKING:
         joint_state_motion,
         stamp_parts,
     )
+    from .damage import (
+        Damage,
+        describe_damage,
+        describe_unclosed,
+    )
     from .errors import (
         BagError,
         ChunkTooLarge,
@@ -88,9 +100,6 @@ if TYPE_CHECKING:
         mcap_files,
     )
     from .recovery import (
-        Damage,
-        describe_damage,
-        describe_unclosed,
         mcap_chunks,
     )
     from .typestore import (
@@ -123,9 +132,9 @@ _HOME = {
     "ReadResult": "reader",
     "TopicInfo": "reader",
     "mcap_files": "reader",
-    "Damage": "recovery",
-    "describe_damage": "recovery",
-    "describe_unclosed": "recovery",
+    "Damage": "damage",
+    "describe_damage": "damage",
+    "describe_unclosed": "damage",
     "mcap_chunks": "recovery",
     "COMPRESSIONS": "writer",
     "BagWriter": "writer",

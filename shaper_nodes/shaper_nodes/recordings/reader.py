@@ -21,8 +21,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from .bounds import ReadLimits, bound_rosbags_decompressors, is_sqlite, read_metadata, scan_mcap
+from .damage import Damage
 from .errors import BagError
-from .recovery import Damage, RecoveredFile
+from .recovery import RecoveredFile
 from .typestore import default_typestore
 
 if TYPE_CHECKING:

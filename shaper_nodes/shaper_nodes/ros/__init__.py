@@ -12,6 +12,8 @@ diagnostics
 graph_watch
     The graph around a node's command path, watched: another node of its name, other publishers,
     wrong types, incompatible QoS, on the log once and on ``/diagnostics``.
+graph_rules
+    The graph watch's decisions without a graph: the findings, their status, and which hold (logged once).
 parameters
     Parameter tables (``Spec``), ``declare_all`` and ``values``: each node declares its
     parameters from one table, derived from its typed parameter class (``param``, ``table``,
@@ -43,4 +45,13 @@ message_types
     recordings themselves are read and written by ``shaper_nodes.recordings``.
 launching
     Installed node executables started as ``ros2 run`` starts them, for tests and tools.
+raw_stream
+    Streamed inputs on serialized messages (the shaper's array and JointTrajectory inputs, the scheduler's
+    joint states): bytes in, the core's rules, bytes out.
+take_loop
+    A lean node's subscriptions taken on one wait set built once, instead of rclpy's executor.
+stream_watch
+    The shaper node's bookkeeping of its inputs: arrivals through the rate watch, forwarded and refused counts.
+lockstep_reader
+    A lockstep reader's side on the wire: its acknowledgements to the sim plant, and its lost samples.
 """

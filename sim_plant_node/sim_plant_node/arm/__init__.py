@@ -18,6 +18,13 @@ task, metrics
     The pick-and-place cycle, and the residual vibration and path deviation of a move.
 offline
     The arm and its controller emulation (:mod:`sim_plant_node.controller`) stepped without ROS.
+lifted
+    MRILC per move's lifted operator: the flange accelerometer's response to each B-spline coefficient of a
+    joint profile correction, the arm linearised at the move's goal pose.
+residual_parts, residual_watch
+    The residual's two parts (the position loop's transient, the joints' vibration) from the arm's state at
+    the commanded end, and the watch that finds that state move by move (what the sim plant node reports).
 """
 
-__all__ = ["description", "dynamics", "metrics", "modal", "offline", "plant", "task"]
+__all__ = ["description", "dynamics", "lifted", "metrics", "modal", "offline", "plant", "residual_parts",
+           "residual_watch", "task"]

@@ -35,7 +35,7 @@ def lifted_operator(model: Any, pose: np.ndarray, count: int, samples: int, firs
     B-spline starts ``first`` output samples after the move's start, the response ``delay`` samples later."""
     from scipy.linalg import expm
 
-    from shaper_nodes.core.learning.mrilc.moves import spline_basis
+    from shaper_nodes.core.learning.mrilc.profile import spline_basis
 
     from .modal import state_matrix, tool_output
 

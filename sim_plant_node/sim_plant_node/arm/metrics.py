@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -130,12 +131,23 @@ def late_residual(imu_times: np.ndarray, imu: np.ndarray, commanded_end: float) 
     return window_residual(imu_times, imu, commanded_end + SERVO_TRANSIENT, commanded_end + RESIDUAL_WINDOW).rms
 
 
-def noise_floor_threshold(noise: float, imu_rate: float = 1000.0) -> float:
-    """The one rule's threshold (docs/guide/learning.md, "Above the noise floor: one rule"), m/s^2: the floor of an
-    accelerometer with white noise ``noise`` m/s^2 per axis, F = sqrt(3) x ``noise``, plus twice one window's
-    scatter of it, s = F / sqrt(6 N) (N = RESIDUAL_WINDOW x ``imu_rate`` samples per axis); 0 with no noise."""
+class NoiseFloor(NamedTuple):
+    """The noise floor of an accelerometer's residual RMS and the one rule's threshold above it, m/s^2
+    (:func:`noise_floor`)."""
+
+    floor: float  #: F = sqrt(3) x the noise: the RMS of the norm of three axes of white noise
+    scatter: float  #: s = F / sqrt(6 N): the scatter of that RMS over one window of N samples per axis
+    threshold: float  #: F + 2 s: a residual measured above it is above the floor
+
+
+def noise_floor(noise: float, imu_rate: float = 1000.0) -> NoiseFloor:
+    """The one rule (docs/guide/learning.md, "Above the noise floor: one rule") for an accelerometer with white
+    noise ``noise`` m/s^2 per axis: the floor F = sqrt(3) x ``noise``, plus twice one window's scatter of it,
+    s = F / sqrt(6 N) (N = RESIDUAL_WINDOW x ``imu_rate`` samples per axis); all 0 with no noise. The one copy
+    of the formula: the demo's report, the DDS client and the reproductions call it."""
     floor = math.sqrt(3.0) * noise
-    return floor + 2.0 * floor / math.sqrt(6.0 * RESIDUAL_WINDOW * imu_rate)
+    scatter = floor / math.sqrt(6.0 * RESIDUAL_WINDOW * imu_rate)
+    return NoiseFloor(floor, scatter, floor + 2.0 * scatter)
 
 
 def inverse_dynamics_peaks(model, times: np.ndarray, positions: np.ndarray, every: int = 5) -> np.ndarray:

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from ..arm.metrics import noise_floor
 from . import arm_split
 from .arm_client import ArmClient, MoveRun
 
@@ -53,7 +54,7 @@ def per_move_table(per_move: list[list[tuple[MoveRun, Any, Any]]], rows: list[di
     cycles = len(per_move)
     head = ["move", *[f"c{k + 1}" for k in range(cycles)], "last % of scheduled", "learner's last report"]
     out = [f"Per move and cycle (the per-move learner's cycles; accelerometer noise {noise:g} m/s^2, its floor"
-           f" {math.sqrt(3) * noise:.4f} m/s^2 in this RMS): residual RMS m/s^2, then move + settle s", "",
+           f" {noise_floor(noise).floor:.4f} m/s^2 in this RMS): residual RMS m/s^2, then move + settle s", "",
            "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for what, key in (("residual", "residual_rms"), ("move+settle", "move_and_settle_s")):
         for i, (run, _, _) in enumerate(per_move[0]):

@@ -28,7 +28,7 @@ import pathlib
 from collections.abc import Callable
 from typing import Any
 
-from ..arm.metrics import noise_floor_threshold
+from ..arm.metrics import noise_floor
 
 #: the sim plant's per-move reports
 SPLITS = "/sim_plant/residual_parts"
@@ -101,7 +101,7 @@ def table(rows: list[dict[str, Any]], cases: list[str], noise: float) -> list[st
     learning = [c for c in cases if c in OVER_SCHEDULE]
     if not sched or not learning:
         return []
-    threshold = noise_floor_threshold(noise)
+    threshold = noise_floor(noise).threshold
     out: list[str] = []
     for case in learning:
         last = {r["move"]: r for r in rows if r["case"] == case}

@@ -39,15 +39,12 @@ realtime
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock as RclpyClock
 from rclpy.clock import ClockType
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
@@ -63,17 +60,18 @@ from shaper_nodes.recordings.cdr import clock_cdr, stamp_parts
 from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 from shaper_nodes.ros.node_main import run_node, with_config
-from shaper_nodes.ros.parameters import declare, flat
+from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 
-from ..controller.jtc import JointTrajectoryController
-from ..controller.server import ControllerServer, tolerances_from
+from ..controller.server import ControllerServer
 from ..models.plants import CycleTask
 from ..models.two_mass import StaircaseTask
+from .controller_runs import ControllerRuns
 from .feedforward import Feedforward
+from .live_parameters import LiveParameters
 from .lockstep import Exchange, Readers
-from .models import START_ONLY, PlantValues, build_plant, make_task
-from .parameters import MODELS, PARAMETERS, PLANT_KEYS, WAITING, SimPlantParams
+from .models import PlantValues, build_plant, make_task
+from .parameters import MODELS, PARAMETERS, WAITING, SimPlantParams
 from .residual_report import residual_reports
 from .sensors import Sensors, StateBytes, WriteBatch, writer
 from .writer_profile import use_writer_profile
@@ -87,7 +85,7 @@ LOCKSTEP_IMU_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reli
 IDLE_STATE_PERIOD = 0.1
 
 
-class SimPlantNode(Node):
+class SimPlantNode(ControllerRuns, LiveParameters, Node):
     """See the module docstring. Extra arguments go to ``Node``."""
 
     def __init__(self, *args, **kwargs) -> None:
@@ -175,15 +173,7 @@ class SimPlantNode(Node):
         self._applied = self.plant.setpoint_at_rest
         self._raw = self._applied.copy()
         self.jtc: ControllerServer | None = None
-        if self.plant.trajectory_controller:
-            defaults = tolerances_from(tuple(self.joint_names), list(p.jtc.trajectory_tolerance),
-                                       list(p.jtc.goal_tolerance), float(p.jtc.goal_time))
-            self.jtc = ControllerServer(self, JointTrajectoryController(tuple(self.joint_names), 1.0 / self.rate,
-                                        defaults, self._applied), self._now, lambda: self.plant.joint_state()[:2],
-                                        self._jtc_busy, t.jtc_action, t.jtc_topic, self._trajectory_taken,
-                                        before_feedback=self._batch.flush)
-            if self.mode == "lockstep":
-                self._free_timer = self.create_timer(0.002, self._free_run)
+        self._start_controller(t.jtc_action, t.jtc_topic)
         idle = float(p.joint_states.idle_period)
         idle = (IDLE_STATE_PERIOD if self.plant.trajectory_controller else 0.0) if idle < 0 else idle
         if self.mode == "lockstep" and idle > 0:
@@ -210,47 +200,11 @@ class SimPlantNode(Node):
         return self.exchange.waiting_since
 
     # ----------------------------------------------------------------- configuration
-    def _values(self, params: SimPlantParams) -> PlantValues:
-        """``params`` (present or proposed) as the plant's builders read them."""
-        return PlantValues(params, self.rate, self.n)
-
     def _cycle_time(self) -> float | None:
         """Time since the current cycle's START at the present step, s (None before any)."""
         if self._cycle_start_step is None:
             return None
         return (self.step_index - self._cycle_start_step) / self.rate
-
-    def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
-        changed = {p.name for p in params}
-        q = self.params.with_changes(params)  # the parameters as they would be
-        if not self.plant.changes_live and changed.intersection(PLANT_KEYS):
-            model = self.params.value.plant.model
-            return SetParametersResult(successful=False, reason=f"the {model} (plant.model {model}) is chosen at"
-                                       " start-up; its model and plant.* do not change live")
-        if "plant.model" in changed and q.plant.model in START_ONLY:
-            return SetParametersResult(successful=False,
-                                       reason=f"plant.model {q.plant.model} is chosen at start-up only")
-        live = self.plant.live_parameters
-        v = self._values(q)
-        try:
-            new = build_plant(v, self.n) if changed.intersection(PLANT_KEYS) else None
-            for name, pose in (("task.start", q.task.start), ("task.goal", q.task.goal)):
-                if name in changed:
-                    v.vector(name, pose)
-            apply = self.plant.prepare({n: flat(q)[n] for n in live}) if changed.intersection(live) else None
-        except ValueError as err:
-            return SetParametersResult(successful=False, reason=str(err))
-        self.sensors.changed(q.imu, q.joint_states)
-        if apply is not None:  # checked above: takes effect at the next step
-            self.get_logger().info(apply())
-        if new is not None:  # all checks passed: takes effect at the next step
-            try:
-                new.state = self.plant.state.copy()
-            except ValueError:  # another state layout: start the new model at rest where the output is
-                new.reset(self.plant.joint_state()[0])
-            new.cycle_time = self.plant.cycle_time
-            self.plant = new
-        return SetParametersResult(successful=True)
 
     # ----------------------------------------------------------------- task
     def _start_task(self, matched: bool = False) -> tuple[bool, str]:
@@ -404,53 +358,7 @@ class SimPlantNode(Node):
         if self._parts is not None:  # (a report goes out after this period's samples)
             self._parts.after()
 
-    # ----------------------------------------------------------------- the trajectory controller (arm)
-    def _jtc_busy(self) -> str | None:
-        if self.task is not None:
-            return "a task is running: forward_position_controller drives the joints (~/stop_task first)"
-        return None
-
-    def _jtc_step(self) -> None:
-        """One controller period and one plant period (arm, no task)."""
-        assert self.jtc is not None
-        self.jtc.update(self._now())
-        c = self.jtc.controller
-        self._integrate(c.command, c.command_velocity)
-
-    def _idle_joint_states(self) -> None:
-        """Lockstep at rest (no trajectory, no task): publish the last joint state again."""
-        if (self.jtc is None or not self.jtc.running) and self.task is None and self.exchange.waiting_since is None:
-            self._js_pub.publish(self._last_js)
-
-    def _free_run(self) -> None:
-        """Lockstep: step while the controller executes a trajectory (no task runs), ~20 ms of wall time a call."""
-        if self.jtc is None:
-            return
-        if not self.jtc.running:  # nothing to step: off until a trajectory comes (_trajectory_taken)
-            self._free_idle = True
-            self._free_timer.cancel()
-            return
-        if self.task is not None or self.exchange.waiting_since is not None:
-            return
-        deadline = time.monotonic() + 0.02
-        try:
-            while self.jtc.running and time.monotonic() < deadline:
-                if not self.readers.may_step(self.sim_time + 1.0 / self.rate):  # held: resumed by an acknowledgement
-                    self._free_held = True
-                    self._free_timer.cancel()
-                    return
-                self._jtc_step()
-                self._publish_clock()  # the commanded positions (what "at rest" means)
-                self._batch.period()
-        finally:
-            self._batch.flush()  # (before a hold, the goal's result, the next callback)
-
-    def _trajectory_taken(self) -> None:
-        """The controller took a trajectory: its idle timer runs again (lockstep)."""
-        if self._free_idle:
-            self._free_idle = False
-            self._free_timer.reset()
-
+    # ------------------------------------------------- the trajectory controller (arm; the rest in .controller_runs)
     def _reader_acked(self) -> None:
         """A reader's acknowledgement while the plant is held: a trajectory or a task it held steps on at once if
         none holds it any more."""

@@ -17,6 +17,9 @@ recommend
     The shortest shaper whose worst-case percentage vibration over the modes' uncertainty
     band stays under a target, with every candidate ranked; modes that do not ring (heavily
     damped, or at the noise floor) set aside.
+drift
+    Drift of a vibration mode against the active shaper: the mode out of the shaper's working band,
+    confirmed over cycles (:class:`~.drift.DriftWatch`, :func:`~.drift.check_mode`).
 """
 
 from .modes import METHODS, ModeFit, combine_modes, identify, identify_records

@@ -14,8 +14,16 @@ session
     limit, a margin between cycles), implausible samples refused.
 moves
     MRILC per move: :class:`~.moves.MoveLearner`, a lifted (matrix) ILC of a move's joint profile
-    correction on B-splines, kept inside :class:`~.moves.JointLimits`, with a divergence guard and a
+    correction on B-splines, kept inside :class:`~.profile.JointLimits`, with a divergence guard and a
     versioned state per move (:func:`~.moves.moves_to_dict`, :func:`~.moves.moves_from_dict`).
+profile
+    A move's correction (the B-spline basis, :class:`~.profile.Profile`) and the joint limits it must hold:
+    their breach measured, the coefficients projected inside, the points sent clipped.
+plan
+    A move's MRILC set-up from its commanded profile (motion end, output grid, weights) and its error from
+    the measured accelerometer.
+payload
+    The payload worked out from a drifted mode (:func:`~.payload.payload_from_modes`), for the operators.
 params
     The learner node's parameters (:data:`DEFAULTS`, :data:`RANGES`, :data:`DESCRIPTIONS`) and
     the model and settings they build (:func:`model_from_params`, :class:`MrilcSettings`), and the check of one value

@@ -33,7 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .model import MrilcError
-from .moves import JointLimits, Profile, spline_basis
+from .profile import JointLimits, Profile, spline_basis
 
 __all__ = ["Family", "MovePlan", "PlanSettings", "limit_breach", "motion_end", "plan_move", "plan_operator",
            "residual_error"]
@@ -220,7 +220,7 @@ def limit_breach(q: Array, v: Array, a: Array, limits: JointLimits, names: list[
                  base: tuple[Array, Array, Array] | None = None) -> str | None:
     """The first limit a corrected (samples, joints) profile breaks, as words naming the joint and the limit
     (None: all held; 1e-9 relative allowed for rounding). With ``base``, the uncorrected profile: where it is already
-    past a limit, only what the correction adds beyond it counts (as :func:`~.moves.excess` does)."""
+    past a limit, only what the correction adds beyond it counts (as :func:`~.profile.excess` does)."""
     tol = 1e-9
     for j in range(q.shape[1]):
         joint = names[j] if names is not None and j < len(names) else f"joint {j}"
