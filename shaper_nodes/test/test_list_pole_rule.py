@@ -160,7 +160,7 @@ def test_the_change_at_a_pole_of_an_unchanged_response_is_about_one_standard_err
 
 
 def test_a_best_fit_at_the_search_grids_top_frequency_is_no_pole():
-    top = Component(2.0 * math.pi * (HZ_RANGE[1] + 30.0), 0.3, 0.0)  # a transient above the grid: its fit sits at the top
+    top = Component(2.0 * math.pi * (HZ_RANGE[1] + 30.0), 0.3, 0.0)  # above the grid: its best fit sits at the top
     rng = np.random.default_rng(3)
     clean = _response(top, 0.2, (1.0, 0.2, 0.1)) + np.array([0.1, -9.81, 0.05])
     assert pole_pick(T, clean + 0.001 * rng.standard_normal(clean.shape), _cost, 0.002, 0.12, 0.1) is None
