@@ -31,7 +31,7 @@ Cases (a registry: name -> function returning rows; another helper's MRILC case 
   that does not pay or when no factor is predicted to pay. A move with no factor kept whose reference finds none
   (or whose factor from one window did not pay) pools its reference windows (up to :data:`POOL_CYCLES`) and looks
   there for the loop's pole (:mod:`~shaper_nodes.core.learning.list.loop_pole`: what noise hides in one window); a
-  factor on it is judged by its measured amplitude at that pole (``PayingFactors.judge_at_pole``);
+  factor on it is judged by its measured response at that pole (``PayingFactors.judge_at_pole``);
 - ``tradeoff`` (one cycle, a side case): what a factor on a mode that rings costs in move + settle time, and
   the factor chosen within larger time budgets (:data:`TRADEOFF_BUDGETS`);
 - ``servo_cost`` (one cycle, a side case): what the pair on the loop's strongest damped component takes off the

@@ -20,10 +20,9 @@ from reproductions.arm_learning.factors import (
 )
 from reproductions.arm_learning.runs import RATE, Cell, Context, Row, Run, _save, register, row
 from reproductions.residual_split import SERVO_ZETA  # more damped than this: the position loop's transient
+from shaper_nodes.core.learning.list.pole_rule import POOL_CYCLES  # the node's payback.pool_cycles default
 
-#: ``scheduled_list_factor``: a move with no factor kept whose reference finds none predicted to pay runs its reference
-#: again, up to this many cycles, the windows pooled, the loop's pole searched in them (``PayingFactors.pooled_pick``)
-POOL_CYCLES = 3
+__all__ = ["POOL_CYCLES", "PayingFactors", "scheduled_list_factor"]
 
 
 class PayingFactors:
@@ -39,7 +38,7 @@ class PayingFactors:
         self.budget: dict[str, float] = {}  # the schedule's move + settle time, s: no kept state is slower
         self.stopped: set[str] = set()
         self.pool: dict[str, list[tuple[Any, Any, float]]] = {}  # the move's reference windows (pooled_pick)
-        self.at_pole: dict[str, tuple[list[complex], tuple[float, float]]] = {}  # a pooled trial's poles, reference
+        self.at_pole: dict[str, tuple[list[complex], tuple[float, float], Any]] = {}  # a trial's poles, reference
         self.trial_pool: dict[str, list[tuple[Any, Any, float]]] = {}  # its trial windows (judge_at_pole)
         self.pool_only: set[str] = set()  # moves whose trial from one window did not pay: pooled references only
 
@@ -165,37 +164,39 @@ class PayingFactors:
         if found is None:
             return None
         loop, err = found.loop, found.error
-        self.at_pole[key] = (list(found.poles), found.reference)
+        self.at_pole[key] = (list(found.poles), found.reference, found.response)
         self.ctx.note(self.case, f"{mv.name}, cycle {c}: the loop's pole in {len(pool)} reference windows pooled:"
                                  f" {loop.hz:.1f} Hz, zeta {loop.zeta:.3f}, amplitude {loop.amplitude:.4f}"
                                  f" +- {err:.4f} m/s^2 (with the pole fixed; beside {found.ringing} mode(s) that"
                                  " ring)")
         return found.choice
 
-    def judge_at_pole(self, entry: Any, run: Run, judged: tuple[list[complex], tuple[float, float]], name: str,
+    def judge_at_pole(self, entry: Any, run: Run, judged: tuple[list[complex], tuple[float, float], Any], name: str,
                       c: int) -> str:
-        """The keep rule for a factor chosen from pooled references: the trial pays when its measured amplitude at
+        """The keep rule for a factor chosen from pooled references: the trial pays when its measured response at
         the loop's pole (least squares with the reference's poles fixed, on the trial's windows pooled) is below the
-        pooled reference's by :data:`~shaper_nodes.core.learning.list.loop_pole.LOWER` combined standard
-        errors AND its move + settle time is within one 2 ms sample of the schedule's (the 1 s RMS cannot resolve
-        the part: it is 0.0001-0.0002 m/s^2 of it, the noise's scatter per window 0.0002). Lower but not by that
-        much: ``"again"``, the same trial once more (up to :data:`POOL_CYCLES` windows); otherwise ``"base"``."""
+        pooled reference's by :data:`~shaper_nodes.core.learning.list.loop_pole.LOWER` standard errors of the change
+        (:func:`~shaper_nodes.core.learning.list.loop_pole.change_at_pole`) AND its move + settle time is within
+        one 2 ms sample of the schedule's (the 1 s RMS cannot resolve the part: it is 0.0001-0.0002 m/s^2 of it, the
+        noise's scatter per window 0.0002). Lower but not by that much: ``"again"``, the same trial once more (up to
+        :data:`POOL_CYCLES` windows); otherwise ``"base"``."""
         from shaper_nodes.core.learning.list.loop_pole import pooled
         from shaper_nodes.core.learning.list.pole_rule import judge_pole
         from shaper_nodes.core.learning.moves import TIME_TOLERANCE_S
 
-        poles, ref = judged
+        poles, ref, response = judged
         pool = self.trial_pool.setdefault(entry.key, [])
         pool.append((run.times, run.imu, run.planned_end + run.measures.delay_s))
         t, y = pooled(pool)
         ms = run.measures.move_and_settle_s
         base = entry.base or {}
         in_time = ms <= base.get("move_settle_s", math.inf) + TIME_TOLERANCE_S
-        decision, trial = judge_pole(t, y, tuple(poles), ref, len(pool), in_time, POOL_CYCLES)
+        decision, trial, change = judge_pole(t, y, tuple(poles), ref, len(pool), in_time, POOL_CYCLES, response)
         paid, again = decision == "learn", decision == "again"
         self.ctx.note(self.case, f"{name}, cycle {c}: amplitude at the loop's pole {trial[0]:.4f} +- {trial[1]:.4f}"
                                  f" m/s^2 ({len(pool)} trial window(s) pooled) against the pooled reference's"
-                                 f" {ref[0]:.4f} +- {ref[1]:.4f}; move + settle {ms:.3f} s against"
+                                 f" {ref[0]:.4f} +- {ref[1]:.4f}, lower by {change:.2f} standard errors of the"
+                                 f" change; move + settle {ms:.3f} s against"
                                  f" {base.get('move_settle_s', math.nan):.3f} s: "
                                  + ("paid, kept" if paid else "lower, not resolved: tried again" if again
                                     else "did not pay"))

@@ -1,6 +1,8 @@
 """The pooled-pole rule per move (core/learning/list/pole_rule.py) and the running pool it keeps (loop_pole.Pool):
 the pool is the mean of the windows, bit for bit, and survives a save; the loop's pole found in pooled references
-gives a factor and the reference's amplitude at it; a trial is kept, run again or withdrawn by its amplitude there."""
+gives a factor and the reference's amplitude and response at it; a trial is kept, run again or withdrawn by its
+response there (the whitened change, ``loop_pole.change_at_pole``; the amplitude's rule for a reference saved before
+it); a best fit at the search grid's top is no pole."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from shaper_nodes.core.learning.list.loop_pole import Pool, pooled
+from shaper_nodes.core.learning.list.loop_pole import HZ_RANGE, LOWER, Pool, change_at_pole, fixed_pole_fit, pooled
 from shaper_nodes.core.learning.list.params import ListError, ListParams
 from shaper_nodes.core.learning.list.payback import Component
 from shaper_nodes.core.learning.list.pole_rule import POOL_CYCLES, PoleState, judge_pole, pole_pick
@@ -96,6 +98,7 @@ def test_the_loop_pole_is_picked_in_pooled_references_where_one_window_cannot_re
 
 
 def test_a_trial_is_kept_run_again_or_withdrawn_by_its_amplitude_at_the_pole():
+    """The amplitude's rule: a reference saved before the response was (no ``response``)."""
     ref_windows = _windows(0.04, 0.01, range(2))
     pick = pole_pick(*pooled(ref_windows), _cost, 0.002, 0.12, 0.1)
     assert pick is not None
@@ -105,10 +108,64 @@ def test_a_trial_is_kept_run_again_or_withdrawn_by_its_amplitude_at_the_pole():
     assert judge_pole(*same, pick.poles, pick.reference, 1)[0] == "base"
     # lower but within the combined errors: again while fewer than POOL_CYCLES windows, then withdrawn
     ref = (pick.reference[0], 0.6 * pick.reference[0])
-    decision, trial = judge_pole(*gone, pick.poles, ref, 1)
-    assert decision == "again" and trial[0] < ref[0]
+    decision, trial, change = judge_pole(*gone, pick.poles, ref, 1)
+    assert decision == "again" and trial[0] < ref[0] and math.isnan(change)
     assert judge_pole(*gone, pick.poles, ref, POOL_CYCLES)[0] == "base"
     assert judge_pole(*gone, pick.poles, pick.reference, 1, in_time=False)[0] == "base"
+
+
+def test_a_trial_is_kept_run_again_or_withdrawn_by_its_response_at_the_pole():
+    ref_windows = _windows(0.04, 0.01, range(2))
+    pick = pole_pick(*pooled(ref_windows), _cost, 0.002, 0.12, 0.1)
+    assert pick is not None and pick.response is not None
+    coef, cov = pick.response
+    assert coef.shape == (2, 3) and cov.shape == (2, 2) and np.all(np.linalg.eigvalsh(cov) > 0)
+    gone = pooled(_windows(0.0, 0.01, range(10, 11)))
+    decision, _, change = judge_pole(*gone, pick.poles, pick.reference, 1, response=pick.response)
+    assert decision == "learn" and change > LOWER
+    same = pooled(_windows(0.04, 0.01, range(20, 21)))
+    decision, _, change = judge_pole(*same, pick.poles, pick.reference, 1, response=pick.response)
+    assert decision == "base" and change < 1.0
+    # lower but not by LOWER standard errors of the change (the reference's covariance 8 times larger): again while
+    # fewer than POOL_CYCLES windows, then withdrawn; out of time: withdrawn
+    wide = (coef, 8.0 * cov)
+    decision, _, change = judge_pole(*gone, pick.poles, pick.reference, 1, response=wide)
+    assert decision == "again" and 0.0 < change <= LOWER
+    assert judge_pole(*gone, pick.poles, pick.reference, POOL_CYCLES, response=wide)[0] == "base"
+    assert judge_pole(*gone, pick.poles, pick.reference, 1, in_time=False, response=pick.response)[0] == "base"
+
+
+def test_the_change_at_a_pole_of_an_unchanged_response_is_about_one_standard_error_and_a_removed_one_resolves():
+    """change_at_pole on the loop's pole fixed (no search: its own bias only), 400 draws each, the transient's
+    amplitude about 3.4 standard errors in one window (a pole found near the margin): an unchanged response (the
+    same transient in reference and trial, independent noise) reads about N(0, 1) (centred; its spread somewhat
+    wider, about 1.1: the direction is measured in the reference's noise) and is judged lower by LOWER in under
+    5 %; a removed response is resolved far more often than by the norm-based amplitude's rule (about 60 % against
+    35 %)."""
+    poles = (RING.pole, LOOP.pole)
+    unchanged, removed, by_amplitude = [], [], 0
+    for k in range(400):
+        ref = fixed_pole_fit(T, _signal(0.08, 0.03, 1000 + k), 0.0, poles)
+        same = fixed_pole_fit(T, _signal(0.08, 0.03, 5000 + k), 0.0, poles)
+        gone = fixed_pole_fit(T, _signal(0.0, 0.03, 9000 + k), 0.0, poles)
+        assert ref.response is not None and same.response is not None and gone.response is not None
+        unchanged.append(change_at_pole(ref.response, same.response))
+        removed.append(change_at_pole(ref.response, gone.response))
+        e_ref, e_gone = ref.errors[-1], gone.errors[-1]
+        by_amplitude += gone.amplitudes[-1] + LOWER * math.hypot(e_ref, e_gone) < ref.amplitudes[-1]
+    u = np.asarray(unchanged)
+    assert abs(float(u.mean())) < 0.2 and 0.8 < float(u.std()) < 1.3
+    assert float(np.mean(u > LOWER)) < 0.05  # kept without a change: about 2 %
+    assert float(np.mean(np.asarray(removed) > LOWER)) > by_amplitude / 400 + 0.15
+
+
+def test_a_best_fit_at_the_search_grids_top_frequency_is_no_pole():
+    top = Component(2.0 * math.pi * (HZ_RANGE[1] + 30.0), 0.3, 0.0)  # above the grid: its best fit sits at the top
+    rng = np.random.default_rng(3)
+    clean = _response(top, 0.2, (1.0, 0.2, 0.1)) + np.array([0.1, -9.81, 0.05])
+    assert pole_pick(T, clean + 0.001 * rng.standard_normal(clean.shape), _cost, 0.002, 0.12, 0.1) is None
+    inside = _response(LOOP, 0.2, (1.0, 0.2, 0.1)) + np.array([0.1, -9.81, 0.05])
+    assert pole_pick(T, inside + 0.001 * rng.standard_normal(clean.shape), _cost, 0.002, 0.12, 0.1) is not None
 
 
 def test_a_moves_pole_state_survives_a_save_and_bad_ones_are_refused():
@@ -123,8 +180,21 @@ def test_a_moves_pole_state_survives_a_save_and_bad_ones_are_refused():
     assert st.judging and st.pool.count == 0  # the references' pool gave way to the trial's
     restored = PoleState.from_dict(json.loads(json.dumps(st.to_dict())))
     assert restored.poles == pytest.approx(pick.poles) and restored.reference == pytest.approx(pick.reference)
+    assert restored.response is not None and pick.response is not None
+    assert np.array_equal(restored.response[0], pick.response[0]) and np.array_equal(restored.response[1],
+                                                                                     pick.response[1])
+    old = st.to_dict()
+    del old["response"]  # a state saved before the response was: judged by the amplitude's rule
+    assert PoleState.from_dict(old).judging and PoleState.from_dict(old).response is None
+    for bad in ({**st.to_dict(), "response": {"coefficients": [[1.0, 2.0]], "covariance": [[1.0, 0.0], [0.0, 1.0]]}},
+                {**st.to_dict(), "response": {"coefficients": [[1.0], [2.0]], "covariance": [[1.0, 2.0], [2.0, 1.0]]}},
+                {**st.to_dict(), "response": {"coefficients": [[1.0], [math.nan]],
+                                              "covariance": [[1.0, 0.0], [0.0, 1.0]]}},
+                {**st.to_dict(), "response": [1.0]}, {**st.to_dict(), "extra": 1}):
+        with pytest.raises(ListError):
+            PoleState.from_dict(bad)
     st.reset()
-    assert not st.judging and st.pool.count == 0
+    assert not st.judging and st.pool.count == 0 and st.response is None
     good = PoleState(pooled_only=True).to_dict()
     assert PoleState.from_dict(good).pooled_only
     for bad in ({**good, "pooled_only": 1}, {**good, "poles": [[-1.0, 2.0]]}, {**good, "reference": [0.1, 0.01]},

@@ -37,12 +37,12 @@ reproduction's ``scheduled_list_factor`` case (``reproductions.arm_learning``) i
   is not tried). A trial that does not pay is withdrawn and the move stays with the factors kept before it.
 - **after**: the kept factors (or the schedule alone) stay; each cycle is still measured and reported. The default
   ``payback.max_factors`` 1 is one factor per move.
-- **pooled references** (``payback.pool_cycles``, default 3; :mod:`.learner_payback_pole`, the rule of
+- **pooled references** (``payback.pool_cycles``, default 5; :mod:`.learner_payback_pole`, the rule of
   :mod:`shaper_nodes.core.learning.list.pole_rule`, the reproduction's): a move over a schedule with no factor kept
   whose reference finds none predicted to pay runs its reference again, up to that many cycles, the windows aligned
   at the shaped command's end and averaged; the loop's pole is searched in the mean and a factor on it chosen by the
-  same time rule; its trial is judged at the pole (its own windows pooled: kept when its amplitude there is lower by
-  2 combined standard errors, run again when lower but not resolved, withdrawn otherwise). A factor from one window
+  same time rule; its trial is judged at the pole (its own windows pooled: kept when its response there is lower by
+  2 standard errors of the change, run again when lower but not resolved, withdrawn otherwise). A factor from one window
   whose trial did not pay sends the move's references to the pool from then on.
 
 State: the move's entry (:class:`~shaper_nodes.core.learning.moves.MoveEntry`): ``base`` (the latest reference's

@@ -10,8 +10,9 @@ between cycles and in the state file, and says what was decided:
   and searches the loop's pole in the mean; a factor on it chosen by the one-sample time rule is the move's trial;
   none after ``payback.pool_cycles`` windows: the move is held at the schedule alone;
 - the trial of a factor chosen so is judged at the pole (:meth:`PooledPole.trial`): its windows pooled, kept when
-  its amplitude there is lower than the reference's by 2 combined standard errors, run again when lower but not by
-  that much (up to ``payback.pool_cycles`` windows), withdrawn otherwise. The node measures no flange position over
+  its response there is lower than the reference's by 2 standard errors of the change
+  (:func:`~shaper_nodes.core.learning.list.loop_pole.change_at_pole`), run again when lower but not by that much
+  (up to ``payback.pool_cycles`` windows), withdrawn otherwise. The node measures no flange position over
   a schedule, so the time is the one predicted before the trial (within one 2 ms sample), as for the one-window
   rule;
 - a factor from one window whose trial did not pay: the move's references are pooled from then on (its pool starts
@@ -116,13 +117,15 @@ class PooledPole:
         count = st.pool.count
         t, y = st.pool.mean()
         ref = st.reference
-        decision, trial = judge_pole(t, y, st.poles, ref, count, True, self.cycles)
+        decision, trial, change = judge_pole(t, y, st.poles, ref, count, True, self.cycles, st.response)
         self.measured[key] = (count, *trial)
         if decision != "again":  # decided: the move has its factor, or is held (nothing pooled any more)
             del self.states[key]
         return decision, trial, count, (
             f"; amplitude at the loop's pole {trial[0]:.4g} +- {trial[1]:.4g} m/s^2 ({count} trial window(s) pooled)"
-            f" against the pooled reference's {ref[0]:.4g} +- {ref[1]:.4g}: "
+            f" against the pooled reference's {ref[0]:.4g} +- {ref[1]:.4g}"
+            + ("" if math.isnan(change) else f", its response lower by {change:.2f} standard errors of the change")
+            + ": "
             + {"learn": "lower, the factor is kept", "again": "lower, not resolved: the trial runs again",
                "base": ("lower, not resolved in the windows allowed" if trial[0] < ref[0] else "not lower")
                + ": withdrawn, the schedule alone, held"}[decision])
