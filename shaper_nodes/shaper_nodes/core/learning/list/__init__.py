@@ -21,6 +21,15 @@ payback
 stack
     A move's stacked factors (:class:`.stack.FactorStack`: those kept, each because it paid, and the one on
     trial) and their convolution, the one impulse sequence the move's goals run with (:func:`.stack.stack_shaper`).
+loop_pole
+    The position loop's damped pole in a noisy residual: reference windows pooled
+    (:class:`.loop_pole.Pool`), the pole searched with the ringing modes fixed (:func:`.loop_pole.loop_pole`),
+    a trial's change at the pole in standard errors (:func:`.loop_pole.change_at_pole`).
+pole_rule
+    The pooled-pole rule per move (:func:`.pole_rule.pole_pick`, :func:`.pole_rule.judge_pole`,
+    :class:`.pole_rule.PoleState`): one copy for the learner node and the reproduction.
+settle
+    A move's move + settle time from its accelerometer, measured and predicted, for a move with no schedule.
 session
     The bookkeeping the learner node and the offline replay share: which shaper a cycle ran
     with, the accelerometer buffer (bounded: the cycle duration limit), the sensor's range,
