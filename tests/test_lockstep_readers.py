@@ -175,6 +175,43 @@ def test_a_reader_that_stops_acknowledging_is_dropped_with_one_line(start_node, 
     reader_node.destroy_node()
 
 
+def _wait_log(proc, text: str, timeout: float = 120.0) -> str:
+    """The line of ``proc``'s log holding ``text``, once it is there."""
+    deadline = time.monotonic() + timeout
+    while True:
+        lines = [ln for ln in proc.log_path.read_text().splitlines() if text in ln]
+        if lines:
+            return lines[-1]
+        assert time.monotonic() < deadline and proc.running(), proc.log_path.read_text()
+        time.sleep(0.05)
+
+
+def test_a_reader_paused_past_the_lease_is_counted_from_the_plants_time_when_back(start_node, ros_context,
+                                                                               tmp_path):
+    """The recorder (on /tip_imu alone) paused until it leaves the graph (the DDS lease): the plant steps on
+    without it, and what it sends meanwhile never reaches it. Continued, it is back with its last acknowledgement,
+    behind the plant's time; held at it the plant waited for a sample that never comes, until
+    lockstep.reader_timeout (here an hour: the next goal never ended; session 13's walk, 30 s). It is counted from
+    the plant's time, and the next goal succeeds with it waited for."""
+    plant = sim(start_node, ["/recorder"], **{"lockstep.reader_timeout": 3600.0})
+    recorder = start_node("shaper_nodes", "recorder", {"output": str(tmp_path / "bag"), "topics": ["/tip_imu"]})
+    _wait_log(plant, "lockstep: reader /recorder counted")
+    mover = Mover(ros_context)
+    assert mover.move(goal(0.1, 0.5, 0.2)) == 0
+    os.kill(recorder.proc.pid, signal.SIGSTOP)
+    try:  # the plant holds the move a lead beyond the paused recorder until the lease drops it, then completes it
+        assert mover.move(goal(-0.1, 0.5, 0.2)) == 0
+        _wait_log(plant, "lockstep: reader /recorder went away")
+    finally:
+        os.kill(recorder.proc.pid, signal.SIGCONT)
+    back = _wait_log(plant, "lockstep: reader /recorder is back")
+    assert "never reach it" in back, back
+    assert mover.move(goal(0.1, 0.5, 0.2)) == 0  # not held by the samples it lost
+    log = plant.log_path.read_text()
+    assert "reader_timeout" not in log and "Traceback" not in log, log
+    mover.node.destroy_node()
+
+
 # ---------------------------------------------------------------------- the readers paused, the numbers the same
 def _children(pid: int) -> dict[int, str]:
     """The child processes of ``pid``: pid -> command line."""
