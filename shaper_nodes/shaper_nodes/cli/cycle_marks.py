@@ -74,8 +74,9 @@ class CycleMarks:
         The publisher is new (one per command) and volatile, as the subscribers are: a subscriber that has not
         matched it yet when START goes out never gets START, and the writer's side matches a reader before the
         reader's side matches the writer (a volatile reader that matches late starts after the samples sent
-        before). Sent at the first match, START reached the identifier and not the learner in 5 of 42 goals of
-        the owner's walk on the sim arm (session 13: "END without its START", the cycle not learned from)."""
+        before). Sent at the first match, one of the three listeners (learner, identifier, recorder) missed START
+        in 6 of 23 goals of the owner's walk on the sim arm (session 13: "END without its START", the cycle not
+        learned from)."""
         matched = self.pub.get_subscription_count()
         now = time.monotonic()
         if not (matched > 0 and matched >= self.node.count_subscribers(self.spec.topic)):
