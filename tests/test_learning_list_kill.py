@@ -324,6 +324,29 @@ def test_iterative_a_kill_9_during_a_move_resumes_every_moves_learner_from_its_s
         cell.close()
 
 
+def test_a_cycle_whose_end_never_came_is_reported_not_dropped(start_node, ros_context, tmp_path):
+    """A cycle whose END never reaches the learner (lost while it was paused past the DDS lease, session 13's walk:
+    its START came before the pause, its END while it was out of the graph) was replaced by the next START without a
+    word: no log line, no report. It is reported as not learned from when the next cycle's event comes, and the
+    next cycle is learned from as usual."""
+    cell = Cell(start_node, ros_context, tmp_path / "learner_state.json", "/shaper/follow_joint_trajectory")
+    try:
+        cell.peer.spin_until(lambda: cell.peer.learner_up(INPUTS, set()), "the learner's subscriptions")
+        cell.wait_started(0, 1)
+        assert cell.run(0, 0)[0]["iteration"] == 1.0
+        t0 = cell.start(1)  # pick -> home: START, its goal, its accelerometer; MOTION_END and END lost
+        cell.event(CycleEvent.START, 1, t0, 1)
+        cell.peer.run_goal(plan(1), "the goal of cycle 1")
+        cell.imu(t0, MOTION + 1.8)
+        got, _ = cell.run(2, 0)
+        assert got["iteration"] == 2.0 and "skipped" not in got, got
+        assert cell.peer.report(1) == {"skipped": 1.0}
+        line = "cycle 1 not learned from: its END never came"
+        cell.peer.spin_until(lambda: any(line in got for got in cell.peer.logs), "the learner's line on cycle 1")
+    finally:
+        cell.close()
+
+
 #: the pooled-pole test's accelerometer noise per axis, m/s^2, and the loop's transient (50 Hz, damping 0.6)
 NOISE, LOOP_HZ, LOOP_ZETA = 0.005, 50.0, 0.6
 

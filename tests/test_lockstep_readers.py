@@ -27,6 +27,7 @@ import rclpy
 from builtin_interfaces.msg import Duration
 from conftest import ONE_WORKER, SMALL_CALIBRATION_PLANT, SMALL_PLAN, calibrate_config
 from control_msgs.action import FollowJointTrajectory
+from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -36,7 +37,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from shaper_nodes.ros.action_client import ResilientActionClient
 from shaper_nodes.ros.conversions import time_to_sec
-from shaper_nodes.ros.lockstep_reader import LockstepReader, header_stamp, subscribe_draining
+from shaper_nodes.ros.lockstep_reader import AckWatch, LockstepReader, header_stamp, subscribe_draining
 from sim_plant_node.arm.description import JOINT_NAMES
 from sim_plant_node.arm.task import HOME
 
@@ -173,6 +174,60 @@ def test_a_reader_that_stops_acknowledging_is_dropped_with_one_line(start_node, 
     ex.shutdown()
     mover.node.destroy_node()
     reader_node.destroy_node()
+
+
+def _wait_log(proc, text: str, timeout: float = 120.0) -> str:
+    """The line of ``proc``'s log holding ``text``, once it is there."""
+    deadline = time.monotonic() + timeout
+    while True:
+        lines = [ln for ln in proc.log_path.read_text().splitlines() if text in ln]
+        if lines:
+            return lines[-1]
+        assert time.monotonic() < deadline and proc.running(), proc.log_path.read_text()
+        time.sleep(0.05)
+
+
+def test_a_reader_paused_past_the_lease_is_counted_from_the_plants_time_when_back(start_node, ros_context,
+                                                                               tmp_path):
+    """The recorder (on /tip_imu alone) paused until it leaves the graph (the DDS lease): the plant steps on
+    without it, and what it sends meanwhile never reaches it. Continued, it is back with its last acknowledgement,
+    behind the plant's time; held at it the plant waited for a sample that never comes, until
+    lockstep.reader_timeout (here an hour: the goal during which it came back never ended; session 13's walk, 30 s).
+    It is counted from the plant's time, and the goals succeed with it waited for; its recording's hole is reported."""
+    plant = sim(start_node, ["/recorder"], **{"lockstep.reader_timeout": 3600.0})
+    recorder = start_node("shaper_nodes", "recorder", {"output": str(tmp_path / "bag"), "topics": ["/tip_imu"]})
+    _wait_log(plant, "lockstep: reader /recorder counted")
+    mover = Mover(ros_context)
+    assert mover.move(goal(0.1, 0.5, 0.2)) == 0
+    os.kill(recorder.proc.pid, signal.SIGSTOP)
+    try:  # the plant holds the move a lead beyond the paused recorder until the lease drops it, then completes it
+        assert mover.move(goal(-0.1, 0.5, 0.2)) == 0
+        _wait_log(plant, "lockstep: reader /recorder went away")
+    finally:
+        os.kill(recorder.proc.pid, signal.SIGCONT)
+    # back in the graph while the plant rests: its last acknowledgement (kept by the topic) reaches a new subscriber,
+    # and two of its statuses after it (1 s apart: the plant, which heard the same announcement, has matched it again
+    # too); the plant takes that acknowledgement at the next move's first step, before the recorder has a sample of it
+    watch = AckWatch(mover.node, "/recorder")
+    mover.spin_until(lambda: watch.announced, "the recorder's acknowledgement, re-sent")
+    beats: list[object] = []
+    mover.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: beats.extend(
+        st for st in m.status if st.name.startswith("recorder")), 100)
+    mover.spin_until(lambda: len(beats) >= 2, "two statuses of the recorder")
+    assert mover.move(goal(0.1, 0.5, 0.2)) == 0  # the old rule: held at what it took before the pause, for ever
+    back = _wait_log(plant, "lockstep: reader /recorder is back", timeout=1.0)
+    assert "never reach it" in back, back
+    assert mover.move(goal(-0.1, 0.5, 0.2)) == 0
+    log = plant.log_path.read_text()
+    assert "reader_timeout" not in log and "Traceback" not in log, log
+    mover.node.destroy_node()
+    # the recording's hole is reported: at close (it said nothing, session 13), and in the metadata
+    recorder.stop()
+    closed = _wait_log(recorder, "closed ")
+    lost = re.search(r"lost (\d+) samples of /tip_imu \(gaps in the stamps\): the recording has holes", closed)
+    assert lost and int(lost.group(1)) > 0, closed
+    meta = (tmp_path / "bag" / "metadata.yaml").read_text()
+    assert f"shaper_nodes.recorder.lost: /tip_imu={lost.group(1)}" in meta, meta
 
 
 # ---------------------------------------------------------------------- the readers paused, the numbers the same

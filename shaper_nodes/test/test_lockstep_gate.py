@@ -82,6 +82,35 @@ def test_gate_drops_a_reader_that_went_away():
     assert gate.may_step(9.0, 0.0) == (True, "")
 
 
+def test_gate_counts_a_reader_back_from_out_of_the_graph_from_the_plants_time():
+    """A reader paused past the DDS lease leaves the graph; the plant steps on, and what it sends meanwhile never
+    reaches the reader (unmatched). Back, its last acknowledgement (kept by the topic) is behind the plant's time:
+    held at it, the reader could never release the plant (no sample to take) until lockstep.reader_timeout (30 s
+    on the sim arm, session 13). It is counted from the plant's time instead, with the line saying so."""
+    gate = ReaderGate(["/paused"], lead=0.25, timeout=30.0)
+    gate.ack("/paused", 19.5, sim_time=19.5)
+    assert "went away" in gate.leave("/paused")
+    assert gate.may_step(21.8, 0.0) == (True, "")  # stepped on without it
+    back = gate.ack("/paused", 19.513, sim_time=21.85)
+    assert "back" in back and "never reach it" in back and "21.850" in back and "\n" not in back
+    assert gate.acked["/paused"] == 21.85
+    assert gate.may_step(21.85 + 0.2, 100.0) == (True, "")  # not held by what it cannot take
+    assert gate.may_step(21.85 + 0.3, 100.0) == (False, "")  # but waited for again, a lead beyond
+    gate.ack("/paused", 22.0, sim_time=22.1)
+    assert gate.acked["/paused"] == 22.0 and gate.may_step(22.2, 101.0) == (True, "")
+    # dropped for its silence first, out of the graph after: also counted from the plant's time when back
+    gate.may_step(23.0, 200.0)
+    ok, line = gate.may_step(23.0, 230.0)
+    assert ok and "reader_timeout" in line
+    assert gate.leave("/paused") == ""  # said once
+    assert "never reach it" in gate.ack("/paused", 22.0, sim_time=40.0) and gate.acked["/paused"] == 40.0
+    # a slow reader dropped for its silence, still in the graph, has the steps queued: held at what it took
+    gate.may_step(40.5, 300.0)
+    gate.may_step(40.5, 330.0)
+    back = gate.ack("/paused", 40.1, sim_time=45.0)
+    assert "back" in back and "never" not in back and gate.acked["/paused"] == 40.1
+
+
 @pytest.mark.parametrize("lead, timeout", [(0.0, 1.0), (math.inf, 1.0), (0.1, 0.0), (0.1, math.nan)])
 def test_gate_refuses_bad_settings(lead, timeout):
     with pytest.raises(ValueError, match="lockstep"):

@@ -15,8 +15,9 @@ simulator's simulated time: no ``use_sim_time`` needed), as the CycleEvent messa
 - END ``--duration + --hold`` s after START (the goal's last point: the hold is the cycle's residual
   window, so ``--cycle`` needs ``--hold`` > 0).
 
-START goes out before the goal (once a subscriber of the events topic has matched, or after
-``--timeout`` with a warning that nobody listens); MOTION_END and END once the goal succeeded, and the
+START goes out before the goal (once every subscriber of the events topic the graph names has matched, or
+after ``--timeout`` with a warning that nobody, or not everybody, listens), and the goal once every subscriber
+has acknowledged START (bounded by ``--timeout``); MOTION_END and END once the goal succeeded, and the
 command waits (bounded) until every subscriber has acknowledged them. A goal that does not succeed
 gets no MOTION_END and END: the learner drops the unfinished cycle at the next START.
 """
@@ -33,6 +34,9 @@ from typing import Any
 EVENTS = "/cycle_events"
 #: the marks' queue depth (reliable, volatile: as the learner and the identifier subscribe)
 DEPTH = 10
+#: wall s every subscriber the graph names must have matched the marks' publisher before START goes out (the
+#: readers' side of the match comes after the writer's: CycleMarks.matched_all)
+SETTLE = 0.5
 
 
 @dataclass(frozen=True)
@@ -57,18 +61,44 @@ class CycleMarks:
         self.pub = node.create_publisher(CycleEvent, spec.topic, DEPTH)
         #: the latest joint state's stamp, s (the clock the marks are stamped on)
         self.latest = 0.0
+        self._matched_since: float | None = None  # wall time every subscriber was matched since (matched_all)
         node.create_subscription(JointState, joint_states, self._on_state, 10)
 
     def _on_state(self, msg: Any) -> None:
         self.latest = max(self.latest, msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
 
+    def matched_all(self) -> bool:
+        """Whether every subscriber of the topic the graph names (one at least) has matched the marks' publisher,
+        and has for :data:`SETTLE` s of wall time.
+
+        The publisher is new (one per command) and volatile, as the subscribers are: a subscriber that has not
+        matched it yet when START goes out never gets START, and the writer's side matches a reader before the
+        reader's side matches the writer (a volatile reader that matches late starts after the samples sent
+        before). Sent at the first match, one of the three listeners (learner, identifier, recorder) missed START
+        in 6 of 23 goals of the owner's walk on the sim arm (session 13: "END without its START", the cycle not
+        learned from)."""
+        matched = self.pub.get_subscription_count()
+        now = time.monotonic()
+        if not (matched > 0 and matched >= self.node.count_subscribers(self.spec.topic)):
+            self._matched_since = None
+            return False
+        if self._matched_since is None:
+            self._matched_since = now
+        return now - self._matched_since >= SETTLE
+
     def wait_listeners(self, spin_until: Any, timeout: float, prog: str) -> None:
-        """Wait (bounded) for a subscriber of the topic; without one say that nobody will see the marks."""
+        """Wait (bounded) for every subscriber of the topic to match; without one say that nobody will see the
+        marks, with some unmatched that they may miss START."""
         try:
-            spin_until(lambda: self.pub.get_subscription_count() > 0, timeout, f"subscriber of {self.spec.topic}")
+            spin_until(self.matched_all, timeout, f"subscriber of {self.spec.topic}")
         except RuntimeError:
-            print(f"{prog}: WARNING: no subscriber of {self.spec.topic} within {timeout:g} s: the cycle marks go"
-                  " out unheard (start the learner, identifier or recorder first)", file=sys.stderr)
+            if self.pub.get_subscription_count() == 0:
+                print(f"{prog}: WARNING: no subscriber of {self.spec.topic} within {timeout:g} s: the cycle marks go"
+                      " out unheard (start the learner, identifier or recorder first)", file=sys.stderr)
+            else:
+                print(f"{prog}: WARNING: {self.pub.get_subscription_count()} of the"
+                      f" {self.node.count_subscribers(self.spec.topic)} subscribers of {self.spec.topic} matched"
+                      f" within {timeout:g} s: the others may miss the cycle's START", file=sys.stderr)
 
     def publish(self, kind: int, stamp_s: float, start: Sequence[float], goal: Sequence[float]) -> None:
         from shaper_nodes.ros.conversions import sec_to_time
@@ -78,19 +108,26 @@ class CycleMarks:
         msg.header.stamp = sec_to_time(stamp_s)
         self.pub.publish(msg)
 
-    def start(self, stamp_s: float, start: Sequence[float], goal: Sequence[float]) -> None:
+    def start(self, stamp_s: float, start: Sequence[float], goal: Sequence[float], timeout: float = 0.0,
+              prog: str = "") -> None:
+        """START, then wait (bounded by ``timeout`` s) until every subscriber has acknowledged it: the goal
+        goes out only once the listeners know the cycle began."""
         self.publish(self.msg.START, stamp_s, start, goal)
+        self._acked(timeout, prog, "START")
+
+    def _acked(self, timeout: float, prog: str, what: str) -> None:
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + timeout
+        while not self.pub.wait_for_all_acked(Duration(seconds=0.1)):
+            if time.monotonic() > deadline:
+                print(f"{prog}: WARNING: the cycle's {what} not acknowledged by every subscriber"
+                      f" of {self.spec.topic} within {timeout:g} s", file=sys.stderr)
+                return
 
     def finish(self, start_s: float, duration: float, hold: float, start: Sequence[float],
                goal: Sequence[float], timeout: float, prog: str) -> None:
         """MOTION_END and END of the cycle that started at ``start_s``, then wait for their acknowledgement."""
-        from rclpy.duration import Duration
-
         self.publish(self.msg.MOTION_END, start_s + duration, start, goal)
         self.publish(self.msg.END, start_s + duration + hold, start, goal)
-        deadline = time.monotonic() + timeout
-        while not self.pub.wait_for_all_acked(Duration(seconds=0.1)):
-            if time.monotonic() > deadline:
-                print(f"{prog}: WARNING: the cycle's MOTION_END and END were not acknowledged by every subscriber"
-                      f" of {self.spec.topic} within {timeout:g} s", file=sys.stderr)
-                return
+        self._acked(timeout, prog, "MOTION_END and END were")

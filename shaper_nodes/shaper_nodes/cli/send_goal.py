@@ -269,21 +269,22 @@ def main(args: list[str] | None = None) -> int:
     sender = GoalSender(node, executor, opts.action)
     marks = None
     try:
+        if opts.cycle is not None:  # first: DDS matches the marks' publisher while the rest is waited for
+            from shaper_nodes.cli.cycle_marks import CycleMarks, CycleSpec
+
+            marks = CycleMarks(node, CycleSpec(opts.cycle, opts.task, opts.events), opts.joints, opts.joint_states)
         here, stamp = (sender.current(opts.joint_states, opts.joints, opts.timeout)
                        if opts.from_current or opts.cycle is not None else (None, 0.0))
         points = trajectory_points(opts.positions, opts.duration, here if opts.from_current else None, opts.hold)
         on_send = None
-        if opts.cycle is not None and here is not None:
-            from shaper_nodes.cli.cycle_marks import CycleMarks, CycleSpec
-
-            marks = CycleMarks(node, CycleSpec(opts.cycle, opts.task, opts.events), opts.joints, opts.joint_states)
+        if marks is not None and here is not None:
             marks.wait_listeners(sender.spin_until, opts.timeout, PROG)
             cycle_marks, start_pose = marks, here
 
             def on_send() -> None:  # START as the goal goes out, at the latest joint state's stamp
                 nonlocal stamp
                 stamp = max(stamp, cycle_marks.latest)
-                cycle_marks.start(stamp, start_pose, opts.positions)
+                cycle_marks.start(stamp, start_pose, opts.positions, opts.timeout, PROG)
         print(f"{PROG}: sending {len(points)} point(s) over {points[-1][0]:g} s to {opts.action}", flush=True)
         outcome = sender.send(opts.joints, points, opts.timeout, opts.result_timeout, on_send)
         if marks is not None and here is not None and outcome.ok:

@@ -26,7 +26,8 @@ Readers
     processed, the oldest of the latest stamps of its streams (:class:`Acks`); the plant holds a step that
     would go beyond the slowest acknowledgement plus ``lockstep.lead`` (:class:`ReaderGate`). A reader that
     acknowledges nothing for ``lockstep.reader_timeout`` s of wall time while the plant waits for it, or whose
-    acknowledgements go away, is dropped with one line naming it (it is waited for again once it acknowledges).
+    acknowledgements go away, is dropped with one line naming it (it is waited for again once it acknowledges; one
+    back from out of the graph is counted from the plant's time then: the steps sent meanwhile never reach it).
 Losses
     In lockstep the plant's streams have a known period (``1 / rate``, the IMU's ``1 / (rate substeps)``), so a
     lost sample is a gap in the stamps (:class:`Gaps`); a repeated stamp (the joint states at rest) is none.
@@ -264,6 +265,8 @@ class ReaderGate:
         self.acked: dict[str, float] = {}
         #: readers dropped (gone, or silent past the timeout) and not back yet
         self.dropped: set[str] = set()
+        #: of those, the ones that went away (out of the graph): what the plant sent meanwhile never reaches them
+        self.gone: set[str] = set()
         #: wall time (s) the plant started to wait for the reader that holds it; None: not waiting
         self._since: float | None = None
         #: how many times each reader held the plant (a step postponed)
@@ -277,21 +280,33 @@ class ReaderGate:
             return ""
         value = sim_time if t < 0 else t
         back, first = reader in self.dropped, reader not in self.acked
+        missed = reader in self.gone and value < sim_time
         self.dropped.discard(reader)
+        self.gone.discard(reader)
         if back or first:
-            self.acked[reader] = value
+            # a reader back from out of the graph (paused past the DDS lease, its network cut) was unmatched
+            # while the plant stepped on: those steps never reach it, so it is counted from now, as a new one
+            # (held at what it processed, it held the plant until lockstep.reader_timeout: session 13)
+            self.acked[reader] = sim_time if missed else value
         else:
             self.acked[reader] = max(self.acked[reader], value)
         if first:  # (a plant holds only for a reader it has heard: a client may wait for this line)
             return f"lockstep: reader {reader} counted from t = {value:.3f} s (it holds the steps past it)"
+        if missed:
+            return (f"lockstep: reader {reader} is back (processed up to t = {value:.3f} s; the steps to"
+                    f" t = {sim_time:.3f} s went out while it was away and never reach it: counted from there)")
         return f"lockstep: reader {reader} is back (processed up to t = {value:.3f} s)" if back else ""
 
     def leave(self, reader: str) -> str:
         """Reader ``reader`` went away (its acknowledgements have no publisher any more): dropped. Returns the
-        line to log ('' if it was not counted)."""
-        if reader not in self.acked or reader in self.dropped:
+        line to log ('' if it was not counted, or was dropped already: then it is marked gone, silently)."""
+        if reader not in self.acked:
             return ""
+        said = reader in self.dropped
         self.dropped.add(reader)
+        self.gone.add(reader)
+        if said:
+            return ""
         return (f"lockstep: reader {reader} went away (processed up to t = {self.acked[reader]:.3f} s);"
                 " stepping on without it")
 

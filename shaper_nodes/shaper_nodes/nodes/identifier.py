@@ -98,7 +98,8 @@ class IdentifierNode(Node):
         p = self.params.value
         validate_method(p.method)
 
-        self.monitor = CycleMonitor(float(p.settle_tolerance))
+        # the residual logged is the vibration's: the window's mean (gravity, an offset) removed (the fit has its own)
+        self.monitor = CycleMonitor(float(p.settle_tolerance), remove_mean=True)
         self.cycles: deque[tuple[CycleResult, tuple[np.ndarray, np.ndarray]]] = deque(
             maxlen=int(p.buffer_cycles))
         self.skipped: list[str] = []

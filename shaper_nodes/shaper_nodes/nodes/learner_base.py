@@ -160,6 +160,20 @@ class LearnerBase(Node):
             self.get_logger().warning(text)
         return self.report(msg, window, ["skipped"], [1.0])
 
+    def unended(self, open_cycles: dict[int, Any], msg: CycleEvent, *also: dict[int, Any]) -> None:
+        """The cycles of ``open_cycles`` (their START handled, popped at their END) other than ``msg``'s: their
+        END never came (lost while this node was paused past the DDS lease or out of the graph, or the motion
+        source stopped mid-cycle). Each is reported as not learned from (log and ``~/reports``) and forgotten,
+        with its entries in ``also``; a START that replaced it dropped it silently (session 13's walk)."""
+        for cycle in [c for c in open_cycles if c != int(msg.cycle)]:
+            open_cycles.pop(cycle)
+            for other in also:
+                other.pop(cycle, None)
+            lost = CycleEvent(header=msg.header, event=CycleEvent.END, cycle=cycle, task=msg.task)
+            why = (f"its END never came (events lost, or this node paused or out of the graph); cycle {msg.cycle}"
+                   f" {'began' if msg.event == CycleEvent.START else 'ended'} since")
+            self._report_pub.publish(self.skipped(lost, (float("nan"), float("nan")), why))
+
     def notice(self, text: str | None) -> None:
         """A notice of the core's sample bookkeeping (a cycle passing its duration limit), if any."""
         if text:

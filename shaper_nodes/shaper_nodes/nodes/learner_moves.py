@@ -349,6 +349,7 @@ class MovesMode:
 
     async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
         cycle = int(msg.cycle)
+        self.node.unended(self._cycle_move, msg, self._skip)
         if msg.event == START:
             await self._on_start(msg, stamp)
             return None
