@@ -255,7 +255,7 @@ def test_process_values_takes_one_sample_of_the_filters_channels(cls):
 def test_tap_steps_written_out_are_the_loop_over_the_taps_exactly(k):
     """The one-sample path's written-out step (up to UNROLLED_TAPS taps) writes the deviation to the ring's row and
     adds in the loop's order: equal bit for bit, the ring alike."""
-    from shaper_nodes.core.shaping.fir import UNROLLED_TAPS, _tap_step, _tap_step_loop
+    from shaper_nodes.core.shaping.fir_stage import UNROLLED_TAPS, _tap_step, _tap_step_loop
 
     rng = np.random.default_rng(k)
     size = k + 3
