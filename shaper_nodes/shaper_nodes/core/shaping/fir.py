@@ -58,6 +58,7 @@ settles at the input.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,7 +150,7 @@ class _ChannelShaper:
             raise ValueError("channels must be >= 1")
         self.channels = int(channels)
         self._fir = fir
-        self._last: np.ndarray | list[float] | None = None
+        self._last: np.ndarray | Sequence[float] | None = None
 
     @property
     def fir(self) -> SparseFir:
@@ -165,8 +166,8 @@ class _ChannelShaper:
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         raise NotImplementedError
 
-    def process_values(self, values: list[float]) -> list[float]:
-        """:meth:`process` for one sample given as a list of ``channels`` floats; returns a list."""
+    def process_values(self, values: Sequence[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list or tuple of ``channels`` floats; returns a list."""
         if len(values) != self.channels:
             raise ValueError(f"expected {self.channels} values, got {len(values)}")
         out: list[float] = self.process(np.array(values, dtype=float)).tolist()
@@ -232,7 +233,7 @@ class StreamingShaper(_ChannelShaper):
             raise RuntimeError(
                 f"{len(self._stages)} shaper changes still settling; wait {self._fir.length} samples"
             )
-        last = np.array(self._last, dtype=float)  # (a list after process_values)
+        last = np.array(self._last, dtype=float)  # (a tuple after process_values)
         active = self._stages[-1]
         active.held = last - active.origin
         active.held_samples = 0
@@ -294,9 +295,9 @@ class StreamingShaper(_ChannelShaper):
             self._offset_tiled = (offset, tiled)
         return tiled[:size]
 
-    def process_values(self, values: list[float]) -> list[float]:
-        """:meth:`process` for one sample given as a list of ``channels`` floats; returns the shaped sample as
-        a list. In the usual case (started, one filter, no change settling) it runs on Python floats
+    def process_values(self, values: Sequence[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list or tuple of ``channels`` floats; returns the shaped
+        sample as a list. In the usual case (started, one filter, no change settling) it runs on Python floats
         (:meth:`_Stage.step_values`), cheaper than numpy's calls on a few values; equal to :meth:`process`
         to rounding (tests hold them to 1e-12)."""
         if len(values) != self.channels:
@@ -309,7 +310,7 @@ class StreamingShaper(_ChannelShaper):
         if offset is not self._offset:  # (the offset array is replaced, never changed in place)
             offset, offset_list = self._offset_list = (self._offset, self._offset.tolist())
         y = stages[0].step_values(values, offset_list)
-        self._last = list(values)  # (the caller's list may change)
+        self._last = tuple(values)  # a list copied (the caller's may change), a tuple kept as it is
         return y
 
     def _sample(self, x: np.ndarray) -> np.ndarray:

@@ -7,7 +7,8 @@ Split out of fir.py (session 13) with no change of behaviour; :class:`_Stage` is
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from operator import sub
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,6 +23,8 @@ LINEAR_ROWS = 1024
 
 #: the most taps :func:`_tap_step` writes a comprehension for (more: a loop over the taps)
 UNROLLED_TAPS = 32
+#: the most products (taps x channels) :func:`_tap_step` writes out one by one, with no comprehension
+UNROLLED_TERMS = 256
 
 
 def _tap_sum_loop(gains: list[float], rows: list[list[float]], offset: list[float]) -> list[float]:
@@ -34,7 +37,7 @@ def _tap_sum_loop(gains: list[float], rows: list[list[float]], offset: list[floa
     return [a + o for a, o in zip(out, offset, strict=True)]
 
 
-def _tap_step_loop(values: list[float], origin: list[float], rows: list[list[float]], taps: list[int], p: int,
+def _tap_step_loop(values: Sequence[float], origin: list[float], rows: list[list[float]], taps: list[int], p: int,
                    gains: list[float], offset: list[float]) -> list[float]:
     """:func:`_tap_step` for any number of taps: the deviation into ``rows[p]``, then :func:`_tap_sum_loop` of
     the tapped rows."""
@@ -43,28 +46,40 @@ def _tap_step_loop(values: list[float], origin: list[float], rows: list[list[flo
 
 
 @functools.cache
-def _tap_step(k: int) -> Callable[..., list[float]]:
+def _tap_step(k: int, channels: int = 0) -> Callable[..., list[float]]:
     """``f(values, origin, rows, taps, p, gains, offset)``: one sample of :meth:`_Stage.step_values` in one call,
     for ``k`` taps: the deviation ``values - origin`` written to ``rows[p]``, then per column j
     ``(gains[0] rows[taps[0]][j] + ... + gains[k-1] rows[taps[k-1]][j]) + offset[j]`` summed left to right.
-    Written out for ``k`` up to :data:`UNROLLED_TAPS` (as the standard library's ``namedtuple`` and
-    ``dataclasses`` write their methods): one comprehension over the columns, with no loop over the taps and
-    no list of the tapped rows, is what makes one sample of a few channels cheaper on Python floats than
-    numpy's calls."""
+    Written out (as the standard library's ``namedtuple`` and ``dataclasses`` write their methods): for
+    ``channels`` given and ``k * channels`` up to :data:`UNROLLED_TERMS`, every product one by one (no
+    comprehension: on Python 3.11 each is a function call of its own, which a sample pays cold at 1 kHz), else for
+    ``k`` up to :data:`UNROLLED_TAPS` one comprehension over the columns; with no loop over the taps and no list
+    of the tapped rows, it is what makes one sample of a few channels cheaper on Python floats than numpy's
+    calls. The same sums in the same order whichever form: equal bit for bit."""
     if k < 1:
         raise ValueError("a FIR has at least one tap")
-    if k > UNROLLED_TAPS:
-        return _tap_step_loop
     gs, xs, ts = ([f"{c}{i}" for i in range(k)] for c in "gxt")
-    terms = " + ".join(f"{g} * {x}" for g, x in zip(gs, xs, strict=True))
-    source = (f"def tap_step(values, origin, rows, taps, p, gains, offset):\n"
-              f"    rows[p] = [v - o for v, o in zip(values, origin)]\n"
-              f"    {', '.join(gs)}, = gains\n"
-              f"    {', '.join(ts)}, = taps\n"
-              f"    return [({terms}) + o for o, {', '.join(xs)} in zip(offset, "
-              f"{', '.join(f'rows[{t}]' for t in ts)})]\n")
-    namespace: dict[str, Any] = {}
-    exec(compile(source, f"<fir tap step, {k} taps>", "exec"), namespace)  # our own source text
+    head = (f"def tap_step(values, origin, rows, taps, p, gains, offset):\n"
+            f"    rows[p] = list(map(sub, values, origin))\n"
+            f"    {', '.join(gs)}, = gains\n"
+            f"    {', '.join(ts)}, = taps\n")
+    if channels > 0 and k * channels <= UNROLLED_TERMS:
+        os_ = [f"o{j}" for j in range(channels)]
+        sums = ", ".join("(" + " + ".join(f"{g} * {x}[{j}]" for g, x in zip(gs, xs, strict=True)) + f") + {o}"
+                         for j, o in enumerate(os_))
+        source = (head + f"    {', '.join(xs)}, = {', '.join(f'rows[{t}]' for t in ts)},\n"
+                  f"    {', '.join(os_)}, = offset\n"
+                  f"    return [{sums}]\n")
+        name = f"<fir tap step, {k} taps x {channels} channels>"
+    elif k <= UNROLLED_TAPS:
+        terms = " + ".join(f"{g} * {x}" for g, x in zip(gs, xs, strict=True))
+        source = head + (f"    return [({terms}) + o for o, {', '.join(xs)} in zip(offset, "
+                         f"{', '.join(f'rows[{t}]' for t in ts)})]\n")
+        name = f"<fir tap step, {k} taps>"
+    else:
+        return _tap_step_loop
+    namespace: dict[str, Any] = {"sub": sub}
+    exec(compile(source, name, "exec"), namespace)  # our own source text
     fn = namespace["tap_step"]
     return fn  # type: ignore[no-any-return]
 
@@ -116,7 +131,7 @@ class _Stage:
         self._taps = [ix.tolist() for ix in self._idx]
         self._gain_list: list[float] = self._gains.tolist()
         self._origin_list: list[float] = self.origin.tolist()
-        self._step = _tap_step(len(self._taps[0]))
+        self._step = _tap_step(len(self._taps[0]), origin.size)
 
     def _numpy_ring(self) -> None:
         """Make the numpy ring current (before a numpy path reads it); the list ring stays current."""
@@ -151,7 +166,7 @@ class _Stage:
         y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
         return y
 
-    def step_values(self, values: list[float], offset: list[float]) -> list[float]:
+    def step_values(self, values: Sequence[float], offset: list[float]) -> list[float]:
         """:meth:`step_value` on Python floats (one sample of a few channels), plus ``offset``: the deviation
         goes into the list ring, and the output is the same sum of the tapped inputs times the gains, in the
         order of the delays, then plus the offset (equal to the numpy paths to rounding). Returns a new list."""
