@@ -68,10 +68,10 @@ def _spin_take(in_topic: str, out_topic: str, context: rclpy.context.Context, ex
     try:
         executor.spin()
     finally:
+        if timing is not None:  # first: the process has been seen to end on SIGSEGV in the closes below (-11)
+            timing.write()
         side.close()
         parent.destroy_node()
-        if timing is not None:
-            timing.write()
 
 
 def main(argv: list[str] | None = None) -> int:
