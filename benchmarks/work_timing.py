@@ -2,11 +2,12 @@
 
 The latency bench runs the floor (``echo_node --take``) and the shaper targets with
 :data:`shaper_nodes.ros.stream_watch.WORK_TIMING_ENV` naming a file beside each node's log: the node then times, as
-it runs at 1 kHz (caches cold from the wait between messages), its array callback (``callback``), and for the
-shaper the callback's work (``work``: ``RawArrays.shape``, the read, the stream's rules, the FIR and the write) and
-its publish (``publish``), and writes their medians and spreads when it stops
-(:class:`~shaper_nodes.ros.stream_watch.WorkTiming`). The floor's callback is its publish. Unset (any run of the node
-outside the bench) nothing is wrapped: no cost.
+it runs at 1 kHz (caches cold from the wait between messages), its array callback (``callback``) and the wake-up
+before it (``wake``: from the middleware's reception of the message to the callback's start), and for the shaper
+the callback's work (``work``: ``RawArrays.shape``, the read, the stream's rules, the FIR and the write) and its
+publish (``publish``); it writes their medians and spreads when it stops
+(:class:`~shaper_nodes.ros.stream_watch.WorkTiming`). The floor's callback is its publish (a (message, info)
+callback when timed, as the shaper's). Unset (any run of the node outside the bench) nothing is wrapped: no cost.
 
 :func:`decomposition` sets them beside the round trips: the shaper's p50 above the floor's (its ``+p50``) against
 its work's median. When the two agree (within the work's spread) the hop adds nothing beyond the work it must do.
@@ -57,7 +58,8 @@ def decomposition(runs: list[dict]) -> list[dict[str, Any]]:
                     "work_us": work, "work_p90_us": r.get("extra", {}).get("work", {}).get("work", {}).get("p90_us",
                                                                                                          math.nan),
                     "publish_us": _p50(r, "publish"), "callback_us": _p50(r, "callback"),
-                    "floor_callback_us": _p50(floor, "callback"), "above_minus_work_us": above - work})
+                    "floor_callback_us": _p50(floor, "callback"), "above_minus_work_us": above - work,
+                    "wake_us": _p50(r, "wake"), "floor_wake_us": _p50(floor, "wake")})
     return out
 
 
@@ -71,14 +73,14 @@ def print_decomposition(lat: dict) -> None:
     if not rows:
         return
     print("  the hop above the floor against the node's own work (medians over every message, timed in the nodes at")
-    print("  1 kHz; work: read, rules, FIR, write; the floor's callback is its publish)")
+    print("  1 kHz; work: read, rules, FIR, write; the floor's callback is its publish; wake: reception to callback)")
     head = (f"  {'node':<24}{'+p50 us':>9}{'work':>7}{'p90':>6}{'+p50-work':>10}{'publish':>9}{'floor pub':>10}"
-            f"{'callback':>9}")
+            f"{'callback':>9}{'wake':>7}{'floor wake':>11}")
     print(head)
     for q in rows:
         print(f"  {q['label']:<24}{_f(q['above_us']):>9}{_f(q['work_us']):>7}{_f(q['work_p90_us']):>6}"
               f"{_f(q['above_minus_work_us'], '+.1f'):>10}{_f(q['publish_us']):>9}{_f(q['floor_callback_us']):>10}"
-              f"{_f(q['callback_us']):>9}")
+              f"{_f(q['callback_us']):>9}{_f(q['wake_us']):>7}{_f(q['floor_wake_us']):>11}")
 
 
 def summary_rows(lat: dict, row: Any, goal: str) -> list[dict[str, Any]]:

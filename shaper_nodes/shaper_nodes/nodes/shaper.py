@@ -194,13 +194,13 @@ class ShaperNode(Node):
             self._stream_side = SideNode(self, "stream", lean=True, take=str(p.stream_executor) == "take")
             stream_node = self._stream_side.node
             streamed = {k: self.resolve_topic_name(name) for k, name in streamed.items()}
-        on_array = self._on_array
+        on_array: Any = self._on_array
         #: the array path's timers, with SHAPER_WORK_TIMING set (benchmarks; ros/stream_watch.py): None, no cost
         self.work_timing = WorkTiming.from_env()
         if self.work_timing is not None:  # the work (read, rules, FIR, write), the publish, the whole callback
             self.work_timing.patch(self._raw_arrays, "shape", "work")
             self.work_timing.patch(self._array_pub, "publish", "publish")
-            on_array = self.work_timing.timed("callback", on_array)
+            on_array = self.work_timing.timed_callback(on_array)  # and its wake-up
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
             # raw: read and written as serialized bytes (ros/raw_stream.py)

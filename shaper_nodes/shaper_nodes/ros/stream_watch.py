@@ -213,6 +213,23 @@ class WorkTiming:
 
         return timed_call
 
+    def timed_callback(self, fn: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+        """A subscription's (message, info) callback ``fn`` timed under "callback", and its wake-up under "wake":
+        from the middleware's reception of the message (the info's ``received_timestamp``, system clock) to the
+        callback's start (the take loop's wait, wake-up and take)."""
+        times, wakes = self.times.setdefault("callback", []).append, self.times.setdefault("wake", []).append
+        clock, now = time.perf_counter_ns, time.time_ns
+
+        def callback(msg: Any, info: Any) -> Any:
+            wakes(now() - info["received_timestamp"])
+            t = clock()
+            try:
+                return fn(msg, info)
+            finally:
+                times(clock() - t)
+
+        return callback
+
     def patch(self, owner: Any, method: str, name: str) -> None:
         """Time ``owner.method`` under ``name``: the bound method replaced on the instance by :meth:`timed`'s."""
         setattr(owner, method, self.timed(name, getattr(owner, method)))
