@@ -54,6 +54,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--discovery-timeout", type=float, default=30.0, help="node start-up and discovery limit, s")
     p.add_argument("--fir-repeats", type=int, default=5, help="passes per FIR method, best reported (default 5)")
     p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
+    p.add_argument("--skip-work-timing", action="store_true",
+                   help="latency: the floor and the shapers do not time their callbacks in the node (the hop above the"
+                        " floor against the work, benchmarks/work_timing.py)")
     p.add_argument("--skip-hog", action="store_true",
                    help="skip the latency measurements under load (echo and shaper ZVD again, each with a busy-loop"
                         " process on one core)")
@@ -104,12 +107,13 @@ def run_latency(args: argparse.Namespace) -> dict:
     # the floor: the echo's raw bytes on the shaper's take loop, a Python node that does no work on its path
     floor = ("/bench/echo_take_in", "/bench/echo_take_out")
     # the floor and the shapers time their callbacks in the node (benchmarks/work_timing.py)
-    groups = [(False, [echo_target(), echo_target(*floor, take=True, timed=True),
-                       shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}, timed=True),
-                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=True)])]
+    timed = not args.skip_work_timing
+    groups = [(False, [echo_target(), echo_target(*floor, take=True, timed=timed),
+                       shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}, timed=timed),
+                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed)])]
     if not args.skip_hog:
-        groups.append((True, [echo_target(), echo_target(*floor, take=True, timed=True),
-                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=True)]))
+        groups.append((True, [echo_target(), echo_target(*floor, take=True, timed=timed),
+                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed)]))
     rounds = max(1, round(args.seconds / args.turn)) if args.turn > 0 else 1
     runs: list[dict] = []
     hog_runs: list[dict] = []
