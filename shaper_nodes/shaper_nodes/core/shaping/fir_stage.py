@@ -1,7 +1,8 @@
 """One FIR stage of the streaming shapers (core/shaping/fir.py): its input history as a ring or a linear buffer,
 and its three paths: one sample on numpy, one sample of a few channels on Python floats, a block on numpy.
 
-Split out of fir.py (session 13) with no change of behaviour; :class:`_Stage` is the streaming shapers' own.
+Split out of fir.py (session 13); :class:`_Stage` is the streaming shapers' own. The one-sample step on Python floats
+is written out per number of taps and channels (:func:`_tap_step`), equal bit for bit to the loop over the taps.
 """
 
 from __future__ import annotations
