@@ -54,6 +54,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--discovery-timeout", type=float, default=30.0, help="node start-up and discovery limit, s")
     p.add_argument("--fir-repeats", type=int, default=5, help="passes per FIR method, best reported (default 5)")
     p.add_argument("--skip-latency", action="store_true", help="skip the node latency measurements")
+    p.add_argument("--skip-work-timing", action="store_true",
+                   help="latency: the floor and the shapers do not time their callbacks in the node (the hop above the"
+                        " floor against the work, benchmarks/work_timing.py)")
     p.add_argument("--skip-hog", action="store_true",
                    help="skip the latency measurements under load (echo and shaper ZVD again, each with a busy-loop"
                         " process on one core)")
@@ -103,12 +106,14 @@ def run_latency(args: argparse.Namespace) -> dict:
            "discretization": "split"}
     # the floor: the echo's raw bytes on the shaper's take loop, a Python node that does no work on its path
     floor = ("/bench/echo_take_in", "/bench/echo_take_out")
-    groups = [(False, [echo_target(), echo_target(*floor, take=True),
-                       shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}),
-                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)])]
+    # the floor and the shapers time their callbacks in the node (benchmarks/work_timing.py)
+    timed = not args.skip_work_timing
+    groups = [(False, [echo_target(), echo_target(*floor, take=True, timed=timed),
+                       shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}, timed=timed),
+                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed)])]
     if not args.skip_hog:
-        groups.append((True, [echo_target(), echo_target(*floor, take=True),
-                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd)]))
+        groups.append((True, [echo_target(), echo_target(*floor, take=True, timed=timed),
+                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed)]))
     rounds = max(1, round(args.seconds / args.turn)) if args.turn > 0 else 1
     runs: list[dict] = []
     hog_runs: list[dict] = []
@@ -198,6 +203,10 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
     _print_ratios(lat["baseline"], lat["ratios_to_baseline"])
     if lat.get("hog_runs"):
         _print_ratios(lat["hog_baseline"], lat["hog_ratios_to_baseline"])
+    print()
+    from .work_timing import print_decomposition
+
+    print_decomposition(lat)
 
 
 def _terminate(signum: int, frame: object) -> None:
@@ -243,6 +252,8 @@ GOALS = {
     "cpu_per_msg": "<= 0.5x echo",
     # the corrected goal, against the floor of the same run (docs/results/benchmarks.md, "The floor of the hop")
     "p50_floor": "<= 1.1x the floor (corrected goal)",
+    # the hop against the work it must do, both from the same run (benchmarks/work_timing.py)
+    "p50_work": "<= 1x: the floor + the work (proposed, session 13)",
     "fir_blocks": ">= 5x lfilter",
     "fir_sample": "<= 5 us",
     "scheduler_cpu": "<= 1.1x idle",
@@ -343,7 +354,9 @@ def _latency_rows(lat: dict) -> list[dict[str, Any]]:
                                          ("node_cpu_us_per_msg", "CPU per message", "us")):
                     rows.append(_row(f"latency {r['label']}: {label}", r[key], unit, f"{floor['label']} {label}",
                                      floor[key], goal=GOALS["p50_floor"] if zvd and key == "p50_us" else ""))
-    return rows
+    from .work_timing import summary_rows
+
+    return rows + summary_rows(lat, _row, GOALS["p50_work"])
 
 
 def _memory_rows(res: dict) -> list[dict[str, Any]]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -51,19 +52,26 @@ class EchoNode(Node):
 def _spin_take(in_topic: str, out_topic: str, context: rclpy.context.Context, executor: SingleThreadedExecutor) -> None:
     """Echo the raw bytes from ``in_topic`` to ``out_topic`` on a take loop until the context shuts down."""
     from shaper_nodes.ros.side_node import SideNode
+    from shaper_nodes.ros.stream_watch import WorkTiming
 
     parent = Node("bench_echo", context=context)  # names the side node; spun by ``executor`` for SIGINT only
     side = SideNode(parent, "take", take=True)
     # the publisher on the parent, as the shaper node's are on its main node: on the side node its QoS event handlers
     # would sit in the take loop's wait set, a cost per wake-up the shaper's loop does not pay (session 12, hopwork)
     pub = parent.create_publisher(Float64MultiArray, out_topic, DEPTH)
-    side.node.create_subscription(Float64MultiArray, in_topic, pub.publish, DEPTH, raw=True)
+    # with SHAPER_WORK_TIMING set (the bench), the callback (the publish) and its wake-up timed as the shaper's
+    # (ros/stream_watch.py; a (message, info) callback then, as the shaper's)
+    timing = WorkTiming.from_env()
+    callback: Any = pub.publish if timing is None else timing.timed_callback(lambda msg, info: pub.publish(msg))
+    side.node.create_subscription(Float64MultiArray, in_topic, callback, DEPTH, raw=True)
     side.start()
     parent.get_logger().info(f"echoing {in_topic} -> {out_topic} (raw, take loop)")
     executor.add_node(parent)
     try:
         executor.spin()
     finally:
+        if timing is not None:  # first: the process has been seen to end on SIGSEGV in the closes below (-11)
+            timing.write()
         side.close()
         parent.destroy_node()
 

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import os
 import pathlib
 import signal
@@ -69,6 +70,7 @@ from shaper_nodes.core.shaping import SparseFir, StreamingShaper
 from shaper_nodes.ros.launching import ChildProcess
 
 from .echo_node import DEPTH
+from .work_timing import work_env, work_path
 
 #: the repository root (the parent of this package), the working directory of the echo node
 REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -456,8 +458,13 @@ def measure_interleaved(targets: list[Target], *, seconds: float = 5.0, rate: fl
 
     # the stamp index at which each turn after the first began
     turns = [int(b) - 1 for b in bounds[1:-1]]
-    return [_analyse(d.target, rep, d.stamps, d.expected, rate, joints, node_cpu=d.node_cpu, driver_cpu=d.driver_cpu,
-                     busy=d.busy, wall=d.wall, turns=turns) for d, rep in zip(driven, replies, strict=True)]
+    results = [_analyse(d.target, rep, d.stamps, d.expected, rate, joints, node_cpu=d.node_cpu,
+                        driver_cpu=d.driver_cpu, busy=d.busy, wall=d.wall, turns=turns)
+               for d, rep in zip(driven, replies, strict=True)]
+    for d, result in zip(driven, results, strict=True):  # the node's own timers, where it kept them (work_timing.py)
+        with contextlib.suppress(OSError, ValueError):
+            result.extra["work"] = json.loads(work_path(d.log_path).read_text())
+    return results
 
 
 def _analyse(target: Target, replies: list[tuple[int, int, object]], stamps: np.ndarray, expected: np.ndarray,
@@ -566,22 +573,27 @@ class CpuHog:
             self.proc = None
 
 
-def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_out", take: bool = False) -> Target:
+def echo_target(in_topic: str = "/bench/echo_in", out_topic: str = "/bench/echo_out", take: bool = False,
+                timed: bool = False) -> Target:
     """The bare echo node (:mod:`benchmarks.echo_node`) run with this interpreter; ``take``: its raw
-    echo on the take loop (the floor of the shaper's path), labelled ``echo, take loop``."""
+    echo on the take loop (the floor of the shaper's path), labelled ``echo, take loop``; ``timed`` (with
+    ``take``): its callback timed in the node (:mod:`benchmarks.work_timing`)."""
 
     def make(log_path: pathlib.Path) -> ChildProcess:
         cmd = [sys.executable, "-m", "benchmarks.echo_node", "--in", in_topic, "--out", out_topic]
-        return ChildProcess(cmd + (["--take"] if take else []), log_path, cwd=REPO_ROOT)
+        return ChildProcess(cmd + (["--take"] if take else []), log_path, cwd=REPO_ROOT,
+                            env=work_env(log_path) if timed else None)
 
     return Target("echo, take loop" if take else "echo (baseline)", make, in_topic, out_topic, identity_fir())
 
 
-def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any] | None = None) -> Target:
+def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any] | None = None,
+                  timed: bool = False) -> Target:
     """The real shaper node (``shaper_nodes shaper_node``) with ``joints`` joints at ``rate``.
 
     ``params`` are extra node parameters (``shaper.*``, ``discretization``); the FIR used for
-    decoding is designed from them exactly as the node does.
+    decoding is designed from them exactly as the node does. ``timed``: the array callback, its work and
+    its publish timed in the node (:mod:`benchmarks.work_timing`).
     """
     from shaper_nodes.core.shaping import Mode, design, discretize
     from shaper_nodes.ros.launching import NodeProcess, executable, ros_args
@@ -601,7 +613,8 @@ def shaper_target(label: str, joints: int, rate: float, params: Mapping[str, Any
     remaps = {"__node": name}
 
     def make(log_path: pathlib.Path) -> NodeProcess:
-        return NodeProcess("shaper_nodes", "shaper_node", node_params, log_path=log_path, remaps=remaps)
+        return NodeProcess("shaper_nodes", "shaper_node", node_params, log_path=log_path, remaps=remaps,
+                           env=work_env(log_path) if timed else None)
 
     return Target(label, make, in_topic, out_topic, fir,
                   [str(executable("shaper_nodes", "shaper_node")), *ros_args(node_params, remaps)])

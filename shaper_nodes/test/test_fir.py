@@ -255,7 +255,7 @@ def test_process_values_takes_one_sample_of_the_filters_channels(cls):
 def test_tap_steps_written_out_are_the_loop_over_the_taps_exactly(k):
     """The one-sample path's written-out step (up to UNROLLED_TAPS taps) writes the deviation to the ring's row and
     adds in the loop's order: equal bit for bit, the ring alike."""
-    from shaper_nodes.core.shaping.fir import UNROLLED_TAPS, _tap_step, _tap_step_loop
+    from shaper_nodes.core.shaping.fir_stage import UNROLLED_TAPS, _tap_step, _tap_step_loop
 
     rng = np.random.default_rng(k)
     size = k + 3
@@ -270,3 +270,27 @@ def test_tap_steps_written_out_are_the_loop_over_the_taps_exactly(k):
     assert out_a == out_b and rows_a == rows_b
     assert rows_a[p] == [v - o for v, o in zip(values, origin, strict=True)]
     assert (_tap_step(k) is _tap_step_loop) == (k > UNROLLED_TAPS)
+
+
+@pytest.mark.parametrize(("k", "channels"), [(1, 1), (1, 7), (2, 3), (5, 7), (18, 7), (36, 7), (37, 7), (5, 60)])
+def test_tap_steps_written_out_product_by_product_are_the_loop_over_the_taps_exactly(k, channels):
+    """The one-sample path's step written out product by product (up to UNROLLED_TERMS products; beyond, the
+    comprehension's or the loop's form) writes the deviation to the ring's row and adds in the loop's order: equal
+    bit for bit, the ring alike, for a tuple of values as for a list."""
+    from shaper_nodes.core.shaping.fir_stage import UNROLLED_TAPS, UNROLLED_TERMS, _tap_step, _tap_step_loop
+
+    rng = np.random.default_rng(100 * k + channels)
+    size = k + 3
+    gains, offset = rng.normal(size=k).tolist(), rng.normal(size=channels).tolist()
+    values, origin = tuple(rng.normal(size=channels).tolist()), rng.normal(size=channels).tolist()
+    taps = [int(t) for t in rng.permutation(size)[:k]]
+    p = taps[-1]
+    rows_a = rng.normal(size=(size, channels)).tolist()
+    rows_b = [list(r) for r in rows_a]
+    step = _tap_step(k, channels)
+    out_a = step(values, origin, rows_a, taps, p, gains, offset)
+    out_b = _tap_step_loop(values, origin, rows_b, taps, p, gains, offset)
+    assert out_a == out_b and rows_a == rows_b and isinstance(out_a, list) and isinstance(rows_a[p], list)
+    by_product = step is not _tap_step_loop and step.__code__.co_filename.endswith(f"x {channels} channels>")
+    assert by_product == (k * channels <= UNROLLED_TERMS)  # beyond: the comprehension's form, or the loop
+    assert (step is _tap_step_loop) == (k * channels > UNROLLED_TERMS and k > UNROLLED_TAPS)

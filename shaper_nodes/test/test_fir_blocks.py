@@ -1,4 +1,4 @@
-"""The FIR block path's linear buffer (core/shaping/fir.py, _Stage.run_values): how a stream is cut into blocks
+"""The FIR block path's linear buffer (core/shaping/fir_stage.py, _Stage.run_values): how a stream is cut into blocks
 changes nothing, across the buffer's wrap, and the other paths read the state it leaves.
 
 Every output row of the block path is the same sum in the same order (first tap times its input, then each
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.shaping.families import design
-from shaper_nodes.core.shaping.fir import LINEAR_ROWS, SparseFir, StreamingShaper, discretize
+from shaper_nodes.core.shaping.fir import SparseFir, StreamingShaper, discretize
+from shaper_nodes.core.shaping.fir_stage import LINEAR_ROWS
 from shaper_nodes.core.shaping.types import Mode
 
 RATE = 1000.0

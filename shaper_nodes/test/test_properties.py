@@ -72,7 +72,7 @@ from shaper_nodes.core.shaping import (
     discretize,
     modes_from_hz,
 )
-from shaper_nodes.core.shaping.fir import MAX_EXACT_DECAY
+from shaper_nodes.core.shaping.fir_exact import MAX_EXACT_DECAY
 from shaper_nodes.core.shaping.trajectory import (
     MAX_TRAJECTORY_POINTS,
     MAX_TRAJECTORY_SAMPLES,

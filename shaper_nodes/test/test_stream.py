@@ -299,3 +299,26 @@ def test_the_lock_is_held_by_every_call_on_the_filters():
     s.switch(NONE)
     assert seen == [True, True]
     assert not s.lock.locked()
+
+
+def test_the_written_out_bounds_check_is_the_comparisons_of_each_value():
+    """The streamed sample's check (limits.bounds_check): one value per joint, lo <= v <= hi for each, a NaN or an
+    infinity beyond a finite bound fails; the same truth as the comparisons through map(), on values at, inside and
+    beyond the bounds, in a tuple or a list."""
+    from operator import le
+
+    from shaper_nodes.core.shaping.limits import bounds_check
+
+    big = sys.float_info.max
+    lo, hi = (-1.0, -big, 0.0, -math.inf), (1.0, big, 0.0, math.inf)
+    within = bounds_check(lo, hi)
+    assert bounds_check(lo, hi) is within  # cached per bounds
+    rng = np.random.default_rng(7)
+    picks = [-math.inf, -big, -1.5, -1.0, -0.0, 0.0, 0.5, 1.0, 1.5, big, math.inf, math.nan]
+    for _ in range(2000):
+        v = [float(x) for x in rng.choice(picks, size=4)]
+        want = all(map(le, lo, v)) and all(map(le, v, hi))
+        assert within(v) is want and within(tuple(v)) is want
+    assert not within([0.0, 0.0, 0.0]) and not within([0.0] * 5)  # one value per joint
+    with pytest.raises(ValueError, match="one \\(lowest, highest\\) pair per joint"):
+        bounds_check((0.0,), (1.0, 2.0))

@@ -72,3 +72,46 @@ def test_drops_are_not_counted_while_several_publishers_are_seen():
         w.arrived("array", info(i))
     _, _, values = w.summary("quiet")
     assert dict(values)["input.array.drops"] == "n/a (several publishers)"
+
+
+def test_work_timing_is_off_unless_its_variable_names_a_file(monkeypatch, tmp_path):
+    """WorkTiming (the benchmarks' timers in the node): None without SHAPER_WORK_TIMING; with it, a timed callable
+    keeps the callable's signature (rclpy tells a (message, info) callback by it), its answer and its exception,
+    and the summary written at the end counts every call."""
+    import inspect
+    import json
+
+    import pytest
+    from rclpy.subscription import Subscription
+
+    from shaper_nodes.ros.stream_watch import WORK_TIMING_ENV, WorkTiming
+
+    monkeypatch.delenv(WORK_TIMING_ENV, raising=False)
+    assert WorkTiming.from_env() is None
+    monkeypatch.setenv(WORK_TIMING_ENV, str(tmp_path / "work.json"))
+    timing = WorkTiming.from_env()
+    assert timing is not None
+
+    class Node:
+        def on_array(self, data, info):
+            if data == b"bad":
+                raise ValueError("refused")
+            return data + b"!"
+
+        def publish(self, msg):
+            return len(msg)
+
+    node = Node()
+    callback = timing.timed("callback", node.on_array)
+    timing.patch(node, "publish", "publish")
+    assert inspect.signature(callback) == inspect.signature(node.on_array)
+    sub = Subscription.__new__(Subscription)
+    sub.callback = callback  # rclpy's own check of the callback's arguments
+    assert sub._callback_type is Subscription.CallbackType.WithMessageInfo
+    assert callback(b"ok", {}) == b"ok!" and node.publish(b"abc") == 3
+    with pytest.raises(ValueError, match="refused"):
+        callback(b"bad", None)
+    timing.write()
+    got = json.loads((tmp_path / "work.json").read_text())
+    assert got["callback"]["n"] == 2 and got["publish"]["n"] == 1
+    assert 0 <= got["callback"]["p10_us"] <= got["callback"]["p50_us"] <= got["callback"]["p90_us"]

@@ -95,7 +95,7 @@ from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 from shaper_nodes.ros.raw_stream import RawArrays, RawTrajectories
 from shaper_nodes.ros.side_node import SideNode
-from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch
+from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch, WorkTiming
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
 
 from .shaper_interpreter import background_pause
@@ -194,10 +194,17 @@ class ShaperNode(Node):
             self._stream_side = SideNode(self, "stream", lean=True, take=str(p.stream_executor) == "take")
             stream_node = self._stream_side.node
             streamed = {k: self.resolve_topic_name(name) for k, name in streamed.items()}
+        on_array: Any = self._on_array
+        #: the array path's timers, with SHAPER_WORK_TIMING set (benchmarks; ros/stream_watch.py): None, no cost
+        self.work_timing = WorkTiming.from_env()
+        if self.work_timing is not None:  # the work (read, rules, FIR, write), the publish, the whole callback
+            self.work_timing.patch(self._raw_arrays, "shape", "work")
+            self.work_timing.patch(self._array_pub, "publish", "publish")
+            on_array = self.work_timing.timed_callback(on_array)  # and its wake-up
         # two-argument callbacks: rclpy passes each message's info (stamps, sequence number) for the rate watch
         subs = {
             # raw: read and written as serialized bytes (ros/raw_stream.py)
-            "array_in": self.graph.subscription(Float64MultiArray, streamed["array_in"], self._on_array, depth,
+            "array_in": self.graph.subscription(Float64MultiArray, streamed["array_in"], on_array, depth,
                                                 on=stream_node, raw=True),
             "stream_in": self.graph.subscription(JointTrajectory, streamed["stream_in"], self._on_stream, depth,
                                                  on=stream_node, raw=True),
@@ -405,6 +412,8 @@ class ShaperNode(Node):
         if self._stream_side is not None:  # the streamed inputs stop first
             self._stream_side.close()
             self._stream_side = None
+        if self.work_timing is not None:
+            self.work_timing.write()
         if self._action is not None:  # action servers and clients are not destroyed with the node
             self._action.destroy()
             self._action = None

@@ -73,9 +73,8 @@ class RawArrays:
         """
         codec = self.codec
         got = codec.read_sample(raw)  # the usual message: one sample of the last layout
-        if got is not None:
-            data_offset, *values = got
-            return codec.write_sample(data_offset, self.stream.shape_values(values))
+        if got is not None:  # (data_offset, values...): the values as a tuple, not copied again
+            return codec.write_sample(got[0], self.stream.shape_values(got[1:]))
         try:
             sizes, data = codec.decode(raw)
         except CdrError as err:

@@ -20,8 +20,8 @@ ZV family: no discretisation floor). The correction is refused (``ValueError``) 
 period leaves no solution on the samples next to the impulses (for a positive shaper, none with
 taps >= 0: then the least change is found with the taps bounded below by zero), and, before any
 arithmetic, for a design mode far above the command rate, one that decays by more than
-:data:`MAX_EXACT_DECAY` (zeta omega Ts) over one command period or turns through more than
-:data:`MAX_EXACT_PHASE` over the shaper.
+:data:`~.fir_exact.MAX_EXACT_DECAY` (zeta omega Ts) over one command period or turns through more than
+:data:`~.fir_exact.MAX_EXACT_PHASE` over the shaper.
 
 Bumpless switching
 ------------------
@@ -57,14 +57,14 @@ settles at the input.
 
 from __future__ import annotations
 
-import functools
 import math
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
+from .fir_exact import _exact_taps
+from .fir_stage import _Stage
 from .types import Shaper
 
 #: most filters alive at once (the active one plus those whose tails are still running)
@@ -136,332 +136,9 @@ def discretize(shaper: Shaper, rate: float, method: str = "split") -> SparseFir:
     return SparseFir(delays=nz, gains=acc[nz])
 
 
-#: derivative order of the conditions each family meets at its design modes (``exact``)
-_EXACT_ORDER = {"zv": 0, "zvd": 1, "zvdd": 2, "mzv": 0, "si": 0, "custom": 0,
-                "ei": 1, "2hump_ei": 1, "3hump_ei": 1}
-
-
-def _exact_order(shaper: Shaper) -> int:
-    if shaper.family == "zvdn":
-        return int(shaper.params.get("derivative_order", 0))
-    return _EXACT_ORDER.get(shaper.family, 0)
-
-
-#: the most a design mode may decay over one command period, zeta omega Ts, for ``exact``: the conditions'
-#: rows hold exp(zeta omega (t - t_last)) for taps up to one period after the last impulse, and
-#: exp(700) ~ 1e304 leaves them finite (exp overflows beyond ~709.8)
-MAX_EXACT_DECAY = 700.0
-#: the largest phase omega_d (t_n + Ts) (rad) a design mode may turn through over the shaper for ``exact``:
-#: beyond 2**53 a float phase has no fraction left, its cos and sin mean nothing (and near 1.8e308 it overflows)
-MAX_EXACT_PHASE = 2.0**53
-
-
-def _exact_taps(shaper: Shaper, rate: float, split: np.ndarray, base: np.ndarray) -> np.ndarray:
-    """The split taps ``split`` corrected to meet the shaper's conditions at its modes (``exact``)."""
-    if not shaper.modes or split.size == 1:
-        return split
-    for i, mode in enumerate(shaper.modes):  # before any exp() of it
-        decay = mode.zeta * mode.omega / rate
-        if not decay <= MAX_EXACT_DECAY:
-            raise ValueError(
-                f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz cannot hold design mode {i}"
-                f" ({mode.hz:.6g} Hz, damping ratio {mode.zeta:g}): it decays by zeta omega Ts = {decay:.3g} over"
-                f" one command period, beyond the limit of {MAX_EXACT_DECAY:g}; use 'split'")
-        phase = mode.damped_omega * (float(shaper.times[-1]) + 1.0 / rate)
-        if not phase <= MAX_EXACT_PHASE:
-            raise ValueError(
-                f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz cannot hold design mode {i}"
-                f" ({mode.hz:.6g} Hz, damping ratio {mode.zeta:g}): it turns through omega_d (t_n + Ts) = {phase:.3g}"
-                f" rad over the shaper, beyond the limit of {MAX_EXACT_PHASE:.4g} rad (2**53); use 'split'")
-    order = _exact_order(shaper)
-    amps, times = np.asarray(shaper.amplitudes), np.asarray(shaper.times)
-    span = max(float(times[-1]), 1.0 / rate)
-
-    def system(taps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        t = taps / rate
-        rows, rhs = [np.ones(taps.size)], [1.0]
-        for mode in shaper.modes:
-            s = complex(-mode.zeta * mode.omega, mode.damped_omega)
-            # scaled by exp(s t_n) and span^-n so every row is of order one
-            fir_row = np.exp(-s * (t - times[-1]))
-            cont = amps * np.exp(-s * (times - times[-1]))
-            for n in range(order + 1):
-                row = fir_row * (-t / span) ** n
-                target = complex(np.sum(cont * (-times / span) ** n))
-                rows += [row.real, row.imag]
-                rhs += [target.real, target.imag]
-        return np.array(rows), np.array(rhs)
-
-    positive = bool(np.all(amps >= 0.0))
-
-    def solve(taps: np.ndarray) -> np.ndarray | None:
-        """Least change from the split on ``taps`` meeting the conditions (and >= 0 for a positive shaper)."""
-        a, b = system(taps)
-        g0 = split[taps]
-        g: np.ndarray = g0 + np.linalg.lstsq(a, b - a @ g0, rcond=None)[0]
-        if np.max(np.abs(a @ g - b)) > 1e-9:
-            return None
-        if not positive or np.min(g) >= -1e-12:
-            return g
-        # the same least change with the taps bounded below by 0 (a small convex QP), then polished on
-        # its support so the conditions hold to rounding
-        from scipy.optimize import minimize
-
-        res = minimize(lambda x: float(np.sum((x - g0) ** 2)), np.clip(g, 0.0, None), jac=lambda x: 2.0 * (x - g0),
-                       bounds=[(0.0, None)] * taps.size, method="SLSQP", options={"ftol": 1e-15, "maxiter": 500},
-                       constraints=[{"type": "eq", "fun": lambda x: a @ x - b, "jac": lambda x: a}])
-        keep = res.x > 1e-9
-        if not res.success or not np.any(keep):
-            return None
-        sub = res.x[keep] + np.linalg.lstsq(a[:, keep], b - a[:, keep] @ res.x[keep], rcond=None)[0]
-        if np.max(np.abs(a[:, keep] @ sub - b)) > 1e-9 or np.min(sub) < -1e-12:
-            return None
-        g = np.zeros(taps.size)
-        g[keep] = sub
-        return g
-
-    occupied = np.flatnonzero(split)
-    nearby = np.concatenate([base - 1, base, base + 1])
-    wider = np.union1d(occupied, nearby[nearby >= 0])
-    for taps in (occupied, wider):
-        g = solve(taps)
-        if g is not None:
-            break
-    else:
-        worst = max(shaper.modes, key=lambda m: m.omega)
-        raise ValueError(
-            f"exact discretisation of the {shaper.family} shaper at {rate:g} Hz has no "
-            f"{'non-negative ' if positive else ''}solution on the samples next to its impulses "
-            f"(highest mode {worst.hz:.3g} Hz, omega Ts = {worst.omega / rate:.2f}); use 'split'")
-    out = np.zeros(max(int(taps.max()) + 1, split.size))
-    out[taps] = g
-    out[np.abs(out) < 1e-15] = 0.0
-    return out
-
-
 def fir_impulses(fir: SparseFir, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """The FIR as an impulse sequence (amplitudes, times in s), e.g. to evaluate its V."""
     return fir.gains.copy(), fir.delays / float(rate)
-
-
-#: rows a stage's linear buffer has room for after the history, at least (the block path moves the history to
-#: the front when they are used up: a stream of one-row blocks moves it once every this many rows)
-LINEAR_ROWS = 1024
-
-#: the most taps :func:`_tap_step` writes a comprehension for (more: a loop over the taps)
-UNROLLED_TAPS = 32
-
-
-def _tap_sum_loop(gains: list[float], rows: list[list[float]], offset: list[float]) -> list[float]:
-    """:func:`_tap_step`'s sum as a loop over the taps (any number of them), in the same order: per column j,
-    ``(gains[0] rows[0][j] + ... + gains[k-1] rows[k-1][j]) + offset[j]``."""
-    g = gains[0]
-    out = [g * v for v in rows[0]]
-    for g, row in zip(gains[1:], rows[1:], strict=True):
-        out = [a + g * b for a, b in zip(out, row, strict=True)]
-    return [a + o for a, o in zip(out, offset, strict=True)]
-
-
-def _tap_step_loop(values: list[float], origin: list[float], rows: list[list[float]], taps: list[int], p: int,
-                   gains: list[float], offset: list[float]) -> list[float]:
-    """:func:`_tap_step` for any number of taps: the deviation into ``rows[p]``, then :func:`_tap_sum_loop` of
-    the tapped rows."""
-    rows[p] = [v - o for v, o in zip(values, origin, strict=True)]
-    return _tap_sum_loop(gains, [rows[t] for t in taps], offset)
-
-
-@functools.cache
-def _tap_step(k: int) -> Callable[..., list[float]]:
-    """``f(values, origin, rows, taps, p, gains, offset)``: one sample of :meth:`_Stage.step_values` in one call,
-    for ``k`` taps: the deviation ``values - origin`` written to ``rows[p]``, then per column j
-    ``(gains[0] rows[taps[0]][j] + ... + gains[k-1] rows[taps[k-1]][j]) + offset[j]`` summed left to right.
-    Written out for ``k`` up to :data:`UNROLLED_TAPS` (as the standard library's ``namedtuple`` and
-    ``dataclasses`` write their methods): one comprehension over the columns, with no loop over the taps and
-    no list of the tapped rows, is what makes one sample of a few channels cheaper on Python floats than
-    numpy's calls."""
-    if k < 1:
-        raise ValueError("a FIR has at least one tap")
-    if k > UNROLLED_TAPS:
-        return _tap_step_loop
-    gs, xs, ts = ([f"{c}{i}" for i in range(k)] for c in "gxt")
-    terms = " + ".join(f"{g} * {x}" for g, x in zip(gs, xs, strict=True))
-    source = (f"def tap_step(values, origin, rows, taps, p, gains, offset):\n"
-              f"    rows[p] = [v - o for v, o in zip(values, origin)]\n"
-              f"    {', '.join(gs)}, = gains\n"
-              f"    {', '.join(ts)}, = taps\n"
-              f"    return [({terms}) + o for o, {', '.join(xs)} in zip(offset, "
-              f"{', '.join(f'rows[{t}]' for t in ts)})]\n")
-    namespace: dict[str, Any] = {}
-    exec(compile(source, f"<fir tap step, {k} taps>", "exec"), namespace)  # our own source text
-    fn = namespace["tap_step"]
-    return fn  # type: ignore[no-any-return]
-
-
-class _Stage:
-    """One FIR running on its own input stream (deviation from ``origin``).
-
-    The last ``fir.length`` inputs are kept in one of three forms, whichever path wrote last (the
-    others are rebuilt from it when a path that reads them runs):
-
-    - a numpy ring (``_buf``, the next input at row ``_pos``): the single-sample numpy path writes one
-      row and gathers the few rows the taps need (one ``take`` with precomputed indices);
-    - the same ring as Python lists (``_rows``): one sample of a few channels on Python floats;
-    - a linear buffer (``_ext``): the block path writes a block's deviations right after the
-      ``length - 1`` inputs before it, and each tap is then one strided pass over that buffer
-      (``out += g x[k - d]`` as two numpy passes on the flat rows: every output's arithmetic the same wherever
-      the block boundaries fall, so any partition into blocks gives the same output bit for bit). The buffer is
-      kept from block to block (grown only for a larger block), so a block allocates nothing but its output; the next
-      block goes after it while there is room (:data:`LINEAR_ROWS`), else the history (``length - 1``
-      rows) is moved to the front first.
-    """
-
-    __slots__ = ("_buf", "_buf_ok", "_delays", "_ext", "_ext_end", "_gain_list", "_gains", "_idx", "_origin_flat",
-                 "_origin_list", "_pos", "_rows", "_rows_ok", "_scratch", "_size", "_step", "_taps", "fir", "held",
-                 "held_samples", "origin")
-
-    def __init__(self, fir: SparseFir, origin: np.ndarray) -> None:
-        self.fir = fir
-        self.origin = origin.copy()
-        self.held: np.ndarray | None = None
-        self.held_samples = 0
-        self._size = size = fir.length
-        self._buf = np.zeros((size, origin.size))  # ring: input k at row k mod size
-        self._pos = 0  # the row the next input goes to
-        self._delays = [int(d) for d in fir.delays]
-        self._gains = np.asarray(fir.gains, dtype=float)
-        # per ring position, the rows holding x(k - delays[i]) when x(k) is at that position
-        self._idx = [(p - fir.delays) % size for p in range(size)]
-        # the same ring as Python lists, for one sample of a few channels (step_values): numpy's calls cost
-        # more than the arithmetic there
-        self._rows: list[list[float]] = self._buf.tolist()
-        self._rows_ok = self._buf_ok = True
-        # the block path's linear buffer: the newest `size` inputs are its rows _ext_end - size .. _ext_end - 1
-        # when _ext_end >= 0 (the form written last); -1: the ring is current
-        self._ext = np.zeros((0, origin.size))
-        self._ext_end = -1
-        self._origin_flat = np.tile(-self.origin, 1)  # -origin repeated row after row (grown as blocks need)
-        self._scratch = np.empty(0)  # g x of one tap, for the block path (grown as blocks need)
-        self._taps = [ix.tolist() for ix in self._idx]
-        self._gain_list: list[float] = self._gains.tolist()
-        self._origin_list: list[float] = self.origin.tolist()
-        self._step = _tap_step(len(self._taps[0]))
-
-    def _numpy_ring(self) -> None:
-        """Make the numpy ring current (before a numpy path reads it); the list ring stays current."""
-        if not self._buf_ok:
-            end = self._ext_end
-            if end >= 0:  # the block path wrote last: its newest `size` inputs, the oldest at row 0
-                self._buf[:] = self._ext[end - self._size : end]
-                self._pos = 0
-                self._ext_end = -1
-            else:
-                self._buf[:] = self._rows
-            self._buf_ok = True
-
-    def step(self, x: np.ndarray) -> np.ndarray:
-        """One input (deviation, shape (channels,)); returns the FIR output for it (a new array)."""
-        self._numpy_ring()
-        self._rows_ok = False
-        p = self._pos
-        self._buf[p] = x
-        self._pos = p + 1 if p + 1 < self._size else 0
-        y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
-        return y
-
-    def step_value(self, x: np.ndarray) -> np.ndarray:
-        """:meth:`step` for an input value ``x`` (not a deviation): its deviation from :attr:`origin` is
-        written straight into the ring (one numpy call instead of two). Returns a new array."""
-        self._numpy_ring()
-        self._rows_ok = False
-        p = self._pos
-        np.subtract(x, self.origin, out=self._buf[p])
-        self._pos = p + 1 if p + 1 < self._size else 0
-        y: np.ndarray = np.dot(self._gains, self._buf.take(self._idx[p], axis=0))
-        return y
-
-    def step_values(self, values: list[float], offset: list[float]) -> list[float]:
-        """:meth:`step_value` on Python floats (one sample of a few channels), plus ``offset``: the deviation
-        goes into the list ring, and the output is the same sum of the tapped inputs times the gains, in the
-        order of the delays, then plus the offset (equal to the numpy paths to rounding). Returns a new list."""
-        if not self._rows_ok:
-            self._numpy_ring()
-            self._rows = self._buf.tolist()
-            self._rows_ok = True
-        self._buf_ok = False
-        p = self._pos
-        self._pos = p + 1 if p + 1 < self._size else 0
-        return self._step(values, self._origin_list, self._rows, self._taps[p], p, self._gain_list, offset)
-
-    def _history(self, n: int) -> tuple[np.ndarray, int]:
-        """The flat linear buffer (``self._ext``) with room for ``n`` inputs from its row ``at`` on, the last
-        ``size - 1`` inputs in the rows just before, oldest first; returns (flat, at). The history is moved to
-        the front only when the room after it runs out (for blocks of a few rows, once every
-        :data:`LINEAR_ROWS` rows or so)."""
-        hist = self._size - 1
-        ext, end = self._ext, self._ext_end
-        if end >= 0:  # the block path wrote last: the history is the rows end - hist .. end - 1
-            if end + n <= ext.shape[0]:
-                return ext.reshape(-1), end
-            if hist + n > ext.shape[0]:
-                grown = np.empty((hist + max(n, LINEAR_ROWS), ext.shape[1]))
-                grown[:hist] = ext[end - hist : end]
-                self._ext = ext = grown
-            elif end != hist:
-                ext[:hist] = ext[end - hist : end]  # (numpy copies through a buffer when the two overlap)
-        else:
-            self._numpy_ring()
-            if ext.shape[0] < hist + n:
-                self._ext = ext = np.empty((hist + max(n, LINEAR_ROWS), self._buf.shape[1]))
-            p, buf = self._pos, self._buf  # the ring's next row holds its oldest input, not in the history
-            ext[: hist - p] = buf[p + 1 :]
-            ext[hist - p : hist] = buf[:p]
-        return ext.reshape(-1), hist
-
-    def _tap_sum_block(self, flat: np.ndarray, at: int, n: int) -> np.ndarray:
-        """The FIR output of the ``n`` inputs written from row ``at`` of the flat buffer ``flat``, after the
-        history; the block path's state then lives in the linear buffer."""
-        c = self._ext.shape[1]
-        nc = n * c
-        delays, gains = self._delays, self._gains
-        out = np.empty((n, c))
-        acc = out.reshape(-1)
-        start = (at - delays[0]) * c
-        np.multiply(gains[0], flat[start : start + nc], out=acc)
-        # the other taps added in place: g x into a scratch row, then added (two numpy passes; BLAS daxpy fuses the
-        # multiply and the add in its vector body and not in its tail on some CPUs, so an output's last bit would
-        # depend on where the block boundaries fall)
-        tmp = self._scratch
-        if tmp.size < nc:
-            tmp = self._scratch = np.empty(max(nc, LINEAR_ROWS * c))
-        tmp = tmp[:nc]
-        for d, g in zip(delays[1:], self._gain_list[1:], strict=True):
-            start = (at - d) * c
-            np.multiply(flat[start : start + nc], g, out=tmp)
-            np.add(acc, tmp, out=acc)
-        self._ext_end = at + n
-        self._buf_ok = self._rows_ok = False
-        return out
-
-    def run(self, block: np.ndarray) -> np.ndarray:
-        """A block of inputs (deviations, shape (N, channels)); returns the FIR output (a new array)."""
-        n = block.shape[0]
-        flat, at = self._history(n)
-        self._ext[at : at + n] = block
-        return self._tap_sum_block(flat, at, n)
-
-    def run_values(self, block: np.ndarray) -> np.ndarray:
-        """:meth:`run` for a block of input values (not deviations, C-contiguous, shape (N, channels)): their
-        deviations from :attr:`origin` are written straight into the linear buffer, as one flat pass (equal
-        to ``run(block - origin)``, bit for bit). Returns a new array."""
-        n, c = block.shape
-        nc = n * c
-        flat, at = self._history(n)
-        neg = self._origin_flat
-        if neg.size < nc:
-            neg = self._origin_flat = np.tile(-self.origin, n)
-        start = at * c
-        np.add(block.reshape(-1), neg[:nc], out=flat[start : start + nc])
-        return self._tap_sum_block(flat, at, n)
 
 
 class _ChannelShaper:
@@ -473,7 +150,7 @@ class _ChannelShaper:
             raise ValueError("channels must be >= 1")
         self.channels = int(channels)
         self._fir = fir
-        self._last: np.ndarray | list[float] | None = None
+        self._last: np.ndarray | Sequence[float] | None = None
 
     @property
     def fir(self) -> SparseFir:
@@ -489,8 +166,8 @@ class _ChannelShaper:
         """Shape a block of samples, shape (N, channels) or (channels,); returns the same shape."""
         raise NotImplementedError
 
-    def process_values(self, values: list[float]) -> list[float]:
-        """:meth:`process` for one sample given as a list of ``channels`` floats; returns a list."""
+    def process_values(self, values: Sequence[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list or tuple of ``channels`` floats; returns a list."""
         if len(values) != self.channels:
             raise ValueError(f"expected {self.channels} values, got {len(values)}")
         out: list[float] = self.process(np.array(values, dtype=float)).tolist()
@@ -556,7 +233,7 @@ class StreamingShaper(_ChannelShaper):
             raise RuntimeError(
                 f"{len(self._stages)} shaper changes still settling; wait {self._fir.length} samples"
             )
-        last = np.array(self._last, dtype=float)  # (a list after process_values)
+        last = np.array(self._last, dtype=float)  # (a tuple after process_values)
         active = self._stages[-1]
         active.held = last - active.origin
         active.held_samples = 0
@@ -618,9 +295,9 @@ class StreamingShaper(_ChannelShaper):
             self._offset_tiled = (offset, tiled)
         return tiled[:size]
 
-    def process_values(self, values: list[float]) -> list[float]:
-        """:meth:`process` for one sample given as a list of ``channels`` floats; returns the shaped sample as
-        a list. In the usual case (started, one filter, no change settling) it runs on Python floats
+    def process_values(self, values: Sequence[float]) -> list[float]:
+        """:meth:`process` for one sample given as a list or tuple of ``channels`` floats; returns the shaped
+        sample as a list. In the usual case (started, one filter, no change settling) it runs on Python floats
         (:meth:`_Stage.step_values`), cheaper than numpy's calls on a few values; equal to :meth:`process`
         to rounding (tests hold them to 1e-12)."""
         if len(values) != self.channels:
@@ -633,7 +310,7 @@ class StreamingShaper(_ChannelShaper):
         if offset is not self._offset:  # (the offset array is replaced, never changed in place)
             offset, offset_list = self._offset_list = (self._offset, self._offset.tolist())
         y = stages[0].step_values(values, offset_list)
-        self._last = list(values)  # (the caller's list may change)
+        self._last = tuple(values)  # a list copied (the caller's may change), a tuple kept as it is
         return y
 
     def _sample(self, x: np.ndarray) -> np.ndarray:

@@ -43,8 +43,8 @@ from __future__ import annotations
 import array
 import math
 import threading
-from collections.abc import Mapping, Sequence
-from operator import le, lt
+from collections.abc import Callable, Mapping, Sequence
+from operator import lt
 from typing import Any
 
 import numpy as np
@@ -52,7 +52,7 @@ import numpy as np
 from shaper_nodes.core.checks import InputError, finite_array, strictly_increasing
 
 from .fir import RetimingShaper, SparseFir, StreamingShaper
-from .limits import JointLimits
+from .limits import JointLimits, bounds_check
 
 #: the fields of a trajectory point that are shaped, in message order
 FIELDS = ("positions", "velocities", "accelerations")
@@ -144,19 +144,30 @@ class CommandStream:
         self.lock = threading.Lock()
         # the last command passed on per filter ("array", "stream.<field>"), where a refused output restarts it
         self._last_sent: dict[str, np.ndarray | list[float]] = {}
-        self._bounds_for = -1.0  # the max_abs of _bounds (see input_bounds)
+        self._bounds_for = -1.0  # the max_abs of _bounds and _within_in (see input_bounds)
         self._bounds: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
+        # the streamed sample's checks, written out per joint (limits.bounds_check): its input's, made with _bounds,
+        # and its output's (finite, within the position limits)
+        self._within_in: Callable[[Sequence[float]], bool] = lambda v: False
+        self._within_out = bounds_check(*limits.sample_bounds)
         self.last_stamp_ns = 0  # the last accepted non-zero header stamp of the stream, ns (0: none yet)
 
     @property
     def input_bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """Per joint, the (lowest, highest) value a streamed position may take (``max_abs`` and the
         position limits; see :meth:`shape_array`), recomputed when ``max_abs`` changes."""
+        self._input_check()
+        return self._bounds
+
+    def _input_check(self) -> Callable[[Sequence[float]], bool]:
+        """The streamed sample's input check with the bounds of :attr:`input_bounds` (made again when ``max_abs``
+        changes): ``lo <= v <= hi`` per value, one value per joint."""
         max_abs = self.max_abs
         if self._bounds_for != max_abs:
             self._bounds = self.limits.input_bounds(max_abs)
+            self._within_in = bounds_check(*self._bounds)
             self._bounds_for = max_abs
-        return self._bounds
+        return self._within_in
 
     # ------------------------------------------------------------------ shaping
     def shape_array(self, data: Sequence[float] | array.array[float] | np.ndarray) -> list[float]:
@@ -171,20 +182,19 @@ class CommandStream:
         Holds :attr:`lock`. Returns the shaped values."""
         return self.shape_values(data.tolist() if isinstance(data, array.array) else list(data))
 
-    def shape_values(self, values: list[float]) -> list[float]:
-        """:meth:`shape_array` for a sample given as a new list of Python floats (the streamed sample's path:
-        no conversion)."""
+    def shape_values(self, values: Sequence[float]) -> list[float]:
+        """:meth:`shape_array` for a sample given as a tuple or a new list of Python floats (the streamed sample's
+        path: no conversion, no copy)."""
         with self.lock:
-            lo, hi = self._bounds if self._bounds_for == self.max_abs else self.input_bounds
-            # all(map(le, ...)) stops at the first pair out of order, in C; a NaN compares False
-            if not (len(values) == self.joints and all(map(le, lo, values)) and all(map(le, values, hi))):
+            within = self._within_in if self._bounds_for == self.max_abs else self._input_check()
+            # lo <= v <= hi per value, and one value per joint, written out (limits.bounds_check); a NaN compares False
+            if not within(values):
                 # the reason, as the general checks give it
                 x = finite_array("data", values, size=self.joints, limit=self.max_abs)
                 self.limits.check("positions", "the command", x)
                 values = x.tolist()
             out = self.array_filter.process_values(values)
-            lo, hi = self.limits.sample_bounds
-            if not (all(map(le, lo, out)) and all(map(le, out, hi))):
+            if not self._within_out(out):
                 self._check_shaped({"array": (self.array_filter, np.array(values), "positions")},
                                    {"array": np.array(out)})
             self._last_sent["array"] = out
