@@ -119,6 +119,7 @@ class _Recorder:
 
         from shaper_msgs.msg import CycleEvent, ModeEstimate
         from shaper_msgs.msg import Shaper as ShaperMsg
+        from shaper_nodes.nodes.scheduler_lockstep import MODES_QOS
         from shaper_nodes.ros.conversions import time_to_sec
         from shaper_nodes.ros.qos import LATCHED
 
@@ -133,7 +134,7 @@ class _Recorder:
         node.create_subscription(JointState, "/sim_plant/tip_state", self._on_tip, 1000)
         if commands:
             node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self._on_cmd, 1000)
-        node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, LATCHED)
+        node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, MODES_QOS)  # all of them
         node.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         node.create_subscription(ShaperMsg, "/shaper/active_shaper", self._on_shaper, LATCHED)
 

@@ -112,7 +112,7 @@ from shaper_nodes.ros.raw_stream import RawJointStates
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
-from .scheduler_lockstep import LockstepPoses
+from .scheduler_lockstep import MODES_QOS, LockstepPoses
 from .scheduler_moves import MoveService
 from .scheduler_parameters import PARAMETERS, RuleParams, SchedulerParams, rule_table
 
@@ -144,7 +144,7 @@ class SchedulerNode(Node):
                                    self.diagnostics, get=True)
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
-        self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
+        self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", MODES_QOS if p.lockstep else LATCHED)
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper, qos_profile=SERVICE_QOS)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
         self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at, qos_profile=SERVICE_QOS)

@@ -24,9 +24,17 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
 from shaper_nodes.ros.lockstep_reader import LockstepReader
 
-__all__ = ["STREAM", "LockstepPoses"]
+__all__ = ["MODES_QOS", "STREAM", "LockstepPoses"]
+
+#: ~/mode_estimate in lockstep: latched as on a robot (a late subscriber gets the latest), and deep, so that a
+#: recorder that subscribes as deep takes every estimate of a run (the plant does not wait for it); depth 1, a
+#: slow recorder missed some, and the reproduction's plot of the modes changed with the load
+MODES_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 #: the stream name the acknowledgements count (the joint states)
 STREAM = "joint_states"
