@@ -53,6 +53,7 @@ RATE = 25.0       # Hz, command and simulation rate (the modes are below 0.16 Hz
 DWELL = 30.0      # s per step
 WINDOW = 10.0     # s after a step where its residual window starts
 PREROLL = 4.0     # s at rest before the first step (the scheduler's first shaper is active before the task starts)
+SCHEDULER = "/scheduler"  # the scheduler node, a lockstep reader of the plant
 @dataclass(frozen=True)
 class Case:
     name: str
@@ -118,6 +119,7 @@ class _Recorder:
 
         from shaper_msgs.msg import CycleEvent, ModeEstimate
         from shaper_msgs.msg import Shaper as ShaperMsg
+        from shaper_nodes.nodes.scheduler_lockstep import MODES_QOS
         from shaper_nodes.ros.conversions import time_to_sec
         from shaper_nodes.ros.qos import LATCHED
 
@@ -132,7 +134,7 @@ class _Recorder:
         node.create_subscription(JointState, "/sim_plant/tip_state", self._on_tip, 1000)
         if commands:
             node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self._on_cmd, 1000)
-        node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, LATCHED)
+        node.create_subscription(ModeEstimate, "/scheduler/mode_estimate", self._on_mode, MODES_QOS)  # all of them
         node.create_subscription(CycleEvent, "/cycle_events", self._on_event, 100)
         node.create_subscription(ShaperMsg, "/shaper/active_shaper", self._on_shaper, LATCHED)
 
@@ -187,20 +189,26 @@ class _Recorder:
 
 
 def _start_nodes(case: Case, start: StartNode) -> None:
+    # with a scheduler, the plant waits for it as a lockstep reader, one period ahead at most: its retune is
+    # answered by the shaper before the plant asks for the next step, whatever the load (scheduler.md)
+    readers = {"lockstep.readers": [SCHEDULER], "lockstep.lead": 1.0 / RATE} if case.scheduler is not None else {}
     start("sim_plant_node", "sim_plant", {
         "joint_names": [JOINT], "rate": RATE, "mode": "lockstep", "plant.model": "two_mass",
         "imu.axes": [0, -1, -1], "task.start": [0.0], "task.levels": [float(v) for v in STEP_LEVELS],
-        "task.dwell": DWELL, "task.preroll": PREROLL, "lockstep_timeout": 10.0, "joint_states.idle_period": 0.1})
+        "task.dwell": DWELL, "task.preroll": PREROLL, "lockstep_timeout": 10.0, "joint_states.idle_period": 0.1,
+        **readers})
     shaper = {"joint_names": [JOINT], "command_rate": RATE, "use_sim_time": True, **case.shaper}
     if case.scheduler is not None:
         shaper["retime_sources"] = ["scheduler"]
-        start("shaper_nodes", "scheduler", {"use_sim_time": True, **case.scheduler})
+        start("shaper_nodes", "scheduler", {"use_sim_time": True, "lockstep": True, **case.scheduler})
     start("shaper_nodes", "shaper_node", shaper)
 
 
 def _wait_for_nodes(case: Case, node: Any, until: Callable[[Callable[[], bool], float, str], None],
                     rec: _Recorder, start_cli: Any, commands: bool = True) -> None:
     """Wait for the services, the subscribers and the first active shaper, then let discovery settle."""
+    from shaper_nodes.ros.lockstep_reader import ack_topic
+
     until(start_cli.service_is_ready, 60.0, "the sim plant")
     need = {"/shaper/commands": 1, "/forward_position_controller/commands": 2 if commands else 1,
             "/joint_states": 1, "/sim_plant/tip_state": 1}
@@ -210,6 +218,8 @@ def _wait_for_nodes(case: Case, node: Any, until: Callable[[Callable[[], bool], 
 
         sched = node.create_client(GetShaper, "/scheduler/get_shaper")
         until(sched.service_is_ready, 60.0, "the scheduler")
+    if case.scheduler is not None:  # the plant counts the scheduler from its announcement (latched) on
+        need[ack_topic(SCHEDULER)] = 1
     for topic, n in need.items():
         until(functools.partial(_has_subscribers, node, topic, n), 60.0, f"{n} subscribers on {topic}")
     until(lambda: bool(rec.active), 60.0, "the shaper's active shaper")

@@ -39,6 +39,11 @@ GRADE_TOLERANCE, says why that is safe); ~/mode_estimate is still published at e
 Until the first shaper is sent, each joint state wakes this node to try at once (also while
 simulated time stands still).
 
+Lockstep (``lockstep`` true, for a lockstep sim plant that names this node in its ``lockstep.readers`` with
+``lockstep.lead`` one period): the rule base is evaluated on the poses' stamps instead of the timer, and each pose
+is acknowledged to the plant once the shaper decided on it is answered, so that every retune takes effect at the
+same step whatever the load (nodes/scheduler_lockstep.py). Off (the default), nothing of it runs.
+
 Interfaces
 ----------
 /joint_states (sensor_msgs/JointState)                in
@@ -107,6 +112,7 @@ from shaper_nodes.ros.raw_stream import RawJointStates
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
+from .scheduler_lockstep import MODES_QOS, LockstepPoses
 from .scheduler_moves import MoveService
 from .scheduler_parameters import PARAMETERS, RuleParams, SchedulerParams, rule_table
 
@@ -138,7 +144,7 @@ class SchedulerNode(Node):
                                    self.diagnostics, get=True)
         self.create_subscription(ShaperMsg, f"{shaper}/active_shaper", self._on_active, LATCHED)
         self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
-        self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", LATCHED)
+        self._mode_pub = self.create_publisher(ModeEstimate, "~/mode_estimate", MODES_QOS if p.lockstep else LATCHED)
         self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper, qos_profile=SERVICE_QOS)
         self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
         self.create_service(ShaperAt, "~/shaper_at", self._on_shaper_at, qos_profile=SERVICE_QOS)
@@ -158,9 +164,15 @@ class SchedulerNode(Node):
         self._forwarding = False                   # a learner's request in flight
         self._held_by_learner = False
         self._active: ShaperMsg | None = None
+        self._answered: ShaperMsg | None = None  # the active shaper in the last accepted answer (lockstep)
         self.sent = 0
         self.refused = 0
-        self.create_timer(float(p.period), self._tick)
+        self._lockstep: LockstepPoses | None = None
+        if p.lockstep:  # the poses' stamps drive the evaluations (nodes/scheduler_lockstep.py)
+            self._lockstep = LockstepPoses(self, float(p.period), self._lockstep_tick, self._in_flight,
+                                           lambda: self.last_sent is None)
+        else:
+            self.create_timer(float(p.period), self._tick)
         # wall clock (with use_sim_time the node clock stands still while a lockstep plant is idle):
         # notes when the shaper's set_shaper service appeared, see _service_settled
         self._ready_since: float | None = None
@@ -228,6 +240,10 @@ class SchedulerNode(Node):
             self._refusals.append(str(err))
             self._wake.trigger()
             return
+        if self._lockstep is not None:
+            self._lockstep.put(z, stamp)
+            self._wake.trigger()
+            return
         self._pose = (z, self._now(), time.monotonic(), stamp)
         if self.last_sent is None:
             # the first shaper goes out as soon as a pose and the shaper node are there, also while
@@ -237,7 +253,9 @@ class SchedulerNode(Node):
     def _on_wake(self) -> None:
         while self._refusals:
             self.diagnostics.report("input", ERROR, f"refused joint_states: {self._refusals.popleft()}")
-        if self.last_sent is None:
+        if self._lockstep is not None:
+            self._lockstep.drain()
+        elif self.last_sent is None:
             self._tick()
 
     def _on_active(self, msg: ShaperMsg) -> None:
@@ -245,15 +263,33 @@ class SchedulerNode(Node):
         self._active_pub.publish(msg)
 
     # ----------------------------------------------------------------- scheduling
-    def _tick(self) -> None:
+    def _tick(self, now: float | None = None) -> bool:
+        """Evaluate the rule base at the latest pose and send its shaper if due. ``now``: the pose's time in
+        lockstep (the rate limit counts on the poses' stamps, with the active shaper of the last answer); None: the
+        node clock. False: a shaper is due but set_shaper is not settled yet."""
         self._poll_call()
         interp = self._evaluate()
-        if interp is None or self._pending or self._held_by_learner or not self._service_settled():
-            return
-        duration = self._active.times[-1] if self._active is not None and len(self._active.times) else 0.0
-        if self._rate_limit().due(self.last_sent.modes if self.last_sent else None, interp.modes,
-                                  self._now() - self._sent_at, duration):
-            self._send(interp)
+        if interp is None or self._pending or self._held_by_learner:
+            return True
+        t = self._now() if now is None else now
+        active = self._active if now is None else self._answered
+        duration = active.times[-1] if active is not None and len(active.times) else 0.0
+        if not self._rate_limit().due(self.last_sent.modes if self.last_sent else None, interp.modes,
+                                      t - self._sent_at, duration):
+            return True
+        if not self._service_settled():
+            return False
+        self._send(interp, t)
+        return True
+
+    def _lockstep_tick(self, z: list[float], stamp: tuple[int, int], now: float) -> bool:
+        self._pose = (z, now, time.monotonic(), stamp)
+        return self._tick(now)
+
+    def _in_flight(self) -> bool:
+        """The scheduled shaper sent is still unanswered (its answer, if it came, taken)."""
+        self._poll_call()
+        return self._call is not None
 
     def _evaluate(self) -> Interpolation | None:
         """The rule base at the latest pose, published on ~/mode_estimate (None: no fresh pose).
@@ -292,6 +328,8 @@ class SchedulerNode(Node):
                 self._ready_since = time.monotonic()
         else:
             self._ready_since = None
+        if self._lockstep is not None:  # a shaper that waited for the service, or an answer that timed out
+            self._lockstep.drain()
 
     def _watch_match(self) -> None:
         """Once a second: publishers of the joint states on the graph, none matched for UNMATCHED_WARN s
@@ -314,7 +352,7 @@ class SchedulerNode(Node):
         lost (then service_timeout sends it again, but late)."""
         return self._ready_since is not None and time.monotonic() - self._ready_since > DISCOVERY_SETTLE
 
-    def _send(self, interp: Interpolation) -> None:
+    def _send(self, interp: Interpolation, now: float) -> None:
         try:
             shaper = self.core.shaper(interp)
         except ShaperError as err:
@@ -323,8 +361,11 @@ class SchedulerNode(Node):
         msg = shaper_to_msg(shaper, SOURCE, 0, self.get_clock().now().to_msg())
         if shaper.family != "custom":  # a family design: the shaper node designs it on the modes
             msg.amplitudes, msg.times = [], []
-        self._sent_at = self._now()
-        self._call = (self.shaper.set.start(self.shaper.request(msg)), interp)
+        self._sent_at = now
+        call = self.shaper.set.start(self.shaper.request(msg))
+        self._call = (call, interp)
+        if self._lockstep is not None:  # the answer acknowledges its pose at once
+            call.on_done(self._wake.trigger)
 
     def _poll_call(self) -> None:
         """The answer to the scheduled shaper in flight, if it came (or was given up: then it is
@@ -337,6 +378,7 @@ class SchedulerNode(Node):
         interp, self._call = self._call[1], None
         if answer.response is not None and answer.response.success:
             self.last_sent = interp
+            self._answered = answer.response.active
             self.sent += 1
         elif answer.response is not None:
             self.diagnostics.report("refused", WARN,

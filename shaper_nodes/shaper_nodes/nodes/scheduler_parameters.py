@@ -59,8 +59,13 @@ class SchedulerParams:
     feed: str = param("take", "Who takes joint_states on the lean node <name>_joint_states: 'take' (a take loop,"
                       " ros/take_loop.py) or 'thread' (rclpy's SingleThreadedExecutor).", choices=("take", "thread"),
                       read_only=True)
-    period: float = param(0.05, "How often the rule base is evaluated, s (node clock).", (0.001, 60.0),
+    period: float = param(0.05, "How often the rule base is evaluated, s (node clock; with lockstep, the joint"
+                          " states' stamps).", (0.001, 60.0),
                           read_only=True)
+    lockstep: bool = param(False, "A lockstep sim plant waits for this node (it names it in lockstep.readers, with"
+                           " lockstep.lead one period): period counts on the joint states' stamps, and each joint"
+                           " state is acknowledged once the shaper decided on it is answered, so a retune takes"
+                           " effect at the next step whatever the load. False on a robot.", read_only=True)
     min_interval: float = param(0.1, "Least time between two shapers sent, s.", (0.0, 3600.0),
                                 check=lambda v: RateLimit(min_interval=v))
     service_timeout: float = param(

@@ -97,6 +97,15 @@ class PendingCall:
                 self._answer = self._client._gave_up(self._future)
         return self._answer
 
+    def on_done(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` (from the thread that completes the call: keep it short, e.g. a guard condition's
+        trigger) once the response is in; at once for a call answered without one. A timeout is not a response:
+        :meth:`result` tells it when polled."""
+        if self._future is None:
+            callback()
+        else:
+            self._future.add_done_callback(lambda _future: callback())
+
 
 class ServiceClient:
     """A client of one service whose waits are bounded (see the module docstring).
