@@ -21,7 +21,8 @@ learner
     watched (:mod:`.learner_drift`) and the goals matched to moves (:mod:`.move_goals`).
 scheduler
     ``scheduler``: the shaper follows the pose by Takagi-Sugeno interpolation; its parameters in
-    :mod:`.scheduler_parameters`, the per-move corrections in :mod:`.scheduler_moves`.
+    :mod:`.scheduler_parameters`, the per-move corrections in :mod:`.scheduler_moves`, the learner's interface in
+    :mod:`.scheduler_learner`, the lockstep poses in :mod:`.scheduler_lockstep`.
 calibrate
     ``calibrate``: the modes over the arm's workspace and the scheduler's rule base; its ROS side in
     :mod:`.calibrator`, its parameters in :mod:`.calibrate_parameters`, how a run stops in

@@ -102,8 +102,8 @@ from shaper_nodes.core.scheduling import (
     Scheduler,
     rule_base_from_dict,
 )
-from shaper_nodes.core.shaping import ShaperError, none_shaper
-from shaper_nodes.ros.conversions import estimate_msg, shaper_from_msg, shaper_to_msg
+from shaper_nodes.core.shaping import ShaperError
+from shaper_nodes.ros.conversions import estimate_msg, shaper_to_msg
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare, declare_all, flat, read
@@ -112,6 +112,7 @@ from shaper_nodes.ros.raw_stream import RawJointStates
 from shaper_nodes.ros.shaper_client import PendingCall, ShaperClient
 from shaper_nodes.ros.side_node import SideNode
 
+from .scheduler_learner import LearnerInterface
 from .scheduler_lockstep import MODES_QOS, LockstepPoses
 from .scheduler_moves import MoveService
 from .scheduler_parameters import PARAMETERS, RuleParams, SchedulerParams, rule_table
@@ -129,7 +130,7 @@ _REFUSALS_KEPT = 100
 UNMATCHED_WARN = 3.0
 
 
-class SchedulerNode(Node):
+class SchedulerNode(LearnerInterface, Node):
     """See the module docstring. Extra arguments go to ``Node``."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -406,61 +407,6 @@ class SchedulerNode(Node):
                         f" at " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.premises, interp.z_in, strict=True))
                         + f" (region {region})" + (f"; {clamped}" if clamped else "") + move)
         return resp
-
-    # ----------------------------------------------------------------- the learner's interface
-    async def _on_set_shaper(self, req: SetShaper.Request, resp: SetShaper.Response) -> SetShaper.Response:
-        source = req.shaper.source.strip() or "service"
-        resp.active = self._active or ShaperMsg()
-        if source != "learner":
-            resp.success, resp.message = False, (f"the scheduler takes corrections from the learner only; source"
-                                                 f" {source!r} sets {self.shaper.srv_name} directly")
-            return resp
-        before = self.core.corrections.copy()
-        interp = self._interp
-        try:
-            learned = shaper_from_msg(req.shaper)
-            identity = learned.family == "none"
-            region, corr = (0, (1.0, 1.0)) if identity else self._learn(interp, learned)
-        except (ShaperError, FuzzyError) as err:
-            resp.success, resp.message = False, f"refused: {err}"
-            return resp
-        self._forwarding = True
-        try:
-            answer = await self.shaper.set.call(SetShaper.Request(shaper=req.shaper))
-        finally:
-            self._forwarding = False
-        if answer.response is None or not answer.response.success:
-            self.core.corrections = before  # the learner's shaper did not become active: nothing learned
-            resp.success, resp.message = False, answer.error if answer.response is None else answer.response.message
-            return resp
-        resp.success, resp.active = True, answer.response.active
-        self._held_by_learner = identity
-        self._sent_at = self._now()
-        if identity:
-            resp.message = f"{answer.response.message}; schedule held until the learner sends a shaper"
-        else:
-            self.last_sent = interp
-            name = self.core.rule_base.rules[region].name or str(region)
-            if self.core.factors[region] is not None:  # several modes: an extra factor (core docstring)
-                what = f"extra factor T2 = {corr[0]:.4f} s, A1 = {corr[1]:.4f}"
-            else:
-                what = f"T2 x {corr[0]:.4f}, A1 x {corr[1]:.4f}"
-            self.get_logger().info(f"learner correction in region {name}: {what}")
-            resp.message = f"{answer.response.message}; kept as the correction of region {name}"
-        return resp
-
-    def _learn(self, interp: Interpolation | None, learned: Any) -> tuple[int, tuple[float, float]]:
-        if interp is None:
-            raise ShaperError("no pose yet (no joint states): the correction has no operating region")
-        return self.core.learn(interp, learned)
-
-    async def _on_get_shaper(self, req: GetShaper.Request, resp: GetShaper.Response) -> GetShaper.Response:
-        assert self.shaper.get is not None
-        answer = await self.shaper.get.call(GetShaper.Request())
-        if answer.response is None:
-            resp.active = self._active or shaper_to_msg(none_shaper(), "", 0)
-            return resp
-        return answer.response
 
 
 def _estimate(interp: Interpolation, stamp: Any) -> ModeEstimate:
