@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
-from builtin_interfaces.msg import Duration
 from conftest import arm_parameters
 from control_msgs.action import FollowJointTrajectory
 from rclpy.executors import SingleThreadedExecutor
@@ -46,10 +45,6 @@ LINEAR_TOLERANCE = 0.05
 
 def stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-
-
-def duration(t: float) -> Duration:
-    return Duration(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)) % 1_000_000_000)
 
 
 def goal(move) -> FollowJointTrajectory.Goal:
