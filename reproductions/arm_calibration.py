@@ -113,20 +113,18 @@ def accuracy(cal: Any) -> list[dict[str, Any]]:
 
 def goal_waypoints(move: Any, shaper: Any, rate: float = RATE, dwell: float = DWELL
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The goal the demo sends for ``move`` (its waypoints after the start, then ``dwell`` s holding the
-    goal), shaped by ``shaper`` as the shaper node shapes a whole goal (None: unshaped): times (s from the
-    start), positions, velocities, accelerations ((N, 6) each)."""
+    """The goal the demo sends for ``move`` (:func:`sim_plant_node.arm.task.goal_points`: its start at time 0, its
+    waypoints, then ``dwell`` s holding the goal), shaped by ``shaper`` as the shaper node shapes a whole goal (None:
+    unshaped), as the controller runs it: without the point at time 0 (the controller starts from the measured
+    state). Times (s from the start), positions, velocities, accelerations ((N, 6) each)."""
     from shaper_nodes.core.shaping.fir import discretize
     from shaper_nodes.core.shaping.trajectory import shape_trajectory
+    from sim_plant_node.arm.task import goal_points
 
-    times = np.append(move.times[1:], move.duration + dwell)
-    pos = np.vstack([move.positions[1:], move.positions[-1]])
-    vel = np.vstack([move.velocities[1:], np.zeros(6)])
-    acc = np.vstack([move.accelerations[1:], np.zeros(6)])
+    times, pos, vel, acc = goal_points(move, dwell)
     if shaper is None:
-        return times, pos, vel, acc
-    shaped = shape_trajectory(np.append(0.0, times), np.vstack([move.positions[0], pos]),
-                              discretize(shaper, rate), rate, np.vstack([np.zeros(6), vel]))
+        return times[1:], pos[1:], vel[1:], acc[1:]
+    shaped = shape_trajectory(times, pos, discretize(shaper, rate), rate, vel)
     return shaped.times[1:], shaped.positions[1:], shaped.velocities[1:], shaped.accelerations[1:]
 
 

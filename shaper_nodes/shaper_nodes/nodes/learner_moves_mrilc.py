@@ -325,6 +325,12 @@ class MrilcMovesMode:
         """The goal with its move's correction (None: as it came; module docstring)."""
         names = list(traj.joint_names)
         times, fields = trajectory_arrays(traj, names, True)
+        # a point at time 0 (a planner's start; the controller starts from the measured state) passes as it came: the
+        # move's profile and correction are the points after it
+        lead = int(np.count_nonzero(times <= 0.0))
+        head = {k: fields[k][:lead] if k in fields else np.zeros((lead, len(names)))
+                for k in ("positions", "velocities", "accelerations", "effort")}
+        times, fields = times[lead:], {k: x[lead:] for k, x in fields.items()}
         q = fields["positions"]
         def pending() -> _Cycle | None:
             cyc = self._last
@@ -362,6 +368,7 @@ class MrilcMovesMode:
         out = {"positions": qc, "velocities": vc, "accelerations": ac}
         if "effort" in fields:
             out["effort"] = fields["effort"]
+        out = {k: np.vstack([head[k], x]) for k, x in out.items()}
         return trajectory_msg(traj.header, names, [p.time_from_start for p in traj.points], out)
 
     def _limits(self, joints: int) -> JointLimits:

@@ -76,6 +76,20 @@ def cycle_moves() -> list[Move]:
     return [trapezoid_move(f"{a}->{b}", pa, pb) for (a, pa), (b, pb) in itertools.pairwise(CYCLE)]
 
 
+def goal_points(move: Move, dwell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The trajectory goal the demo's client sends for ``move``: times (s from the start), (N, 6) positions, velocities,
+    accelerations. Its first point is the move's start at time 0, as a planner's (MoveIt's) is the robot's present
+    state at time 0: a shaper node in front of the controller shapes the motion from there (the controller's own
+    interpolation from the measured state to a first point later than 0 is not shaped, docs/guide/robot.md); then
+    the move's waypoints, and the goal again ``dwell`` s after the motion, at rest. The controller replaces the
+    point at time 0 with the measured state (:mod:`sim_plant_node.controller.jtc`)."""
+    times = np.append(move.times, move.duration + float(dwell))
+    positions = np.vstack([move.positions, move.positions[-1]])
+    velocities = np.vstack([move.velocities, np.zeros(move.positions.shape[1])])
+    accelerations = np.vstack([move.accelerations, np.zeros(move.positions.shape[1])])
+    return times, positions, velocities, accelerations
+
+
 def time_scaled(move: Move, factor: float) -> Move:
     """``move`` run ``factor`` times faster on the same path: times / factor, velocities x factor,
     accelerations x factor^2 (factor > 1 speeds up; 1 returns the move as it is).

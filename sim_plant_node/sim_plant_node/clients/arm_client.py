@@ -26,6 +26,24 @@ WAIT = 300.0
 DWELL = 1.5  # s at rest after each move (the gripper's time; the residual window is in it)
 
 
+def goal_trajectory(move: Any) -> Any:
+    """The JointTrajectory of ``move``'s goal (:func:`sim_plant_node.arm.task.goal_points`: from its start at time
+    0, so that the shaper node shapes the whole motion, to its end held :data:`DWELL` s)."""
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from ..arm.description import JOINT_NAMES
+    from ..arm.task import goal_points
+
+    def dur(t: float) -> Duration:
+        return Duration(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)) % 1_000_000_000)
+
+    pts = [JointTrajectoryPoint(positions=p.tolist(), velocities=v.tolist(), accelerations=a.tolist(),
+                                time_from_start=dur(t))
+           for t, p, v, a in zip(*goal_points(move, DWELL), strict=True)]
+    return JointTrajectory(joint_names=list(JOINT_NAMES), points=pts)
+
+
 @dataclass
 class Streams:
     """Stamped samples received by the client (times in simulated s)."""
@@ -180,22 +198,7 @@ class ArmClient:
         self.recorder.wait_subscribed(self.c.spin_until, topics, timeout)
 
     def _goal(self, move: Any) -> Any:
-        from builtin_interfaces.msg import Duration
-        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
-
-        from ..arm.description import JOINT_NAMES
-
-        def dur(t: float) -> Duration:
-            return Duration(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)) % 1_000_000_000)
-
-        pts = [JointTrajectoryPoint(positions=p.tolist(), velocities=v.tolist(), accelerations=a.tolist(),
-                                    time_from_start=dur(t))
-               for t, p, v, a in zip(move.times[1:], move.positions[1:], move.velocities[1:], move.accelerations[1:],
-                                     strict=True)]
-        last = move.positions[-1].tolist()
-        pts.append(JointTrajectoryPoint(positions=last, velocities=[0.0] * 6, accelerations=[0.0] * 6,
-                                        time_from_start=dur(move.duration + DWELL)))
-        return self._Goal(trajectory=JointTrajectory(joint_names=list(JOINT_NAMES), points=pts))
+        return self._Goal(trajectory=goal_trajectory(move))
 
     def _event(self, kind: int, cycle: int, t: float, start: np.ndarray, goal: np.ndarray) -> None:
         from shaper_nodes.ros.conversions import sec_to_time
