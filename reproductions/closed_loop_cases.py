@@ -18,6 +18,7 @@ docs/results/img/closed_loop_*.png; the integration tests call :func:`run_seed00
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import pathlib
@@ -62,6 +63,9 @@ DWELL_001 = 30.0
 RATE_002 = 1000.0
 SUBSTEPS_002 = 10  # loop at 10 kHz (at 1 kHz the zero-order-hold controller's sample of delay destabilises it)
 WHITE_NOISE = 1e-3  # white measurement noise, m (one sigma per loop sample)
+# ------------------------------------------------------------------ the record
+RECORD_DEPTH = 1000  # the recorder's ~/loop_state history (samples waiting for this process's executor)
+ATTEMPTS = 3  # runs of a case whose record lost samples before the reproduction gives up
 
 
 def tdf_interval_from_cli(omega_a: float = OMEGA_A, delay: float = DELAY_USED) -> tuple[float, float]:
@@ -86,6 +90,7 @@ class _Recorder:
         self.joints = joints
         self.rows: list[np.ndarray] = []
         self.times: list[float] = []
+        self.ends = 0  # END events seen: the plant's task is over (it takes the next start)
 
     def __call__(self, msg) -> None:
         from shaper_nodes.ros.conversions import time_to_sec
@@ -93,16 +98,30 @@ class _Recorder:
         self.times.append(time_to_sec(msg.header.stamp))
         self.rows.append(np.asarray(msg.position, dtype=float))
 
+    def on_event(self, msg) -> None:
+        from shaper_msgs.msg import CycleEvent
+
+        self.ends += msg.event == CycleEvent.END
+
     def traces(self, start: float) -> Traces:
         t = np.asarray(self.times) - start
         a = np.vstack(self.rows).reshape(len(self.rows), 4, self.joints)
         keep = t >= -1e-9
         return Traces(t[keep], *(a[keep, i, :] for i in range(4)))
 
+    def lost(self, start: float, end: float, rate: float) -> int:
+        """How many of the run's loop samples (one a step, ``start`` to ``end`` s of the plant's time) did not
+        arrive: the plant's ~/loop_state writer keeps 10 samples (KEEP_LAST), so a sample lost in transport
+        while this process was descheduled is gone once the lockstep plant has written 10 more."""
+        k = np.rint((np.asarray(self.times) - start) * rate)
+        want = np.arange(int(round((end - start) * rate)) + 1)
+        return int(want.size - np.intersect1d(k, want).size)
+
 
 def _session(start: StartNode, ctx, joints: list[str], rate: float, plant: dict):
     from sensor_msgs.msg import JointState
 
+    from shaper_msgs.msg import CycleEvent
     from sim_plant_node.clients.conductor import Conductor
 
     # a generous lockstep timeout: on a loaded machine the plant waits for the shaper instead of holding
@@ -115,19 +134,41 @@ def _session(start: StartNode, ctx, joints: list[str], rate: float, plant: dict)
                                           "discretization": "exact"})
     conductor = Conductor(context=ctx)
     rec = _Recorder(len(joints))
-    conductor.create_subscription(JointState, "/sim_plant/loop_state", rec, 1000)
+    conductor.create_subscription(JointState, "/sim_plant/loop_state", rec, RECORD_DEPTH)
+    conductor.create_subscription(CycleEvent, "/cycle_events", rec.on_event, 100)
     conductor.wait_ready(60.0, {"/shaper/commands": 1, "/forward_position_controller/commands": 1,
                                 "/sim_plant/loop_state": 1})
     return conductor, rec
 
 
-def _run(conductor, rec: _Recorder, timeout: float = 600.0) -> Traces:
+def _record(conductor, rec: _Recorder, rate: float, timeout: float) -> tuple[Traces | None, str]:
+    """One run of the case as the plant was prepared: its traces, or None and what was lost."""
     rec.rows, rec.times = [], []
+    ends = rec.ends
     result = conductor.run_cycles(1, timeout=timeout)[0]
-    deadline = time.monotonic() + 5.0  # the last loop_state samples may trail the END event
-    conductor.spin_until(lambda: (rec.times and rec.times[-1] >= result.residual.window_end - 1e-6)
-                         or time.monotonic() > deadline, 10.0, "the last loop samples")
-    return rec.traces(result.start)
+    conductor.spin_until(lambda: rec.ends > ends, 60.0, "the run's END event")  # (the plant takes a next start)
+    end = result.residual.window_end
+    with contextlib.suppress(TimeoutError):  # the last loop_state samples may trail the END event
+        conductor.spin_until(lambda: bool(rec.times) and rec.times[-1] >= end - 1e-6, 30.0, "the last loop samples")
+    lost = rec.lost(result.start, end, rate)
+    if lost:
+        return None, f"{lost} loop samples of {round((end - result.start) * rate) + 1}"
+    return rec.traces(result.start), ""
+
+
+def _run(conductor, rec: _Recorder, rate: float, prepare: Callable[[], None], timeout: float = 600.0) -> Traces:
+    """One run with every loop sample recorded: ``prepare`` (the run's parameters and shaper) then the run,
+    again (up to :data:`ATTEMPTS` times) while samples were lost on the way to the recorder. The plant's
+    run is the same each time (the model is rebuilt by ``prepare`` or rests exactly at the preroll's end),
+    a record with a gap is not: the metrics of a trace that misses samples are not the run's."""
+    for attempt in range(1, ATTEMPTS + 1):
+        prepare()
+        traces, lost = _record(conductor, rec, rate, timeout)
+        if traces is not None:
+            return traces
+        print(f"closed_loop_cases: {lost} lost on the way to the recorder (attempt {attempt} of {ATTEMPTS});"
+              " running the case again", file=sys.stderr, flush=True)
+    raise RuntimeError(f"loop samples lost in each of {ATTEMPTS} runs of the case")
 
 
 def run_seed001(start: StartNode, ctx, interval: tuple[float, float],
@@ -142,8 +183,7 @@ def run_seed001(start: StartNode, ctx, interval: tuple[float, float],
              "task.dwell": dwell, "task.preroll": 0.1, "task.cycles": 1}
     conductor, rec = _session(start, ctx, joints, RATE_001, plant)
     try:
-        conductor.set_shaper("none")
-        return cases, _run(conductor, rec)
+        return cases, _run(conductor, rec, RATE_001, lambda: conductor.set_shaper("none"))
     finally:
         conductor.close()
 
@@ -189,9 +229,12 @@ def run_seed002(start: StartNode, ctx, runs=RUNS_002,
         for run in runs:
             params = {"plant.model": run.model, "loop.disturbance_step": 0.0, "loop.noise_step": 0.0,
                       "loop.noise_stddev": 0.0, **run.loop}
-            conductor.set_plant(**{k.replace(".", "__"): v for k, v in params.items()})
-            conductor.set_shaper(run.shaper, p0.omega_n, p0.zeta)
-            out[run.name] = _run(conductor, rec)
+
+            def prepare(params: dict = params, run: Run002 = run) -> None:  # (the model rebuilt: a fresh noise seed)
+                conductor.set_plant(**{k.replace(".", "__"): v for k, v in params.items()})
+                conductor.set_shaper(run.shaper, p0.omega_n, p0.zeta)
+
+            out[run.name] = _run(conductor, rec, RATE_002, prepare)
             if progress:
                 progress(run.name)
     finally:

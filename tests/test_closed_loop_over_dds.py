@@ -117,3 +117,15 @@ def test_seed002_zv_with_feedforward_feedback(start_node, ros_context):
     assert np.all(event_effect(tr["noise_ffb"], "measured") < 0.25 * event_effect(tr["noise_open"], "measured"))
     late = tr["noise_ffb"].t > EVENT_TIME + 0.3
     assert np.allclose(tr["noise_ffb"].output[late], 0.0, atol=0.05)
+
+
+def test_record_with_lost_loop_samples_is_refused(start_node, ros_context, monkeypatch):
+    """A record that missed loop samples is not measured (session 13, H7 loopdet): under load, samples of the
+    plant's ~/loop_state were lost on the way to the recorder and the page's metrics came out of a trace with a
+    gap (metric 2 blown up to 1e10 mm). A recorder that keeps one sample loses them on every run: each run of
+    the case is refused and the reproduction gives up, instead of measuring the gap."""
+    import reproductions.closed_loop_cases as cases
+
+    monkeypatch.setattr(cases, "RECORD_DEPTH", 1)
+    with pytest.raises(RuntimeError, match=f"loop samples lost in each of {cases.ATTEMPTS} runs"):
+        run_seed002(start_node, ros_context, (Run002("zv", "qft_open", "zv", {}),))
