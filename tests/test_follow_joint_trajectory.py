@@ -256,6 +256,25 @@ def test_goal_reaches_the_controller_shaped_and_the_result_and_feedback_come_bac
     assert rig.node.forwarded["action"] == 1
 
 
+def late_start_warnings(rig) -> list:
+    return [s for s in rig.statuses if s.name == "shaper: action" and "not 0" in s.message]
+
+
+def test_a_goal_whose_first_point_is_after_time_0_is_forwarded_with_a_warning_that_its_start_is_not_shaped(
+        rig, controller):
+    status, _ = rig.send(goal_of(trajectory())).wait_result()  # from time 0: no warning
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    one_point = trajectory(points=((1.5, (1.0, 2.0, -1.0)),))  # a goal typed by hand: the whole motion
+    status, _ = rig.send(goal_of(one_point)).wait_result()
+    assert status == GoalStatus.STATUS_SUCCEEDED and len(controller.goals) == 2
+    rig.spin_until(lambda: late_start_warnings(rig), "the warning on /diagnostics")
+    (warning,) = late_start_warnings(rig)  # the goal from time 0 gave none
+    assert warning.level == DiagnosticStatus.WARN
+    assert warning.message.startswith("goal's first point is at 1.500 s, not 0: the whole motion is the"
+                                      " controller's interpolation from the robot's state and is not shaped")
+    assert "send_goal --from-current" in warning.message
+
+
 def test_controller_abort_is_relayed_with_its_error(rig, controller):
     controller.mode = "abort"
     status, result = rig.send(goal_of(trajectory())).wait_result()

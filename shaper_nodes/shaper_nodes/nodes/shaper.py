@@ -232,7 +232,8 @@ class ShaperNode(Node):
                 side, action_topic, str(p.action.controller), self.shape_whole,
                 on_refused=lambda err: self._reject(action_topic, err),
                 on_forwarded=lambda: self._count_forwarded("action"),
-                timeout=float(p.action.server_timeout), reshape=self.pose_shaper)
+                timeout=float(p.action.server_timeout), reshape=self.pose_shaper,
+                on_late_start=lambda text: self.diagnostics.report("late_start", WARN, text, name="action"))
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
         self.create_timer(float(p.diagnostics_period), self._publish_summary,

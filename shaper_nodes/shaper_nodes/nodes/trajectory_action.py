@@ -14,6 +14,10 @@ does) and is a client of the controller's. For each goal:
   rclpy itself converts the whole request into Python objects before any of this runs: that part of a
   huge goal's cost (about 2 s and 70 MiB per 10^5 points of 6 joints) is beyond the node's reach
   (docs/guide/shaper_node.md, "Goal size").
+- a goal whose first point is after time 0: shaped and forwarded as it is, and ``on_late_start`` is called with
+  the warning's text (:func:`late_start_warning`): the motion from the robot's state to that point is the
+  controller's interpolation, which no shaper in front of it sees (a goal of one point is all of it). Planners
+  start trajectories at the current state at time 0; ``send_goal --from-current`` does.
 - a goal id already accepted (a client's request sent again after no answer came, as
   ``ResilientActionClient`` does): rclpy's action server refuses it as a duplicate before the goal
   callback (rcl_action checks the id again as it accepts), so the goal runs once and nothing is
@@ -161,6 +165,8 @@ class TrajectoryActionProxy:
     timeout : float
         s: how long a goal waits for the controller's action server and for its answer to the
         goal request.
+    on_late_start : callable, optional
+        Called with :func:`late_start_warning`'s text for each goal accepted whose first point is after time 0.
     reshape : coroutine function, optional
         ``JointTrajectory -> JointTrajectory | None``, awaited for each accepted goal (its
         request's trajectory) before it is sent: the trajectory to send instead of the one shaped
@@ -171,8 +177,10 @@ class TrajectoryActionProxy:
                  shape: Callable[[JointTrajectory], JointTrajectory],
                  on_refused: Callable[[InputError], None], on_forwarded: Callable[[], None],
                  timeout: float,
-                 reshape: Callable[[JointTrajectory], Awaitable[JointTrajectory | None]] | None = None) -> None:
+                 reshape: Callable[[JointTrajectory], Awaitable[JointTrajectory | None]] | None = None,
+                 on_late_start: Callable[[str], object] | None = None) -> None:
         self._node = node
+        self._on_late_start = on_late_start
         self._shape = shape
         self._reshape = reshape
         self._on_refused = on_refused
@@ -263,6 +271,9 @@ class TrajectoryActionProxy:
                 self._release_later()
             return GoalResponse.REJECT
         self._shaped[id(goal)] = (goal, shaped)  # the request object itself keeps the id unique
+        first = goal.trajectory.points[0].time_from_start  # (a shaped goal has points)
+        if self._on_late_start is not None and (first.sec or first.nanosec):
+            self._on_late_start(late_start_warning(first.sec + first.nanosec * 1e-9, len(goal.trajectory.points)))
         return GoalResponse.ACCEPT
 
     def _release_later(self) -> None:
@@ -412,6 +423,14 @@ class TrajectoryActionProxy:
         self._log.error(f"goal aborted: {why}")
         fwd.handle.abort()
         return Result(error_code=Result.INVALID_GOAL, error_string=why)
+
+
+def late_start_warning(first_s: float, points: int) -> str:
+    """The warning for a goal whose first point is ``first_s`` s after its start (``points`` points)."""
+    what = "the whole motion" if points == 1 else "the motion to its first point"
+    return (f"goal's first point is at {first_s:.3f} s, not 0: {what} is the controller's interpolation from the"
+            " robot's state and is not shaped; start the trajectory at the current state at time 0 (as planners"
+            " do; send_goal --from-current)")
 
 
 def _with_trajectory(goal: Goal, trajectory: JointTrajectory) -> Goal:
