@@ -19,6 +19,7 @@ file's flag (:data:`FLAG`, read back by :func:`saved_flag`) and the log line tha
 
 from __future__ import annotations
 
+import math
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -33,6 +34,8 @@ from .learner_base import LearnerBase
 LEVEL_OK, LEVEL_WARN, LEVEL_ERROR, LEVEL_STALE = 0, 1, 2, 3
 #: the state file's key of the episode flag (:attr:`DriftWarnings.warned`)
 FLAG = "drift_warned"
+#: the cycles whose identified modes :class:`DriftWarnings` keeps (the latest)
+KEPT_CYCLES = 64
 
 
 def saved_flag(doc: dict[str, Any], error: type[Exception] = MoveError) -> bool:
@@ -81,6 +84,11 @@ class DriftWarnings:
         self.resets = 0
         #: the KeyValues of the WARN last acted on (key -> value; the mode the identifier measured)
         self.values: dict[str, str] = {}
+        #: cycle -> the sharp modes (Hz) the watch identified in it (``modes_hz`` of its status, any level; the
+        #: last :data:`KEPT_CYCLES` cycles; not saved: a restarted learner has none)
+        self.modes: dict[int, list[float]] = {}
+        #: cycle -> the move it ran (the learner's :meth:`ran`; the latest :data:`KEPT_CYCLES`, not saved)
+        self.moved: dict[int, str] = {}
         self.diagnostics: Diagnostics = node.diagnostics
         if status:
             # the node's default group, as the cycle events': an episode's action never interleaves with a
@@ -94,11 +102,43 @@ class DriftWarnings:
         return (f"drift warning ({self.status}): relearning {what}{len(keys)} move{'' if len(keys) == 1 else 's'}"
                 f" {origin}: {', '.join(keys) or 'none yet'} (the warning: {warning})")
 
+    def _keep_modes(self, values: dict[str, str]) -> None:
+        """Keep a status's ``modes_hz`` under its ``cycle`` (a status without them, or not numbers, is passed)."""
+        try:
+            cycle = int(values["cycle"])
+            modes = [float(f) for f in values.get("modes_hz", "").split(",") if f.strip()]
+        except (KeyError, ValueError):
+            return
+        modes = [f for f in modes if math.isfinite(f) and f > 0.0]
+        if modes:
+            self.modes[cycle] = modes
+            for old in sorted(self.modes)[:-KEPT_CYCLES]:
+                del self.modes[old]
+
+    def ran(self, cycle: int, key: str) -> None:
+        """A cycle's START named the move ``key`` (the latest :data:`KEPT_CYCLES` are kept)."""
+        self.moved[cycle] = key
+        for old in sorted(self.moved)[:-KEPT_CYCLES]:
+            del self.moved[old]
+
+    def drifted_mode(self, key: str, schedule_hz: float, band: float) -> float | None:
+        """In a warning episode: the lowest mode (Hz) the watch identified in the move's latest cycle it has modes
+        for, when that is further than ``band`` (a fraction) from the schedule's ``schedule_hz`` there (the plant
+        changed at the move's goal); otherwise None (outside an episode, no modes, or within the band)."""
+        if not self.warned:
+            return None
+        cycles = sorted((c for c, k in self.moved.items() if k == key and c in self.modes), reverse=True)
+        if not cycles:
+            return None
+        hz = min(self.modes[cycles[0]])
+        return None if abs(hz - schedule_hz) <= band * schedule_hz else hz
+
     async def _on_array(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name != self.status:
                 continue
             level = level_of(status.level)
+            self._keep_modes({str(kv.key): str(kv.value) for kv in status.values})
             if level == LEVEL_WARN:
                 if not self.warned:
                     self.warned = True

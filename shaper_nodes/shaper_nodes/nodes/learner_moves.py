@@ -42,7 +42,9 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   learner, factor, base and hold are dropped, one line on the log names the moves reset, the state is
   saved (atomically, with the episode flag ``drift_warned``), and every move's factor is withdrawn from the
   scheduler (``set_move_shaper`` with family ``none``: the schedule alone). Each move's next cycle is
-  then its new reference, its learner made from the schedule's lowest mode at its goal as for a new move;
+  then its new reference, its learner made as for a new move from the schedule's lowest mode at its goal, or in the
+  episode from the lowest mode the drift watch identified in the move's latest cycle (its statuses' ``modes_hz``)
+  when that is more than :data:`T2_BAND` off the schedule's (the payload moved it; not kept over a restart);
   a cycle under way at the warning is not learned from; a withdrawal the scheduler did not acknowledge is
   sent again at the move's next START (and that cycle is not learned from).
 
@@ -310,15 +312,19 @@ class MovesMode:
             if resp is not None and resp.success and len(resp.estimate.modes):
                 try:
                     lowest = min((mode_from_msg(m) for m in resp.estimate.modes), key=lambda m: m.omega)
-                    initial = ListParams.from_mode(Mode(lowest.omega, lowest.zeta))
+                    drifted = self.drift.drifted_mode(entry.key, lowest.hz, T2_BAND)
+                    initial = ListParams.from_mode(Mode(lowest.omega if drifted is None else 2 * math.pi * drifted,
+                                                        lowest.zeta))
                     end = float(resp.shaper.times[-1]) if len(resp.shaper.times) else 0.0
                     config = schedule_config(self.config, initial, None if self.user_delay else end)
                     learner = ListLearner(config, initial)
                     entry.origin = "schedule"
                     lo, hi = config.t2_bounds or (math.nan, math.nan)
-                    self.node.get_logger().info(f"move {entry.key}: starts from the schedule's lowest mode"
-                                                f" {lowest.hz:.4g} Hz, zeta {lowest.zeta:.3g} at its goal;"
-                                                f" T2 within {lo * 1e3:.1f}-{hi * 1e3:.1f} ms")
+                    start = (f"the schedule's lowest mode {lowest.hz:.4g} Hz" if drifted is None else
+                             f"the lowest mode the drift watch identified in its last cycle, {drifted:.4g} Hz (the"
+                             f" schedule's {lowest.hz:.4g} Hz is the unchanged plant's)")
+                    self.node.get_logger().info(f"move {entry.key}: starts from {start}, zeta {lowest.zeta:.3g} at its"
+                                                f" goal; T2 within {lo * 1e3:.1f}-{hi * 1e3:.1f} ms")
                     return learner
                 except (ShaperError, ListError, ValueError) as err:
                     why = str(err)
@@ -379,6 +385,7 @@ class MovesMode:
             self._skip[cycle] = f"the cycle's move cannot be identified: {err}"
             return
         self._cycle_move[cycle] = entry.key
+        self.drift.ran(cycle, entry.key)
         if new:
             self.names[entry.key] = list(msg.joint_names)
         if self.payback is not None:
