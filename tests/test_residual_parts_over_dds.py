@@ -81,6 +81,18 @@ class Client:
         self.node.destroy_node()
 
 
+def run_goal(client: Client, goal_msg: FollowJointTrajectory.Goal, name: str, reports: int) -> None:
+    """Send ``goal_msg``, wait for its success and for the ``reports``-th split (states, generous waits)."""
+    future = client.action.send_goal_async(goal_msg)
+    client.spin_until(future.done, f"the answer to {name}")
+    handle = future.result()
+    assert handle.accepted, name
+    result = handle.get_result_async()
+    client.spin_until(result.done, f"the result of {name}")
+    assert result.result().status == GoalStatus.STATUS_SUCCEEDED, name
+    client.spin_until(lambda: len(client.reports) >= reports, f"the split of {name}")
+
+
 def test_each_move_reports_its_servo_and_vibration_parts_from_the_arms_state(start_node, ros_context):
     from shaper_nodes.core.shaping.vibration import residual_vibration
     from sim_plant_node.arm.task import HOME, cycle_moves
@@ -96,14 +108,7 @@ def test_each_move_reports_its_servo_and_vibration_parts_from_the_arms_state(sta
             client.spin_until(lambda t=topic: client.node.count_publishers(t) > 0, f"the sim plant's {topic}")
         moves = cycle_moves()[:2]
         for k, move in enumerate(moves):
-            future = client.action.send_goal_async(goal(move))
-            client.spin_until(future.done, f"the answer to {move.name}")
-            handle = future.result()
-            assert handle.accepted, move.name
-            result = handle.get_result_async()
-            client.spin_until(result.done, f"the result of {move.name}")
-            assert result.result().status == GoalStatus.STATUS_SUCCEEDED, move.name
-            client.spin_until(lambda n=k + 1: len(client.reports) >= n, f"the split of {move.name}")
+            run_goal(client, goal(move), move.name, k + 1)
         # every sample up to the last window's end received (reliable streams, the plant at rest after the goals)
         last_end = client.reports[-1].window_end
         client.spin_until(lambda: client.imu and client.imu[-1][0] >= last_end and client.cmd
@@ -167,14 +172,7 @@ def test_a_shaped_move_splits_over_dds_as_on_the_offline_arm(start_node, ros_con
         assert sim.running() and shaper_node.running(), "a node exited"
         for topic in ("/sim_plant/residual_parts", "/tip_imu", "/sim_plant/reference"):
             client.spin_until(lambda t=topic: client.node.count_publishers(t) > 0, f"the sim plant's {topic}")
-        future = client.action.send_goal_async(goal(move))
-        client.spin_until(future.done, f"the answer to {move.name}")
-        handle = future.result()
-        assert handle.accepted, move.name
-        result = handle.get_result_async()
-        client.spin_until(result.done, f"the result of {move.name}")
-        assert result.result().status == GoalStatus.STATUS_SUCCEEDED, move.name
-        client.spin_until(lambda: len(client.reports) >= 1, f"the split of {move.name}")
+        run_goal(client, goal(move), move.name, 1)
     finally:
         client.close()
     m = dict(zip(client.reports[0].metric_names, client.reports[0].metric_values, strict=True))
