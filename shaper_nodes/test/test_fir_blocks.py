@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from shaper_nodes.core.shaping.families import design
-from shaper_nodes.core.shaping.fir import SparseFir, StreamingShaper, discretize
+from shaper_nodes.core.shaping.fir import StreamingShaper, discretize
 from shaper_nodes.core.shaping.fir_stage import LINEAR_ROWS
+from shaper_nodes.core.shaping.sparse_fir import SparseFir
 from shaper_nodes.core.shaping.types import Mode
 
 RATE = 1000.0

@@ -20,7 +20,9 @@ vibration
     insensitivity widths, and the residual vibration of measured cycles.
 fir
     Discretisation of an impulse sequence to a causal FIR at the command rate (split, round,
-    exact), and the streaming multi-joint FIR with bumpless switching and re-timing.
+    exact), and the streaming multi-joint FIR with bumpless switching and re-timing; the FIR itself
+    (:class:`SparseFir`) in :mod:`.sparse_fir`, a stage's history and paths in :mod:`.fir_stage`, the exact
+    discretisation's correction in :mod:`.fir_exact`.
 trajectory
     Whole-trajectory shaping (resampling, convolution, derivatives) for
     joint_trajectory_controller.
@@ -37,8 +39,9 @@ policy
 """
 
 from .families import FAMILIES, design, family_info, family_params, none_shaper
-from .fir import MAX_STAGES, RetimingShaper, SparseFir, StreamingShaper, discretize, fir_impulses
+from .fir import MAX_STAGES, RetimingShaper, StreamingShaper, discretize, fir_impulses
 from .policy import PolicyError, UpdatePolicy
+from .sparse_fir import SparseFir
 from .stream import CommandStream, check_times
 from .trajectory import shape_trajectory
 from .types import (

@@ -59,38 +59,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from .fir_exact import _exact_taps
 from .fir_stage import _Stage
+from .sparse_fir import SparseFir
 from .types import Shaper
 
 #: most filters alive at once (the active one plus those whose tails are still running)
 MAX_STAGES = 16
-
-
-@dataclass(frozen=True)
-class SparseFir:
-    """A causal FIR with few non-zero taps: ``y(k) = sum_i gains[i] x(k - delays[i])``.
-
-    ``delays`` are distinct, increasing integers (samples); ``gains`` dimensionless.
-    """
-
-    delays: np.ndarray
-    gains: np.ndarray
-
-    @property
-    def length(self) -> int:
-        """Number of dense taps (largest delay + 1)."""
-        return int(self.delays[-1]) + 1
-
-    def dense(self) -> np.ndarray:
-        """The dense tap vector b_0 .. b_{length-1}."""
-        taps = np.zeros(self.length)
-        taps[self.delays] = self.gains
-        return taps
 
 
 def discretize(shaper: Shaper, rate: float, method: str = "split") -> SparseFir:

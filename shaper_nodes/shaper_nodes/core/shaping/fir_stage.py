@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from .fir import SparseFir
+    from .sparse_fir import SparseFir
 
 
 #: rows a stage's linear buffer has room for after the history, at least (the block path moves the history to

@@ -51,8 +51,9 @@ import numpy as np
 
 from shaper_nodes.core.checks import InputError, finite_array, strictly_increasing
 
-from .fir import RetimingShaper, SparseFir, StreamingShaper
+from .fir import RetimingShaper, StreamingShaper
 from .limits import JointLimits, bounds_check
+from .sparse_fir import SparseFir
 
 #: the fields of a trajectory point that are shaped, in message order
 FIELDS = ("positions", "velocities", "accelerations")

@@ -13,7 +13,8 @@ import numpy as np
 
 from shaper_nodes.core.checks import InputError, finite_array, strictly_increasing
 
-from .fir import SparseFir, StreamingShaper
+from .fir import StreamingShaper
+from .sparse_fir import SparseFir
 
 #: most points of one trajectory (a message or a request), refused before any work
 MAX_TRAJECTORY_POINTS = 100_000
