@@ -402,10 +402,20 @@ def test_calibrate_paused_gives_the_unpaused_report(start_node, tmp_path, domain
     assert "without it" not in run["plant_log"]  # the plant waited for calibrate, never dropped it
     plant = start_node("sim_plant_node", "sim_plant", SMALL_CALIBRATION_PLANT)
     out = tmp_path / "paused"
+    # the watch sees the plant's /clock publisher before calibrate starts: calibrate can be done in 4 s of wall
+    # time, less than a late discovery took under load (the watch then never saw the clock move)
+    watch = ClockWatch(domain_id)
+    try:
+        deadline = time.monotonic() + 120.0
+        while watch.node.count_publishers("/clock") == 0:
+            assert time.monotonic() < deadline, "the watch saw no /clock publisher"
+            time.sleep(0.05)
+    except BaseException:
+        watch.close()
+        raise
     proc = start_node("shaper_nodes", "calibrate", SMALL_PLAN, params_file=calibrate_config(),
                       args=["--execute", "--out", str(out), *ONE_WORKER])
-    watch = ClockWatch(domain_id)  # in the middle of the first pose's approach: 0.3 s of simulated time after
-    try:  # its recording began
+    try:  # in the middle of the first pose's approach: 0.3 s of simulated time after its recording began
         deadline = time.monotonic() + 300.0
         while not list((out / "recording").glob("*.partial")):
             assert proc.running() and time.monotonic() < deadline, proc.log_path.read_text()
