@@ -4,7 +4,9 @@ Run with ``./run bench`` (``python -m benchmarks`` in the suite's environment; `
 the options). Every figure is printed next to a baseline measured in the same run, because the
 machines it runs on are small and noisy. The run ends with one summary table (figure, value,
 baseline of the same run, ratio, goal) that ``--json PATH`` writes too; figures and goals are in
-``docs/results/benchmarks.md``:
+``docs/results/benchmarks.md``. The run itself is :mod:`benchmarks.__main__` (the options, the order, the report),
+the latency targets as it runs them and their tables :mod:`benchmarks.latency_suite`, the summary table and its goals
+:mod:`benchmarks.summary`:
 
 * :mod:`benchmarks.latency`: round-trip latency (driver -> node -> driver) and CPU share of the
   shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`) and the floor

@@ -5,7 +5,7 @@ Pure Python on made-up latency figures (no node, no timing): what the rows are, 
 
 from __future__ import annotations
 
-from benchmarks.__main__ import GOALS, _latency_rows
+from benchmarks.summary import GOALS, _latency_rows
 
 
 def _run(label: str, p50: float, p99: float, cpu_per_msg: float) -> dict:

@@ -13,7 +13,13 @@ trials
     trials and steps, and the search of the minimum of M.
 learner
     :class:`ListLearner`, the state machine that updates A1 and T2 cycle by cycle (with
-    rollback, patience and hold), and its state as a dictionary.
+    rollback, patience and hold): the update and what to apply next.
+phases
+    The learner's rules after a measured trial (:class:`.phases.PhaseRules`): ranking, rollback, patience,
+    the phase's steps (phi's model, the sensitivity step, the search of M alone) within bounds and maximum step.
+state
+    The learner's fields, the bounds of its parameters and its state as a dictionary
+    (:class:`.state.LearnerState`, with :meth:`~.state.LearnerState.to_dict` and ``from_dict``).
 payback
     A factor over a move's base shaper chosen to pay before it is tried: the residual's components
     (:func:`.payback.components`), the time cost predicted from the shaped command
