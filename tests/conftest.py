@@ -12,6 +12,7 @@ import fcntl
 import gc
 import itertools
 import json
+import math
 import os
 import pathlib
 import shutil
@@ -23,8 +24,10 @@ from collections.abc import Callable
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Log
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
 from shaper_msgs.srv import GetShaper, SetFeedforward, SetShaper
@@ -414,16 +417,49 @@ def start_scheduled_arm(start_node, rule_base, rate: float, readers: list[str], 
                                                "action.scheduler": "/scheduler", **shaper})
 
 
-def restart_learner(start_node, learner, params: dict, conductor, inputs: tuple[str, ...]) -> None:
-    """``kill -9`` the learner (a NodeProcess) and start it again with ``params`` (the same state file); returns
-    once its subscriptions of ``inputs`` are on ``conductor``'s graph again."""
+#: rcl's QoS of /rosout (rcl_qos_profile_rosout_default: reliable, transient local, depth 1000; its 10 s lifespan is
+#: the publisher's)
+ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class LogLines:
+    """The lines node ``name`` logs on /rosout, with their stamps (s, the system clock: a node logs with it also on
+    simulated time). Transient local: a line logged before this subscription matched the node's publisher (a started
+    node's first lines) still arrives."""
+
+    def __init__(self, node: Node, name: str) -> None:
+        self.lines: list[tuple[float, str]] = []
+        node.create_subscription(Log, "/rosout", lambda m: self.lines.append(
+            (m.stamp.sec + 1e-9 * m.stamp.nanosec, m.msg)) if m.name == name else None, ROSOUT)
+
+    def logged(self, words: str, since: float = -math.inf) -> bool:
+        """Whether a line holding ``words`` was logged at ``since`` (system clock, s) or later."""
+        return any(t >= since and words in line for t, line in self.lines)
+
+
+def restart_learner(start_node, learner, params: dict, conductor, inputs: tuple[str, ...],
+                    resumed: int | None = None, remaps: dict[str, str] | None = None):
+    """``kill -9`` the learner (a NodeProcess) and start it again with ``params`` and ``remaps`` (the same state
+    file); returns the new NodeProcess once its subscriptions of ``inputs`` are on ``conductor``'s graph again and,
+    with ``resumed`` (a per-move LIST learner), once it has logged that the scheduler acknowledged the saved factors
+    of ``resumed`` moves (:func:`~shaper_nodes.nodes.learner_moves.resumed_line`): a move's START before that is
+    not learned from, as the learner cannot know which factor its goal ran with."""
+    from shaper_nodes.nodes.learner_moves import resumed_line
+
+    name = (remaps or {}).get("__node", "learner")
+    lines = LogLines(conductor, name) if resumed is not None else None
     before = conductor.subscription_gids(inputs)
     assert learner.proc is not None
     learner.proc.kill()
     learner.proc.wait(timeout=30)
-    start_node("shaper_nodes", "learner", params)
+    killed = time.time()
+    restarted = start_node("shaper_nodes", "learner", params, remaps=remaps)
     conductor.spin_until(lambda: conductor.new_subscriptions(inputs, before), 120.0,
                          f"the restarted learner's subscriptions of {', '.join(inputs)}")
+    if lines is not None:
+        conductor.spin_until(lambda: lines.logged(resumed_line(resumed), killed), 120.0,
+                             f"the restarted learner's saved factors of {resumed} moves acknowledged by the scheduler")
+    return restarted
 
 
 def run_move_cycle(client, cycle: int, index: int, move, wait: float):

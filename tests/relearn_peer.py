@@ -18,13 +18,13 @@ import time
 from collections.abc import Callable, Sequence
 
 from action_msgs.msg import GoalStatus
+from conftest import ROSOUT
 from control_msgs.action import FollowJointTrajectory
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import Log
 from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory
@@ -37,8 +37,6 @@ from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 
 LEARNER_PROXY = "/learner/follow_joint_trajectory"
 WAIT = 120.0  # s of wall time for a state to come (two busy cores)
-#: rcl's QoS of /rosout (rcl_qos_profile_rosout_default: reliable, transient local, depth 1000, lifespan 10 s)
-ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class Peer:
