@@ -12,19 +12,24 @@ import fcntl
 import gc
 import itertools
 import json
+import math
 import os
 import pathlib
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
+from typing import IO
 
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Log
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
 from shaper_msgs.srv import GetShaper, SetFeedforward, SetShaper
@@ -35,16 +40,53 @@ _counter = itertools.count()
 DOMAINS = 200
 
 
+#: one lock file per ROS domain on this machine: a test holds its domain's (flock) while it runs
+DOMAIN_LOCKS = pathlib.Path(tempfile.gettempdir()) / "shaper-ros-domains"
+_held: dict[int, IO[str]] = {}
+
+
+def _claim(domain: int) -> bool:
+    """Take the machine-wide lock of ``domain`` for this process; False if another process holds it."""
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    lock = open(DOMAIN_LOCKS / f"{domain}.lock", "a")  # noqa: SIM115 (held until release_domain)
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.close()
+        return False
+    _held[domain] = lock
+    return True
+
+
+def release_domain(domain: int) -> None:
+    """Give ``domain``'s machine-wide lock back (the test that had it has ended)."""
+    lock = _held.pop(domain, None)
+    if lock is not None:
+        lock.close()
+
+
 def new_domain() -> int:
-    """A ROS domain no test has had in this process yet (until the 200 wrap): the base, then every stride-th.
+    """A ROS domain no test has had in this process yet (until the 200 wrap): the base, then every stride-th,
+    passing over a domain another process on this machine holds.
 
     Under pytest-xdist the root conftest.py gives each worker a base and a stride of its own
     (``ROS_DOMAIN_ID``, ``SHAPER_DOMAIN_STRIDE``), so the tests running at once on different workers never
     share a domain; without xdist the stride is 1, the domains of a run follow each other from the base.
+    Test sessions started apart (other checkouts, other users of the machine) know nothing of each other's
+    bases, and discovery is LOCALHOST: two of them on one domain see each other's nodes (a goal of one
+    preempts the other's, a killed server of one stays on the graph while the other's serves). So the domain
+    is taken with a lock file of its own (:data:`DOMAIN_LOCKS`, flock: released when the holder ends, however
+    it ends), held until :func:`release_domain` (the fixtures: when the test ends); a domain locked by another
+    process is passed over for the next of this worker's.
     """
     base = int(os.environ.get("ROS_DOMAIN_ID", "30"))
     stride = int(os.environ.get("SHAPER_DOMAIN_STRIDE", "1"))
-    return 1 + (base + stride * next(_counter)) % DOMAINS
+    for _ in range(DOMAINS):
+        domain = 1 + (base + stride * next(_counter)) % DOMAINS
+        if domain in _held or _claim(domain):
+            return domain
+    raise RuntimeError(f"every ROS domain of this process's ({base} + k * {stride}) is held by another process"
+                       f" (lock files in {DOMAIN_LOCKS})")
 
 
 def shared_once(tmp_path_factory: pytest.TempPathFactory, name: str,
@@ -294,14 +336,18 @@ def help_texts(tmp_path_factory) -> dict[str, dict]:
 
 
 @pytest.fixture
-def domain_id() -> int:
-    return new_domain()
+def domain_id():
+    domain = new_domain()
+    yield domain
+    release_domain(domain)  # (after the fixtures that use it: their nodes and processes have ended)
 
 
 @pytest.fixture
-def another_domain_id(domain_id) -> int:
+def another_domain_id(domain_id):
     """A second domain of the test's own, for a test that runs two things apart at once or in turn."""
-    return new_domain()
+    domain = new_domain()
+    yield domain
+    release_domain(domain)
 
 
 @pytest.fixture
@@ -414,16 +460,49 @@ def start_scheduled_arm(start_node, rule_base, rate: float, readers: list[str], 
                                                "action.scheduler": "/scheduler", **shaper})
 
 
-def restart_learner(start_node, learner, params: dict, conductor, inputs: tuple[str, ...]) -> None:
-    """``kill -9`` the learner (a NodeProcess) and start it again with ``params`` (the same state file); returns
-    once its subscriptions of ``inputs`` are on ``conductor``'s graph again."""
+#: rcl's QoS of /rosout (rcl_qos_profile_rosout_default: reliable, transient local, depth 1000; its 10 s lifespan is
+#: the publisher's)
+ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class LogLines:
+    """The lines node ``name`` logs on /rosout, with their stamps (s, the system clock: a node logs with it also on
+    simulated time). Transient local: a line logged before this subscription matched the node's publisher (a started
+    node's first lines) still arrives."""
+
+    def __init__(self, node: Node, name: str) -> None:
+        self.lines: list[tuple[float, str]] = []
+        node.create_subscription(Log, "/rosout", lambda m: self.lines.append(
+            (m.stamp.sec + 1e-9 * m.stamp.nanosec, m.msg)) if m.name == name else None, ROSOUT)
+
+    def logged(self, words: str, since: float = -math.inf) -> bool:
+        """Whether a line holding ``words`` was logged at ``since`` (system clock, s) or later."""
+        return any(t >= since and words in line for t, line in self.lines)
+
+
+def restart_learner(start_node, learner, params: dict, conductor, inputs: tuple[str, ...],
+                    resumed: int | None = None, remaps: dict[str, str] | None = None):
+    """``kill -9`` the learner (a NodeProcess) and start it again with ``params`` and ``remaps`` (the same state
+    file); returns the new NodeProcess once its subscriptions of ``inputs`` are on ``conductor``'s graph again and,
+    with ``resumed`` (a per-move LIST learner), once it has logged that the scheduler acknowledged the saved factors
+    of ``resumed`` moves (:func:`~shaper_nodes.nodes.learner_moves.resumed_line`): a move's START before that is
+    not learned from, as the learner cannot know which factor its goal ran with."""
+    from shaper_nodes.nodes.learner_moves import resumed_line
+
+    name = (remaps or {}).get("__node", "learner")
+    lines = LogLines(conductor, name) if resumed is not None else None
     before = conductor.subscription_gids(inputs)
     assert learner.proc is not None
     learner.proc.kill()
     learner.proc.wait(timeout=30)
-    start_node("shaper_nodes", "learner", params)
+    killed = time.time()
+    restarted = start_node("shaper_nodes", "learner", params, remaps=remaps)
     conductor.spin_until(lambda: conductor.new_subscriptions(inputs, before), 120.0,
                          f"the restarted learner's subscriptions of {', '.join(inputs)}")
+    if lines is not None:
+        conductor.spin_until(lambda: lines.logged(resumed_line(resumed), killed), 120.0,
+                             f"the restarted learner's saved factors of {resumed} moves acknowledged by the scheduler")
+    return restarted
 
 
 def run_move_cycle(client, cycle: int, index: int, move, wait: float):

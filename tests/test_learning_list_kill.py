@@ -40,6 +40,7 @@ from shaper_nodes.core.learning.list.pole_rule import PoleState
 from shaper_nodes.core.learning.list.stack import FactorStack, stack_shaper
 from shaper_nodes.core.learning.moves import MoveStore, keep_when_it_pays, move_key
 from shaper_nodes.core.shaping.families import convolve
+from shaper_nodes.nodes.learner_moves import resumed_line
 from shaper_nodes.ros.conversions import duration_to_sec, sec_to_duration, sec_to_time
 
 pytestmark = pytest.mark.integration
@@ -130,7 +131,7 @@ class Cell:
     def wait_started(self, moves: int, times: int) -> None:
         """Until learners have logged ``times`` times that they sent the saved factors of ``moves`` moves to the
         scheduler (a START before that is not learned from: its factor may not have been in place)."""
-        line = f"learning per move: {moves} moves resumed from the state file"
+        line = resumed_line(moves)
         self.peer.spin_until(lambda: self.at.service_is_ready()
                              and sum(line in got for got in self.peer.logs) >= times,
                              f"the learner's saved factors sent to the scheduler ({times})")

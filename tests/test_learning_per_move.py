@@ -143,7 +143,7 @@ def test_each_move_learns_its_own_factor_and_resumes_after_a_kill_9(start_node, 
             assert (entry.correction is None) == (entry.key in held), (entry.key, held, entry.correction)
 
         # kill -9 mid-run, and start again on the same state file
-        restart_learner(start_node, learner, learner_params, conductor, INPUTS)
+        restart_learner(start_node, learner, learner_params, conductor, INPUTS, resumed=len(MOVES))
         mark = cell.cycle
         for _ in range(2):
             for i, move in enumerate(MOVES):
@@ -364,10 +364,10 @@ def test_payback_chooses_each_moves_factor_from_its_reference_and_resumes_after_
             assert entry is not None and entry.base is not None and entry.list_state is None
             assert (entry.correction is None) == (entry.key in doc["at_schedule"]), (entry, doc["at_schedule"])
 
-        restart_learner(start_node, learner, learner_params, conductor, INPUTS)
+        restart_learner(start_node, learner, learner_params, conductor, INPUTS, resumed=len(MOVES))
         conductor.spin_until(client.action.server_is_ready, 120.0, "the restarted learner's action server")
         mark = cell.cycle
-        for _ in range(2):  # a move whose START came before the restarted learner sent its factor is not learned from
+        for _ in range(2):  # (a START the restarted learner missed: its cycle not learned from, the next one is)
             for i, move in enumerate(MOVES):
                 cell.run(i, move)
         for move in MOVES:

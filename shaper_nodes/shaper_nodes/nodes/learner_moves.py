@@ -101,6 +101,13 @@ RESET = "every move was relearned (drift warning) while this cycle ran"
 T2_BAND = 0.1
 
 
+def resumed_line(moves: int) -> str:
+    """The start-up line (log and ``/diagnostics`` ``learner: moves``) once every saved move's factor was acknowledged
+    by the scheduler: from then on a move's START is learned from (before it, the START sends the factor again and
+    its cycle is not: it may have run with either)."""
+    return f"learning per move: {moves} moves resumed from the state file"
+
+
 def schedule_config(config: ListConfig, initial: ListParams, shaper_end: float | None) -> ListConfig:
     """The LIST configuration of a move whose learner starts from the schedule's lowest mode (``initial``).
 
@@ -248,7 +255,7 @@ class MovesMode:
                 answered = await self._send(entry, self._wanted(key)) is not None and answered
         if answered:  # the moves' state, once, on the log and /diagnostics ("learner: moves")
             moves = [(k, _describe(self._wanted(k)) if k in resumes else "afresh") for k in self._restored]
-            text = f"learning per move: {len(moves)} moves resumed from the state file"
+            text = resumed_line(len(moves))
             self.node.get_logger().info(text + "".join(f"; {k}: {d}" for k, d in moves))
             self.node.diagnostics.publish("moves", OK, text, moves)
         return answered
