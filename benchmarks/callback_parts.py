@@ -115,7 +115,7 @@ def _node_main(kind: str, out: str, argv: list[str]) -> None:
 
     from shaper_nodes.ros.side_node import SideNode
 
-    from .echo_node import DEPTH, IN_TOPIC, OUT_TOPIC
+    from .echo_node import DEPTH, IN_TOPIC, OUT_TOPIC, stop_signal_handlers
 
     in_topic, out_topic = (FLOOR_IN, FLOOR_OUT) if kind == "floor" else (IN_TOPIC, OUT_TOPIC)
     context = rclpy.context.Context()
@@ -136,6 +136,7 @@ def _node_main(kind: str, out: str, argv: list[str]) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        stop_signal_handlers()  # before any executor is shut down (echo_node.py)
         executor.shutdown()
         if side is not None:
             side.close()

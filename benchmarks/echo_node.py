@@ -6,7 +6,8 @@ very message object), on the output topic: one subscription, one publisher, a
 latency and this node's is what the shaper's own work (validation, FIR, message building) costs.
 
 Run it as ``python -m benchmarks.echo_node [--in TOPIC] [--out TOPIC] [--take] [--ros-args ...]``;
-SIGINT stops it cleanly. ``--take`` echoes the serialized bytes from a lean side node served by the
+SIGINT stops it cleanly: rclpy's signal handlers are uninstalled first, before any executor is shut down
+(:func:`stop_signal_handlers`). ``--take`` echoes the serialized bytes from a lean side node served by the
 shaper's take loop (:class:`shaper_nodes.ros.side_node.SideNode` with ``take=True``) instead, written by a publisher
 of the main node as the shaper's are: the round trip of a Python node that does no work on the shaper's own path, the
 floor of the shaper's hop.
@@ -21,7 +22,7 @@ from typing import Any
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
+from rclpy.signals import SignalHandlerOptions, uninstall_signal_handlers
 from std_msgs.msg import Float64MultiArray
 
 #: default topics (the benchmark driver uses the same defaults)
@@ -29,6 +30,18 @@ IN_TOPIC = "/bench/echo_in"
 OUT_TOPIC = "/bench/echo_out"
 #: QoS depth, as the shaper node's subscriptions and publishers
 DEPTH = 10
+
+
+def stop_signal_handlers() -> None:
+    """Uninstall rclpy's signal handlers and join their thread, before the executors are shut down.
+
+    On SIGINT rclpy 7.1.6 wakes a thread of its own that triggers every executor's SIGINT guard condition from a
+    global list, with no lock against that list's change: an executor shut down meanwhile (the main thread, woken
+    by the first guard condition, runs ``finally`` at once) unregisters its guard condition, which frees the list
+    and the guard condition under that thread, and the process ended on SIGSEGV (-11) in
+    ``rcl_trigger_guard_condition`` on that thread (a core dump, session 14: about one stop in 20 on a loaded
+    machine). Uninstalling joins that thread first (idempotent)."""
+    uninstall_signal_handlers()
 
 
 class EchoNode(Node):
@@ -56,21 +69,23 @@ def _spin_take(in_topic: str, out_topic: str, context: rclpy.context.Context, ex
 
     parent = Node("bench_echo", context=context)  # names the side node; spun by ``executor`` for SIGINT only
     side = SideNode(parent, "take", take=True)
-    # the publisher on the parent, as the shaper node's are on its main node: on the side node its QoS event handlers
-    # would sit in the take loop's wait set, a cost per wake-up the shaper's loop does not pay (session 12, hopwork)
-    pub = parent.create_publisher(Float64MultiArray, out_topic, DEPTH)
     # with SHAPER_WORK_TIMING set (the bench), the callback (the publish) and its wake-up timed as the shaper's
     # (ros/stream_watch.py; a (message, info) callback then, as the shaper's)
     timing = WorkTiming.from_env()
-    callback: Any = pub.publish if timing is None else timing.timed_callback(lambda msg, info: pub.publish(msg))
-    side.node.create_subscription(Float64MultiArray, in_topic, callback, DEPTH, raw=True)
-    side.start()
-    parent.get_logger().info(f"echoing {in_topic} -> {out_topic} (raw, take loop)")
-    executor.add_node(parent)
-    try:
+    try:  # from here on a stop (SIGINT) closes the side node, whenever it comes
+        # the publisher on the parent, as the shaper node's are on its main node: on the side node its QoS event
+        # handlers would sit in the take loop's wait set, a cost per wake-up the shaper's loop does not pay (session
+        # 12, hopwork)
+        pub = parent.create_publisher(Float64MultiArray, out_topic, DEPTH)
+        callback: Any = pub.publish if timing is None else timing.timed_callback(lambda msg, info: pub.publish(msg))
+        side.node.create_subscription(Float64MultiArray, in_topic, callback, DEPTH, raw=True)
+        side.start()
+        parent.get_logger().info(f"echoing {in_topic} -> {out_topic} (raw, take loop)")
+        executor.add_node(parent)
         executor.spin()
     finally:
-        if timing is not None:  # first: the process has been seen to end on SIGSEGV in the closes below (-11)
+        stop_signal_handlers()  # before the side node's executor is shut down (its SIGINT guard condition)
+        if timing is not None:
             timing.write()
         side.close()
         parent.destroy_node()
@@ -101,6 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        stop_signal_handlers()
         executor.shutdown()
         if node is not None:
             node.destroy_node()

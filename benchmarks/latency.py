@@ -70,6 +70,7 @@ from shaper_nodes.core.shaping import SparseFir, StreamingShaper
 from shaper_nodes.ros.launching import ChildProcess
 
 from .echo_node import DEPTH
+from .thread_cpu import ThreadCpu
 from .work_timing import work_env, work_path
 
 #: the repository root (the parent of this package), the working directory of the echo node
@@ -308,6 +309,7 @@ class _Driven:
     driver_cpu: float = 0.0
     busy: float = 0.0
     wall: float = 0.0
+    threads: ThreadCpu = field(default_factory=ThreadCpu)  # its busiest thread per message (thread_cpu.py)
 
     def alive(self) -> None:
         if not self.proc.running():
@@ -341,6 +343,7 @@ def _drive_turn(executor: SingleThreadedExecutor, d: _Driven, data: np.ndarray, 
     """Send rows ``lo`` to ``hi - 1`` of ``data`` to ``d``'s node at ``rate`` (one turn); add up its CPU and wall
     time."""
     pid = d.proc.proc.pid
+    d.threads.start(pid)
     node0, driver0, busy0 = proc_cpu_seconds(pid), self_cpu_seconds(), machine_busy_seconds()
     wall0 = time.perf_counter()
     stamps = d.stamps[lo - 1:hi - 1]  # the stamp of data row i is at i - 1
@@ -353,6 +356,7 @@ def _drive_turn(executor: SingleThreadedExecutor, d: _Driven, data: np.ndarray, 
     d.driver_cpu += self_cpu_seconds() - driver0
     d.busy += machine_busy_seconds() - busy0
     d.wall += time.perf_counter() - wall0
+    d.threads.stop(pid, hi - lo)
     # its last replies come back before the next turn
     _spin_until(executor, functools.partial(_has_replies, d.driver, hi - 1), 0.2, alive)
 
@@ -462,6 +466,7 @@ def measure_interleaved(targets: list[Target], *, seconds: float = 5.0, rate: fl
                         driver_cpu=d.driver_cpu, busy=d.busy, wall=d.wall, turns=turns)
                for d, rep in zip(driven, replies, strict=True)]
     for d, result in zip(driven, results, strict=True):  # the node's own timers, where it kept them (work_timing.py)
+        result.extra["thread"] = d.threads.busiest()
         with contextlib.suppress(OSError, ValueError):
             result.extra["work"] = json.loads(work_path(d.log_path).read_text())
     return results

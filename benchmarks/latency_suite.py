@@ -143,6 +143,8 @@ def print_latency(lat: dict, args: argparse.Namespace) -> None:
     if lat.get("hog_runs"):
         _print_ratios(lat["hog_baseline"], lat["hog_ratios_to_baseline"])
     print()
+    from .thread_cpu import print_threads
     from .work_timing import print_decomposition
 
     print_decomposition(lat)
+    print_threads(lat)
