@@ -90,6 +90,11 @@ class CycleMonitor:
         """Accelerometer samples collected in the cycle in progress (0 between cycles)."""
         return len(self._acc_t)
 
+    @property
+    def held_before(self) -> int:
+        """Accelerometer samples kept between cycles (``keep_before``), for a START stood in for."""
+        return len(self._before_acc)
+
     def _in_cycle(self, t: float) -> bool:
         """Whether a sample stamped ``t`` belongs to the cycle in progress: one stamped before its START
         belongs to none (over DDS the samples come on other topics than the events, and a node behind by a

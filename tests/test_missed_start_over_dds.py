@@ -1,0 +1,176 @@
+"""A listener that misses a cycle's START over DDS still gets the cycle (or says exactly why not): the identifier
+in-process, the robot program's cycle events from a publisher of another participant made for the cycle, as
+``send_goal --cycle`` makes one per goal (session 13's walk: a listener whose side of the match came late missed
+START in 3 of 34 goals, "END without its START").
+
+START goes out while that publisher has matched no subscriber (asserted at the publish: a volatile writer never
+sends it to a reader that matches later); MOTION_END and END go out once it has matched the identifier, carrying the
+START's stamp (CycleEvent ``start_stamp``). The identifier stands in for the START it never received
+(``events.rule.stood_in``): listening since before START, it measures the cycle as it measures the same cycle seen
+from its START; created after START went out, it says that it did not see the window from START and uses nothing."""
+
+from __future__ import annotations
+
+import pathlib
+from collections.abc import Callable
+
+import pytest
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import Imu
+from test_identifier_node import RATE, Rig, decay, stamp
+
+from shaper_msgs.msg import CycleEvent
+from shaper_nodes.ros.cycle_events import set_start_stamp
+
+pytestmark = pytest.mark.integration
+MOTION, RING = 0.5, 2.0  # s: START to MOTION_END, MOTION_END to END
+
+
+@pytest.fixture
+def program(domain_id):
+    """Makes the robot program's node for one cycle, a participant of its own (a context of its own), as each
+    ``send_goal --cycle`` is a process of its own: its new publisher matches the identifier only once discovery
+    has run (the writer's side first, the reader's later)."""
+    made = []
+
+    def make():
+        ctx = rclpy.context.Context()
+        rclpy.init(context=ctx, domain_id=domain_id)
+        made.append((ctx, rclpy.create_node("robot_program", context=ctx)))
+        return made[-1][1]
+
+    yield make
+    for ctx, node in made:
+        node.destroy_node()
+        ctx.try_shutdown()
+
+
+def imu(rig: Rig, t0: float, t1: float, accel) -> int:
+    """Samples stamped from t0 up to (not including) t1 s at RATE, ``accel(t - t0)`` m/s^2 on x; their count."""
+    n = int(round((t1 - t0) * RATE))
+    for k in range(n):
+        msg = Imu()
+        msg.header.stamp = stamp(t0 + k / RATE)
+        msg.linear_acceleration.x = float(accel(k / RATE))
+        rig.imu.publish(msg)
+        if k % 20 == 0:
+            rig.ex.spin_once(timeout_sec=0.0)
+    return n
+
+
+def event(pub, kind: int, cycle: int, t: float, start: float) -> None:
+    msg = CycleEvent(event=kind, cycle=cycle, task="program")
+    msg.header.stamp = stamp(t)
+    set_start_stamp(msg, start)
+    pub.publish(msg)
+
+
+def seen_cycle(rig: Rig, cycle: int) -> None:
+    """The cycle with its START received: START first, then the motion's samples, MOTION_END, the ring, END."""
+    start = rig.t
+    event(rig.events, CycleEvent.START, cycle, start, start)
+    rig.spin_until(lambda: rig.node.monitor.in_cycle, "START")
+    sent = imu(rig, start, start + MOTION, lambda t: 0.01 * t)
+    event(rig.events, CycleEvent.MOTION_END, cycle, start + MOTION, start)
+    sent += imu(rig, start + MOTION, start + MOTION + RING, decay)
+    rig.spin_until(lambda: rig.node.monitor.accel_samples >= sent, f"the {sent} samples", timeout=60.0)
+    event(rig.events, CycleEvent.END, cycle, start + MOTION + RING, start)
+    rig.spin_until(lambda: not rig.node.monitor.in_cycle, "END")
+    rig.t = start + MOTION + RING + 1.0
+
+
+def missed_cycle(rig: Rig, program: Callable[[], Node], cycle: int, before: float = 0.5) -> None:
+    """The same cycle, its START sent by a publisher made for it before it matched the identifier; the samples
+    from ``before`` s before START."""
+    start = rig.t
+    pub = program().create_publisher(CycleEvent, "/cycle_events", 10)
+    assert pub.get_subscription_count() == 0  # nobody matched: nobody gets this START
+    event(pub, CycleEvent.START, cycle, start, start)
+    # the samples go out after it, stamped from before it on (the topics are apart: stamps, not arrival, count)
+    held = imu(rig, start - before, start, lambda t: 0.0) + imu(rig, start, start + MOTION, lambda t: 0.01 * t)
+    rig.spin_until(lambda: rig.node.monitor.held_before >= held, f"the {held} samples before MOTION_END")
+    rig.spin_until(lambda: pub.get_subscription_count() >= 1, "the identifier matching the program's publisher")
+    assert not rig.node.monitor.in_cycle and rig.node.events.rule.stood_in == 0  # START never came
+    event(pub, CycleEvent.MOTION_END, cycle, start + MOTION, start)
+    rig.spin_until(lambda: rig.node.monitor.in_cycle, "MOTION_END")
+    sent = rig.node.monitor.accel_samples + imu(rig, start + MOTION, start + MOTION + RING, decay)
+    rig.spin_until(lambda: rig.node.monitor.accel_samples >= sent, f"the {sent} samples", timeout=60.0)
+    event(pub, CycleEvent.END, cycle, start + MOTION + RING, start)
+    rig.spin_until(lambda: not rig.node.monitor.in_cycle, "END")
+    assert rig.node.events.rule.stood_in >= 1  # the START was stood in for: the identifier never received it
+    rig.t = start + MOTION + RING + 1.0
+
+
+def test_a_listener_that_missed_start_measures_the_cycle_as_if_it_had_seen_it(ros_context, program):
+    rig = Rig(ros_context)
+    try:
+        rig.t = 10.0
+        seen_cycle(rig, 0)
+        missed_cycle(rig, program, 1)
+        assert rig.node.skipped == [], rig.node.skipped
+        (seen, _), (missed, _) = rig.node.cycles
+        assert missed.cycle == 1 and missed.start == 13.5 and missed.unseen == ""
+        assert len(missed.accel_times) == len(seen.accel_times)
+        assert missed.accel_times[0] == missed.start  # its samples from its START on
+        assert missed.residual.window_end - missed.residual.window_start == pytest.approx(
+            seen.residual.window_end - seen.residual.window_start, abs=1e-9)
+        assert missed.residual.rms == pytest.approx(seen.residual.rms, rel=1e-9)
+    finally:
+        rig.close()
+
+
+def test_a_listener_started_after_start_says_it_did_not_see_the_window(ros_context, program):
+    pub = program().create_publisher(CycleEvent, "/cycle_events", 10)
+    event(pub, CycleEvent.START, 0, 10.0, 10.0)  # before the identifier exists
+    rig = Rig(ros_context)
+    try:
+        rig.t = 10.0 + MOTION
+        rig.spin_until(lambda: pub.get_subscription_count() >= 1, "the identifier matching the program's publisher")
+        event(pub, CycleEvent.MOTION_END, 0, 10.0 + MOTION, 10.0)
+        rig.spin_until(lambda: rig.node.monitor.in_cycle, "MOTION_END")
+        sent = imu(rig, 10.0 + MOTION, 10.0 + MOTION + RING, decay)
+        rig.spin_until(lambda: rig.node.monitor.accel_samples >= sent, f"the {sent} samples", timeout=60.0)
+        event(pub, CycleEvent.END, 0, 10.0 + MOTION + RING, 10.0)
+        rig.spin_until(lambda: rig.node.skipped, "the cycle's refusal")
+        assert not rig.node.cycles
+        assert rig.node.skipped == ["cycle 0: its START was missed (stood in for by a later event's start stamp,"
+                                    " 10.000 s) and no samples held: the window from START was not seen"]
+        # the next cycle, seen from its START, is measured
+        rig.t = 20.0
+        seen_cycle(rig, 1)
+        assert [r.cycle for r, _ in rig.node.cycles] == [1]
+    finally:
+        rig.close()
+
+
+def test_bag_play_plays_the_cycle_events_of_a_recording_older_than_start_stamp(start_node, ros_context):
+    """The reference recording bags/demo_joint_5hz_none_zvd was made before CycleEvent had ``start_stamp``: its
+    recorded bytes do not deserialize as the installed CycleEvent, and bag_play would leave the topic out. They are
+    played converted (the field empty), every event as recorded."""
+    import time
+
+    from rclpy.executors import SingleThreadedExecutor
+
+    bag = pathlib.Path(__file__).resolve().parents[1] / "bags" / "demo_joint_5hz_none_zvd"
+    node = rclpy.create_node("listener", context=ros_context)
+    got: list[CycleEvent] = []
+    node.create_subscription(CycleEvent, "/cycle_events", got.append, 100)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    try:
+        player = start_node("shaper_nodes", "bag_play", {"bag": str(bag), "rate": 50.0, "topics": ["/cycle_events"],
+                                                         "wait_for_subscribers": 1, "start_delay": 0.5})
+        deadline = time.monotonic() + 120.0
+        while len(got) < 12 or player.running():
+            assert time.monotonic() < deadline, f"timed out: {len(got)} events"
+            executor.spin_once(timeout_sec=0.05)
+        assert player.stop() == 0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+    log = player.log_path.read_text()
+    assert "recorded with an older definition: played with the fields added since empty" in log, log
+    assert "not played" not in log and "done (/cycle_events: 12)" in log, log
+    assert [m.event for m in got] == [CycleEvent.START, CycleEvent.MOTION_END, CycleEvent.END] * 4
+    assert all(len(m.start_stamp) == 0 and list(m.joint_names) == ["joint_1"] for m in got)
