@@ -11,6 +11,7 @@ from its START; created after START went out, it says that it did not see the wi
 
 from __future__ import annotations
 
+import math
 import pathlib
 from collections.abc import Callable
 
@@ -174,3 +175,108 @@ def test_bag_play_plays_the_cycle_events_of_a_recording_older_than_start_stamp(s
     assert "not played" not in log and "done (/cycle_events: 12)" in log, log
     assert [m.event for m in got] == [CycleEvent.START, CycleEvent.MOTION_END, CycleEvent.END] * 4
     assert all(len(m.start_stamp) == 0 and list(m.joint_names) == ["joint_1"] for m in got)
+
+
+# ------------------------------------------------------------------ the LIST learner, its own process
+class _ShaperSide:
+    """The shaper node's side the learner talks to: ``/shaper/set_shaper`` accepting every request, and the active
+    shaper (latched) the identity, so the learner's first cycle is its reference (as the bag_play test's stand-in,
+    tests/test_bag_analysis_over_dds.py)."""
+
+    def __init__(self, ctx) -> None:
+        from shaper_msgs.msg import Shaper
+        from shaper_msgs.srv import SetShaper
+        from shaper_nodes.ros.qos import LATCHED
+
+        self.node = rclpy.create_node("shaper_side", context=ctx)
+        self.requests: list = []
+
+        def accept(req, resp):
+            self.requests.append(req)
+            resp.success, resp.message = True, "accepted"
+            return resp
+
+        self.node.create_service(SetShaper, "/shaper/set_shaper", accept)
+        self.active = self.node.create_publisher(Shaper, "/shaper/active_shaper", LATCHED)
+        self.active.publish(Shaper(family="none", amplitudes=[1.0], times=[0.0], source="learner", revision=1))
+
+
+def ring(t: float) -> tuple[float, float, float]:
+    """The tool's accelerometer t s after START: gravity, and after the motion a decaying 8 Hz ring (m/s^2)."""
+    a = 0.05 * math.exp(-(t - MOTION) / 0.3) * math.sin(2 * math.pi * 8.0 * (t - MOTION)) if t > MOTION else 0.0
+    return a, 0.0, 9.81
+
+
+def learner_cycle(start_node, ros_context, program: Callable[[], Node], state: pathlib.Path, missed: bool):
+    """A fresh LIST learner (its own process) and one cycle at 100 s, its START seen or missed (sent before the
+    program's new publisher matched the learner); the learner's report of it, and its log."""
+    import time
+
+    from rclpy.duration import Duration
+    from rclpy.executors import SingleThreadedExecutor
+
+    from shaper_msgs.msg import CycleReport
+    from shaper_nodes.ros.lockstep_reader import STREAM_QOS
+
+    side = _ShaperSide(ros_context)
+    reports: list = []
+    side.node.create_subscription(CycleReport, "/learner/reports", reports.append, 10)
+    imu_pub = side.node.create_publisher(Imu, "/tip_imu", STREAM_QOS)
+    events = side.node.create_publisher(CycleEvent, "/cycle_events", 10)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(side.node)
+
+    def spin_until(done, what, timeout=120.0):
+        deadline = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < deadline, f"timed out waiting for {what}"
+            executor.spin_once(timeout_sec=0.05)
+
+    def samples(t0: float, t1: float) -> None:
+        for k in range(int(round(t0 * 500)), int(round(t1 * 500)) + 1):
+            msg = Imu()
+            msg.header.stamp = stamp(100.0 + k / 500)
+            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = ring(k / 500)
+            imu_pub.publish(msg)
+
+    try:
+        learner = start_node("shaper_nodes", "learner", {"mode": "list", "state_file": str(state),
+                                                         "topics.imu_reliable": True, "end_wait": 10.0})
+        spin_until(lambda: side.requests and imu_pub.get_subscription_count() and events.get_subscription_count(),
+                   "the learner's start-up request and its subscriptions")
+        # the active shaper (latched) in the learner's reader: a cycle that starts before it is not learned from
+        acked = lambda: side.active.wait_for_all_acked(Duration(seconds=0.1))  # noqa: E731
+        spin_until(lambda: side.active.get_subscription_count() and acked(),
+                   "the learner's acknowledgement of the active shaper")
+        pub = events
+        if missed:
+            pub = program().create_publisher(CycleEvent, "/cycle_events", 10)
+            assert pub.get_subscription_count() == 0  # nobody matched: nobody gets this START
+        event(pub, CycleEvent.START, 0, 100.0, 100.0)
+        samples(-1.0, MOTION)
+        spin_until(lambda: pub.get_subscription_count() >= 1, "the learner matching the events' publisher")
+        event(pub, CycleEvent.MOTION_END, 0, 100.0 + MOTION, 100.0)
+        samples(MOTION + 1 / 500, MOTION + RING)
+        event(pub, CycleEvent.END, 0, 100.0 + MOTION + RING, 100.0)
+        spin_until(lambda: reports, "the learner's report of the cycle")
+        assert learner.stop() == 0
+    finally:
+        executor.shutdown()
+        side.node.destroy_node()
+    return reports[0], learner.log_path.read_text()
+
+
+def metric(report, name: str) -> float:
+    return report.metric_values[list(report.metric_names).index(name)]
+
+
+def test_the_learner_learns_from_a_cycle_whose_start_it_missed_as_from_the_same_cycle_seen(start_node, ros_context,
+                                                                                          program, tmp_path):
+    seen, _ = learner_cycle(start_node, ros_context, program, tmp_path / "seen.json", missed=False)
+    missed, log = learner_cycle(start_node, ros_context, program, tmp_path / "missed.json", missed=True)
+    assert "cycle 0: its START was missed; stood in for by the MOTION_END's start stamp, 100.000 s" in log, log
+    for report in (seen, missed):
+        assert "skipped" not in report.metric_names, list(report.metric_names)
+    assert (missed.window_start, missed.window_end) == (seen.window_start, seen.window_end)
+    for name in ("M", "a1_next", "t2_next"):
+        assert metric(missed, name) == pytest.approx(metric(seen, name), rel=1e-9), name
