@@ -287,7 +287,8 @@ def learner_cycle(start_node, ros_context, program: Callable[[], Node], state: p
         samples(MOTION + 1 / 500, MOTION + RING)
         event(pub, CycleEvent.END, 0, 100.0 + MOTION + RING, 100.0)
         spin_until(lambda: reports, "the learner's report of the cycle")
-        assert learner.stop() == 0
+        # a clean stop (SIGINT), waited for generously: at load 40 with two hogs a learner once took over 10 s
+        assert learner.stop(timeout=60.0) == 0, learner.log_path.read_text()
     finally:
         executor.shutdown()
         side.node.destroy_node()
