@@ -388,7 +388,7 @@ def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float 
     def event(kind, cycle, ns, log_ns=None):
         write("ev", ns if log_ns is None else log_ns, T["shaper_msgs/msg/CycleEvent"](
             header=hdr(ns), event=kind, cycle=cycle, task="round_trip", joint_names=["joint_1"],
-            start_positions=np.zeros(1), goal_positions=np.ones(1)), "shaper_msgs/msg/CycleEvent")
+            start_positions=np.zeros(1), goal_positions=np.ones(1), start_stamp=[]), "shaper_msgs/msg/CycleEvent")
 
     try:
         for c in range(cycles):

@@ -5,12 +5,14 @@ time-ordered, finite :class:`~.signals.Signal` arrays (split out of :mod:`.strea
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from shaper_nodes.core.cycles import start_stamp
 from shaper_nodes.core.stamps import stamp_to_sec
 from shaper_nodes.recordings import BagError
 from shaper_nodes.recordings.cdr import JointStateDecoder, imu_fast, joint_state_efforts, little_endian
@@ -145,6 +147,8 @@ class _Collector:
         events.start.append(tuple(float(x) for x in m.start_positions))
         events.goal.append(tuple(float(x) for x in m.goal_positions))
         events.joint_names.append(tuple(str(x) for x in m.joint_names))
+        start = start_stamp(m)
+        events.start_stamp.append(math.nan if start is None else start)
 
     def _shaper(self, topic: str, seq: int, log_ns: int, raw: Any) -> None:
         m = self.decoders[topic](raw)

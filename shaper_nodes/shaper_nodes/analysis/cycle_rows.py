@@ -60,7 +60,7 @@ def _segment(rec: Recording, opt: Options) -> tuple[list[CycleSpan], str, list[s
     if opt.segmentation not in ("auto", "events", "motion"):
         raise BagError(f"segmentation must be auto, events or motion, got {opt.segmentation!r}")
     if opt.segmentation != "motion" and rec.events.kind:
-        spans, notes = from_events(rec.events)
+        spans, notes = from_events(rec.events, float(np.min(rec.accel.t)) if len(rec.accel.t) else None)
         return spans, f"cycle events ({rec.topics['events']})", notes
     if opt.segmentation == "events":
         raise BagError(f"{rec.path}: no cycle events (shaper_msgs/msg/CycleEvent) to segment by")

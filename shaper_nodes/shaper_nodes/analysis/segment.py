@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shaper_nodes.core.cycles import END, MOTION_END, START
+from shaper_nodes.core.cycles import END, MOTION_END, START, unseen_window
 
 from .streams import Events, Signal
 
@@ -79,14 +79,37 @@ class CycleSpan:
     complete: bool = True
 
 
-def from_events(events: Events) -> tuple[list[CycleSpan], list[str]]:
-    """Cycles from the events in recording order; notes on events that do not pair up."""
+def from_events(events: Events, first_sample: float | None = None) -> tuple[list[CycleSpan], list[str]]:
+    """Cycles from the events in recording order; notes on events that do not pair up.
+
+    A cycle whose START the recording missed (the recorder's side of the match came late) starts at the stamp its
+    MOTION_END or END carries (``start_stamp``), placed at that event in the recording's order, if the recording's
+    accelerometer samples (from ``first_sample`` s; None: not checked) reach back to it
+    (:class:`~shaper_nodes.core.cycles.MissedStarts`); without the stamp it is left out, as before."""
     spans: list[CycleSpan] = []
     notes: list[str] = []
     order = np.argsort(np.asarray(events.seq), kind="stable")
     current: dict | None = None
+    starts = events.start_stamp  # shorter than kind for events decoded with an older definition
+    unseen_cycle: int | None = None  # the cycle left out as not seen from its START (its later events too)
     for i in order:
         kind, cyc, t, seq = events.kind[i], events.cycle[i], events.t[i], events.seq[i]
+        start = starts[i] if i < len(starts) and np.isfinite(starts[i]) else None
+        if kind != START and cyc == unseen_cycle:
+            continue
+        if kind != START and (current is None or cyc != current["cycle"]) and start is not None:
+            unseen = unseen_window(start, first_sample) if first_sample is not None else ""
+            if current is not None:
+                notes.append(f"cycle {current['cycle']}: no END before the next START; left out")
+            current = None
+            if unseen:
+                notes.append(f"cycle {cyc}: {unseen}; left out")
+                unseen_cycle = cyc
+                continue
+            notes.append(f"cycle {cyc}: START not in the recording; stood in for by the"
+                         f" {'END' if kind == END else 'MOTION_END'}'s start stamp ({start:.3f} s)")
+            current = {"cycle": cyc, "start": start, "seq": seq, "me": None, "me_seq": seq,
+                       "sp": events.start[i], "gp": events.goal[i]}
         if kind == START:
             if current is not None:
                 notes.append(f"cycle {current['cycle']}: no END before the next START; left out")

@@ -16,7 +16,8 @@ EVENT, SHAPER = "shaper_msgs/msg/CycleEvent", "shaper_msgs/msg/Shaper"
 
 @dataclass
 class Events:
-    """Cycle events: order in the recording, time (s), kind, cycle, start and goal positions."""
+    """Cycle events: order in the recording, time (s), kind, cycle, start and goal positions, the joints, and the
+    stamp of the cycle's START each carries (s; NaN: absent, as in recordings older than the field)."""
 
     seq: list[int] = field(default_factory=list)
     t: list[float] = field(default_factory=list)
@@ -25,6 +26,7 @@ class Events:
     start: list[tuple[float, ...]] = field(default_factory=list)
     goal: list[tuple[float, ...]] = field(default_factory=list)
     joint_names: list[tuple[str, ...]] = field(default_factory=list)
+    start_stamp: list[float] = field(default_factory=list)
 
 
 @dataclass

@@ -19,7 +19,10 @@ START goes out before the goal (once every subscriber of the events topic the gr
 after ``--timeout`` with a warning that nobody, or not everybody, listens), and the goal once every subscriber
 has acknowledged START (bounded by ``--timeout``); MOTION_END and END once the goal succeeded, and the
 command waits (bounded) until every subscriber has acknowledged them. A goal that does not succeed
-gets no MOTION_END and END: the learner drops the unfinished cycle at the next START.
+gets no MOTION_END and END: the learner drops the unfinished cycle at the next START. Every mark carries
+the START's stamp (``start_stamp``): a listener whose side of the match came after START still learns
+when the cycle began, from MOTION_END or END (ros/cycle_events.py; the waits above make that rare, they
+cannot rule it out: session 13's walk).
 """
 
 from __future__ import annotations
@@ -100,12 +103,17 @@ class CycleMarks:
                       f" {self.node.count_subscribers(self.spec.topic)} subscribers of {self.spec.topic} matched"
                       f" within {timeout:g} s: the others may miss the cycle's START", file=sys.stderr)
 
-    def publish(self, kind: int, stamp_s: float, start: Sequence[float], goal: Sequence[float]) -> None:
+    def publish(self, kind: int, stamp_s: float, start: Sequence[float], goal: Sequence[float],
+                start_s: float | None = None) -> None:
+        """One event stamped ``stamp_s`` s, carrying its cycle's START stamp ``start_s`` (default ``stamp_s``: the
+        START itself), so a listener that missed START has it (ros/cycle_events.py)."""
         from shaper_nodes.ros.conversions import sec_to_time
+        from shaper_nodes.ros.cycle_events import set_start_stamp
 
         msg = self.msg(event=kind, cycle=self.spec.cycle, task=self.spec.task, joint_names=self.joints,
                        start_positions=[float(x) for x in start], goal_positions=[float(x) for x in goal])
         msg.header.stamp = sec_to_time(stamp_s)
+        set_start_stamp(msg, stamp_s if start_s is None else start_s)
         self.pub.publish(msg)
 
     def start(self, stamp_s: float, start: Sequence[float], goal: Sequence[float], timeout: float = 0.0,
@@ -128,6 +136,6 @@ class CycleMarks:
     def finish(self, start_s: float, duration: float, hold: float, start: Sequence[float],
                goal: Sequence[float], timeout: float, prog: str) -> None:
         """MOTION_END and END of the cycle that started at ``start_s``, then wait for their acknowledgement."""
-        self.publish(self.msg.MOTION_END, start_s + duration, start, goal)
-        self.publish(self.msg.END, start_s + duration + hold, start, goal)
+        self.publish(self.msg.MOTION_END, start_s + duration, start, goal, start_s)
+        self.publish(self.msg.END, start_s + duration + hold, start, goal, start_s)
         self._acked(timeout, prog, "MOTION_END and END were")

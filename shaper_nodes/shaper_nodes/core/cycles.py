@@ -8,16 +8,22 @@ the cycle's MOTION_END (within ``settle_tolerance`` of their final value) until 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from shaper_nodes.core.shaping.vibration import ResidualVibration, residual_vibration, settle_time
+from shaper_nodes.core.stamps import stamp_to_sec
 
 START, MOTION_END, END = 0, 1, 2
+#: s of samples a listener keeps between cycles so that a START it missed, stood in for by the cycle's MOTION_END
+#: or END (:class:`MissedStarts`), finds its samples: a motion up to this long
+STAND_IN_SPAN = 30.0
 
 #: stamped samples (time in s, values) in order of arrival
 _Samples = deque[tuple[float, np.ndarray]]
@@ -35,6 +41,9 @@ class CycleResult:
     accel: np.ndarray
     position_times: np.ndarray
     positions: np.ndarray
+    #: why the cycle, its START missed and stood in for, was not seen from its START ("" if it was:
+    #: :func:`unseen_window`); its figures then cover only what was seen
+    unseen: str = ""
 
 
 class CycleMonitor:
@@ -49,14 +58,21 @@ class CycleMonitor:
     max_samples : int
         Most samples kept per stream in one cycle: a cycle that passes it (its END lost, say) is
         abandoned and its samples dropped, so memory stays bounded; :attr:`abandoned` counts them.
+    keep_before : float
+        s of samples kept between cycles (0: none), for a START stood in for (:meth:`event` with
+        ``stood_in``): its cycle takes the samples kept from its START on, if they reach back to it.
     """
 
     def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False,
-                 max_samples: int = 2_000_000) -> None:
+                 max_samples: int = 2_000_000, keep_before: float = 0.0) -> None:
         self.settle_tolerance = float(settle_tolerance)
         self.remove_mean = remove_mean
         self.max_samples = int(max_samples)
+        self.keep_before = float(keep_before)
         self.abandoned = 0
+        self._before_acc: _Samples = deque()  # samples outside a cycle, the last keep_before s
+        self._before_pos: _Samples = deque()
+        self._unseen = ""
         self._cycle: int | None = None
         self._start = 0.0
         self._motion_end: float | None = None
@@ -74,6 +90,11 @@ class CycleMonitor:
         """Accelerometer samples collected in the cycle in progress (0 between cycles)."""
         return len(self._acc_t)
 
+    @property
+    def held_before(self) -> int:
+        """Accelerometer samples kept between cycles (``keep_before``), for a START stood in for."""
+        return len(self._before_acc)
+
     def _in_cycle(self, t: float) -> bool:
         """Whether a sample stamped ``t`` belongs to the cycle in progress: one stamped before its START
         belongs to none (over DDS the samples come on other topics than the events, and a node behind by a
@@ -87,6 +108,8 @@ class CycleMonitor:
             self._acc_t.append(float(t))
             self._acc.append(np.asarray(accel, dtype=float).ravel())
             self._bound(self._acc_t)
+        elif self.keep_before > 0.0:
+            self._keep(self._before_acc, t, accel)
 
     def add_positions(self, t: float, positions: npt.ArrayLike) -> None:
         """Joint positions (rad or m) at time t (s)."""
@@ -94,6 +117,13 @@ class CycleMonitor:
             self._pos_t.append(float(t))
             self._pos.append(np.asarray(positions, dtype=float).ravel())
             self._bound(self._pos_t)
+        elif self.keep_before > 0.0:
+            self._keep(self._before_pos, t, positions)
+
+    def _keep(self, buf: _Samples, t: float, values: npt.ArrayLike) -> None:
+        buf.append((float(t), np.asarray(values, dtype=float).ravel()))
+        while buf and buf[0][0] < t - self.keep_before:
+            buf.popleft()
 
     def _bound(self, stream: list[float]) -> None:
         if len(stream) > self.max_samples:  # a cycle without end: abandoned, its samples dropped
@@ -101,11 +131,21 @@ class CycleMonitor:
             self._acc_t, self._acc, self._pos_t, self._pos = [], [], [], []
             self.abandoned += 1
 
-    def event(self, kind: int, cycle: int, t: float) -> CycleResult | None:
-        """A cycle event; returns the cycle's result at its END, else None."""
+    def event(self, kind: int, cycle: int, t: float, stood_in: bool = False) -> CycleResult | None:
+        """A cycle event; returns the cycle's result at its END, else None. ``stood_in``: a START missed, stood in
+        for by a later event of its cycle (:class:`MissedStarts`): the cycle takes the samples kept from ``t`` on
+        (``keep_before``), and its result says if they do not reach back to ``t`` (``unseen``)."""
         if kind == START:
             self._cycle, self._start, self._motion_end = int(cycle), float(t), None
             self._acc_t, self._acc, self._pos_t, self._pos = [], [], [], []
+            self._unseen = ""
+            if stood_in:
+                self._unseen = unseen_window(float(t), self._before_acc[0][0] if self._before_acc else None)
+                for buf, add in ((self._before_acc, self.add_accel), (self._before_pos, self.add_positions)):
+                    for ts, values in list(buf):
+                        add(ts, values)
+            self._before_acc.clear()
+            self._before_pos.clear()
             return None
         if self._cycle is None or int(cycle) != self._cycle:
             return None
@@ -118,8 +158,74 @@ class CycleMonitor:
         motion_end = self._motion_end if self._motion_end is not None else self._start
         acc = np.vstack(self._acc) if self._acc else np.zeros((0, 3))
         pos = np.vstack(self._pos) if self._pos else np.zeros((0, 1))
-        return evaluate_cycle(cycle, self._start, motion_end, float(t), np.asarray(self._acc_t), acc,
-                              np.asarray(self._pos_t), pos, self.settle_tolerance, self.remove_mean)
+        result = evaluate_cycle(cycle, self._start, motion_end, float(t), np.asarray(self._acc_t), acc,
+                                np.asarray(self._pos_t), pos, self.settle_tolerance, self.remove_mean)
+        return dataclasses.replace(result, unseen=self._unseen) if self._unseen else result
+
+
+@dataclass(frozen=True)
+class Event:
+    """A cycle event as a listener handles it: kind, cycle, stamp (s); ``stood_in``: a START the listener never
+    received, stood in for by a later event's start stamp (:class:`MissedStarts`)."""
+
+    kind: int
+    cycle: int
+    t: float
+    stood_in: bool = False
+
+
+class MissedStarts:
+    """One listener's rule for a START it missed: a later event of the cycle stands in for it.
+
+    Over DDS a volatile reader whose side of the match comes after a START went out never gets it
+    (``send_goal --cycle`` makes a publisher per goal: session 13's walk lost 3 STARTs in 34 goals).
+    Every event of a cycle repeats its START's stamp (CycleEvent ``start_stamp``), so the first
+    MOTION_END or END of a cycle whose START was not seen here is preceded by a START at that stamp,
+    marked ``stood_in``. Without the stamp (a publisher older than the field) the event passes as it
+    came: "END without its START", as before. A stood-in START says when the cycle began, not that the
+    listener saw it: what the listener measures from START needs its samples from that stamp on
+    (:func:`unseen_window`).
+    """
+
+    def __init__(self) -> None:
+        self._open: int | None = None  # the cycle whose START (received or stood in) came and no END yet
+        #: STARTs stood in for so far
+        self.stood_in = 0
+
+    def events(self, kind: int, cycle: int, t: float, start: float | None) -> list[Event]:
+        """What to handle for the event ``kind`` of ``cycle`` stamped ``t`` s carrying its START's stamp
+        ``start`` s (None: absent), in order."""
+        kind, cycle = int(kind), int(cycle)
+        out = []
+        if kind == START:
+            self._open = cycle
+        elif cycle != self._open and start is not None and kind in (MOTION_END, END):
+            out.append(Event(START, cycle, float(start), True))
+            self.stood_in += 1
+            self._open = cycle
+        if kind == END and cycle == self._open:
+            self._open = None
+        out.append(Event(kind, cycle, float(t)))
+        return out
+
+
+def start_stamp(msg: Any) -> float | None:
+    """The START stamp a CycleEvent (live, or decoded from a recording) carries, s; None: absent, or decoded with
+    a definition older than the field."""
+    stamps = getattr(msg, "start_stamp", None)
+    return stamp_to_sec(stamps[0]) if stamps is not None and len(stamps) else None
+
+
+def unseen_window(start: float, first_held: float | None) -> str:
+    """Why a listener that missed the START of a cycle that began at ``start`` s cannot measure it from START
+    ("" if it can): it needs a sample stamped at or before ``start`` among those it held when the stand-in came
+    (``first_held``, the earliest stamp held, s; None: none held), else it was not listening from START (started
+    mid-cycle) or dropped the samples since."""
+    if first_held is not None and first_held <= start:
+        return ""
+    held = "no samples held" if first_held is None else f"the samples held begin at {first_held:.3f} s"
+    return (f"its START was missed (stood in for by a later event's start stamp, {start:.3f} s) and {held}: the"
+            " window from START was not seen")
 
 
 def evaluate_cycle(cycle: int, start: float, motion_end: float, end: float, accel_times: np.ndarray,

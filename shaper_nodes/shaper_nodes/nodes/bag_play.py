@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,6 +41,7 @@ from std_srvs.srv import Trigger
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_nodes.recordings import Bag, BagError, describe_damage, shaper_after_end
+from shaper_nodes.recordings.cdr import empty_sequence_appended
 from shaper_nodes.ros.conversions import ns_to_time
 from shaper_nodes.ros.message_types import message_class
 from shaper_nodes.ros.node_main import run_node
@@ -48,6 +50,9 @@ from shaper_nodes.ros.qos import SERVICE_QOS
 
 LATCHED_TYPES = ("shaper_msgs/msg/Shaper",)
 LATCHED_NAMES = ("/tf_static",)
+#: types whose older recorded layouts are played converted to the installed one (CycleEvent before start_stamp)
+OLDER_LAYOUTS: dict[str, Callable[[bytes], bytes]] = {"shaper_msgs/msg/CycleEvent": empty_sequence_appended}
+
 
 @dataclass(frozen=True)
 class BagPlayParams:
@@ -122,6 +127,7 @@ class BagPlayNode(Node):
         self.pause_topics = {t for t in p.pause_after_topics if t}
         self.pause = float(p.pause_after)
         infos = self.bag.topics
+        self._older: dict[str, Callable[[bytes], bytes]] = {}  # topic -> its bytes in the installed layout
         wanted = [t for t in p.topics if t]
         missing = [t for t in wanted if t not in infos]
         if missing:
@@ -132,6 +138,11 @@ class BagPlayNode(Node):
         for topic in selected:
             msgtype = infos[topic].msgtype
             why = self._check(topic, msgtype)
+            if why and msgtype in OLDER_LAYOUTS and not self._check(topic, msgtype, OLDER_LAYOUTS[msgtype]):
+                self._older[topic] = OLDER_LAYOUTS[msgtype]
+                self.get_logger().info(f"{topic} [{msgtype}] recorded with an older definition: played with the"
+                                       " fields added since empty")
+                why = ""
             if why:
                 self.get_logger().error(f"{topic} [{msgtype}] not played: {why}")
                 continue
@@ -161,8 +172,14 @@ class BagPlayNode(Node):
         self._thread.start()
         self.get_logger().info(f"playing {sorted(self._pubs)} from {path} at {self.rate:g}x ({self.bag.reader_name})")
 
-    def _check(self, topic: str, msgtype: str) -> str:
-        """Why ``topic`` cannot be played ("" if it can): type not installed, or layout mismatch."""
+    def _data(self, topic: str, raw: object) -> bytes:
+        """A recorded message's bytes as published (in the installed layout)."""
+        older = self._older.get(topic)
+        return _cdr(raw) if older is None else older(_cdr(raw))
+
+    def _check(self, topic: str, msgtype: str, convert: Callable[[bytes], bytes] = bytes) -> str:
+        """Why ``topic`` cannot be played ("" if it can): type not installed, or layout mismatch (after
+        ``convert``)."""
         from rclpy.serialization import deserialize_message
 
         try:
@@ -171,7 +188,7 @@ class BagPlayNode(Node):
             return f"message type not installed here ({err})"
         for _, _, _, raw in self.bag.messages([topic]):
             try:
-                deserialize_message(_cdr(raw), cls)
+                deserialize_message(convert(_cdr(raw)), cls)
             except Exception as err:
                 return f"the recorded messages do not match the installed {msgtype} ({err})"
             break
@@ -198,11 +215,10 @@ class BagPlayNode(Node):
             self._reported += 1
             self._reports.notify_all()
 
-    @staticmethod
-    def _is_end(raw: object) -> bool:
+    def _is_end(self, topic: str, raw: object) -> bool:
         from rclpy.serialization import deserialize_message
 
-        return bool(deserialize_message(_cdr(raw), CycleEvent).event == CycleEvent.END)
+        return bool(deserialize_message(self._data(topic, raw), CycleEvent).event == CycleEvent.END)
 
     def _await_reports(self) -> float:
         """Before a cycle event or an active shaper: wait for the report of every END played so far (at most
@@ -244,7 +260,7 @@ class BagPlayNode(Node):
             self._reported = self._ends = 0
         ordered = shaper_after_end(self.bag.messages(list(self._pubs)), lambda m: m[2],
                                    lambda m: m[0] in self._shaper_topics,
-                                   lambda m: m[0] in self._event_topics and self._is_end(m[3]))
+                                   lambda m: m[0] in self._event_topics and self._is_end(m[0], m[3]))
         for topic, _, log_ns, raw in ordered:
             if first_ns is None:
                 first_ns, wall0 = log_ns, time.monotonic()
@@ -262,13 +278,13 @@ class BagPlayNode(Node):
                 last += waited
             if self._clock_pub is not None:
                 self._clock_pub.publish(Clock(clock=ns_to_time(log_ns)))
-            self._pubs[topic].publish(_cdr(raw))
+            self._pubs[topic].publish(self._data(topic, raw))
             self.published[topic] += 1
             last = time.monotonic()
             if topic in self.pause_topics and self.pause > 0.0:
                 wall0 += self.pause  # the rest of the recording keeps its spacing, later
                 last += self.pause
-            if self._await and topic in self._event_topics and self._is_end(raw):
+            if self._await and topic in self._event_topics and self._is_end(topic, raw):
                 self._ends += 1
 
     def _on_stop(self, req, resp):

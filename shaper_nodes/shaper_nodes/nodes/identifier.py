@@ -66,12 +66,13 @@ from shaper_msgs.msg import CycleEvent, ModeEstimate
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import Identify
 from shaper_nodes.core.cycle_records import MAX_GAP_PERIODS, SaturatedRecord, SensorFault, check_record
-from shaper_nodes.core.cycles import CycleMonitor, CycleResult
+from shaper_nodes.core.cycles import STAND_IN_SPAN, CycleMonitor, CycleResult
 from shaper_nodes.core.identification import IdentificationError, identify_records, recommend_shaper
 from shaper_nodes.core.identification.drift import Baseline, DriftWatch
 from shaper_nodes.core.shaping import ShaperError, none_shaper
 from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import estimate_msg, shaper_to_msg, time_to_sec
+from shaper_nodes.ros.cycle_events import EventStream
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS, LockstepReader, subscribe_draining
 from shaper_nodes.ros.node_main import run_node, with_config
@@ -99,7 +100,8 @@ class IdentifierNode(Node):
         validate_method(p.method)
 
         # the residual logged is the vibration's: the window's mean (gravity, an offset) removed (the fit has its own)
-        self.monitor = CycleMonitor(float(p.settle_tolerance), remove_mean=True)
+        self.monitor = CycleMonitor(float(p.settle_tolerance), remove_mean=True, keep_before=STAND_IN_SPAN)
+        self.events = EventStream()
         self.cycles: deque[tuple[CycleResult, tuple[np.ndarray, np.ndarray]]] = deque(
             maxlen=int(p.buffer_cycles))
         self.skipped: list[str] = []
@@ -164,6 +166,13 @@ class IdentifierNode(Node):
         self.get_logger().error(f"{topic}: a message dropped: {err}", throttle_duration_sec=1.0)
 
     def _on_event(self, msg: CycleEvent) -> None:
+        for event in self.events.handle(msg):  # a START missed: stood in for by the later event's start stamp
+            if event.stood_in:
+                self.get_logger().warning(f"cycle {msg.cycle}: its START was missed; stood in for by a later"
+                                          f" event's start stamp, {event.stamp:.3f} s")
+            self._on_cycle_event(event.msg, event.stood_in)
+
+    def _on_cycle_event(self, msg: CycleEvent, stood_in: bool) -> None:
         if msg.event == CycleEvent.END and not self.monitor.in_cycle:
             self._skip(f"cycle {msg.cycle}: END without its START (it began before this node was listening,"
                        " or events were lost)")
@@ -171,7 +180,7 @@ class IdentifierNode(Node):
         if msg.event == CycleEvent.START and self.monitor.in_cycle:
             self._skip("the cycle in progress never ended (its END was lost)")
         try:
-            result = self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp))
+            result = self.monitor.event(msg.event, msg.cycle, time_to_sec(msg.header.stamp), stood_in)
         except ValueError as err:  # e.g. joint states of changing size within a cycle
             self._skip(f"cycle {msg.cycle}: {err}")
             return
@@ -180,6 +189,9 @@ class IdentifierNode(Node):
             if self.move_shapers is not None:
                 self.move_shapers.on_start(msg)
         if result is None:
+            return
+        if result.unseen:
+            self._skip(f"cycle {result.cycle}: {result.unseen}")
             return
         lost = self.lockstep.describe_lost(self._cycle_start, result.residual.window_end)
         if lost:

@@ -58,6 +58,7 @@ from std_srvs.srv import SetBool
 
 from shaper_msgs.msg import CycleEvent
 from shaper_nodes.ros.conversions import time_to_sec
+from shaper_nodes.ros.cycle_events import EventStream, Handled
 from shaper_nodes.ros.diagnostics import ERROR
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.qos import SERVICE_QOS
@@ -97,6 +98,7 @@ class LearnerNode(LearnerBase):
             else:
                 self.mode = ListMode(self, declared)
         # a coroutine callback: rclpy runs it as a task (its typing knows only plain callbacks)
+        self.events = EventStream()
         self.create_subscription(CycleEvent, self.mode.events_topic, self._on_event, 100)  # type: ignore[arg-type]
         self.create_service(SetBool, "~/hold", self._on_hold, callback_group=MutuallyExclusiveCallbackGroup(),
                             qos_profile=SERVICE_QOS)
@@ -127,9 +129,15 @@ class LearnerNode(LearnerBase):
             deadline = time.monotonic() + float(self.params.value.end_wait)
             while self.mode.latest() < stamp and time.monotonic() < deadline:
                 await self.sleep(0.01)
-        report = await self.mode.on_event(msg, stamp)
-        if report is not None:
-            self._report_pub.publish(report)
+        # a START this node missed, stood in for by the later event's start stamp (modes that check the window)
+        for event in self.events.handle(msg) if self.mode.stands_in else [Handled(msg, stamp)]:
+            if event.stood_in:
+                self.get_logger().warning(f"cycle {msg.cycle}: its START was missed; stood in for by the"
+                                          f" {'END' if msg.event == CycleEvent.END else 'MOTION_END'}'s start"
+                                          f" stamp, {event.stamp:.3f} s")
+            report = await self.mode.on_event(event.msg, event.stamp, event.stood_in)
+            if report is not None:
+                self._report_pub.publish(report)
 
     async def _on_hold(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
         resp.success, resp.message = await self.mode.hold(bool(req.data))

@@ -66,6 +66,10 @@ class Mode(Protocol):
 
     #: the cycle events topic
     events_topic: str
+    #: whether a START the learner missed is stood in for by a later event's start stamp (ros/cycle_events.py):
+    #: ``on_event`` then gets it with ``stood_in`` (a mode that cannot check it saw the window says "END without
+    #: its START", as before)
+    stands_in: bool
 
     def describe(self) -> str:
         """One line for the start-up log."""
@@ -79,8 +83,9 @@ class Mode(Protocol):
     async def start(self) -> bool:
         """Send the start-up shaper (and profile); False if an answer did not come (send again)."""
 
-    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
-        """A cycle event; at the end of a cycle, learn, send, and return the cycle's report."""
+    async def on_event(self, msg: CycleEvent, stamp: float, stood_in: bool = False) -> CycleReport | None:
+        """A cycle event; at the end of a cycle, learn, send, and return the cycle's report. ``stood_in``: a
+        START the learner missed, made from a later event of its cycle."""
 
     async def hold(self, on: bool) -> tuple[bool, str]:
         """Hold at the best so far (``on``), or learn again; (success, message)."""

@@ -47,6 +47,7 @@ from sensor_msgs.msg import Imu
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
+from shaper_nodes.core.cycles import STAND_IN_SPAN
 from shaper_nodes.core.learning.list import (
     ListConfig,
     ListError,
@@ -214,9 +215,10 @@ class ListMode:
         learner = node.restore(learner_from_state, {"structure": self.structure})
         self.session = ListSession(learner or ListLearner(self.config, self._initial_params(v)), self.structure,
                                    float(node.params.value.stale_after), node.max_cycle_duration,
-                                   float(v.sensor.max_abs_accel))
+                                   float(v.sensor.max_abs_accel), STAND_IN_SPAN)
         self.events_topic = v.topics.cycle_events
         self.imu_topic = v.topics.imu
+        self.stands_in = True
         inputs = MutuallyExclusiveCallbackGroup()  # taken while an END's update awaits the shaper node
         subscribe_imu(node, v.topics, lambda t, a: node.notice(self.session.on_imu(t, a)), inputs)
         node.create_subscription(ShaperMsg, f"{node.shaper.srv_name.rsplit('/', 1)[0]}/active_shaper",
@@ -279,8 +281,9 @@ class ListMode:
             ok, why, _ = await self._send(params)
         return ok, f"holding at {_describe(params)}" + ("" if ok else f"; shaper node refused: {why}")
 
-    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
-        result = self.session.on_event(msg.event, msg.cycle, stamp, msg.start_positions, msg.goal_positions)
+    async def on_event(self, msg: CycleEvent, stamp: float, stood_in: bool = False) -> CycleReport | None:
+        result = self.session.on_event(msg.event, msg.cycle, stamp, msg.start_positions, msg.goal_positions,
+                                       stood_in)
         if result is None:
             return None
         window = (result.start, result.end)

@@ -71,7 +71,7 @@ from sensor_msgs.msg import JointState
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import SetMoveShaper, ShaperAt
-from shaper_nodes.core.cycles import END, START
+from shaper_nodes.core.cycles import END, STAND_IN_SPAN, START
 from shaper_nodes.core.learning.list import ListConfig, ListError, ListLearner, ListParams, ListSession
 from shaper_nodes.core.learning.list.stack import Wanted, stack_shaper
 from shaper_nodes.core.learning.list.stack import factors_of as _factors
@@ -175,8 +175,8 @@ class MovesMode:
         #: the moves whose withdrawal after a relearn the scheduler did not acknowledge (sent again at START)
         self.unreset: set[str] = set()
         self.session = ListSession(ListLearner(self.config), self.structure, float(node.params.value.stale_after),
-                                   node.max_cycle_duration, float(v.sensor.max_abs_accel))
-        self.events_topic = v.topics.cycle_events
+                                   node.max_cycle_duration, float(v.sensor.max_abs_accel), STAND_IN_SPAN)
+        self.events_topic, self.stands_in = v.topics.cycle_events, True
         self.imu_topic = v.topics.imu
         self._cycle_move: dict[int, str] = {}  # cycle -> move key, or why the cycle is not learned from
         self._skip: dict[int, str] = {}
@@ -360,11 +360,11 @@ class MovesMode:
         what = "holding every move at its best factor" if on else "learning resumed on every move"
         return ok, what + ("" if ok else "; the scheduler did not take every factor")
 
-    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+    async def on_event(self, msg: CycleEvent, stamp: float, stood_in: bool = False) -> CycleReport | None:
         cycle = int(msg.cycle)
         self.node.unended(self._cycle_move, msg, self._skip)
         if msg.event == START:
-            await self._on_start(msg, stamp)
+            await self._on_start(msg, stamp, stood_in)
             return None
         result = self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
         if msg.event != END:
@@ -383,7 +383,7 @@ class MovesMode:
             return await self.payback.on_end(msg, key, result)
         return await self._on_end(msg, key, result)
 
-    async def _on_start(self, msg: CycleEvent, stamp: float) -> None:
+    async def _on_start(self, msg: CycleEvent, stamp: float, stood_in: bool) -> None:
         cycle = int(msg.cycle)
         self.session.expect_start(stamp)  # the samples that come while this START awaits the scheduler are kept
         try:
@@ -396,7 +396,7 @@ class MovesMode:
         if new:
             self.names[entry.key] = list(msg.joint_names)
         if self.payback is not None:
-            await self.payback.on_start(msg, stamp, entry, new)
+            await self.payback.on_start(msg, stamp, entry, new, stood_in)
             return
         learner = self.learners.get(entry.key)
         if learner is None:
@@ -412,7 +412,7 @@ class MovesMode:
         if cycle in self._skip:
             return
         self.session.switch(learner, (*_factors(wanted), None)[0])  # (the iterative LIST: one factor at most)
-        self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
+        self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions, stood_in)
 
     async def _on_end(self, msg: CycleEvent, key: str, result: Any) -> CycleReport:
         entry = self.store.get(key)

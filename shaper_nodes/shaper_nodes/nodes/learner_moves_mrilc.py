@@ -224,7 +224,7 @@ class MrilcMovesMode:
         self._samples: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=MAX_SAMPLES)
         self.latest_imu = -math.inf
         topics = self.params.value.topics
-        self.events_topic, self.imu_topic = topics.cycle_events, topics.imu
+        self.events_topic, self.imu_topic, self.stands_in = topics.cycle_events, topics.imu, False
         subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
         self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
                                            self._refused, lambda: None, float(v.action_timeout), self._correct)
@@ -406,7 +406,7 @@ class MrilcMovesMode:
         move.plan, move.times, move.saved = plan, times.copy(), None
         return move.learner
 
-    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+    async def on_event(self, msg: CycleEvent, stamp: float, stood_in: bool = False) -> CycleReport | None:
         cycle = int(msg.cycle)
         if msg.event == START:
             try:

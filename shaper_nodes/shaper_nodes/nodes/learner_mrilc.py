@@ -92,7 +92,7 @@ class MrilcMode:
         self.settings = settings
         self.injection = self.model.injection
         self.family = settings.shaper_family
-        self.events_topic = settings.topics["cycle_events"]
+        self.events_topic, self.stands_in = settings.topics["cycle_events"], False
         self.session: MrilcSession | None = node.restore(self._session_from, {"mode": "mrilc"})
         if self.session is None and self.joint_names:
             self.session = self._new_session(len(self.joint_names))
@@ -229,7 +229,7 @@ class MrilcMode:
         ok, why, _ = await self._install(learner.hold())
         return ok, "holding at the best profile" + ("" if ok else f"; refused: {why}")
 
-    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+    async def on_event(self, msg: CycleEvent, stamp: float, stood_in: bool = False) -> CycleReport | None:
         if self.session is None:
             if msg.event == CycleEvent.START:
                 await self._first_start(msg)

@@ -256,7 +256,8 @@ class PaybackMoves:
                                        " against the unshaped command")
         return None
 
-    async def on_start(self, msg: CycleEvent, stamp: float, entry: MoveEntry, new: bool) -> None:
+    async def on_start(self, msg: CycleEvent, stamp: float, entry: MoveEntry, new: bool,
+                       stood_in: bool = False) -> None:
         mode, cycle, key = self.mode, int(msg.cycle), entry.key
         if key not in self.schedule:
             self.schedule[key] = await self._schedule_at(entry, mode.names.get(key, list(msg.joint_names)))
@@ -270,7 +271,7 @@ class PaybackMoves:
         self._phase[cycle] = self.phase(key)
         ran = self._ran[cycle] = self.stack(key).factors()
         mode.session.switch(self.capture, ran[-1] if ran else None)  # (the cycle's own record: _ran)
-        mode.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
+        mode.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions, stood_in)
 
     async def on_end(self, msg: CycleEvent, key: str, result: Any) -> CycleReport:
         mode, cycle = self.mode, int(msg.cycle)

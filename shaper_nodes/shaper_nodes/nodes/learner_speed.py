@@ -156,7 +156,7 @@ class SpeedMovesMode:
         self._samples: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=MAX_SAMPLES)
         self.latest_imu = -math.inf
         topics = self.params.value.topics
-        self.events_topic, self.imu_topic = topics.cycle_events, topics.imu
+        self.events_topic, self.imu_topic, self.stands_in = topics.cycle_events, topics.imu, False
         subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
         scheduler = str(v.scheduler).strip().rstrip("/")
         self.shaper_at = (ServiceClient(node, ShaperAt, f"{scheduler}/shaper_at", node.service_timeout,
@@ -343,7 +343,7 @@ class SpeedMovesMode:
         return delay, freq
 
     # ----------------------------------------------------------------- cycles
-    async def on_event(self, msg: CycleEvent, stamp: float) -> CycleReport | None:
+    async def on_event(self, msg: CycleEvent, stamp: float, stood_in: bool = False) -> CycleReport | None:
         cycle = int(msg.cycle)
         if msg.event == START:
             try:

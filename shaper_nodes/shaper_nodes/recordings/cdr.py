@@ -159,6 +159,14 @@ def clock_cdr(sec: int, nanosec: int) -> bytes:
     return ENCAPSULATION + _STAMP.pack(sec, nanosec)
 
 
+def empty_sequence_appended(raw: bytes) -> bytes:
+    """A message's CDR with one empty sequence appended (its length 0, aligned to 4 bytes): a message recorded with a
+    definition that ended one sequence field short, as the definition with that field has it, the field empty
+    (shaper_msgs/CycleEvent before its ``start_stamp``, session 14)."""
+    data = bytes(raw)
+    return data + bytes((-(len(data) - 4)) % 4) + bytes(4)
+
+
 # ------------------------------------------------------------------------------ reading
 _D3 = struct.Struct("<3d")
 

@@ -54,4 +54,7 @@ stream_watch
     The shaper node's bookkeeping of its inputs: arrivals through the rate watch, forwarded and refused counts.
 lockstep_reader
     A lockstep reader's side on the wire: its acknowledgements to the sim plant, and its lost samples.
+cycle_events
+    Cycle events with a START the listener missed stood in for by a later event's ``start_stamp``
+    (``EventStream``), and the field filled by a publisher (``set_start_stamp``).
 """

@@ -13,7 +13,10 @@ which makes it the reference), with the same shaper from START to END; otherwise
 skipped with the reason, as are cycles whose START was missed.
 
 Memory is bounded: between cycles at most ``2 KEEP_BEFORE_START`` samples are kept (those stamped
-after a START may arrive before it); a cycle that runs longer than ``max_cycle_duration`` is
+after a START may arrive before it), or with ``keep_span`` the samples of the last ``keep_span`` s (at most twice
+as many, and at least ``KEEP_BEFORE_START``): a START the learner missed is stood in for by a later event of its
+cycle (:class:`~shaper_nodes.core.cycles.MissedStarts`), and the cycle is learned from only if the samples from
+its START on are still held; a cycle that runs longer than ``max_cycle_duration`` is
 refused, and its samples are dropped the moment a sample stamped past the limit arrives (the
 session says so once, as :meth:`ListSession.on_imu`'s return value), not at its END. A cycle with
 an accelerometer sample at or beyond the sensor's range (``max_abs_accel``) is saturated: the
@@ -30,7 +33,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from shaper_nodes.core.cycles import END, MOTION_END, START
+from shaper_nodes.core.cycles import END, MOTION_END, START, unseen_window
 
 from ..samples import MAX_ABS_ACCEL, MAX_CYCLE_DURATION, SampleBuffer, out_of_range, sensor_fault
 from .learner import ListLearner
@@ -152,6 +155,10 @@ class ListSession:
     max_abs_accel : float
         The accelerometer's range, m/s^2: a cycle with a sample at or beyond it is refused as
         saturated (inf: no bound).
+    keep_span : float
+        s of samples kept between cycles (0: the last ``KEEP_BEFORE_START``), so that a START stood in for
+        (:meth:`on_event` with ``stood_in``) finds its samples; the learner node keeps
+        :data:`~shaper_nodes.core.cycles.STAND_IN_SPAN`.
 
     Raises
     ------
@@ -160,12 +167,14 @@ class ListSession:
     """
 
     def __init__(self, learner: ListLearner, structure: str = "zv2", stale_after: float = 0.1,
-                 max_cycle_duration: float = MAX_CYCLE_DURATION, max_abs_accel: float = MAX_ABS_ACCEL) -> None:
+                 max_cycle_duration: float = MAX_CYCLE_DURATION, max_abs_accel: float = MAX_ABS_ACCEL,
+                 keep_span: float = 0.0) -> None:
         self.learner = learner
         self.structure = structure
         self.stale_after = float(stale_after)
         self.max_cycle_duration = finite_value("max_cycle_duration", max_cycle_duration)
         self.max_abs_accel = float(max_abs_accel)
+        self.keep_span = float(keep_span)
         if not self.max_cycle_duration > 0.0 or not self.max_abs_accel > 0.0:
             raise ListError(f"max_cycle_duration and max_abs_accel must be > 0, got {max_cycle_duration!r},"
                             f" {max_abs_accel!r}")
@@ -183,6 +192,8 @@ class ListSession:
         self._ref_displacement: npt.NDArray[np.float64] | None = None
         self._latest = -math.inf
         self._pending: float | None = None  # the stamp of a START received and not handled yet (s)
+        self._trim_at = 2 * KEEP_BEFORE_START  # samples held between cycles at which they are cut (keep_span)
+        self._unseen = ""  # why the cycle in progress (its START stood in for) was not seen from its START
         #: accelerometer samples counted as saturated, over all cycles refused for it
         self.saturated = 0
         #: accelerometer samples stamped before the START of the cycle in progress that arrived after it (dropped)
@@ -256,10 +267,15 @@ class ListSession:
             return (f"cycle {self._cycle} has run {t - self._start:.1f} s, longer than max_cycle_duration"
                     f" {self.max_cycle_duration:g} s: its samples are dropped, no more are kept for it, and it will"
                     " not be learned from")
-        if not in_cycle and len(buf) > 2 * KEEP_BEFORE_START:
+        if not in_cycle and len(buf) > self._trim_at:
             pending = self._pending
+            self._trim_at = 2 * KEEP_BEFORE_START
+            recent = buf.times >= t - self.keep_span
             if pending is not None and t - pending <= self.max_cycle_duration:
                 buf.keep(buf.times >= pending)  # the samples of a START on its way in are the cycle's
+            elif self.keep_span > 0.0 and int(recent.sum()) >= KEEP_BEFORE_START:
+                buf.keep(recent)
+                self._trim_at = 2 * len(buf)  # cut again once doubled: amortised
             else:
                 buf.keep_last(KEEP_BEFORE_START)
         return None
@@ -271,10 +287,14 @@ class ListSession:
         self._pending = float(t)
 
     def on_event(self, kind: int, cycle: int, t: float, start_positions: npt.ArrayLike = (),
-                 goal_positions: npt.ArrayLike = ()) -> SessionResult | None:
-        """A cycle event; returns the result at a cycle's END, else None."""
+                 goal_positions: npt.ArrayLike = (), stood_in: bool = False) -> SessionResult | None:
+        """A cycle event; returns the result at a cycle's END, else None. ``stood_in``: a START the learner
+        missed, stood in for by a later event of its cycle (its START stamp): the cycle is learned from only if
+        the samples held reach back to ``t`` (:func:`~shaper_nodes.core.cycles.unseen_window`)."""
         t = float(t)
         if kind == START:
+            held = self._buf.times
+            self._unseen = unseen_window(t, float(held.min()) if held.size else None) if stood_in else ""
             self._pending = None
             self._cycle, self._start, self._motion_end = int(cycle), t, None
             self._at_start = self.active
@@ -303,6 +323,8 @@ class ListSession:
             self._overlong = False
             return result(None, f"the cycle lasted {t - start:.1f} s, longer than max_cycle_duration"
                                 f" {self.max_cycle_duration:g} s (its samples were dropped at the limit)", "too_long")
+        if self._unseen:
+            return result(None, self._unseen)
         if self._motion_end is None:
             return result(None, "no MOTION_END event in the cycle")
         used, why = self._used(self._at_start)
