@@ -338,6 +338,36 @@ def test_stamped_monitor_completes_a_cycle_whose_last_samples_were_lost():
         assert len(mon.poll()) == expected
 
 
+def test_stamped_monitor_waits_for_a_backlog_still_coming_in(monkeypatch):
+    # a busy machine: END is taken a while before the samples stamped up to it, which keep coming in; the
+    # cycle is evaluated with all of them, not with what had come max_wait after END (session 14)
+    from shaper_nodes.core import cycles
+    from shaper_nodes.core.cycles import END, MOTION_END, START, StampedCycleMonitor
+
+    clock = [0.0]
+    monkeypatch.setattr(cycles.time, "monotonic", lambda: clock[0])
+    mon = StampedCycleMonitor(max_wait=1.0)
+    mon.event(START, 0, 0.0)
+    mon.event(MOTION_END, 0, 0.2)
+    mon.event(END, 0, 1.0)
+    for k in range(101):  # one sample every 0.5 s of wall time: 50 s of backlog, each within max_wait of the last
+        clock[0] += 0.5
+        mon.add_accel(0.01 * k, (np.sin(0.3 * k), 0.0, 0.0))
+        mon.add_positions(0.01 * k, [min(0.01 * k, 0.2)])
+        got = mon.poll()
+        assert (len(got) == 1) == (k == 100)
+    assert got[0].accel.shape[0] == 101
+    # a stream that went quiet behind END is given up on max_wait after its last sample
+    mon.event(START, 1, 2.0)
+    mon.event(END, 1, 3.0)
+    mon.add_accel(2.5, (0.0, 0.0, 0.0))
+    mon.add_positions(2.5, [0.2])
+    clock[0] += 0.9
+    assert mon.poll() == []
+    clock[0] += 0.2
+    assert len(mon.poll()) == 1
+
+
 # ------------------------------------------------------------------------------ MRILC replay
 def _mrilc_recording(path, cycles: int = 3, reference: bool = True, rate: float = 200.0, first_at: int = 200,
                      log_offset_ns: int = 0):

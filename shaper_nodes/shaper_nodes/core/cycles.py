@@ -260,8 +260,12 @@ class StampedCycleMonitor:
     keep : int
         Most samples kept per stream (older ones are dropped first).
     max_wait : float
-        A cycle is evaluated anyway this long (s, wall clock) after its END arrived, with the samples
-        there are (a best-effort sample stamped at END may be lost, and a plant may stop after END).
+        A cycle is evaluated anyway, with the samples there are, once each stream not yet past its END
+        has taken no sample for this long (s, wall clock) and its END arrived at least this long ago (a
+        best-effort sample stamped at END may be lost, and a plant may stop after END). A stream still
+        delivering, as a busy machine's backlog of samples stamped before END does, is waited for:
+        counted from END's arrival alone, a load that held the samples back for a second left them out
+        of the cycle's result (session 14).
     """
 
     def __init__(self, settle_tolerance: float = 1e-6, remove_mean: bool = False, keep: int = 500_000,
@@ -273,14 +277,17 @@ class StampedCycleMonitor:
         self._pos: _Samples = deque(maxlen=keep)
         self._open: tuple[int, float, float | None] | None = None
         self._pending: list[tuple[int, float, float, float, float]] = []  # ..., wall time END arrived
+        self._arrived = {"acc": -np.inf, "pos": -np.inf}  # wall time of each stream's latest sample
 
     def add_accel(self, t: float, accel: npt.ArrayLike) -> None:
         """An accelerometer sample (m/s^2, 1 to 3 axes) stamped t (s)."""
         self._acc.append((float(t), np.asarray(accel, dtype=float).ravel()))
+        self._arrived["acc"] = time.monotonic()
 
     def add_positions(self, t: float, positions: npt.ArrayLike) -> None:
         """Joint positions (rad or m) stamped t (s)."""
         self._pos.append((float(t), np.asarray(positions, dtype=float).ravel()))
+        self._arrived["pos"] = time.monotonic()
 
     def event(self, kind: int, cycle: int, t: float) -> None:
         """A cycle event; a cycle's result comes from :meth:`poll` once its samples are in."""
@@ -296,12 +303,19 @@ class StampedCycleMonitor:
                 self._open = None
 
     def poll(self) -> list[CycleResult]:
-        """The cycles whose END has passed on both sample streams (or ``max_wait`` ago), in order."""
+        """The cycles whose END has passed on both sample streams (or whose streams behind it went quiet), in order."""
         out = []
-        latest_acc = self._acc[-1][0] if self._acc else -np.inf
-        latest_pos = self._pos[-1][0] if self._pos else -np.inf
-        while self._pending and (min(latest_acc, latest_pos) >= self._pending[0][3]
-                                 or time.monotonic() - self._pending[0][4] > self.max_wait):
+        latest = {"acc": self._acc[-1][0] if self._acc else -np.inf,
+                  "pos": self._pos[-1][0] if self._pos else -np.inf}
+
+        def ready(end: float, end_arrived: float) -> bool:
+            behind = [name for name, t in latest.items() if t < end]
+            if not behind:
+                return True
+            # given up on only once the streams behind are quiet: not while a backlog is still coming in
+            return time.monotonic() - max([end_arrived] + [self._arrived[n] for n in behind]) > self.max_wait
+
+        while self._pending and ready(self._pending[0][3], self._pending[0][4]):
             cycle, start, motion_end, end, _ = self._pending.pop(0)
             acc_t, acc = self._select(self._acc, start, end, 3)
             pos_t, pos = self._select(self._pos, start, end, 1)
