@@ -57,7 +57,7 @@ def test_demo_recording_analysis_matches_the_demo_and_the_plant(joint_demo, tmp_
     assert an.predicted["rms_nominal"] < 0.1 * an.cycles[0].rms
 
     # the recording cut in the middle of the first chunk that starts after the second cycle's START was
-    # recorded (the recorder closes a chunk every second), as a recorder killed while writing leaves it: that
+    # recorded (the demo here closes a chunk every 0.1 s: JOINT_DEMO), as a killed recorder leaves it: that
     # cycle's END is lost. Chunks are ordered by log time (when the recorder took a message), which on a busy
     # machine lags the events' stamps, so the chunk is chosen by the START's and END's log times
     with Bag(out / "recording") as bag:

@@ -49,6 +49,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--distance", type=float, default=0.5, help="move distance, rad (default 0.5)")
     p.add_argument("--compression", choices=("none", "zstd"), default="none",
                    help="MCAP chunk compression of the recording (default none)")
+    p.add_argument("--flush-period", type=float, default=1.0,
+                   help="the recorder's flush_period: time between two closed MCAP chunks of the recording, s"
+                        " (default 1)")
     return p.parse_args(argv)
 
 
@@ -107,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         NodeProcess("shaper_nodes", "shaper_node", {
             "joint_names": joint, "command_rate": args.rate, "use_sim_time": True}, log_path=out / "shaper.log"),
         NodeProcess("shaper_nodes", "recorder", {
-            "output": str(bag_path), "topics": RECORDED, "use_sim_time": True, "compression": args.compression},
+            "output": str(bag_path), "topics": RECORDED, "use_sim_time": True, "compression": args.compression,
+            "flush_period": args.flush_period},
             log_path=out / "recorder.log"),
     ]
     ctx = spin_context()
