@@ -62,7 +62,7 @@ from .arm_split import write_csv as write_splits
 
 # the names the tests and scripts/arm_reference_bags.py import from here
 __all__ = ["CASES", "DEFAULT_CASES", "ArmClient", "MoveRun", "_learned", "_losses", "_per_move_table", "_sums",
-           "_table", "fallback_request", "main", "parse_args", "plot"]
+           "_table", "fallback_request", "main", "parse_args", "plot", "sim_plant_params"]
 _learned, _losses, _per_move_table, _sums, _table = learned_report, losses, per_move_table, sums, table
 
 RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/shaper/active_shaper", "/diagnostics",
@@ -70,6 +70,17 @@ RECORDED = ["/joint_states", "/tip_imu", "/cycle_events", "/shaper/active_shaper
 #: the nodes the sim plant waits for in lockstep (lockstep.readers): calibrate, this demo's client, the
 #: identifier and the recorder
 READERS = ["/calibrate", "/conductor", "/identifier", RECORDER]
+#: the sim plant's imu.seed by default (the default run's table, the README's, is of this noise draw)
+IMU_SEED = 1
+
+
+def sim_plant_params(args: argparse.Namespace) -> dict[str, Any]:
+    """The sim plant's parameters for the demo's options ``args`` (the noise and its seed)."""
+    from ..arm.task import HOME
+
+    return {"plant.model": "arm", "mode": "lockstep", "rate": RATE, "task.start": HOME.tolist(),
+            "imu.noise_stddev": args.noise, "imu.seed": args.seed, "lockstep_timeout": 60.0,
+            "arm.substeps": SUBSTEPS, "lockstep.readers": READERS}
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -85,6 +96,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--calibration", type=pathlib.Path, default=None,
                    help="a calibration folder to use (scheduler.yaml, shaper.yaml) instead of calibrating first")
     p.add_argument("--noise", type=float, default=0.01, help="accelerometer noise, m/s^2 (default 0.01)")
+    p.add_argument("--seed", type=int, default=IMU_SEED, help="seed of the accelerometer noise, the sim plant's"
+                   f" imu.seed (default {IMU_SEED}): another noise draw of the same run (the calibration's too when"
+                   " the demo calibrates first)")
     arm_payload.add_arguments(p)
     return p.parse_args(argv)
 
@@ -148,10 +162,7 @@ def _main(argv: list[str] | None) -> int:
     per_move: list[list[tuple[MoveRun, Any, Any]]] = []  # per cycle of the per-move case: (run, measure, report)
     splits: list[tuple[str, int, int, str, Any]] = []  # per case, cycle and move: the sim plant's split (arm_split)
     with node_session(out, "arm") as (start, ctx):
-        start("sim_plant_node", "sim_plant", {"plant.model": "arm", "mode": "lockstep", "rate": RATE,
-                                              "task.start": HOME.tolist(), "imu.noise_stddev": args.noise,
-                                              "lockstep_timeout": 60.0, "arm.substeps": SUBSTEPS,
-                                              "lockstep.readers": READERS})
+        start("sim_plant_node", "sim_plant", sim_plant_params(args))
         shaper_params = {"joint_names": list(JOINT_NAMES), "command_rate": RATE, "use_sim_time": True,
                          "action.server_timeout": 30.0}
         session = Session(start, start("shaper_nodes", "shaper_node", shaper_params), shaper_params,
