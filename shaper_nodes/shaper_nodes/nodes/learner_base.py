@@ -132,6 +132,7 @@ class LearnerBase(Node):
             self.goals.start(int(msg.cycle), list(msg.joint_names), list(msg.goal_positions))
         elif msg.event == CycleEvent.END:
             self.goals.end(int(msg.cycle))
+
     def service_timeout(self) -> float:
         return float(self.params.value.service_timeout)
 

@@ -32,9 +32,8 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   restarted scheduler).
 - **A correction not acknowledged** (the scheduler refused or did not answer) is sent again at the
   move's next START, and that cycle is not learned from (it may have run with either).
-- **A cycle whose goal was not shaped by the scheduler** (the shaper node's ``~/shaped_goals`` says it ran with the
-  active shaper: the scheduler did not answer, or the node has no ``action.scheduler``) is not learned from, with the
-  reason (:mod:`shaper_nodes.core.learning.goal_shaping`): it ran without the move's factor.
+- **A cycle whose goal ran with the active shaper** (the shaper node's ``~/shaped_goals``: the scheduler did not
+  answer, or no ``action.scheduler``) is not learned from, with the reason (core/learning/goal_shaping.py).
 - ``~/hold``: every move holds at its best factor (or learns again).
 - ``/diagnostics``: once the saved factors are sent at start, an OK status ``learner: moves`` with the
   number of moves resumed and, per move key, what its goals run with.
