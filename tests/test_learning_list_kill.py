@@ -110,12 +110,12 @@ class Cell:
     """The rig (module docstring): the scheduler, the shaper node and the learner (``learner`` adds to its
     parameters) started, the peer playing the robot program and the controller, its goals sent to ``proxy``."""
 
-    def __init__(self, start_node, ros_context, state, proxy: str, **learner) -> None:
+    def __init__(self, start_node, ros_context, state, proxy: str, shaper_timeout: float = 60.0, **learner) -> None:
         self.start_node, self.state = start_node, state
-        start_node("shaper_nodes", "scheduler", SCHEDULER)
+        self.scheduler = start_node("shaper_nodes", "scheduler", SCHEDULER)
         start_node("shaper_nodes", "shaper_node", {"joint_names": NAMES, "command_rate": RATE,
-                                                   "action.server_timeout": 60.0, "action.scheduler": "/scheduler",
-                                                   "action.controller": CONTROLLER})
+                                                   "action.server_timeout": shaper_timeout,
+                                                   "action.scheduler": "/scheduler", "action.controller": CONTROLLER})
         self.params = {"mode": "list", "shaper": "/scheduler", "list.structure": "zv2", "list.per_move": True,
                        "state_file": str(state), "topics.imu_reliable": True, "end_wait": 10.0, **learner}
         self.learner = start_node("shaper_nodes", "learner", self.params)

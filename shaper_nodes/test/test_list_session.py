@@ -76,6 +76,23 @@ def test_end_without_start_and_shaper_change_mid_cycle_are_skipped():
     assert r.update is None and "changed during the cycle" in r.skipped
 
 
+def test_a_dropped_cycle_gives_no_update_and_the_next_is_learned_from():
+    """Per-move learning drops a cycle whose goal ran with another shaper before its END is handled: the learner is
+    not updated (its reference is not taken from it), and the next cycle is learned from as the first."""
+    s = fresh()
+    s.on_event(START, 0, 0.0, [0.0], [1.0])
+    s.on_event(MOTION_END, 0, 1.5)
+    for t in np.arange(0.0, 6.0 + 1e-9, 1.0 / RATE):
+        s.on_imu(t, (float(decay(t)), 0.0, 0.0))
+    s.drop(1)  # another cycle: nothing happens
+    s.drop(0)
+    r = s.on_event(END, 0, 6.0)
+    assert r is not None and r.update is None and "without its START" in r.skipped
+    assert s.learner.reference is None
+    r = run_cycle(s, 1, 10.0)
+    assert r.learned and r.update.action == "reference"
+
+
 def test_samples_are_taken_by_stamp_whatever_their_arrival_order():
     a, b = fresh(), fresh()
     ra = run_cycle(a, 0, 0.0)

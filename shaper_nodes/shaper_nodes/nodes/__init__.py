@@ -5,7 +5,8 @@ Modules
 shaper
     ``shaper_node``: the causal real-time FIR per joint between a motion source and a controller;
     whole trajectories; the update policy. With :mod:`.trajectory_action`, the
-    FollowJointTrajectory proxy in front of joint_trajectory_controller; its parameters in
+    FollowJointTrajectory proxy in front of joint_trajectory_controller (a goal's rules in
+    :mod:`.goal_rules`); its parameters in
     :mod:`.shaper_parameters`, its process' interpreter settings in :mod:`.shaper_interpreter`.
 identifier
     ``identifier``: modes from the last cycles' residual vibration, and the recommended shaper; its drift

@@ -125,6 +125,7 @@ class LearnerNode(LearnerBase):
 
     async def _on_event(self, msg: CycleEvent) -> None:
         stamp = time_to_sec(msg.header.stamp)
+        self.goal_event(msg)  # which goals ran in which cycle (learner_base.LearnerBase.goals)
         if msg.event == CycleEvent.END:  # the last samples of the cycle may still be on their way
             deadline = time.monotonic() + float(self.params.value.end_wait)
             while self.mode.latest() < stamp and time.monotonic() < deadline:

@@ -19,11 +19,13 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.task import Future
 
-from shaper_msgs.msg import CycleEvent, CycleReport
+from shaper_msgs.msg import CycleEvent, CycleReport, ShapedGoal
+from shaper_nodes.core.learning.goal_shaping import GoalBook, GoalRecord
 from shaper_nodes.core.learning.samples import MAX_CYCLE_DURATION
 from shaper_nodes.core.learning.state_file import load_state, write_state
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.parameters import Spec, declare, param, table
+from shaper_nodes.ros.qos import SHAPED_GOALS_QOS
 from shaper_nodes.ros.shaper_client import ShaperClient, wait_for
 
 #: refusal classes that are a fault of the sensor (reported as such: ERROR, status "sensor")
@@ -55,6 +57,10 @@ class LearnerParams:
     service_timeout: float = param(
         5.0, "Time to wait for the shaper node's services (and the injection point's), and"
         " then for their answer, s.", (0.1, 600.0))
+    shaped_goals: str = param(
+        "/shaper/shaped_goals", "The shaper node's record of what each goal was shaped with (shaper_msgs/ShapedGoal):"
+        " the per-move learners refuse a cycle whose goal was not shaped as they expect ('' = not watched).",
+        read_only=True)
 
 
 #: the parameters every mode has (derived from LearnerParams)
@@ -114,6 +120,24 @@ class LearnerBase(Node):
         # the END wait's sleeps (the waiting callback holds its own group; Node has its own _timers)
         self._sleep_group = MutuallyExclusiveCallbackGroup()
         self._report_pub = self.create_publisher(CycleReport, "~/reports", 10)
+        #: each cycle's goals as the shaper node shaped them (``shaped_goals``; core/learning/goal_shaping.py),
+        #: fed in the default callback group, where the cycle events are handled one at a time
+        self.goals = GoalBook()
+        if str(p.shaped_goals).strip():
+            self.create_subscription(ShapedGoal, str(p.shaped_goals).strip(), self._on_shaped_goal, SHAPED_GOALS_QOS)
+
+    def _on_shaped_goal(self, msg: ShapedGoal) -> None:
+        self.goals.shaped(GoalRecord(int(msg.shaped_with), str(msg.detail), tuple(msg.joint_names),
+                                     tuple(float(x) for x in msg.goal_positions), str(msg.shaper.source),
+                                     int(msg.shaper.revision)))
+
+    def goal_event(self, msg: CycleEvent) -> None:
+        """A cycle event as it is taken (before its handling waits for anything): for :attr:`goals`."""
+        if msg.event == CycleEvent.START:
+            self.goals.start(int(msg.cycle), list(msg.joint_names), list(msg.goal_positions))
+        elif msg.event == CycleEvent.END:
+            self.goals.end(int(msg.cycle))
+
     def service_timeout(self) -> float:
         return float(self.params.value.service_timeout)
 

@@ -32,6 +32,8 @@ that move the shaper node's proxy asks it about (``~/shaper_at`` with the goal's
   restarted scheduler).
 - **A correction not acknowledged** (the scheduler refused or did not answer) is sent again at the
   move's next START, and that cycle is not learned from (it may have run with either).
+- **A cycle whose goal ran with the active shaper** (the shaper node's ``~/shaped_goals``: the scheduler did not
+  answer, or no ``action.scheduler``) is not learned from, with the reason (core/learning/goal_shaping.py).
 - ``~/hold``: every move holds at its best factor (or learns again).
 - ``/diagnostics``: once the saved factors are sent at start, an OK status ``learner: moves`` with the
   number of moves resumed and, per move key, what its goals run with.
@@ -366,6 +368,13 @@ class MovesMode:
         if msg.event == START:
             await self._on_start(msg, stamp, stood_in)
             return None
+        if msg.event == END and not self._skip.get(cycle):  # its goal shaped otherwise: no update (goal_shaping)
+            shaped = self.node.goals.refusal(cycle, True)
+            if shaped:
+                self._skip[cycle] = shaped
+                self.session.drop(cycle)
+                if self.payback is not None:
+                    self.payback.forget(cycle)
         result = self.session.on_event(msg.event, cycle, stamp, msg.start_positions, msg.goal_positions)
         if msg.event != END:
             return None

@@ -429,8 +429,9 @@ class MrilcMovesMode:
             return self.node.skipped(msg, (math.nan, stamp), "END without its START")
         move = self.moves[cyc.key]
         lr, plan = move.learner, move.plan
-        if cyc.refused or cyc.applied is None or lr is None or plan is None:
-            why = cyc.refused or "no goal of the move came through the learner"
+        shaped = self.node.goals.refusal(cycle, False)  # its goal shaped with the active shaper as a fallback
+        if cyc.refused or shaped or cyc.applied is None or lr is None or plan is None:
+            why = cyc.refused or shaped or "no goal of the move came through the learner"
             return self.node.skipped(msg, (cyc.start, stamp), why)
         window = (cyc.start + plan.motion_end, cyc.start + float(plan.grid[-1]))
         samples = [s for s in self._samples if cyc.start <= s[0] <= window[1] + self.settings.output_period]

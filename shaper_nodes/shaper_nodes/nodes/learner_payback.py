@@ -192,6 +192,11 @@ class PaybackMoves:
         self.proxy = TrajectoryActionProxy(self.node, "~/follow_joint_trajectory", controller, self.goals.record,
                                            self._refused, lambda: None, float(group.action_timeout))
 
+    def forget(self, cycle: int) -> None:
+        """A cycle under way that will not be learned from (its goal shaped with another shaper)."""
+        self._phase.pop(int(cycle), None)
+        self._ran.pop(int(cycle), None)
+
     def stack(self, key: str) -> FactorStack:
         return self.stacks.setdefault(key, FactorStack())
 

@@ -362,9 +362,10 @@ class SpeedMovesMode:
         cyc = self._cycles.pop(cycle, None)
         if cyc is None:
             return self.node.skipped(msg, (math.nan, stamp), "END without its START")
-        if cyc.refused or cyc.factor is None:
-            return self.node.skipped(msg, (cyc.start, stamp), cyc.refused or "no goal of the move came through the"
-                                     " learner")
+        shaped = self.node.goals.refusal(cycle, bool(str(self.params.value.speed.scheduler).strip()))
+        if cyc.refused or shaped or cyc.factor is None:
+            return self.node.skipped(msg, (cyc.start, stamp), cyc.refused or shaped or "no goal of the move came"
+                                     " through the learner")
         if cyc.frequency is None:
             return self.node.skipped(msg, (cyc.start, stamp), "no mode to convert the tolerance (no schedule at the"
                                      " goal and speed.frequency_hz 0)")

@@ -20,7 +20,8 @@ action.server_name (~/follow_joint_trajectory) -> action.controller
     forwarded to the controller's action, feedback, result and cancel relayed; a new goal
     preempts the running one (see trajectory_action.py). With ``action.scheduler`` set, each goal
     is shaped with the shaper that scheduler gives for the goal's final point (see
-    ros/pose_shaper.py); the active shaper is not changed by it.
+    ros/pose_shaper.py); the active shaper is not changed by it. ``~/shaped_goals``
+    (shaper_msgs/ShapedGoal, ros/shaped_goals.py) says, per goal, what it was shaped with.
 ~/active_shaper (latched), ~/set_shaper, ~/get_shaper
     The active shaper, and changing or reading it. Changes (service or parameters) are
     validated first; a refused change leaves the active shaper as it was. Accepted changes are
@@ -94,6 +95,7 @@ from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
 from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
 from shaper_nodes.ros.raw_stream import RawArrays, RawTrajectories
+from shaper_nodes.ros.shaped_goals import ShapedGoals
 from shaper_nodes.ros.side_node import SideNode
 from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch, WorkTiming
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
@@ -233,7 +235,8 @@ class ShaperNode(Node):
                 on_refused=lambda err: self._reject(action_topic, err),
                 on_forwarded=lambda: self._count_forwarded("action"),
                 timeout=float(p.action.server_timeout), reshape=self.pose_shaper,
-                on_late_start=lambda text: self.diagnostics.report("late_start", WARN, text, name="action"))
+                on_late_start=lambda text: self.diagnostics.report("late_start", WARN, text, name="action"),
+                on_sending=ShapedGoals(self, self.active_msg).tell)  # ~/shaped_goals (ros/shaped_goals.py)
         self.add_on_set_parameters_callback(self._validate_params)
         self.add_post_set_parameters_callback(self._apply_params)
         self.create_timer(float(p.diagnostics_period), self._publish_summary,

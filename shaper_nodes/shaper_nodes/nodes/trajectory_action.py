@@ -27,9 +27,10 @@ does) and is a client of the controller's. For each goal:
 - accepted: a goal still running is preempted (its controller goal is cancelled), as
   joint_trajectory_controller does; one goal is active at a time.
 - execution: with a ``reshape`` coroutine (the node's ``action.scheduler``: the trajectory shaped
-  for its final pose), first awaits it and sends what it returns instead, or keeps the trajectory
-  shaped at the goal request if it returns None; then waits up to ``timeout`` s for the
-  controller's action server, sends the shaped trajectory with the goal's tolerances and
+  for its final pose), first awaits it and sends the trajectory it returns instead, or keeps the trajectory
+  shaped at the goal request if it returns none; then waits up to ``timeout`` s for the
+  controller's action server, tells ``on_sending`` (the node's ``~/shaped_goals``) what the goal is shaped
+  with, sends the shaped trajectory with the goal's tolerances and
   ``goal_time_tolerance`` unchanged, relays every feedback, and ends with the controller's status
   and result (error_code, error_string).
 - cancel: accepted and forwarded to the controller goal; the final status is the controller's.
@@ -67,11 +68,14 @@ from rclpy.task import Future
 from rclpy.timer import Timer
 from trajectory_msgs.msg import JointTrajectory
 
-from shaper_nodes.core.checks import InputError, finite_array
+from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.memory import release_freed_memory
 from shaper_nodes.ros.action_client import ResilientActionClient
+from shaper_nodes.ros.pose_shaper import FALLBACK, Reshaped
 from shaper_nodes.ros.qos import ACTION_CLIENT_QOS, ACTION_QOS
 from shaper_nodes.ros.shaper_client import wait_for
+
+from .goal_rules import check_tolerance_counts, check_tolerances, late_start_warning, with_trajectory
 
 Goal: TypeAlias = FollowJointTrajectory.Goal
 Result: TypeAlias = FollowJointTrajectory.Result
@@ -85,42 +89,6 @@ WATCH = 1.0  # s, how often a running goal checks that the controller's server i
 RELEASE_ABOVE = 60_000
 #: s after such a refusal: rclpy drops the request once the goal request's task has sent the answer
 RELEASE_DELAY = 0.5
-
-
-def check_tolerance_counts(goal: Goal) -> None:
-    """Refuse a tolerance list with more entries than the trajectory has joints (one per joint at most).
-
-    Raises
-    ------
-    InputError
-        ``too_large``, naming the list and the counts.
-    """
-    joints = len(goal.trajectory.joint_names)
-    for field in ("path_tolerance", "goal_tolerance", "component_path_tolerance", "component_goal_tolerance"):
-        count = len(getattr(goal, field))
-        if count > joints:
-            raise InputError("too_large", f"{field} has {count} entries, more than the trajectory's {joints}"
-                             " joints (one per joint at most)")
-
-
-def check_tolerances(goal: Goal) -> None:
-    """Refuse non-finite tolerances: joint_trajectory_controller compares with them unchecked.
-
-    Raises
-    ------
-    InputError
-        ``non_finite``, naming the tolerance list and joint.
-    """
-    lists = {"path_tolerance": goal.path_tolerance, "goal_tolerance": goal.goal_tolerance}
-    for field, tols in lists.items():
-        for tol in tols:
-            finite_array(f"{field} of joint {tol.name!r}", [tol.position, tol.velocity, tol.acceleration])
-    lists = {"component_path_tolerance": goal.component_path_tolerance,
-             "component_goal_tolerance": goal.component_goal_tolerance}
-    for field, ctols in lists.items():
-        for ctol in ctols:
-            finite_array(f"{field} of joint {ctol.joint_name!r}",
-                         [ctol.position, ctol.velocity, ctol.acceleration])
 
 
 class _Forward:
@@ -168,18 +136,24 @@ class TrajectoryActionProxy:
     on_late_start : callable, optional
         Called with :func:`late_start_warning`'s text for each goal accepted whose first point is after time 0.
     reshape : coroutine function, optional
-        ``JointTrajectory -> JointTrajectory | None``, awaited for each accepted goal (its
-        request's trajectory) before it is sent: the trajectory to send instead of the one shaped
-        at the goal request, or None to keep that one. It must bound its own wait and not raise.
+        ``JointTrajectory -> JointTrajectory | Reshaped | None``, awaited for each accepted goal (its request's
+        trajectory) before it is sent: the trajectory to send instead of the one shaped at the goal request (None,
+        or a :class:`Reshaped` without one: keep that one), a :class:`Reshaped` saying what it was shaped with.
+        It must bound its own wait and not raise.
+    on_sending : callable, optional
+        Called with the goal's handle and its :class:`Reshaped` (None if ``reshape`` gave none) just before the
+        goal is sent to the controller.
     """
 
     def __init__(self, node: Node, server_name: str, controller_name: str,
                  shape: Callable[[JointTrajectory], JointTrajectory],
                  on_refused: Callable[[InputError], None], on_forwarded: Callable[[], None],
                  timeout: float,
-                 reshape: Callable[[JointTrajectory], Awaitable[JointTrajectory | None]] | None = None,
-                 on_late_start: Callable[[str], object] | None = None) -> None:
+                 reshape: Callable[[JointTrajectory], Awaitable[JointTrajectory | Reshaped | None]] | None = None,
+                 on_late_start: Callable[[str], object] | None = None,
+                 on_sending: Callable[[ServerGoalHandle, Reshaped | None], object] | None = None) -> None:
         self._node = node
+        self._on_sending = on_sending
         self._on_late_start = on_late_start
         self._shape = shape
         self._reshape = reshape
@@ -253,7 +227,7 @@ class TrajectoryActionProxy:
         check_tolerance_counts(goal)
         shaped = self._shape(goal.trajectory)  # its size first, then its points (the node's joints from here)
         check_tolerances(goal)
-        return _with_trajectory(goal, shaped)
+        return with_trajectory(goal, shaped)
 
     def _on_goal(self, goal: Goal) -> GoalResponse:
         if self._stopping:
@@ -328,14 +302,9 @@ class TrajectoryActionProxy:
 
     async def _run(self, fwd: _Forward) -> Result:
         name = self.controller_name
+        reshaped = None
         if self._reshape is not None:
-            try:
-                reshaped = await self._reshape(fwd.handle.request.trajectory)
-            except Exception as err:  # a fault there must not lose the goal: it keeps its shaped trajectory
-                self._log.error(f"reshaping the goal failed ({err!r}); it is sent as shaped at its request")
-                reshaped = None
-            if reshaped is not None:
-                fwd.goal = _with_trajectory(fwd.goal, reshaped)
+            reshaped = await self._reshaped(fwd)
             if fwd.stop:
                 return self._stopped_before_sending(fwd)
         if not await self._wait_for_server(fwd):
@@ -347,6 +316,8 @@ class TrajectoryActionProxy:
             return self._stopped_before_sending(fwd)
 
         handle = fwd.handle
+        if self._on_sending is not None:
+            self._on_sending(handle, reshaped)
         heard = [time.monotonic()]  # the last feedback from the controller (wall s)
 
         def relay(msg) -> None:
@@ -372,6 +343,20 @@ class TrajectoryActionProxy:
                 return self._abort(fwd, f"controller action server {name} went away while the goal was running")
         response = done.result()
         return self._finish(fwd, response.status, response.result)
+
+    async def _reshaped(self, fwd: _Forward) -> Reshaped | None:
+        """The goal reshaped (``reshape``; its trajectory put in ``fwd.goal``), and what it was shaped with (None:
+        ``reshape`` does not say)."""
+        assert self._reshape is not None
+        try:
+            answer = await self._reshape(fwd.handle.request.trajectory)
+        except Exception as err:  # a fault there must not lose the goal: it keeps its shaped trajectory
+            self._log.error(f"reshaping the goal failed ({err!r}); it is sent as shaped at its request")
+            answer = Reshaped(None, FALLBACK, f"reshaping the goal failed ({err!r})")
+        trajectory = answer.trajectory if isinstance(answer, Reshaped) else answer
+        if trajectory is not None:
+            fwd.goal = with_trajectory(fwd.goal, trajectory)
+        return answer if isinstance(answer, Reshaped) else None
 
     async def _wait_for_server(self, fwd: _Forward) -> bool:
         end = time.monotonic() + self._timeout
@@ -423,22 +408,6 @@ class TrajectoryActionProxy:
         self._log.error(f"goal aborted: {why}")
         fwd.handle.abort()
         return Result(error_code=Result.INVALID_GOAL, error_string=why)
-
-
-def late_start_warning(first_s: float, points: int) -> str:
-    """The warning for a goal whose first point is ``first_s`` s after its start (``points`` points)."""
-    what = "the whole motion" if points == 1 else "the motion to its first point"
-    return (f"goal's first point is at {first_s:.3f} s, not 0: {what} is the controller's interpolation from the"
-            " robot's state and is not shaped; start the trajectory at the current state at time 0 (as planners"
-            " do; send_goal --from-current)")
-
-
-def _with_trajectory(goal: Goal, trajectory: JointTrajectory) -> Goal:
-    """``goal`` with ``trajectory`` and the same tolerances and goal_time_tolerance."""
-    return Goal(trajectory=trajectory,
-                path_tolerance=goal.path_tolerance, component_path_tolerance=goal.component_path_tolerance,
-                goal_tolerance=goal.goal_tolerance, component_goal_tolerance=goal.component_goal_tolerance,
-                goal_time_tolerance=goal.goal_time_tolerance)
 
 
 def _to_canceling(handle: ServerGoalHandle) -> bool:

@@ -32,6 +32,8 @@ goal_feedback
 pose_shaper
     A whole trajectory shaped for its final pose with the shaper a scheduler's ``~/shaper_at``
     gives (the shaper node's ``action.scheduler``), falling back to the active shaper with a warning.
+shaped_goals
+    The shaper node's ``~/shaped_goals`` (shaper_msgs/ShapedGoal): what each goal was shaped with, and why.
 node_main
     The Jazzy ``main`` of every node.
 side_node

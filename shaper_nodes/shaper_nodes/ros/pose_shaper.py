@@ -19,7 +19,9 @@ names a scheduler node; :class:`PoseShaperClient` then, for each goal:
 
 If any step fails (scheduler absent, no answer in time, pose refused, shaper refused, shaped goal
 invalid) the goal keeps the trajectory shaped with the active shaper, and a warning on the log and
-``/diagnostics`` (kind ``pose_shaper``) says why. The active shaper is never changed here.
+``/diagnostics`` (kind ``pose_shaper``) says why. The active shaper is never changed here. Either way the
+answer (:class:`Reshaped`) says what the goal was shaped with, and why, for the node's ``~/shaped_goals``
+(shaper_msgs/ShapedGoal: the per-move learners refuse a cycle whose goal fell back).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from shaper_msgs.msg import ShapedGoal
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.shaping import Shaper, ShaperError
 from shaper_nodes.core.shaping.policy import PolicyError, check_design
@@ -39,6 +42,21 @@ from shaper_nodes.core.shaping.policy import PolicyError, check_design
 from .conversions import shaper_from_msg
 from .diagnostics import WARN, Diagnostics
 from .shaper_client import ServiceClient
+
+#: shaper_msgs/ShapedGoal's ways a goal was shaped
+SCHEDULED, FALLBACK, ACTIVE = ShapedGoal.SCHEDULED, ShapedGoal.FALLBACK, ShapedGoal.ACTIVE
+
+
+@dataclass(frozen=True)
+class Reshaped:
+    """What a goal was shaped with: ``trajectory`` shaped for its final pose (None: the one shaped with the active
+    shaper at its request stays), ``shaped_with`` (:data:`SCHEDULED`, :data:`FALLBACK`, :data:`ACTIVE`), ``detail``
+    (the scheduler's summary, or why it fell back) and the scheduler's ``shaper`` (None: the active one)."""
+
+    trajectory: JointTrajectory | None
+    shaped_with: int
+    detail: str = ""
+    shaper: Shaper | None = None
 
 
 @dataclass(frozen=True)
@@ -130,9 +148,9 @@ class PoseShaperClient:
                                     f" {type(err).__name__}: {err}")
         return PoseAnswer(shaper, resp.message)
 
-    async def __call__(self, trajectory: JointTrajectory) -> JointTrajectory | None:
-        """``trajectory`` shaped for its final pose, or None (then the caller keeps the trajectory
-        shaped with the active shaper; the reason has been reported)."""
+    async def __call__(self, trajectory: JointTrajectory) -> Reshaped:
+        """``trajectory`` shaped for its final pose, or no trajectory (then the caller keeps the trajectory
+        shaped with the active shaper; the reason has been reported, and is in the answer's ``detail``)."""
         answer = await self.shaper_at(final_pose(trajectory), first_pose(trajectory))
         why = answer.message
         if answer.shaper is not None:
@@ -145,8 +163,8 @@ class PoseShaperClient:
                 s = answer.shaper
                 self._log.info(f"goal shaped for its final pose: {len(s)} impulses, {s.duration * 1e3:.1f} ms"
                                f" ({answer.message})")
-                return shaped
+                return Reshaped(shaped, SCHEDULED, answer.message, s)
         self.fallbacks += 1
         self._diagnostics.report("pose_shaper", WARN, f"goal shaped with the active shaper, not for its final"
                                  f" pose: {why}", values=[("service", self.srv_name)])
-        return None
+        return Reshaped(None, FALLBACK, why)

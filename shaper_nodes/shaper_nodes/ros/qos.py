@@ -51,5 +51,10 @@ ACTION_QOS = {**_ACTION_SERVICES, "feedback_pub_qos_profile": FEEDBACK_QOS}
 #: the same for an action client's goal, cancel and result services and its feedback (keyword arguments of
 #: ActionClient; ResilientActionClient takes them by default)
 ACTION_CLIENT_QOS = {**_ACTION_SERVICES, "feedback_sub_qos_profile": FEEDBACK_QOS}
+#: the shaper node's ``~/shaped_goals`` (ros/shaped_goals.py), publisher and subscribers: latched, the last 16 goals
+#: (the proxy holds at most 16 at once), so a subscriber that matches late still gets the goals under way
+SHAPED_GOALS_QOS = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-__all__ = ["ACTION_CLIENT_QOS", "ACTION_QOS", "FEEDBACK_QOS", "IMU_QOS", "LATCHED", "SERVICE_DEPTH", "SERVICE_QOS"]
+__all__ = ["ACTION_CLIENT_QOS", "ACTION_QOS", "FEEDBACK_QOS", "IMU_QOS", "LATCHED", "SERVICE_DEPTH", "SERVICE_QOS",
+           "SHAPED_GOALS_QOS"]

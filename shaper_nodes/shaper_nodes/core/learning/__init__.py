@@ -2,6 +2,9 @@
 
 Subpackages and modules
 -----------------------
+goal_shaping
+    Which shaper each cycle's goal ran with (the shaper node's ``~/shaped_goals``), matched to the cycle whose
+    START named its goal, and why a per-move learner may not learn from a cycle whose goal fell back.
 list
     The Learning Input Shaping Technique (seed 003): a two-impulse shaper tuned cycle by cycle
     from the residual vibration (parameters, measurement, the learner, the session the node and
@@ -33,4 +36,4 @@ state_file
     never fails: a file that cannot be used is reported, moved aside if it can be, and ignored.
 """
 
-__all__ = ["list", "moves", "mrilc", "samples", "speed", "speed_limits", "speed_peaks", "state_file"]
+__all__ = ["goal_shaping", "list", "moves", "mrilc", "samples", "speed", "speed_limits", "speed_peaks", "state_file"]

@@ -286,6 +286,12 @@ class ListSession:
         :meth:`on_event` (within ``max_cycle_duration``), not cut to the last ones kept between cycles."""
         self._pending = float(t)
 
+    def drop(self, cycle: int) -> None:
+        """Forget the cycle in progress if it is ``cycle``: its END then gives no update (a cycle not to be learned
+        from, known before its END is handled: per-move learning's goal shaped with another shaper)."""
+        if self._cycle == int(cycle):
+            self._cycle, self._overlong = None, False
+
     def on_event(self, kind: int, cycle: int, t: float, start_positions: npt.ArrayLike = (),
                  goal_positions: npt.ArrayLike = (), stood_in: bool = False) -> SessionResult | None:
         """A cycle event; returns the result at a cycle's END, else None. ``stood_in``: a START the learner
