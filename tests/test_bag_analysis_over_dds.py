@@ -19,6 +19,7 @@ import subprocess
 import time
 
 import pytest
+from shaper_stand_in import ShaperStandIn
 
 from reproductions.common import metric as _metric
 from reproductions.list_cases import CASES, LEARNER
@@ -86,26 +87,6 @@ def test_demo_recording_analysis_matches_the_demo_and_the_plant(joint_demo, tmp_
     assert any("the recording ends before its END" in n for n in partial.notes)
 
 
-class _ShaperStandIn:
-    """A ``/shaper/set_shaper`` server that accepts every request: in a replay the active shaper comes
-    from the recording, so the shaper node itself must not run (it would publish its own)."""
-
-    def __init__(self, ctx) -> None:
-        from rclpy.node import Node
-
-        from shaper_msgs.srv import SetShaper
-
-        self.node = Node("shaper_stand_in", context=ctx)
-        self.requests: list = []
-
-        def accept(req, resp):
-            self.requests.append(req)
-            resp.success, resp.message = True, "accepted (replay)"
-            return resp
-
-        self.node.create_service(SetShaper, "/shaper/set_shaper", accept)
-
-
 def test_bag_play_into_a_running_learner_gives_the_live_updates(list_case2_recording, start_node, ros_context,
                                                                 tmp_path, domain_id):
     from rclpy.executors import SingleThreadedExecutor
@@ -131,7 +112,8 @@ def test_bag_play_into_a_running_learner_gives_the_live_updates(list_case2_recor
         assert (row["a1_next"], row["t2_next"]) == pytest.approx((it.a1_next, it.t2_next), rel=1e-9)
 
     # 2. a fresh learner, fed by bag_play (no plant, no shaper node)
-    stand_in = _ShaperStandIn(ros_context)
+    stand_in = ShaperStandIn(ros_context, message="accepted (replay)")  # in a replay the active shaper comes from
+    # the recording, so the shaper node itself must not run (it would publish its own)
     reports: list = []
     stand_in.node.create_subscription(CycleReport, "/learner/reports", reports.append, 100)
     executor = SingleThreadedExecutor(context=ros_context)

@@ -19,6 +19,7 @@ import pytest
 import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
+from shaper_stand_in import ShaperStandIn
 from test_identifier_node import RATE, Rig, decay, stamp
 
 from shaper_msgs.msg import CycleEvent
@@ -207,29 +208,6 @@ def test_bag_play_plays_the_cycle_events_of_a_recording_older_than_start_stamp(s
 
 
 # ------------------------------------------------------------------ the LIST learner, its own process
-class _ShaperSide:
-    """The shaper node's side the learner talks to: ``/shaper/set_shaper`` accepting every request, and the active
-    shaper (latched) the identity, so the learner's first cycle is its reference (as the bag_play test's stand-in,
-    tests/test_bag_analysis_over_dds.py)."""
-
-    def __init__(self, ctx) -> None:
-        from shaper_msgs.msg import Shaper
-        from shaper_msgs.srv import SetShaper
-        from shaper_nodes.ros.qos import LATCHED
-
-        self.node = rclpy.create_node("shaper_side", context=ctx)
-        self.requests: list = []
-
-        def accept(req, resp):
-            self.requests.append(req)
-            resp.success, resp.message = True, "accepted"
-            return resp
-
-        self.node.create_service(SetShaper, "/shaper/set_shaper", accept)
-        self.active = self.node.create_publisher(Shaper, "/shaper/active_shaper", LATCHED)
-        self.active.publish(Shaper(family="none", amplitudes=[1.0], times=[0.0], source="learner", revision=1))
-
-
 def ring(t: float) -> tuple[float, float, float]:
     """The tool's accelerometer t s after START: gravity, and after the motion a decaying 8 Hz ring (m/s^2)."""
     a = 0.05 * math.exp(-(t - MOTION) / 0.3) * math.sin(2 * math.pi * 8.0 * (t - MOTION)) if t > MOTION else 0.0
@@ -247,7 +225,7 @@ def learner_cycle(start_node, ros_context, program: Callable[[], Node], state: p
     from shaper_msgs.msg import CycleReport
     from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 
-    side = _ShaperSide(ros_context)
+    side = ShaperStandIn(ros_context, "shaper_side", active=True)  # the shaper node's side the learner talks to
     reports: list = []
     side.node.create_subscription(CycleReport, "/learner/reports", reports.append, 10)
     imu_pub = side.node.create_publisher(Imu, "/tip_imu", STREAM_QOS)
