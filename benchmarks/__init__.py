@@ -10,11 +10,17 @@ the latency targets as it runs them and their tables :mod:`benchmarks.latency_su
 
 * :mod:`benchmarks.latency`: round-trip latency (driver -> node -> driver) and CPU share of the
   shaper node at 1 kHz with 7 joints, against a bare echo node (:mod:`benchmarks.echo_node`) and the floor
-  (the same echo's raw bytes on the shaper's take loop, ``echo_node --take``).
+  (the same echo's raw bytes on the shaper's take loop, ``echo_node --take``): the interleaved measurement;
+  its parts are the targets (:mod:`benchmarks.latency_targets`), the driver node
+  (:mod:`benchmarks.latency_driver`), the replies matched to the sends and their figures
+  (:mod:`benchmarks.latency_replies`), the CPU accounting (:mod:`benchmarks.proc_cpu`) and the busy-loop
+  load (:mod:`benchmarks.cpu_hog`).
 * :mod:`benchmarks.callback_parts` (run on its own, not by ``./run bench``): where a streamed message's
   time goes inside the echo and shaper nodes (wake-up, callback and its parts), timed in their processes.
 * :mod:`benchmarks.hop_work` (run on its own): the shaper hop's own work per message (the array callback's
   read, rules, FIR and write) in one process, hot; ``--source`` times another checkout's code, for A B A B.
+* :mod:`benchmarks.watch_cost` (run on its own): the shaper node's main-thread bookkeeping per message (the
+  rate watch over a batch of kept arrivals, the summary) in one process, hot or ``--cold``; ``--source`` likewise.
 * :mod:`benchmarks.raw_path` (run on its own): the array hop's conversions in one process, message
   objects against the serialized bytes the shaper node reads and writes (no DDS).
 * :mod:`benchmarks.raw_trajectory` (run on its own): the same for the stream topic's JointTrajectory.

@@ -148,16 +148,11 @@ def run(seconds: float = 30.0, progress: Callable[[str], None] = print,
         hog: bool = False) -> dict[str, dict[str, tuple[float, float]]]:
     """Drive the three nodes for ``seconds`` each in 5 s turns (``hog``: with the bench's busy-loop process on
     the last core); per node and part, (p50, p90) in us."""
-    from .latency import (
-        REPO_ROOT,
-        ChildProcess,
-        CpuHog,
-        Target,
-        echo_target,
-        identity_fir,
-        measure_interleaved,
-        shaper_target,
-    )
+    from shaper_nodes.ros.launching import ChildProcess
+
+    from .cpu_hog import CpuHog
+    from .latency import measure_interleaved
+    from .latency_targets import REPO_ROOT, Target, echo_target, identity_fir, shaper_target
 
     echo, zvd = echo_target(), shaper_target("shaper zvd 8 Hz", 7, 1000.0, ZVD)
     with tempfile.TemporaryDirectory(prefix="callback_parts_") as tmp:

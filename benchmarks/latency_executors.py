@@ -25,7 +25,9 @@ ZVD = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio
 def run(executors: list[str], seconds: float, turn: float, hog: bool, rate: float = 1000.0,
         joints: int = 7) -> list[dict]:
     """Rows (group, label, lost, p50/p99 in us, CPU per message in us, and their ratios to the echo's)."""
-    from .latency import CpuHog, echo_target, measure_interleaved, shaper_target
+    from .cpu_hog import CpuHog
+    from .latency import measure_interleaved
+    from .latency_targets import echo_target, shaper_target
 
     rows: list[dict] = []
     for loaded in ([False, True] if hog else [False]):

@@ -1,9 +1,9 @@
 """The latency measurements as ``./run bench`` runs them, and their tables.
 
-:func:`run_latency` measures the echo baseline, the floor (the echo on the take loop), shaper none and shaper ZVD
-(:mod:`benchmarks.latency`), in turns, and unless ``--skip-hog`` echo, floor and shaper ZVD again with a busy-loop
-process on one core; :func:`print_latency` prints their table, the ratios to the baseline of the same run and the
-hop set against the work it must do (:mod:`benchmarks.work_timing`).
+:func:`run_latency` measures the echo baseline, the floor (the echo on the take loop), shaper none, shaper ZVD and
+the floor doing the ZVD shaper's work (:mod:`benchmarks.latency`), in turns, and unless ``--skip-hog`` all but shaper
+none again with a busy-loop process on one core; :func:`print_latency` prints their table, the ratios to the
+baseline of the same run and the hop set against the work it must do (:mod:`benchmarks.work_timing`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,9 @@ def run_latency(args: argparse.Namespace, progress: Callable[[str], None]) -> di
     """The latency measurements (echo baseline, the floor: the echo on the take loop, shaper none, shaper ZVD)
     and their ratios; unless ``--skip-hog``, echo, floor and shaper ZVD again, each with a busy-loop process on
     one core (the same load for all), and their ratios; ``progress`` is told what is measured."""
-    from .latency import CpuHog, echo_target, measure_interleaved, shaper_target
+    from .cpu_hog import CpuHog
+    from .latency import measure_interleaved
+    from .latency_targets import echo_target, lean_zvd_target, shaper_target
 
     zvd = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03,
            "discretization": "split"}
@@ -49,10 +51,12 @@ def run_latency(args: argparse.Namespace, progress: Callable[[str], None]) -> di
     timed = not args.skip_work_timing
     groups = [(False, [echo_target(), echo_target(*floor, take=True, timed=timed),
                        shaper_target("shaper none", args.joints, args.rate, {"shaper.family": "none"}, timed=timed),
-                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed)])]
+                       shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed),
+                       lean_zvd_target(args.joints, args.rate, zvd, timed)])]
     if not args.skip_hog:
         groups.append((True, [echo_target(), echo_target(*floor, take=True, timed=timed),
-                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed)]))
+                              shaper_target("shaper zvd 8 Hz", args.joints, args.rate, zvd, timed=timed),
+                              lean_zvd_target(args.joints, args.rate, zvd, timed)]))
     rounds = max(1, round(args.seconds / args.turn)) if args.turn > 0 else 1
     runs: list[dict] = []
     hog_runs: list[dict] = []

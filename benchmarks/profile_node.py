@@ -19,7 +19,8 @@ import tempfile
 
 from shaper_nodes.ros.launching import ChildProcess
 
-from .latency import REPO_ROOT, Target, echo_target, identity_fir, measure, shaper_target
+from .latency import measure
+from .latency_targets import REPO_ROOT, Target, echo_target, identity_fir, shaper_target
 
 ZVD = {"shaper.family": "zvd", "shaper.frequency_hz": 8.0, "shaper.damping_ratio": 0.03, "discretization": "split"}
 

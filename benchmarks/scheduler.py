@@ -109,7 +109,7 @@ def cpu_share(seconds: float = 5.0, rate: float = 500.0, repeats: int = 2,
     from reproductions.scheduler_rules import scheduler_parameters
     from shaper_nodes.ros.launching import ChildProcess, NodeProcess
 
-    from .latency import proc_cpu_seconds
+    from .proc_cpu import proc_cpu_seconds
 
     env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     out: dict = {"rate_hz": rate, "seconds": seconds}

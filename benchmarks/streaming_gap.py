@@ -3,7 +3,7 @@
 The shaper node streams one setpoint per command period on its array path and shapes whole
 trajectories (topic, ``~/shape_trajectory``, FollowJointTrajectory) in a callback group of its own
 on a multi-threaded executor. This benchmark drives the array path at ``rate`` from a paced
-thread (:class:`benchmarks.latency.Driver`) and records when each shaped setpoint comes back,
+thread (:class:`benchmarks.latency_driver.Driver`) and records when each shaped setpoint comes back,
 in two windows of the same run:
 
 baseline
@@ -109,7 +109,7 @@ def measure(seconds: float = 8.0, rate: float = 1000.0, points: int | None = Non
     import rclpy.context
     from rclpy.executors import SingleThreadedExecutor
 
-    from benchmarks.latency import Driver
+    from benchmarks.latency_driver import Driver
     from shaper_nodes.core.shaping.trajectory import MAX_TRAJECTORY_POINTS
     from shaper_nodes.nodes.shaper import DEFAULT_MAX_SAMPLES
     from shaper_nodes.ros.launching import NodeProcess

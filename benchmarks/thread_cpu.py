@@ -54,9 +54,11 @@ class ThreadCpu:
         self._sums: dict[int, list[int]] = defaultdict(lambda: [0, 0, 0])
         self._before: Times = {}
         self.messages = 0
+        self._pid = 0  # the process's main thread has the process's id
 
     def start(self, pid: int) -> None:
         """Read the threads before a turn."""
+        self._pid = pid
         self._before = thread_times(pid)
 
     def stop(self, pid: int, messages: int) -> None:
@@ -73,14 +75,18 @@ class ThreadCpu:
 
     def busiest(self) -> dict[str, float]:
         """The thread that ran most: ``cpu_us_per_msg``, ``wait_us_per_msg`` (runnable, waiting for a core) and
-        ``involuntary_per_msg`` (preemptions), per message sent, and its ``tid``; NaN when nothing was read."""
+        ``involuntary_per_msg`` (preemptions), per message sent, and its ``tid``; besides, the CPU per message of the
+        process's main thread (``main_cpu_us_per_msg``: a node's executor, its timers) and of all its threads
+        (``process_cpu_us_per_msg``); NaN when nothing was read."""
         if not self._sums or self.messages <= 0:
             return {"cpu_us_per_msg": math.nan, "wait_us_per_msg": math.nan, "involuntary_per_msg": math.nan,
-                    "tid": math.nan}
+                    "tid": math.nan, "main_cpu_us_per_msg": math.nan, "process_cpu_us_per_msg": math.nan}
         tid, (run, wait, invol) = max(self._sums.items(), key=lambda kv: kv[1][0])
         n = self.messages
+        main = self._sums[self._pid][0] if self._pid in self._sums else math.nan
         return {"cpu_us_per_msg": 1e-3 * run / n, "wait_us_per_msg": 1e-3 * wait / n, "involuntary_per_msg": invol / n,
-                "tid": tid}
+                "tid": tid, "main_cpu_us_per_msg": 1e-3 * main / n,
+                "process_cpu_us_per_msg": 1e-3 * sum(acc[0] for acc in self._sums.values()) / n}
 
 
 def print_threads(lat: dict) -> None:
@@ -90,14 +96,17 @@ def print_threads(lat: dict) -> None:
     if not any(groups):
         return
     print("  each node's busiest thread (the take loop; the bare echo's executor) per message sent: its CPU, its")
-    print("  wait for a core (runnable, not running) and its preemptions, from /proc (benchmarks/thread_cpu.py)")
-    print(f"  {'node':<24}{'CPU us':>8}{'above floor':>12}{'wait us':>9}{'preempted':>10}")
+    print("  wait for a core (runnable, not running) and its preemptions; the main thread's CPU (the node's executor")
+    print("  and timers) and all the process's threads', from /proc (benchmarks/thread_cpu.py)")
+    print(f"  {'node':<24}{'CPU us':>8}{'above floor':>12}{'wait us':>9}{'preempted':>10}{'main us':>9}"
+          f"{'process us':>11}")
     for rows in groups:
         floor = next((t for label, t in rows if label.startswith("echo, take loop")), None)
         for label, t in rows:
             above = t["cpu_us_per_msg"] - floor["cpu_us_per_msg"] if floor else math.nan
             print(f"  {label:<24}{_f(t['cpu_us_per_msg']):>8}{_f(above, '+.1f'):>12}{_f(t['wait_us_per_msg']):>9}"
-                  f"{_f(t['involuntary_per_msg'], '.2f'):>10}")
+                  f"{_f(t['involuntary_per_msg'], '.2f'):>10}{_f(t.get('main_cpu_us_per_msg', math.nan)):>9}"
+                  f"{_f(t.get('process_cpu_us_per_msg', math.nan)):>11}")
 
 
 def _f(value: float, spec: str = ".1f") -> str:

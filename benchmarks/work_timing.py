@@ -23,8 +23,10 @@ from typing import Any
 
 from shaper_nodes.ros.stream_watch import WORK_TIMING_ENV
 
-#: the floor's label prefix (benchmarks/latency.py, echo_target with take)
+#: the floor's label prefix (benchmarks/latency_targets.py, echo_target with take)
 FLOOR = "echo, take loop"
+#: the label of the floor that does the ZVD shaper's work (benchmarks/latency_suite.py, benchmarks/echo_node.py --shape)
+LEAN = "floor + ZVD work"
 
 
 def work_path(log_path: pathlib.Path) -> pathlib.Path:
@@ -50,7 +52,7 @@ def decomposition(runs: list[dict]) -> list[dict[str, Any]]:
         return []
     out = []
     for r in runs:
-        if not r["label"].startswith("shaper"):
+        if not r["label"].startswith(("shaper", LEAN)):
             continue
         above = r["p50_us"] - floor["p50_us"]
         work = _p50(r, "work")
@@ -93,5 +95,5 @@ def summary_rows(lat: dict, row: Any, goal: str) -> list[dict[str, Any]]:
         if not math.isnan(q["work_us"]):
             rows.append(row(f"latency {q['label']}: p50 above the floor", q["above_us"], "us",
                             "its work per message in the node (median)", q["work_us"],
-                            goal=goal if "zvd" in q["label"] else ""))
+                            goal=goal if q["label"].startswith("shaper zvd") else ""))
     return rows

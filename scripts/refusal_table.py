@@ -204,7 +204,7 @@ def _srv(node: ShaperNode, msg: JointTrajectory) -> str:
 
 
 def _set(node: ShaperNode, msg: ShaperMsg) -> str:
-    resp = node._on_set_shaper(SetShaper.Request(shaper=msg), SetShaper.Response())
+    resp = node.changes.on_set_shaper(SetShaper.Request(shaper=msg), SetShaper.Response())
     return f"{'accepted' if resp.success else 'refused'}: {resp.message}"
 
 

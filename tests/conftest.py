@@ -363,6 +363,25 @@ def another_domain_id(domain_id):
 
 
 @pytest.fixture
+def program(domain_id):
+    """Makes the robot program's node for one cycle, a participant of its own (a context of its own), as each
+    ``send_goal --cycle`` is a process of its own: its new publisher matches a listener (the identifier, a
+    learner) only once discovery has run (the writer's side first, the reader's later)."""
+    made = []
+
+    def make():
+        ctx = rclpy.context.Context()
+        rclpy.init(context=ctx, domain_id=domain_id)
+        made.append((ctx, rclpy.create_node("robot_program", context=ctx)))
+        return made[-1][1]
+
+    yield make
+    for ctx, node in made:
+        node.destroy_node()
+        ctx.try_shutdown()
+
+
+@pytest.fixture
 def ros_context(domain_id):
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain_id)

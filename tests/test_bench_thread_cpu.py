@@ -57,6 +57,8 @@ def test_the_busiest_thread_is_the_one_that_worked_and_its_figures_are_per_messa
     assert cpu.messages == 1000
     assert got["tid"] == tid[0]
     assert got["cpu_us_per_msg"] > 0 and got["wait_us_per_msg"] >= 0 and got["involuntary_per_msg"] >= 0
+    # the main thread (this one, the process's id) waited for the worker; the process's sum holds the worker's
+    assert 0 <= got["main_cpu_us_per_msg"] < got["cpu_us_per_msg"] <= got["process_cpu_us_per_msg"]
 
 
 def test_nothing_read_gives_nan():
@@ -64,11 +66,13 @@ def test_nothing_read_gives_nan():
 
 
 def test_each_group_is_printed_against_its_floor(capsys):
-    def run(label: str, cpu: float) -> dict:
-        return {"label": label, "extra": {"thread": {"cpu_us_per_msg": cpu, "wait_us_per_msg": 5.0,
-                                                     "involuntary_per_msg": 0.5, "tid": 1}}}
+    def run(label: str, cpu: float, main: float | None = None) -> dict:
+        thread = {"cpu_us_per_msg": cpu, "wait_us_per_msg": 5.0, "involuntary_per_msg": 0.5, "tid": 1}
+        if main is not None:  # the main thread's and the process's, since session 15
+            thread.update(main_cpu_us_per_msg=main, process_cpu_us_per_msg=cpu + main + 10.0)
+        return {"label": label, "extra": {"thread": thread}}
 
-    lat = {"runs": [run("echo (baseline)", 80.0), run("echo, take loop", 40.0), run("shaper zvd 8 Hz", 62.0)],
+    lat = {"runs": [run("echo (baseline)", 80.0, 3.0), run("echo, take loop", 40.0), run("shaper zvd 8 Hz", 62.0)],
            "hog_runs": [run("echo, take loop + hog", 45.0), run("shaper zvd 8 Hz + hog", 70.0)]}
     print_threads(lat)
     out = capsys.readouterr().out.splitlines()
@@ -79,3 +83,5 @@ def test_each_group_is_printed_against_its_floor(capsys):
     assert line("shaper zvd 8 Hz")[4:6] == ["62.0", "+22.0"]  # against the floor of its own group
     assert line("shaper zvd 8 Hz + hog")[6:8] == ["70.0", "+25.0"]
     assert line("echo (baseline)")[2:4] == ["80.0", "+40.0"]
+    assert line("echo (baseline)")[6:8] == ["3.0", "93.0"]  # the main thread's and the process's CPU
+    assert line("shaper zvd 8 Hz")[8:10] == ["n/a", "n/a"]  # a report without them

@@ -10,6 +10,7 @@ import time
 import pytest
 
 from shaper_msgs.srv import Identify
+from shaper_nodes.ros.lockstep_reader import AckWatch
 from sim_plant_node.clients.conductor import Conductor, rms
 from sim_plant_node.models.plants import mck_from_mode
 
@@ -31,25 +32,38 @@ def identify(conductor: Conductor, request: Identify.Request, timeout: float = 6
 
 
 def start_plant_and_shaper(start_node) -> float:
-    """The sim plant (one joint at TRUE_HZ, TRUE_ZETA; lockstep, 500 Hz) and the shaper node; the plant's
+    """The sim plant (one joint at TRUE_HZ, TRUE_ZETA; lockstep, 500 Hz, waiting for the identifier: a lockstep
+    reader, so that a loaded machine loses none of its accelerometer samples) and the shaper node; the plant's
     mass (kg) is returned."""
     m, c, k = mck_from_mode(2 * math.pi * TRUE_HZ, TRUE_ZETA, 1.0)
     start_node("sim_plant_node", "sim_plant", {
         "joint_names": ["joint_1"], "rate": 500.0, "mode": "lockstep", "imu.noise_stddev": 0.01,
         "imu.axes": [0, -1, -1], "plant.mass": [m], "plant.damping": [c], "plant.stiffness": [k],
-        "task.dwell": 3.0, "task.preroll": 0.5})
+        "task.dwell": 3.0, "task.preroll": 0.5, "lockstep.readers": ["/identifier"]})
     start_node("shaper_nodes", "shaper_node", {"joint_names": ["joint_1"], "command_rate": 500.0})
     return m
+
+
+def start_identifier(start_node, **params):
+    """The identifier node, reading the accelerometer reliably (the plant waits for it)."""
+    return start_node("shaper_nodes", "identifier", {"buffer_cycles": 3, "topics.imu_reliable": True, **params})
+
+
+def wait_identifier(conductor: Conductor) -> None:
+    """Until the identifier reads the accelerometer and has announced itself to the lockstep plant (a cycle it
+    misses for samples lost on a loaded machine would leave it nothing to identify from: CI, stop 48)."""
+    AckWatch(conductor, "/identifier").wait_subscribed(conductor.spin_until, ["/tip_imu"], 120.0)
 
 
 def test_identify_from_one_unshaped_cycle_then_shape(start_node, ros_context):
     omega = 2 * math.pi * TRUE_HZ
     start_plant_and_shaper(start_node)
-    identifier = start_node("shaper_nodes", "identifier", {"buffer_cycles": 3})
+    identifier = start_identifier(start_node)
     conductor = Conductor(context=ros_context)
     try:
         conductor.wait_ready(60.0, {"/shaper/commands": 1, "/forward_position_controller/commands": 1,
                                     "/tip_imu": 2, "/cycle_events": 2})
+        wait_identifier(conductor)
         conductor.set_shaper("none")
         # two cycles: the identifier may have joined the graph too late for the first START
         unshaped = conductor.run_cycles(2, timeout=120.0)
@@ -98,7 +112,7 @@ def test_the_drift_watch_warns_when_a_payload_moves_the_mode_out_of_the_shapers_
 
     omega = 2 * math.pi * TRUE_HZ
     m = start_plant_and_shaper(start_node)
-    identifier = start_node("shaper_nodes", "identifier", {"buffer_cycles": 3, "watch.confirm": 2})
+    identifier = start_identifier(start_node, **{"watch.confirm": 2})
     conductor = Conductor(context=ros_context)
     drift: list = []
     conductor.create_subscription(
@@ -107,6 +121,7 @@ def test_the_drift_watch_warns_when_a_payload_moves_the_mode_out_of_the_shapers_
     try:
         conductor.wait_ready(60.0, {"/shaper/commands": 1, "/forward_position_controller/commands": 1,
                                     "/tip_imu": 2, "/cycle_events": 2, "/shaper/active_shaper": 1})
+        wait_identifier(conductor)
         conductor.set_shaper("zv", omega, TRUE_ZETA)
         # the identifier may join too late for the first START: three cycles in one run give at least two
         # checks, and cycle numbers that no other run repeats (the identifier may still be checking one

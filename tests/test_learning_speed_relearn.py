@@ -103,7 +103,7 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
 
         # a cycle under way: its goal runs at the saved factor (the motion 1.4 times shorter at the controller)
         event(peer, CycleEvent.START, 1, 10.0, 0)
-        peer.spin_until(lambda: 1 in mode._cycles, "the learner's START of cycle 1")
+        peer.spin_until(lambda: 1 in mode.cycles.open, "the learner's START of cycle 1")
         scaled = peer.run_goal(plan(0))
         assert motion_end(scaled) == pytest.approx(MOTION / SAVED, abs=1e-6)
 
@@ -135,7 +135,7 @@ def test_a_drift_warning_starts_every_moves_speed_again_at_the_planned_speed(ros
         # the next goal of each move runs as planned (factor 1)
         for cycle, move in ((2, 1), (3, 0)):
             event(peer, CycleEvent.START, cycle, 20.0 + 10 * cycle, move)
-            peer.spin_until(lambda c=cycle: c in mode._cycles, f"the learner's START of cycle {cycle}")
+            peer.spin_until(lambda c=cycle: c in mode.cycles.open, f"the learner's START of cycle {cycle}")
             sent = peer.run_goal(plan(move))
             assert motion_end(sent) == pytest.approx(MOTION, abs=1e-6)
             assert [duration_to_sec(p.time_from_start) for p in sent.points] == \

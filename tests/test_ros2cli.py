@@ -275,7 +275,7 @@ def test_a_double_parameter_takes_an_integer_over_the_parameter_service(ros_cont
         assert ok.successful, ok.reason
         got = svc.dump("/shaper")["shaper.frequency_hz"]
         assert got.type == ParameterType.PARAMETER_DOUBLE and got.double_value == 8.0
-        assert node._shaper.modes[0].hz == pytest.approx(8.0)  # the design follows
+        assert node.changes.shaper.modes[0].hz == pytest.approx(8.0)  # the design follows
 
         (high,) = svc.set("/shaper", _int("shaper.frequency_hz", 5000))
         assert not high.successful and "out of range" in high.reason and "1000" in high.reason
@@ -302,7 +302,7 @@ def test_a_double_parameter_takes_an_integer_over_the_parameter_service(ros_cont
         (cleared,) = svc.set("/shaper", empty, empty_z, atomically=True)
         assert cleared.successful, cleared.reason
         assert svc.dump("/shaper")["shaper.frequencies_hz"].type == ParameterType.PARAMETER_DOUBLE_ARRAY
-        assert [m.hz for m in node._shaper.modes] == pytest.approx([8.0])
+        assert [m.hz for m in node.changes.shaper.modes] == pytest.approx([8.0])
     finally:
         svc.close()
         node.destroy_node()
@@ -322,7 +322,7 @@ def test_a_params_file_with_integers_for_doubles_starts_the_node(domain_id, tmp_
         assert (rate.type_, rate.value) == (Parameter.Type.DOUBLE, 500.0)
         assert (vel.type_, list(vel.value)) == (Parameter.Type.DOUBLE_ARRAY, [2.0, 3.0])
         assert node.describe_parameter("command_rate").read_only  # still read-only after the conversion
-        assert node._shaper.modes[0].hz == pytest.approx(5.0)
+        assert node.changes.shaper.modes[0].hz == pytest.approx(5.0)
     finally:
         node.destroy_node()
         ctx.try_shutdown()

@@ -144,10 +144,16 @@ def test_cycle_marks_the_goal_on_cycle_events_stamped_on_the_sims_clock(start_no
 
 def test_cycle_marks_reach_every_subscriber_in_the_graph(start_node, domain_id):
     """Three subscribers of /cycle_events, each its own DDS participant (as the learner, the identifier and the
-    recorder are), started just before the goal: each gets START, MOTION_END and END. START went out at the first
-    match, and one of the three listeners missed it in 6 of 23 goals of session 13's walk ("END without its
-    START"); now once every subscriber the graph names has matched (and for CycleMarks' settle time)."""
+    recorder are), started just before the goal: each gets MOTION_END and END, and the cycle's START, either itself
+    or as the START's stamp the later marks carry (a listener send_goal's graph did not name yet when START went
+    out: the learners stand in for it, ros/cycle_events.py). START waits until every subscriber the graph names has
+    matched, for CycleMarks' settle time (the rule: the unit test below); a listener discovered later than that can
+    still miss it (session 15: one of three, once, in a suite on two busy cores), which is why the marks repeat it."""
     from shaper_msgs.msg import CycleEvent
+
+    def start_of(m: CycleEvent) -> tuple[int, int]:
+        stamp = m.start_stamp[0] if m.start_stamp else m.header.stamp
+        return stamp.sec, stamp.nanosec
 
     sim(start_node)
     listeners = []
@@ -155,8 +161,9 @@ def test_cycle_marks_reach_every_subscriber_in_the_graph(start_node, domain_id):
         ctx = rclpy.context.Context()
         rclpy.init(context=ctx, domain_id=domain_id)
         node = rclpy.create_node(f"listener_{k}", context=ctx, start_parameter_services=False)
-        got: list[int] = []
-        node.create_subscription(CycleEvent, "/cycle_events", lambda m, got=got: got.append(m.event), 10)
+        got: list[tuple[int, tuple[int, int]]] = []
+        node.create_subscription(CycleEvent, "/cycle_events", lambda m, got=got: got.append((m.event, start_of(m))),
+                                 10)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         listeners.append((ctx, node, ex, got))
@@ -164,20 +171,57 @@ def test_cycle_marks_reach_every_subscriber_in_the_graph(start_node, domain_id):
         GOAL, JOINT_NAMES, "--from-current", "--hold", "0.5", "--cycle", "0"))
     try:
         deadline = time.monotonic() + 300.0
-        while proc.proc.poll() is None or any(len(got) < 3 for *_, got in listeners):
+        # until the sender is done and every listener has the cycle's END (the last mark)
+        while proc.proc.poll() is None or any(not got or got[-1][0] != CycleEvent.END for *_, got in listeners):
             assert time.monotonic() < deadline, [got for *_, got in listeners]
             for _, _, ex, _ in listeners:
                 ex.spin_once(timeout_sec=0.01)
         assert proc.proc.returncode == 0, proc.log_path.read_text()
         assert "WARNING" not in proc.log_path.read_text()
-        for *_, got in listeners:
-            assert got == [CycleEvent.START, CycleEvent.MOTION_END, CycleEvent.END]
+        events = [[e for e, _ in got] for *_, got in listeners]
+        for seen in events:
+            assert seen in ([CycleEvent.START, CycleEvent.MOTION_END, CycleEvent.END],
+                            [CycleEvent.MOTION_END, CycleEvent.END]), events
+        assert any(seen[0] == CycleEvent.START for seen in events), events  # START went out, and was heard
+        starts = {stamp for *_, got in listeners for _, stamp in got}
+        assert len(starts) == 1, [got for *_, got in listeners]  # one cycle start, the same for every listener
     finally:
         proc.stop()
         for ctx, node, ex, _ in listeners:
             ex.shutdown()
             node.destroy_node()
             ctx.try_shutdown()
+
+
+def test_start_waits_until_every_subscriber_the_graph_names_has_matched_for_the_settle_time(monkeypatch):
+    """CycleMarks.matched_all, the rule START waits on, with the graph and the clock played: not before one
+    subscriber, not at the first match, not before every subscriber the graph names has matched, and only after
+    SETTLE s of that; a subscriber the graph names later starts the wait again."""
+    from types import SimpleNamespace
+
+    from shaper_nodes.cli import cycle_marks
+
+    clock = [100.0]
+    monkeypatch.setattr(cycle_marks.time, "monotonic", lambda: clock[0])
+    graph = {"matched": 0, "named": 0}
+    marks = object.__new__(cycle_marks.CycleMarks)
+    marks.pub = SimpleNamespace(get_subscription_count=lambda: graph["matched"])
+    marks.node = SimpleNamespace(count_subscribers=lambda topic: graph["named"])
+    marks.spec, marks._matched_since = cycle_marks.CycleSpec(0, "task"), None
+
+    def after(dt: float, **state: int) -> bool:
+        clock[0] += dt
+        graph.update(state)
+        return marks.matched_all()
+
+    assert not after(0.0)  # nobody
+    assert not after(1.0, named=3, matched=1)  # the first match
+    assert not after(1.0, matched=3)  # every one named: the settle time starts
+    assert not after(cycle_marks.SETTLE - 0.01)
+    assert not after(0.005, named=4)  # a fourth named: not every one matched
+    assert not after(0.1, matched=4)  # matched again: the settle time starts again
+    assert not after(cycle_marks.SETTLE - 0.01)
+    assert after(0.02)
 
 
 def test_an_aborted_goal_prints_the_controllers_code_its_name_and_its_text(start_node):

@@ -218,6 +218,18 @@ def test_texts_say_an_unknown_uncertainty_and_never_print_nan():
     assert value(float("nan"), unit="Hz") == "n/a" and plus_minus(float("nan"), 1.0) == "n/a"
 
 
+def test_a_fleet_of_one_recording_of_one_robot_is_said_in_the_singular():
+    from shaper_nodes.analysis.fleet import FleetRun
+    from shaper_nodes.analysis.fleet_report import headline
+
+    one = FleetRun(results=_results([10.0]), analysed=1, cached=0, seconds=0.5, where="this process")
+    alone = [robot_drift("arm", one.results, DriftRule())]
+    assert headline(one, alone).startswith("1 recording of 1 robot: 1 analysed")
+    three = FleetRun(results=_results([10.0, 10.0, 10.0]), analysed=0, cached=3, seconds=0.2, where="x")
+    drift = [robot_drift("arm", three.results, DriftRule())]
+    assert headline(three, drift).startswith("3 recordings of 1 robot: 0 analysed (x), 3 from the cache")
+
+
 def _results(hz: list[float]) -> list[Result]:
     return [Result(path=f"r{i:02d}", key=str(i), robot="arm", start_s=3600.0 * i,
                    modes=[{"frequency_hz": f, "frequency_std_hz": 0.01, "zeta": 0.03, "zeta_std": 0.001,
@@ -333,3 +345,21 @@ def test_the_sensitivity_figure_marks_every_mode():
 
         for f in figs.values():
             plt.close(f)
+
+
+def test_each_groups_recommended_shaper_is_labelled_with_the_modes_it_was_designed_for():
+    """A group's modes may include one that does not ring (set aside by the recommendation): the spectrum's label
+    of the group's recommended shaper names the modes the shaper was designed for, not that one."""
+    import dataclasses
+
+    from shaper_nodes.analysis.report_figures import _shapers_to_draw
+
+    an = analyze(read_recording(BAGS / "arm_production_payload"), DEFAULTS)
+    assert len(an.groups) > 1  # the payload change: two groups, a label for each
+    g0 = an.groups[0]
+    heavy = ModeFit(2 * math.pi * 55.9, 0.6, 2 * math.pi * 10.0, 0.15, 0.05, "fit")
+    shown = dataclasses.replace(an, groups=[dataclasses.replace(g0, modes=[*g0.modes, heavy]), *an.groups[1:]])
+    labels = [label for label, _, _ in _shapers_to_draw(shown) if label.startswith("recommended for")]
+    designed = ", ".join(f"{m.hz:.3g}" for m in g0.recommendation.modes)
+    assert labels[0] == f"recommended for {designed} Hz: {g0.recommendation.best.family}"
+    assert "55.9" not in labels[0]

@@ -963,3 +963,31 @@ def test_a_cycle_event_stamped_0_among_stamped_ones_is_at_time_0_not_at_its_log_
     assert an.segmentation == "cycle events (/cycle_events)"
     assert [r.start for r in an.cycles] == [0.0, pytest.approx(260 / 200.0)]
     assert all(r.samples > 0 and not r.issue for r in an.cycles)
+
+
+def test_a_recording_with_no_mode_gets_its_figures_without_a_warning(tmp_path):
+    """A well-shaped recording (the accelerometer's noise alone after every move, as the owner's walk of
+    session 15 recorded through the calibrated shaper) identifies no mode: its report is written with no
+    matplotlib warning (the spectrum's legend had no entry to show) and the spectrum says no mode was found."""
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    from shaper_nodes.analysis.report import figures, write_report
+
+    t, u, _a, _ = simulate(cycles=4)
+    quiet = np.random.default_rng(3).normal(0.0, 0.01, (len(t), 3))
+    write_bag(tmp_path / "quiet", t, u, quiet)
+    an = analyze(read_recording(tmp_path / "quiet"), Options(learners=()))
+    assert not an.modes
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        figs = figures(an)
+        try:
+            texts = [x.get_text() for x in figs["spectrum.png"].axes[0].texts]
+            assert "no mode identified in this band" in texts
+        finally:
+            for fig in figs.values():
+                plt.close(fig)
+        write_report(an, tmp_path / "report")
+    assert (tmp_path / "report" / "spectrum.png").stat().st_size > 0

@@ -170,3 +170,27 @@ def test_kill_9_of_the_analysis_leaves_no_worker_alive():
             assert not any(_alive(p) for p in pids), [p for p in pids if _alive(p)]
         finally:
             proc.kill()
+
+
+def test_from_bag_names_what_the_folder_is_when_it_holds_no_pose(tmp_path):
+    """The owner's mistakes of session 15's walk: a wrong path, the output folder instead of its
+    recording/, and one recording of another kind (a rosbag2 folder, a bare .mcap) each get their own
+    words, not "holds no completed pose"."""
+    from shaper_nodes.analysis.calibration import read_recording
+    from shaper_nodes.core.calibration.plan import PlanError
+
+    with pytest.raises(PlanError, match="no such folder; --from-bag takes a calibration's recording folder"):
+        read_recording(tmp_path / "cal" / "recordin")
+    pose = tmp_path / "cal" / "recording" / "pose_000"
+    pose.mkdir(parents=True)
+    (pose / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    with pytest.raises(PlanError, match=r"holds no completed pose; its recording/ does: --from-bag .*cal/recording"):
+        read_recording(tmp_path / "cal")
+    with pytest.raises(PlanError, match="is a single recording, not a calibration's recording folder"):
+        read_recording(pose)
+    (tmp_path / "bare.mcap").write_bytes(b"\x89MCAP0\r\n")
+    with pytest.raises(PlanError, match="is a single recording"):
+        read_recording(tmp_path / "bare.mcap")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(PlanError, match=r"holds no completed pose \(pose_NNN bags with metadata.yaml\)"):
+        read_recording(tmp_path / "empty")

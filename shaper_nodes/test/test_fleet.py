@@ -113,8 +113,15 @@ def test_robot_from_metadata_else_folder_and_refusals(tmp_path):
     assert robot_of(tmp_path / "day_1" / "rec_b", root=tmp_path / "day_1") == "rec_b"
     with pytest.raises(FleetError, match="more than 1 recordings"):
         find_recordings(tmp_path, limit=1)
-    with pytest.raises(FleetError, match="not a folder"):
+    with pytest.raises(FleetError, match="missing: no such folder"):
         find_recordings(tmp_path / "missing")
+    # the owner's mistakes of session 15's walk: one recording's .mcap given for the fleet's folder
+    bare = next((tmp_path / "loose_run").glob("*.mcap"))
+    with pytest.raises(FleetError, match="not a folder; it is one recording: analyze_bag analyses one recording"):
+        find_recordings(bare)
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(FleetError, match=r"notes.txt: not a folder$"):
+        find_recordings(tmp_path / "notes.txt")
 
 
 def test_analyze_bag_names_analyze_fleet_for_a_folder_of_recordings(tmp_path, capsys):

@@ -3,7 +3,16 @@
 
 from __future__ import annotations
 
-from shaper_nodes.core.learning.goal_shaping import ACTIVE, FALLBACK, KEPT, SCHEDULED, GoalBook, GoalRecord, refusal
+from shaper_nodes.core.learning.goal_shaping import (
+    ACTIVE,
+    BEFORE_START,
+    FALLBACK,
+    KEPT,
+    SCHEDULED,
+    GoalBook,
+    GoalRecord,
+    refusal,
+)
 
 NAMES = ["a", "b"]
 PICK, HOME = [0.5, -0.25], [0.0, 0.0]
@@ -80,3 +89,32 @@ def test_a_cycle_with_no_record_is_learned_from_and_memory_is_bounded() -> None:
     for cycle in range(3 * KEPT):
         book.end(cycle)
     assert len(book._ended) <= KEPT
+
+
+def stamped(how: int, goal: list[float], stamp: float) -> GoalRecord:
+    return GoalRecord(how, "", tuple(NAMES), tuple(goal), "parameters", 3, stamp)
+
+
+def test_a_stale_record_of_the_same_move_cannot_decide_a_new_cycle() -> None:
+    """A restarted learner receives the shaper node's latched records of goals sent before it (session 15): a FALLBACK
+    of the move, stamped before the new cycle's START (less BEFORE_START), is not the cycle's, whichever order."""
+    book = GoalBook()
+    book.shaped(stamped(FALLBACK, PICK, 80.0))  # the latched history: two cycles of the move ago
+    book.shaped(stamped(SCHEDULED, HOME, 90.0))
+    book.start(0, NAMES, PICK, 100.0)
+    assert book.unclaimed == 2  # neither claimed (the stale one, the other move's): dropped at this END
+    book.shaped(stamped(FALLBACK, PICK, 99.0))  # delivered late, still older than the START: not this cycle's
+    book.shaped(stamped(SCHEDULED, PICK, 100.0))  # this cycle's goal
+    book.end(0)
+    assert [r.shaped_with for r in book.records(0)] == [SCHEDULED]
+    assert book.refusal(0, True) == ""
+    # a goal sent just before its START (a motion source that sends the goal first) is the cycle's
+    book.shaped(stamped(FALLBACK, PICK, 110.0 - BEFORE_START))
+    book.start(1, NAMES, PICK, 110.0)
+    book.end(1)
+    assert "not for its final pose" in book.refusal(1, False)
+    # a record or a START without a stamp is matched by its move alone, as before
+    book.shaped(record(FALLBACK, PICK))
+    book.start(2, NAMES, PICK, 120.0)
+    book.end(2)
+    assert [r.shaped_with for r in book.records(2)] == [FALLBACK]

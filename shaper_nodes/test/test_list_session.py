@@ -204,6 +204,29 @@ def test_list_config_from_node_parameters():
     assert ListParams(0.5, 0.3).shaper("zv2").duration == pytest.approx(0.3)
 
 
+@pytest.mark.parametrize("key, value, words", [
+    ("highpass_hz", "abc", "list.highpass_hz must be a number, got 'abc'"),
+    ("patience", "two", "list.patience must be an integer, got 'two'"),
+    ("a1_bounds", "0.3", "list.a1_bounds must be a list of numbers, got '0.3'"),
+    ("t2_bounds", [0.1, "x"], "list.t2_bounds must be a list of numbers"),
+])
+def test_a_value_of_the_wrong_type_names_the_parameter(key, value, words):
+    """As `analyze_bag --param list.highpass_hz=abc` gives it (session 15's owner's walk): the error
+    named neither the parameter nor the value ("could not convert string to float: 'abc'")."""
+    with pytest.raises(ListError) as err:
+        list_config({key: value})
+    assert words in str(err.value)
+
+
+def test_the_replays_parameters_of_the_wrong_type_are_named():
+    from shaper_nodes.analysis.replay import session_for
+
+    with pytest.raises(ListError, match=r"initial\.frequency_hz must be a number, got .ten."):
+        session_for({"initial.frequency_hz": "ten"})
+    with pytest.raises(ListError, match=r"stale_after must be a number, got None"):
+        session_for({"stale_after": None})
+
+
 # --------------------------------------------------------------------------------------------
 # Bounded memory and the sensor's range (issue 17)
 
@@ -332,3 +355,24 @@ def test_sensor_fault_words():
     assert sensor_fault(np.array([[1.0, 0.0, 9.81], [1.0, 0.0, 9.8100001]])) is None  # one axis moves
     assert "1 of 2 accelerometer samples are non-finite (first at sample 1)" in sensor_fault(
         np.array([[1.0, 0.0, 9.81], [np.inf, 0.0, 9.81]]))
+
+
+def test_a_shaper_recorded_before_the_end_it_followed_is_replayed_after_it():
+    """An END delivered to the recorder after the shaper change it caused (session 17's suite: the shaper stamped
+    15.012 recorded just before the END stamped 15.008): by its stamp the change came after the cycle, so the
+    analysis replays it after the END (the live learner learned from that cycle); one stamped inside the cycle stays
+    where it was recorded, and a change logged at the END's own stamp goes after it as before."""
+    from types import SimpleNamespace
+
+    from shaper_nodes.analysis.replay import _shaper_order
+
+    events = SimpleNamespace(seq=[10, 20, 30, 40, 50, 60], kind=[START, MOTION_END, END, START, MOTION_END, END],
+                             t=[10.5, 12.0, 15.008, 15.5, 17.0, 20.0])
+    late = SimpleNamespace(seq=[29], t=[15.012])  # recorded before the END, stamped after it
+    assert _shaper_order(SimpleNamespace(events=events, shapers=late)) == [30]
+    tie = SimpleNamespace(seq=[29], t=[15.008])  # at the END's own stamp
+    assert _shaper_order(SimpleNamespace(events=events, shapers=tie)) == [30]
+    inside = SimpleNamespace(seq=[25], t=[13.0])  # a change during the cycle: it stays inside
+    assert _shaper_order(SimpleNamespace(events=events, shapers=inside)) == [25]
+    after = SimpleNamespace(seq=[35], t=[15.2])  # recorded after the END: unchanged
+    assert _shaper_order(SimpleNamespace(events=events, shapers=after)) == [35]

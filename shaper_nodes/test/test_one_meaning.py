@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import pytest
+import yaml
 from rclpy.parameter import Parameter
 
 from shaper_nodes.core.shaping import Mode, ShaperError, design
@@ -194,3 +195,76 @@ def test_modes_travel_in_hz_and_come_back_as_the_core_holds_them():
     assert list(est.frequency_hz_std) == [pytest.approx(0.1)] and list(est.damping_ratio_std) == [0.01]
     with pytest.raises(ShaperError, match=r"frequency_hz must be finite and > 0 Hz, got -1.0"):
         mode_from_msg(msgs.Mode(frequency_hz=-1.0, damping_ratio=0.0))
+
+
+# --- a -p override of another type than the params file's (session 15, the owner's walk) ----------------------
+
+@pytest.mark.parametrize(("file_value", "rule", "kept"), [
+    ("500", "command_rate:=250.0", "an integer (500)"),
+    ("8.0", "shaper.frequency_hz:=ten", "a double (8.0)"),
+    ("[2, 8]", "shaper.frequencies_hz:=[2.5, 8.5]", "an integer array ([2, 8])"),
+    ("3", "queue_depth:=[1, 2]", "an integer (3)"),
+])
+def test_an_override_rcl_would_drop_is_refused_naming_both_values(tmp_path, file_value, rule, kept):
+    """rcl keeps a params file's value beside a -p override of another type, and rclpy reads the first in its
+    order (bool, integer, double, string, arrays): the override was dropped without a word. The check is held to
+    what rclpy does: the value it reads from a real context is the file's."""
+    name = rule.split(":=")[0]
+    head, _, last = name.rpartition(".")
+    body = f"      {last}: {file_value}\n" if head else f"    {last}: {file_value}\n"
+    path = tmp_path / "p.yaml"
+    path.write_text("/**:\n  ros__parameters:\n" + (f"    {head}:\n" if head else "") + body)
+    argv = ["shaper_node", "--ros-args", "--params-file", str(path), "-p", rule]
+    problem = params_file_problem(argv)
+    assert problem is not None and problem.startswith(f"-p {rule}: ") and "\n" not in problem
+    assert f"gives {name} {kept}" in problem and "drop the override" in problem
+    _assert_rclpy_reads(argv, name, yaml.safe_load(file_value))
+
+
+def _assert_rclpy_reads(argv, name, value):
+    """What rclpy reads for ``name`` from these arguments in a real context is ``value`` (the earlier one)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+
+    context = Context()
+    rclpy.init(args=argv, context=context)
+    try:
+        node = Node("shaper", context=context)
+        assert node._parameter_overrides[name].value == value
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+@pytest.mark.parametrize("rule", ["command_rate:=250", "command_rate:=250.0", "shaper:joint_names:=[a, b]",
+                                  "other:=1.5"])
+def test_an_override_rcl_takes_is_not_refused(tmp_path, rule):
+    """An override of the file's type, of a type rclpy reads before the file's (an integer over a double: the
+    node converts it), or of a parameter the file does not set, is rcl's to take."""
+    path = tmp_path / "p.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    command_rate: 500.0\n    joint_names: [j]\n")
+    assert params_file_problem(["node", "--ros-args", "--params-file", str(path), "-p", rule]) is None
+
+
+def test_a_later_params_file_of_another_type_is_refused_as_rcl_would_drop_it(tmp_path):
+    """Two params files (calibration.md's walkthrough gives calibrate.yaml, then calibrate_quick.yaml): rcl keeps
+    the first file's value beside the second's of another type, as for a -p override."""
+    first, second, other = tmp_path / "a.yaml", tmp_path / "b.yaml", tmp_path / "c.yaml"
+    first.write_text("/**:\n  ros__parameters:\n    command_rate: 500\n")
+    second.write_text("/**:\n  ros__parameters:\n    command_rate: 250.0\n")
+    other.write_text("/shaper:\n  ros__parameters:\n    command_rate: 250.0\n")
+    argv = ["shaper_node", "--ros-args", "--params-file", str(first), "--params-file", str(second)]
+    problem = params_file_problem(argv)
+    assert problem is not None and problem.startswith(f"--params-file {second} (/**): command_rate is a double (250.0)")
+    assert f"where --params-file {first} (/**) before it gives an integer (500)" in problem
+    _assert_rclpy_reads(argv, "command_rate", 500)
+    # a -p rule after another of a type rclpy reads first
+    rules = ["shaper_node", "--ros-args", "-p", "command_rate:=500", "-p", "command_rate:=250.0"]
+    assert "where -p command_rate:=500 gives command_rate an integer (500)" in params_file_problem(rules)
+    # the node's own entry beside /**: two entries, no mixing (rclpy reads the node's own); the same type: none
+    keyed = ["shaper_node", "--ros-args", "--params-file", str(first), "--params-file", str(other)]
+    assert params_file_problem(keyed) is None
+    _assert_rclpy_reads(keyed, "command_rate", 250.0)
+    assert params_file_problem(["shaper_node", "--ros-args", "--params-file", str(second), "-p",
+                                "command_rate:=100.0"]) is None

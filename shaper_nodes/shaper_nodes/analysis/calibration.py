@@ -254,6 +254,20 @@ def pose_folders(recording: pathlib.Path) -> list[pathlib.Path]:
     return sorted(p for p in recording.glob("pose_[0-9][0-9][0-9]") if (p / "metadata.yaml").exists())
 
 
+def _no_pose(path: pathlib.Path) -> str:
+    """Why ``path`` is not a calibration recording, naming what it is where that is plain (the owner's
+    mistakes: a wrong path, the output folder instead of its recording/, one recording of another kind)."""
+    wanted = "a calibration's recording folder (the recording/ that calibrate --execute writes)"
+    if not path.exists():
+        return f"{path}: no such folder; --from-bag takes {wanted}"
+    if path.is_file() or (path / "metadata.yaml").exists():
+        return (f"{path} is a single recording, not {wanted}, whose poses are pose_NNN recordings;"
+                " analyze_bag analyses a single recording")
+    if pose_folders(path / "recording"):
+        return f"{path} holds no completed pose; its recording/ does: --from-bag {path / 'recording'}"
+    return f"{path} holds no completed pose (pose_NNN bags with metadata.yaml)"
+
+
 def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[PoseData]]:
     """The recorded setup and per-pose samples of a calibration recording folder (the accelerometer:
     its sensor_msgs/Imu topic).
@@ -266,7 +280,7 @@ def read_recording(recording: str | pathlib.Path) -> tuple[dict[str, Any], list[
     path = pathlib.Path(recording)
     folders = pose_folders(path)
     if not folders:
-        raise PlanError(f"{path} holds no completed pose (pose_NNN bags with metadata.yaml)")
+        raise PlanError(_no_pose(path))
     setup: dict[str, Any] | None = None
     poses = []
     for folder in folders:

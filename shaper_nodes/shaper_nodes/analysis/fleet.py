@@ -129,8 +129,11 @@ def find_recordings(root: str | pathlib.Path, limit: int = MAX_RECORDINGS) -> li
         ``root`` is not a folder, or holds more than ``limit`` recordings (refused before any work).
     """
     root = pathlib.Path(root)
+    if not root.exists():
+        raise FleetError(f"{root}: no such folder")
     if not root.is_dir():
-        raise FleetError(f"{root}: not a folder")
+        raise FleetError(f"{root}: not a folder" + ("; it is one recording: analyze_bag analyses one recording"
+                                                    if root.suffix == ".mcap" else ""))
     found: list[pathlib.Path] = []
     for here, dirs, files in os.walk(root):
         folder = pathlib.Path(here)

@@ -21,7 +21,7 @@ from typing import Any
 from .fleet import FleetRun
 from .fleet_drift import DriftRule, RobotDrift
 from .report import json_ready
-from .text import plus_minus, value
+from .text import counted, plus_minus, value
 
 
 def _f(x: float | None, spec: str = ".4g") -> str:
@@ -63,14 +63,19 @@ def _shaper_text(s: dict[str, Any] | None) -> str:
             f" {s['designed_zeta']:.3g}; V {100 * s['v_nominal']:.2g} % nominal, {100 * s['v_worst']:.2g} % worst)")
 
 
+def headline(run: FleetRun, drift: Sequence[RobotDrift]) -> str:
+    """The run in one line: recordings, robots, how many analysed, from the cache, failed; its time."""
+    return (f"{counted(len(run.results), 'recording')} of {counted(len(drift), 'robot')}: {run.analysed} analysed"
+            f" ({run.where}), {run.cached} from the cache, {sum(1 for r in run.results if r.error)} could not be"
+            f" analysed; {run.seconds:.1f} s" + (f" (cluster start {run.startup_s:.1f} s)" if run.startup_s else ""))
+
+
 def markdown(run: FleetRun, drift: Sequence[RobotDrift], rule: DriftRule, plot: str | None) -> str:
     """The report as Markdown."""
     alerts = [a for d in drift for a in d.alerts]
     lines = [
         "# Fleet report", "",
-        f"{len(run.results)} recordings of {len(drift)} robots: {run.analysed} analysed ({run.where}),"
-        f" {run.cached} from the cache, {sum(1 for r in run.results if r.error)} could not be analysed;"
-        f" {run.seconds:.1f} s.", "",
+        headline(run, drift) + ".", "",
         f"Rule: baseline = each robot's first {rule.baseline} recordings with a mode (by start time); a later"
         f" recording is out when its mode moved by more than {100 * rule.max_frequency_shift:g} % and"
         f" {rule.sigmas:g} sigma, or its damping ratio by more than the larger of"

@@ -19,6 +19,7 @@ cycles, the segmentation and the parameters given with ``--param``), which retur
 
 from __future__ import annotations
 
+import bisect
 import heapq
 import pathlib
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -42,6 +43,15 @@ if TYPE_CHECKING:
 TOPICS = {"imu": "/tip_imu", "events": "/cycle_events", "shaper": "/shaper/active_shaper"}
 
 
+def _number(values: Mapping[str, Any], name: str, default: float) -> float:
+    """``values[name]`` as a float, or a ListError that names the parameter and the value."""
+    value = values.get(name, default)
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ListError(f"{name} must be a number, got {value!r}") from None
+
+
 def session_for(params: Mapping[str, object] | None = None) -> ListSession:
     """A fresh ListSession configured as the learner node with these parameters (``list.*``,
     ``initial.frequency_hz``, ``initial.damping_ratio``, ``stale_after``), having asked for the
@@ -55,10 +65,10 @@ def session_for(params: Mapping[str, object] | None = None) -> ListSession:
     # values as parsed from JSON or given as text: float() below checks the numeric ones
     values: dict[str, Any] = dict(params or {})
     config = list_config({k[len("list."):]: v for k, v in values.items() if k.startswith("list.")})
-    hz = float(values.get("initial.frequency_hz", 0.0))
-    initial = (ListParams.from_mode(Mode.from_hz(hz, float(values.get("initial.damping_ratio", 0.0))))
+    hz = _number(values, "initial.frequency_hz", 0.0)
+    initial = (ListParams.from_mode(Mode.from_hz(hz, _number(values, "initial.damping_ratio", 0.0)))
                if hz > 0 else None)
-    session = ListSession(ListLearner(config, initial), config.structure, float(values.get("stale_after", 0.1)))
+    session = ListSession(ListLearner(config, initial), config.structure, _number(values, "stale_after", 0.1))
     session.sent(None)
     return session
 
@@ -189,9 +199,12 @@ class LearnerReplay:
 
 
 def _shaper_order(rec: Recording) -> list[int]:
-    """Where each active shaper goes in the recording order: its own place, or, recorded before an END of the
-    same stamp, just after that END (:func:`shaper_nodes.recordings.shaper_after_end`, on the events and
-    shapers in recording order; the key the merge gives it is then the END's)."""
+    """Where each active shaper goes in the recording order: its own place, or just after a cycle's END when it
+    was recorded before that END (inside the cycle) yet became active at or after it: logged at the END's own
+    stamp (:func:`shaper_nodes.recordings.shaper_after_end`, on the events and shapers in recording order), or
+    stamped later than the END (the shaper node stamps a change when it makes it; an END delivered to the recorder
+    after the change it caused, session 17's suite: stamps 15.012 against the END's 15.008). The key the merge
+    gives such a shaper is then the END's."""
     s, e = rec.shapers, rec.events
     marks = sorted([(q, t, k == END, None) for q, k, t in zip(e.seq, e.kind, e.t, strict=True)]
                    + [(q, t, False, i) for i, (q, t) in enumerate(zip(s.seq, s.t, strict=True))],
@@ -203,6 +216,13 @@ def _shaper_order(rec: Recording) -> list[int]:
             before = q
         else:
             out[i] = max(q, before)
+    # the next event after each shaper, in recording order: an END stamped no later than the shaper takes it along
+    events = sorted(zip(e.seq, e.kind, e.t, strict=True))
+    seqs = [q for q, _, _ in events]
+    for i, (q, t) in enumerate(zip(out, s.t, strict=True)):
+        k = bisect.bisect_right(seqs, q)
+        if k < len(events) and events[k][1] == END and events[k][2] <= t:
+            out[i] = events[k][0]
     return out
 
 

@@ -170,7 +170,8 @@ def _shapers_to_draw(an: Analysis) -> list[tuple[str, Shaper | tuple[np.ndarray,
         for g in an.groups:
             if g.recommendation is not None and g.recommendation.best is not None:
                 b = g.recommendation.best
-                out.append((f"recommended for {', '.join(f'{m.hz:.3g}' for m in g.modes)} Hz: {b.family}", b.shaper,
+                designed = g.recommendation.modes or tuple(g.modes)  # the modes it shapes (those that ring)
+                out.append((f"recommended for {', '.join(f'{m.hz:.3g}' for m in designed)} Hz: {b.family}", b.shaper,
                             "-"))
     elif an.recommendation is not None and an.recommendation.best is not None:
         out.append((f"recommended: {an.recommendation.best.family}", an.recommendation.best.shaper, "-"))
@@ -205,14 +206,17 @@ def _plot_spectrum(plt, an: Analysis, spectrum: tuple[np.ndarray, np.ndarray]):
     # mode lines: one colour per group, the same as its recommended shaper's V(f) below
     modes = ([(m, "", "C3") for m in an.modes] if len(an.groups) < 2 else
              [(m, f"group {k + 1}: ", _group_color(k)) for k, g in enumerate(an.groups) for m in g.modes])
-    for m, where, color in sorted(modes, key=lambda e: e[0].omega):
-        if lo <= m.hz <= hi:  # labelled in the legend, in frequency order: labels on the plot overlap
-            for k, a in enumerate(axes[:, 0]):
-                a.axvline(m.hz, color=color, ls="--", lw=0.9,
-                          label=(f"{where}{m.hz:.4g} Hz, ζ {m.zeta:.2g}"
-                                 + (" (not used: " + an.ringing_issue(m).split(":")[0] + ")" if an.ringing_issue(m)
-                                    else "")) if k == 0 else None)
-    ax.legend(fontsize=6, loc="lower left", title="identified modes", title_fontsize=6, framealpha=0.8)
+    marked = [e for e in sorted(modes, key=lambda e: e[0].omega) if lo <= e[0].hz <= hi]
+    for m, where, color in marked:  # labelled in the legend, in frequency order: labels on the plot overlap
+        for k, a in enumerate(axes[:, 0]):
+            a.axvline(m.hz, color=color, ls="--", lw=0.9,
+                      label=(f"{where}{m.hz:.4g} Hz, ζ {m.zeta:.2g}"
+                             + (" (not used: " + an.ringing_issue(m).split(":")[0] + ")" if an.ringing_issue(m)
+                                else "")) if k == 0 else None)
+    if marked:
+        ax.legend(fontsize=6, loc="lower left", title="identified modes", title_fontsize=6, framealpha=0.8)
+    else:  # a well-shaped recording: no legend to draw (matplotlib warned "No artists with labels")
+        ax.text(0.01, 0.03, "no mode identified in this band", transform=ax.transAxes, fontsize=7, color="0.3")
     ax.set_ylabel("PSD ((m/s²)²/Hz)")
     ax.set_title(f"residual vibration spectrum (Welch, averaged over cycles), {lo:.3g}-{hi:.3g} Hz", fontsize=9,
                  loc="left")

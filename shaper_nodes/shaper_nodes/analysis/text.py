@@ -35,3 +35,8 @@ def plus_minus_fixed(x: float, std: float, decimals: int) -> str:
         return f"{x:.{decimals}f} (uncertainty unknown)"
     decimals = max(decimals, 1 - math.floor(math.log10(std)))
     return f"{x:.{decimals}f} +- {std:.{decimals}f}"
+
+
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun``, with an "s" unless ``n`` is 1: "1 recording", "5 recordings", "0 robots"."""
+    return f"{n} {noun if n == 1 else noun + 's'}"

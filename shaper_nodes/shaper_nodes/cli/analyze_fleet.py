@@ -24,7 +24,7 @@ import sys
 
 from shaper_nodes.analysis.fleet import MAX_RECORDINGS, Cache, FleetError, find_recordings, run_fleet
 from shaper_nodes.analysis.fleet_drift import DriftRule, fleet_drift
-from shaper_nodes.analysis.fleet_report import fleet_doc, write_fleet_report
+from shaper_nodes.analysis.fleet_report import fleet_doc, headline, write_fleet_report
 
 from .analyze_bag import add_limit_options, limits_of
 from .common import add_analysis_options, analysis_options
@@ -98,9 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(fleet_doc(run, drift, rule), indent=1, allow_nan=False))
     else:
-        print(f"{len(run.results)} recordings of {len(drift)} robots: {run.analysed} analysed ({run.where}),"
-              f" {run.cached} from the cache, {sum(1 for r in run.results if r.error)} failed; {run.seconds:.1f} s"
-              + (f" (cluster start {run.startup_s:.1f} s)" if run.startup_s else ""))
+        print(headline(run, drift))
         for d in drift:
             base = f"baseline {d.baseline_hz:8.4g} Hz" if math.isfinite(d.baseline_hz) else "baseline: none     "
             why = ": the baseline is not steady (below)" if d.baseline_issue and not d.alerts else ""

@@ -125,13 +125,15 @@ class LearnerNode(LearnerBase):
 
     async def _on_event(self, msg: CycleEvent) -> None:
         stamp = time_to_sec(msg.header.stamp)
-        self.goal_event(msg)  # which goals ran in which cycle (learner_base.LearnerBase.goals)
+        handled = self.events.handle(msg)  # a START this node missed stood in for by the event's start stamp
+        for event in handled:  # which goals ran in which cycle (learner_base.LearnerBase.goals), whatever the mode
+            self.goal_event(event.msg, event.stamp)
         if msg.event == CycleEvent.END:  # the last samples of the cycle may still be on their way
             deadline = time.monotonic() + float(self.params.value.end_wait)
             while self.mode.latest() < stamp and time.monotonic() < deadline:
                 await self.sleep(0.01)
-        # a START this node missed, stood in for by the later event's start stamp (modes that check the window)
-        for event in self.events.handle(msg) if self.mode.stands_in else [Handled(msg, stamp)]:
+        # the START stood in for goes to the modes that check the window (the others say "END without its START")
+        for event in handled if self.mode.stands_in else [Handled(msg, stamp)]:
             if event.stood_in:
                 self.get_logger().warning(f"cycle {msg.cycle}: its START was missed; stood in for by the"
                                           f" {'END' if msg.event == CycleEvent.END else 'MOTION_END'}'s start"

@@ -23,6 +23,7 @@ from shaper_msgs.msg import CycleEvent, CycleReport, ShapedGoal
 from shaper_nodes.core.learning.goal_shaping import GoalBook, GoalRecord
 from shaper_nodes.core.learning.samples import MAX_CYCLE_DURATION
 from shaper_nodes.core.learning.state_file import load_state, write_state
+from shaper_nodes.core.stamps import stamp_to_sec
 from shaper_nodes.ros.diagnostics import ERROR, WARN, Diagnostics
 from shaper_nodes.ros.parameters import Spec, declare, param, table
 from shaper_nodes.ros.qos import SHAPED_GOALS_QOS
@@ -129,12 +130,13 @@ class LearnerBase(Node):
     def _on_shaped_goal(self, msg: ShapedGoal) -> None:
         self.goals.shaped(GoalRecord(int(msg.shaped_with), str(msg.detail), tuple(msg.joint_names),
                                      tuple(float(x) for x in msg.goal_positions), str(msg.shaper.source),
-                                     int(msg.shaper.revision)))
+                                     int(msg.shaper.revision), stamp_to_sec(msg.header.stamp)))
 
-    def goal_event(self, msg: CycleEvent) -> None:
-        """A cycle event as it is taken (before its handling waits for anything): for :attr:`goals`."""
+    def goal_event(self, msg: CycleEvent, stamp: float) -> None:
+        """A cycle event stamped ``stamp`` s as it is taken (before its handling waits for anything), a START stood
+        in for included: for :attr:`goals`."""
         if msg.event == CycleEvent.START:
-            self.goals.start(int(msg.cycle), list(msg.joint_names), list(msg.goal_positions))
+            self.goals.start(int(msg.cycle), list(msg.joint_names), list(msg.goal_positions), stamp)
         elif msg.event == CycleEvent.END:
             self.goals.end(int(msg.cycle))
 

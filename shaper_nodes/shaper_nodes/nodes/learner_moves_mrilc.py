@@ -8,7 +8,9 @@ reproduction ``reproductions.arm_mrilc`` runs) and the move's set-up of :mod:`~s
 node's proxy and the controller: the shaper node's ``action.controller`` names ``/learner/follow_joint_trajectory``
 and ``mrilc_moves.controller`` the controller's action. Each goal (the shaped trajectory) is matched to the move
 whose cycle START came last (``/cycle_events``: its ``goal_positions`` equal to the goal's last point within
-:data:`MATCH` rad; a goal that came first waits up to ``mrilc_moves.match_timeout`` s for it), the move's correction
+:data:`MATCH` rad), or at once to a known move whose start and goal are its first and last points (its START not
+come yet, or missed: the START, or its stand-in at MOTION_END, claims it; core/learning/move_cycles.py); a goal of a
+move not known yet waits up to ``mrilc_moves.match_timeout`` s for its START. The move's correction
 dq(t), dq'(t), dq''(t) is added to the goal's points (positions, velocities, accelerations; missing velocities or
 accelerations are differentiated from the positions), and the goal goes on to the controller. A goal matched to no
 move goes on uncorrected (one line on the log). So each move's correction reaches that move's goals only.
@@ -64,7 +66,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -73,7 +75,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.cycles import END, START
+from shaper_nodes.core.cycles import END, START, unseen_window
+from shaper_nodes.core.learning.move_cycles import MoveCycles
 from shaper_nodes.core.learning.moves import MoveError, move_key
 from shaper_nodes.core.learning.mrilc.model import MrilcError
 from shaper_nodes.core.learning.mrilc.moves import MoveLearner
@@ -88,15 +91,17 @@ from shaper_nodes.core.learning.mrilc.plan import (
 from shaper_nodes.core.learning.mrilc.profile import JointLimits, clip_into, profile_excess
 from shaper_nodes.ros.conversions import trajectory_arrays, trajectory_msg
 from shaper_nodes.ros.diagnostics import ERROR, OK, WARN
-from shaper_nodes.ros.parameters import Spec, declare, param, table
+from shaper_nodes.ros.parameters import declare
 
 from .learner_base import LearnerBase
 from .learner_drift import FLAG, DriftWarnings, saved_flag
-from .learner_list import TopicParams, subscribe_imu
+from .learner_list import subscribe_imu
+from .learner_moves_mrilc_parameters import PARAMETERS as PARAMETERS  # (re-exported: the mode's table)
+from .learner_moves_mrilc_parameters import MrilcMovesParams
 from .learner_payload import KEY, PayloadGlue, saved_payload
 from .learner_payload import load_provider as load_operator  # (kept: the provider's loader)
 from .move_goals import MATCH as MATCH  # (re-exported: the tolerance of the match, rad)
-from .move_goals import await_match, goal_matches
+from .move_goals import await_match
 from .trajectory_action import TrajectoryActionProxy
 
 #: most accelerometer samples kept (a bound whatever the cycle events do)
@@ -104,71 +109,9 @@ MAX_SAMPLES = 400_000
 _ENTRY = {"start", "goal", "joint_names", "learner"}
 #: why a cycle whose goal ran with a correction dropped meanwhile is not learned from
 RESET = "every move's correction was dropped (drift warning) after this cycle's goal ran with it"
-
-
-@dataclass(frozen=True)
-class MrilcMovesGroup:
-    """mrilc_moves.*: the learner's and the correction's settings."""
-
-    operator: str = param("", "The lifted operator's provider, 'module:function' called as f(goal_pose, count,"
-                          " samples, first, spacing, period) -> G ((samples x 3) x (count x joints), m/s^2 per rad);"
-                          " the simulated arm's: 'sim_plant_node.arm.lifted:arm_operator'. Required.", read_only=True)
-    controller: str = param("/joint_trajectory_controller/follow_joint_trajectory", "The controller's"
-                            " FollowJointTrajectory action the corrected goals go to.", read_only=True)
-    action_timeout: float = param(30.0, "How long a goal waits for the controller's action server and its"
-                                  " answer, s.", (0.1, 600.0), read_only=True)
-    match_timeout: float = param(2.0, "How long a goal waits for the START of its move on the cycle events, s.",
-                                 (0.0, 60.0), read_only=True)
-    gain: float = param(0.5, "Learning gain gamma.", (1e-6, 1.0), read_only=True)
-    regularisation: float = param(1e-3, "rho relative to the mean of diag(G^T G).", (1e-12, 1e6), read_only=True)
-    patience: int = param(2, "Divergence guard: cycles in a row above growth x the best cost before falling back.",
-                          (1, 1000), read_only=True)
-    growth: float = param(1.2, "Divergence guard: cost ratio to the best that counts as growing.", (1.0001, 100.0),
-                          read_only=True)
-    noise_floor: float = param(0.0, "Divergence guard: costs below this never count as growing, m/s^2.",
-                               (0.0, 1e3), read_only=True)
-    max_fallbacks: int = param(3, "Fallbacks to the best coefficients before holding them.", (1, 1000),
-                               read_only=True)
-    spacing: float = param(0.04, "s between the correction's B-spline knots.", (0.004, 1.0), read_only=True)
-    tail: float = param(0.4, "The correction acts in the last tail s of the shaped motion.", (0.02, 10.0),
-                        read_only=True)
-    fine_spacing: float = param(0.004, "s between the knots of the second family of B-splines (the position"
-                                " loop's transient).", (0.001, 1.0), read_only=True)
-    fine_tail: float = param(0.048, "The second family acts in the last fine_tail s of the shaped motion (0: no"
-                             " second family).", (0.0, 10.0), read_only=True)
-    position_min: tuple[float, ...] = param([-2 * math.pi], "Lowest joint positions, rad (one per joint, or one"
-                                            " for all).", read_only=True)
-    position_max: tuple[float, ...] = param([2 * math.pi], "Highest joint positions, rad.", read_only=True)
-    velocity: tuple[float, ...] = param([math.pi], "Largest joint speeds, rad/s.", read_only=True)
-    acceleration: tuple[float, ...] = param([15.0], "Largest joint accelerations, rad/s^2.", read_only=True)
-    drift_status: str = param("identifier: drift", "The /diagnostics status whose WARN (a drift warning: a payload"
-                              " change) drops every move's correction and restarts its learner ('' = none).",
-                              read_only=True)
-    payload_mass: float = param(0.0, "The payload the robot is told, kg (0: not told, the operator provider's own):"
-                                " when set, the provider is called with payload= it; a change takes effect when each"
-                                " move's operator is next built (a drift warning's relearn, a restart). Set it when"
-                                " the robot's payload changes (payload_from_drift sets it too).", (0.0, 1000.0))
-    payload_from_drift: bool = param(True, "At a drift warning's relearn, work the payload out from the mode the"
-                                     " warning carries (with modes set) and set payload_mass to it; refused (no mass"
-                                     " in payload_range matches, ambiguous), payload_mass is kept. Default on: on the"
-                                     " old payload's operator the relearn does not converge.", read_only=True)
-    modes: str = param("", "The model's modes, 'module:function' called as f(goal_pose, payload) -> Hz; the"
-                       " simulated arm's: 'sim_plant_node.arm.lifted:arm_modes' ('' = no payload from the drift).",
-                       read_only=True)
-    payload_range: tuple[float, ...] = param([0.0, 10.0], "The payloads searched for the drift's mode, [low, high]"
-                                             " kg (default 0 to twice a UR5e's rated 5 kg).", read_only=True)
-
-
-@dataclass(frozen=True)
-class MrilcMovesParams:
-    """The MRILC-per-move mode's parameters."""
-
-    mrilc_moves: MrilcMovesGroup = field(default_factory=MrilcMovesGroup)
-    topics: TopicParams = field(default_factory=TopicParams)
-
-
-#: the MRILC-per-move mode's parameters (derived from MrilcMovesParams)
-PARAMETERS: tuple[Spec, ...] = table(MrilcMovesParams)
+#: why a cycle whose START was missed, its goal come before the stand-in matching no move known, is not learned from
+UNMATCHED = ("its START was missed and its goal, which came before the stand-in, matched no move known then (the"
+             " move's first cycle): it went uncorrected, without the move's plan")
 
 
 @dataclass
@@ -219,12 +162,12 @@ class MrilcMovesMode:
         self.payload = PayloadGlue(node, self.params, self.operator, self._saved_payload)
         self.moves, warned = restored if restored is not None else ({}, False)
         self._resumed = len(self.moves)
-        self._cycles: dict[int, _Cycle] = {}
-        self._last: _Cycle | None = None
+        self.cycles: MoveCycles[_Cycle] = MoveCycles(lambda c: c.applied is None and not c.refused,
+                                                     lambda key, goal: _Cycle(key, math.nan, goal))
         self._samples: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=MAX_SAMPLES)
         self.latest_imu = -math.inf
         topics = self.params.value.topics
-        self.events_topic, self.imu_topic, self.stands_in = topics.cycle_events, topics.imu, False
+        self.events_topic, self.imu_topic, self.stands_in = topics.cycle_events, topics.imu, True
         subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
         self.proxy = TrajectoryActionProxy(node, "~/follow_joint_trajectory", str(v.controller), self._check,
                                            self._refused, lambda: None, float(v.action_timeout), self._correct)
@@ -268,8 +211,8 @@ class MrilcMovesMode:
         self.payload.from_drift(self.drift.values, {k: m.goal for k, m in self.moves.items()})
         for m in self.moves.values():
             m.learner = m.saved = m.plan = m.times = None
-        for cyc in self._cycles.values():  # under way: its goal ran with the correction dropped now
-            if cyc.applied is not None:
+        for cyc in [*self.cycles.open.values(), self.cycles.early]:  # under way: its goal ran with the correction
+            if cyc is not None and cyc.applied is not None:  # dropped now
                 cyc.refused = cyc.refused or RESET
         self.node.save()
         text = self.drift.relearn_line(keys, warning, "the correction of ", "from the current schedule (none)")
@@ -325,6 +268,7 @@ class MrilcMovesMode:
         """The goal with its move's correction (None: as it came; module docstring)."""
         names = list(traj.joint_names)
         times, fields = trajectory_arrays(traj, names, True)
+        first = fields["positions"][0].copy()  # the move's start (a known move's goal matches at once by it)
         # a point at time 0 (a planner's start; the controller starts from the measured state) passes as it came: the
         # move's profile and correction are the points after it
         lead = int(np.count_nonzero(times <= 0.0))
@@ -332,12 +276,8 @@ class MrilcMovesMode:
                 for k in ("positions", "velocities", "accelerations", "effort")}
         times, fields = times[lead:], {k: x[lead:] for k, x in fields.items()}
         q = fields["positions"]
-        def pending() -> _Cycle | None:
-            cyc = self._last
-            free = cyc is not None and cyc.applied is None and not cyc.refused
-            return cyc if free and goal_matches(cyc.goal, q[-1]) else None  # type: ignore[union-attr]
-
-        cyc = await await_match(self.node, pending, self.match_timeout)
+        moves = lambda: ((k, m.start, m.goal) for k, m in self.moves.items())  # noqa: E731
+        cyc = await await_match(self.node, lambda: self.cycles.for_goal(first, q[-1], moves()), self.match_timeout)
         if cyc is None:
             self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
                                            " sent uncorrected")
@@ -417,14 +357,17 @@ class MrilcMovesMode:
             if key not in self.moves:
                 self.moves[key] = _Move(key, [float(x) for x in msg.start_positions],
                                         [float(x) for x in msg.goal_positions], list(msg.joint_names))
-            self._last = self._cycles[cycle] = _Cycle(key, stamp, np.asarray(msg.goal_positions, dtype=float))
+            opened = self.cycles.started(cycle, _Cycle(key, stamp, np.asarray(msg.goal_positions, dtype=float)),
+                                         stood_in)
+            if stood_in:  # its samples must reach back to the stand-in's stamp, and its goal must have been matched
+                held = self._samples[0][0] if self._samples else None
+                opened.refused = opened.refused or unseen_window(stamp, held) \
+                    or ("" if opened.applied is not None else UNMATCHED)
             self.payload.seen(cycle, key)
-            while len(self._cycles) > 64:  # ENDs that never came
-                self._cycles.pop(next(iter(self._cycles)))
             return None
         if msg.event != END:
             return None
-        cyc = self._cycles.pop(cycle, None)
+        cyc = self.cycles.ended(cycle)
         if cyc is None:
             return self.node.skipped(msg, (math.nan, stamp), "END without its START")
         move = self.moves[cyc.key]

@@ -9,8 +9,10 @@ node's proxy: the motion source sends its goals to ``/learner/follow_joint_traje
 and sends it on to ``speed.controller`` (the shaper node's ``/shaper/follow_joint_trajectory``), which shapes it for
 its final pose and sends it to the controller. A shaper's impulses are tuned to the mode; scaling a shaped
 trajectory would shift them off it, so the scaling comes first. Each goal is matched to the move whose cycle START
-came last (``/cycle_events``: its goal pose equal to the goal's last point, :mod:`.move_goals`; a goal that came
-first waits up to ``speed.match_timeout`` s); its points run ``s`` times faster
+came last (``/cycle_events``: its goal pose equal to the goal's last point), or at once to a known move whose start
+and goal are its first and last points (its START not come yet, or missed: the START or its stand-in claims it;
+core/learning/move_cycles.py); a goal of a move not known yet waits up to ``speed.match_timeout`` s for its START.
+Its points run ``s`` times faster
 (:func:`~shaper_nodes.core.learning.speed.time_scale`: times / s up to the motion's last point, velocities x s,
 accelerations x s^2; a hold at the goal keeps its length). A goal matched to no move goes on as planned.
 
@@ -83,7 +85,8 @@ from trajectory_msgs.msg import JointTrajectory
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.cycles import END, START
+from shaper_nodes.core.cycles import END, START, unseen_window
+from shaper_nodes.core.learning.move_cycles import MoveCycles
 from shaper_nodes.core.learning.moves import MoveError, MoveStore
 from shaper_nodes.core.learning.speed import (
     SpeedError,
@@ -108,7 +111,7 @@ from .learner_drift import FLAG, DriftWarnings, saved_flag
 from .learner_efforts import EffortWatch
 from .learner_list import subscribe_imu
 from .learner_speed_parameters import SpeedMovesParams, on_set, refusal
-from .move_goals import await_match, goal_matches, load_moves
+from .move_goals import await_match, load_moves
 from .trajectory_action import TrajectoryActionProxy
 
 #: most accelerometer samples kept (a bound whatever the cycle events do)
@@ -116,6 +119,9 @@ MAX_SAMPLES = 400_000
 _DOC_KEYS = {"version", "per_move", "moves", "joint_names", FLAG, "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move's factor was relearned (drift warning) while this cycle ran"
+#: why a cycle whose START was missed, its goal come before the stand-in matching no move known, is not learned from
+UNMATCHED = ("its START was missed and its goal, which came before the stand-in, matched no move known then (the"
+             " move's first cycle): it went as planned, its factor not recorded")
 
 
 @dataclass
@@ -151,12 +157,12 @@ class SpeedMovesMode:
         self.store, self.names, warned = restored if restored is not None else (MoveStore(), {}, False)
         self._resumed = len(self.store)
         self.holding = False
-        self._cycles: dict[int, _Cycle] = {}
-        self._last: _Cycle | None = None
+        self.cycles: MoveCycles[_Cycle] = MoveCycles(lambda c: not c.taken and not c.refused,
+                                                     lambda key, goal: _Cycle(key, math.nan, goal))
         self._samples: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=MAX_SAMPLES)
         self.latest_imu = -math.inf
         topics = self.params.value.topics
-        self.events_topic, self.imu_topic, self.stands_in = topics.cycle_events, topics.imu, False
+        self.events_topic, self.imu_topic, self.stands_in = topics.cycle_events, topics.imu, True
         subscribe_imu(node, topics, self._on_imu, MutuallyExclusiveCallbackGroup())
         scheduler = str(v.scheduler).strip().rstrip("/")
         self.shaper_at = (ServiceClient(node, ShaperAt, f"{scheduler}/shaper_at", node.service_timeout,
@@ -180,8 +186,8 @@ class SpeedMovesMode:
     async def relearn(self, warning: str) -> None:
         """A drift warning: every move's factor starts again from 1 (module docstring)."""
         keys = self.store.relearn("schedule")
-        for cyc in self._cycles.values():  # under way: its goal ran (or is being scaled) with the old factor
-            if cyc.taken:
+        for cyc in [*self.cycles.open.values(), self.cycles.early]:  # under way: its goal ran (or is being
+            if cyc is not None and cyc.taken:  # scaled) with the old factor
                 cyc.refused = cyc.refused or RESET
         self.node.save()
         text = self.drift.relearn_line(keys, warning, "the speed of ", "from the planned speed (factor 1)")
@@ -273,12 +279,9 @@ class SpeedMovesMode:
         names, times, fields, v, a = self._profile(traj)
         q = fields["positions"]
 
-        def pending() -> _Cycle | None:
-            cyc = self._last
-            free = cyc is not None and not cyc.taken and not cyc.refused
-            return cyc if free and goal_matches(cyc.goal, q[-1]) else None  # type: ignore[union-attr]
-
-        cyc = await await_match(self.node, pending, float(self.params.value.speed.match_timeout))
+        moves = lambda: ((e.key, e.start, e.goal) for e in self.store)  # noqa: E731
+        cyc = await await_match(self.node, lambda: self.cycles.for_goal(q[0], q[-1], moves()),
+                                float(self.params.value.speed.match_timeout))
         if cyc is None:
             self.node.get_logger().warning("a goal matched no move's START (its last point is no START's goal):"
                                            " sent as planned")
@@ -353,13 +356,16 @@ class SpeedMovesMode:
                 return None
             if new:
                 self.names[entry.key] = list(msg.joint_names)
-            self._last = self._cycles[cycle] = _Cycle(entry.key, stamp, np.asarray(msg.goal_positions, dtype=float))
-            while len(self._cycles) > 64:  # ENDs that never came
-                self._cycles.pop(next(iter(self._cycles)))
+            opened = self.cycles.started(cycle, _Cycle(entry.key, stamp, np.asarray(msg.goal_positions, dtype=float)),
+                                         stood_in)
+            if stood_in:  # its samples must reach back to the stand-in's stamp, and its goal must have been matched
+                held = self._samples[0][0] if self._samples else None
+                opened.refused = opened.refused or unseen_window(stamp, held) \
+                    or ("" if opened.taken else UNMATCHED)
             return None
         if msg.event != END:
             return None
-        cyc = self._cycles.pop(cycle, None)
+        cyc = self.cycles.ended(cycle)
         if cyc is None:
             return self.node.skipped(msg, (math.nan, stamp), "END without its START")
         shaped = self.node.goals.refusal(cycle, bool(str(self.params.value.speed.scheduler).strip()))

@@ -29,7 +29,8 @@ class SpeedGroup:
                            read_only=True)
     action_timeout: float = param(30.0, "How long a goal waits for the next action server and its answer, s.",
                                   (0.1, 600.0), read_only=True)
-    match_timeout: float = param(2.0, "How long a goal waits for the START of its move on the cycle events, s.",
+    match_timeout: float = param(2.0, "How long a goal of a move not known yet waits for its START on the cycle"
+                                 " events, s (a known move's goal is matched at once by its first and last points).",
                                  (0.0, 60.0), read_only=True)
     tolerance: float = param(5e-5, "Tolerance of the settled flange, m (0.05 mm), converted to the accelerometer"
                              " level tolerance x (2 pi f)^2 at the goal's lowest mode f.", (1e-7, 0.1))

@@ -18,24 +18,17 @@ import numpy as np
 from trajectory_msgs.msg import JointTrajectory
 
 from shaper_nodes.core.checks import InputError
+from shaper_nodes.core.learning.move_cycles import MATCH, goal_matches
 from shaper_nodes.core.learning.speed import motion_end_index
 from shaper_nodes.ros.conversions import trajectory_arrays
 
 __all__ = ["KEPT_GOALS", "MATCH", "POLL", "GoalRecorder", "Planned", "await_match", "goal_matches"]
 
-#: rad: how far a goal's last point may be from a START's goal for the goal to be that move's
-MATCH = 1e-3
 #: s between two looks for the START
 POLL = 0.01
 T = TypeVar("T")
 #: goals kept by :class:`GoalRecorder` (the latest of each move is the one used)
 KEPT_GOALS = 32
-
-
-def goal_matches(goal: np.ndarray, last: np.ndarray, atol: float = MATCH) -> bool:
-    """Whether a goal whose last point is ``last`` (rad) is the move whose START named ``goal`` (rad)."""
-    g, q = np.asarray(goal, dtype=float), np.asarray(last, dtype=float)
-    return g.shape == q.shape and bool(np.allclose(g, q, atol=atol, rtol=0))
 
 
 async def await_match(node: Any, pending: Callable[[], T | None], timeout: float) -> T | None:

@@ -62,7 +62,9 @@ Update policy (:mod:`shaper_nodes.core.shaping.policy`): every change names its 
 replaces another source's shaper is reported; a setting that cannot take effect is refused
 (docs/guide/shaper_node.md, "Who sets the shaper"). Changes from the sources in ``retime_sources``
 (e.g. the scheduler) re-time the motion already commanded instead of switching bumplessly
-(time-varying shaping, see core/shaping/fir.py).
+(time-varying shaping, see core/shaping/fir.py). The active shaper, its revision and every change to it
+(the design parameters, ``~/set_shaper``, ``~/get_shaper``, :meth:`ShaperNode.request`) are
+:class:`ShaperChanges`'s (nodes/shaper_changes.py); this module wires it and serves the data paths.
 
 Parameters: :class:`ShaperParams` and its table :data:`PARAMETERS` (names, defaults, ranges and descriptions;
 config/shaper.yaml), written in nodes/shaper_parameters.py with what their values mean (the design, the joint
@@ -74,32 +76,29 @@ from __future__ import annotations
 from time import time_ns
 from typing import Any
 
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from shaper_msgs.msg import Shaper as ShaperMsg
 from shaper_msgs.srv import GetShaper, SetShaper, ShapeTrajectory
 from shaper_nodes.core.checks import InputError
-from shaper_nodes.core.shaping import PolicyError, Shaper, ShaperError, SparseFir, UpdatePolicy, discretize
-from shaper_nodes.core.shaping.policy import PARAMETERS_SOURCE
+from shaper_nodes.core.shaping import Shaper, UpdatePolicy, discretize
 from shaper_nodes.core.shaping.stream import CommandStream
-from shaper_nodes.ros.conversions import shaper_from_msg, shaper_to_msg
-from shaper_nodes.ros.diagnostics import OK, WARN, Diagnostics
+from shaper_nodes.ros.diagnostics import WARN, Diagnostics
 from shaper_nodes.ros.graph_watch import GraphWatch
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare
 from shaper_nodes.ros.pose_shaper import PoseShaperClient
-from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
+from shaper_nodes.ros.qos import SERVICE_QOS
 from shaper_nodes.ros.raw_stream import RawArrays, RawTrajectories
 from shaper_nodes.ros.shaped_goals import ShapedGoals
 from shaper_nodes.ros.side_node import SideNode
 from shaper_nodes.ros.stream_watch import WATCH_PERIOD, StreamWatch, WorkTiming
 from shaper_nodes.ros.whole_trajectory import TrajectoryWorker, WholeShaping
 
+from .shaper_changes import ShaperChanges
 from .shaper_interpreter import background_pause
 from .shaper_interpreter import tune_interpreter as _tune_interpreter  # (benchmarks call it from here)
 from .shaper_parameters import (  # the table and its constants, importable from here as before
@@ -110,10 +109,7 @@ from .shaper_parameters import (  # the table and its constants, importable from
     STREAM_EXECUTORS,
     TOPICS,
     ShaperParams,
-    describe,
     design_from_params,
-    displacement,
-    ineffective,
     limits_from_params,
 )
 from .trajectory_action import TrajectoryActionProxy
@@ -141,17 +137,10 @@ class ShaperNode(Node):
         n = len(self.joint_names)
 
         shaper, method = design_from_params(p, self.rate)
-        self._method = method
-        self._shaper = shaper
-        self._fir: SparseFir = discretize(shaper, self.rate, method)
-        self._source = PARAMETERS_SOURCE
-        self._revision = 1
-        self._pending_params: tuple[Shaper, str] | None = None
-        #: what the last change displaced ("replaces the shaper set by <source> (revision N)"), or None
-        self.displaced: str | None = None
+        fir = discretize(shaper, self.rate, method)
         self.limits = limits_from_params(self.joint_names, p.limits)  # the parameters' and the URDF's
         #: the streamed inputs' filters and rules (core/shaping/stream.py); it owns the stream lock
-        self.stream = CommandStream(self._fir, self.limits, retiming=bool(self.policy.retime_sources),
+        self.stream = CommandStream(fir, self.limits, retiming=bool(self.policy.retime_sources),
                                     max_abs=float(p.limits.max_abs_value),
                                     max_samples=int(p.limits.max_trajectory_samples))
         #: held while a streamed sample is shaped and while the shaper changes (they run on different threads
@@ -185,7 +174,9 @@ class ShaperNode(Node):
         self._array_pub = pub(tp.array_out, Float64MultiArray)
         self._stream_pub = pub(tp.stream_out, JointTrajectory)
         self._traj_pub = pub(tp.trajectory_out, JointTrajectory)
-        self._active_pub = self.create_publisher(ShaperMsg, "~/active_shaper", LATCHED)
+        #: the active shaper and its changes (nodes/shaper_changes.py): it makes the latched ~/active_shaper here
+        self.changes = ShaperChanges(self, self.params, self.policy, self.stream, self.diagnostics, shaper, method,
+                                     fir, self.rate)
         depth = int(p.queue_depth)
         # the streamed inputs: on a lean node of their own, spun on a thread of its own (the names resolved by
         # this node), or on this node
@@ -216,8 +207,8 @@ class ShaperNode(Node):
         }
         self._subs = subs
         self._in_topics = {k: sub.topic_name for k, sub in subs.items()}  # fully qualified, for messages
-        self.create_service(SetShaper, "~/set_shaper", self._on_set_shaper, qos_profile=SERVICE_QOS)
-        self.create_service(GetShaper, "~/get_shaper", self._on_get_shaper, qos_profile=SERVICE_QOS)
+        self.create_service(SetShaper, "~/set_shaper", self.changes.on_set_shaper, qos_profile=SERVICE_QOS)
+        self.create_service(GetShaper, "~/get_shaper", self.changes.on_get_shaper, qos_profile=SERVICE_QOS)
         side.create_service(ShapeTrajectory, self.resolve_service_name("~/shape_trajectory"),
                             self._on_shape_trajectory, qos_profile=SERVICE_QOS)
         self._action: TrajectoryActionProxy | None = None
@@ -237,124 +228,50 @@ class ShaperNode(Node):
                 timeout=float(p.action.server_timeout), reshape=self.pose_shaper,
                 on_late_start=lambda text: self.diagnostics.report("late_start", WARN, text, name="action"),
                 on_sending=ShapedGoals(self, self.active_msg).tell)  # ~/shaped_goals (ros/shaped_goals.py)
-        self.add_on_set_parameters_callback(self._validate_params)
-        self.add_post_set_parameters_callback(self._apply_params)
+        self.add_on_set_parameters_callback(self.changes.validate_params)
+        self.add_post_set_parameters_callback(self.changes.apply_params)
         self.create_timer(float(p.diagnostics_period), self._publish_summary,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.create_timer(WATCH_PERIOD, self.watch.watch, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if float(p.diagnostics_period) > WATCH_PERIOD:  # (each summary watches the arrivals too)
+            self.create_timer(WATCH_PERIOD, self.watch.watch, clock=Clock(clock_type=ClockType.STEADY_TIME))
         #: which node of this process serves which input (``ros2 node info`` lists a node's own entities)
         self.side_nodes = {stream_node.get_fully_qualified_name(): "array_in, stream_in",
                            side.get_fully_qualified_name(): "trajectory_in, ~/shape_trajectory"
                            + (", action.server_name" if self._action else "")}
-        self._publish_active()
+        self.changes.publish()
         self.graph.start()
         self._side.start()
         if self._stream_side is not None:
             self._stream_side.start()
         self.get_logger().info(
-            f"shaping {n} joints at {self.rate:g} Hz with {self._describe()};"
+            f"shaping {n} joints at {self.rate:g} Hz with {self.changes.describe()};"
             f" {self._in_topics['array_in']} -> {self._array_pub.topic_name}"
             + (f"; FollowJointTrajectory {action_topic} -> {self._action.controller_name}" if self._action else "")
             + (f", each goal shaped for its final pose by {self.pose_shaper.srv_name}" if self.pose_shaper else "")
             + f"; {self.limits.describe()}; inputs served by "
             + "; ".join(f"{k} ({v})" for k, v in self.side_nodes.items()))
 
-    # ----------------------------------------------------------------- shaper changes
-    def _describe(self) -> str:
-        return describe(self._shaper)
-
-    def _validate_params(self, params: list[Parameter]) -> SetParametersResult:
-        if not any(p.name in DESIGN_PARAMS for p in params):
-            return SetParametersResult(successful=True)
-        try:
-            proposed = self.params.with_changes(params)
-            why = ineffective(self.params.value, proposed, {p.name for p in params})
-            if why is not None:
-                return SetParametersResult(successful=False, reason=why)
-            self.policy.allow(PARAMETERS_SOURCE)
-            shaper, method = design_from_params(proposed, self.rate)
-            self.policy.settled(self.stream.stages())
-            discretize(shaper, self.rate, method)  # may refuse; nothing has changed yet
-        except (ShaperError, PolicyError, ValueError) as err:
-            return SetParametersResult(successful=False, reason=str(err))
-        except Exception as err:  # whatever the values, the node refuses them and keeps running
-            return SetParametersResult(successful=False, reason=f"the design failed ({type(err).__name__}: {err})")
-        self._pending_params = (shaper, method)
-        return SetParametersResult(successful=True)
-
-    def _apply_params(self, params: list[Parameter]) -> None:
-        p = self.params.refresh()  # rclpy calls this before the typed parameters' own post-set callback
-        self.stream.max_abs = float(p.limits.max_abs_value)
-        self.stream.max_samples = int(p.limits.max_trajectory_samples)
-        pending, self._pending_params = self._pending_params, None
-        if pending is not None:
-            self._commit(pending[0], PARAMETERS_SOURCE, pending[1])
-
+    # ----------------------------------------------------------------- the active shaper (nodes/shaper_changes.py)
     def request(self, shaper: Shaper, source: str) -> tuple[bool, str]:
         """Validate and make ``shaper`` active on behalf of ``source``; returns (accepted, why)."""
-        try:
-            self.policy.decide(source, shaper, self.rate, self.stream.stages())
-            self._commit(shaper, source, self._method)
-        except (PolicyError, RuntimeError, ValueError) as err:
-            return False, str(err)
-        note = f"; {self.displaced}" if self.displaced else ""
-        return True, f"active: {self._describe()}, revision {self._revision}{note}"
-
-    def _commit(self, shaper: Shaper, source: str, method: str) -> None:
-        fir = discretize(shaper, self.rate, method)  # may raise; nothing changed yet
-        self.stream.switch(fir, retime=self.policy.how(source) == "retime")  # between two streamed samples
-        before, before_revision = self._source, self._revision
-        self._shaper, self._fir, self._source, self._method = shaper, fir, source, method
-        self._revision += 1
-        self._publish_active()
-        self.displaced = displacement(before, before_revision, source)  # reported: log, /diagnostics, answer
-        line = f"shaper changed by {source}: {self._describe()}, revision {self._revision}"
-        level = OK if before in (source, PARAMETERS_SOURCE) else WARN  # the start-up design is there to be replaced
-        if level == WARN:  # one call site per severity, as rclpy's logger wants
-            self.get_logger().warning(f"{line}; {self.displaced}")
-        else:
-            self.get_logger().info(line + (f"; {self.displaced}" if self.displaced else ""))
-        if self.displaced:
-            self.diagnostics.publish("source", level, f"{source} {self.displaced}: {self._describe()}",
-                                     [("displaced", before), ("by", source), ("revision", str(self._revision))])
+        return self.changes.request(shaper, source)
 
     def active_msg(self) -> ShaperMsg:
-        return shaper_to_msg(self._shaper, self._source, self._revision, self.get_clock().now().to_msg())
-
-    def _publish_active(self) -> None:
-        self._active_pub.publish(self.active_msg())
-
-    def _on_set_shaper(self, req: SetShaper.Request, resp: SetShaper.Response) -> SetShaper.Response:
-        source = UpdatePolicy.source_of(req.shaper.source)
-        try:
-            shaper = shaper_from_msg(req.shaper, float(self.params.value.shaper.max_gain))
-            resp.success, resp.message = self.request(shaper, source)
-        except ShaperError as err:
-            resp.success, resp.message = False, f"invalid shaper: {err}"
-        except Exception as err:  # whatever a request holds, the node answers and keeps running
-            resp.success, resp.message = False, f"invalid shaper: the design failed ({type(err).__name__}: {err})"
-        if not resp.success:
-            self.get_logger().warning(f"set_shaper from {source} refused: {resp.message}")
-        resp.active = self.active_msg()
-        return resp
-
-    def _on_get_shaper(self, req: GetShaper.Request, resp: GetShaper.Response) -> GetShaper.Response:
-        resp.active = self.active_msg()
-        resp.command_rate = self.rate
-        resp.fir_taps = self._fir.dense().tolist()
-        return resp
+        """The active shaper as a message, stamped now."""
+        return self.changes.msg()
 
     # ----------------------------------------------------------------- bad input, summary
     def _reject(self, topic: str, err: InputError) -> None:
         self.watch.refused(topic, err)
 
     def _publish_summary(self) -> None:
-        head = [("revision", str(self._revision)), ("source", self._source), ("family", self._shaper.family),
+        c = self.changes
+        head = [("revision", str(c.revision)), ("source", c.source), ("family", c.shaper.family),
                 ("command_rate_hz", f"{self.rate:g}"),
                 *((f"inputs on {k}", v) for k, v in self.side_nodes.items())]
         tail = [] if self.pose_shaper is None else [("action.scheduler.shaped", str(self.pose_shaper.shaped)),
                                                      ("action.scheduler.fallbacks", str(self.pose_shaper.fallbacks))]
-        level, msg, values = self.watch.summary(f"shaping with {self._describe()}", head, tail)
+        level, msg, values = self.watch.summary(f"shaping with {c.describe()}", head, tail)
         self.diagnostics.publish("shaper", level, msg, values)
 
     # ----------------------------------------------------------------- data paths
@@ -385,7 +302,7 @@ class ShaperNode(Node):
     def whole_shaping(self, shaper: Shaper | None = None) -> WholeShaping:
         """What a whole trajectory is shaped with now: the active FIR, or ``shaper`` discretised as the
         active one is (ShaperError or ValueError if it cannot be), the limits in force."""
-        fir = self._fir if shaper is None else discretize(shaper, self.rate, self._method)
+        fir = self.changes.fir if shaper is None else discretize(shaper, self.rate, self.changes.method)
         return WholeShaping(tuple(self.joint_names), self.rate, fir, self.limits, self.stream.max_abs,
                             self.stream.max_samples)
 

@@ -138,7 +138,9 @@ class GraphWatchParams:
         1.0, "Period of the look at the ROS graph around the command path, s of wall"
         " time: another node of this node's name, several publishers on an input, another publisher on an"
         " output, a wrong message type or incompatible QoS on either, reported on /diagnostics (status"
-        " '<node>: graph') and logged once each (ros/graph_watch.py). 0 disables it.", (0.0, 3600.0),
+        " '<node>: graph') and logged once each (ros/graph_watch.py). A look asks for the node names and the"
+        " endpoint counts; every endpoint with its QoS only when those changed, a middleware event waits, or every"
+        " 10 looks. 0 disables it.", (0.0, 3600.0),
         read_only=True)
 
 

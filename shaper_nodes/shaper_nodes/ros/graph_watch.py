@@ -25,6 +25,16 @@ time and reports each of these as a *finding*:
 A finding that names an endpoint the graph has not tied to a node (yet: DDS discovers a new node's
 endpoints before its name) is reported only once it has held :data:`GRACE` looks in a row.
 
+Most looks are cheap. A full look asks rclpy for every endpoint of every watched topic with its QoS (50-80 us
+a topic on the 2-core machine, in C that holds the interpreter: the shaper's stream waits meanwhile, which
+read as +100-200 us on the hop's quiet p99 with a 1 s period, docs/results/benchmarks.md, session 16). A
+look first takes the graph's *signature*: the node names and, per watched topic, the publisher and
+subscriber counts (about 15 us a topic). While the signature is the last full look's, no middleware event
+waits to be explained and fewer than :data:`FULL_EVERY` looks went by since it, the look reuses the last
+full look's findings. A change the signature does not show (a publisher replaced within one period by
+another with other QoS; the middleware's incompatible-QoS event then reports it at once) is seen within
+:data:`FULL_EVERY` looks.
+
 Each finding is logged once, when it appears (again only if it clears and comes back), and a
 status ``<node>: graph`` goes to ``/diagnostics`` at every look: the findings (worst level, their
 messages, key values naming the topic, the nodes, the types or the QoS), or OK. The decisions are
@@ -64,6 +74,9 @@ from .graph_rules import (
     summary,
     type_name,
 )
+
+#: looks between two full looks while the graph's signature holds (see the module docstring)
+FULL_EVERY = 10
 
 
 def _qos_problem(pub_qos: QoSProfile, sub_qos: QoSProfile) -> str:
@@ -119,6 +132,11 @@ class GraphWatch:
         self._lock = threading.Lock()
         self._events: dict[tuple[str, str], tuple[str, int]] = {}  # (topic, qos|type) -> (detail, look seen)
         self._looks = 0
+        self._signature: tuple[Any, ...] | None = None  # the graph's at the last full look
+        self._graph_found: list[Finding] = []  # the findings of the last full look, from the graph
+        self._since_full = 0  # looks since the last full look
+        #: full looks so far (the rest reused the last one's findings)
+        self.full_looks = 0
         self.findings: list[Finding] = []
         #: middleware events seen, per ``incompatible_qos@<topic>`` / ``incompatible_type@<topic>``
         self.events: Counter[str] = Counter()
@@ -179,8 +197,32 @@ class GraphWatch:
             out.append(Endpoint(fqn(i.node_name, i.node_namespace), i.topic_type, _qos_problem(pub_qos, sub_qos)))
         return out
 
+    def signature(self) -> tuple[Any, ...]:
+        """The graph as the cheap queries show it: node names, and the publisher and subscriber counts of
+        every watched topic."""
+        g = self._looker
+        return (tuple(sorted(g.get_node_names_and_namespaces())),
+                tuple((g.count_publishers(name), g.count_subscribers(name)) for name in self._topics))
+
     def look(self) -> list[Finding]:
-        """One look at the graph: the findings, new ones logged, cleared ones noted, the status published."""
+        """One look at the graph: the findings, new ones logged, cleared ones noted, the status published. The
+        graph is looked at in full only when its signature changed, an event waits or every FULL_EVERY looks."""
+        signature = self.signature()
+        with self._lock:
+            waiting = bool(self._events)
+        if waiting or signature != self._signature or self._since_full + 1 >= FULL_EVERY:
+            self._graph_found = self._full_look()
+            self._signature, self._since_full = signature, 0
+            self.full_looks += 1
+        else:
+            self._since_full += 1
+        found = list(self._graph_found)
+        found += self._unexplained(found)
+        self.report(found)
+        return self.findings
+
+    def _full_look(self) -> list[Finding]:
+        """The findings from every endpoint of the watched topics, with their QoS."""
         g = self._looker
         nodes = [fqn(n, ns) for n, ns in g.get_node_names_and_namespaces()]
         pubs: dict[str, list[Endpoint]] = {}
@@ -195,10 +237,7 @@ class GraphWatch:
             mine_eps = [Endpoint(fqn(i.node_name, i.node_namespace), i.topic_type) for i in mine]
             pubs[name], subs[name] = (peer_eps, mine_eps) if t.watched.direction == IN else (mine_eps, peer_eps)
         me = self.node.get_fully_qualified_name()
-        found = graph_findings(me, nodes, [t.watched for t in self._topics.values()], pubs, subs)
-        found += self._unexplained(found)
-        self.report(found)
-        return self.findings
+        return graph_findings(me, nodes, [t.watched for t in self._topics.values()], pubs, subs)
 
     def _unexplained(self, found: Sequence[Finding]) -> list[Finding]:
         """Middleware events that the graph has not explained within GRACE looks (reported once each)."""
@@ -230,4 +269,4 @@ class GraphWatch:
         self.diagnostics.publish("graph", *summary(found))
 
 
-__all__ = ["GraphWatch"]
+__all__ = ["FULL_EVERY", "GraphWatch"]

@@ -5,7 +5,8 @@ node's usage, generated from its module docstring and its parameter tables, with
 anything: no ``rclpy.init``, no file written. A configuration error (a missing or invalid
 parameter) ends the node with one line on stderr and exit status 1, no traceback; so does a
 ``--params-file`` that is missing, unreadable or not a params file (:func:`params_file_problem`,
-checked before ``rclpy.init``, which would otherwise end in a traceback).
+checked before ``rclpy.init``, which would otherwise end in a traceback), and a ``-p`` override that rcl
+would drop without a word because the params file gives the parameter another type (:func:`override_problem`).
 
 Stops (:class:`StopSignals`): SIGINT (Ctrl-C) and SIGTERM (``kill``, a supervisor, or the parent-death signal
 of a node started by a script, ros/launching.py) are the same clean stop. The first one asks the node to stop:
@@ -141,7 +142,8 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
     """Why a ``--params-file`` of ``argv`` cannot be used, in one line naming the file (None if
     every one can be): missing, unreadable, not YAML, or not a params file (a mapping of node
     names, ``/**`` or ``/name``, each to a mapping with ``ros__parameters``). rcl reads the file
-    again at ``rclpy.init``; these are the problems it would otherwise report as a traceback."""
+    again at ``rclpy.init``; these are the problems it would otherwise report as a traceback. Then a
+    ``-p`` override rcl would drop (:func:`override_problem`)."""
     import yaml
 
     for path in params_files(argv):
@@ -163,6 +165,81 @@ def params_file_problem(argv: Sequence[str]) -> str | None:
             if not isinstance(body, dict) or "ros__parameters" not in body:
                 return (f"--params-file {path}: key {key!r} has no 'ros__parameters' mapping"
                         " (expected '<node name or /**>: ros__parameters: ...')")
+    return override_problem(argv)
+
+
+#: the order in which rclpy reads a parameter's value out of rcl's variant (bool first, string arrays last)
+_RCL_ORDER = ("a bool", "an integer", "a double", "a string", "a bool array", "an integer array", "a double array",
+              "a string array")
+
+
+def _rcl_kind(value: Any) -> int | None:
+    """The index in :data:`_RCL_ORDER` of a YAML value as rcl stores it (None: nothing rcl would keep)."""
+    if isinstance(value, list):
+        kind = _rcl_kind(value[0]) if value else None
+        return None if kind is None or kind > 3 else kind + 4
+    for k, t in enumerate((bool, int, float, str)):
+        if isinstance(value, t):
+            return k
+    return None
+
+
+def _flat(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {f"{prefix}{key}": value})
+    return out
+
+
+def override_problem(argv: Sequence[str]) -> str | None:
+    """A value of ``argv`` that rcl would drop without a word (None if none would be): a ``-p NAME:=VALUE``,
+    or a later ``--params-file``'s value, of another type than an earlier value of NAME in the same entry.
+
+    rcl keeps the earlier value beside the later one of another type, and rclpy reads the first it finds
+    in :data:`_RCL_ORDER`: after ``--params-file`` with ``command_rate: 500`` (an integer), ``-p
+    command_rate:=250.0`` (or a second file's ``250.0``) left the node at 500 Hz, and ``-p
+    shaper.frequency_hz:=ten`` kept the file's 8 Hz (session 15's owner's walk; the node's own type
+    checks never saw the later value). Such a value is refused here, naming both. rcl applies every
+    params file, in order, then the ``-p`` rules; types mix within one entry of its table only (one key).
+    """
+    import yaml
+
+    # (what gave it, its entry in rcl's table, the parameter's name, its value): files first, then -p rules. rcl
+    # mixes two types within one entry only (a params file's key as written; "/**" for a -p rule without a node):
+    # a "/**" value and a "/shaper" one are two entries, and rclpy applies the node's own after "/**"
+    sources: list[tuple[str, str, str, Any]] = []
+    for path in params_files(argv):
+        with open(path, encoding="utf-8") as f:
+            tree = yaml.safe_load(f)
+        for key, body in tree.items():
+            sources += [(f"--params-file {path} ({key})", str(key), name, value)
+                        for name, value in _flat(body["ros__parameters"] or {}).items()]
+    inside = False
+    for i, arg in enumerate(argv):
+        if arg == "--ros-args":
+            inside = True
+        elif arg == "--":
+            inside = False
+        elif inside and arg in ("-p", "--param") and i + 1 < len(argv) and ":=" in argv[i + 1]:
+            left, _, text = argv[i + 1].partition(":=")
+            node, _, name = left.rpartition(":")
+            try:
+                sources.append((f"-p {argv[i + 1]}", node or "/**", name, yaml.safe_load(text)))
+            except yaml.YAMLError:
+                continue  # rcl reports it
+    for k, (where, scope, name, value) in enumerate(sources):
+        given = _rcl_kind(value)
+        for before, other, same, kept_value in sources[:k]:
+            kept = _rcl_kind(kept_value)
+            if same != name or scope != other or given is None or kept is None or kept >= given:
+                continue
+            if where.startswith("-p "):
+                return (f"{where}: {_RCL_ORDER[given]}, where {before} gives {name} {_RCL_ORDER[kept]}"
+                        f" ({kept_value!r}); rcl would keep that value and drop the override without a word:"
+                        f" give {name} {_RCL_ORDER[kept]} on the command line, or change the file")
+            return (f"{where}: {name} is {_RCL_ORDER[given]} ({value!r}), where {before} before it gives"
+                    f" {_RCL_ORDER[kept]} ({kept_value!r}); rcl would keep the earlier value and drop this one"
+                    f" without a word: give {name} one type in both ({_RCL_ORDER[kept]} or {_RCL_ORDER[given]})")
     return None
 
 

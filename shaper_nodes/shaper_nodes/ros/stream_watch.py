@@ -2,8 +2,9 @@
 
 The streaming path only appends each message's info (the middleware's stamps and sequence number) and
 when it was taken (:meth:`StreamWatch.arrived`: a deque's append, atomic); the node's main thread
-passes them through one :class:`~shaper_nodes.core.rate.RateWatch` per stream every
-:data:`WATCH_PERIOD` s (:meth:`StreamWatch.watch`), off the streaming path. The kept arrivals are
+passes them through one :class:`~shaper_nodes.core.rate.RateWatch` per stream at each summary, and every
+:data:`WATCH_PERIOD` s where the summaries are rarer (:meth:`StreamWatch.watch`), off the streaming path, as
+one batch of arrays (:func:`arrival_arrays`). The kept arrivals are
 bounded (10 s at the command rate, at least 4096): reaching the bound means a stalled main thread,
 and the arrivals pushed out unseen are reported. :meth:`StreamWatch.summary` builds the periodic
 ``/diagnostics`` summary: the input windows (rate, gaps, bursts, drops, lag), what was forwarded and
@@ -26,6 +27,9 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.rate import RateWatch
 
@@ -35,8 +39,27 @@ from .diagnostics import ERROR, OK, WARN, Diagnostics
 STREAMS = ("array", "stream")
 #: the environment variable naming the file a node writes its :class:`WorkTiming` to when it stops (unset: off)
 WORK_TIMING_ENV = "SHAPER_WORK_TIMING"
-#: how often the streams' kept arrivals go through the rate watch (s, steady clock, main thread)
-WATCH_PERIOD = 0.25
+#: how often the streams' kept arrivals go through the rate watch (s, steady clock, main thread) where the
+#: summaries (every ``diagnostics_period``, 1 s by default; each watches too) are rarer than this: a quarter of the
+#: kept arrivals' bound (10 s), so they are watched in time however rare the summaries. Each wake-up of the main
+#: thread costs its executor about 0.45 ms of CPU, and a batch's numpy calls a fixed cost: at 0.25 s (before
+#: session 15) the main thread spent about 3-4 us per message at 1 kHz, at 2.5 s about 2 us (docs/results/
+#: benchmarks.md, issue 34, session 15, H1 watch); with the default 1 s summaries, no timer of its own (session 17)
+WATCH_PERIOD = 2.5
+
+
+_NO_INFO: dict[str, Any] = {}
+_Ints = npt.NDArray[np.int64]
+
+
+def arrival_arrays(kept: list[tuple[dict[str, Any] | None, int]]) -> tuple[_Ints, _Ints, _Ints, _Ints]:
+    """The kept (info, taken) pairs as :meth:`~shaper_nodes.core.rate.RateWatch.arrivals`' arrays: source and
+    received stamps, taken (ns), sequence numbers; 0 where the info (or the info itself) gives none."""
+    infos = [info or _NO_INFO for info, _ in kept]
+    return (np.array([i.get("source_timestamp") or 0 for i in infos], np.int64),
+            np.array([i.get("received_timestamp") or 0 for i in infos], np.int64),
+            np.array([taken for _, taken in kept], np.int64),
+            np.array([i.get("publication_sequence_number") or 0 for i in infos], np.int64))
 
 
 class StreamWatch:
@@ -117,16 +140,13 @@ class StreamWatch:
             self._watch_arrivals()
 
     def _watch_arrivals(self) -> None:
-        """:meth:`watch` with :attr:`lock` held."""
+        """:meth:`watch` with :attr:`lock` held: each stream's kept arrivals as one batch (:func:`arrival_arrays`)."""
         for k, queue in self._arrivals.items():
-            watch, publishers = self.rate_watch[k], self._publisher_counts[k]
             # bounded: what is there now (the stream thread may go on appending)
-            for _ in range(len(queue)):
-                info, handled = queue.popleft()
-                info = info or {}
-                watch.arrival(info.get("source_timestamp"), info.get("received_timestamp"), handled,
-                              info.get("publication_sequence_number"), publishers)
-                self._arrivals_seen[k] += 1
+            kept = [queue.popleft() for _ in range(len(queue))]
+            if kept:
+                self.rate_watch[k].arrivals(*arrival_arrays(kept), self._publisher_counts[k])
+                self._arrivals_seen[k] += len(kept)
 
     def watched(self, stream: str) -> RateWatch:
         """The rate watch of ``stream`` ('array' or 'stream') with every arrival so far taken in."""

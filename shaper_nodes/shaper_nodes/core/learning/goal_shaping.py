@@ -16,6 +16,12 @@ kept (at most :data:`KEPT`) and claimed by the START (the latest one matching), 
 cycle is open goes to it. A cycle's records are taken when its END comes; the records not claimed by then are
 dropped (a goal is shaped before its motion, so before its cycle's END). A cycle with no record (a shaper node
 that does not publish them, goals not through its proxy, a record lost) is learned from as before.
+
+A record goes to a cycle only if it was stamped (when the shaper node sent the goal on) at or after the cycle's
+START stamp less :data:`BEFORE_START`: the shaper node's ``~/shaped_goals`` is latched (depth 16), so a learner that
+starts, or restarts, receives the records of goals sent before it, and a stale FALLBACK of the same move decided the
+new cycle (session 15). The stamps compare on one clock: the robot's (or the simulator's simulated time) for both the
+cycle events and the shaper node. A record without a stamp is matched by its move alone, as before.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ACTIVE", "FALLBACK", "KEPT", "MATCH", "SCHEDULED", "GoalBook", "GoalRecord", "refusal"]
+__all__ = ["ACTIVE", "BEFORE_START", "FALLBACK", "KEPT", "MATCH", "SCHEDULED", "GoalBook", "GoalRecord", "refusal"]
 
 #: the ways a goal was shaped (shaper_msgs/ShapedGoal's constants)
 SCHEDULED, FALLBACK, ACTIVE = 0, 1, 2
@@ -34,6 +40,9 @@ SCHEDULED, FALLBACK, ACTIVE = 0, 1, 2
 MATCH = 1e-3
 #: records kept before their START, and cycles open at once (ENDs that never came are forgotten beyond it)
 KEPT = 64
+#: s: how long before its cycle's START a goal's record may be stamped and still be the cycle's (a motion source that
+#: sends the goal, then START); a record of an earlier cycle of the same move is older by a whole other move at least
+BEFORE_START = 0.5
 
 
 @dataclass(frozen=True)
@@ -48,6 +57,12 @@ class GoalRecord:
     goal: tuple[float, ...]
     source: str = ""
     revision: int = 0
+    #: when the shaper node sent the goal on, s (its clock: the header stamp); None: not known
+    stamp: float | None = None
+
+    def after(self, start: float | None) -> bool:
+        """Whether the record may be of a cycle whose START is stamped ``start`` s (None: not known)."""
+        return self.stamp is None or start is None or self.stamp >= start - BEFORE_START
 
 
 def refusal(record: GoalRecord, scheduled: bool) -> str:
@@ -92,24 +107,25 @@ class GoalBook:
 
     def __init__(self) -> None:
         self._pending: collections.deque[GoalRecord] = collections.deque(maxlen=KEPT)
-        #: open cycles: cycle -> (joint names, goal, records)
-        self._open: dict[int, tuple[list[str], list[float], list[GoalRecord]]] = {}
+        #: open cycles: cycle -> (joint names, goal, records, START stamp)
+        self._open: dict[int, tuple[list[str], list[float], list[GoalRecord], float | None]] = {}
         #: ended cycles' records, until asked
         self._ended: dict[int, list[GoalRecord]] = {}
 
-    def start(self, cycle: int, names: Sequence[str], goal: Sequence[float]) -> None:
-        """A cycle's START: the move's joints and goal (rad); it claims the latest record that came before it."""
-        claimed = [r for r in self._pending if _matches(r, names, goal)][-1:]
+    def start(self, cycle: int, names: Sequence[str], goal: Sequence[float], stamp: float | None = None) -> None:
+        """A cycle's START (received, or stood in for) stamped ``stamp`` s: the move's joints and goal (rad); it
+        claims the latest record that came before it stamped from its START on (module docstring)."""
+        claimed = [r for r in self._pending if _matches(r, names, goal) and r.after(stamp)][-1:]
         for r in claimed:
             self._pending.remove(r)
-        self._open[int(cycle)] = (list(names), [float(x) for x in goal], claimed)
+        self._open[int(cycle)] = (list(names), [float(x) for x in goal], claimed, stamp)
         while len(self._open) > KEPT:
             self._open.pop(next(iter(self._open)))
 
     def shaped(self, record: GoalRecord) -> None:
         """A goal's record: to the latest open cycle of its move, else kept for a START to come."""
-        for names, goal, records in reversed(list(self._open.values())):
-            if _matches(record, names, goal):
+        for names, goal, records, stamp in reversed(list(self._open.values())):
+            if _matches(record, names, goal) and record.after(stamp):
                 records.append(record)
                 return
         self._pending.append(record)
@@ -122,6 +138,11 @@ class GoalBook:
             while len(self._ended) > KEPT:
                 self._ended.pop(next(iter(self._ended)))
         self._pending.clear()
+
+    @property
+    def unclaimed(self) -> int:
+        """Records kept for a START to come."""
+        return len(self._pending)
 
     def records(self, cycle: int) -> list[GoalRecord]:
         """The records of an ended cycle (without taking them)."""

@@ -48,6 +48,21 @@ _DOC_KEYS = {"version", "structure", "saved_at", "learner"}
 MATCH_TOL = 1e-9
 
 
+def _floats(value: Any) -> tuple[float, ...]:
+    if isinstance(value, str):
+        raise ValueError(f"expected a list of numbers, got {value!r}")
+    return tuple(float(x) for x in value)
+
+
+def _converted(key: str, kind: Any, value: Any) -> Any:
+    """``kind(value)``, or a ListError naming ``list.<key>`` and the value (``float('abc')`` named neither)."""
+    try:
+        return kind(value)
+    except (TypeError, ValueError) as err:
+        name = {float: "a number", int: "an integer"}.get(kind, "a list of numbers")
+        raise ListError(f"list.{key} must be {name}, got {value!r} ({err})") from None
+
+
 def list_config(values: Mapping[str, Any]) -> ListConfig:
     """The ListConfig of the learner node's ``list.*`` parameters (keys without the prefix).
 
@@ -66,18 +81,18 @@ def list_config(values: Mapping[str, Any]) -> ListConfig:
             kw[key] = str(v[key])
     for key in ("highpass_hz", "max_step_a1", "max_step_t2", "switch_tol", "rollback_factor"):
         if key in v:
-            kw[key] = float(v[key])
+            kw[key] = _converted(key, float, v[key])
     for key in ("phase_trials", "patience", "min_samples"):
         if key in v:
-            kw[key] = int(v[key])
+            kw[key] = _converted(key, int, v[key])
     if "window_delay" in v:
-        kw["window_delay"] = float(v["window_delay"]) or None
+        kw["window_delay"] = _converted("window_delay", float, v["window_delay"]) or None
     if "saturation" in v:
-        kw["saturation"] = float(v["saturation"]) or math.inf
+        kw["saturation"] = _converted("saturation", float, v["saturation"]) or math.inf
     if "a1_bounds" in v:
-        kw["a1_bounds"] = tuple(float(x) for x in v["a1_bounds"])
+        kw["a1_bounds"] = _converted("a1_bounds", _floats, v["a1_bounds"])
     if "t2_bounds" in v:
-        t2 = tuple(float(x) for x in v["t2_bounds"])
+        t2 = _converted("t2_bounds", _floats, v["t2_bounds"])
         kw["t2_bounds"] = t2 if any(t2) else None
     try:
         return ListConfig(**kw)
