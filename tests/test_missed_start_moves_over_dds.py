@@ -7,11 +7,12 @@ The rig of the per-move learners' tests without the arm (tests/relearn_peer.py: 
 controller's FollowJointTrajectory action, recording each goal it receives, sends the planned goals to the learner's
 proxy, publishes the accelerometer and the cycle events); the learner is its own process (the MRILC learner with the
 simulated arm's lifted operator, as tests/test_learning_mrilc_relearn.py), or in-process where the test reads its
-goal records' book. A START is missed as ``send_goal --cycle`` makes it missed (tests/test_missed_start_over_dds.py's
-StartLost: the events' publisher of a participant of its own made for the cycle, whose START never reaches the
-learner), then the goal, then, once the goal ran, MOTION_END and END carrying the START's stamp. The goal comes before the stand-in: the learner
-matches it at once to its known move by its first and last points (core/learning/move_cycles.py), so it runs with
-the move's correction or factor, and the stand-in claims it.
+goal records' book. A START is missed as ``send_goal --cycle`` makes it missed
+(tests/test_missed_start_over_dds.py's StartLost: the events' publisher of a participant of its own made for the
+cycle, whose START never reaches the learner), then the goal, then, once the goal ran, MOTION_END and END carrying
+the START's stamp. The goal comes before the stand-in: the learner matches it at once to its known move by its first
+and last points (core/learning/move_cycles.py), so it runs with the move's correction or factor, and the stand-in
+claims it.
 """
 
 from __future__ import annotations

@@ -3,11 +3,12 @@ in-process, the robot program's cycle events from a publisher of another partici
 ``send_goal --cycle`` makes one per goal (session 13's walk: a listener whose side of the match came late missed
 START in 3 of 34 goals, "END without its START").
 
-START is lost (:class:`StartLost`: a START sent before that publisher matched is never sent to a reader that
-matches later, and a listener cannot tell it from one never sent); MOTION_END and END go out once it has matched the
-identifier, carrying the START's stamp (CycleEvent ``start_stamp``). The identifier stands in for the START it never received
-(``events.rule.stood_in``): listening since before START, it measures the cycle as it measures the same cycle seen
-from its START; created after START went out, it says that it did not see the window from START and uses nothing."""
+START is lost (:class:`StartLost`: a START sent before that publisher matched is never sent to a reader that matches
+later, and a listener cannot tell it from one never sent); MOTION_END and END go out once it has matched the
+identifier, carrying the START's stamp (CycleEvent ``start_stamp``). The identifier stands in for the START it never
+received (``events.rule.stood_in``): listening since before START, it measures the cycle as it measures the same
+cycle seen from its START; created after START went out, it says that it did not see the window from START and uses
+nothing."""
 
 from __future__ import annotations
 
