@@ -178,7 +178,8 @@ def test_a_full_disk_cancels_the_goal_ends_with_one_line_and_resume_completes(ro
     out = tmp_path / "cal"
     proc = start_calibrate(domain_id, tmp_path, ["--execute", "--out", str(out)], file_limit=FILE_LIMIT)
     try:
-        code = proc.proc.wait(timeout=300.0)
+        wait_for(lambda: proc.proc.poll() is not None, "calibrate's stop on the full disk", proc=proc)
+        code = proc.proc.returncode
         log = proc.log_path.read_text()
         assert code == EXIT_WRITE_FAILED, f"{peer.describe()}\n{log}"
         assert "Traceback" not in log, log

@@ -101,3 +101,26 @@ def test_what_a_move_waited_for_in_vain_is_named(server_ready, words):
         with pytest.raises(Aborted) as stop:
             cal.move((Waypoint(0.0, np.zeros(1)), Waypoint(1.0, np.ones(1))), "the approach to pose 0 (home)")
         assert str(stop.value) == words
+
+
+def test_a_failed_write_while_the_answer_is_awaited_ends_the_wait():
+    """A write that fails in a callback (a full disk: the accelerometer's samples are recorded from the approach's
+    goal on) while calibrate waits for the controller's answer ends the run with that failure. Before, the wait
+    suppressed every Aborted, WriteFailed included: the failure was lost, writing stopped, and the run waited on the
+    goal (the full-disk test of test_calibrate_stops.py, with a controller that never ends a goal, for 300 s under
+    two hogs, session 18)."""
+    from shaper_nodes.nodes.calibrate_stops import WriteFailed
+
+    with pytest.MonkeyPatch.context() as mp:
+        world = World(out_from=1e9, back_at=1e9, answer_at=3.0)
+        cal = calibrator(world, mp)
+
+        def spin_once(timeout_sec: float) -> None:
+            world.spin_once(timeout_sec)
+            if world.t >= 1.0:  # the 2 MB limit reached while the goal's answer is on its way
+                raise WriteFailed(OSError(27, "File too large"), "/cal/recording/pose_000.partial/pose_000.mcap")
+
+        cal.executor = SimpleNamespace(spin_once=spin_once)
+        with pytest.raises(WriteFailed, match=r"cannot write /cal/recording/pose_000\.partial/pose_000\.mcap"):
+            cal._await_answer(SimpleNamespace(done=world.done), "the approach to pose 0 (home)")
+        assert world.t < 1.1 and not cal.peer_lost

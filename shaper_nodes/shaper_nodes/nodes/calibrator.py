@@ -43,6 +43,13 @@ CANCEL_WAIT = 5.0
 SERVER_GONE = 2.0
 
 
+class TimedOut(Aborted):
+    """A wait of :meth:`Calibrator.spin_until` ended with what it waited for not there; the waits that may end
+    so suppress this alone, so that a failed write raised out of a callback during them (:class:`WriteFailed`)
+    still ends the run (session 18: suppressed while calibrate waited for the controller's answer, the full
+    disk went unnoticed and the run waited on the running goal)."""
+
+
 class Calibrator:
     """The ROS side of a calibration run: a node, its action client, its subscriptions and the recording."""
 
@@ -130,10 +137,13 @@ class Calibrator:
 
     # ------------------------------------------------------------------ waiting
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
+        """Spin until ``done()``; :class:`TimedOut` after ``timeout`` s. What a callback raises comes out as it is
+        (a failed write's :class:`WriteFailed`, also an :class:`Aborted`): a wait that may end unmet suppresses
+        :class:`TimedOut` only."""
         deadline = time.monotonic() + timeout
         while not done():
             if time.monotonic() > deadline:
-                raise Aborted(f"no {what} within {timeout:g} s")
+                raise TimedOut(f"no {what} within {timeout:g} s")
             try:
                 self.executor.spin_once(timeout_sec=POLL)
             except Exception as err:  # a stop signal that landed inside rclpy's C++ comes out as another error
@@ -170,7 +180,7 @@ class Calibrator:
                                                                            "timeouts.server"))
         deadline = time.monotonic() + bound
         while True:
-            with contextlib.suppress(Aborted):
+            with contextlib.suppress(TimedOut):
                 self.spin_until(lambda: sent.done() or self._server_gone(), max(deadline - time.monotonic(), 0.0), "")
             if sent.done():
                 return
@@ -259,7 +269,7 @@ class Calibrator:
             raise Aborted(f"the controller {state} the goal of {what}: error_code {res.result.error_code}"
                           f" {res.result.error_string!r}")
         if not stamps:  # the result came first: the feedback waits behind a batch of samples (a deep queue)
-            with contextlib.suppress(Aborted):
+            with contextlib.suppress(TimedOut):
                 self.spin_until(lambda: bool(stamps), float(self.p.timeouts.data), "")
         if not stamps:
             raise Aborted(f"no feedback from the controller for {what}: its start time is unknown")
