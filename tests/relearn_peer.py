@@ -204,9 +204,15 @@ class Peer:
             except AssertionError as err:  # (seen twice under two hogs in session 13: say what the graph still has)
                 raise AssertionError(f"{err}; on the graph still: {self.server_endpoints()}") from None
         assert not result.done(), result.result()  # the killed server's answer never comes
-        restart()
+        restarted = restart()
         self.spin_until(lambda: self.learner_up(inputs, before), "the restarted learner's subscriptions and server")
-        again = self.result_again(handle, f"the restarted learner's answer to the result of {what}")
+        try:
+            again = self.result_again(handle, f"the restarted learner's answer to the result of {what}")
+        except AssertionError as err:  # say whether the learner still runs, and what it logged (CI, stop 49)
+            path, running = getattr(restarted, "log_path", None), getattr(restarted, "running", None)
+            log = pathlib.Path(path).read_text()[-3000:] if path else "(not known here)"
+            alive = running() if callable(running) else "(not known here)"
+            raise AssertionError(f"{err}; the restarted learner running: {alive}; its log ends:\n{log}") from None
         assert again.status == GoalStatus.STATUS_UNKNOWN, again
         return sent
 

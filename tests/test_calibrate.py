@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
-from conftest import ARM_RATE, ONE_WORKER, SMALL_PLAN, arm_parameters, calibrate_config
+from conftest import ARM_RATE, ONE_WORKER, RESTARTED, SMALL_PLAN, arm_parameters, calibrate_config
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
@@ -37,9 +37,9 @@ def sim(start_node, noise: float = 0.01, **extra):
     return start_node("sim_plant_node", "sim_plant", arm_parameters(noise, **extra))
 
 
-def calibrate(start_node, args: list[str], params: dict | None = None, timeout: float = 600.0
-              ) -> tuple[int, str]:
-    proc = start_node("shaper_nodes", "calibrate", params or {}, params_file=CONFIG, args=args)
+def calibrate(start_node, args: list[str], params: dict | None = None, timeout: float = 600.0,
+              env: dict[str, str] | None = None) -> tuple[int, str]:
+    proc = start_node("shaper_nodes", "calibrate", params or {}, params_file=CONFIG, args=args, env=env)
     try:
         code = proc.proc.wait(timeout=timeout)
     finally:
@@ -128,7 +128,8 @@ def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_
     proc.proc.wait()
     kept = {p.name: p.read_bytes() for p in first.iterdir()}
     assert not (cut / "report.json").exists()
-    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(cut), *ONE_WORKER], SMALL)
+    code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(cut), *ONE_WORKER], SMALL,
+                          env=RESTARTED)
     assert code == 0, log
     assert "resuming" in log
     assert {p.name: p.read_bytes() for p in first.iterdir()} == kept  # what was measured is not lost
@@ -216,7 +217,7 @@ def test_a_controller_killed_mid_goal_ends_calibrate_with_one_line_and_resume_co
     last = [ln for ln in log.splitlines() if ln.startswith("calibrate: aborted:")]
     assert len(last) == 1 and ("no feedback from the controller" in last[0] or "left the graph" in last[0]), log
     print(f"calibrate ended {ended:.1f} s after the controller was killed: {last[0]}")
-    sim(start_node, noise=0.0)
+    start_node("sim_plant_node", "sim_plant", arm_parameters(0.0), env=RESTARTED)
     code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out), *ONE_WORKER], SMALL)
     assert code == 0, log
     assert "resuming" in log and (out / "report.json").exists()

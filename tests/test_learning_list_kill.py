@@ -29,6 +29,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from conftest import RESTARTED
 from relearn_peer import LEARNER_PROXY, Peer
 from sensor_msgs.msg import Imu, JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -124,9 +125,10 @@ class Cell:
         #: added to each accelerometer sample (x, y, z m/s^2) of the move started at t0, sample k (500 Hz); None: none
         self.extra: Callable[[float, int], np.ndarray] | None = None
 
-    def restart(self) -> None:
-        """The learner started again (the same parameters: the same state file)."""
-        self.learner = self.start_node("shaper_nodes", "learner", self.params)
+    def restart(self):
+        """The learner started again (the same parameters: the same state file); its NodeProcess."""
+        self.learner = self.start_node("shaper_nodes", "learner", self.params, env=RESTARTED)
+        return self.learner
 
     def wait_started(self, moves: int, times: int) -> None:
         """Until learners have logged ``times`` times that they sent the saved factors of ``moves`` moves to the

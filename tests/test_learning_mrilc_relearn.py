@@ -26,11 +26,13 @@ residual window measured) resumes every move's correction from its saved state
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 
 import numpy as np
 import pytest
+from conftest import RESTARTED
 from relearn_peer import Peer
 from sensor_msgs.msg import Imu
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -177,7 +179,7 @@ def test_a_drift_warning_drops_every_moves_correction_and_a_kill_9_resumes_the_r
         learner.proc.kill()
         learner.proc.wait(timeout=30)
         peer.statuses.clear()
-        start_node("shaper_nodes", "learner", params)
+        start_node("shaper_nodes", "learner", params, env=RESTARTED)
         peer.spin_until(lambda: up(before), "the restarted learner's subscriptions and action server")
         # the same episode's WARN: nothing (the flag was saved); its OK ends the episode (saved)
         peer.identifier.publish("drift", WARN, "the mode has drifted out of the active shaper's working band"
@@ -269,9 +271,9 @@ def test_a_kill_9_during_a_move_resumes_every_moves_correction_from_its_saved_st
         t0 = 130.0
         event(peer, CycleEvent.START, 3, t0, 0)
         half = float(MOVES[0].duration) + 0.5 * (WINDOW - float(MOVES[0].duration))
-        killed = peer.kill_during_move(learner, lambda: start_node("shaper_nodes", "learner", params), INPUTS,
-                                       goal(0), lambda _: accelerometer(peer, t0, 0, half), state,
-                                       "the goal of cycle 3")
+        restart = functools.partial(start_node, "shaper_nodes", "learner", params, env=RESTARTED)
+        killed = peer.kill_during_move(learner, restart, INPUTS, goal(0), lambda _: accelerometer(peer, t0, 0, half),
+                                       state, "the goal of cycle 3")
         assert saved() == before  # the interrupted cycle not learned from
         want = [corrected(i, before[k]) for i, k in enumerate(KEYS)]
         got = np.array([p.positions for p in killed.points])

@@ -17,11 +17,13 @@ The payload change on the lockstep arm itself, with the identifier's real warnin
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 
 import numpy as np
 import pytest
+from conftest import RESTARTED
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from relearn_peer import Peer
@@ -246,7 +248,8 @@ def test_a_kill_9_during_a_move_resumes_every_move_from_its_saved_state(start_no
         # window runs to motion + 1.0 s); started again on the same state file
         t0 = 130.0
         event(peer, CycleEvent.START, 3, t0, 1)
-        sent = peer.kill_during_move(learner, lambda: start_node("shaper_nodes", "learner", params), inputs, plan(1),
+        restart = functools.partial(start_node, "shaper_nodes", "learner", params, env=RESTARTED)
+        sent = peer.kill_during_move(learner, restart, inputs, plan(1),
                                      lambda g: imu_window(peer, t0, motion_end(g), motion_end(g) + 0.5), state,
                                      "the goal of cycle 3")
         motion = motion_end(sent)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from conftest import RESTARTED
 from relearn_peer import Peer
 from test_learning_mrilc_relearn import INPUTS, KEYS, MOVES, learner_params, run_cycle
 
@@ -85,7 +86,7 @@ def test_the_payload_from_the_drifts_mode_rebuilds_the_operators_and_a_kill_9_re
         learner.proc.kill()
         learner.proc.wait(timeout=30)
         peer.logs.clear()
-        start_node("shaper_nodes", "learner", params)
+        start_node("shaper_nodes", "learner", params, env=RESTARTED)
         peer.spin_until(lambda: peer.learner_up(INPUTS, before), "the restarted learner")
         peer.spin_until(lambda: any(f"payload {entry['mass']:.4g} kg from the drift's mode (the state file)" in line
                                     for line in peer.logs), "the restarted learner's line of its payload")
