@@ -396,7 +396,7 @@ def ros_context(domain_id):
 #: and removes the port's segment (SharedMemGlobal ``open_port_internal``, v2.14.3), without marking it unusable, so a
 #: peer that held the old port open (the test's participant, the plant) goes on writing into the orphaned segment; its
 #: watchdog flags a dead listener found waiting or on one buffer, never one that died between the two (the peer then
-#: never reopens the port). Read from the code as the cause of CI's failure on stop 49 ( a restarted learner heard
+#: never reopens the port). Read from the code as the cause of CI's failure on stop 49 (a restarted learner heard
 #: nothing of the test for 120 s; not reproduced here) and of an unexplained calibrate resume without accelerometer data
 #: (docs/results/testing.md, "A restarted node over shared memory"; upstream: eProsima/Fast-DDS#5053, #5469, PR #4728).
 #: Without a shared-memory port the new process is reached over UDP, which a new socket on the same port serves at once.
