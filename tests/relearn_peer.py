@@ -16,6 +16,7 @@ import json
 import pathlib
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from action_msgs.msg import GoalStatus
 from conftest import ROSOUT
@@ -160,23 +161,23 @@ class Peer:
                        for i in self.node.get_subscriptions_info_by_topic(topic))
                    for topic in inputs) and self.client.server_is_ready()
 
-    def kill_during_move(self, learner, restart: Callable[[], object], inputs: Sequence[str],
+    def kill_during_move(self, learner, restart: Callable[[], Any], inputs: Sequence[str],
                          trajectory: JointTrajectory, measure: Callable[[JointTrajectory], object],
                          state: pathlib.Path, what: str = "the goal", gone: bool = False) -> JointTrajectory:
         """Kill the learner (``learner``: a NodeProcess) with SIGKILL during a move and start it again.
 
-        The move's START must have been sent. ``trajectory`` goes to the proxy (the learner's, or the shaper
-        node's when the learner is not in the goals' path: then the goal's result comes as usual, succeeded, and
-        the checks of the client below are moot); once the controller received it and runs it (held),
-        ``measure(sent)`` publishes part of the move's residual window, and the learner is killed. Shown on the
-        way: the controller still runs the goal after the kill and finishes it (a robot's controller does not
-        need the learner); the state file is byte for byte as when the goal reached the controller (nothing
-        written since, nothing half written: saves are atomic) and parses; the client (the robot program) never
-        gets the result it asked the killed server for (with ``gone``: it sees the server gone from its graph
-        first, once DDS's lease of the killed process ran out: 20 s, Fast DDS's default); then ``restart()``
-        starts the learner on the same state file and, once its subscriptions of ``inputs`` and its action
-        server are up, the goal's result asked again is answered ``STATUS_UNKNOWN`` (the restarted learner knows
-        no goal of the killed one): a clear end, no hang. Returns what the controller received."""
+        The move's START must have been sent. ``trajectory`` goes to the proxy (the learner's, or the shaper node's when
+        the learner is not in the goals' path: then the goal's result comes as usual, succeeded, and the checks of the
+        client below are moot); once the controller received it and runs it (held), ``measure(sent)`` publishes part of
+        the move's residual window, and the learner is killed. Shown on the way: the controller still runs the goal
+        after the kill and finishes it (a robot's controller does not need the learner); the state file is byte for byte
+        as when the goal reached the controller (nothing written since, nothing half written: saves are atomic) and
+        parses; the client (the robot program) never gets the result it asked the killed server for (with ``gone``: it
+        sees the server gone from its graph first, once DDS's lease of the killed process ran out: 20 s, Fast DDS's
+        default); then ``restart()`` starts the learner on the same state file (and returns its NodeProcess) and, once
+        its subscriptions of ``inputs`` and its action server are up, the goal's result asked again is answered
+        ``STATUS_UNKNOWN`` (the restarted learner knows no goal of the killed one): a clear end, no hang. Returns what
+        the controller received."""
         self.hold()
         handle = self.send(trajectory, what)
         result = handle.get_result_async()
@@ -209,10 +210,8 @@ class Peer:
         try:
             again = self.result_again(handle, f"the restarted learner's answer to the result of {what}")
         except AssertionError as err:  # say whether the learner still runs, and what it logged (CI, stop 49)
-            path, running = getattr(restarted, "log_path", None), getattr(restarted, "running", None)
-            log = pathlib.Path(path).read_text()[-3000:] if path else "(not known here)"
-            alive = running() if callable(running) else "(not known here)"
-            raise AssertionError(f"{err}; the restarted learner running: {alive}; its log ends:\n{log}") from None
+            raise AssertionError(f"{err}; the restarted learner running: {restarted.running()}; its log ends:\n"
+                                 f"{restarted.log_path.read_text()[-3000:]}") from None
         assert again.status == GoalStatus.STATUS_UNKNOWN, again
         return sent
 

@@ -33,8 +33,8 @@ RATE = ARM_RATE
 SMALL = SMALL_PLAN
 
 
-def sim(start_node, noise: float = 0.01, **extra):
-    return start_node("sim_plant_node", "sim_plant", arm_parameters(noise, **extra))
+def sim(start_node, noise: float = 0.01, env: dict[str, str] | None = None, **extra):
+    return start_node("sim_plant_node", "sim_plant", arm_parameters(noise, **extra), env=env)
 
 
 def calibrate(start_node, args: list[str], params: dict | None = None, timeout: float = 600.0,
@@ -217,7 +217,7 @@ def test_a_controller_killed_mid_goal_ends_calibrate_with_one_line_and_resume_co
     last = [ln for ln in log.splitlines() if ln.startswith("calibrate: aborted:")]
     assert len(last) == 1 and ("no feedback from the controller" in last[0] or "left the graph" in last[0]), log
     print(f"calibrate ended {ended:.1f} s after the controller was killed: {last[0]}")
-    start_node("sim_plant_node", "sim_plant", arm_parameters(0.0), env=RESTARTED)
+    sim(start_node, noise=0.0, env=RESTARTED)
     code, log = calibrate(start_node, ["--execute", "--resume", "--out", str(out), *ONE_WORKER], SMALL)
     assert code == 0, log
     assert "resuming" in log and (out / "report.json").exists()
