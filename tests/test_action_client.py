@@ -9,13 +9,14 @@ status topic) and ask again where nothing can be seen.
 from __future__ import annotations
 
 import time
+import uuid
 from typing import Any
 
 import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
-from rclpy.action import ActionClient, ActionServer, GoalResponse
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.executors import SingleThreadedExecutor
 
 from shaper_nodes.ros.action_client import GoalFeedback, ResilientActionClient
@@ -29,8 +30,9 @@ class LossyHandle:
     """The server's rclpy handle, losing the first ``lose_goal`` goal responses and the first
     ``lose_result`` result responses (they are handled, then not sent)."""
 
-    def __init__(self, handle: Any, lose_goal: int = 0, lose_result: int = 0) -> None:
+    def __init__(self, handle: Any, lose_goal: int = 0, lose_result: int = 0, lose_status: bool = False) -> None:
         self._handle, self.lose_goal, self.lose_result = handle, lose_goal, lose_result
+        self.lose_status = lose_status
         self.goal_requests = 0
         self.lost = 0
 
@@ -51,6 +53,10 @@ class LossyHandle:
             return
         self._handle.send_goal_response(header, response)
 
+    def publish_status(self) -> None:
+        if not self.lose_status:
+            self._handle.publish_status()
+
     def send_result_response(self, header: Any, response: Any) -> None:
         if self.lose_result > 0:
             self.lose_result -= 1
@@ -63,10 +69,12 @@ class Rig:
     """A server node and a client node in one executor."""
 
     def __init__(self, ctx: Any, *, accept: bool = True, lose_goal: int = 0, lose_result: int = 0,
-                 give_up_after: float | None = None, feedback: int = 0) -> None:
+                 lose_status: bool = False, hold: bool = False, give_up_after: float | None = None,
+                 feedback: int = 0) -> None:
         self.server_node = rclpy.create_node("lossy_controller", context=ctx)
         self.client_node = rclpy.create_node("resilient_client", context=ctx)
         self.executed = 0
+        self.cancelled: list[bytes] = []  # the ids of the goals whose cancel the server took
 
         def execute(handle: Any) -> Any:
             self.executed += 1
@@ -77,9 +85,16 @@ class Rig:
             handle.succeed()
             return FollowJointTrajectory.Result(error_code=0, error_string=f"done {self.executed}")
 
+        def cancel(handle: Any) -> CancelResponse:
+            self.cancelled.append(bytes(handle.goal_id.uuid))
+            return CancelResponse.ACCEPT
+
+        # hold: an accepted goal is not started (it stays ACCEPTED, as a goal queued at a busy controller)
         self.server = ActionServer(self.server_node, FollowJointTrajectory, ACTION, execute_callback=execute,
-                                   goal_callback=lambda _goal: GoalResponse.ACCEPT if accept else GoalResponse.REJECT)
-        self.lossy = LossyHandle(self.server._handle, lose_goal, lose_result)
+                                   goal_callback=lambda _goal: GoalResponse.ACCEPT if accept else GoalResponse.REJECT,
+                                   cancel_callback=cancel,
+                                   handle_accepted_callback=(lambda _h: None) if hold else None)
+        self.lossy = LossyHandle(self.server._handle, lose_goal, lose_result, lose_status)
         self.server._handle = self.lossy
         self.client = ResilientActionClient(self.client_node, FollowJointTrajectory, ACTION, resend_period=0.5,
                                             give_up_after=give_up_after)
@@ -142,6 +157,34 @@ def test_a_rejection_whose_response_is_lost_is_asked_again_and_stays_a_rejection
     assert not handle.accepted
     assert r.lossy.goal_requests >= 2 and r.client.resent >= 1
     assert r.executed == 0
+
+
+def test_a_goal_whose_answer_and_status_are_lost_is_cancelled_by_its_id(rig):
+    """The worst a stop meets (calibrate's SIGTERM landing in rclpy's take of the goal's response and status
+    together, session 19): the goal runs at the server, the client never learns it was accepted, and its resend
+    is refused as a duplicate id. ``cancel_goal_id`` cancels it by the id it was sent with all the same."""
+    from unique_identifier_msgs.msg import UUID
+
+    r = rig(lose_goal=1, lose_status=True, hold=True)
+    goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+    future = r.client.send_goal_async(Goal(), goal_uuid=goal_id)
+    r.spin_until(future.done, "the refusal of the resent request")
+    assert not future.result().accepted and r.lossy.goal_requests == 2  # what the client knows: refused
+    cancel = r.client.cancel_goal_id(goal_id)
+    r.spin_until(cancel.done, "the answer to the cancel")
+    assert r.cancelled == [bytes(goal_id.uuid)]
+    assert [bytes(g.goal_id.uuid) for g in cancel.result().goals_canceling] == [bytes(goal_id.uuid)]
+
+
+def test_a_cancel_by_id_of_a_goal_the_server_never_had_is_refused(rig):
+    from action_msgs.srv import CancelGoal
+    from unique_identifier_msgs.msg import UUID
+
+    r = rig(hold=True)
+    cancel = r.client.cancel_goal_id(UUID(uuid=list(uuid.uuid4().bytes)))
+    r.spin_until(cancel.done, "the answer to the cancel")
+    assert r.cancelled == [] and not cancel.result().goals_canceling
+    assert cancel.result().return_code == CancelGoal.Response.ERROR_UNKNOWN_GOAL_ID
 
 
 def test_a_lost_result_is_asked_for_again(rig):

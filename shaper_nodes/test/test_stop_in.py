@@ -28,3 +28,21 @@ def test_an_error_without_a_stop_is_not_one_and_a_loop_ends():
     a, b = RuntimeError("a"), RuntimeError("b")
     a.__context__, b.__context__ = b, a  # a cycle of contexts ends the walk
     assert stop_in(a) is None
+
+
+def test_a_ctrl_c_carried_as_the_context_of_another_error_is_found_and_a_stop_is_one():
+    """send_goal's waits look for any KeyboardInterrupt (Ctrl-C); calibrate's Stopped is one too."""
+    from shaper_nodes.core.interrupts import interrupt_in
+
+    ctrl_c = KeyboardInterrupt()
+    try:
+        try:
+            raise ctrl_c
+        except KeyboardInterrupt:
+            raise TypeError("Unable to convert function return value to a Python type!")  # noqa: B904 (context)
+    except TypeError as err:
+        assert interrupt_in(err, KeyboardInterrupt) is ctrl_c
+        assert interrupt_in(err, Stopped) is None
+    stop = Stopped(signal.SIGINT)
+    assert interrupt_in(TypeError("x"), KeyboardInterrupt) is None
+    assert interrupt_in(stop, KeyboardInterrupt) is stop

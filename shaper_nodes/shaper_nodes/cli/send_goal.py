@@ -21,9 +21,11 @@ It prints the result, ``succeeded`` or ``aborted``/``canceled``/``rejected``/``u
 server gone, or restarted without the goal) with the controller's ``error_code`` (and its name) and
 ``error_string``, and the last feedback's largest position error, and exits 0 when the goal succeeded,
 1 when it did not (rejected, aborted, canceled, unknown) or a wait ran out (the line names what did
-not come: the action server, the joint states, the answer to the goal, its result), 2 for bad input,
-130 after Ctrl-C (the goal is cancelled first). Every wait is bounded in wall time: ``--timeout`` for
-the server, the joint states and the answer, ``--result-timeout`` for the result.
+not come: the action server, the joint states, the answer to the goal, its result; a goal sent is
+cancelled first), 2 for bad input, 130 after Ctrl-C (the goal is cancelled first, by the id it was sent
+with if its answer has not come: an accepted goal whose answer was lost runs all the same). Every wait
+is bounded in wall time: ``--timeout`` for the server, the joint states and the answer,
+``--result-timeout`` for the result.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from typing import Any
 
 from shaper_nodes.cli.common import Parser, UsageError, count, number
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
+from shaper_nodes.core.interrupts import interrupt_in
 
 PROG = "send_goal"
 EXIT_FAILED, EXIT_USAGE, EXIT_CANCELLED = 1, 2, 130
@@ -161,13 +164,21 @@ class GoalSender:
         self.fjt = FollowJointTrajectory
         self.client = ResilientActionClient(node, FollowJointTrajectory, action)
         self.handle: Any = None
+        self.sent: Any = None  # the goal's request while its answer is awaited, and the id it was sent with
+        self.goal_id: Any = None
 
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
         deadline = time.monotonic() + timeout
         while not done():
             if time.monotonic() > deadline:
                 raise WaitError(f"no {what} within {timeout:g} s")
-            self.executor.spin_once(timeout_sec=POLL)
+            try:
+                self.executor.spin_once(timeout_sec=POLL)
+            except Exception as err:  # a Ctrl-C that landed inside rclpy's C++ comes out as another error
+                interrupt = interrupt_in(err, KeyboardInterrupt)
+                if interrupt is None:
+                    raise
+                raise interrupt from None
 
     def current(self, topic: str, joints: Sequence[str], timeout: float) -> tuple[list[float], float]:
         """The present positions of ``joints`` from the first joint state that names them all, and its stamp (s)."""
@@ -190,9 +201,12 @@ class GoalSender:
 
     def send(self, joints: Sequence[str], points: Sequence[tuple[float, Sequence[float]]], timeout: float,
              result_timeout: float, on_send: Callable[[], None] | None = None) -> Outcome:
+        import uuid
+
         from action_msgs.msg import GoalStatus
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+        from unique_identifier_msgs.msg import UUID
 
         def dur(t: float) -> Any:
             ns = int(round(t * 1e9))
@@ -212,8 +226,10 @@ class GoalSender:
             if e:
                 errors.append(max(e))
 
-        sent = self.client.send_goal_async(goal, feedback_callback=on_feedback)
+        self.goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        sent = self.sent = self.client.send_goal_async(goal, feedback_callback=on_feedback, goal_uuid=self.goal_id)
         self.spin_until(sent.done, timeout, f"answer from {self.action_name} to the goal")
+        self.sent = None
         handle = sent.result()
         if not handle.accepted:
             return Outcome("rejected")
@@ -229,15 +245,26 @@ class GoalSender:
         return Outcome(status, code, _code_name(self.fjt.Result, code), str(res.result.error_string),
                        errors[-1] if errors else math.nan)
 
-    def cancel(self) -> None:
-        """Cancel the goal in progress (after Ctrl-C), waiting a bounded time for the answer."""
-        if self.handle is None:
-            return
-        future = self.handle.cancel_goal_async()
+    def cancel(self) -> str:
+        """Cancel the goal out at the controller (after Ctrl-C, or a wait that ran out), waiting at most 5 s for
+        the answer; returns what happened in words for the last line ('' if no goal was out). A goal whose
+        answer has not come is cancelled by the id it was sent with (accepted with its answer lost, it runs)."""
+        if self.handle is not None:
+            future, why = self.handle.cancel_goal_async(), ""
+        elif self.sent is not None:
+            future, why = self.client.cancel_goal_id(self.goal_id), " (by its goal id: its answer had not come)"
+        else:
+            return ""
+        self.handle = self.sent = None
         try:
             self.spin_until(future.done, 5.0, "answer to the cancel request")
-        except WaitError as err:
-            print(f"{PROG}: {err}", file=sys.stderr)
+        except WaitError:
+            return f"; a cancel of the goal was sent{why}, not confirmed within 5 s"
+        answer = future.result()
+        if answer is not None and answer.goals_canceling:
+            return f"; the goal was cancelled at the controller{why}"
+        code = answer.return_code if answer is not None else "none"
+        return f"; a cancel of the goal was sent{why}: the controller had no such goal running (return code {code})"
 
 
 def _code_name(result_type: Any, code: int) -> str:
@@ -293,11 +320,12 @@ def main(args: list[str] | None = None) -> int:
                   f" MOTION_END {stamp + opts.duration:.3f} s, END {stamp + opts.duration + opts.hold:.3f} s",
                   flush=True)
     except KeyboardInterrupt:
-        sender.cancel()
-        print(f"\n{PROG}: cancelled", file=sys.stderr)
+        note = sender.cancel()
+        print(f"\n{PROG}: cancelled{note}", file=sys.stderr)
         return EXIT_CANCELLED
-    except WaitError as err:
-        print(f"{PROG}: {err}", file=sys.stderr)
+    except WaitError as err:  # a goal out whose answer or result did not come is not left running
+        note = sender.cancel()
+        print(f"{PROG}: {err}{note}", file=sys.stderr)
         return EXIT_FAILED
     finally:
         executor.shutdown()

@@ -29,6 +29,7 @@ import signal
 from collections.abc import Sequence
 from types import FrameType
 
+from shaper_nodes.core.interrupts import interrupt_in
 from shaper_nodes.recordings import describe_write_error
 
 __all__ = ["EXIT_ABORTED", "EXIT_CANCELLED", "EXIT_REFUSED", "EXIT_TERMINATED", "EXIT_WRITE_FAILED",
@@ -73,14 +74,7 @@ def stop_in(err: BaseException) -> Stopped | None:
     """The :class:`Stopped` that ``err`` carries as its cause or context, if any: a signal that lands while rclpy's C++
     calls back into Python (a message built while taking it) comes out of pybind11 as a ``TypeError`` ("Unable to
     convert function return value") whose cause is the :class:`Stopped`."""
-    seen: set[int] = set()
-    cur: BaseException | None = err
-    while cur is not None and id(cur) not in seen:
-        if isinstance(cur, Stopped):
-            return cur
-        seen.add(id(cur))
-        cur = cur.__cause__ or cur.__context__
-    return None
+    return interrupt_in(err, Stopped)
 
 
 def stop_on_signals() -> None:

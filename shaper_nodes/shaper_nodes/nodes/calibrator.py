@@ -70,6 +70,7 @@ class Calibrator:
         self.write_failed: WriteFailed | None = None  # the recording's failure: nothing more is written
         self.goal: Any = None  # the running goal's handle (cancelled on every stop), what it is, its answer
         self.goal_what = ""
+        self.goal_id: Any = None  # the id the running goal was sent with (its cancel names it)
         self.sent: Any = None
         self.peer_lost = False  # the controller went away or went silent: a cancel is sent, not awaited
         self._absent_since: float | None = None  # wall time the action server was first seen out of the graph
@@ -248,7 +249,7 @@ class Calibrator:
             self.feedback.forget(goal_id)
 
     def _run_goal(self, goal: Any, goal_id: Any, stamps: list[float], what: str) -> float:
-        self.goal_what = what
+        self.goal_what, self.goal_id = what, goal_id
         sent = self.sent = self.action.send_goal_async(goal, goal_uuid=goal_id)
         self._await_answer(sent, what)
         self.sent = None
@@ -280,27 +281,39 @@ class Calibrator:
         controller, an error); returns what happened in words for the stop's line ('' if no goal ran).
 
         A goal sent but not answered yet is awaited (at most :data:`CANCEL_WAIT` s) and cancelled if
-        accepted; the controller's answer to the cancel is awaited at most :data:`CANCEL_WAIT` s, and not
-        at all when the controller went away or silent (the cancel is still sent, for a stalled one)."""
+        accepted; with no acceptance known by then (the answer lost, or its resend refused as a duplicate id
+        with the status lost too, as when the stop's signal lands in rclpy's take of both) it is cancelled by
+        the id it was sent with: a controller that never took it refuses that, harmless. The controller's
+        answer to the cancel is awaited at most :data:`CANCEL_WAIT` s, and not at all when the controller went
+        away or silent (the cancel is still sent, for a stalled one)."""
         wait = 0.0 if self.peer_lost else CANCEL_WAIT
-        if self.goal is None and self.sent is not None and wait:
-            with contextlib.suppress(Aborted):
-                self.spin_until(self.sent.done, wait, "answer to the goal")
-            if self.sent.done() and self.sent.result().accepted:
-                self.goal = self.sent.result()
-        self.sent = None
-        if self.goal is None:
+        sent, self.sent = self.sent, None
+        unanswered = False
+        if self.goal is None and sent is not None:
+            if wait:
+                with contextlib.suppress(Aborted):
+                    self.spin_until(sent.done, wait, "answer to the goal")
+            if sent.done() and sent.result().accepted:
+                self.goal = sent.result()
+            else:
+                unanswered = True
+        if self.goal is None and not unanswered:
             return ""
         handle, self.goal = self.goal, None
-        future = handle.cancel_goal_async()
+        future = self.action.cancel_goal_id(self.goal_id) if unanswered else handle.cancel_goal_async()
+        why = "; its acceptance had not come, so it was cancelled by the goal id it was sent with" if unanswered else ""
         if not wait:
             self.executor.spin_once(timeout_sec=0.0)
-            return f"; a cancel of {self.goal_what} was sent to the controller"
+            return f"; a cancel of {self.goal_what} was sent to the controller{why}"
         with contextlib.suppress(Aborted):
             self.spin_until(future.done, wait, "answer to the cancel request")
-        if future.done() and future.result() is not None and future.result().goals_canceling:
-            return f"; {self.goal_what} was cancelled at the controller"
-        return f"; a cancel of {self.goal_what} was sent to the controller (not confirmed within {wait:g} s)"
+        answer = future.result() if future.done() else None
+        if answer is not None and answer.goals_canceling:
+            return f"; {self.goal_what} was cancelled at the controller{why}"
+        if answer is not None:  # refused: the goal was not running there (never taken, or already ended)
+            return (f"; a cancel of {self.goal_what} was sent to the controller: it had no such goal running"
+                    f" (return code {answer.return_code}){why}")
+        return f"; a cancel of {self.goal_what} was sent to the controller (not confirmed within {wait:g} s){why}"
 
     # ------------------------------------------------------------------ one pose
     def event(self, kind: int, repeat: int, pose: PoseStep, stamp: float) -> None:

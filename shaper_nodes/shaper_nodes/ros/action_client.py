@@ -201,6 +201,20 @@ class ResilientActionClient(ActionClient):
             " its status says so); going on with the goal")
         return handle
 
+    def cancel_goal_id(self, goal_id: Any) -> Future:
+        """Ask the server to cancel goal ``goal_id`` whatever this client knows of its answer: a stop that cannot
+        wait for the answer to a goal request (a signal, a dead link) cancels so a goal the server accepted but
+        whose response and status were lost; a server that never took the goal refuses the cancel, harmless. A
+        goal request still pending is given up (a late acceptance of it is cancelled on arrival). The future
+        completes with the server's ``CancelGoal`` response."""
+        key = bytes(goal_id.uuid)
+        with self._lock:
+            send = self._sends.pop(key, None)
+            if send is not None and not send.future.done():
+                self._abandon(key)
+        response = self._action_type.Impl.SendGoalService.Response(accepted=True)
+        return self._cancel_goal_async(ClientGoalHandle(self, goal_id, response))
+
     # ------------------------------------------------------------------ results
     def _get_result_async(self, goal_handle: ClientGoalHandle) -> Future:
         outer = Future()
@@ -311,9 +325,7 @@ class ResilientActionClient(ActionClient):
                 continue
             elif self.give_up_after is not None and now - send.first_at > self.give_up_after:
                 del self._sends[key]
-                self._abandoned[key] = None
-                while len(self._abandoned) > MAX_STATUSES:
-                    self._abandoned.pop(next(iter(self._abandoned)))
+                self._abandon(key)
                 self.given_up += 1
             elif key in self._statuses:  # accepted (the status says so), and no response came
                 del self._sends[key]
@@ -322,6 +334,12 @@ class ResilientActionClient(ActionClient):
                 send.sent_at, send.attempts = now, send.attempts + 1
                 goals.append(send)
         return goals, done
+
+    def _abandon(self, key: bytes) -> None:
+        """Remember a goal request given up, so that its late acceptance is cancelled (lock held)."""
+        self._abandoned[key] = None
+        while len(self._abandoned) > MAX_STATUSES:
+            self._abandoned.pop(next(iter(self._abandoned)))
 
     def _check(self) -> None:
         """Resend what has had no answer for a period; conclude the refusals of resent goals."""
