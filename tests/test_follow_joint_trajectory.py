@@ -365,6 +365,26 @@ def test_absent_controller_aborts_with_a_clear_reason(ros_context):
         rig.close()
 
 
+def test_a_controller_whose_answer_never_comes_gets_the_goal_cancelled_by_its_id(ros_context):
+    """The controller accepts and runs the goal but its answer and its status are lost on the way (as a
+    response is at start-up under load, and a status with it): the shaper aborts its client's goal after
+    ``action.server_timeout`` and cancels the goal at the controller by the id it sent it with, which the
+    controller's cancel names; it is not left running there."""
+    from test_action_client import LossyHandle
+
+    controller = TestController(ros_context, mode="hold")
+    controller.server._handle = LossyHandle(controller.server._handle, lose_goal=1 << 30, lose_status=True)
+    rig = Rig(ros_context, controller, **{"action.server_timeout": 2.0})
+    try:
+        status, result = rig.send(goal_of(trajectory())).wait_result()
+        assert status == GoalStatus.STATUS_ABORTED
+        assert result.error_string == f"controller {CONTROLLER} did not answer the goal request within 2 s"
+        rig.spin_until(lambda: controller.cancels == 1, "the cancel at the controller")
+        assert len(controller.goals) == 1
+    finally:
+        rig.close()
+
+
 def test_installed_shaper_node_forwards_goals(start_node, ros_context):
     shaper = start_node("shaper_nodes", "shaper_node", {"joint_names": JOINTS, "command_rate": RATE,
                                                           "shaper.family": "zvd", "shaper.frequency_hz": 4.0,

@@ -32,7 +32,9 @@ does) and is a client of the controller's. For each goal:
   controller's action server, tells ``on_sending`` (the node's ``~/shaped_goals``) what the goal is shaped
   with, sends the shaped trajectory with the goal's tolerances and
   ``goal_time_tolerance`` unchanged, relays every feedback, and ends with the controller's status
-  and result (error_code, error_string).
+  and result (error_code, error_string). A controller that does not answer the goal within ``timeout`` s
+  aborts it, and the goal is cancelled at the controller by the id it was sent with: an answer lost on the
+  way (and its status with it) leaves an accepted goal running there.
 - cancel: accepted and forwarded to the controller goal; the final status is the controller's.
 - the node stops (:meth:`TrajectoryActionProxy.stop`, from the node's ``close()`` on SIGINT or SIGTERM):
   new goals are rejected, every goal still running is cancelled at the controller (or not sent, if it
@@ -53,6 +55,7 @@ from __future__ import annotations
 
 import threading
 import time
+import uuid
 from collections.abc import Awaitable, Callable
 from typing import TypeAlias
 
@@ -67,6 +70,7 @@ from rclpy.node import Node
 from rclpy.task import Future
 from rclpy.timer import Timer
 from trajectory_msgs.msg import JointTrajectory
+from unique_identifier_msgs.msg import UUID
 
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.memory import release_freed_memory
@@ -325,9 +329,12 @@ class TrajectoryActionProxy:
             if handle.is_active:
                 handle.publish_feedback(msg.feedback)
 
-        sent = self._client.send_goal_async(fwd.goal, feedback_callback=relay)
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        sent = self._client.send_goal_async(fwd.goal, feedback_callback=relay, goal_uuid=goal_id)
         if not await wait_for(self._node, sent, self._timeout):
-            sent.add_done_callback(_cancel_if_accepted)  # do not leave it running if it comes late
+            # not left running: cancelled by its id now (accepted with its answer and status lost, it runs), and
+            # again if its acceptance comes late (the client cancels a goal request it gave up on when answered)
+            self._client.cancel_goal_id(goal_id)
             return self._abort(fwd, f"controller {name} did not answer the goal request within {self._timeout:g} s")
         fwd.controller = sent.result()
         if not fwd.controller.accepted:
@@ -425,9 +432,3 @@ def _to_canceling(handle: ServerGoalHandle) -> bool:
     except Exception:
         return False
     return handle.is_cancel_requested
-
-
-def _cancel_if_accepted(future: Future) -> None:
-    goal_handle = future.result()
-    if goal_handle is not None and goal_handle.accepted:
-        goal_handle.cancel_goal_async()
