@@ -241,12 +241,14 @@ def test_what_does_not_come_is_named_in_one_line(start_node):
         f"send_goal: no joint states naming {', '.join(JOINT_NAMES)} on /joint_states within 3 s"), log
 
 
-@pytest.mark.parametrize(("stop", "answer"), [("ctrl-c", "delivered"), ("ctrl-c", "lost"), ("timeout", "lost")])
+@pytest.mark.parametrize(("stop", "answer"), [("SIGINT", "delivered"), ("SIGINT", "lost"), ("SIGTERM", "delivered"),
+                                              ("timeout", "lost")])
 def test_a_goal_out_is_cancelled_at_the_controller_on_ctrl_c_or_a_wait_run_out(start_node, ros_context, stop,
                                                                                 answer):
     """The controller (a test peer on the real action) accepts the goal and runs it until cancelled. Ctrl-C
-    cancels it; with the controller's answer to the goal lost (and its status: the client cannot learn it was
-    accepted), Ctrl-C or ``--timeout`` running out on the answer cancels it by the goal id it was sent with."""
+    (SIGINT) or SIGTERM cancels it; with the controller's answer to the goal lost (and its status: the client
+    cannot learn it was accepted), Ctrl-C or ``--timeout`` running out on the answer cancels it by the goal id it
+    was sent with."""
     import signal
 
     from test_calibrate_stops import StuckController, wait_for
@@ -255,16 +257,16 @@ def test_a_goal_out_is_cancelled_at_the_controller_on_ctrl_c_or_a_wait_run_out(s
     try:
         proc = start_node("shaper_nodes", "send_goal", {}, args=goal_args(GOAL, JOINT_NAMES, "--timeout", "10"))
         wait_for(lambda: peer.goals >= 1, "the goal at the controller", proc=proc)
-        if stop == "ctrl-c":
-            proc.proc.send_signal(signal.SIGINT)
+        if stop != "timeout":  # (pytest's workers ignore SIGINT, and so do the processes they start, unless they
+            proc.proc.send_signal(getattr(signal, stop))  # handle it: a background job of a shell the same)
         code = proc.proc.wait(timeout=120.0)
         log = proc.log_path.read_text()
         wait_for(lambda: peer.cancels >= 1, "the cancel at the controller", proc=proc)
         assert peer.cancels == 1 and "Traceback" not in log, log
         line = log.strip().splitlines()[-1]
-        head = ("send_goal: cancelled" if stop == "ctrl-c"
+        head = (f"send_goal: cancelled by {stop}" if stop != "timeout"
                 else f"send_goal: no answer from {ACTION} to the goal within 10 s")
-        assert code == (130 if stop == "ctrl-c" else 1), log
+        assert code == {"SIGINT": 130, "SIGTERM": 143, "timeout": 1}[stop], log
         assert line == head + "; the goal was cancelled at the controller" + (
             " (by its goal id: its answer had not come)" if answer == "lost" else ""), log
     finally:

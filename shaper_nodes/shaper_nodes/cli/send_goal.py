@@ -22,10 +22,10 @@ server gone, or restarted without the goal) with the controller's ``error_code``
 ``error_string``, and the last feedback's largest position error, and exits 0 when the goal succeeded,
 1 when it did not (rejected, aborted, canceled, unknown) or a wait ran out (the line names what did
 not come: the action server, the joint states, the answer to the goal, its result; a goal sent is
-cancelled first), 2 for bad input, 130 after Ctrl-C (the goal is cancelled first, by the id it was sent
-with if its answer has not come: an accepted goal whose answer was lost runs all the same). Every wait
-is bounded in wall time: ``--timeout`` for the server, the joint states and the answer,
-``--result-timeout`` for the result.
+cancelled first), 2 for bad input, 130 after Ctrl-C (SIGINT) and 143 after SIGTERM (the goal is cancelled
+first, by the id it was sent with if its answer has not come: an accepted goal whose answer was lost runs
+all the same). Every wait is bounded in wall time: ``--timeout`` for the server, the joint states and the
+answer, ``--result-timeout`` for the result.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from typing import Any
 
 from shaper_nodes.cli.common import Parser, UsageError, count, number
 from shaper_nodes.core.closed_pipe import survives_closed_pipe
-from shaper_nodes.core.interrupts import interrupt_in
+from shaper_nodes.core.interrupts import Stopped, interrupt_in, signals_held, stop_on_signals
 
 PROG = "send_goal"
 EXIT_FAILED, EXIT_USAGE, EXIT_CANCELLED = 1, 2, 130
@@ -173,7 +173,8 @@ class GoalSender:
             if time.monotonic() > deadline:
                 raise WaitError(f"no {what} within {timeout:g} s")
             try:
-                self.executor.spin_once(timeout_sec=POLL)
+                with signals_held():  # a Ctrl-C inside the take would drop what it took (the goal's answer)
+                    self.executor.spin_once(timeout_sec=POLL)
             except Exception as err:  # a Ctrl-C that landed inside rclpy's C++ comes out as another error
                 interrupt = interrupt_in(err, KeyboardInterrupt)
                 if interrupt is None:
@@ -294,6 +295,7 @@ def main(args: list[str] | None = None) -> int:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     sender = GoalSender(node, executor, opts.action)
+    stop_on_signals()  # SIGINT and SIGTERM cancel the goal, also where SIGINT came ignored (a background job)
     marks = None
     try:
         if opts.cycle is not None:  # first: DDS matches the marks' publisher while the rest is waited for
@@ -319,10 +321,11 @@ def main(args: list[str] | None = None) -> int:
             print(f"{PROG}: marked cycle {opts.cycle} of {opts.task!r} on {opts.events}: START at {stamp:.3f} s,"
                   f" MOTION_END {stamp + opts.duration:.3f} s, END {stamp + opts.duration + opts.hold:.3f} s",
                   flush=True)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:  # SIGINT or SIGTERM (stop_on_signals)
         note = sender.cancel()
-        print(f"\n{PROG}: cancelled{note}", file=sys.stderr)
-        return EXIT_CANCELLED
+        name = f"{stop}" if isinstance(stop, Stopped) else "SIGINT"
+        print(f"\n{PROG}: cancelled by {name}{note}", file=sys.stderr)
+        return stop.status if isinstance(stop, Stopped) else EXIT_CANCELLED
     except WaitError as err:  # a goal out whose answer or result did not come is not left running
         note = sender.cancel()
         print(f"{PROG}: {err}{note}", file=sys.stderr)

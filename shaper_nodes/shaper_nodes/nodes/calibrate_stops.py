@@ -27,9 +27,8 @@ from __future__ import annotations
 import os
 import signal
 from collections.abc import Sequence
-from types import FrameType
 
-from shaper_nodes.core.interrupts import interrupt_in
+from shaper_nodes.core.interrupts import Stopped, interrupt_in, stop_on_signals
 from shaper_nodes.recordings import describe_write_error
 
 __all__ = ["EXIT_ABORTED", "EXIT_CANCELLED", "EXIT_REFUSED", "EXIT_TERMINATED", "EXIT_WRITE_FAILED",
@@ -58,37 +57,11 @@ class WriteFailed(Aborted):
         super().__init__(describe_write_error(err, pathlib.Path(path)))
 
 
-class Stopped(KeyboardInterrupt):
-    """SIGINT or SIGTERM arrived (raised where the main thread was, as Ctrl-C's KeyboardInterrupt is)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-    @property
-    def status(self) -> int:
-        return 128 + self.signum
-
-
 def stop_in(err: BaseException) -> Stopped | None:
     """The :class:`Stopped` that ``err`` carries as its cause or context, if any: a signal that lands while rclpy's C++
     calls back into Python (a message built while taking it) comes out of pybind11 as a ``TypeError`` ("Unable to
     convert function return value") whose cause is the :class:`Stopped`."""
     return interrupt_in(err, Stopped)
-
-
-def stop_on_signals() -> None:
-    """SIGINT and SIGTERM raise :class:`Stopped` in the main thread, once: the stop that follows (cancelling the
-    goal, removing the partial pose) is not interrupted by a second signal."""
-    hit: list[int] = []
-
-    def handler(signum: int, frame: FrameType | None) -> None:
-        if not hit:
-            hit.append(signum)
-            raise Stopped(signum)
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, handler)
 
 
 def params_file_too_large(files: Sequence[str], limit: int = MAX_PARAMS_FILE_BYTES) -> str | None:

@@ -21,6 +21,7 @@ from shaper_nodes.analysis.calibration import (
     SETUP_TOPIC,
 )
 from shaper_nodes.core.calibration import PoseStep, Waypoint
+from shaper_nodes.core.interrupts import signals_held
 from shaper_nodes.recordings.cdr_sensors import CdrError, JointStateReader
 from shaper_nodes.ros.conversions import time_to_sec
 from shaper_nodes.ros.diagnostics import Diagnostics
@@ -146,7 +147,8 @@ class Calibrator:
             if time.monotonic() > deadline:
                 raise TimedOut(f"no {what} within {timeout:g} s")
             try:
-                self.executor.spin_once(timeout_sec=POLL)
+                with signals_held():  # a stop inside the take would drop what it took (the goal's answer)
+                    self.executor.spin_once(timeout_sec=POLL)
             except Exception as err:  # a stop signal that landed inside rclpy's C++ comes out as another error
                 stop = stop_in(err)
                 if stop is None:
@@ -217,7 +219,8 @@ class Calibrator:
                               " died or stalled; rerun with --resume once it is back")
             if now > deadline:
                 raise Aborted(f"no result of {what} within {float(self.p.timeouts.result):g} s")
-            self.executor.spin_once(timeout_sec=POLL)
+            with signals_held():
+                self.executor.spin_once(timeout_sec=POLL)
 
     # ------------------------------------------------------------------ moving
     def move(self, waypoints: tuple[Waypoint, ...], what: str) -> float:
@@ -303,7 +306,8 @@ class Calibrator:
         future = self.action.cancel_goal_id(self.goal_id) if unanswered else handle.cancel_goal_async()
         why = "; its acceptance had not come, so it was cancelled by the goal id it was sent with" if unanswered else ""
         if not wait:
-            self.executor.spin_once(timeout_sec=0.0)
+            with signals_held():
+                self.executor.spin_once(timeout_sec=0.0)
             return f"; a cancel of {self.goal_what} was sent to the controller{why}"
         with contextlib.suppress(Aborted):
             self.spin_until(future.done, wait, "answer to the cancel request")
