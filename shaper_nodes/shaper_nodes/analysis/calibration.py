@@ -299,6 +299,7 @@ def read_pose(folder: pathlib.Path) -> tuple[dict[str, Any] | None, PoseData]:
     """One completed pose's bag (``pose_NNN``): the setup it was recorded with (None if it has none; the last
     if several) and its samples."""
     from shaper_nodes.recordings import Bag
+    from shaper_nodes.recordings.cdr import imu_fast, little_endian
 
     data = PoseData(int(folder.name.split("_")[1]))
     setup: dict[str, Any] | None = None
@@ -310,6 +311,11 @@ def read_pose(folder: pathlib.Path) -> tuple[dict[str, Any] | None, PoseData]:
         decode = {t: bag.deserializer(i.msgtype) for t, i in bag.topics.items()
                   if t in (SETUP_TOPIC, EVENTS_TOPIC, imu_topic)}
         for topic, _, _, raw in bag.messages([SETUP_TOPIC, EVENTS_TOPIC, imu_topic]):
+            if topic == imu_topic and little_endian(raw):  # most of a pose's messages: the fields read in place
+                t, a = imu_fast(raw)
+                data.imu_t.append(t)
+                data.imu.append(a)
+                continue
             msg = decode[topic](raw)
             if topic == SETUP_TOPIC:
                 this = json.loads(msg.data)
