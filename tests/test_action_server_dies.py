@@ -205,8 +205,33 @@ def test_the_shaper_proxy_aborts_a_goal_whose_controller_dies(rig, restart):
     res = result.result()
     assert res.status == GoalStatus.STATUS_ABORTED, res
     assert res.result.error_code != FollowJointTrajectory.Result.SUCCESSFUL
-    words = ("restarted and does not know goal",) if restart else ("is gone", "went away")
-    assert any(w in res.result.error_string for w in words), res.result.error_string
+    # the client's words (the proxy's own quicker watch read a restart as a death: CI, session 21)
+    words = "restarted and does not know goal" if restart else "is gone"
+    assert words in res.result.error_string, res.result.error_string
+
+
+def test_the_proxy_keeps_a_goal_whose_controller_blinks_out_of_the_graph(rig):
+    """A restarted controller's old instance can leave the graph with the new one's arrival, before the new one's
+    services show (docs/results/testing.md, session 11): the proxy's client sees no server for a moment. The
+    graph made to read the controller as absent for less than the client's gone period (GONE_AFTER, 2 s), then
+    present again: the goal runs on and succeeds (the proxy's own 1 s watch aborted it: CI, session 21)."""
+    from shaper_nodes.ros.action_client import GONE_AFTER
+
+    r = rig(proxy=True)
+    _handle, result = r.running_goal()
+    client = r.shaper._action._client
+    real = client.server_is_ready
+    blink_end = time.monotonic() + 0.75 * GONE_AFTER
+    client.server_is_ready = lambda: time.monotonic() >= blink_end and real()
+    end = time.monotonic() + 0.75 * GONE_AFTER + 1.0  # the experiment: the blink, then a second of the graph back
+    while time.monotonic() < end:
+        r.ex.spin_once(timeout_sec=0.05)
+    assert not result.done(), result.result().result.error_string
+    r.spin_until(lambda: r.release.get_subscription_count() > 0, "the server's release subscription")
+    r.release.publish(Empty())
+    r.spin_until(result.done, "the released goal's result")
+    res = result.result()
+    assert res.status == GoalStatus.STATUS_SUCCEEDED, res.result.error_string
 
 
 def test_a_status_list_that_drops_a_running_goal_has_its_result_asked_again(ros_context):
