@@ -270,13 +270,17 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
     from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
     from std_srvs.srv import Trigger
 
+    from shaper_nodes.ros.qos import NoDefaultQosEvents
     from sim_plant_node.clients.conductor import spin_until
 
+    class Driver(NoDefaultQosEvents, Node):
+        pass
+
     _start_nodes(case, start)
-    # no parameter or type description services: rclpy's executor builds its wait set over every entity of the
-    # node at each of the run's thousands of wake-ups (as the Conductor's)
-    node = Node("scheduler_cases", context=ctx, start_parameter_services=False,
-                parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+    # no parameter or type description services, no QoS event handlers: rclpy's executor builds its wait set over
+    # every entity of the node at each of the run's thousands of wake-ups (as the Conductor's)
+    node = Driver("scheduler_cases", context=ctx, start_parameter_services=False,
+                  parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     rec = _Recorder(node, commands)

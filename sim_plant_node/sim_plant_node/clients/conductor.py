@@ -37,6 +37,7 @@ from shaper_nodes.recordings.cdr_arrays import CdrError
 from shaper_nodes.recordings.cdr_sensors import JointStateReader, decode_imu
 from shaper_nodes.ros.conversions import mode_msg, time_to_sec
 from shaper_nodes.ros.lockstep_reader import subscribe_draining
+from shaper_nodes.ros.qos import NoDefaultQosEvents
 
 from ..models.plants import mck_from_mode
 from ..node.parameters import WAITING
@@ -82,7 +83,7 @@ def spin_until(executor: Executor, done: Callable[[], bool], timeout: float, wha
         executor.spin_once(timeout_sec=0.05)
 
 
-class Conductor(Node):
+class Conductor(NoDefaultQosEvents, Node):
     """Drive the sim plant and the shaper; collect per-cycle results."""
 
     def __init__(self, *args, plant: str = "/sim_plant", shaper: str = "/shaper", imu_topic: str = "/tip_imu",

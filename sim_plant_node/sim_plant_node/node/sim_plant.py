@@ -61,7 +61,7 @@ from shaper_nodes.ros.conversions import sec_to_time
 from shaper_nodes.ros.lockstep_reader import STREAM_QOS
 from shaper_nodes.ros.node_main import run_node, with_config
 from shaper_nodes.ros.parameters import declare
-from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS
+from shaper_nodes.ros.qos import LATCHED, SERVICE_QOS, NoDefaultQosEvents
 
 from ..controller.server import ControllerServer
 from ..models.plants import CycleTask
@@ -85,8 +85,9 @@ LOCKSTEP_IMU_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST, reli
 IDLE_STATE_PERIOD = 0.1
 
 
-class SimPlantNode(ControllerRuns, LiveParameters, Node):
-    """See the module docstring. Extra arguments go to ``Node``."""
+class SimPlantNode(ControllerRuns, LiveParameters, NoDefaultQosEvents, Node):
+    """See the module docstring. Extra arguments go to ``Node``. No default QoS event handlers (a stand-in for a
+    robot: ``NoDefaultQosEvents``)."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__("sim_plant", *args, **kwargs)
