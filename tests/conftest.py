@@ -407,6 +407,27 @@ def ros_context(domain_id):
 #: hog suite met the failure again: docs/results/testing.md, "The restarted node was on shared memory all along").
 #: The restarted node still finds the test's LOCALHOST participants: they announce themselves to every local port.
 #: tests/test_restarted_transport.py shows the node maps no shared memory and is reached.
+def call_answered(executor, client, request, what: str, timeout: float = 120.0, resend: float = 5.0):
+    """The answer of an idempotent service call (``shaper_at``, ``get_shaper``): wait for the service, call, and
+    call again every ``resend`` s of wall time while no answer came, up to ``timeout`` s. A response can be lost
+    at a server's start: it answers before its reply writer has matched the client's reader, and Fast DDS drops
+    the reply ("failed to send response (timeout)" in the server's log; seen on the calibration test's scheduler,
+    session 22). ``executor`` spins the client's node."""
+    deadline = time.monotonic() + timeout
+    while not client.service_is_ready():
+        assert time.monotonic() < deadline, f"timed out after {timeout:g} s waiting for {what}"
+        executor.spin_once(timeout_sec=0.05)
+    while True:
+        future = client.call_async(request)
+        again = min(time.monotonic() + resend, deadline)
+        while not future.done() and time.monotonic() < again:
+            executor.spin_once(timeout_sec=0.05)
+        if future.done():
+            return future.result()
+        client.remove_pending_request(future)
+        assert time.monotonic() < deadline, f"no answer from {what} within {timeout:g} s"
+
+
 RESTARTED = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
-from conftest import ARM_RATE, ONE_WORKER, RESTARTED, SMALL_PLAN, arm_parameters, calibrate_config
+from conftest import ARM_RATE, ONE_WORKER, RESTARTED, SMALL_PLAN, arm_parameters, calibrate_config, call_answered
 from mcap.reader import make_reader
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
@@ -83,16 +83,9 @@ def test_calibration_meets_modal_analysis(start_node, tmp_path, ros_context):
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     try:
-        deadline = time.monotonic() + 60.0
-        while not client.service_is_ready() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        future = client.call_async(ShaperAt.Request(pose=JointState(name=list(report["plan"]["joint_names"]),
-                                                                    position=HOME.tolist())))
-        deadline = time.monotonic() + 60.0
-        while not future.done() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        answer = future.result()
-        assert answer is not None and answer.success, answer
+        answer = call_answered(executor, client, ShaperAt.Request(pose=JointState(
+            name=list(report["plan"]["joint_names"]), position=HOME.tolist())), "the scheduler's shaper_at")
+        assert answer.success, answer
         home = next(p for p in report["poses"] if p["name"] == "home")
         got = sorted(m.frequency_hz for m in answer.shaper.design_modes)
         assert got == pytest.approx(sorted(m["frequency_hz"] for m in home["modes"]), rel=1e-4)

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import call_answered
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -117,10 +118,8 @@ def spin_until(ex, done, timeout: float, what: str) -> None:
 
 
 def shaper_at(peer, ex, names, positions) -> ShaperAt.Response:
-    spin_until(ex, peer.at.service_is_ready, 30.0, "shaper_at")
-    future = peer.at.call_async(ShaperAt.Request(pose=JointState(name=list(names), position=list(positions))))
-    spin_until(ex, future.done, 30.0, "the answer of shaper_at")
-    return future.result()
+    return call_answered(ex, peer.at, ShaperAt.Request(pose=JointState(name=list(names), position=list(positions))),
+                         "shaper_at")
 
 
 def true_mode(x: float) -> Mode:
