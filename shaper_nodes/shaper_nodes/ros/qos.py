@@ -66,7 +66,7 @@ SHAPED_GOALS_QOS = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 __all__ = ["ACTION_CLIENT_QOS", "ACTION_QOS", "FEEDBACK_QOS", "IMU_QOS", "LATCHED", "SERVICE_DEPTH", "SERVICE_QOS",
-           "SHAPED_GOALS_QOS"]
+           "SHAPED_GOALS_QOS", "NoDefaultQosEvents"]
 
 
 class NoDefaultQosEvents:
