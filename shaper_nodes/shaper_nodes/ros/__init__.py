@@ -52,6 +52,9 @@ raw_stream
     joint states): bytes in, the core's rules, bytes out.
 take_loop
     A lean node's subscriptions taken on one wait set built once, instead of rclpy's executor.
+sim_clock
+    ``use_sim_time``'s ``/clock`` taken on a side node's take loop, not on the node's executor (every node of
+    the suite, through ``node_main``).
 stream_watch
     The shaper node's bookkeeping of its inputs: arrivals through the rate watch, forwarded and refused counts.
 lockstep_reader

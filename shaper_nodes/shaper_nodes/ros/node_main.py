@@ -382,10 +382,14 @@ def _run(factory: Callable[[], Any], name: str, argv: list[str], stop: StopSigna
         print(f"{name}: the ROS arguments were refused: {said[0] if said else type(err).__name__}",
               file=sys.stderr, flush=True)
         return EXIT_CONFIG
+    from .sim_clock import ClockOnSide
+
     node = None
+    clock: ClockOnSide | None = None
     executor = SingleThreadedExecutor()
     try:
         node = factory()  # a signal meanwhile is acted on once the node is made
+        clock = ClockOnSide(node)  # /clock, with use_sim_time, on a thread of its own (ros/sim_clock.py)
         executor.add_node(node)
         stop.wake_with(node)
         while stop.signal is None and rclpy.ok():
@@ -406,6 +410,8 @@ def _run(factory: Callable[[], Any], name: str, argv: list[str], stop: StopSigna
             close = getattr(node, "close", None)
             if callable(close):
                 close()
+            if clock is not None:
+                clock.close()
             node.destroy_node()
         rclpy.try_shutdown()
     code = int(getattr(node, "exit_code", 0) or 0)

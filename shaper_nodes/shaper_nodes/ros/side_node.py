@@ -17,11 +17,16 @@ set again over every entity of its nodes at each wake-up, so a fast stream serve
 wakes a wait set of one subscription instead of the owner's dozens of entities (the scheduler's
 500 Hz ``/joint_states``). With ``take=True`` a lean side node is served by a
 :class:`~.take_loop.TakeLoop` instead (one wait set built once, no executor; subscriptions only).
+
+A side node that is not lean takes the process's arguments, ``-p use_sim_time:=true`` too; it keeps no
+``/clock`` subscription of its own (:func:`follow_parent_time`): its clock is set with the parent's, so
+a process has one ``/clock`` subscription, off its executors (:mod:`.sim_clock`).
 """
 
 from __future__ import annotations
 
 import threading
+from typing import Any
 
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -29,6 +34,21 @@ from rclpy.parameter import Parameter
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from .take_loop import TakeLoop
+
+
+def follow_parent_time(parent: Node, node: Node) -> None:
+    """``node`` on simulated time (``use_sim_time``) without a ``/clock`` subscription of its own: its clock is
+    set by ``parent``'s time source, with the parent's clock (rclpy's ``TimeSource`` internals, those
+    :mod:`.sim_clock` uses). Each ``/clock`` subscription wakes its node's executor at every message, several
+    thousand a second from the sim plant in lockstep. Nothing changes for a node on the system clock."""
+    own: Any = node._time_source
+    parent_source: Any = parent._time_source
+    if own._clock_sub is None or not parent_source.ros_time_is_active:
+        return
+    node.destroy_subscription(own._clock_sub)
+    own._clock_sub = None
+    own._subscribe_to_clock_topic = lambda: None  # use_sim_time turned on again: still the parent's time
+    parent_source.attach_clock(node.get_clock())
 
 
 class SideNode:
@@ -58,6 +78,7 @@ class SideNode:
         # a local __node rule comes before the process's global one (which names the parent)
         self.node = Node(name, namespace=parent.get_namespace(), context=parent.context,
                          cli_args=["--ros-args", "-r", f"__node:={name}"], start_parameter_services=False, **extra)
+        follow_parent_time(parent, self.node)
         self._take = take
         self._loop: TakeLoop | None = None
         self._executor = SingleThreadedExecutor(context=parent.context)
