@@ -42,10 +42,11 @@ def _clock_topics(node: Node) -> list[str]:
 
 
 def _publish_until(pub, stamp_s: float, done, timeout: float = WAIT, spin=None) -> None:
-    """Publish /clock at ``stamp_s`` (again every 10 ms: best effort, the first may go before discovery) until
-    ``done()`` or the timeout; ``spin()`` runs between the messages if given."""
+    """Publish /clock at ``stamp_s`` (s, or ns as an int above 1e12; again every 10 ms: best effort, the first may
+    go before discovery) until ``done()`` or the timeout; ``spin()`` runs between the messages if given."""
     msg = Clock()
-    msg.clock.sec, msg.clock.nanosec = int(stamp_s), int(round((stamp_s % 1) * 1e9))
+    ns = stamp_s if isinstance(stamp_s, int) and stamp_s > 10**12 else int(round(stamp_s * 1e9))
+    msg.clock.sec, msg.clock.nanosec = divmod(ns, 1_000_000_000)
     end = time.monotonic() + timeout
     while not done():
         assert time.monotonic() < end, f"/clock at {stamp_s} s not seen in {timeout} s"
@@ -68,6 +69,8 @@ def test_the_clock_follows_clock_with_the_executor_idle(ros_context):
         # nobody spins `node`: the side node's loop sets its clock
         for t in (12.5, 13.0, 20.25):
             _publish_until(pub, t, lambda t=t: node.get_clock().now().nanoseconds == int(t * 1e9))
+        big = 1_764_460_800_123_456_789  # a wall-clock-like time, to the ns
+        _publish_until(pub, big, lambda: node.get_clock().now().nanoseconds == big)
         assert node.get_clock().clock_type == ClockType.ROS_TIME and node.get_clock().ros_time_is_active
     finally:
         clock.close()

@@ -261,6 +261,13 @@ def joint_state_motion(raw, end: int) -> tuple[tuple[float, ...], tuple[float, .
     return vel, struct.unpack_from(f"<{neff}d", raw, _align(pos, 8) if neff else pos)
 
 
+def time_ns(raw) -> int:
+    """The builtin_interfaces/Time a CDR message begins with (a std_msgs/Header's stamp, rosgraph_msgs/Clock's
+    clock), in ns; either byte order."""
+    sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
 def little_endian(raw) -> bool:
     """Whether serialized bytes are little-endian CDR (their encapsulation header says so)."""
     return len(raw) > 4 and raw[1] == 1

@@ -15,23 +15,28 @@ from another thread. This is rclcpp's default (``NodeOptions::use_clock_thread``
 the node still wakes its executor when it is due: rcl triggers the timer's guard condition from the clock's
 jump callback when the new time passes the timer's next call, whichever thread sets the time.
 
-``TimeSource`` keeps the subscription in an attribute (``_clock_sub``) and makes it in a method
-(``_subscribe_to_clock_topic``) that turning ``use_sim_time`` on at run time calls again; both are rclpy
-internals (locked rclpy 7.1.6), checked by name in ``shaper_nodes/test/test_sim_clock.py``.
+``TimeSource`` keeps the subscription in an attribute (``_clock_sub``), makes it in a method
+(``_subscribe_to_clock_topic``) that turning ``use_sim_time`` on at run time calls again, and keeps its
+clocks and the last time in ``_associated_clocks`` and ``_last_time_set``; all rclpy internals (locked
+rclpy 7.1.6), checked by name in ``tests/test_sim_clock.py``.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
+
+from shaper_nodes.recordings.cdr import time_ns
 
 from .side_node import SideNode
 
 #: the rclpy internals of ``TimeSource`` used here (checked by the test named in the module docstring)
-INTERNALS = ("_clock_sub", "_subscribe_to_clock_topic", "clock_callback")
+INTERNALS = ("_clock_sub", "_subscribe_to_clock_topic", "_associated_clocks", "_last_time_set")
 #: rclpy's own QoS for ``/clock`` (``TimeSource._subscribe_to_clock_topic``)
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 
@@ -55,8 +60,16 @@ class ClockOnSide:
         if self.side is not None:
             return
         side = SideNode(self.node, "clock", take=True)
-        side.node.create_subscription(Clock, "/clock", self._source.clock_callback, CLOCK_QOS)
+        side.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS, raw=True)
         self.side = side.start()
+
+    def _on_clock(self, raw: bytes) -> None:
+        """``TimeSource.clock_callback`` on the serialized message: the time kept, and set on every clock."""
+        t = Time(nanoseconds=time_ns(raw), clock_type=ClockType.ROS_TIME)
+        source = self._source
+        source._last_time_set = t
+        for clock in tuple(source._associated_clocks):  # (a clock attached meanwhile by another thread)
+            clock.set_ros_time_override(t)
 
     def close(self) -> None:
         """Stop the side node's loop and destroy it (once)."""
