@@ -347,7 +347,8 @@ def run_node(factory: Callable[[], Any], name: str, args: list[str] | None = Non
     exit code 1, as does a ``--params-file`` that cannot be used (:func:`params_file_problem`). A
     node with a ``close()`` method gets it called before it is destroyed, with its context still valid
     when a signal stopped it (:class:`StopSignals`). A node that sets ``exit_code`` (and ``exit_reason``)
-    ends with that code, the reason printed as ``name: reason``.
+    ends with that code, the reason printed as ``name: reason``. With ``use_sim_time`` the node's ``/clock`` is
+    taken on a side node's thread, not by its executor (:class:`~.sim_clock.ClockOnSide`).
     """
     argv = list(sys.argv if args is None else args)
     if wants_help(argv):
