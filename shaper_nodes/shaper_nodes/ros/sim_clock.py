@@ -8,7 +8,7 @@ than real time: a node with sim time that had nothing else to do spent most of a
 (the shaper node 20 CPU s of the demo's 56 s calibration; docs/results/benchmarks.md, "Issue 34,
 session 23").
 
-:func:`clock_on_side` moves that subscription to a lean side node served by a
+:class:`ClockOnSide` moves that subscription to a lean side node served by a
 :class:`~.take_loop.TakeLoop` (one wait set of one subscription, built once), which hands each message to
 the node's own ``TimeSource.clock_callback``: the node's clocks get the same times in the same order,
 from another thread. This is rclcpp's default (``NodeOptions::use_clock_thread``). A ROS-time timer of
@@ -76,8 +76,3 @@ class ClockOnSide:
         if self.side is not None:
             side, self.side = self.side, None
             side.close()
-
-
-def clock_on_side(node: Node) -> ClockOnSide:
-    """Take ``node``'s ``/clock`` on a side node's thread (:class:`ClockOnSide`)."""
-    return ClockOnSide(node)
