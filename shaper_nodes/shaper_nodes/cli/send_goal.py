@@ -17,7 +17,8 @@ cycle N of task ``--task`` on ``--events`` (START, MOTION_END, END, stamped on t
 the hold is the cycle's residual window), for a learner per move, the identifier or a recording
 (cli/cycle_marks.py).
 
-It prints the result, ``succeeded`` or ``aborted``/``canceled``/``rejected``/``unknown`` (the action
+It prints a line with the goal's id when the controller accepts it, then the result, ``succeeded`` or
+``aborted``/``canceled``/``rejected``/``unknown`` (the action
 server gone, or restarted without the goal) with the controller's ``error_code`` (and its name) and
 ``error_string``, and the last feedback's largest position error, and exits 0 when the goal succeeded,
 1 when it did not (rejected, aborted, canceled, unknown) or a wait ran out (the line names what did
@@ -235,6 +236,8 @@ class GoalSender:
         if not handle.accepted:
             return Outcome("rejected")
         self.handle = handle
+        print(f"{PROG}: accepted by {self.action_name}, goal id {uuid.UUID(bytes=bytes(self.goal_id.uuid))}",
+              flush=True)
         result = handle.get_result_async()
         self.spin_until(result.done, result_timeout, f"result from {self.action_name}")
         self.handle = None
