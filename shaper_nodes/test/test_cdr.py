@@ -18,7 +18,15 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 
-from shaper_nodes.recordings.cdr import IMU_FIELDS, ImuCdr, JointStateCdr, SerializedMessage, clock_cdr, stamp_parts
+from shaper_nodes.recordings.cdr import (
+    IMU_FIELDS,
+    ImuCdr,
+    JointStateCdr,
+    SerializedMessage,
+    clock_cdr,
+    goal_feedback_stamp,
+    stamp_parts,
+)
 
 STAMPS = [(0, 0), (1, 999_999_999), (-3, 5), (2_147_483_647, 123)]
 # frame ids of every length mod 8 (the doubles after the header are aligned to 8), and non-ASCII
@@ -96,6 +104,33 @@ def test_clock_equals_rclpy(stamp: tuple[int, int]) -> None:
     msg.clock.sec, msg.clock.nanosec = stamp
     assert clock_cdr(*stamp) == serialize_message(msg)
     assert deserialize_message(clock_cdr(*stamp), Clock) == msg
+
+
+@pytest.mark.parametrize("stamp", STAMPS)
+def test_goal_feedback_stamp_reads_rclpys_feedback_message(stamp: tuple[int, int]) -> None:
+    """The goal id and the header stamp of a FollowJointTrajectory FeedbackMessage as rclpy serializes it (joint
+    names, three points filled), and of the same in big-endian CDR (the fields swapped by hand)."""
+    import struct
+    import uuid
+
+    from control_msgs.action import FollowJointTrajectory
+
+    msg = FollowJointTrajectory.Impl.FeedbackMessage()
+    goal = uuid.uuid4().bytes
+    msg.goal_id.uuid = list(goal)
+    fb = msg.feedback
+    fb.header.stamp.sec, fb.header.stamp.nanosec = stamp
+    fb.header.frame_id = "base_link"
+    fb.joint_names = [f"joint_{i}" for i in range(6)]
+    for point in (fb.desired, fb.actual, fb.error):
+        point.positions = [0.1 * i for i in range(6)]
+        point.velocities = [0.2] * 6
+    raw = serialize_message(msg)
+    assert goal_feedback_stamp(raw) == (goal, stamp[0] + 1e-9 * stamp[1])
+    big = bytearray(raw[:28])
+    big[1] = 0  # CDR_BE
+    big[20:28] = struct.pack(">iI", *stamp)
+    assert goal_feedback_stamp(bytes(big)) == (goal, stamp[0] + 1e-9 * stamp[1])
 
 
 def test_data_is_a_snapshot_and_stamp_parts_round_to_the_nanosecond() -> None:

@@ -268,6 +268,13 @@ def time_ns(raw) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
+def goal_feedback_stamp(raw) -> tuple[bytes, float]:
+    """(goal id, the feedback's header stamp in s) of a CDR action FeedbackMessage whose feedback begins with a
+    std_msgs/Header (FollowJointTrajectory's): the goal's 16-byte UUID, then the stamp; either byte order."""
+    sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 20)
+    return bytes(raw[4:20]), sec + 1e-9 * nanosec
+
+
 def little_endian(raw) -> bool:
     """Whether serialized bytes are little-endian CDR (their encapsulation header says so)."""
     return len(raw) > 4 and raw[1] == 1

@@ -38,15 +38,20 @@ class GoalFeedback:
         from .qos import FEEDBACK_QOS
 
         self._stamps: dict[bytes, list[float]] = {}
+        # raw: only the goal id and the stamp are read (recordings.cdr.goal_feedback_stamp), not the whole
+        # feedback (three trajectory points and the joint names) built as a message, which rclpy's action client
+        # does once already for every feedback it takes
         self._sub = node.create_subscription(action_type.Impl.FeedbackMessage,
                                              action_name.rstrip("/") + "/_action/feedback", self._on_feedback,
-                                             FEEDBACK_QOS)
+                                             FEEDBACK_QOS, raw=True)
 
-    def _on_feedback(self, msg: Any) -> None:
-        stamps = self._stamps.get(bytes(msg.goal_id.uuid))
+    def _on_feedback(self, raw: bytes) -> None:
+        from shaper_nodes.recordings.cdr import goal_feedback_stamp
+
+        goal, stamp = goal_feedback_stamp(raw)
+        stamps = self._stamps.get(goal)
         if stamps is not None:
-            stamp = msg.feedback.header.stamp
-            stamps.append(stamp.sec + stamp.nanosec * 1e-9)
+            stamps.append(stamp)
 
     def new_goal(self) -> tuple[Any, list[float]]:
         """A new goal id (a unique_identifier_msgs/UUID, to give ``send_goal_async`` as ``goal_uuid``) whose
