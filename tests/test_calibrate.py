@@ -144,6 +144,31 @@ def test_a_calibration_killed_mid_run_resumes_to_the_uninterrupted_result(start_
             assert abs(ma["damping_ratio"] - mb["damping_ratio"]) <= dz, (pa["name"], ma, mb)
 
 
+def test_the_pose_pipeline_writes_the_sequential_runs_files_byte_for_byte(small_calibration, tmp_path):
+    """``calibrate --execute`` with two workers identifies each pose as it completes and draws the figures in both
+    workers at once (analysis/calibration_pool.py); on the session's one-worker run's recording it writes that
+    run's files (the figures, scheduler.yaml, shaper.yaml, report.md and report.json) byte for byte."""
+    from shaper_nodes.analysis.calibration import pose_folders, read_recording
+    from shaper_nodes.analysis.calibration_pool import NICENESS, PosePipeline
+    from shaper_nodes.analysis.worker_pool import worker_pool
+
+    whole, run = small_calibration
+    assert run["returncode"] == 0, run["log"]
+    setup, _ = read_recording(whole / "recording")
+    out = tmp_path / "pipeline"
+    with worker_pool(2, NICENESS) as pool:
+        pipeline = PosePipeline(pool, setup, 2)
+        for folder in pose_folders(whole / "recording"):
+            pipeline.submit(int(folder.name.removeprefix("pose_")), folder)
+        _, written = pipeline.finish(out, *pipeline.results())
+    names = [p.name for p in written]
+    assert names == ["modes_vs_pose.png", "spectra.png", "residual.png", "scheduler.yaml", "shaper.yaml",
+                     "report.md", "report.json"]
+    for name in names:
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+    assert sorted(p.name for p in out.iterdir()) == sorted(names)  # no temporary file left
+
+
 def _flat(tree: dict, prefix: str = ""):
     for key, value in tree.items():
         if isinstance(value, dict):

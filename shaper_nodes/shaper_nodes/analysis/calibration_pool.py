@@ -74,8 +74,14 @@ class PosePipeline:
         return setup, results
 
     def finish(self, out: pathlib.Path, setup: dict[str, Any], results: list[Any]) -> tuple[Any, list[pathlib.Path]]:
-        """The calibration assembled and its outputs written in ``out`` by a worker
-        (:func:`.calibration_report.assemble_and_write`); an OSError of the writing is raised here."""
-        from .calibration_report import assemble_and_write
+        """The calibration assembled by a worker (:func:`.calibration_report.assemble_from_setup`), its figures
+        drawn by the workers at once (the longest first), then the rest of its outputs written by one
+        (:func:`.calibration_report.write_outputs`): the files :func:`.calibration_report.write_outputs` alone
+        writes, byte for byte. An OSError of the writing is raised here."""
+        from .calibration_report import FIGURES, LONGEST, assemble_from_setup, write_figure, write_outputs
 
-        return self.pool.submit(assemble_and_write, out, setup, results).result()
+        cal = self.pool.submit(assemble_from_setup, setup, results).result()
+        names = sorted((name for name, _ in FIGURES), key=lambda name: name != LONGEST)
+        jobs = {name: self.pool.submit(write_figure, out, cal, name) for name in names}
+        figs = [path for name, _ in FIGURES if (path := jobs[name].result()) is not None]
+        return cal, self.pool.submit(write_outputs, out, cal, "recording", figs).result()

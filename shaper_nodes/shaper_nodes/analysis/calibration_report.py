@@ -146,26 +146,35 @@ def residual_figure(cal: Calibration) -> Any:
     return fig
 
 
-def figures(out: pathlib.Path, cal: Calibration) -> list[pathlib.Path]:
-    """Writes the figures that ``cal`` has data for (PNG, Agg) into ``out``; the paths written."""
+#: the figures, in report order: (file name, the function that builds it)
+FIGURES = (("modes_vs_pose.png", modes_figure), ("spectra.png", spectra_figure), ("residual.png", residual_figure))
+#: the figure that takes longest to draw (a panel per pose): :class:`.calibration_pool.PosePipeline` starts it first
+LONGEST = "spectra.png"
+
+
+def write_figure(out: pathlib.Path, cal: Calibration, name: str) -> pathlib.Path | None:
+    """Writes figure ``name`` (one of :data:`FIGURES`; PNG, Agg) into ``out`` if ``cal`` has data for it; its path,
+    or None."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    paths = []
-    for name, build in (("modes_vs_pose.png", modes_figure), ("spectra.png", spectra_figure),
-                        ("residual.png", residual_figure)):
-        fig = build(cal)
-        if fig is None:
-            continue
-        tmp = out / (name + ".tmp.png")
-        fig.savefig(tmp, dpi=100)
-        plt.close(fig)
-        write_atomic(out / name, tmp.read_bytes())
-        tmp.unlink()
-        paths.append(out / name)
-    return paths
+    fig = dict(FIGURES)[name](cal)
+    if fig is None:
+        return None
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / (name + ".tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    write_atomic(out / name, tmp.read_bytes())
+    tmp.unlink()
+    return out / name
+
+
+def figures(out: pathlib.Path, cal: Calibration) -> list[pathlib.Path]:
+    """Writes the figures that ``cal`` has data for (PNG, Agg) into ``out``; the paths written."""
+    return [path for name, _ in FIGURES if (path := write_figure(out, cal, name)) is not None]
 
 
 def _label_mode_axes(col: Any, joint: str) -> None:
@@ -213,11 +222,13 @@ def markdown(cal: Calibration, report: dict[str, Any], figs: list[str], recordin
     return "\n".join(lines) + "\n"
 
 
-def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recording") -> list[pathlib.Path]:
-    """report.json, report.md with figures, scheduler.yaml and shaper.yaml in ``out``; the paths written."""
+def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recording",
+                  figs: list[pathlib.Path] | None = None) -> list[pathlib.Path]:
+    """report.json, report.md with figures, scheduler.yaml and shaper.yaml in ``out``; the paths written. ``figs``:
+    the figures already written (by :func:`write_figure`), in report order; without, :func:`figures` writes them."""
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    figs = figures(out, cal)
+    figs = figures(out, cal) if figs is None else figs
     written += figs
     report = report_dict(cal)
     if cal.rule_base is not None:
@@ -231,11 +242,9 @@ def write_outputs(out: pathlib.Path, cal: Calibration, recording: str = "recordi
     return [*written, out / "report.md", out / "report.json"]
 
 
-def assemble_and_write(out: pathlib.Path, setup: dict[str, Any], results: list[Any],
-                       recording: str = "recording") -> tuple[Calibration, list[pathlib.Path]]:
+def assemble_from_setup(setup: dict[str, Any], results: list[Any]) -> Calibration:
     """The calibration from its poses' results on the setup they were recorded with (as
-    :func:`.calibration.compute` assembles it), and :func:`write_outputs`'s files; both returned (``calibrate``
-    runs it in a worker of its pool: the recording process imports neither the fits nor matplotlib)."""
+    :func:`.calibration.compute` assembles it; ``calibrate`` runs it in a worker of its pool: the recording process
+    imports neither the fits nor matplotlib)."""
     plan, settings, family, threshold = plan_from_setup(setup)
-    cal = assemble(plan, settings, family, threshold, results, wiring_of(setup))
-    return cal, write_outputs(out, cal, recording)
+    return assemble(plan, settings, family, threshold, results, wiring_of(setup))
