@@ -170,15 +170,16 @@ class _Recorder:
         return (len(ends) >= steps and bool(self.js) and self.js[-1][0] >= last_end and bool(self.tip)
                 and self.tip[-1][0] >= last_end)
 
-    def run(self, case: Case) -> Run:
-        """The recording as a :class:`Run`: joint and tip states paired by stamp, residuals per step."""
+    def run(self, case: Case, steps: int = len(STEP_LEVELS)) -> Run:
+        """The recording of the first ``steps`` steps as a :class:`Run`: joint and tip states paired by stamp,
+        residuals per step."""
         # a loaded machine may starve this driver and let a few messages go (the plant keeps 10); what
         # arrived is paired by stamp, and a run that lost more than 10 % is an error
         t_js, x0_all = np.array(self.js).T
         t_tip, x1_all = np.array(self.tip).T
         t0, i0, i1 = np.intersect1d(t_js, t_tip, return_indices=True)
         x0, x1 = x0_all[i0], x1_all[i1]
-        expected = int(round((PREROLL + len(STEP_LEVELS) * DWELL) * RATE))
+        expected = int(round((PREROLL + steps * DWELL) * RATE))
         if t0.size < 0.9 * expected:
             raise RuntimeError(f"only {t0.size} of {expected} joint and tip states arrived")
         v = np.array(self.cmd)  # the k-th shaped command is integrated over the k-th step (if none was lost)
@@ -188,13 +189,13 @@ class _Recorder:
                    self.active)
 
 
-def _start_nodes(case: Case, start: StartNode) -> None:
+def _start_nodes(case: Case, start: StartNode, steps: int) -> None:
     # with a scheduler, the plant waits for it as a lockstep reader, one period ahead at most: its retune is
     # answered by the shaper before the plant asks for the next step, whatever the load (scheduler.md)
     readers = {"lockstep.readers": [SCHEDULER], "lockstep.lead": 1.0 / RATE} if case.scheduler is not None else {}
     start("sim_plant_node", "sim_plant", {
         "joint_names": [JOINT], "rate": RATE, "mode": "lockstep", "plant.model": "two_mass",
-        "imu.axes": [0, -1, -1], "task.start": [0.0], "task.levels": [float(v) for v in STEP_LEVELS],
+        "imu.axes": [0, -1, -1], "task.start": [0.0], "task.levels": [float(v) for v in STEP_LEVELS[:steps]],
         "task.dwell": DWELL, "task.preroll": PREROLL, "lockstep_timeout": 10.0, "joint_states.idle_period": 0.1,
         **readers})
     shaper = {"joint_names": [JOINT], "command_rate": RATE, "use_sim_time": True, **case.shaper}
@@ -260,10 +261,13 @@ def _has_subscribers(node: Any, topic: str, n: int) -> bool:
 
 
 def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
-             progress: Callable[[str], None] | None = None, commands: bool = True) -> Run:
-    """Run the five steps of ``case``; ``start(package, executable, params)`` starts a node process.
-    ``commands``: also record the shaped commands (``Run.v_shaped``, which only the docs' plot shows; a
-    message fewer per step to take without)."""
+             progress: Callable[[str], None] | None = None, commands: bool = True, steps: int = len(STEP_LEVELS)
+             ) -> Run:
+    """Run the five steps of ``case`` (the first ``steps`` of them: the plant's task ends after them);
+    ``start(package, executable, params)`` starts a node process. ``commands``: also record the shaped commands
+    (``Run.v_shaped``, which only the docs' plot shows; a message fewer per step to take without)."""
+    if not 1 <= steps <= len(STEP_LEVELS):
+        raise ValueError(f"steps must be 1 to {len(STEP_LEVELS)}, got {steps}")
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
@@ -276,7 +280,7 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
     class Driver(NoDefaultQosEvents, Node):
         pass
 
-    _start_nodes(case, start)
+    _start_nodes(case, start, steps)
     # no parameter or type description services, no QoS event handlers: rclpy's executor builds its wait set over
     # every entity of the node at each of the run's thousands of wake-ups (as the Conductor's)
     node = Driver("scheduler_cases", context=ctx, start_parameter_services=False,
@@ -289,7 +293,7 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
     try:
         _wait_for_nodes(case, node, until, rec, start_cli, commands)
         _start_task(start_cli, until)
-        n_steps = len(STEP_LEVELS)
+        n_steps = steps
         seen = 0
 
         def finished() -> bool:
@@ -300,13 +304,13 @@ def run_case(case: Case, start: StartNode, ctx: Any, timeout: float = 900.0,
                 progress(f"step {ends} of {n_steps} done")
             return rec.complete(n_steps)
 
-        until(finished, timeout, "the five steps")
+        until(finished, timeout, f"the {n_steps} steps")
         settle = time.monotonic() + 0.5
         until(lambda: time.monotonic() > settle, 5.0, "the last messages")
     finally:
         ex.shutdown()
         node.destroy_node()
-    return rec.run(case)
+    return rec.run(case, steps)
 
 
 # --------------------------------------------------------------------------------------------- docs
