@@ -28,12 +28,14 @@ Goal = FollowJointTrajectory.Goal
 
 class LossyHandle:
     """The server's rclpy handle, losing the first ``lose_goal`` goal responses and the first
-    ``lose_result`` result responses (they are handled, then not sent)."""
+    ``lose_result`` result responses (they are handled, then not sent); ``result_requests`` counts the result
+    requests taken (a client asks for the result once it has the goal's answer)."""
 
     def __init__(self, handle: Any, lose_goal: int = 0, lose_result: int = 0, lose_status: bool = False) -> None:
         self._handle, self.lose_goal, self.lose_result = handle, lose_goal, lose_result
         self.lose_status = lose_status
         self.goal_requests = 0
+        self.result_requests = 0
         self.lost = 0
 
     def __getattr__(self, name: str) -> Any:
@@ -52,6 +54,12 @@ class LossyHandle:
             self.lost += 1
             return
         self._handle.send_goal_response(header, response)
+
+    def take_result_request(self, *args: Any) -> Any:
+        taken = self._handle.take_result_request(*args)
+        if taken is not None and taken[0] is not None:
+            self.result_requests += 1
+        return taken
 
     def publish_status(self) -> None:
         if not self.lose_status:

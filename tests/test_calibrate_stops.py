@@ -55,7 +55,8 @@ def wait_for(done, what: str, timeout: float = 300.0, proc: NodeProcess | None =
 class StuckController:
     """The controller's side as calibrate sees it: joint states (the arm at HOME), an accelerometer, and a
     FollowJointTrajectory server whose goals run until cancelled (feedback at 20 Hz); ``cancels`` counts
-    the cancel requests that arrived."""
+    the cancel requests that arrived, ``answered`` whether a client has had a goal's answer (it asked for the
+    result)."""
 
     def __init__(self, ctx, padding: int = 0, mute: bool = False) -> None:
         self.node = rclpy.create_node("stuck_controller", context=ctx)
@@ -72,8 +73,10 @@ class StuckController:
         self.server = ActionServer(self.node, FollowJointTrajectory, ACTION, execute_callback=self._execute,
                                    goal_callback=lambda _g: GoalResponse.ACCEPT,
                                    cancel_callback=self._cancel, callback_group=group)
-        if mute:  # its answers to goal requests and its status never arrive (lost; the feedback does)
-            self.server._handle = LossyHandle(self.server._handle, lose_goal=1 << 30, lose_status=True)
+        # muted, its answers to goal requests and its status never arrive (lost; the feedback does); either way it
+        # counts the result requests (a client asks for a goal's result once it has the goal's answer)
+        self.handle = self.server._handle = LossyHandle(self.server._handle, lose_goal=(1 << 30) if mute else 0,
+                                                        lose_status=mute)
         self.ex = MultiThreadedExecutor(num_threads=4, context=ctx)
         self.ex.add_node(self.node)
         self.died: BaseException | None = None  # what ended its executor's spin, if anything did before close()
@@ -87,6 +90,9 @@ class StuckController:
             self.ex.spin()
         except BaseException as err:
             self.died = err
+
+    def answered(self) -> bool:
+        return self.handle.result_requests >= 1
 
     def describe(self) -> str:
         """The controller's state for a failed assertion: goals, cancels, and whether its executor died."""
@@ -159,6 +165,8 @@ def test_sigterm_cancels_the_running_goal_at_the_controller(ros_context, domain_
     proc = start_calibrate(domain_id, tmp_path, ["--execute", "--out", str(out)])
     try:
         wait_for(lambda: peer.goals >= 1, "calibrate's first goal at the controller", proc=proc)
+        if answer == "delivered":  # the answer in at calibrate (it asked for the result), not only the goal out
+            wait_for(peer.answered, "calibrate's request for the goal's result", proc=proc)
         assert peer.cancels == 0
         proc.proc.send_signal(signal.SIGTERM)
         code = proc.proc.wait(timeout=120.0)
