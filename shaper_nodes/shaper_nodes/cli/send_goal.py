@@ -18,9 +18,9 @@ the hold is the cycle's residual window), for a learner per move, the identifier
 (cli/cycle_marks.py).
 
 It prints a line with the goal's id when the controller accepts it, then the result, ``succeeded`` or
-``aborted``/``canceled``/``rejected``/``unknown`` (the action
-server gone, or restarted without the goal) with the controller's ``error_code`` (and its name) and
-``error_string``, and the last feedback's largest position error, and exits 0 when the goal succeeded,
+``aborted``/``canceled``/``rejected``/``unknown`` (the action server gone, or restarted without the goal)
+with the controller's ``error_code`` (and its name) and ``error_string``, and the last feedback's
+largest position error, and exits 0 when the goal succeeded,
 1 when it did not (rejected, aborted, canceled, unknown) or a wait ran out (the line names what did
 not come: the action server, the joint states, the answer to the goal, its result; a goal sent is
 cancelled first), 2 for bad input, 130 after Ctrl-C (SIGINT) and 143 after SIGTERM (the goal is cancelled
