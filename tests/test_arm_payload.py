@@ -18,6 +18,7 @@ import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
+from conftest import call_answered
 from control_msgs.action import FollowJointTrajectory
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.action import ActionClient
@@ -69,10 +70,8 @@ class Client:
             self.ex.spin_once(timeout_sec=0.05)
 
     def call(self, cli, request, what: str):
-        self.spin_until(cli.service_is_ready, f"the service of {what}")
-        future = cli.call_async(request)
-        self.spin_until(future.done, f"the answer to {what}")
-        return future.result()
+        """The node's answer, the request sent again while none comes (a get, or a set of the same values)."""
+        return call_answered(self.ex, cli, request, what, timeout=60.0)
 
     def set_payload(self, **values: float):
         req = SetParameters.Request(parameters=[Parameter(f"arm.payload_{k}", value=v).to_parameter_msg()

@@ -29,7 +29,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
-from conftest import RESTARTED
+from conftest import RESTARTED, call_answered
 from relearn_peer import LEARNER_PROXY, Peer
 from sensor_msgs.msg import Imu, JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -203,9 +203,7 @@ class Cell:
         req = ShaperAt.Request(pose=JointState(name=NAMES, position=goal))
         if with_start:
             req.start = JointState(name=NAMES, position=start)
-        future = self.at.call_async(req)
-        self.peer.spin_until(future.done, "the scheduler's answer")
-        resp = future.result()
+        resp = call_answered(self.peer.ex, self.at, req, "the scheduler's shaper_at", timeout=60.0)
         assert resp.success, resp.message
         return np.asarray(resp.shaper.amplitudes), np.asarray(resp.shaper.times)
 

@@ -13,10 +13,9 @@ trap, so that a change of rmw that reads the variable shows here).
 from __future__ import annotations
 
 import pathlib
-import time
 
 import pytest
-from conftest import RESTARTED
+from conftest import RESTARTED, call_answered
 from rcl_interfaces.srv import GetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -38,15 +37,9 @@ def answered(ros_context, node_name: str) -> list[str]:
     ex.add_node(node)
     try:
         client = node.create_client(GetParameters, f"/{node_name}/get_parameters")
-        deadline = time.monotonic() + WAIT
-        while not client.service_is_ready():
-            assert time.monotonic() < deadline, f"/{node_name}/get_parameters not discovered within {WAIT:g} s"
-            ex.spin_once(timeout_sec=0.1)
-        future = client.call_async(GetParameters.Request(names=["use_sim_time"]))
-        while not future.done():
-            assert time.monotonic() < deadline, f"/{node_name}/get_parameters not answered within {WAIT:g} s"
-            ex.spin_once(timeout_sec=0.1)
-        return [str(v) for v in future.result().values]
+        answer = call_answered(ex, client, GetParameters.Request(names=["use_sim_time"]),
+                               f"/{node_name}/get_parameters", timeout=WAIT)
+        return [str(v) for v in answer.values]
     finally:
         ex.shutdown()
         node.destroy_node()

@@ -14,11 +14,11 @@ import pathlib
 import re
 import shutil
 import subprocess
-import time
 
 import pytest
 import rclpy
 import yaml
+from conftest import call_answered
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters, SetParametersAtomically
@@ -70,17 +70,13 @@ class Services:
             self.ex.add_node(n)
 
     def call(self, srv_type, name: str, request):
+        """The answer of a parameter service of another process; sent again while none comes (every request
+        here is idempotent in effect: a list, a get, a set of the values already set)."""
         cli = self.probe.create_client(srv_type, name)
-        end = time.monotonic() + TIMEOUT
-        while not cli.service_is_ready():
-            assert time.monotonic() < end, f"no service {name}"
-            self.ex.spin_once(timeout_sec=0.05)
-        fut = cli.call_async(request)
-        while not fut.done():
-            assert time.monotonic() < end, f"no answer from {name}"
-            self.ex.spin_once(timeout_sec=0.05)
-        self.probe.destroy_client(cli)
-        return fut.result()
+        try:
+            return call_answered(self.ex, cli, request, name, timeout=TIMEOUT)
+        finally:
+            self.probe.destroy_client(cli)
 
     def dump(self, node: str) -> dict[str, ParameterValue]:
         """Every parameter of ``node`` (fully qualified name) and its value: ``ros2 param dump``."""
