@@ -158,6 +158,41 @@ def test_the_mrilc_learner_learns_from_a_cycle_whose_start_it_missed_as_from_the
     assert missed_moves == seen_moves  # the learned coefficients, digit for digit
 
 
+def test_a_new_moves_first_cycle_whose_start_the_speed_learner_missed_runs_as_planned_and_is_reported(
+        start_node, ros_context, program, tmp_path):
+    """A move's first cycle whose START the speed learner missed: its goal, a move not known yet, waits
+    ``speed.match_timeout`` s for a START that never comes and goes on as planned (no factor: none known for it); the
+    stand-in at MOTION_END finds the goal matched to no cycle, and the cycle is reported not learned from with that
+    reason (learner_speed.UNMATCHED). The move's next cycle, its START seen, is
+    its first learned from (factor 1, the next 1.2). Cycle 0, another move, seen: the learner listens from the start
+    (its samples reach back to the stand-in's stamp, the window rule's other reason not to learn)."""
+    params = {**speed_params(tmp_path / "state.json"), "speed.match_timeout": 2.0}
+    learner = start_node("shaper_nodes", "learner", params)
+    peer = Peer(ros_context, SPEED_CONTROLLER, imu=True)
+
+    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
+        motion = motion_end(sent)
+        return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
+
+    try:
+        peer.spin_until(lambda: peer.learner_up(SPEED_INPUTS, set()), "the learner's subscriptions and action server")
+        other, _ = one_cycle(peer, peer.events, 0, NAMES, SPEED_MOVES[1], plan(1), window)
+        assert "skipped" not in other and other["speed_factor"] == 1.0, other
+        got, sent = one_cycle(peer, StartLost(program), 1, NAMES, SPEED_MOVES[0], plan(0), window)
+        assert got == {"skipped": 1.0}, got
+        assert sent.points == plan(0).points  # as planned: not scaled
+        line = ("cycle 1 not learned from: its START was missed and its goal, which came before the stand-in, matched"
+                " no move known then (the move's first cycle): it went as planned, its factor not recorded")
+        peer.spin_until(lambda: any(line in m for m in peer.logs), "the learner's line on cycle 1")
+        assert any("a goal matched no move's START" in m and "sent as planned" in m for m in peer.logs), peer.logs
+        first, sent = one_cycle(peer, peer.events, 2, NAMES, SPEED_MOVES[0], plan(0), window)
+        assert "skipped" not in first, first
+        assert first["speed_factor"] == pytest.approx(1.0) and first["factor_next"] == pytest.approx(1.2), first
+        assert learner.stop(timeout=60.0) == 0, learner.log_path.read_text()
+    finally:
+        peer.destroy()
+
+
 def test_a_stale_record_is_ignored_and_a_stood_in_start_gets_its_goals_record(ros_context, program, tmp_path):
     """The shaper node's ``~/shaped_goals`` is latched (depth 16): a learner that starts receives the records of goals
     sent before it. A stale FALLBACK of a move, stamped long before the move's next START, took that cycle (the START
