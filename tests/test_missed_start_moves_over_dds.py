@@ -158,39 +158,70 @@ def test_the_mrilc_learner_learns_from_a_cycle_whose_start_it_missed_as_from_the
     assert missed_moves == seen_moves  # the learned coefficients, digit for digit
 
 
+def first_cycle_missed(start_node, ros_context, program, params: dict, inputs, controller: str, names,
+                       moves: Sequence[tuple], plans: Sequence[JointTrajectory], window, how: str
+                       ) -> tuple[dict[str, float], dict[str, float]]:
+    """A move's first cycle whose START a per-move learner (its own process) missed, and the move's next cycle: cycle 0
+    of move 1, seen (the learner listens from the start: its samples reach back to the stand-in's stamp, the window
+    rule's other reason not to learn); cycle 1, move 0's first, its START lost; cycle 2 of move 0, seen. Shown: cycle
+    1's goal, of a move not known yet, waits the learner's match timeout for a START that never comes and reaches the
+    controller as planned; the stand-in at MOTION_END finds the goal matched to no cycle, and the cycle is reported
+    not learned from with that reason (the learner's UNMATCHED, ending with ``how``: what the goal went without).
+    Returns the reports of cycles 0 and 2."""
+    learner = start_node("shaper_nodes", "learner", params)
+    peer = Peer(ros_context, controller, imu=True)
+    try:
+        peer.spin_until(lambda: peer.learner_up(inputs, set()), "the learner's subscriptions and action server")
+        other, _ = one_cycle(peer, peer.events, 0, names, moves[1], plans[1], window)
+        got, sent = one_cycle(peer, StartLost(program), 1, names, moves[0], plans[0], window)
+        assert got == {"skipped": 1.0}, got
+        assert sent.points == plans[0].points  # as planned
+        line = ("cycle 1 not learned from: its START was missed and its goal, which came before the stand-in, matched"
+                f" no move known then (the move's first cycle): {how}")
+        peer.spin_until(lambda: any(line in m for m in peer.logs), "the learner's line on cycle 1")
+        assert any(m.startswith("a goal matched no move's START") for m in peer.logs), peer.logs  # its WARN
+        first, _ = one_cycle(peer, peer.events, 2, names, moves[0], plans[0], window)
+        assert learner.stop(timeout=60.0) == 0, learner.log_path.read_text()
+    finally:
+        peer.destroy()
+    return other, first
+
+
 def test_a_new_moves_first_cycle_whose_start_the_speed_learner_missed_runs_as_planned_and_is_reported(
         start_node, ros_context, program, tmp_path):
-    """A move's first cycle whose START the speed learner missed: its goal, a move not known yet, waits
-    ``speed.match_timeout`` s for a START that never comes and goes on as planned (no factor: none known for it); the
-    stand-in at MOTION_END finds the goal matched to no cycle, and the cycle is reported not learned from with that
-    reason (learner_speed.UNMATCHED). The move's next cycle, its START seen, is
-    its first learned from (factor 1, the next 1.2). Cycle 0, another move, seen: the learner listens from the start
-    (its samples reach back to the stand-in's stamp, the window rule's other reason not to learn)."""
-    params = {**speed_params(tmp_path / "state.json"), "speed.match_timeout": 2.0}
-    learner = start_node("shaper_nodes", "learner", params)
-    peer = Peer(ros_context, SPEED_CONTROLLER, imu=True)
-
+    """:func:`first_cycle_missed` for the speed learner (its match timeout 2 s): cycle 2 is move 0's first learned
+    from, at factor 1 (the next 1.2), as cycle 0 was move 1's."""
     def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
         motion = motion_end(sent)
         return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
 
-    try:
-        peer.spin_until(lambda: peer.learner_up(SPEED_INPUTS, set()), "the learner's subscriptions and action server")
-        other, _ = one_cycle(peer, peer.events, 0, NAMES, SPEED_MOVES[1], plan(1), window)
-        assert "skipped" not in other and other["speed_factor"] == 1.0, other
-        got, sent = one_cycle(peer, StartLost(program), 1, NAMES, SPEED_MOVES[0], plan(0), window)
-        assert got == {"skipped": 1.0}, got
-        assert sent.points == plan(0).points  # as planned: not scaled
-        line = ("cycle 1 not learned from: its START was missed and its goal, which came before the stand-in, matched"
-                " no move known then (the move's first cycle): it went as planned, its factor not recorded")
-        peer.spin_until(lambda: any(line in m for m in peer.logs), "the learner's line on cycle 1")
-        assert any("a goal matched no move's START" in m and "sent as planned" in m for m in peer.logs), peer.logs
-        first, sent = one_cycle(peer, peer.events, 2, NAMES, SPEED_MOVES[0], plan(0), window)
-        assert "skipped" not in first, first
-        assert first["speed_factor"] == pytest.approx(1.0) and first["factor_next"] == pytest.approx(1.2), first
-        assert learner.stop(timeout=60.0) == 0, learner.log_path.read_text()
-    finally:
-        peer.destroy()
+    params = {**speed_params(tmp_path / "state.json"), "speed.match_timeout": 2.0}
+    other, first = first_cycle_missed(start_node, ros_context, program, params, SPEED_INPUTS, SPEED_CONTROLLER,
+                                      NAMES, SPEED_MOVES, (plan(0), plan(1)), window,
+                                      "it went as planned, its factor not recorded")
+    for got in (other, first):
+        assert "skipped" not in got, got
+        assert got["speed_factor"] == pytest.approx(1.0) and got["factor_next"] == pytest.approx(1.2), got
+
+
+def test_a_new_moves_first_cycle_whose_start_the_mrilc_learner_missed_runs_uncorrected_and_is_reported(
+        start_node, ros_context, program, tmp_path):
+    """:func:`first_cycle_missed` for the MRILC learner per move (its match timeout 2 s; the simulated arm's lifted
+    operator): cycle 2 is move 0's first iteration, as cycle 0 was move 1's."""
+    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
+        index = next(i for i, m in enumerate(ARM_MOVES)  # the move whose goal pose the goal ends at
+                     if list(sent.points[-1].positions) == pytest.approx(m.positions[-1].tolist(), abs=1e-9))
+        accelerometer(peer, t0, index, WINDOW)
+        return t0 + float(ARM_MOVES[index].duration), t0 + WINDOW
+
+    params = {**mrilc_params(tmp_path / "state.json"), "mrilc_moves.match_timeout": 2.0}
+    poses = [(m.positions[0], m.positions[-1]) for m in ARM_MOVES]
+    other, first = first_cycle_missed(start_node, ros_context, program, params, MRILC_INPUTS, MRILC_CONTROLLER,
+                                      JOINT_NAMES, poses, (goal(0), goal(1)), window,
+                                      "it went uncorrected, without the move's plan")
+    for got in (other, first):
+        assert "skipped" not in got, got
+        assert got["iteration"] == 1.0, got
 
 
 def test_a_stale_record_is_ignored_and_a_stood_in_start_gets_its_goals_record(ros_context, program, tmp_path):
