@@ -204,6 +204,37 @@ def test_a_new_moves_first_cycle_whose_start_the_speed_learner_missed_runs_as_pl
         assert got["speed_factor"] == pytest.approx(1.0) and got["factor_next"] == pytest.approx(1.2), got
 
 
+def test_a_known_moves_cycle_whose_start_was_missed_and_whose_goal_leaves_out_its_start_is_reported_so(
+        start_node, ros_context, program, tmp_path):
+    """A goal that leaves out its start point (a FollowJointTrajectory goal need not begin where the robot stands) is
+    matched to its cycle by its START (its last point the START's goal pose), not before it: with the START missed
+    the goal waits the match timeout and goes as planned, and the cycle's reason says the goal did not match its move
+    (not "the move's first cycle", which it is not). The speed learner, its own process; cycle 0 of the move seen."""
+    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
+        motion = motion_end(sent)
+        return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
+
+    trimmed = plan(0)
+    trimmed.points = trimmed.points[1:]  # from the first point after the start (t > 0)
+    learner = start_node("shaper_nodes", "learner", {**speed_params(tmp_path / "state.json"),
+                                                     "speed.match_timeout": 2.0})
+    peer = Peer(ros_context, SPEED_CONTROLLER, imu=True)
+    try:
+        peer.spin_until(lambda: peer.learner_up(SPEED_INPUTS, set()), "the learner's subscriptions and action server")
+        got, _ = one_cycle(peer, peer.events, 0, NAMES, SPEED_MOVES[0], trimmed, window)
+        assert "skipped" not in got and got["factor_next"] == pytest.approx(1.2), got  # matched by its START
+        got, sent = one_cycle(peer, StartLost(program), 1, NAMES, SPEED_MOVES[0], trimmed, window)
+        assert got == {"skipped": 1.0}, got
+        assert sent.points == trimmed.points  # as planned
+        line = ("cycle 1 not learned from: its START was missed and its goal, which came before the stand-in, did not"
+                " match its move: an early goal is matched by its first and last points, within 0.001 rad of the"
+                " move's start and goal poses: it went as planned, its factor not recorded")
+        peer.spin_until(lambda: any(line in m for m in peer.logs), "the learner's line on cycle 1")
+        assert learner.stop(timeout=60.0) == 0, learner.log_path.read_text()
+    finally:
+        peer.destroy()
+
+
 def test_a_new_moves_first_cycle_whose_start_the_mrilc_learner_missed_runs_uncorrected_and_is_reported(
         start_node, ros_context, program, tmp_path):
     """:func:`first_cycle_missed` for the MRILC learner per move (its match timeout 2 s; the simulated arm's lifted

@@ -76,7 +76,7 @@ from trajectory_msgs.msg import JointTrajectory
 from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.cycles import END, START, unseen_window
-from shaper_nodes.core.learning.move_cycles import MoveCycles
+from shaper_nodes.core.learning.move_cycles import MoveCycles, unmatched
 from shaper_nodes.core.learning.moves import MoveError, move_key
 from shaper_nodes.core.learning.mrilc.model import MrilcError
 from shaper_nodes.core.learning.mrilc.moves import MoveLearner
@@ -109,9 +109,8 @@ MAX_SAMPLES = 400_000
 _ENTRY = {"start", "goal", "joint_names", "learner"}
 #: why a cycle whose goal ran with a correction dropped meanwhile is not learned from
 RESET = "every move's correction was dropped (drift warning) after this cycle's goal ran with it"
-#: why a cycle whose START was missed, its goal come before the stand-in matching no move known, is not learned from
-UNMATCHED = ("its START was missed and its goal, which came before the stand-in, matched no move known then (the"
-             " move's first cycle): it went uncorrected, without the move's plan")
+#: how a goal matched to no cycle went (the reason a cycle whose START was missed is not learned from: unmatched())
+UNMATCHED = "it went uncorrected, without the move's plan"
 
 
 @dataclass
@@ -354,7 +353,8 @@ class MrilcMovesMode:
             except MoveError as err:
                 self.node.get_logger().error(f"cycle {cycle}: the move cannot be identified: {err}")
                 return None
-            if key not in self.moves:
+            new = key not in self.moves
+            if new:
                 self.moves[key] = _Move(key, [float(x) for x in msg.start_positions],
                                         [float(x) for x in msg.goal_positions], list(msg.joint_names))
             opened = self.cycles.started(cycle, _Cycle(key, stamp, np.asarray(msg.goal_positions, dtype=float)),
@@ -362,7 +362,7 @@ class MrilcMovesMode:
             if stood_in:  # its samples must reach back to the stand-in's stamp, and its goal must have been matched
                 held = self._samples[0][0] if self._samples else None
                 opened.refused = opened.refused or unseen_window(stamp, held) \
-                    or ("" if opened.applied is not None else UNMATCHED)
+                    or ("" if opened.applied is not None else unmatched(new, UNMATCHED))
             self.payload.seen(cycle, key)
             return None
         if msg.event != END:

@@ -86,7 +86,7 @@ from shaper_msgs.msg import CycleEvent, CycleReport
 from shaper_msgs.srv import ShaperAt
 from shaper_nodes.core.checks import InputError
 from shaper_nodes.core.cycles import END, START, unseen_window
-from shaper_nodes.core.learning.move_cycles import MoveCycles
+from shaper_nodes.core.learning.move_cycles import MoveCycles, unmatched
 from shaper_nodes.core.learning.moves import MoveError, MoveStore
 from shaper_nodes.core.learning.speed import (
     SpeedError,
@@ -119,9 +119,8 @@ MAX_SAMPLES = 400_000
 _DOC_KEYS = {"version", "per_move", "moves", "joint_names", FLAG, "saved_at"}
 #: why a cycle under way when the moves were relearned is not learned from
 RESET = "every move's factor was relearned (drift warning) while this cycle ran"
-#: why a cycle whose START was missed, its goal come before the stand-in matching no move known, is not learned from
-UNMATCHED = ("its START was missed and its goal, which came before the stand-in, matched no move known then (the"
-             " move's first cycle): it went as planned, its factor not recorded")
+#: how a goal matched to no cycle went (the reason a cycle whose START was missed is not learned from: unmatched())
+UNMATCHED = "it went as planned, its factor not recorded"
 
 
 @dataclass
@@ -361,7 +360,7 @@ class SpeedMovesMode:
             if stood_in:  # its samples must reach back to the stand-in's stamp, and its goal must have been matched
                 held = self._samples[0][0] if self._samples else None
                 opened.refused = opened.refused or unseen_window(stamp, held) \
-                    or ("" if opened.taken else UNMATCHED)
+                    or ("" if opened.taken else unmatched(new, UNMATCHED))
             return None
         if msg.event != END:
             return None

@@ -29,7 +29,7 @@ from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
-__all__ = ["KEPT", "MATCH", "MoveCycles", "goal_matches"]
+__all__ = ["KEPT", "MATCH", "MoveCycles", "goal_matches", "unmatched"]
 
 #: rad: how far a goal's first and last points may be from a move's start and goal poses for the goal to be its
 MATCH = 1e-3
@@ -44,6 +44,17 @@ class _Cycle(Protocol):
 
 
 C = TypeVar("C", bound=_Cycle)
+
+
+def unmatched(first_cycle: bool, went: str) -> str:
+    """Why a cycle whose START was missed is not learned from when its goal, come before the stand-in, was matched to
+    no cycle: the move was not known then (its first cycle), or it was and the goal's first and last points are not
+    its start and goal poses (a goal that leaves out its start point, a jog): an early goal is matched by both.
+    ``went``: how the goal went instead (the learner's words)."""
+    why = ("matched no move known then (the move's first cycle)" if first_cycle else
+           f"did not match its move: an early goal is matched by its first and last points, within {MATCH:g} rad of"
+           " the move's start and goal poses")
+    return f"its START was missed and its goal, which came before the stand-in, {why}: {went}"
 
 
 def goal_matches(goal: Sequence[float] | np.ndarray, last: Sequence[float] | np.ndarray, atol: float = MATCH) -> bool:
