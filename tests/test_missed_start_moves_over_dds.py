@@ -57,6 +57,13 @@ def speed_params(state) -> dict:
             "speed.match_timeout": 30.0, "speed.action_timeout": 60.0, "speed.step": 0.2}
 
 
+def speed_window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
+    """The speed learner's cycle after its goal ``sent`` started at ``t0`` s: the accelerometer to 1.2 s after the
+    motion; MOTION_END's and END's stamps."""
+    motion = motion_end(sent)
+    return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
+
+
 def mark(pub, kind: int, cycle: int, t: float, start: float, names: Sequence[str], poses) -> None:
     """A cycle event stamped ``t`` s carrying its START's stamp ``start`` s, naming the move (start and goal poses)."""
     msg = CycleEvent(event=kind, cycle=cycle, task="per_move", joint_names=list(names),
@@ -114,14 +121,10 @@ def stood_in(logs: list[str]) -> bool:
 
 def test_the_speed_learner_learns_from_a_cycle_whose_start_it_missed_as_from_the_same_cycle_seen(
         start_node, ros_context, program, tmp_path):
-    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
-        motion = motion_end(sent)
-        return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
-
     runs = {}
     for missed in (False, True):
         runs[missed] = learner_run(start_node, ros_context, program, speed_params(tmp_path / f"{missed}.json"),
-                                   SPEED_INPUTS, SPEED_CONTROLLER, NAMES, SPEED_MOVES[0], plan(0), window, missed)
+                                   SPEED_INPUTS, SPEED_CONTROLLER, NAMES, SPEED_MOVES[0], plan(0), speed_window, missed)
     (seen, seen_goals, seen_moves, seen_logs), (missed_, missed_goals, missed_moves, logs) = runs[False], runs[True]
     assert stood_in(logs) and not stood_in(seen_logs), logs
     for report in (*seen, *missed_):
@@ -191,13 +194,9 @@ def test_a_new_moves_first_cycle_whose_start_the_speed_learner_missed_runs_as_pl
         start_node, ros_context, program, tmp_path):
     """:func:`first_cycle_missed` for the speed learner (its match timeout 2 s): cycle 2 is move 0's first learned
     from, at factor 1 (the next 1.2), as cycle 0 was move 1's."""
-    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
-        motion = motion_end(sent)
-        return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
-
     params = {**speed_params(tmp_path / "state.json"), "speed.match_timeout": 2.0}
     other, first = first_cycle_missed(start_node, ros_context, program, params, SPEED_INPUTS, SPEED_CONTROLLER,
-                                      NAMES, SPEED_MOVES, (plan(0), plan(1)), window,
+                                      NAMES, SPEED_MOVES, (plan(0), plan(1)), speed_window,
                                       "it went as planned, its factor not recorded")
     for got in (other, first):
         assert "skipped" not in got, got
@@ -210,10 +209,6 @@ def test_a_known_moves_cycle_whose_start_was_missed_and_whose_goal_leaves_out_it
     matched to its cycle by its START (its last point the START's goal pose), not before it: with the START missed
     the goal waits the match timeout and goes as planned, and the cycle's reason says the goal did not match its move
     (not "the move's first cycle", which it is not). The speed learner, its own process; cycle 0 of the move seen."""
-    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
-        motion = motion_end(sent)
-        return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
-
     trimmed = plan(0)
     trimmed.points = trimmed.points[1:]  # from the first point after the start (t > 0)
     learner = start_node("shaper_nodes", "learner", {**speed_params(tmp_path / "state.json"),
@@ -221,9 +216,9 @@ def test_a_known_moves_cycle_whose_start_was_missed_and_whose_goal_leaves_out_it
     peer = Peer(ros_context, SPEED_CONTROLLER, imu=True)
     try:
         peer.spin_until(lambda: peer.learner_up(SPEED_INPUTS, set()), "the learner's subscriptions and action server")
-        got, _ = one_cycle(peer, peer.events, 0, NAMES, SPEED_MOVES[0], trimmed, window)
+        got, _ = one_cycle(peer, peer.events, 0, NAMES, SPEED_MOVES[0], trimmed, speed_window)
         assert "skipped" not in got and got["factor_next"] == pytest.approx(1.2), got  # matched by its START
-        got, sent = one_cycle(peer, StartLost(program), 1, NAMES, SPEED_MOVES[0], trimmed, window)
+        got, sent = one_cycle(peer, StartLost(program), 1, NAMES, SPEED_MOVES[0], trimmed, speed_window)
         assert got == {"skipped": 1.0}, got
         assert sent.points == trimmed.points  # as planned
         line = ("cycle 1 not learned from: its START was missed and its goal, which came before the stand-in, did not"
@@ -284,16 +279,12 @@ def test_a_stale_record_is_ignored_and_a_stood_in_start_gets_its_goals_record(ro
     peer_ex.add_node(shaper)
     peer = Peer(ros_context, SPEED_CONTROLLER, peer_ex, imu=True)
 
-    def window(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
-        motion = motion_end(sent)
-        return t0 + motion, imu_window(peer, t0, motion, motion + 1.2)
-
     def goal_recorded(how: int, stamp: float, detail: str = "") -> Callable[[Peer, float, JointTrajectory],
                                                                             tuple[float, float]]:
         def then(peer: Peer, t0: float, sent: JointTrajectory) -> tuple[float, float]:
             record(how, stamp, detail)  # the goal's record, as the shaper node sends it on
             peer.spin_until(lambda: records.wait_for_all_acked(Duration(seconds=0.05)), "the record acknowledged")
-            return window(peer, t0, sent)
+            return speed_window(peer, t0, sent)
         return then
 
     try:
